@@ -1,0 +1,5 @@
+import sys
+
+from doefab.cli import main
+
+sys.exit(main())

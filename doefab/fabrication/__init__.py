@@ -1,0 +1,1 @@
+"""Fabrication: level conventions, photomask export and verification."""

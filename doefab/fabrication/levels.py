@@ -1,0 +1,62 @@
+"""The level ↔ height convention of a multi-level DOE, kept in one place (DESIGN-NOTES, Conventions).
+
+Heights are heights of material above the deepest etch; level k of L (L = 16 for 4 binary masks) means
+height k·d with d = h_2π / L and h_2π = λ_design / (n(λ_design) − 1). Quantization rounds to the nearest
+level (not flooring) after wrapping the height into one 2π period; the mask export and the simulation
+use these same functions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from doefab.errors import DoefabError
+from doefab.optics.camera import Camera
+
+__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "wrap_height"]
+
+N_LEVELS = 16
+
+
+def level_step(camera: Camera, n_levels: int = N_LEVELS) -> float:
+    """Height of one level d (metres) = h_2π(design wavelength) / n_levels."""
+    if not isinstance(n_levels, (int, np.integer)) or n_levels < 2:
+        raise DoefabError(f"n_levels must be an integer ≥ 2, got {n_levels!r}")
+    return camera.material.height_2pi(camera.design_wavelength) / n_levels
+
+
+def wrap_height(height, camera: Camera):
+    """Height modulo h_2π at the design wavelength (same type as input), in [0, h_2π)."""
+    h2pi = camera.material.height_2pi(camera.design_wavelength)
+    if isinstance(height, torch.Tensor):
+        return torch.remainder(height, h2pi)
+    return np.mod(np.asarray(height, dtype=np.float64), h2pi)
+
+
+def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+    """Nearest level index (uint8, 0..n_levels-1) of each height, after wrapping into one 2π period.
+
+    A height within half a step below h_2π rounds to level n_levels ≡ 0 (it is the same phase).
+    """
+    h = height.detach().cpu().numpy() if isinstance(height, torch.Tensor) else np.asarray(height, np.float64)
+    if not np.all(np.isfinite(h)):
+        raise DoefabError("height contains NaN or infinite values: cannot quantize")
+    d = level_step(camera, n_levels)
+    k = np.rint(np.mod(h, d * n_levels) / d).astype(np.int64) % n_levels
+    return k.astype(np.uint8)
+
+
+def levels_to_height(levels, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+    """Height map (float64 metres) of a level map: level k → k·d."""
+    lv = np.asarray(levels)
+    if lv.dtype.kind not in "iu":
+        raise DoefabError(f"levels must be an integer array, got dtype {lv.dtype}")
+    if lv.size and (lv.min() < 0 or lv.max() >= n_levels):
+        raise DoefabError(f"levels must lie in 0..{n_levels - 1}, found {lv.min()}..{lv.max()}")
+    return lv.astype(np.float64) * level_step(camera, n_levels)
+
+
+def quantize_height(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+    """Height map rounded to the nearest of ``n_levels`` levels (float64 metres)."""
+    return levels_to_height(quantize_levels(height, camera, n_levels), camera, n_levels)

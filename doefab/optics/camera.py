@@ -1,0 +1,130 @@
+"""The camera: a frozen, validated description of aperture, DOE grid, lens and sensor (SI units).
+
+Defaults are the authors' prototype (../shared/DESIGN-NOTES.md): 8.64 mm DOE clear aperture, DOE grid
+1600 × 1600 at 5.4 µm, sensor 50 mm behind the lens focused at 5 m (so f ≈ 49.5 mm), 5.4 µm sensor pitch,
+fused silica.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+from doefab.errors import DoefabError
+from doefab.optics.materials import FUSED_SILICA, Material
+
+__all__ = ["Camera", "PRESETS"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Split-aperture camera geometry. All lengths in metres.
+
+    Attributes:
+        aperture_diameter: clear aperture of the DOE / lens stop, metres (8.64e-3).
+        doe_pitch: DOE pixel pitch, metres (5.4e-6).
+        doe_pixels: DOE grid size N (the height map is N × N), pixels (1600).
+        sensor_pitch: sensor pixel pitch, metres (5.4e-6).
+        sensor_distance: lens (aperture plane) to sensor distance s, metres (50e-3).
+        focus_distance: object distance imaged sharply on the sensor, metres; ``inf`` means s = f (5.0).
+        material: DOE substrate (fused silica).
+        design_wavelength: wavelength whose 2π height sets the 16-level etch depths, metres (550e-9).
+    """
+
+    aperture_diameter: float = 8.64e-3
+    doe_pitch: float = 5.4e-6
+    doe_pixels: int = 1600
+    sensor_pitch: float = 5.4e-6
+    sensor_distance: float = 50e-3
+    focus_distance: float = 5.0
+    material: Material = field(default=FUSED_SILICA)
+    design_wavelength: float = 550e-9
+
+    def __post_init__(self) -> None:
+        for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise DoefabError(f"Camera.{name} must be a positive finite length in metres, got {v!r}")
+        fd = self.focus_distance
+        if not isinstance(fd, (int, float)) or math.isnan(fd) or fd <= 0:
+            raise DoefabError(f"Camera.focus_distance must be > 0 m (or inf), got {fd!r}")
+        if not isinstance(self.doe_pixels, int) or isinstance(self.doe_pixels, bool) or self.doe_pixels < 2:
+            raise DoefabError(f"Camera.doe_pixels must be an integer ≥ 2, got {self.doe_pixels!r}")
+        if not isinstance(self.material, Material):
+            raise DoefabError(f"Camera.material must be a doefab.Material, got {self.material!r}")
+        extent = self.doe_pixels * self.doe_pitch
+        if extent < self.aperture_diameter * (1 - 1e-9):
+            raise DoefabError(
+                f"DOE grid {self.doe_pixels} px × {self.doe_pitch:g} m = {extent:g} m is smaller than the "
+                f"aperture diameter {self.aperture_diameter:g} m: raise doe_pixels to at least "
+                f"{math.ceil(self.aperture_diameter / self.doe_pitch - 1e-9)} or the pitch")
+        if math.isfinite(fd) and fd <= self.sensor_distance:
+            raise DoefabError(
+                f"focus_distance {fd:g} m must exceed sensor_distance {self.sensor_distance:g} m for a real image")
+
+    # ---- derived quantities -------------------------------------------------------------------
+    @property
+    def focal_length(self) -> float:
+        """Thin-lens focal length f (metres) from 1/f = 1/s + 1/z_focus."""
+        inv = 1.0 / self.sensor_distance + (0.0 if math.isinf(self.focus_distance) else 1.0 / self.focus_distance)
+        return 1.0 / inv
+
+    @property
+    def f_number(self) -> float:
+        """Working f-number s / D (dimensionless)."""
+        return self.sensor_distance / self.aperture_diameter
+
+    def replace(self, **changes) -> "Camera":
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "Camera":
+        """Camera of a task preset: ``"default"``, ``"hdr"``, ``"hyperspectral"`` or ``"depth"``."""
+        try:
+            base = PRESETS[name]
+        except KeyError:
+            raise DoefabError(f"unknown camera preset {name!r}: choose one of {sorted(PRESETS)}") from None
+        return cls(**{**base, **overrides})
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict; every length in metres (keys carry ``_m`` where a unit applies)."""
+        return {
+            "aperture_diameter_m": self.aperture_diameter,
+            "doe_pitch_m": self.doe_pitch,
+            "doe_pixels": self.doe_pixels,
+            "sensor_pitch_m": self.sensor_pitch,
+            "sensor_distance_m": self.sensor_distance,
+            "focus_distance_m": self.focus_distance if math.isfinite(self.focus_distance) else "inf",
+            "design_wavelength_m": self.design_wavelength,
+            "focal_length_m": self.focal_length,
+            "material": self.material.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Camera":
+        try:
+            fd = d["focus_distance_m"]
+            return cls(
+                aperture_diameter=float(d["aperture_diameter_m"]),
+                doe_pitch=float(d["doe_pitch_m"]),
+                doe_pixels=int(d["doe_pixels"]),
+                sensor_pitch=float(d["sensor_pitch_m"]),
+                sensor_distance=float(d["sensor_distance_m"]),
+                focus_distance=float("inf") if fd == "inf" else float(fd),
+                design_wavelength=float(d.get("design_wavelength_m", 550e-9)),
+                material=Material.from_dict(d["material"]),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DoefabError(f"camera record is incomplete or malformed ({exc!r}); expected Camera.to_dict() "
+                              f"fields") from None
+
+
+PRESETS: dict[str, dict] = {
+    "default": {},
+    # Authors' released configurations (DESIGN-NOTES): HDR uses a finer DOE grid.
+    "hdr": {"doe_pixels": 3200, "doe_pitch": 2.7e-6},
+    "hyperspectral": {"doe_pixels": 1600, "doe_pitch": 5.4e-6},
+    "depth": {"doe_pixels": 1600, "doe_pitch": 5.4e-6, "focus_distance": 3.5},
+}

@@ -1,0 +1,70 @@
+"""Refractive index of DOE substrates (Sellmeier dispersion).
+
+The default substrate is fused silica (Malitson 1965, see ../shared/DESIGN-NOTES.md):
+``n² − 1 = Σ B_i λ² / (λ² − C_i²)`` with λ in micrometres inside the formula; the public functions take
+and return SI units (metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["Material", "FUSED_SILICA", "material_by_name"]
+
+
+@dataclass(frozen=True)
+class Material:
+    """A dispersive substrate described by a three-term Sellmeier formula.
+
+    Attributes:
+        name: human-readable name, stored in design and mask manifests.
+        b: Sellmeier B coefficients (dimensionless), three values.
+        c_um: Sellmeier C coefficients in micrometres (the resonance wavelengths), three values.
+    """
+
+    name: str
+    b: tuple[float, float, float]
+    c_um: tuple[float, float, float]
+
+    def index(self, wavelength_m):
+        """Refractive index at ``wavelength_m`` (metres; scalar or array) -> same shape, float64."""
+        lam_um = np.asarray(wavelength_m, dtype=np.float64) * 1e6
+        if np.any(~np.isfinite(lam_um)) or np.any(lam_um <= 0):
+            raise DoefabError(f"wavelength must be positive and finite in metres, got {wavelength_m!r}")
+        l2 = lam_um**2
+        n2 = 1.0 + sum(bi * l2 / (l2 - ci**2) for bi, ci in zip(self.b, self.c_um))
+        return np.sqrt(n2)
+
+    def height_2pi(self, wavelength_m: float) -> float:
+        """Height (metres) of material that delays light of ``wavelength_m`` by one wave: λ / (n − 1)."""
+        return float(wavelength_m / (self.index(wavelength_m) - 1.0))
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "sellmeier_b": list(self.b), "sellmeier_c_um": list(self.c_um)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Material":
+        return cls(d["name"], tuple(d["sellmeier_b"]), tuple(d["sellmeier_c_um"]))
+
+
+FUSED_SILICA = Material(
+    name="fused silica",
+    b=(0.6961663, 0.4079426, 0.8974794),
+    c_um=(0.0684043, 0.1162414, 9.896161),
+)
+
+_MATERIALS = {"fused silica": FUSED_SILICA, "fused_silica": FUSED_SILICA}
+
+
+def material_by_name(name: str) -> Material:
+    """Look up a built-in material by name (``"fused silica"``)."""
+    try:
+        return _MATERIALS[name.lower()]
+    except KeyError:
+        raise DoefabError(
+            f"unknown material {name!r}: built-in ones are {sorted(set(_MATERIALS))}; "
+            f"pass a doefab.Material for others") from None

@@ -1,0 +1,89 @@
+"""Spectral route: exact pixel integration of the band-limited intensity (the default).
+
+The intensity of a pupil sampled at pitch b is a trigonometric polynomial in the sensor coordinate whose
+frequencies are the sample separations m·b/(λ s), |m| < N. Zero-padding the pupil to L ≥ 2N and one FFT
+therefore give its intensity on a grid that determines it everywhere (no aliasing of the autocorrelation).
+Integrating that polynomial over a sensor pixel multiplies each frequency by p·sinc(m b p/(λ s)), so the
+pixel-integrated PSF is ``W_y @ I @ W_xᵀ`` with real K × L matrices built once per wavelength:
+
+    W[k, j] = (p/L) Σ_{|m|<N} sinc(m b p/(λ s)) exp(2πi m (b u_k/(λ s) − j/L)).
+
+No quadrature nodes, no interpolation: the pixel integral is exact for the sampled pupil; the remaining
+error is the pupil sampling itself (rim, smooth phase inside a sample). The far field of one flat pupil
+sample (the envelope) is applied at pixel centres (it changes by < 0.1 % across a pixel).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft
+import torch
+
+from doefab.optics.propagators.base import FocalSetup, check_window
+
+__all__ = ["SpectralRoute", "band_limited_pixel_matrix"]
+
+
+def band_limited_pixel_matrix(centres: np.ndarray, n_pupil: int, n_fft: int, pitch: float, wavelength: float,
+                              distance: float, pixel: float) -> np.ndarray:
+    """(K, L) real matrix integrating the FFT-sampled intensity over K pixels (see module docstring).
+
+    Args:
+        centres: (K,) uniformly spaced pixel centre coordinates on the sensor, metres.
+        n_pupil: N, pupil samples along this axis.  n_fft: L ≥ 2N, padded FFT size.
+        pitch: pupil sample pitch b, metres.  wavelength, distance: λ and s, metres.
+        pixel: sensor pixel pitch p, metres.
+    Returns:
+        float64 array (K, L); column j multiplies FFT output index j (natural FFT order).
+    """
+    m = torch.from_numpy(np.fft.fftfreq(n_fft, 1.0 / n_fft))  # integer frequencies in FFT order
+    scale = pitch / (wavelength * distance)
+    spec = torch.where(m.abs() < n_pupil, torch.sinc(m * (scale * pixel)), torch.zeros(()).double())
+    theta0 = float(centres[0]) * scale
+    dtheta = (float(centres[1]) - float(centres[0])) * scale if len(centres) > 1 else 0.0
+    # exp(2πi m θ_k) for uniformly spaced θ_k by a running product (exact to ~K·1e-16)
+    first = torch.polar(spec, 2 * np.pi * torch.remainder(m * theta0, 1.0))
+    step = torch.polar(torch.ones_like(m), 2 * np.pi * torch.remainder(m * dtheta, 1.0))
+    rows = torch.cat([first[None, :], step.expand(len(centres) - 1, -1)], dim=0)
+    a = torch.cumprod(rows, dim=0)
+    return ((pixel / n_fft) * torch.fft.fft(a, dim=1).real).numpy()
+
+
+class SpectralRoute:
+    """2×-padded FFT of the pupil, then exact band-limited pixel integration (real matrix products)."""
+
+    name = "spectral"
+
+    def check(self, setup: FocalSetup) -> None:
+        check_window(setup, self.name)
+
+    @staticmethod
+    def sizes(setup: FocalSetup) -> tuple[int, int]:
+        return (scipy.fft.next_fast_len(2 * len(setup.y)), scipy.fft.next_fast_len(2 * len(setup.x)))
+
+    def prepare(self, setup: FocalSetup):
+        ly, lx = self.sizes(setup)
+        uc, vc = setup.pixel_centres()
+        out = []
+        for lam in setup.wavelengths:
+            s = setup.sensor_distance
+            wx = band_limited_pixel_matrix(uc, len(setup.x), lx, setup.pitch, lam, s, setup.sensor_pitch)
+            wy = band_limited_pixel_matrix(vc, len(setup.y), ly, setup.pitch, lam, s, setup.sensor_pitch)
+            env = None
+            if setup.envelope:
+                sc = setup.pitch / (lam * s)
+                env = torch.from_numpy(np.outer(np.sinc(vc * sc) ** 2, np.sinc(uc * sc) ** 2)).to(setup.real_dtype)
+            rd = setup.real_dtype
+            out.append((torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
+        return (ly, lx), out
+
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared) -> torch.Tensor:
+        (ly, lx), mats = prepared
+        wy, wxt, env = mats[index]
+        lam = setup.wavelengths[index]
+        scale = setup.pitch**2 / (lam * setup.sensor_distance)
+        # rows are stored top (largest y) first; flip so that FFT row j is at +j·δ along y
+        field = torch.fft.fft2(torch.flip(pupil, dims=(-2,)), s=(ly, lx))
+        inten = (field.real**2 + field.imag**2) * scale**2
+        out = wy @ inten @ wxt
+        return out * env if env is not None else out

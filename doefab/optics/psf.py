@@ -1,0 +1,201 @@
+"""Split-aperture PSFs (seed Eq. 1–10 and 14): the coded (x < 0, DOE) and uncoded (x > 0) halves.
+
+``PSFPlan`` precomputes everything that does not depend on the height map (pupil sampling, source
+wavefronts, transform matrices) so that an optimiser calls it cheaply; ``split_aperture_psf`` is the
+one-shot function. Both return energy fractions of the *whole* aperture's light on sensor pixels: each
+half sums to about 0.5 over a large kernel.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from doefab import _validate
+from doefab.errors import DoefabError
+from doefab.optics.camera import Camera
+from doefab.optics.propagators import make_route
+from doefab.optics.propagators.base import FocalSetup, check_smooth_phase
+from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
+
+__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor"]
+
+SOURCE_PHASE_LIMIT = math.pi / 2  # max smooth phase change between neighbouring pupil samples (radians)
+
+
+@dataclass
+class PSFPair:
+    """Coded and uncoded PSFs.
+
+    Attributes:
+        coded, uncoded: (n_depths, n_wavelengths, K, K) tensors of energy fractions (or None when not
+            asked for); rows are y (row 0 = top), columns x, pixel (K//2, K//2) on the chief ray.
+        wavelengths: metres.  depths: metres (``inf`` = plane wave).  sensor_pitch: metres.
+    """
+
+    coded: torch.Tensor | None
+    uncoded: torch.Tensor | None
+    wavelengths: tuple[float, ...]
+    depths: tuple[float, ...]
+    sensor_pitch: float
+    full: torch.Tensor | None = None
+
+    def __getitem__(self, half: str) -> torch.Tensor:
+        out = getattr(self, half, None) if half in APERTURES else None
+        if out is None:
+            raise DoefabError(f"the {half!r} PSF was not computed: pass halves including it")
+        return out
+
+
+def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.float32) -> torch.Tensor:
+    """Validate a height map (metres, shape (N, N) of the camera's DOE grid) and return it as a tensor.
+
+    Tensors keep their autograd graph; numpy arrays are converted.
+    """
+    n = camera.doe_pixels
+    if isinstance(height, torch.Tensor):
+        t = height
+    else:
+        try:
+            arr = np.asarray(height)
+        except Exception:  # noqa: BLE001 - anything that is not array-like
+            raise DoefabError(f"{name} must be an (N, N) array of heights in metres") from None
+        if arr.dtype.kind not in "fiu":
+            raise DoefabError(f"{name} must be a real numeric array of heights in metres, got dtype {arr.dtype}")
+        t = torch.from_numpy(np.ascontiguousarray(arr, dtype=np.float64))
+    if t.is_complex() or not (t.is_floating_point() or t.dtype in (torch.int32, torch.int64, torch.uint8)):
+        raise DoefabError(f"{name} must hold real heights in metres, got dtype {t.dtype}")
+    if tuple(t.shape) != (n, n):
+        raise DoefabError(
+            f"{name} has shape {tuple(t.shape)} but the camera's DOE grid is ({n}, {n}); resample it or set "
+            f"Camera.doe_pixels")
+    if not bool(torch.isfinite(t.detach()).all()):
+        bad = int((~torch.isfinite(t.detach())).sum())
+        raise DoefabError(f"{name} contains {bad} NaN or infinite values: every height must be finite (metres)")
+    if float(t.detach().abs().max()) > 1e-3:
+        raise DoefabError(f"{name} holds heights above 1 mm: heights are in metres (a DOE step is ~1e-7 m)")
+    return t.to(dtype)
+
+
+class PSFPlan:
+    """Precomputed split-aperture PSF model for one camera, wavelength list, depth list and window.
+
+    Args:
+        camera: the camera.
+        wavelengths: metres.  depths: metres (> 0, ``inf`` for a plane wave).
+        kernel_size: K, output window K × K sensor pixels (odd K makes the blank coded PSF the exact mirror
+            of the uncoded one).
+        halves: which PSFs to compute, a subset of ``("coded", "uncoded")``; ``"full"`` adds the whole
+            aperture as one coherent pupil (a conventional camera; used for reference checks).
+        route: ``"spectral"`` (default), ``"mft"``, ``"fft"`` or ``"asm"``, or a Route object.
+        pupil_oversample: pupil samples per DOE pixel and axis (heights are held per DOE pixel).
+        precision: ``"float32"`` (default) or ``"float64"``.
+        center: (u, v) sensor position of the window's centre pixel, metres.
+        check: run the routes' sampling checks (refuse rather than return a wrong PSF).
+        route_options: passed to the route (``pixel_nodes`` for mft, ``oversample`` for fft, ``pad`` for asm).
+    """
+
+    def __init__(self, camera: Camera, wavelengths, depths, kernel_size: int = 255,
+                 halves=HALVES, route="spectral", pupil_oversample: int = 1, precision: str = "float32",
+                 center=(0.0, 0.0), check: bool = True, **route_options):
+        if not isinstance(camera, Camera):
+            raise DoefabError(f"camera must be a doefab.Camera, got {type(camera).__name__}")
+        self.camera = camera
+        self.wavelengths = _validate.wavelengths(wavelengths)
+        self.depths = _validate.depths(depths)
+        if not isinstance(kernel_size, (int, np.integer)) or kernel_size < 1:
+            raise DoefabError(f"kernel_size must be a positive integer (sensor pixels), got {kernel_size!r}")
+        halves = (halves,) if isinstance(halves, str) else tuple(halves)
+        if not halves or any(h not in APERTURES for h in halves):
+            raise DoefabError(f"halves must be a non-empty subset of {APERTURES}, got {halves!r}")
+        if precision not in ("float32", "float64"):
+            raise DoefabError(f"precision must be 'float32' or 'float64', got {precision!r}")
+        self.real_dtype = torch.float32 if precision == "float32" else torch.float64
+        self.halves = halves
+        self.kernel_size = int(kernel_size)
+        self.route = make_route(route, **route_options)
+        self.center = (float(center[0]), float(center[1]))
+        self.check = check
+        n_idx = camera.material.index(np.asarray(self.wavelengths))
+        self._k = [2 * math.pi / lam for lam in self.wavelengths]
+        self._dn = [float(v) - 1.0 for v in np.atleast_1d(n_idx)]
+        self._halves: dict[str, tuple] = {}
+        for half in halves:
+            geo = pupil_half(camera, half, pupil_oversample)
+            opd = np.stack([source_path_difference(geo.r2, z, camera.focus_distance) for z in self.depths])
+            support = geo.coverage > 0
+            if check:
+                for z, o in zip(self.depths, opd):
+                    check_smooth_phase(self._k[int(np.argmin(self.wavelengths))] * o, support, SOURCE_PHASE_LIMIT,
+                                       getattr(self.route, "name", "route"),
+                                       f"wavefront of the point at {z:g} m", pupil_oversample)
+            cov = torch.from_numpy(geo.coverage).to(self.real_dtype)
+            opd_t = torch.from_numpy(opd).to(self.real_dtype)
+            setups = {}
+            for env in (False, True):
+                setup = FocalSetup(geo.x, geo.y, geo.pitch, env, self.wavelengths, camera.sensor_distance,
+                                   camera.sensor_pitch, self.kernel_size, self.center, self.real_dtype, support)
+                setups[env] = setup
+            if check:
+                self.route.check(setups[False])
+            self._halves[half] = (geo, cov, opd_t, setups, {})
+
+    def _prepared(self, half: str, envelope: bool):
+        geo, cov, opd, setups, cache = self._halves[half]
+        if envelope not in cache:
+            cache[envelope] = self.route.prepare(setups[envelope])
+        return setups[envelope], cache[envelope]
+
+    def half_psf(self, half: str, height: torch.Tensor | None) -> torch.Tensor:
+        """(n_depths, n_wavelengths, K, K) PSF of one half; ``height`` is the full-grid map or None (flat)."""
+        geo, cov, opd, _, _ = self._halves[half]
+        h = None
+        if height is not None:
+            h = height[geo.rows, geo.cols]
+            if geo.oversample > 1:
+                h = h.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
+        # a flat plate is smooth; only a structured DOE has flat pixels whose far field is an envelope
+        envelope = h is not None and bool((h.detach().max() - h.detach().min()) > 0)
+        setup, prepared = self._prepared(half, envelope)
+        out = []
+        for i in range(len(self.wavelengths)):
+            phase = self._k[i] * opd
+            if h is not None:
+                phase = phase + (self._k[i] * self._dn[i]) * h.to(self.real_dtype)
+            pupil = torch.polar(cov.expand_as(phase), phase)
+            out.append(self.route.intensity(pupil, i, setup, prepared))
+        return torch.stack(out, dim=1) / geo.full_area
+
+    def __call__(self, height=None, height_right=None) -> PSFPair:
+        """PSFs for a full-grid height map (metres; None = blank DOE) and optional right-half map."""
+        h = None if height is None else as_height_tensor(height, self.camera, "height", self.real_dtype)
+        hr = None if height_right is None else as_height_tensor(height_right, self.camera, "height_right",
+                                                                 self.real_dtype)
+        coded = self.half_psf("coded", h) if "coded" in self.halves else None
+        uncoded = self.half_psf("uncoded", hr) if "uncoded" in self.halves else None
+        full = self.half_psf("full", h) if "full" in self.halves else None
+        return PSFPair(coded, uncoded, self.wavelengths, self.depths, self.camera.sensor_pitch, full)
+
+
+def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size: int = 255,
+                       halves=HALVES, h_right=None, **options) -> PSFPair:
+    """Coded and uncoded PSFs of a split aperture (seed Eq. 10/14), one call.
+
+    Args:
+        height: (N, N) DOE height map over the full aperture grid, metres (numpy or torch; torch keeps
+            gradients). Only its x < 0 half acts (coded half). None means a blank DOE.
+        camera: the camera (doefab.Camera).
+        wavelengths: metres, e.g. [656e-9, 589e-9, 486e-9].
+        depths: point-source distances, metres; ``inf`` is a plane wave.
+        kernel_size: K (sensor pixels); output (n_depths, n_wavelengths, K, K).
+        halves: ``("coded",)``, ``("uncoded",)`` or both; only what is asked is computed.
+        h_right: optional (N, N) height map whose x > 0 half acts on the uncoded half (default 0).
+        **options: see :class:`PSFPlan` (route, pupil_oversample, precision, center, check, pixel_nodes…).
+    Returns:
+        PSFPair with energy fractions of the whole aperture's light per sensor pixel.
+    """
+    plan = PSFPlan(camera, wavelengths, depths, kernel_size, halves, **options)
+    return plan(height, h_right)

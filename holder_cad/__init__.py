@@ -1,0 +1,1 @@
+"""holder_cad: the parametric 3D-printable DOE holder (millimetres, the CAD convention)."""

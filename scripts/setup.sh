@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Create .venv at the repository root and install doefab with everything its commands and tests use.
+# PyTorch: the CPU build 2.13.0 is pinned first (it installs from local disk on the project machines), so
+# no multi-gigabyte CUDA build is ever pulled; pyproject.toml itself keeps a range (torch>=2.2).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+    "$PY" -m venv .venv
+fi
+stamp=.venv/.doefab-installed
+want=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)
+if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+    exit 0
+fi
+.venv/bin/python -m pip install --quiet --upgrade pip
+.venv/bin/python -m pip install --quiet "torch==2.13.0"
+.venv/bin/python -m pip install --quiet -e ".[test,klayout]"
+echo "$want" > "$stamp"

@@ -1,0 +1,70 @@
+"""Extreme and malformed inputs: one clear DoefabError (a ValueError) each, never a NaN PSF."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return doefab.Camera(aperture_diameter=20 * 5.4e-6, doe_pixels=24)
+
+
+def test_nan_and_inf_heights(cam):
+    h = np.zeros((24, 24))
+    h[3, 4] = np.nan
+    with pytest.raises(DoefabError, match="NaN or infinite"):
+        doefab.split_aperture_psf(h, cam, [550e-9], [1.0])
+    h[3, 4] = np.inf
+    with pytest.raises(DoefabError, match="NaN or infinite"):
+        doefab.split_aperture_psf(torch.from_numpy(h), cam, [550e-9], [1.0])
+
+
+@pytest.mark.parametrize("shape", [(24, 23), (24,), (2, 24, 24)])
+def test_wrong_shapes(cam, shape):
+    with pytest.raises(DoefabError, match=r"has shape .* DOE grid is \(24, 24\)"):
+        doefab.split_aperture_psf(np.zeros(shape), cam, [550e-9], [1.0])
+
+
+def test_heights_in_wrong_unit(cam):
+    with pytest.raises(DoefabError, match="metres"):
+        doefab.split_aperture_psf(np.full((24, 24), 0.5), cam, [550e-9], [1.0])
+
+
+@pytest.mark.parametrize("lams, msg", [([-550e-9], "positive"), ([0.0], "positive"), ([550.0], "metres"),
+                                       ([], "empty"), ([float("nan")], "positive")])
+def test_bad_wavelengths(cam, lams, msg):
+    with pytest.raises(DoefabError, match=msg):
+        doefab.split_aperture_psf(None, cam, lams, [1.0])
+
+
+@pytest.mark.parametrize("depths, msg", [([0.0], "> 0"), ([-2.0], "> 0"), ([], "empty"), ([float("nan")], "> 0")])
+def test_bad_depths(cam, depths, msg):
+    with pytest.raises(DoefabError, match=msg):
+        doefab.split_aperture_psf(None, cam, [550e-9], depths)
+
+
+def test_bad_options(cam):
+    with pytest.raises(DoefabError, match="kernel_size"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=0)
+    with pytest.raises(DoefabError, match="halves"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [1.0], halves=("left",))
+    with pytest.raises(DoefabError, match="unknown propagation route"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [1.0], route="magic")
+    with pytest.raises(DoefabError, match="precision"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [1.0], precision="half")
+    with pytest.raises(DoefabError, match="not computed"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [1.0], halves=("coded",))["uncoded"]
+
+
+def test_extreme_but_valid_inputs_stay_finite(cam):
+    h = np.full((24, 24), 1e-4)  # 100 µm of glass: many waves, still a valid height
+    pair = doefab.split_aperture_psf(h, cam, [400e-9, 2e-6], [1e-2, 1e6, math.inf], kernel_size=9,
+                                     pupil_oversample=2)
+    for t in (pair.coded, pair.uncoded):
+        assert torch.isfinite(t).all() and (t >= -1e-9).all()

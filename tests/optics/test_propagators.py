@@ -1,0 +1,110 @@
+"""The routes agree where each is valid, and each refuses (with the fix named) where it is not."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import SamplingError
+
+
+def _rel(a, b):
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return np.linalg.norm(a - b) / np.linalg.norm(b)
+
+
+@pytest.fixture(scope="module")
+def random_doe(small_camera):
+    rng = np.random.default_rng(0)
+    levels = rng.integers(0, 16, size=(small_camera.doe_pixels,) * 2)
+    return doefab.levels_to_height(levels, small_camera)
+
+
+@pytest.mark.parametrize("depth", ["focus", 0.5, math.inf])
+def test_spectral_mft_fft_agree(small_camera, random_doe, depth):
+    cam = small_camera
+    z = cam.focus_distance if depth == "focus" else depth
+    kw = dict(kernel_size=41, precision="float64", halves=("coded", "uncoded"))
+    lams = [450e-9, 650e-9]
+    spectral = doefab.split_aperture_psf(random_doe, cam, lams, [z], route="spectral", **kw)
+    mft = doefab.split_aperture_psf(random_doe, cam, lams, [z], route="mft", pixel_nodes=8, **kw)
+    fft = doefab.split_aperture_psf(random_doe, cam, lams, [z], route="fft", oversample=16, **kw)
+    for half in ("coded", "uncoded"):
+        # the spectral route applies the flat-pixel envelope at pixel centres (a < 1e-4 approximation)
+        assert _rel(spectral[half], mft[half]) < 2e-4
+        assert _rel(fft[half], spectral[half]) < 2e-3
+
+
+@pytest.mark.parametrize("depth", [0.5, math.inf])
+def test_spectral_pixel_integral_is_exact(small_camera, depth):
+    """Without a DOE there is no envelope: the spectral route's pixel integral equals high-order quadrature."""
+    kw = dict(kernel_size=41, precision="float64", halves=("coded", "full"))
+    spectral = doefab.split_aperture_psf(None, small_camera, [450e-9], [depth], route="spectral", **kw)
+    mft = doefab.split_aperture_psf(None, small_camera, [450e-9], [depth], route="mft", pixel_nodes=10, **kw)
+    for half in ("coded", "full"):
+        assert _rel(spectral[half], mft[half]) < 1e-8
+
+
+def test_asm_route_agrees_where_it_is_valid():
+    # a fine-pitched, small-aperture camera whose lens sphere the pupil grid resolves
+    cam = doefab.Camera(aperture_diameter=0.2e-3, doe_pitch=1e-6, doe_pixels=200, sensor_pitch=1e-6,
+                        sensor_distance=5e-3, focus_distance=1.0)
+    kw = dict(kernel_size=81, precision="float64", halves=("coded", "uncoded"))
+    h = doefab.blazed_grating_height(cam, 100, n_levels=8)  # first order 27 px off axis, inside the window
+    asm = doefab.split_aperture_psf(h, cam, [550e-9], [cam.focus_distance], route="asm", **kw)
+    spectral = doefab.split_aperture_psf(h, cam, [550e-9], [cam.focus_distance], route="spectral", **kw)
+    for half in ("coded", "uncoded"):
+        assert _rel(asm[half], spectral[half]) < 2e-2
+
+
+def test_near_point_source_refused_with_fix():
+    cam = doefab.Camera()
+    with pytest.raises(SamplingError, match=r"pupil phase sampling.*pupil_oversample ≥"):
+        doefab.split_aperture_psf(None, cam, [550e-9], [0.05], kernel_size=63)
+    # the fix it names works: the same point with a finer pupil sampling is accepted
+    doefab.PSFPlan(doefab.Camera(aperture_diameter=1.08e-3, doe_pixels=200), [550e-9], [0.05], 31,
+                   pupil_oversample=4)
+
+
+@pytest.mark.parametrize("route", ["spectral", "mft", "fft"])
+def test_coarse_pitch_and_huge_kernel_refused(route):
+    coarse = doefab.Camera(doe_pitch=20e-6, doe_pixels=440)
+    with pytest.raises(SamplingError, match="output window aliasing"):
+        doefab.PSFPlan(coarse, [450e-9], [math.inf], 255, route=route)
+    with pytest.raises(SamplingError, match=r"smaller kernel"):
+        doefab.PSFPlan(doefab.Camera(), [400e-9], [math.inf], 1024, route=route)
+
+
+def test_asm_refuses_default_camera():
+    with pytest.raises(SamplingError, match=r"\[asm\] pupil phase sampling: the lens's converging wave"):
+        doefab.PSFPlan(doefab.Camera(), [550e-9], [math.inf], 63, route="asm")
+
+
+def test_fft_refuses_oversized_padding():
+    with pytest.raises(SamplingError, match=r"\[fft\] padding"):
+        doefab.PSFPlan(doefab.Camera(), [700e-9], [math.inf], 63, route="fft", oversample=64)
+
+
+def test_angular_spectrum_gaussian_beam():
+    """Band-limited ASM against the analytic Gaussian beam (waist 40 µm, 4 mm, 633 nm)."""
+    lam, w0, z, b, n = 633e-9, 40e-6, 4e-3, 1e-6, 512
+    c = (np.arange(n) - n / 2) * b
+    xx, yy = np.meshgrid(c, c)
+    r2 = xx**2 + yy**2
+    field = torch.from_numpy(np.exp(-r2 / w0**2).astype(np.complex128))
+    out = doefab.angular_spectrum(field, b, lam, z).numpy()
+    k = 2 * math.pi / lam
+    zr = math.pi * w0**2 / lam
+    q = z - 1j * zr  # complex beam parameter at the waist is -i z_R
+    analytic = (-1j * zr / q) * np.exp(1j * k * r2 / (2 * q)) * np.exp(1j * k * z)  # e^{ikz} convention
+    # the ASM is exact; the analytic beam is the paraxial solution (difference ~ (λ/πw0)² ≈ 3e-5)
+    assert np.abs(out - analytic).max() < 2e-3
+    assert np.sum(np.abs(out) ** 2) == pytest.approx(np.sum(np.abs(field.numpy()) ** 2), rel=1e-6)
+
+
+def test_angular_spectrum_refuses_long_distance():
+    field = torch.ones(128, 128, dtype=torch.complex128)
+    with pytest.raises(SamplingError, match="transfer-function aliasing"):
+        doefab.angular_spectrum(field * torch.exp(1j * torch.linspace(0, 300, 128))[None, :], 1e-6, 500e-9, 0.5)

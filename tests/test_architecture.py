@@ -1,0 +1,75 @@
+"""Import rules (prybm-style): a light top-level import, one-way layering, heavy packages only on use."""
+
+import ast
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[1] / "doefab"
+HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya"}
+# a stage may import from the stages listed for it (and itself); lower layers never import upper ones
+ALLOWED = {
+    "optics": {"optics"},
+    "fabrication": {"optics", "fabrication"},
+    "tasks": {"optics", "fabrication", "tasks"},
+    "design": {"optics", "fabrication", "tasks", "design"},
+    "cli": None,  # the command line may use everything
+}
+
+
+def _imports(path: Path):
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield a.name, node
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            yield node.module, node
+
+
+def test_import_doefab_is_light():
+    code = "import sys, time; t = time.perf_counter(); import doefab; dt = time.perf_counter() - t; " \
+           "print(dt); print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in " \
+           "{'torch', 'matplotlib', 'cadquery', 'klayout', 'dask', 'gdstk', 'trimesh', 'manifold3d'})))"
+    t = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert time.perf_counter() - t < 2.0
+    assert float(out[0]) < 0.5
+    assert out[1].strip() == "", f"import doefab loaded {out[1]}"
+
+
+def test_heavy_packages_only_inside_functions():
+    for path in PKG.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in tree.body:  # module level only
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            for n in names:
+                assert n.split(".")[0] not in HEAVY, f"{path}: module-level import of {n}"
+
+
+def test_layering():
+    for path in PKG.rglob("*.py"):
+        rel = path.relative_to(PKG).parts
+        stage = rel[0] if len(rel) > 1 else None
+        allowed = ALLOWED.get(stage)
+        if allowed is None:
+            continue
+        for name, _ in _imports(path):
+            parts = name.split(".")
+            if parts[0] != "doefab" or len(parts) < 2 or parts[1].startswith("_"):
+                continue
+            if parts[1] in ("errors", "io", "plotting"):
+                continue
+            assert parts[1] in allowed, f"{path}: stage '{stage}' must not import doefab.{parts[1]}"
+
+
+def test_public_api_exports_resolve():
+    import doefab
+
+    for name in doefab.__all__:
+        assert getattr(doefab, name) is not None

@@ -1,0 +1,45 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from doefab.cli import main
+
+
+def test_help_lists_subcommands(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "demo" in out and "psf" in out
+
+
+@pytest.mark.parametrize("cmd", ["demo", "psf"])
+def test_subcommand_help(cmd, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([cmd, "--help"])
+    assert exc.value.code == 0
+    assert "--out" in capsys.readouterr().out
+
+
+def test_psf_command_writes_outputs(tmp_path):
+    rc = main(["psf", "--wavelengths-nm", "550", "--depths-m", "inf", "5", "--kernel", "63",
+               "--out", str(tmp_path)])
+    assert rc == 0
+    data = np.load(tmp_path / "psf.npz")
+    assert data["coded"].shape == (2, 1, 63, 63)
+    assert (tmp_path / "psf.png").stat().st_size > 1000
+
+
+def test_psf_command_bad_input_is_one_clear_error(tmp_path, capsys):
+    np.save(tmp_path / "h.npy", np.zeros((10, 10)))
+    assert main(["psf", "--height", str(tmp_path / "h.npy"), "--out", str(tmp_path / "o")]) == 2
+    assert "has shape (10, 10)" in capsys.readouterr().err
+    assert main(["psf", "--height", str(tmp_path / "missing.npy"), "--out", str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_entry_point_runs():
+    out = subprocess.run([sys.executable, "-m", "doefab", "--help"], capture_output=True, text=True)
+    assert out.returncode == 0 and "SUBCOMMAND" in out.stdout
