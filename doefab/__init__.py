@@ -25,6 +25,10 @@ _EXPORTS = {
     "quantize_height": "doefab.fabrication.levels",
     "levels_to_height": "doefab.fabrication.levels",
     "level_step": "doefab.fabrication.levels",
+    "optimize": "doefab.design.optimize",
+    "Design": "doefab.design.design",
+    "get_task": "doefab.tasks",
+    "TASKS": "doefab.tasks",
     "DoefabError": "doefab.errors",
     "SamplingError": "doefab.errors",
 }

@@ -149,9 +149,17 @@ class PSFPlan:
             cache[envelope] = self.route.prepare(setups[envelope])
         return setups[envelope], cache[envelope]
 
-    def half_psf(self, half: str, height: torch.Tensor | None) -> torch.Tensor:
-        """(n_depths, n_wavelengths, K, K) PSF of one half; ``height`` is the full-grid map or None (flat)."""
+    def half_psf(self, half: str, height: torch.Tensor | None, depth_indices=None,
+                 wavelength_indices=None) -> torch.Tensor:
+        """(n_depths, n_wavelengths, K, K) PSF of one half; ``height`` is the full-grid map or None (flat).
+
+        ``depth_indices`` / ``wavelength_indices`` restrict the computation to those entries of the plan's
+        lists (the output then has that many depths / wavelengths, in the order given).
+        """
         geo, cov, opd, _, _ = self._halves[half]
+        if depth_indices is not None:
+            opd = opd[list(depth_indices)]
+        wl = range(len(self.wavelengths)) if wavelength_indices is None else list(wavelength_indices)
         h = None
         if height is not None:
             h = height[geo.rows, geo.cols]
@@ -161,7 +169,7 @@ class PSFPlan:
         envelope = h is not None and bool((h.detach().max() - h.detach().min()) > 0)
         setup, prepared = self._prepared(half, envelope)
         out = []
-        for i in range(len(self.wavelengths)):
+        for i in wl:
             phase = self._k[i] * opd
             if h is not None:
                 phase = phase + (self._k[i] * self._dn[i]) * h.to(self.real_dtype)

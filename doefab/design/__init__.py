@@ -1,0 +1,6 @@
+"""Design: optimise a task's height map and quantize it to 16 levels."""
+
+from doefab.design.design import Design, levels_sha256
+from doefab.design.optimize import DesignConfig, optimize
+
+__all__ = ["Design", "DesignConfig", "optimize", "levels_sha256"]

@@ -1,0 +1,41 @@
+"""Checkpoints of a design run: written atomically, loaded with ``torch.load(..., weights_only=True)``."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import torch
+
+from doefab.errors import DoefabError
+from doefab.io import atomic_write_bytes
+
+__all__ = ["save_checkpoint", "load_checkpoint"]
+
+
+def save_checkpoint(path: str | Path, state: dict) -> None:
+    """Save ``state`` (tensors, numbers, strings, lists, dicts) atomically."""
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: str | Path, config: dict) -> dict:
+    """Load a checkpoint and check that it belongs to a run with the same ``config``."""
+    path = Path(path)
+    if not path.is_file():
+        raise DoefabError(f"no checkpoint at {path}: run without --resume first")
+    try:
+        state = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
+        raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
+                          f"delete it and start again without --resume") from None
+    if not isinstance(state, dict) or "config" not in state or "theta" not in state:
+        raise DoefabError(f"checkpoint {path} lacks doefab fields; delete it and start again without --resume")
+    saved = json.loads(state["config"])
+    if saved != config:
+        diff = {k: (saved.get(k), config.get(k)) for k in set(saved) | set(config) if saved.get(k) != config.get(k)}
+        raise DoefabError(f"checkpoint {path} was made with other settings {diff} (saved, asked): resume with the "
+                          f"same settings or start a new --out folder")
+    return state

@@ -1,0 +1,295 @@
+"""Design optimisation: any task, Adam (torch) or nlopt (L-BFGS / MMA) behind one interface.
+
+The loop sees only the task interface (wavelengths, depths, kernel, loss, metric, init), so a new task
+needs no change here. Heights are parameterised in waves and wrapped (``parameterization``); a final
+quantization-aware stage uses a straight-through estimator around the mask export's rounding. Runs
+checkpoint every N steps and resume exactly (Adam; nlopt resumes from the last checkpointed point); a
+non-finite loss stops the run with an error and keeps the last good checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from doefab.design.checkpoint import load_checkpoint, save_checkpoint
+from doefab.design.design import Design
+from doefab.design.parameterization import isolated_pixel_penalty, quantize_ste, theta_to_height
+from doefab.errors import DoefabError
+from doefab.fabrication.levels import N_LEVELS, level_step, quantize_levels
+from doefab.optics.camera import Camera
+from doefab.optics.psf import PSFPlan
+from doefab.optics.pupil import pupil_half
+from doefab.tasks import get_task
+
+__all__ = ["DesignConfig", "optimize", "PLAIN_LEVEL", "OPTIMIZERS"]
+
+PLAIN_LEVEL = N_LEVELS - 1  # the plain half and the area outside the clear aperture stay unetched
+OPTIMIZERS = ("adam", "lbfgs", "mma")
+
+
+@dataclass
+class DesignConfig:
+    """Settings of one design run (all JSON-serialisable; a checkpoint must match them to resume).
+
+    Attributes:
+        task: task name.  task_params: task parameters (JSON).  iterations: optimiser steps.
+        optimizer: adam, lbfgs or mma.  lr: Adam step in waves.  seed: RNG seed.
+        sampling: DOE grid coarsening factor during the design (1 = the preset's grid, 2 = half).
+        qat_fraction: last fraction of the steps run quantization-aware (0 = off).
+        batch: number of (depth, wavelength) pairs per Adam step (0 = all; a random subset otherwise).
+        fab_weight: weight of the isolated-pixel regulariser (0 = off).
+        checkpoint_every: steps between checkpoints.  eval_every: steps between full metric evaluations.
+    """
+
+    task: str = "streak"
+    task_params: dict | None = None
+    iterations: int = 200
+    optimizer: str = "adam"
+    lr: float = 0.02
+    seed: int = 0
+    sampling: int = 1
+    qat_fraction: float = 0.2
+    batch: int = 0
+    fab_weight: float = 0.0
+    checkpoint_every: int = 20
+    eval_every: int = 20
+
+    def key(self) -> dict:
+        d = asdict(self)
+        d.pop("eval_every")
+        d.pop("checkpoint_every")
+        return d
+
+
+def _design_camera(camera: Camera, sampling: int) -> Camera:
+    if sampling == 1:
+        return camera
+    if camera.doe_pixels % sampling:
+        raise DoefabError(f"sampling {sampling} must divide the DOE grid ({camera.doe_pixels} px)")
+    return camera.replace(doe_pixels=camera.doe_pixels // sampling, doe_pitch=camera.doe_pitch * sampling)
+
+
+def _coded_mask(camera: Camera) -> torch.Tensor:
+    """(N, N) float mask of DOE pixels that carry coded light (inside the aperture, x < 0)."""
+    geo = pupil_half(camera, "coded")
+    m = np.zeros((camera.doe_pixels,) * 2)
+    m[geo.rows, geo.cols] = geo.coverage > 0
+    return torch.from_numpy(m).float()
+
+
+def finalize_levels(height: np.ndarray, camera: Camera) -> np.ndarray:
+    """Levels of a design: nearest level in the coded aperture, PLAIN_LEVEL elsewhere."""
+    lv = quantize_levels(height, camera)
+    mask = _coded_mask(camera).numpy() > 0
+    lv[~mask] = PLAIN_LEVEL
+    return lv
+
+
+def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0, camera: Camera | None = None,
+             out_dir: str | Path | None = None, resume: bool = False, progress: bool = True, **settings) -> Design:
+    """Optimise a task's coded height map and return the quantized design.
+
+    Args:
+        task: ``"streak"``, ``"grating"``, ``"half-ring"`` or a Task object.
+        iterations: optimiser steps (function evaluations for nlopt); default: the task's.
+        optimizer: ``"adam"`` (default), ``"lbfgs"`` or ``"mma"`` (nlopt, driven by torch gradients).
+        seed: RNG seed; the same seed and settings give the same design.
+        camera: defaults to the task's preset camera.
+        out_dir: folder for ``checkpoint.pt`` and ``history.csv`` while running (None: no checkpoints).
+        resume: continue from ``out_dir/checkpoint.pt``.
+        **settings: other :class:`DesignConfig` fields (lr, sampling, qat_fraction, batch, fab_weight, …).
+    """
+    task_obj = get_task(task, **(settings.pop("task_params", None) or {}))
+    iterations = task_obj.default_iterations if iterations is None else iterations
+    settings.setdefault("lr", task_obj.default_lr)
+    settings.setdefault("batch", task_obj.default_batch if optimizer == "adam" else 0)
+    if optimizer not in OPTIMIZERS:
+        raise DoefabError(f"unknown optimizer {optimizer!r}: choose one of {OPTIMIZERS}")
+    if not isinstance(iterations, int) or iterations < 1:
+        raise DoefabError(f"iterations must be a positive integer, got {iterations!r}")
+    unknown = set(settings) - set(DesignConfig.__dataclass_fields__)
+    if unknown:
+        raise DoefabError(f"unknown design settings {sorted(unknown)}")
+    cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=iterations, optimizer=optimizer,
+                       seed=seed, **settings)
+    cam = camera or Camera.preset(task_obj.preset)
+    task_obj.bind(cam)
+    cfg.task_params = task_obj.params()
+    dcam = _design_camera(cam, cfg.sampling)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    lams, depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
+    plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",))
+    mask = _coded_mask(dcam)
+    h2pi = dcam.material.height_2pi(dcam.design_wavelength)
+    theta = torch.from_numpy(task_obj.init_height(dcam, rng) / h2pi).float().requires_grad_(True)
+    pairs = [(d, w) for d in range(len(depths)) for w in range(len(lams))]
+    gen = torch.Generator().manual_seed(cfg.seed)
+    history: list = []
+    step0, elapsed0 = 0, 0.0
+    out = Path(out_dir) if out_dir is not None else None
+    ckpt = out / "checkpoint.pt" if out is not None else None
+    config_json = json.dumps(cfg.key(), sort_keys=True)
+    adam = torch.optim.Adam([theta], lr=cfg.lr) if optimizer == "adam" else None
+    if resume:
+        if ckpt is None:
+            raise DoefabError("resume needs out_dir (where checkpoint.pt lives)")
+        state = load_checkpoint(ckpt, json.loads(config_json))
+        with torch.no_grad():
+            theta.copy_(state["theta"])
+        if adam is not None and "adam" in state:
+            adam.load_state_dict(state["adam"])
+        gen.set_state(state["generator"])
+        step0, elapsed0 = int(state["step"]), float(state["elapsed"])
+        history = [list(r) for r in state["history"]]
+    qat_start = int(round(cfg.iterations * (1 - cfg.qat_fraction))) if cfg.qat_fraction > 0 else cfg.iterations
+
+    def objective(step: int, batch_pairs=None):
+        h = theta_to_height(theta, dcam)
+        if step >= qat_start:
+            h = quantize_ste(h, dcam)
+        if batch_pairs is None:
+            psf = plan.half_psf("coded", h)
+            loss = task_obj.loss(psf, dcam)
+        else:
+            loss = 0.0
+            for d, w in batch_pairs:
+                psf = plan.half_psf("coded", h, depth_indices=[d], wavelength_indices=[w])
+                loss = loss + task_obj.loss(psf, dcam, [d], [w]) / len(batch_pairs)
+        if cfg.fab_weight > 0:
+            loss = loss + cfg.fab_weight * isolated_pixel_penalty(theta, mask)
+        return loss
+
+    def full_metric(quantized: bool) -> dict:
+        with torch.no_grad():
+            h = theta_to_height(theta, dcam)
+            if quantized:
+                h = quantize_ste(h, dcam)
+            return task_obj.metric(plan.half_psf("coded", h), dcam)
+
+    def checkpoint(step: int, elapsed: float) -> None:
+        if ckpt is None:
+            return
+        state = {"config": config_json, "theta": theta.detach().clone(), "step": step, "elapsed": elapsed,
+                 "generator": gen.get_state(), "history": history}
+        if adam is not None:
+            state["adam"] = adam.state_dict()
+        save_checkpoint(ckpt, state)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.iterations, initial=step0, desc=f"design {task_obj.name} ({optimizer})", unit="step")
+    t_start = time.perf_counter() - elapsed0
+    last_metric = history[-1][3] if history else float("nan")
+
+    def record(step: int, loss_value: float) -> None:
+        nonlocal last_metric
+        if not math.isfinite(loss_value):
+            raise DoefabError(f"the loss became {loss_value} at step {step}: stopping; the last good checkpoint "
+                              f"is kept{'' if ckpt is None else ' in ' + str(ckpt)} (lower the learning rate)")
+        if step % cfg.eval_every == 0 or step == cfg.iterations - 1:
+            last_metric = full_metric(step >= qat_start)["value"]
+        history.append([step, round(time.perf_counter() - t_start, 3), loss_value, last_metric])
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss_value:.4f}", metric=f"{last_metric:.4f}")
+        if (step + 1) % cfg.checkpoint_every == 0:
+            checkpoint(step + 1, time.perf_counter() - t_start)
+
+    try:
+        if optimizer == "adam":
+            for step in range(step0, cfg.iterations):
+                batch_pairs = None
+                if 0 < cfg.batch < len(pairs):
+                    idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
+                    batch_pairs = [pairs[i] for i in sorted(idx)]
+                adam.zero_grad()
+                loss = objective(step, batch_pairs)
+                if not torch.isfinite(loss):
+                    record(step, float(loss.detach()))
+                loss.backward()
+                adam.step()
+                record(step, float(loss.detach()))
+        else:
+            _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start)
+    finally:
+        if bar is not None:
+            bar.close()
+    checkpoint(cfg.iterations, time.perf_counter() - t_start)
+    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), history, lams, depths)
+    design.extra["wall_time_s"] = round(time.perf_counter() - t_start, 1)
+    design.extra["optimizer_time_s"] = history[-1][1] if history else 0.0
+    return design
+
+
+def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start):
+    import nlopt
+
+    algo = {"lbfgs": nlopt.LD_LBFGS, "mma": nlopt.LD_MMA}[name]
+    n = theta.numel()
+    opt = nlopt.opt(algo, n)
+    counter = {"step": step0}
+
+    def f(x, grad):
+        step = counter["step"]
+        with torch.no_grad():
+            theta.copy_(torch.from_numpy(np.array(x, copy=True).reshape(theta.shape)).to(theta.dtype))
+        theta.grad = None
+        loss = objective(min(step, iterations - 1))
+        if torch.isfinite(loss):
+            loss.backward()
+        if grad.size > 0:
+            grad[:] = theta.grad.detach().double().numpy().ravel() if theta.grad is not None else 0.0
+        record(step, float(loss.detach()))
+        counter["step"] += 1
+        return float(loss.detach())
+
+    opt.set_min_objective(f)
+    opt.set_maxeval(max(iterations - step0, 1))
+    if name == "mma":  # MMA needs bounds; θ is periodic, so a wide box is no constraint in practice
+        x0 = theta.detach().double().numpy().ravel()
+        opt.set_lower_bounds(x0 - 1e3)
+        opt.set_upper_bounds(x0 + 1e3)
+    try:
+        x = opt.optimize(theta.detach().double().numpy().ravel())
+    except nlopt.RoundoffLimited:
+        x = theta.detach().double().numpy().ravel()
+    with torch.no_grad():
+        theta.copy_(torch.from_numpy(x.reshape(theta.shape)).to(theta.dtype))
+
+
+def _finish(task_obj, cfg, cam, dcam, theta, history, lams, depths) -> Design:
+    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution."""
+    h_design = theta_to_height(theta, dcam).double().numpy()
+    if cfg.sampling > 1:
+        h_design = np.kron(h_design, np.ones((cfg.sampling, cfg.sampling)))
+    levels = finalize_levels(h_design, cam)
+    mask = _coded_mask(cam).numpy() > 0
+    height = np.where(mask, h_design, PLAIN_LEVEL * level_step(cam))
+    plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",))
+    with torch.no_grad():
+        psf_c = plan(height).coded
+        psf_q = plan(levels.astype(np.float64) * level_step(cam)).coded
+    mc, mq = task_obj.metric(psf_c, cam), task_obj.metric(psf_q, cam)
+    metrics = {
+        "name": task_obj.metric_name,
+        "continuous": mc["value"], "quantized": mq["value"],
+        "continuous_worst": mc["worst"], "quantized_worst": mq["worst"],
+        "per_entry_axes": ["depth", "wavelength"],
+        "per_entry": {"continuous": mc["per_entry"], "quantized": mq["per_entry"]},
+        "loss_kind": task_obj.loss_kind,
+    }
+    return Design(task=task_obj.name, task_params=task_obj.params(), camera=cam, wavelengths=tuple(lams),
+                  depths=tuple(depths), height=height, levels=levels, metrics=metrics, seed=cfg.seed,
+                  optimizer=cfg.optimizer, iterations=cfg.iterations, history=history,
+                  psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(),
+                  extra={"config": cfg.key()})

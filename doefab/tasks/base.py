@@ -1,0 +1,116 @@
+"""What every task declares, and the metric helpers shared by tasks, design, tolerance and reports.
+
+A task is a small object: the camera preset it designs for, the wavelengths / depths / kernel it needs
+(nothing more is computed), its target PSFs, its loss, its metric and a starting height map. The
+optimiser only talks to this interface, so a fourth task needs no change there.
+
+Every fraction is of all the light through the coded half (0.5 of the aperture's light), not of what
+falls inside the simulated window: light thrown outside the window counts as lost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from doefab.optics.camera import Camera
+
+__all__ = ["Task", "HALF_LIGHT", "RGB_WAVELENGTHS", "masked_fraction", "softmin"]
+
+HALF_LIGHT = 0.5
+RGB_WAVELENGTHS = (656e-9, 589e-9, 486e-9)
+
+
+def masked_fraction(psf: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Fraction of the coded half's light inside ``mask``: sum(psf · mask) / 0.5 over the last two axes."""
+    return (psf * mask).sum(dim=(-1, -2)) / HALF_LIGHT
+
+
+def softmin(x: torch.Tensor, temperature: float = 0.02) -> torch.Tensor:
+    """Smooth minimum of a 1-D tensor (→ min as temperature → 0)."""
+    return -temperature * torch.logsumexp(-x / temperature, dim=0) + temperature * math.log(x.numel())
+
+
+@dataclass
+class Task:
+    """Base class. Subclasses set ``name``, ``preset`` and implement the methods below.
+
+    Attributes:
+        kernel_size: K, sensor pixels of the simulated window.
+        loss_kind: which loss drives the design: ``"band"`` (1 − mean in-band fraction: Eq. 26 made
+            window-independent), ``"window"`` (band plus 1 − soft-min over bands/depths, which also lifts the
+            worst entry) or ``"l1"`` (the seed's L1 to the target scaled to sum 0.5).
+        focus_depth: design the PSF for a point at the camera's focus distance (True, default) or at
+            the depths the task lists explicitly.
+    """
+
+    kernel_size: int = 63
+    loss_kind: str = "band"
+    name: str = field(default="task", init=False)
+    preset: str = field(default="default", init=False)
+    metric_name: str = field(default="fraction", init=False)
+    # run defaults the CLI and optimize() use unless told otherwise (measured choices, see README)
+    default_iterations: int = field(default=200, init=False)
+    default_lr: float = field(default=0.02, init=False)
+    default_batch: int = field(default=0, init=False)
+
+    def bind(self, camera: Camera) -> None:
+        """Fix physical (metre) parameters from the camera the design is for, before any resampling."""
+
+    # --- what to compute ------------------------------------------------------------------------
+    def wavelengths(self, camera: Camera) -> tuple[float, ...]:
+        return RGB_WAVELENGTHS
+
+    def depths(self, camera: Camera) -> tuple[float, ...]:
+        return (camera.focus_distance,)
+
+    # --- what to aim for ------------------------------------------------------------------------
+    def targets(self, camera: Camera) -> torch.Tensor:
+        """(n_depths, n_wavelengths, K, K) target PSFs, each summing to 0.5."""
+        raise NotImplementedError
+
+    def band_masks(self, camera: Camera) -> torch.Tensor:
+        """(n_depths, n_wavelengths, K, K) 0/1 masks of the pixels that count for the metric."""
+        raise NotImplementedError
+
+    def fractions(self, psf: torch.Tensor, camera: Camera, depth_idx=None, wl_idx=None) -> torch.Tensor:
+        """(n_depths, n_wavelengths) fraction of the coded light inside the metric band."""
+        masks = self.band_masks(camera)
+        if depth_idx is not None:
+            masks = masks[list(depth_idx)]
+        if wl_idx is not None:
+            masks = masks[:, list(wl_idx)]
+        return masked_fraction(psf, masks.to(psf.dtype))
+
+    def loss(self, psf: torch.Tensor, camera: Camera, depth_idx=None, wl_idx=None) -> torch.Tensor:
+        """Scalar loss of a (subset of the) PSF stack."""
+        frac = self.fractions(psf, camera, depth_idx, wl_idx)
+        if self.loss_kind == "band":
+            return 1.0 - frac.mean()
+        if self.loss_kind == "window":
+            flat = frac.flatten()
+            return (1.0 - flat.mean()) + (1.0 - softmin(flat))
+        if self.loss_kind == "l1":
+            tg = self.targets(camera)
+            if depth_idx is not None:
+                tg = tg[list(depth_idx)]
+            if wl_idx is not None:
+                tg = tg[:, list(wl_idx)]
+            return (psf - tg.to(psf.dtype)).abs().sum(dim=(-1, -2)).mean()
+        raise ValueError(f"unknown loss_kind {self.loss_kind!r}")
+
+    def metric(self, psf: torch.Tensor, camera: Camera) -> dict:
+        """The task metric of a full PSF stack: mean and worst, plus per-entry lists."""
+        frac = self.fractions(psf.detach(), camera).double()
+        return {"value": float(frac.mean()), "worst": float(frac.min()), "per_entry": frac.tolist()}
+
+    def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
+        """(N, N) starting height map in metres."""
+        raise NotImplementedError
+
+    def params(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_") and not k.startswith("default_")
+                and k not in ("name", "preset", "metric_name")}

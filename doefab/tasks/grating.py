@@ -1,0 +1,80 @@
+"""Grating (hyperspectral) task, seed Eq. 21–22: one first-order spot per band."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from doefab.optics.camera import Camera
+from doefab.optics.elements import blazed_grating_height
+from doefab.tasks.base import HALF_LIGHT, Task
+
+__all__ = ["GratingTask", "grating_spot_px"]
+
+
+def grating_spot_px(camera: Camera, wavelength: float, period: float) -> float:
+    """Sensor position (pixels from the axis, +x) of the first order: s·tan(asin(λ/Λ)) / p (Eq. 21 erratum).
+
+    ``period`` Λ in metres.
+    """
+    return camera.sensor_distance * math.tan(math.asin(wavelength / period)) / camera.sensor_pitch
+
+
+@dataclass
+class GratingTask(Task):
+    """Spots at the grating's first order for 31 bands 400–700 nm, Λ = 16 DOE pixels.
+
+    The metric box for band λ is the 3 × 3 pixels around the pixel that holds the spot centre. Kernel:
+    the 700 nm spot lies 75 px off axis, so K = 191 keeps every box inside with margin. ``loss_kind``:
+    ``"window"`` (default: 1 − mean box fraction + (1 − soft-min over bands), which raises the worst band
+    too), ``"band"`` (1 − mean box fraction) or ``"l1"`` (seed Eq. 22, L1 to a Dirac per band — it can
+    lower the metric, see the README).
+    """
+
+    kernel_size: int = 191
+    period_pixels: float = 16.0
+    period_m: float | None = None  # set by bind(): period_pixels × the preset's DOE pitch
+    n_bands: int = 31
+    loss_kind: str = "window"
+    name: str = field(default="grating", init=False)
+    preset: str = field(default="hyperspectral", init=False)
+    metric_name: str = field(default="fraction of coded light in the 3x3 box of each band's first order", init=False)
+    default_iterations: int = field(default=500, init=False)
+    default_lr: float = field(default=0.01, init=False)
+    default_batch: int = field(default=6, init=False)
+
+    def wavelengths(self, camera: Camera) -> tuple[float, ...]:
+        return tuple(float(v) for v in np.linspace(400e-9, 700e-9, self.n_bands))
+
+    def spot_pixels(self, camera: Camera) -> list[int]:
+        """Column offset (pixels from the centre) of the pixel holding each band's spot centre."""
+        return [int(round(grating_spot_px(camera, lam, self.period(camera)))) for lam in self.wavelengths(camera)]
+
+    def bind(self, camera: Camera) -> None:
+        if self.period_m is None:
+            self.period_m = self.period_pixels * camera.doe_pitch
+
+    def period(self, camera: Camera) -> float:
+        """Grating period Λ in metres."""
+        return self.period_m if self.period_m is not None else self.period_pixels * camera.doe_pitch
+
+    def _masks(self, camera: Camera, width: int) -> torch.Tensor:
+        k, c = self.kernel_size, self.kernel_size // 2
+        out = torch.zeros(1, self.n_bands, k, k, dtype=torch.float64)
+        for w, off in enumerate(self.spot_pixels(camera)):
+            col = c + off
+            out[0, w, c - width:c + width + 1, col - width:col + width + 1] = 1.0
+        return out
+
+    def targets(self, camera: Camera) -> torch.Tensor:
+        return self._masks(camera, 0) * HALF_LIGHT
+
+    def band_masks(self, camera: Camera) -> torch.Tensor:
+        return self._masks(camera, 1)
+
+    def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
+        """The 16-pixel blazed grating (seed 4.4), blazed at the design wavelength."""
+        return blazed_grating_height(camera, self.period(camera) / camera.doe_pitch)

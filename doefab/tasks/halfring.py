@@ -1,0 +1,91 @@
+"""Half-ring (depth) task, seed Eq. 25–26: a semicircle whose radius encodes depth."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from doefab.optics.camera import Camera
+from doefab.tasks.base import HALF_LIGHT, Task
+
+__all__ = ["HalfRingTask"]
+
+
+@dataclass
+class HalfRingTask(Task):
+    """Semicircle of radius 25 − 5z pixels (z in metres) for points at 1–5 m in 0.25 m steps.
+
+    Choices: the semicircle opens toward +x (the arc lies on the x ≤ 0 side, ``side = -1``), the side of
+    the coded half, where a plain defocused half-aperture already puts its blur for near points; ``side``
+    flips it. K = 63 holds the largest ring (20 px at 1 m) with margin. The metric band is every pixel
+    within δ = 1 px of the arc (Eq. 26's mask complement). Loss: ``"window"`` by default (Eq. 26 made
+    window-independent, 1 − in-band fraction, so light thrown outside the window is penalised too, plus the
+    same for the worst depth through a soft minimum: Eq. 26's plain sum let the worst depth stay near 0).
+    """
+
+    kernel_size: int = 63
+    delta_px: float = 1.0
+    side: int = -1
+    z_min: float = 1.0
+    z_max: float = 5.0
+    z_step: float = 0.25
+    loss_kind: str = "window"
+    name: str = field(default="half-ring", init=False)
+    preset: str = field(default="depth", init=False)
+    metric_name: str = field(default="fraction of coded light within 1 px of the half-ring", init=False)
+    default_iterations: int = field(default=600, init=False)
+    default_lr: float = field(default=0.03, init=False)
+    default_batch: int = field(default=8, init=False)
+
+    def depths(self, camera: Camera) -> tuple[float, ...]:
+        n = int(round((self.z_max - self.z_min) / self.z_step)) + 1
+        return tuple(float(self.z_min + i * self.z_step) for i in range(n))
+
+    @staticmethod
+    def radius_px(z: float) -> float:
+        """Target ring radius in pixels at depth z (metres): 25 − 5z (seed Eq. 25)."""
+        return max(25.0 - 5.0 * z, 0.0)
+
+    def distance_to_arc(self, r: float) -> np.ndarray:
+        """(K, K) distance in pixels from each pixel centre to the semicircle of radius r."""
+        k, c = self.kernel_size, self.kernel_size // 2
+        i = np.arange(k) - c
+        x = i[None, :].astype(float)
+        y = -i[:, None].astype(float)
+        rho = np.hypot(x, y)
+        on_side = x * self.side >= 0
+        d_arc = np.abs(rho - r)
+        d_end = np.minimum(np.hypot(x, y - r), np.hypot(x, y + r))
+        return np.where(on_side, d_arc, d_end)
+
+    def band_masks(self, camera: Camera) -> torch.Tensor:
+        masks = [torch.from_numpy((self.distance_to_arc(self.radius_px(z)) <= self.delta_px + 1e-9).astype(float))
+                 for z in self.depths(camera)]
+        m = torch.stack(masks)[:, None]
+        return m.expand(-1, len(self.wavelengths(camera)), -1, -1)
+
+    def targets(self, camera: Camera) -> torch.Tensor:
+        tg = []
+        for z in self.depths(camera):
+            ring = (self.distance_to_arc(self.radius_px(z)) <= 0.5).astype(float)
+            tg.append(torch.from_numpy(ring * HALF_LIGHT / ring.sum()))
+        return torch.stack(tg)[:, None].expand(-1, len(self.wavelengths(camera)), -1, -1)
+
+    def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
+        """A weak diffractive lens that moves the coded half's focus to where the ring is a point (5 m).
+
+        With the camera focused at 3.5 m, the coded half needs extra power 1/3.5 − 1/5 m⁻¹ to be sharp at 5 m
+        (ring radius 0); at nearer depths it then blurs on the x ≤ 0 side as the target asks.
+        """
+        n, a = camera.doe_pixels, camera.doe_pitch
+        c = (np.arange(n) - (n - 1) / 2) * a
+        xx, yy = np.meshgrid(c, -c)
+        lam = camera.design_wavelength
+        z_point = 25.0 / 5.0
+        power = (0.0 if math.isinf(camera.focus_distance) else 1.0 / camera.focus_distance) - 1.0 / z_point
+        waves = -(xx**2 + yy**2) * power / (2 * lam)
+        waves = waves + rng.uniform(0, 0.02, size=(n, n))
+        return np.mod(waves, 1.0) * camera.material.height_2pi(lam)

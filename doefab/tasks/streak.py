@@ -1,0 +1,75 @@
+"""Streak (HDR) task, seed Eq. 16–18: a cross-shaped coded PSF through the kernel centre."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from doefab.optics.camera import Camera
+from doefab.tasks.base import HALF_LIGHT, Task
+
+__all__ = ["StreakTask"]
+
+
+@dataclass
+class StreakTask(Task):
+    """Cross of two streaks (row K//2 and column K//2) of half-length ``arm_px`` pixels.
+
+    Choices the seed leaves open: the streak length. The seed draws the cross across the whole kernel
+    (x = R/2, y = R/2); we keep arms of ``arm_px`` = 40 px by default (a 81-px cross, 0.44 mm), long enough to
+    spread a saturated highlight over many unsaturated pixels while the kernel stays small enough to design
+    at full resolution quickly. The metric band is the cross widened by 1 px each side (DESIGN: "within
+    1 px of the target cross"). ``loss_kind``: ``"band"`` (energy outside the band, default: it is the
+    metric) or ``"l1"`` (seed Eq. 18, L1 to the cross scaled to sum 0.5).
+    """
+
+    kernel_size: int = 95
+    arm_px: int = 40
+    band_px: int = 1
+    name: str = field(default="streak", init=False)
+    preset: str = field(default="hdr", init=False)
+    metric_name: str = field(default="fraction of coded light within 1 px of the cross", init=False)
+    default_iterations: int = field(default=60, init=False)
+    default_lr: float = field(default=0.02, init=False)
+    default_batch: int = field(default=0, init=False)
+
+    def _cross(self, width: int) -> torch.Tensor:
+        k, c = self.kernel_size, self.kernel_size // 2
+        i = torch.arange(k)
+        near = (i - c).abs() <= width
+        inside = (i - c).abs() <= self.arm_px + width
+        rows = near[:, None] & inside[None, :]
+        cols = inside[:, None] & near[None, :]
+        return (rows | cols).double()
+
+    def targets(self, camera: Camera) -> torch.Tensor:
+        ind = self._cross(0)
+        t = ind * (HALF_LIGHT / ind.sum())
+        return t.expand(1, len(self.wavelengths(camera)), -1, -1)
+
+    def band_masks(self, camera: Camera) -> torch.Tensor:
+        return self._cross(self.band_px).expand(1, len(self.wavelengths(camera)), -1, -1)
+
+    def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
+        """Two cylindrical lenses in interleaved horizontal stripes: one spreads light along x, one along y.
+
+        A quadratic phase in x alone turns a point into a line along x whose length is set by its power;
+        the arm length fixes that power (defocus giving a geometric half-length of ``arm_px`` pixels).
+        """
+        n, a = camera.doe_pixels, camera.doe_pitch
+        c = (np.arange(n) - (n - 1) / 2) * a
+        xx, yy = np.meshgrid(c, -c)
+        lam = camera.design_wavelength
+        h2pi = camera.material.height_2pi(lam)
+        half_len = self.arm_px * camera.sensor_pitch
+        radius = camera.aperture_diameter / 2
+        # geometric: a wavefront curvature 1/R gives a line half-length s·r_max/R; for x the coded half
+        # spans r ≤ D/2 in x and y; waves = r² / (2 R λ)
+        curv = half_len / (camera.sensor_distance * radius)
+        waves_x = xx**2 * curv / (2 * lam)
+        waves_y = yy**2 * curv / (2 * lam)
+        stripe = (np.floor((yy + radius) / (8 * a)) % 2 == 0)
+        waves = np.where(stripe, waves_x, waves_y) + rng.uniform(0, 0.02, size=(n, n))
+        return np.mod(waves, 1.0) * h2pi

@@ -1,0 +1,77 @@
+"""Each task's target checked against its definition (independent arithmetic, not the code's numbers)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.tasks import get_task
+
+
+def test_streak_target_is_a_cross_summing_to_half():
+    task = get_task("streak", kernel_size=31, arm_px=10)
+    cam = doefab.Camera.preset("hdr")
+    tg = task.targets(cam)[0, 0].numpy()
+    assert tg.sum() == pytest.approx(0.5)
+    on = np.argwhere(tg > 0)
+    c = 15
+    assert all((r == c and abs(col - c) <= 10) or (col == c and abs(r - c) <= 10) for r, col in on)
+    assert len(on) == 2 * 21 - 1
+    assert np.allclose(tg[tg > 0], 0.5 / 41)
+
+
+def test_grating_spots_follow_the_grating_equation():
+    task = get_task("grating")
+    cam = doefab.Camera.preset("hyperspectral")
+    task.bind(cam)
+    tg = task.targets(cam)[0].numpy()
+    lams = np.linspace(400e-9, 700e-9, 31)
+    assert tg.shape[0] == 31
+    for w, lam in enumerate(lams):
+        assert tg[w].sum() == pytest.approx(0.5)
+        r, col = np.argwhere(tg[w] > 0)[0]
+        expected = 0.05 * math.tan(math.asin(lam / (16 * 5.4e-6))) / 5.4e-6
+        assert r == task.kernel_size // 2
+        assert abs((col - task.kernel_size // 2) - expected) <= 0.5
+    # about one pixel per 10 nm (seed 4.4)
+    step = np.diff([np.argwhere(tg[w] > 0)[0][1] for w in range(31)])
+    assert 0.5 <= step.mean() <= 1.5
+
+
+def test_half_ring_radii_are_25_minus_5z():
+    task = get_task("half-ring")
+    cam = doefab.Camera.preset("depth")
+    depths = task.depths(cam)
+    assert len(depths) == 17 and depths[0] == 1.0 and depths[-1] == 5.0
+    tg = task.targets(cam)[:, 0].numpy()
+    c = task.kernel_size // 2
+    for d, z in enumerate(depths):
+        assert tg[d].sum() == pytest.approx(0.5)
+        pts = np.argwhere(tg[d] > 0)
+        x = pts[:, 1] - c
+        y = c - pts[:, 0]
+        r = 25 - 5 * z
+        assert np.all(np.abs(np.hypot(x, y) - r) <= 0.5 + 1e-9)
+        if r > 0:
+            assert np.all(x <= 0)  # the arc lies on the x <= 0 side: it opens toward +x
+            assert {(0, int(round(r))), (0, -int(round(r)))} <= set(zip(x.tolist(), y.tolist())) or r % 1
+        else:
+            assert pts.tolist() == [[c, c]]
+
+
+def test_metric_counts_light_outside_the_window_as_lost():
+    task = get_task("half-ring")
+    cam = doefab.Camera.preset("depth")
+    psf = task.targets(cam).clone() * 0.5  # half the coded light in the band, the rest "outside the window"
+    m = task.metric(psf, cam)
+    assert m["value"] == pytest.approx(0.5) and m["worst"] == pytest.approx(0.5)
+
+
+def test_unknown_task_and_bad_params():
+    with pytest.raises(DoefabError, match="unknown task"):
+        get_task("blur")
+    with pytest.raises(DoefabError, match="bad parameters"):
+        get_task("streak", arm=3)
