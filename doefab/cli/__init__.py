@@ -11,12 +11,12 @@ __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from doefab.cli import demo, design, psf
+    from doefab.cli import demo, design, masks, psf
 
     parser = argparse.ArgumentParser(prog="doefab", description=__doc__)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
-    for module in (demo, psf, design):
+    for module in (demo, psf, design, masks):
         module.register(sub)
     return parser
 

@@ -8,7 +8,6 @@ level range and checksum and refuses a corrupt or mismatched folder with the rea
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
@@ -19,18 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.levels import N_LEVELS, levels_to_height
+from doefab.fabrication.levels import N_LEVELS, levels_sha256, levels_to_height
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text
 from doefab.optics.camera import Camera
 
 __all__ = ["Design", "levels_sha256", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
-
-
-def levels_sha256(levels: np.ndarray) -> str:
-    """SHA-256 (hex) of the C-ordered uint8 level map."""
-    return hashlib.sha256(np.ascontiguousarray(levels, dtype=np.uint8).tobytes()).hexdigest()
 
 
 def _versions() -> dict:

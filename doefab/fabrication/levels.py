@@ -8,13 +8,16 @@ use these same functions.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import torch
 
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
-__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "wrap_height"]
+__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "wrap_height",
+           "levels_sha256"]
 
 N_LEVELS = 16
 
@@ -60,3 +63,8 @@ def levels_to_height(levels, camera: Camera, n_levels: int = N_LEVELS) -> np.nda
 def quantize_height(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
     """Height map rounded to the nearest of ``n_levels`` levels (float64 metres)."""
     return levels_to_height(quantize_levels(height, camera, n_levels), camera, n_levels)
+
+
+def levels_sha256(levels: np.ndarray) -> str:
+    """SHA-256 (hex) of the C-ordered uint8 level map (the checksum in design.json and manifest.json)."""
+    return hashlib.sha256(np.ascontiguousarray(levels, dtype=np.uint8).tobytes()).hexdigest()

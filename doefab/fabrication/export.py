@@ -1,0 +1,287 @@
+"""Export a 16-level design as 4 binary photomask layers with chrome, marks, manifest and previews.
+
+``export_masks`` writes into a staging folder, verifies everything by reading the files back, and only
+then moves the folder into place: no half-written mask set survives a failure.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+from doefab.fabrication.bitplanes import N_MASKS, bit_planes, plane_rectangles, validate_levels
+from doefab.fabrication.gdsii import GDSWriter
+from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LABEL_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
+                                       VERNIER_LAYER, etch_layer)
+from doefab.fabrication.levels import N_LEVELS, level_step, levels_sha256
+from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons
+from doefab.fabrication.verify import verify_mask_set, width_space_report
+from doefab.io import atomic_write_json, atomic_write_text, prepare_out_dir, staging_dir
+from doefab.optics.camera import Camera
+
+__all__ = ["MaskOptions", "export_masks"]
+
+
+@dataclass
+class MaskOptions:
+    """Mask-set options (SI units).
+
+    Attributes:
+        name: base name of the GDS/OASIS files.  oasis: also write OASIS (identical geometry).
+        die_m: die (plate pattern) size, square, metres.  cd_m: critical dimension (default: the pixel pitch).
+        vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
+        align_chain: ``"chrome"`` (every etch mask aligns to the chrome keys; errors don't accumulate) or
+            ``"sequential"`` (mask k aligns to the plate written before it).
+        etch_order: etch layers in process order (default deepest first: 4, 3, 2, 1).
+        resist: ``"positive"`` or ``"negative"``; sets the plate polarity stated in the manifest.
+        depth_tolerance: relative etch-depth tolerance stated to the fab.
+        use_klayout: verify with KLayout too (where installed).
+    """
+
+    name: str = "doe"
+    oasis: bool = False
+    die_m: float = 12e-3
+    cd_m: float | None = None
+    vertex_cap: int = 4000
+    align_chain: str = "chrome"
+    etch_order: tuple = (4, 3, 2, 1)
+    resist: str = "positive"
+    depth_tolerance: float = 0.03
+    use_klayout: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+def _nm(value_m: float, what: str) -> int:
+    v = value_m * 1e9
+    if abs(v - round(v)) > 1e-6 * max(1.0, abs(v)):
+        raise DoefabError(f"{what} = {value_m:g} m is not an integer number of nanometres (the 1 nm database unit): "
+                          f"the pixel edges would fall off the layout grid; use a pitch like 5.4e-6")
+    return int(round(v))
+
+
+def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptions | None = None,
+                 design_dir: str | Path | None = None, force: bool = False, progress: bool = True) -> dict:
+    """Write and verify a mask set for a (N, N) level map on ``camera``'s DOE grid.
+
+    Args:
+        levels: (N, N) integer levels 0..15 (row 0 = top, column 0 = left, x < 0 the coded half).
+        camera: gives the DOE pitch and grid, the design wavelength and the material.
+        out_dir: the mask-set folder (must not exist unless ``force``).
+        design_dir: the design folder it came from; its design.json and levels.npy are copied into
+            ``out_dir/design`` so the set can be re-verified and traced.
+    Returns:
+        The verification report (also in ``out_dir/report.json``).
+    """
+    opts = options or MaskOptions()
+    t0 = time.perf_counter()
+    lv = validate_levels(levels)
+    n = camera.doe_pixels
+    if lv.shape != (n, n):
+        raise DoefabError(f"level map shape {lv.shape} does not match the camera grid ({n}, {n}) at pitch "
+                          f"{camera.doe_pitch:g} m: wrong design or camera")
+    if opts.align_chain not in ("chrome", "sequential"):
+        raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
+    if sorted(opts.etch_order) != [etch_layer(b) for b in range(N_MASKS)]:
+        raise DoefabError(f"etch_order must be a permutation of layers 1..4, got {opts.etch_order!r}")
+    if opts.resist not in ("positive", "negative"):
+        raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
+    if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
+        raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
+    pitch_nm = _nm(camera.doe_pitch, "DOE pitch")
+    die_nm = _nm(opts.die_m, "die size")
+    cd_nm = _nm(opts.cd_m if opts.cd_m is not None else camera.doe_pitch, "critical dimension")
+    extent_nm = n * pitch_nm
+    if die_nm < extent_nm + 2 * 1_000_000:
+        raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
+                          f"pattern for marks: enlarge die_m")
+    out = prepare_out_dir(out_dir, force)
+    origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
+    planes = bit_planes(lv)
+    writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
+    layer_stats = {}
+    for bit in range(N_MASKS):
+        r = plane_rectangles(planes[bit])
+        x0 = origin_nm[0] + r[:, 0] * pitch_nm
+        x1 = origin_nm[0] + r[:, 2] * pitch_nm
+        y1 = origin_nm[1] - r[:, 1] * pitch_nm
+        y0 = origin_nm[1] - r[:, 3] * pitch_nm
+        writer.add_rectangles(np.stack([x0, y0, x1, y1], axis=1), etch_layer(bit))
+        layer_stats[etch_layer(bit)] = len(r)
+    spec = MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
+                    cd_nm=cd_nm)
+    order = list(opts.etch_order)
+    align_to = {}
+    for k, lay in enumerate(order):
+        plate = lay - etch_layer(0) + 1
+        prev = 0 if (opts.align_chain == "chrome" or k == 0) else order[k - 1] - etch_layer(0) + 1
+        align_to[plate] = prev
+    for big in chrome_polygons(spec, CHROME_LAYER) + mark_polygons(spec, align_to):
+        pieces = [big] if len(big.points) <= opts.vertex_cap else big.fracture(max_points=opts.vertex_cap,
+                                                                             precision=1e-3)
+        for poly in pieces:
+            writer.add_polygon(np.rint(poly.points).astype(np.int64), big.layer, big.datatype)
+    gds_bytes = writer.tobytes()
+    with staging_dir(out) as stage:
+        gds_name = f"{opts.name}.gds"
+        (stage / gds_name).write_bytes(gds_bytes)
+        files = {"gds": gds_name}
+        if opts.oasis:
+            import gdstk
+
+            lib = gdstk.read_gds(str(stage / gds_name))
+            lib.write_oas(str(stage / f"{opts.name}.oas"))
+            files["oasis"] = f"{opts.name}.oas"
+        design_sub = stage / "design"
+        design_sub.mkdir()
+        buf = io.BytesIO()
+        np.save(buf, lv)
+        (design_sub / "levels.npy").write_bytes(buf.getvalue())
+        if design_dir is not None and (Path(design_dir) / "design.json").is_file():
+            shutil.copy2(Path(design_dir) / "design.json", design_sub / "design.json")
+        manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
+        atomic_write_json(stage / "manifest.json", manifest)
+        report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout)
+        cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
+        report["width_space"] = {str(etch_layer(b)): width_space_report(planes[b], cd_px, camera.doe_pitch,
+                                                                        (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
+                                 for b in range(N_MASKS)}
+        for lay, nrect in layer_stats.items():
+            report["layers"][str(lay)]["rectangles_written"] = nrect
+        report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
+        report["export_seconds"] = round(time.perf_counter() - t0, 3)
+        _previews(stage, planes, lv, camera.doe_pitch)
+        atomic_write_text(stage / "README.txt", _fab_readme(manifest))
+        atomic_write_json(stage / "report.json", report)
+    return report
+
+
+def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
+    d = level_step(camera)
+    positive = opts.resist == "positive"
+    layers = []
+    for bit in range(N_MASKS):
+        lay = etch_layer(bit)
+        depth_nm = (1 << bit) * d * 1e9
+        plate = bit + 1
+        layers.append({
+            "layer": lay, "datatype": 0, "purpose": "etch", "bit": bit, "plate": plate,
+            "etch_depth_nm": round(depth_nm, 3),
+            "etch_depth_tolerance_nm": round(max(opts.depth_tolerance * depth_nm, 2.0), 3),
+            "critical_dimension_nm": cd_nm,
+            "polygons_mean": "pixels this mask etches (material removed): level = 15 − Σ 2^bit·etched",
+            "resist_tone": opts.resist,
+            "mask_polarity": ("dark field: the plate is clear (chrome removed) inside the polygons"
+                              if positive else "clear field: the plate carries chrome inside the polygons"),
+            "process_step": order.index(lay) + 2,
+            "aligns_to_plate": align_to[plate],
+            "marks": {"keys": [KEY_LAYER, plate], "verniers_cd_ladder": [VERNIER_LAYER, plate]},
+        })
+    layers.insert(0, {
+        "layer": CHROME_LAYER, "datatype": 0, "purpose": "chrome aperture", "plate": 0, "process_step": 1,
+        "polygons_mean": "chrome remains on the DOE (opaque baffle outside the clear aperture)",
+        "resist_tone": opts.resist,
+        "mask_polarity": ("clear field: the plate carries chrome inside the polygons" if positive else
+                          "dark field: the plate is clear inside the polygons"),
+        "critical_dimension_nm": 20_000, "aligns_to_plate": None,
+        "marks": {"keys": [KEY_LAYER, 0], "verniers_cd_ladder": [VERNIER_LAYER, 0]},
+    })
+    n = lv.shape[0]
+    return {
+        "format": "doefab mask set 1",
+        "files": files,
+        "database_unit_m": 1e-9, "user_unit_m": 1e-6,
+        "layers": layers,
+        "other_layers": [{"layer": k, "purpose": v} for k, v in LAYER_PURPOSES.items() if k != CHROME_LAYER]
+                        + [{"layer": OUTLINE_LAYER, "datatype": 0, "purpose": "die outline"}],
+        "plates": {str(p): ([CHROME_LAYER] if p == 0 else [etch_layer(p - 1)]) + [f"{KEY_LAYER}/{p}", f"{VERNIER_LAYER}/{p}"]
+                   for p in range(N_MASKS + 1)},
+        "process_order": [CHROME_LAYER] + list(order),
+        "alignment_chain": {str(k): v for k, v in align_to.items()},
+        "alignment_scheme": opts.align_chain,
+        "key_sites_m": {str(p): [[x * 1e-9, y * 1e-9] for x, y in key_site(MarkSpec(die_nm, 0, cd_nm), p)]
+                        for p in range(N_MASKS + 1)},
+        "pitch_m": pitch_nm * 1e-9,
+        "origin_m": [origin_nm[0] * 1e-9, origin_nm[1] * 1e-9],
+        "origin_means": "layout position of the top-left corner of level-map pixel [0, 0]; x right, y up",
+        "shape": [n, n], "row0": "top",
+        "die_m": die_nm * 1e-9,
+        "clear_aperture_diameter_m": camera.aperture_diameter,
+        "coded_half": "x < 0 (left columns of the level map)",
+        "design_wavelength_m": camera.design_wavelength,
+        "material": camera.material.to_dict(),
+        "refractive_index_at_design_wavelength": float(camera.material.index(camera.design_wavelength)),
+        "level_step_nm": round(d * 1e9, 4),
+        "level_to_height_nm": [round(k * d * 1e9, 3) for k in range(N_LEVELS)],
+        "height_means": "material above the deepest etch; level 15 = unetched surface",
+        "levels_sha256": levels_sha256(lv),
+        "vertex_cap": opts.vertex_cap,
+    }
+
+
+def _previews(stage: Path, planes: np.ndarray, lv: np.ndarray, pitch: float, size: int = 1000) -> None:
+    """PNG previews (Pillow; at most ``size`` px wide) of each etch layer and the composite, with a scale bar."""
+    from matplotlib import colormaps
+    from PIL import Image, ImageDraw
+
+    n = lv.shape[0]
+    step = max(1, int(np.ceil(n / size)))
+    px_m = pitch * step  # metres per preview pixel
+    bar_m = 10 ** np.floor(np.log10(n * pitch / 4))  # a round length, about a quarter of the width
+
+    def save(name: str, rgb: np.ndarray, title: str) -> None:
+        img = Image.fromarray(rgb)
+        pad = Image.new("RGB", (img.width, img.height + 40), "white")
+        pad.paste(img, (0, 40))
+        draw = ImageDraw.Draw(pad)
+        draw.text((6, 4), title, fill="black")
+        bar_px = int(round(bar_m / px_m))
+        y = pad.height - 20
+        draw.rectangle([20, y, 20 + bar_px, y + 6], fill="red")
+        draw.text((20, y - 14), f"{bar_m * 1e3:g} mm", fill="red")
+        buf = io.BytesIO()
+        pad.save(buf, format="PNG")
+        (stage / name).write_bytes(buf.getvalue())
+
+    for bit in range(N_MASKS):
+        g = (planes[bit][::step, ::step] * 255).astype(np.uint8)
+        save(f"preview_layer{etch_layer(bit)}.png", np.repeat(g[..., None], 3, axis=2),
+             f"layer {etch_layer(bit)}: white = etched {1 << bit}*d deep ({pitch * 1e6:g} um pixels, 1:{step})")
+    rgb = (colormaps["viridis"](lv[::step, ::step] / 15.0)[..., :3] * 255).astype(np.uint8)
+    save("preview_composite.png", rgb, "composite: level 0 (deepest, dark) ... 15 (unetched, yellow)")
+
+
+def _fab_readme(man: dict) -> str:
+    lines = [
+        "doefab mask set — instructions for the fab",
+        "",
+        f"Files: {', '.join(man['files'].values())} (GDSII, 1 nm database unit, 1 µm user unit), manifest.json "
+        "(machine-readable), preview_*.png, report.json (verification).",
+        f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
+        f"16 levels, step d = {man['level_step_nm']} nm.",
+        f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
+        f"{man['die_m'] * 1e3:g} mm; clear aperture {man['clear_aperture_diameter_m'] * 1e3:g} mm.",
+        "",
+        "Layers (one plate each; keys on layer 10 and verniers/CD ladder on layer 11 carry the plate number "
+        "as datatype and go on the same plate):",
+    ]
+    for L in man["layers"]:
+        depth = f", etch depth {L['etch_depth_nm']} nm ± {L['etch_depth_tolerance_nm']} nm" if "etch_depth_nm" in L else ""
+        lines.append(f"  layer {L['layer']} (plate {L['plate']}, step {L['process_step']}): {L['purpose']}{depth}; "
+                     f"{L['polygons_mean']}; {L['mask_polarity']} for {L['resist_tone']} resist; aligns to plate "
+                     f"{L['aligns_to_plate']}.")
+    lines += [
+        "",
+        f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
+        "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
+        "keys of the plate it aligns to and carries its own cross).",
+        "Level k = 15 − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
+        "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
+    ]
+    return "\n".join(lines) + "\n"

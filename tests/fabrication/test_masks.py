@@ -1,0 +1,152 @@
+import json
+
+import gdstk
+import numpy as np
+import pytest
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.fabrication.bitplanes import (bit_planes, levels_from_planes, plane_rectangles, rasterize_manhattan,
+                                          rasterize_rectangles)
+from doefab.fabrication.export import MaskOptions, export_masks
+from doefab.fabrication.gdsii import gds_real8
+from doefab.fabrication.verify import verify_mask_set
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100)
+
+
+def test_gds_real8_known_values():
+    # GDSII reals from the format spec: 1.0 = 0x41 10 00..., 1e-3 and 1e-9 as every GDS UNITS record holds
+    assert gds_real8(1.0) == bytes.fromhex("4110000000000000")
+    assert gds_real8(1e-3) == bytes.fromhex("3e4189374bc6a7f0")
+    assert gds_real8(1e-9) == bytes.fromhex("3944b82fa09b5a54")
+
+
+def test_hand_made_4x4_polygons_exact(cam, tmp_path):
+    lv = np.full((100, 100), 15, np.uint8)
+    lv[:4, :4] = np.array([[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11], [12, 13, 14, 15]])
+    planes = bit_planes(lv)
+    # bit 3 of (15 - level) is set for levels 0..7: the top two rows of the block
+    assert plane_rectangles(planes[3]).tolist() == [[0, 0, 4, 2]]
+    # bit 0 set for even levels: columns 0 and 2 of the 4x4 block, all four rows
+    assert sorted(plane_rectangles(planes[0]).tolist()) == [[0, 0, 1, 4], [2, 0, 3, 4]]
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    pitch, (x0, y0) = 5400, man["origin_m"]
+    x0, y0 = round(x0 * 1e9), round(y0 * 1e9)
+    polys = lib.top_level()[0].get_polygons(layer=4, datatype=0)
+    assert len(polys) == 1
+    pts = sorted(map(tuple, np.rint(polys[0].points * 1000).astype(int).tolist()))  # user unit µm -> nm
+    assert pts == sorted([(x0, y0), (x0 + 4 * pitch, y0), (x0 + 4 * pitch, y0 - 2 * pitch), (x0, y0 - 2 * pitch)])
+    assert lib.unit == pytest.approx(1e-6) and lib.precision == pytest.approx(1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_random_round_trip_zero_mismatches(cam, tmp_path, seed):
+    rng = np.random.default_rng(seed)
+    lv = rng.integers(0, 16, (100, 100)).astype(np.uint8)
+    rep = export_masks(lv, cam, tmp_path / "m", MaskOptions(oasis=True))
+    for st in rep["layers"].values():
+        assert st["mismatched_pixels_gdstk"] == 0 and st["max_vertices"] <= 4000
+    assert rep["levels_reproduced"] and rep["marks_present"]
+    assert rep["klayout"]["checked"] and all(v["oasis_identical"] for v in rep["klayout"]["layers"].values())
+    assert verify_mask_set(tmp_path / "m")["levels_reproduced"]
+    for name in ("manifest.json", "README.txt", "preview_composite.png", "preview_layer1.png", "doe.oas"):
+        assert (tmp_path / "m" / name).stat().st_size > 0
+
+
+def test_rectangles_and_manhattan_raster_agree():
+    rng = np.random.default_rng(3)
+    plane = rng.random((37, 53)) > 0.6
+    rects = plane_rectangles(plane)
+    assert np.array_equal(rasterize_rectangles(rects, plane.shape), plane.astype(int))
+    # the same rectangles as polygons (x = column, y = row), in both orientations, through the rasteriser
+    pts = np.concatenate([[[c0, r0], [c1, r0], [c1, r1], [c0, r1]][::(1 if i % 2 else -1)]
+                          for i, (c0, r0, c1, r1) in enumerate(rects)])
+    idx = np.repeat(np.arange(len(rects)), 4)
+    assert np.array_equal(rasterize_manhattan(pts, idx, plane.shape), plane.astype(int))
+    # a keyhole polygon (square with a hole joined by a cut) rasterises to a ring
+    ring = np.array([[0, 0], [6, 0], [6, 6], [0, 6], [0, 3], [2, 3], [2, 4], [4, 4], [4, 2], [2, 2], [2, 3], [0, 3]])
+    r = rasterize_manhattan(ring, np.zeros(len(ring), int), (6, 6))
+    expect = np.ones((6, 6), int)
+    expect[2:4, 2:4] = 0
+    assert np.array_equal(r, expect)
+
+
+def test_levels_sum_reproduces_map():
+    lv = np.arange(16, dtype=np.uint8).reshape(4, 4)
+    assert np.array_equal(levels_from_planes(bit_planes(lv)), lv)
+
+
+def test_vertex_cap_on_checkerboard(cam, tmp_path):
+    lv = np.where((np.indices((100, 100)).sum(0) % 2) == 0, 0, 15).astype(np.uint8)
+    rep = export_masks(lv, cam, tmp_path / "m", MaskOptions(vertex_cap=8, use_klayout=False))
+    assert all(st["max_vertices"] <= 8 for st in rep["layers"].values())
+    lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
+    assert max(len(p.points) for p in lib.top_level()[0].polygons) <= 8  # the chrome circle was fractured too
+    assert rep["width_space"]["1"]["isolated_single_pixels"] == 5000
+
+
+def test_manifest_fields(cam, tmp_path):
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False, align_chain="sequential"))
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    etch = [L for L in man["layers"] if L["purpose"] == "etch"]
+    assert [L["layer"] for L in etch] == [1, 2, 3, 4] and [L["bit"] for L in etch] == [0, 1, 2, 3]
+    d = doefab.level_step(cam) * 1e9
+    assert [L["etch_depth_nm"] for L in etch] == pytest.approx([d, 2 * d, 4 * d, 8 * d], abs=1e-3)
+    assert man["pitch_m"] == pytest.approx(5.4e-6) and man["shape"] == [100, 100] and man["row0"] == "top"
+    assert man["origin_m"] == pytest.approx([-270e-6, 270e-6])
+    assert man["process_order"] == [5, 4, 3, 2, 1]
+    assert man["alignment_chain"] == {"4": 0, "3": 4, "2": 3, "1": 2}
+    assert man["level_to_height_nm"][15] == pytest.approx(15 * d, abs=1e-3)
+    assert all("mask_polarity" in L and "resist_tone" in L for L in man["layers"])
+
+
+@pytest.mark.parametrize("bad, msg", [
+    (np.full((100, 100), 16), "0..15"),
+    (np.full((100, 100), -1), "0..15"),
+    (np.full((100, 100), 2.5), "non-integer"),
+    (np.full((100, 100), np.nan), "NaN"),
+    (np.zeros((99, 100), np.uint8), "does not match the camera grid"),
+])
+def test_bad_levels(cam, tmp_path, bad, msg):
+    with pytest.raises(DoefabError, match=msg):
+        export_masks(bad, cam, tmp_path / "m")
+    assert not (tmp_path / "m").exists()
+
+
+def test_bad_pitch_existing_output_and_no_half_written_set(cam, tmp_path, monkeypatch):
+    lv = np.zeros((100, 100), np.uint8)
+    with pytest.raises(DoefabError, match="not an integer number of nanometres"):
+        export_masks(lv, cam.replace(doe_pitch=5.4003e-6), tmp_path / "m")
+    (tmp_path / "m").mkdir()
+    (tmp_path / "m" / "x").write_text("keep")
+    with pytest.raises(DoefabError, match="already exists"):
+        export_masks(lv, cam, tmp_path / "m")
+    # a failure during verification leaves the old folder untouched and no staging debris
+    import doefab.fabrication.export as ex
+
+    def boom(*a, **k):
+        raise DoefabError("injected verification failure")
+
+    monkeypatch.setattr(ex, "verify_mask_set", boom)
+    with pytest.raises(DoefabError, match="injected"):
+        export_masks(lv, cam, tmp_path / "m", force=True)
+    assert (tmp_path / "m" / "x").read_text() == "keep"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
+
+
+def test_tampered_gds_fails_verification(cam, tmp_path):
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
+    cell = lib.top_level()[0]
+    cell.add(gdstk.rectangle((0, 0), (5.4, 5.4), layer=2))  # one extra pixel on layer 2 (µm)
+    lib.write_gds(str(tmp_path / "m" / "doe.gds"))
+    with pytest.raises(DoefabError, match="layer 2"):
+        verify_mask_set(tmp_path / "m", use_klayout=False)
