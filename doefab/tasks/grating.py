@@ -42,9 +42,9 @@ class GratingTask(Task):
     name: str = field(default="grating", init=False)
     preset: str = field(default="hyperspectral", init=False)
     metric_name: str = field(default="fraction of coded light in the 3x3 box of each band's first order", init=False)
-    default_iterations: int = field(default=500, init=False)
+    default_iterations: int = field(default=300, init=False)
     default_lr: float = field(default=0.01, init=False)
-    default_batch: int = field(default=6, init=False)
+    default_batch: int = field(default=8, init=False)
 
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
         return tuple(float(v) for v in np.linspace(400e-9, 700e-9, self.n_bands))

@@ -1,0 +1,118 @@
+"""Build, check and write the holder: STL/3MF (mesh path), STEP (cadquery path, when installed), renders, JSON."""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from holder_cad.checks import run_checks
+from holder_cad.mesh import build_manifold, to_trimesh
+from holder_cad.params import HolderError, HolderParams
+from holder_cad.recipe import base_body, cartridge_body, coupon_bodies
+
+__all__ = ["build_parts", "assembly", "write_holder", "HolderCheckError"]
+
+
+class HolderCheckError(HolderError):
+    """A built holder failed one of its checks (the report says which)."""
+
+
+def build_parts(p: HolderParams) -> dict:
+    """Manifolds of the base and the cartridge, each in its print orientation (on the bed at z = 0)."""
+    return {"base": build_manifold(base_body(p), p.segments), "cartridge": build_manifold(cartridge_body(p), p.segments)}
+
+
+def assembly(parts: dict, p: HolderParams) -> list:
+    """Both bodies in use position: lens side at z = 0, optical axis = z, scene toward +z."""
+    base, cart = parts["base"], parts["cartridge"]
+    top_c = cart.bounding_box()[5]
+    if p.mount == "thread":
+        base_use = base
+        seat = p.base_height_mm
+    else:  # the slip-fit base prints plate-down: flip it so the plate's lens face is at z = 0
+        base_use = base.rotate((180.0, 0.0, 0.0)).translate((0.0, 0.0, p.flange_height_mm))
+        seat = p.flange_height_mm
+    cart_use = cart.rotate((180.0, 0.0, 0.0)).translate((0.0, 0.0, seat + p.cartridge_flange_mm))
+    del top_c
+    return [base_use, cart_use]
+
+
+def _layout_for_print(manifolds: list, gap: float = 5.0) -> list:
+    """Place bodies side by side along x on the bed."""
+    out, x = [], 0.0
+    for m in manifolds:
+        b = m.bounding_box()
+        out.append(m.translate((x - b[0], -0.5 * (b[1] + b[4]), -b[2])))
+        x += (b[3] - b[0]) + gap
+    return out
+
+
+def _export_mesh(manifolds: list, path: Path, fmt: str) -> None:
+    import trimesh
+
+    from doefab.io import atomic_write_bytes
+
+    mesh = trimesh.util.concatenate([to_trimesh(m) for m in manifolds])
+    atomic_write_bytes(path, mesh.export(file_type=fmt))
+
+
+def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None, renders: bool = True) -> dict:
+    """Build, check and write every output; raise HolderCheckError (after writing holder.json) on a failed check."""
+    from doefab.io import atomic_write_json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    parts = build_parts(p)
+    asm = assembly(parts, p)
+    checks = run_checks(parts, asm, p, expected_bodies=2)
+    t_mesh = time.perf_counter() - t0
+    printed = _layout_for_print([parts["base"], parts["cartridge"]])
+    _export_mesh(printed, out / "holder.stl", "stl")
+    _export_mesh(printed, out / "holder.3mf", "3mf")
+    coupon = {b.name: build_manifold(b, p.segments) for b in coupon_bodies(p)}
+    coupon_checks = run_checks(coupon, [], p, expected_bodies=2)
+    _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")
+    report = {"units": "mm", "parameters": p.to_dict(), "checks": checks, "coupon_checks": coupon_checks,
+              "doe_to_lens_mm": round(p.doe_to_lens_mm, 3), "mesh_seconds": round(t_mesh, 3),
+              "files": ["holder.stl", "holder.3mf", "coupon.stl"]}
+    if step is None:
+        try:
+            import cadquery  # noqa: F401
+
+            step = True
+        except ImportError:
+            step = False
+    if step:
+        from holder_cad.brep import build_brep, export_step
+
+        t1 = time.perf_counter()
+        solids = build_brep(p)
+        export_step(solids, out / "holder.step")
+        report["files"].append("holder.step")
+        report["step_seconds"] = round(time.perf_counter() - t1, 3)
+        report["brep_vs_mesh"] = {name: {"volume_mm3": round(s.Volume(), 3),
+                                         "volume_rel_diff": abs(s.Volume() - parts[name].volume()) / parts[name].volume(),
+                                         "bbox_max_diff_mm": float(np.max(np.abs(
+                                             np.array(_bbox(s)) - np.array(parts[name].bounding_box()))))}
+                                  for name, s in solids.items()}
+        ok = all(v["volume_rel_diff"] <= 0.01 and v["bbox_max_diff_mm"] <= 0.05 for v in report["brep_vs_mesh"].values())
+        checks["brep_agrees"] = ok
+        checks["passed"] &= ok
+    if renders:
+        from holder_cad.render import render_views
+
+        report["files"] += render_views(p, out)
+    atomic_write_json(out / "holder.json", report)
+    if not (checks["passed"] and coupon_checks["passed"]):
+        raise HolderCheckError(f"holder checks failed: see {out / 'holder.json'}")
+    return report
+
+
+def _bbox(solid) -> tuple:
+    bb = solid.BoundingBox()
+    return (bb.xmin, bb.ymin, bb.zmin, bb.xmax, bb.ymax, bb.zmax)

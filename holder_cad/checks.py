@@ -1,0 +1,157 @@
+"""Checks on the built meshes (all reported in holder.json; any failure fails the command).
+
+watertight and a valid volume (trimesh ``is_volume``), the declared number of bodies, manifold3d status
+NoError, minimum wall thickness measured on the mesh by ray casting (thread teeth excluded), die-to-pocket
+gap from a section at mid-pocket height, clear aperture unobstructed (axial rays through the aperture disk
+hit nothing in the assembly), and the overhang area beyond 45° in print orientation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from holder_cad.params import HolderParams
+from holder_cad.recipe import die_outline
+
+__all__ = ["wall_thickness", "overhang_area", "pocket_gap", "aperture_clear", "run_checks"]
+
+OVERHANG_LIMIT_DEG = 45.0
+ANGLE_TOLERANCE_DEG = 0.5
+
+
+def wall_thickness(manifold, exclude=None, samples: int = 4000, seed: int = 0, where: list | None = None) -> float:
+    """Smallest material thickness (mm) along inward face normals, over area-weighted sample faces.
+
+    Args:
+        exclude: optional function (centroids (N, 3)) -> bool mask of faces to skip (e.g. thread teeth).
+        where: if given, receives the (x, y, z) of the thinnest sample.
+    """
+    mesh = manifold.to_mesh()
+    v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
+    f = np.asarray(mesh.tri_verts, np.int64)
+    tri = v[f]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(cross, axis=1) / 2
+    ok = area > 1e-9
+    normal = np.zeros_like(cross)
+    normal[ok] = cross[ok] / (2 * area[ok])[:, None]
+    cent = tri.mean(axis=1)
+    if exclude is not None:
+        ok &= ~exclude(cent)
+    idx = np.flatnonzero(ok)
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(idx, size=min(samples, idx.size), replace=False, p=area[idx] / area[idx].sum())
+    eps = 1e-4
+    best = math.inf
+    for i in pick:
+        o = cent[i] - eps * normal[i]
+        hits = manifold.ray_cast(tuple(o), tuple(o - 100.0 * normal[i]))
+        if hits and hits[0].distance * 100.0 + eps < best:
+            best = hits[0].distance * 100.0 + eps
+            if where is not None:
+                where[:] = [round(float(x), 3) for x in cent[i]]
+    return best
+
+
+def overhang_area(manifold, limit_deg: float = OVERHANG_LIMIT_DEG) -> float:
+    """Area (mm²) of downward faces steeper than ``limit_deg`` from vertical, excluding the bed (z = min)."""
+    mesh = manifold.to_mesh()
+    v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
+    tri = v[np.asarray(mesh.tri_verts, np.int64)]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(cross, axis=1) / 2
+    nz = np.divide(cross[:, 2], 2 * area, out=np.zeros_like(area), where=area > 0)
+    zmin = v[:, 2].min()
+    on_bed = np.all(np.abs(tri[:, :, 2] - zmin) < 1e-6, axis=1)
+    steep = nz < -math.sin(math.radians(limit_deg + ANGLE_TOLERANCE_DEG))
+    return float(area[steep & ~on_bed].sum())
+
+
+def pocket_gap(cartridge, p: HolderParams, z_mid: float) -> float:
+    """Smallest gap (mm) between the die outline and the cartridge section at height ``z_mid``."""
+    from manifold3d import CrossSection
+
+    section = cartridge.slice(z_mid)
+    die = CrossSection([die_outline(p).tolist()])
+    lo, hi = 0.0, 5.0
+    if (die ^ section).area() > 1e-9:
+        return 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if (die.offset(mid, _join("Miter")) ^ section).area() > 1e-9:
+            hi = mid
+        else:
+            lo = mid
+    return lo
+
+
+def _join(name):
+    from manifold3d import JoinType
+
+    return getattr(JoinType, name)
+
+
+def aperture_clear(assembly_parts, radius_mm: float, rings: int = 12) -> int:
+    """Number of axial rays through the aperture disk (radius_mm) that hit the assembly (0 = unobstructed)."""
+    hits = 0
+    zs = [m.bounding_box() for m in assembly_parts]
+    z0 = min(b[2] for b in zs) - 10
+    z1 = max(b[5] for b in zs) + 10
+    pts = [(0.0, 0.0)]
+    for k in range(1, rings + 1):
+        r = radius_mm * k / rings
+        n = 6 * k
+        pts += [(r * math.cos(2 * math.pi * j / n), r * math.sin(2 * math.pi * j / n)) for j in range(n)]
+    for x, y in pts:
+        for m in assembly_parts:
+            if m.ray_cast((x, y, z0), (x, y, z1)):
+                hits += 1
+    return hits
+
+
+def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: int) -> dict:
+    """All checks; ``parts`` maps body name -> Manifold in print orientation."""
+    from holder_cad.mesh import to_trimesh
+
+    out: dict = {"bodies": {}, "passed": True}
+    n_bodies = 0
+    for name, m in parts.items():
+        tm = to_trimesh(m)
+        comps = len(m.decompose())
+        n_bodies += comps
+        exclude = None
+        if name in ("base", "coupon_ring") and p.mount == "thread":
+            r_root, t = p.thread_root_radius_mm, p.thread_length_mm
+
+            def exclude(c, r_root=r_root, t=t):  # thread teeth are not walls (0.3 mm by design)
+                return (np.hypot(c[:, 0], c[:, 1]) > r_root - 0.05) & (c[:, 2] < t + 0.05)
+
+        loc: list = []
+        wall = wall_thickness(m, exclude, where=loc)
+        oh = overhang_area(m)
+        entry = {"status": str(m.status()).split(".")[-1], "watertight": bool(tm.is_watertight),
+                 "is_volume": bool(tm.is_volume), "volume_mm3": round(float(m.volume()), 3), "bodies": comps,
+                 "min_wall_mm": round(wall, 3), "min_wall_at_mm": loc, "overhang_area_beyond_45deg_mm2": round(oh, 3),
+                 "bounding_box_mm": [round(float(x), 4) for x in m.bounding_box()]}
+        entry["ok"] = (entry["status"] == "NoError" and entry["watertight"] and entry["is_volume"]
+                       and wall >= p.wall_mm - 1e-6 and oh == 0.0)
+        out["bodies"][name] = entry
+        out["passed"] &= entry["ok"]
+    out["total_bodies"] = n_bodies
+    out["declared_bodies"] = expected_bodies
+    out["passed"] &= n_bodies == expected_bodies
+    if "cartridge" in parts:
+        c = parts["cartridge"]
+        top = c.bounding_box()[5]
+        z_mid = top - p.washer_recess_mm - p.die_thickness_mm / 2
+        gap = pocket_gap(c, p, z_mid)
+        out["die_to_pocket_gap_mm"] = round(gap, 4)
+        out["passed"] &= gap >= p.clearance_mm - 1e-3
+    if assembly:
+        blocked = aperture_clear(assembly, p.clear_aperture_mm / 2)
+        out["aperture_rays_blocked"] = blocked
+        out["passed"] &= blocked == 0
+    out["doe_to_lens_mm"] = round(p.doe_to_lens_mm, 3)
+    return out

@@ -1,0 +1,175 @@
+"""Holder parameters. Units: millimetres (the CAD convention) — every length field ends in ``_mm``.
+
+The part is two bodies printed separately, each flat on the bed and support-free:
+- the **base ring**: a male filter thread (default M49 × 0.75, 45° flanks so every overhang is ≤ 45°) or a
+  slip-fit sleeve, a 45°-chamfered flange, a cylindrical bore for the cartridge, four M2 pilot holes and
+  10° graduation notches on its rim;
+- the **cartridge**: a flange that rests on the base and a body that reaches down the bore to the lens side,
+  holding the fused-silica die in a keyed pocket (one chamfered die corner: the die fits one way only, not
+  rotated, not flipped), with a clear aperture, two M2 retention screws whose washers overlap the die edge,
+  two 100° arc slots centred on ±x (any rotation can be locked on the base's pilot holes: the thread's
+  start angle does not matter) and two index notches at ±y, on the split-line direction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+__all__ = ["HolderParams", "HolderError"]
+
+
+class HolderError(ValueError):
+    """Impossible or unprintable holder parameters (the message names the parameters)."""
+
+
+@dataclass(frozen=True)
+class HolderParams:
+    """All dimensions in millimetres.
+
+    Attributes:
+        mount: ``"thread"`` (male filter thread into the lens) or ``"slip"`` (sleeve over the front barrel).
+        thread_diameter_mm: nominal filter thread diameter (49 for the Canon EF 50 mm f/1.8 STM).
+        thread_pitch_mm: thread pitch (0.75).  thread_depth_mm: tooth height (0.3; 45° flanks).
+        thread_length_mm: engaged thread length (2.5).
+        barrel_diameter_mm: outer diameter of the lens front barrel (slip fit only).
+        sleeve_length_mm: slip-fit sleeve length.
+        lens_face_to_glass_mm: from the lens's filter face (or barrel front) to the front glass vertex; the
+            DOE-to-lens distance follows from it (measure your lens; 3.5 is an estimate for the EF 50/1.8 STM).
+        die_width_mm, die_height_mm, die_thickness_mm: the fused-silica die (12 × 12 × 1 fits the 8.64 mm
+            aperture and the mask set's marks).  die_chamfer_mm: the keyed die corner (top-left, coded side).
+        clear_aperture_mm: DOE clear aperture (8.64).  aperture_margin_mm: extra radius of the hole.
+        clearance_mm: fit clearance per side (die in pocket, cartridge in bore, thread).
+        wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
+        flange_diameter_mm: outer diameter of both flanges.  flange_height_mm, cartridge_flange_mm: heights.
+        screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
+        washer_diameter_mm, washer_recess_mm: retention washers (recessed so nothing protrudes to the lens).
+        segments: facets of a full circle (mesh path).
+    """
+
+    mount: str = "thread"
+    thread_diameter_mm: float = 49.0
+    thread_pitch_mm: float = 0.75
+    thread_depth_mm: float = 0.3
+    thread_length_mm: float = 2.5
+    barrel_diameter_mm: float = 56.0
+    sleeve_length_mm: float = 8.0
+    lens_face_to_glass_mm: float = 3.5
+    die_width_mm: float = 12.0
+    die_height_mm: float = 12.0
+    die_thickness_mm: float = 1.0
+    die_chamfer_mm: float = 1.5
+    clear_aperture_mm: float = 8.64
+    aperture_margin_mm: float = 0.3
+    clearance_mm: float = 0.25
+    wall_mm: float = 1.2
+    nozzle_mm: float = 0.4
+    flange_diameter_mm: float = 57.0
+    flange_height_mm: float = 6.0
+    cartridge_flange_mm: float = 2.4
+    screw_clearance_mm: float = 2.4
+    pilot_hole_mm: float = 1.7
+    washer_diameter_mm: float = 5.0
+    washer_recess_mm: float = 0.6
+    segments: int = 256
+
+    def __post_init__(self) -> None:
+        errs = []
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name.endswith("_mm") and (not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
+                errs.append(f"{f.name} must be a positive length in mm, got {v!r}")
+        if errs:
+            raise HolderError("; ".join(errs))
+        if self.mount not in ("thread", "slip"):
+            raise HolderError(f"mount must be 'thread' or 'slip', got {self.mount!r}")
+        if self.wall_mm < self.nozzle_mm:
+            raise HolderError(f"wall_mm ({self.wall_mm}) is below nozzle_mm ({self.nozzle_mm}): a printer cannot "
+                              f"make walls thinner than one line; raise wall_mm")
+        if self.clear_aperture_mm + 2 * self.aperture_margin_mm >= min(self.die_width_mm, self.die_height_mm) - 2 * self.wall_mm:
+            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm}) + margins does not fit inside the die "
+                              f"({self.die_width_mm} × {self.die_height_mm} mm) with a {self.wall_mm} mm ledge: use "
+                              f"a larger die or a smaller aperture")
+        if self.die_chamfer_mm >= 0.5 * min(self.die_width_mm, self.die_height_mm):
+            raise HolderError("die_chamfer_mm must be less than half the die side")
+        if self.thread_depth_mm * 2 >= self.thread_pitch_mm:
+            raise HolderError(f"thread_depth_mm ({self.thread_depth_mm}) is too deep for thread_pitch_mm "
+                              f"({self.thread_pitch_mm}) with 45° flanks: depth must be < pitch / 2")
+        if self.segments < 32:
+            raise HolderError("segments must be ≥ 32")
+        # the cartridge body must hold the die pocket with walls around it
+        if self.die_diagonal_mm / 2 + self.clearance_mm + self.wall_mm > self.cartridge_radius_mm:
+            raise HolderError(f"the die ({self.die_width_mm} × {self.die_height_mm} mm) does not fit the cartridge "
+                              f"(radius {self.cartridge_radius_mm:.2f} mm) with clearance_mm and wall_mm: use a "
+                              f"larger thread/barrel or a smaller die")
+        if self.bore_radius_mm + self.wall_mm + self.pilot_hole_mm / 2 + self.wall_mm > self.flange_diameter_mm / 2 - self.wall_mm:
+            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) leaves no room for the pilot holes "
+                              f"with wall_mm around them: enlarge the flange")
+        if self.mount == "thread" and self.flange_diameter_mm / 2 <= self.thread_major_radius_mm + self.wall_mm:
+            raise HolderError("flange_diameter_mm must exceed the thread diameter by 2 × wall_mm")
+        if self.mount == "thread" and self.chamfer_height_mm + self.wall_mm > self.flange_height_mm:
+            raise HolderError(f"flange_height_mm ({self.flange_height_mm}) is too low for the 45° chamfer "
+                              f"({self.chamfer_height_mm:.2f} mm) plus wall_mm")
+        if self.doe_to_lens_mm < 0.2:
+            raise HolderError(f"the DOE would sit {self.doe_to_lens_mm:.2f} mm from the lens glass (< 0.2 mm): "
+                              f"shorten thread_length_mm or check lens_face_to_glass_mm")
+
+    # ---- derived dimensions (mm) --------------------------------------------------------------
+    @property
+    def thread_major_radius_mm(self) -> float:
+        return self.thread_diameter_mm / 2 - self.clearance_mm
+
+    @property
+    def thread_root_radius_mm(self) -> float:
+        return self.thread_major_radius_mm - self.thread_depth_mm
+
+    @property
+    def bore_radius_mm(self) -> float:
+        """Radius of the base's cylindrical bore (the cartridge seat)."""
+        if self.mount == "thread":
+            return self.thread_root_radius_mm - self.wall_mm
+        return self.barrel_diameter_mm / 2 - self.wall_mm - 3.0  # the top plate's opening
+
+    @property
+    def cartridge_radius_mm(self) -> float:
+        return self.bore_radius_mm - self.clearance_mm
+
+    @property
+    def die_diagonal_mm(self) -> float:
+        return math.hypot(self.die_width_mm, self.die_height_mm)
+
+    @property
+    def chamfer_height_mm(self) -> float:
+        return self.flange_diameter_mm / 2 - self.thread_major_radius_mm
+
+    @property
+    def base_height_mm(self) -> float:
+        if self.mount == "thread":
+            return self.thread_length_mm + self.flange_height_mm
+        return self.sleeve_length_mm + self.flange_height_mm
+
+    @property
+    def lens_side_length_mm(self) -> float:
+        """How far the part reaches beyond the lens's filter face toward the glass."""
+        return self.thread_length_mm if self.mount == "thread" else 0.0
+
+    @property
+    def doe_to_lens_mm(self) -> float:
+        """Distance from the DOE's patterned face to the lens glass vertex.
+
+        The DOE face sits ``washer_recess_mm`` inside the cartridge's lens-side end, which is flush with the
+        base's lens-side end (the thread's tip, or the plate's face against the barrel).
+        """
+        reach = self.thread_length_mm if self.mount == "thread" else 0.0
+        return self.lens_face_to_glass_mm - reach + self.washer_recess_mm
+
+    @property
+    def pilot_radius_mm(self) -> float:
+        return 0.5 * (self.bore_radius_mm + self.flange_diameter_mm / 2)
+
+    def replace(self, **changes) -> "HolderParams":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)

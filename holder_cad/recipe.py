@@ -1,0 +1,225 @@
+"""The holder as a backend-neutral recipe of solids (millimetres), built by manifold3d or by cadquery.
+
+A body is ``(adds, subs)``: the union of the added solids minus the union of the subtracted ones. The
+solids are cylinders, frustums, prisms from 2-D polygons and a twisted prism (the thread). Both backends
+evaluate the same recipe, so the mesh and the B-rep agree by construction and their agreement is a
+test of each backend.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from holder_cad.params import HolderParams
+
+__all__ = ["Cyl", "Cone", "Revolve", "Prism", "Twisted", "Body", "base_body", "cartridge_body", "coupon_bodies",
+           "die_outline", "offset_convex", "thread_section"]
+
+
+@dataclass(frozen=True)
+class Cyl:
+    r: float
+    z0: float
+    z1: float
+    x: float = 0.0
+    y: float = 0.0
+
+
+@dataclass(frozen=True)
+class Cone:
+    r0: float
+    r1: float
+    z0: float
+    z1: float
+
+
+@dataclass(frozen=True)
+class Revolve:
+    """Solid of revolution of a closed (r, z) profile (r ≥ 0, counter-clockwise in the r–z plane)."""
+
+    profile: tuple
+
+
+@dataclass(frozen=True)
+class Prism:
+    points: tuple  # ((x, y), ...) counter-clockwise
+    z0: float
+    z1: float
+
+
+@dataclass(frozen=True)
+class Twisted:
+    """Prism of a 2-D section twisted by ``twist_deg`` (counter-clockwise, +z) over z0..z1."""
+
+    points: tuple
+    z0: float
+    z1: float
+    twist_deg: float
+
+
+@dataclass
+class Body:
+    name: str
+    adds: list = field(default_factory=list)
+    subs: list = field(default_factory=list)
+
+
+def offset_convex(points: np.ndarray, d: float) -> np.ndarray:
+    """Outward offset of a convex counter-clockwise polygon by ``d`` with mitred (sharp) corners."""
+    p = np.asarray(points, float)
+    n = len(p)
+    nxt = np.roll(p, -1, axis=0)
+    e = nxt - p
+    normal = np.stack([e[:, 1], -e[:, 0]], 1) / np.linalg.norm(e, axis=1)[:, None]
+    a = p + d * normal  # point on each offset edge line
+    out = []
+    for i in range(n):
+        j = (i - 1) % n  # previous edge
+        d1, d2 = e[j], e[i]
+        m = np.array([[d1[0], -d2[0]], [d1[1], -d2[1]]])
+        t = np.linalg.solve(m, a[i] - a[j])
+        out.append(a[j] + t[0] * d1)
+    return np.array(out)
+
+
+def die_outline(p: HolderParams) -> np.ndarray:
+    """Die outline in the cartridge frame (mm, CCW): rectangle centred on the axis, top-left corner chamfered.
+
+    Seen from the lens side with the split line vertical, the chamfer is at the top of the coded (x < 0)
+    half; a flipped or rotated die does not fit the pocket.
+    """
+    w, h, c = p.die_width_mm / 2, p.die_height_mm / 2, p.die_chamfer_mm
+    return np.array([[-w, -h], [w, -h], [w, h], [-w + c, h], [-w, h - c]])
+
+
+def thread_section(p: HolderParams, n: int = 180) -> np.ndarray:
+    """(n, 2) cross-section of a single-start right-hand thread with 45° flanks at z = 0.
+
+    The radius at angle θ is the axial profile at z = −P·θ/2π; twisting the section by +360° per pitch
+    sweeps it along the helix.
+    """
+    pitch, depth = p.thread_pitch_mm, p.thread_depth_mm
+    r_root = p.thread_root_radius_mm
+    flat = (pitch - 2 * depth) / 2  # crest and root flats share what the flanks leave
+
+    def profile(u):  # u = axial position within one pitch, mm → height above the root
+        return np.interp(np.mod(u, pitch), [0, flat / 2, flat / 2 + depth, flat / 2 + depth + flat,
+                                            pitch - flat / 2, pitch], [0, 0, depth, depth, 0, 0])
+
+    theta = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = r_root + profile(-pitch * theta / (2 * np.pi))
+    return np.stack([r * np.cos(theta), r * np.sin(theta)], 1)
+
+
+def _annular_sector(r_mid: float, width: float, a0: float, a1: float, n: int = 48) -> tuple:
+    """Slot of radial ``width`` centred on radius r_mid from angle a0 to a1 (radians), rounded ends."""
+    ri, ro = r_mid - width / 2, r_mid + width / 2
+    ang = np.linspace(a0, a1, n)
+    outer = [(ro * math.cos(a), ro * math.sin(a)) for a in ang]
+    cap1 = [(r_mid * math.cos(a1) + width / 2 * math.cos(a1 + t), r_mid * math.sin(a1) + width / 2 * math.sin(a1 + t))
+            for t in np.linspace(0, math.pi, 12)[1:-1]]
+    inner = [(ri * math.cos(a), ri * math.sin(a)) for a in ang[::-1]]
+    cap0 = [(r_mid * math.cos(a0) + width / 2 * math.cos(a0 + math.pi + t),
+             r_mid * math.sin(a0) + width / 2 * math.sin(a0 + math.pi + t)) for t in np.linspace(0, math.pi, 12)[1:-1]]
+    return tuple(outer + cap1 + inner + cap0)
+
+
+def _notch(r_outer: float, angle: float, depth: float, width: float) -> tuple:
+    """A V-notch cut into a rim at ``angle`` (radians), as a triangle reaching outside the rim."""
+    c, s = math.cos(angle), math.sin(angle)
+    tip = (c * (r_outer - depth), s * (r_outer - depth))
+    out = r_outer + 1.0
+    half = width / 2 / r_outer * (out / r_outer)
+    a, b = angle - half, angle + half
+    return (tip, (out * math.cos(a), out * math.sin(a)), (out * math.cos(b), out * math.sin(b)))
+
+
+def base_body(p: HolderParams) -> Body:
+    """The base ring in print orientation (flat face on the bed at z = 0)."""
+    rf = p.flange_diameter_mm / 2
+    body = Body("base")
+    if p.mount == "thread":
+        t, fh = p.thread_length_mm, p.flange_height_mm
+        sec = thread_section(p)
+        body.adds.append(Twisted(tuple(map(tuple, sec)), 0.0, t, 360.0 * t / p.thread_pitch_mm))
+        # flange with a 45° chamfer underneath, starting just inside the thread root so no face overhangs
+        r0 = p.thread_root_radius_mm - 0.02
+        z_a = t - (p.thread_major_radius_mm - r0)
+        top = t + fh
+        body.adds.append(Revolve(((0.0, z_a), (r0, z_a), (rf, z_a + (rf - r0)), (rf, top), (0.0, top))))
+    else:
+        fh, ls = p.flange_height_mm, p.sleeve_length_mm
+        rin = p.barrel_diameter_mm / 2 + p.clearance_mm
+        body.adds.append(Cyl(rf, 0.0, fh))  # the plate, printed on the bed (its lens side faces up)
+        body.adds.append(Cyl(rin + p.wall_mm, fh - 1e-3, fh + ls))
+        body.subs.append(Cyl(rin, fh, fh + ls + 1.0))
+        top = fh
+    body.subs.append(Cyl(p.bore_radius_mm, -1.0, top + 1.0))
+    r_hole = p.pilot_hole_mm / 2
+    for k in range(4):  # M2 pilot holes for the cartridge's lock screws
+        a = math.pi / 4 + k * math.pi / 2
+        if p.mount == "thread":  # stop wall_mm (measured square to the 45° chamfer) above the chamfer
+            z_lo = z_a + (p.pilot_radius_mm + r_hole - r0) + p.wall_mm * math.sqrt(2)
+        else:
+            z_lo = -1.0
+        body.subs.append(Cyl(r_hole, z_lo, top + 1.0, p.pilot_radius_mm * math.cos(a),
+                             p.pilot_radius_mm * math.sin(a)))
+    # 10° graduations (deeper every 90°) on the flange rim, wall_mm clear of the chamfer below
+    z0 = (z_a + (rf - r0) + p.wall_mm) if p.mount == "thread" else -1.0
+    for k in range(36):
+        depth = 1.0 if k % 9 == 0 else 0.5
+        body.subs.append(Prism(_notch(rf, math.radians(10 * k), depth, 0.8), z0, top + 1.0))
+    return body
+
+
+def cartridge_body(p: HolderParams) -> Body:
+    """The DOE cartridge in print orientation: flange on the bed (z = 0), lens-side end at the top."""
+    rf = p.flange_diameter_mm / 2
+    cf = p.cartridge_flange_mm
+    length = p.base_height_mm if p.mount == "thread" else p.flange_height_mm  # reaches the lens-side face
+    top = cf + length
+    body = Body("cartridge")
+    body.adds.append(Cyl(rf, 0.0, cf))
+    body.adds.append(Cyl(p.cartridge_radius_mm, cf - 1e-3, top))
+    pocket = offset_convex(die_outline(p), p.clearance_mm)
+    die_top = top - p.washer_recess_mm  # the DOE face, toward the lens; washers sit on the die edge above it
+    body.subs.append(Prism(tuple(map(tuple, pocket)), die_top - p.die_thickness_mm, top + 1.0))
+    body.subs.append(Cyl(p.clear_aperture_mm / 2 + p.aperture_margin_mm, -1.0, top + 1.0))
+    # retention: two M2 screws beside the pocket (±x side centres), washers recessed to overlap the die edge
+    for sx in (-1, 1):
+        cx = sx * (p.die_width_mm / 2 + p.clearance_mm + p.washer_diameter_mm / 2 - 0.8)
+        body.subs.append(Cyl(p.pilot_hole_mm / 2, top - 5.0, top + 1.0, cx, 0.0))
+        rw = p.washer_diameter_mm / 2 + p.clearance_mm  # recess: a rectangle from the pocket wall (square corners)
+        edge = p.die_width_mm / 2 + p.clearance_mm - 0.01
+        x0, x1 = (edge, cx + rw) if sx > 0 else (cx - rw, -edge)
+        body.subs.append(Prism(((x0, -rw), (x1, -rw), (x1, rw), (x0, rw)), die_top, top + 1.0))
+    # two arc slots for the lock screws, 100° each, centred on ±x: whatever angle the thread stops at, a
+    # pilot hole (every 90°) lies under each slot
+    for a0 in (0.0, math.pi):
+        body.subs.append(Prism(_annular_sector(p.pilot_radius_mm, p.screw_clearance_mm, a0 - math.radians(50),
+                                               a0 + math.radians(50)), -1.0, cf + 1.0))
+    # index notches on the split-line direction (the DOE's y axis): 12 and 6 o'clock
+    for a in (math.pi / 2, -math.pi / 2):
+        body.subs.append(Prism(_notch(rf, a, 2.0, 1.6), -1.0, cf + 1.0))
+    return body
+
+
+def coupon_bodies(p: HolderParams) -> list[Body]:
+    """Fit-test coupon: a short thread (or sleeve) ring and a die pocket, quick to print."""
+    q = p.replace(flange_height_mm=max(p.chamfer_height_mm + p.wall_mm, 2.0) if p.mount == "thread" else 2.0,
+                  sleeve_length_mm=min(p.sleeve_length_mm, 4.0))
+    ring = base_body(q)
+    ring.name = "coupon_ring"
+    ring.subs = [s for s in ring.subs if not isinstance(s, Prism)]  # no graduations
+    w = p.die_width_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
+    h = p.die_height_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
+    t = p.die_thickness_mm + 0.05 + p.wall_mm
+    pocket_block = Body("coupon_pocket")
+    pocket_block.adds.append(Prism(((-w, -h), (w, -h), (w, h), (-w, h)), 0.0, t))
+    pocket = offset_convex(die_outline(p), p.clearance_mm)
+    pocket_block.subs.append(Prism(tuple(map(tuple, pocket)), t - p.die_thickness_mm - 0.05, t + 1.0))
+    pocket_block.subs.append(Cyl(p.clear_aperture_mm / 2 + p.aperture_margin_mm, -1.0, t + 1.0))
+    return [ring, pocket_block]

@@ -1,0 +1,58 @@
+"""PNG renders of the assembled holder from three views (matplotlib, coarse mesh, flat shading)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from holder_cad.params import HolderParams
+
+__all__ = ["render_views"]
+
+VIEWS = {"render_front.png": (90, -90), "render_side.png": (0, -90), "render_iso.png": (30, -60)}
+
+
+def render_views(p: HolderParams, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from holder_cad.build import assembly, build_parts
+
+    coarse = p.replace(segments=48)
+    parts = build_parts(coarse)
+    asm = assembly(parts, coarse)
+    colors = ["#4878cf", "#d65f5f"]
+    light = np.array([0.3, -0.5, 0.8])
+    light /= np.linalg.norm(light)
+    names = []
+    for fname, (elev, azim) in VIEWS.items():
+        fig = plt.figure(figsize=(5, 5))
+        ax = fig.add_subplot(111, projection="3d")
+        for m, col in zip(asm, colors):
+            mesh = m.to_mesh()
+            v = np.asarray(mesh.vert_properties)[:, :3]
+            tri = v[np.asarray(mesh.tri_verts)]
+            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
+            shade = 0.35 + 0.65 * np.clip(n @ light, 0, 1)
+            base = np.array(matplotlib.colors.to_rgb(col))
+            pc = Poly3DCollection(tri, facecolors=shade[:, None] * base[None, :], edgecolors="none")
+            ax.add_collection3d(pc)
+        r = p.flange_diameter_mm / 2
+        ax.set_xlim(-r, r)
+        ax.set_ylim(-r, r)
+        ax.set_zlim(-r + 5, r + 5)
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_zlabel("z (mm, toward the scene)")
+        ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(out / fname, dpi=100)
+        plt.close(fig)
+        names.append(fname)
+    return names
