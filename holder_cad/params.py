@@ -70,7 +70,7 @@ class HolderParams:
     cartridge_flange_mm: float = 2.4
     screw_clearance_mm: float = 2.4
     pilot_hole_mm: float = 1.7
-    washer_diameter_mm: float = 5.0
+    washer_diameter_mm: float = 6.0
     washer_recess_mm: float = 0.6
     segments: int = 256
 
@@ -96,6 +96,10 @@ class HolderParams:
         if self.thread_depth_mm * 2 >= self.thread_pitch_mm:
             raise HolderError(f"thread_depth_mm ({self.thread_depth_mm}) is too deep for thread_pitch_mm "
                               f"({self.thread_pitch_mm}) with 45° flanks: depth must be < pitch / 2")
+        overlap = self.die_width_mm / 2 - (self.screw_offset_mm - self.washer_diameter_mm / 2)
+        if overlap < 0.5:
+            raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm}) overlap the die "
+                              f"edge by {overlap:.2f} mm (< 0.5 mm): use larger washers")
         if self.segments < 32:
             raise HolderError("segments must be ≥ 32")
         # the cartridge body must hold the die pocket with walls around it
@@ -103,9 +107,15 @@ class HolderParams:
             raise HolderError(f"the die ({self.die_width_mm} × {self.die_height_mm} mm) does not fit the cartridge "
                               f"(radius {self.cartridge_radius_mm:.2f} mm) with clearance_mm and wall_mm: use a "
                               f"larger thread/barrel or a smaller die")
-        if self.bore_radius_mm + self.wall_mm + self.pilot_hole_mm / 2 + self.wall_mm > self.flange_diameter_mm / 2 - self.wall_mm:
-            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) leaves no room for the pilot holes "
-                              f"with wall_mm around them: enlarge the flange")
+        rf = self.flange_diameter_mm / 2
+        if self.pilot_radius_mm + self.screw_clearance_mm / 2 + self.wall_mm > rf + 1e-9 or (
+                self.pilot_radius_mm - self.pilot_hole_mm / 2 - self.wall_mm < self.bore_radius_mm - 1e-9):
+            need = 2 * (self.pilot_radius_mm + self.screw_clearance_mm / 2 + self.wall_mm)
+            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) leaves no room for the lock-screw "
+                              f"holes and slots with wall_mm around them: use at least {need:.1f} mm")
+        if self.mount == "slip" and rf < self.sleeve_outer_radius_mm + self.wall_mm:
+            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) must cover the sleeve (outer "
+                              f"diameter {2 * self.sleeve_outer_radius_mm:.2f} mm from barrel_diameter_mm)")
         if self.mount == "thread" and self.flange_diameter_mm / 2 <= self.thread_major_radius_mm + self.wall_mm:
             raise HolderError("flange_diameter_mm must exceed the thread diameter by 2 × wall_mm")
         if self.mount == "thread" and self.chamfer_height_mm + self.wall_mm > self.flange_height_mm:
@@ -165,8 +175,20 @@ class HolderParams:
         return self.lens_face_to_glass_mm - reach + self.washer_recess_mm
 
     @property
+    def screw_offset_mm(self) -> float:
+        """x of the two die-retention screws: wall_mm of plastic between pocket and pilot hole."""
+        return self.die_width_mm / 2 + self.clearance_mm + self.wall_mm + self.pilot_hole_mm / 2
+
+    @property
+    def sleeve_outer_radius_mm(self) -> float:
+        return self.barrel_diameter_mm / 2 + self.clearance_mm + self.wall_mm
+
+    @property
     def pilot_radius_mm(self) -> float:
-        return 0.5 * (self.bore_radius_mm + self.flange_diameter_mm / 2)
+        """Radius of the lock-screw circle: mid-flange (thread), outside the sleeve (slip: clear of the barrel)."""
+        if self.mount == "thread":
+            return 0.5 * (self.bore_radius_mm + self.flange_diameter_mm / 2)
+        return self.sleeve_outer_radius_mm + self.wall_mm + self.pilot_hole_mm / 2
 
     def replace(self, **changes) -> "HolderParams":
         return dataclasses.replace(self, **changes)

@@ -190,7 +190,7 @@ def cartridge_body(p: HolderParams) -> Body:
     body.subs.append(Cyl(p.clear_aperture_mm / 2 + p.aperture_margin_mm, -1.0, top + 1.0))
     # retention: two M2 screws beside the pocket (±x side centres), washers recessed to overlap the die edge
     for sx in (-1, 1):
-        cx = sx * (p.die_width_mm / 2 + p.clearance_mm + p.washer_diameter_mm / 2 - 0.8)
+        cx = sx * p.screw_offset_mm
         body.subs.append(Cyl(p.pilot_hole_mm / 2, top - 5.0, top + 1.0, cx, 0.0))
         rw = p.washer_diameter_mm / 2 + p.clearance_mm  # recess: a rectangle from the pocket wall (square corners)
         edge = p.die_width_mm / 2 + p.clearance_mm - 0.01

@@ -10,7 +10,8 @@ from holder_cad.params import HolderParams
 
 __all__ = ["render_views"]
 
-VIEWS = {"render_front.png": (90, -90), "render_side.png": (0, -90), "render_iso.png": (30, -60)}
+# name: (elevation, azimuth, half-section?) — the side view is cut along the y = 0 plane to show the inside
+VIEWS = {"render_front.png": (90, -90, False), "render_side.png": (5, -90, True), "render_iso.png": (30, -60, False)}
 
 
 def render_views(p: HolderParams, out: Path) -> list[str]:
@@ -29,10 +30,13 @@ def render_views(p: HolderParams, out: Path) -> list[str]:
     light = np.array([0.3, -0.5, 0.8])
     light /= np.linalg.norm(light)
     names = []
-    for fname, (elev, azim) in VIEWS.items():
-        fig = plt.figure(figsize=(5, 5))
+    zmin = min(m.bounding_box()[2] for m in asm)
+    zmax = max(m.bounding_box()[5] for m in asm)
+    for fname, (elev, azim, cut) in VIEWS.items():
+        fig = plt.figure(figsize=(6, 5))
         ax = fig.add_subplot(111, projection="3d")
-        for m, col in zip(asm, colors):
+        shown = [m.trim_by_plane((0.0, 1.0, 0.0), 0.0) for m in asm] if cut else asm
+        for m, col in zip(shown, colors):
             mesh = m.to_mesh()
             v = np.asarray(mesh.vert_properties)[:, :3]
             tri = v[np.asarray(mesh.tri_verts)]
@@ -45,12 +49,14 @@ def render_views(p: HolderParams, out: Path) -> list[str]:
         r = p.flange_diameter_mm / 2
         ax.set_xlim(-r, r)
         ax.set_ylim(-r, r)
-        ax.set_zlim(-r + 5, r + 5)
+        ax.set_zlim(zmin, zmax)
+        ax.set_box_aspect((2 * r, 2 * r, max(zmax - zmin, 1.0)))
         ax.view_init(elev=elev, azim=azim)
         ax.set_xlabel("x (mm)")
         ax.set_ylabel("y (mm)")
         ax.set_zlabel("z (mm, toward the scene)")
-        ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view", fontsize=9)
+        what = "half section, base blue, cartridge red" if cut else "base blue, cartridge red"
+        ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view ({what})", fontsize=9)
         fig.tight_layout()
         fig.savefig(out / fname, dpi=100)
         plt.close(fig)

@@ -12,10 +12,11 @@ def test_help_lists_subcommands(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    assert "demo" in out and "psf" in out
+    for cmd in ("demo", "psf", "design", "masks", "holder"):
+        assert cmd in out
 
 
-@pytest.mark.parametrize("cmd", ["demo", "psf"])
+@pytest.mark.parametrize("cmd", ["demo", "psf", "design", "masks", "holder"])
 def test_subcommand_help(cmd, capsys):
     with pytest.raises(SystemExit) as exc:
         main([cmd, "--help"])

@@ -6,17 +6,18 @@ import argparse
 import sys
 
 from doefab.errors import DoefabError
+from holder_cad.params import HolderError
 
 __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from doefab.cli import demo, design, masks, psf
+    from doefab.cli import demo, design, holder, masks, psf
 
     parser = argparse.ArgumentParser(prog="doefab", description=__doc__)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
-    for module in (demo, psf, design, masks):
+    for module in (demo, psf, design, masks, holder):
         module.register(sub)
     return parser
 
@@ -29,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         return int(args.func(args) or 0)
-    except DoefabError as exc:
+    except (DoefabError, HolderError) as exc:
         print(f"doefab {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

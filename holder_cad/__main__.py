@@ -1,0 +1,5 @@
+import sys
+
+from holder_cad.cli import main
+
+sys.exit(main())

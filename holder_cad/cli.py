@@ -1,0 +1,64 @@
+"""Command line of the holder: ``doefab holder`` and ``python -m holder_cad`` (millimetres).
+
+Example: doefab holder --out out/holder --set thread_diameter_mm=52 --set flange_diameter_mm=60
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+
+from holder_cad.params import HolderError, HolderParams
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, help="output folder (holder.stl/.3mf/.step, coupon.stl, renders, holder.json)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter (lengths in mm), e.g. --set die_width_mm=14 --set mount=slip; "
+                        "names: " + ", ".join(f.name for f in dataclasses.fields(HolderParams)))
+    p.add_argument("--no-step", action="store_true", help="skip the cadquery STEP export (mesh path only)")
+    p.add_argument("--no-renders", action="store_true", help="skip the PNG renders")
+
+
+def params_from_sets(sets: list[str]) -> HolderParams:
+    fields = {f.name: f for f in dataclasses.fields(HolderParams)}
+    values = {}
+    for item in sets:
+        if "=" not in item:
+            raise HolderError(f"--set expects NAME=VALUE, got {item!r}")
+        name, raw = item.split("=", 1)
+        if name not in fields:
+            raise HolderError(f"unknown holder parameter {name!r}; known: {', '.join(fields)}")
+        default = getattr(HolderParams(), name)
+        try:
+            values[name] = type(default)(raw) if not isinstance(default, str) else raw
+        except ValueError:
+            raise HolderError(f"{name} expects a {type(default).__name__}, got {raw!r}") from None
+    return HolderParams(**values)
+
+
+def run(args) -> int:
+    from holder_cad.build import write_holder
+
+    p = params_from_sets(args.set)
+    report = write_holder(p, args.out, step=False if args.no_step else None, renders=not args.no_renders)
+    c = report["checks"]
+    print(json.dumps({"checks_passed": c["passed"], "bodies": {k: {kk: v[kk] for kk in ("volume_mm3", "min_wall_mm",
+                      "overhang_area_beyond_45deg_mm2")} for k, v in c["bodies"].items()},
+                      "die_to_pocket_gap_mm": c.get("die_to_pocket_gap_mm"),
+                      "aperture_rays_blocked": c.get("aperture_rays_blocked"),
+                      "doe_to_lens_mm": report["doe_to_lens_mm"], "files": report["files"]}, indent=1))
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m holder_cad", description=__doc__)
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except HolderError as exc:
+        print(f"holder: error: {exc}", file=sys.stderr)
+        return 2

@@ -1,0 +1,108 @@
+import json
+
+import numpy as np
+import pytest
+
+from holder_cad.build import build_parts, write_holder
+from holder_cad.checks import aperture_clear, pocket_gap
+from holder_cad.params import HolderError, HolderParams
+from holder_cad.recipe import thread_section
+
+
+def test_default_part_passes_every_check(tmp_path):
+    rep = write_holder(HolderParams(), tmp_path, step=False, renders=False)
+    c = rep["checks"]
+    assert c["passed"] and c["total_bodies"] == c["declared_bodies"] == 2
+    for body in c["bodies"].values():
+        assert body["status"] == "NoError" and body["watertight"] and body["is_volume"]
+        assert body["min_wall_mm"] >= 1.2 - 0.01
+        assert body["overhang_area_beyond_45deg_mm2"] == 0.0
+    assert c["die_to_pocket_gap_mm"] == pytest.approx(0.25, abs=0.01)
+    assert c["aperture_rays_blocked"] == 0
+    assert rep["coupon_checks"]["passed"]
+    assert rep["doe_to_lens_mm"] == pytest.approx(3.5 - 2.5 + 0.6)
+    saved = json.loads((tmp_path / "holder.json").read_text())
+    assert saved["parameters"]["thread_diameter_mm"] == 49.0 and saved["units"] == "mm"
+    for f in ("holder.stl", "holder.3mf", "coupon.stl"):
+        assert (tmp_path / f).stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("kw", [
+    {"thread_diameter_mm": 52.0, "flange_diameter_mm": 60.0},
+    {"thread_diameter_mm": 58.0, "flange_diameter_mm": 66.0},
+    {"die_width_mm": 13.0, "die_height_mm": 12.0, "die_thickness_mm": 1.5, "clearance_mm": 0.3},
+    {"mount": "slip", "flange_diameter_mm": 70.0},
+])
+def test_parameter_sweep_passes(tmp_path, kw):
+    rep = write_holder(HolderParams(**kw), tmp_path, step=False, renders=False)
+    assert rep["checks"]["passed"], rep["checks"]
+
+
+def test_thread_geometry_is_the_filter_thread():
+    p = HolderParams()
+    parts = build_parts(p)
+    base = parts["base"]
+    # crest radius, root radius and pitch read back from the mesh, against the parameters (M49 x 0.75)
+    sec = np.array(base.slice(1.0).to_polygons()[0])
+    polys = base.slice(1.0).to_polygons()
+    r_all = np.concatenate([np.hypot(*np.array(q).T) for q in polys])
+    assert r_all.max() == pytest.approx(49.0 / 2 - p.clearance_mm, abs=0.01)
+    sec = thread_section(p)
+    assert np.hypot(*sec.T).min() == pytest.approx(49.0 / 2 - p.clearance_mm - 0.3, abs=1e-9)
+    # one pitch up, the section repeats (single-start thread, pitch 0.75 mm)
+    a = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9).to_polygons(), key=len)).T), 3))
+    b = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9 + 0.75).to_polygons(), key=len)).T), 3))
+    assert np.allclose(a[-50:], b[-50:], atol=2e-3)
+
+
+def test_checks_detect_defects():
+    p = HolderParams()
+    parts = build_parts(p)
+    # a too-small pocket: gap measured against a die larger than the pocket allows is zero
+    assert pocket_gap(parts["cartridge"], p.replace(die_width_mm=12.6), 10.9 - 0.6 - 0.5) == 0.0
+    # a plate across the aperture blocks the axial rays
+    from manifold3d import Manifold
+
+    plate = Manifold.cube((4.0, 4.0, 1.0)).translate((-2.0, -2.0, -5.0))
+    assert aperture_clear([plate], p.clear_aperture_mm / 2) > 0
+
+
+@pytest.mark.parametrize("kw, names", [
+    ({"clear_aperture_mm": 11.0}, "clear_aperture_mm"),
+    ({"wall_mm": 0.3}, "wall_mm"),
+    ({"clearance_mm": 0.0}, "clearance_mm"),
+    ({"clearance_mm": -0.1}, "clearance_mm"),
+    ({"flange_diameter_mm": 52.0}, "flange_diameter_mm"),
+    ({"mount": "glue"}, "mount"),
+    ({"die_width_mm": 40.0, "die_height_mm": 40.0}, "die"),
+    ({"thread_depth_mm": 0.5}, "thread_depth_mm"),
+])
+def test_invalid_parameters_refused(kw, names):
+    with pytest.raises(HolderError, match=names):
+        HolderParams(**kw)
+
+
+def test_stl_and_step_load_back_with_same_volume(tmp_path):
+    cq = pytest.importorskip("cadquery")
+    import trimesh
+
+    p = HolderParams()
+    rep = write_holder(p, tmp_path, step=True, renders=True)
+    assert rep["checks"]["brep_agrees"]
+    mesh_volume = sum(b["volume_mm3"] for b in rep["checks"]["bodies"].values())
+    stl = trimesh.load(tmp_path / "holder.stl")
+    assert stl.volume == pytest.approx(mesh_volume, rel=1e-4)
+    step = cq.importers.importStep(str(tmp_path / "holder.step"))
+    assert step.val().Volume() == pytest.approx(mesh_volume, rel=0.01)
+    for name, v in rep["brep_vs_mesh"].items():
+        assert v["volume_rel_diff"] <= 0.01 and v["bbox_max_diff_mm"] <= 0.05
+    for f in ("render_front.png", "render_side.png", "render_iso.png"):
+        assert (tmp_path / f).stat().st_size > 5000
+
+
+def test_cli_bad_parameter(tmp_path, capsys):
+    from doefab.cli import main
+
+    assert main(["holder", "--out", str(tmp_path), "--set", "wall_mm=0.2", "--no-step", "--no-renders"]) == 2
+    assert "wall_mm" in capsys.readouterr().err
+    assert main(["holder", "--out", str(tmp_path), "--set", "colour=red"]) == 2
