@@ -232,39 +232,60 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
 
 
 def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start):
+    """nlopt driven by torch gradients; the continuous and the quantization-aware stages are separate
+    nlopt runs (the straight-through objective is a different function), each keeping its best point."""
     import nlopt
 
     algo = {"lbfgs": nlopt.LD_LBFGS, "mma": nlopt.LD_MMA}[name]
     n = theta.numel()
-    opt = nlopt.opt(algo, n)
     counter = {"step": step0}
 
-    def f(x, grad):
-        step = counter["step"]
-        with torch.no_grad():
-            theta.copy_(torch.from_numpy(np.array(x, copy=True).reshape(theta.shape)).to(theta.dtype))
-        theta.grad = None
-        loss = objective(min(step, iterations - 1))
-        if torch.isfinite(loss):
-            loss.backward()
-        if grad.size > 0:
-            grad[:] = theta.grad.detach().double().numpy().ravel() if theta.grad is not None else 0.0
-        record(step, float(loss.detach()))
-        counter["step"] += 1
-        return float(loss.detach())
+    def run_stage(n_evals: int) -> None:
+        if n_evals <= 0:
+            return
+        best = {"loss": float("inf"), "x": theta.detach().double().numpy().ravel().copy()}
+        failure: list = []
+        opt = nlopt.opt(algo, n)
 
-    opt.set_min_objective(f)
-    opt.set_maxeval(max(iterations - step0, 1))
-    if name == "mma":  # MMA needs bounds; θ is periodic, so a wide box is no constraint in practice
-        x0 = theta.detach().double().numpy().ravel()
-        opt.set_lower_bounds(x0 - 1e3)
-        opt.set_upper_bounds(x0 + 1e3)
-    try:
-        x = opt.optimize(theta.detach().double().numpy().ravel())
-    except nlopt.RoundoffLimited:
-        x = theta.detach().double().numpy().ravel()
-    with torch.no_grad():
-        theta.copy_(torch.from_numpy(x.reshape(theta.shape)).to(theta.dtype))
+        def f(x, grad):
+            step = counter["step"]
+            with torch.no_grad():
+                theta.copy_(torch.from_numpy(np.array(x, copy=True).reshape(theta.shape)).to(theta.dtype))
+            theta.grad = None
+            loss = objective(min(step, iterations - 1))
+            if torch.isfinite(loss):
+                loss.backward()
+            if grad.size > 0:
+                grad[:] = theta.grad.detach().double().numpy().ravel() if theta.grad is not None else 0.0
+            value = float(loss.detach())
+            try:
+                record(step, value)
+            except DoefabError as exc:  # nlopt would turn it into its own error: keep it and stop
+                failure.append(exc)
+                raise nlopt.ForcedStop from exc
+            if value < best["loss"]:
+                best["loss"], best["x"] = value, np.array(x, copy=True)
+            counter["step"] += 1
+            return value
+
+        opt.set_min_objective(f)
+        opt.set_maxeval(n_evals)
+        if name == "mma":  # MMA needs bounds; θ is periodic, so a wide box is no constraint in practice
+            x0 = theta.detach().double().numpy().ravel()
+            opt.set_lower_bounds(x0 - 1e3)
+            opt.set_upper_bounds(x0 + 1e3)
+        try:
+            opt.optimize(theta.detach().double().numpy().ravel())
+        except Exception:  # noqa: BLE001 - nlopt's own error types (roundoff, failure, forced stop)
+            # nlopt stops with an error when its line search cannot progress: the best point seen is the
+            # result. A non-finite loss is ours to report.
+            if failure:
+                raise failure[0] from None
+        with torch.no_grad():
+            theta.copy_(torch.from_numpy(best["x"].reshape(theta.shape)).to(theta.dtype))
+
+    run_stage(min(qat_start, iterations) - counter["step"])
+    run_stage(iterations - counter["step"])
 
 
 def _finish(task_obj, cfg, cam, dcam, theta, history, lams, depths) -> Design:

@@ -70,6 +70,9 @@ def test_nonfinite_loss_stops_and_keeps_checkpoint(tiny_camera, tiny_streak, tmp
     with pytest.raises(DoefabError, match="loss became nan at step 3.*last good checkpoint"):
         doefab.optimize(task, iterations=10, camera=tiny_camera, progress=False, out_dir=tmp_path, checkpoint_every=2)
     assert (tmp_path / "checkpoint.pt").is_file()
+    calls["n"] = 0
+    with pytest.raises(DoefabError, match="loss became nan"):  # nlopt must not swallow it either
+        doefab.optimize(task, iterations=10, optimizer="lbfgs", camera=tiny_camera, progress=False)
 
 
 def test_resume_refuses_other_settings_and_corrupt_checkpoint(tiny_camera, tiny_streak, tmp_path):

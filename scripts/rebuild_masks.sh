@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Rebuild every committed mask set in masks/ from the design it came from (masks/<task>/design/),
+# or, with --from DIR, from fresh design folders DIR/<task> (as written by `doefab design`).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+src=""
+if [ "${1:-}" = "--from" ]; then src="$2"; fi
+for task in streak grating half-ring; do
+    design="masks/$task/design"
+    if [ -n "$src" ]; then design="$src/$task"; fi
+    .venv/bin/doefab masks --design "$design" --out "masks/$task" --name "${task//-/}" --oasis --force
+done
