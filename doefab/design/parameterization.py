@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import torch
 
-from doefab.fabrication.levels import N_LEVELS, level_step
+from doefab.fabrication.levels import N_LEVELS, quantize_torch
 from doefab.optics.camera import Camera
 
 __all__ = ["theta_to_height", "quantize_ste", "isolated_pixel_penalty"]
@@ -19,13 +19,6 @@ def theta_to_height(theta: torch.Tensor, camera: Camera) -> torch.Tensor:
     """Heights (metres) in [0, h_2π) from unconstrained θ (waves at the design wavelength)."""
     h2pi = camera.material.height_2pi(camera.design_wavelength)
     return torch.remainder(theta, 1.0) * h2pi
-
-
-def quantize_torch(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVELS) -> torch.Tensor:
-    """Nearest-level heights (same rule as ``quantize_levels``: wrap, round, level n ≡ 0)."""
-    d = level_step(camera, n_levels)
-    k = torch.remainder(torch.round(torch.remainder(height, d * n_levels) / d), n_levels)
-    return k * d
 
 
 def quantize_ste(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVELS) -> torch.Tensor:

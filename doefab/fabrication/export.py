@@ -154,6 +154,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
                                  for b in range(N_MASKS)}
         for lay, nrect in layer_stats.items():
             report["layers"][str(lay)]["rectangles_written"] = nrect
+            report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
         _previews(stage, planes, lv, camera.doe_pitch)

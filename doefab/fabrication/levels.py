@@ -16,7 +16,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
-__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "wrap_height",
+__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
            "levels_sha256"]
 
 N_LEVELS = 16
@@ -48,6 +48,17 @@ def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndar
     d = level_step(camera, n_levels)
     k = np.rint(np.mod(h, d * n_levels) / d).astype(np.int64) % n_levels
     return k.astype(np.uint8)
+
+
+def quantize_torch(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVELS) -> torch.Tensor:
+    """The rule of :func:`quantize_levels` on a torch tensor (for the quantization-aware design stage).
+
+    Returns heights (metres) ``d · (round(wrap(h) / d) mod n_levels)``; a test checks that it equals
+    ``levels_to_height(quantize_levels(h))`` exactly on random heights.
+    """
+    d = level_step(camera, n_levels)
+    k = torch.remainder(torch.round(torch.remainder(height, d * n_levels) / d), n_levels)
+    return k * d
 
 
 def levels_to_height(levels, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:

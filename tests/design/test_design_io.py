@@ -25,6 +25,17 @@ def test_quantization_rounds_to_nearest_and_is_idempotent(tiny_camera):
     assert np.abs(((h - q) / d + 8) % 16 - 8).max() <= 0.5 + 1e-9  # within half a level (mod 16)
 
 
+def test_design_and_mask_quantization_are_the_same_rule(tiny_camera):
+    import torch
+
+    from doefab.fabrication.levels import levels_to_height, quantize_torch
+
+    h = np.random.default_rng(1).uniform(-5e-6, 5e-6, (64, 64))
+    via_torch = quantize_torch(torch.from_numpy(h), tiny_camera).numpy()
+    via_masks = levels_to_height(quantize_levels(h, tiny_camera), tiny_camera)
+    assert np.allclose(via_torch, via_masks, rtol=0, atol=1e-15)
+
+
 def test_save_load_round_trip(design, tmp_path):
     design.save(tmp_path)
     meta = json.loads((tmp_path / "design.json").read_text())
