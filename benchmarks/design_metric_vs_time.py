@@ -52,13 +52,15 @@ def main(argv=None):
             runs[name] = (t, m, d.metrics["quantized"], d.extra["wall_time_s"])
         best = max(v[2] for v in runs.values())
         for name, (t, m, q, wall) in runs.items():
-            ok = np.flatnonzero(np.isfinite(m) & (m >= 0.99 * best))
-            reach = f"{t[ok[0]]:.0f}" if ok.size else "not reached"
-            rows.append((task, name, q, wall, reach))
+            rows.append((task, name, q, wall, "yes" if q >= 0.99 * best else "no"))
         curves[task] = runs
-    lines = ["| task | run | 16-level metric (full grid) | wall time (s) | time to 99 % of the best metric (s) |",
+    lines = ["| task | run | 16-level metric (full grid) | wall time (s) | within 1 % of the task's best |",
              "| --- | --- | --- | --- | --- |"]
     lines += [f"| {t} | {n} | {q:.4f} | {w:.0f} | {r} |" for t, n, q, w, r in rows]
+    for task in curves:
+        ok = [(w, n) for t, n, q, w, r in rows if t == task and r == "yes"]
+        w, n = min(ok)
+        lines.append(f"\n{task}: a design within 1 % of the best 16-level metric measured here takes {w:.0f} s ({n}).")
     text = "\n".join(lines) + "\n"
     (OUT / "design_metric_vs_time.md").write_text(text)
     print(text)

@@ -72,7 +72,7 @@ class HolderParams:
     pilot_hole_mm: float = 1.7
     washer_diameter_mm: float = 6.0
     washer_recess_mm: float = 0.6
-    segments: int = 256
+    segments: int = 128
 
     def __post_init__(self) -> None:
         errs = []

@@ -95,7 +95,7 @@ def die_outline(p: HolderParams) -> np.ndarray:
     return np.array([[-w, -h], [w, -h], [w, h], [-w + c, h], [-w, h - c]])
 
 
-def thread_section(p: HolderParams, n: int = 180) -> np.ndarray:
+def thread_section(p: HolderParams, n: int = 120) -> np.ndarray:
     """(n, 2) cross-section of a single-start right-hand thread with 45° flanks at z = 0.
 
     The radius at angle θ is the axial profile at z = −P·θ/2π; twisting the section by +360° per pitch

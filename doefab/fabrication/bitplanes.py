@@ -14,7 +14,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.fabrication.levels import N_LEVELS
 
-__all__ = ["N_MASKS", "validate_levels", "bit_planes", "levels_from_planes", "plane_rectangles",
+__all__ = ["N_MASKS", "validate_levels", "bit_planes", "bit_plane", "levels_from_planes", "plane_rectangles",
            "rasterize_rectangles", "rasterize_manhattan"]
 
 N_MASKS = 4
@@ -40,8 +40,12 @@ def validate_levels(levels) -> np.ndarray:
 def bit_planes(levels: np.ndarray) -> np.ndarray:
     """(4, N, M) bool: plane m marks the pixels mask m etches (bit m of 15 − level)."""
     lv = validate_levels(levels)
-    etch = (N_LEVELS - 1) - lv
-    return np.stack([((etch >> m) & 1).astype(bool) for m in range(N_MASKS)])
+    return np.stack([bit_plane(lv, m) for m in range(N_MASKS)])
+
+
+def bit_plane(levels: np.ndarray, bit: int) -> np.ndarray:
+    """(N, M) bool: the pixels mask ``bit`` etches (bit ``bit`` of 15 − level); levels already validated."""
+    return (((N_LEVELS - 1) - np.asarray(levels, np.uint8)) >> bit & 1).astype(bool)
 
 
 def levels_from_planes(planes: np.ndarray) -> np.ndarray:
@@ -85,9 +89,10 @@ def rasterize_rectangles(rects: np.ndarray, shape: tuple[int, int]) -> np.ndarra
 
 
 def _integrate(rows, cols, weights, n, m) -> np.ndarray:
-    """Scatter ±weights at (row, col) corners of an (n+1, m+1) grid and take the 2-D running sum."""
-    acc = np.bincount(rows * (m + 1) + cols, weights=weights, minlength=(n + 1) * (m + 1))
-    acc = acc.astype(np.int32).reshape(n + 1, m + 1)
+    """Scatter ±weights at (row, col) corners of an (n+1, m+1) grid and take the 2-D running sum (int32)."""
+    acc = np.zeros((n + 1) * (m + 1), np.int32)
+    np.add.at(acc, rows * (m + 1) + cols, np.asarray(weights, np.int32))
+    acc = acc.reshape(n + 1, m + 1)
     np.cumsum(acc, axis=0, out=acc)
     np.cumsum(acc, axis=1, out=acc)
     return acc[:n, :m]

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.bitplanes import N_MASKS, bit_planes, plane_rectangles, validate_levels
+from doefab.fabrication.bitplanes import N_MASKS, bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LABEL_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
                                        VERNIER_LAYER, etch_layer)
@@ -103,11 +103,10 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
                           f"pattern for marks: enlarge die_m")
     out = prepare_out_dir(out_dir, force)
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
-    planes = bit_planes(lv)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = {}
-    for bit in range(N_MASKS):
-        r = plane_rectangles(planes[bit])
+    for bit in range(N_MASKS):  # one plane at a time: the 8640² case stays within a few GB
+        r = plane_rectangles(bit_plane(lv, bit))
         x0 = origin_nm[0] + r[:, 0] * pitch_nm
         x1 = origin_nm[0] + r[:, 2] * pitch_nm
         y1 = origin_nm[1] - r[:, 1] * pitch_nm
@@ -127,10 +126,10 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
                                                                              precision=1e-3)
         for poly in pieces:
             writer.add_polygon(np.rint(poly.points).astype(np.int64), big.layer, big.datatype)
-    gds_bytes = writer.tobytes()
     with staging_dir(out) as stage:
         gds_name = f"{opts.name}.gds"
-        (stage / gds_name).write_bytes(gds_bytes)
+        writer.write(stage / gds_name)
+        del writer
         files = {"gds": gds_name}
         if opts.oasis:
             import gdstk
@@ -149,7 +148,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         atomic_write_json(stage / "manifest.json", manifest)
         report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout)
         cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
-        report["width_space"] = {str(etch_layer(b)): width_space_report(planes[b], cd_px, camera.doe_pitch,
+        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(lv, b), cd_px, camera.doe_pitch,
                                                                         (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
                                  for b in range(N_MASKS)}
         for lay, nrect in layer_stats.items():
@@ -157,7 +156,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
-        _previews(stage, planes, lv, camera.doe_pitch)
+        _previews(stage, lv, camera.doe_pitch)
         atomic_write_text(stage / "README.txt", _fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
@@ -226,7 +225,7 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
     }
 
 
-def _previews(stage: Path, planes: np.ndarray, lv: np.ndarray, pitch: float, size: int = 1000) -> None:
+def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000) -> None:
     """PNG previews (Pillow; at most ``size`` px wide) of each etch layer and the composite, with a scale bar."""
     from matplotlib import colormaps
     from PIL import Image, ImageDraw
@@ -250,8 +249,9 @@ def _previews(stage: Path, planes: np.ndarray, lv: np.ndarray, pitch: float, siz
         pad.save(buf, format="PNG")
         (stage / name).write_bytes(buf.getvalue())
 
+    small = lv[::step, ::step]
     for bit in range(N_MASKS):
-        g = (planes[bit][::step, ::step] * 255).astype(np.uint8)
+        g = (bit_plane(small, bit) * 255).astype(np.uint8)
         save(f"preview_layer{etch_layer(bit)}.png", np.repeat(g[..., None], 3, axis=2),
              f"layer {etch_layer(bit)}: white = etched {1 << bit}*d deep ({pitch * 1e6:g} um pixels, 1:{step})")
     rgb = (colormaps["viridis"](lv[::step, ::step] / 15.0)[..., :3] * 255).astype(np.uint8)

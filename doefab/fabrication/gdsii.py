@@ -93,13 +93,25 @@ class GDSWriter:
                 + _record(0x11, 0x00))
         self._chunks.append(body)
 
-    def tobytes(self, timestamp: _dt.datetime | None = None) -> bytes:
+    def _head(self, timestamp: _dt.datetime | None = None) -> bytes:
         t = timestamp or _dt.datetime(2000, 1, 1)
         date = struct.pack(">12h", t.year, t.month, t.day, t.hour, t.minute, t.second,
                            t.year, t.month, t.day, t.hour, t.minute, t.second)
-        head = (_record(0x00, 0x02, struct.pack(">h", 600)) + _record(0x01, 0x02, date)
+        return (_record(0x00, 0x02, struct.pack(">h", 600)) + _record(0x01, 0x02, date)
                 + _record(0x02, 0x06, _ascii(self.lib_name))
                 + _record(0x03, 0x05, gds_real8(self.db_unit_m / self.user_unit_m) + gds_real8(self.db_unit_m))
                 + _record(0x05, 0x02, date) + _record(0x06, 0x06, _ascii(self.cell_name)))
-        tail = _record(0x07, 0x00) + _record(0x04, 0x00)
-        return head + b"".join(self._chunks) + tail
+
+    _TAIL = _record(0x07, 0x00) + _record(0x04, 0x00)
+
+    def tobytes(self, timestamp: _dt.datetime | None = None) -> bytes:
+        return self._head(timestamp) + b"".join(self._chunks) + self._TAIL
+
+    def write(self, path, timestamp: _dt.datetime | None = None) -> int:
+        """Stream the library to ``path`` chunk by chunk (no full copy in memory); returns the byte count."""
+        n = 0
+        with open(path, "wb") as fh:
+            for part in (self._head(timestamp), *self._chunks, self._TAIL):
+                fh.write(part)
+                n += len(part)
+        return n

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.bitplanes import N_MASKS, bit_planes, levels_from_planes, rasterize_manhattan
+from doefab.fabrication.bitplanes import N_MASKS, bit_plane, rasterize_manhattan
+from doefab.fabrication.levels import N_LEVELS
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import CHROME_LAYER, KEY_LAYER, OUTLINE_LAYER, VERNIER_LAYER, etch_layer
 
@@ -36,11 +37,11 @@ class LayerPolygons:
         return int(self.counts.max(initial=0))
 
 
-def read_gds_layers(path: Path) -> dict[tuple[int, int], LayerPolygons]:
-    """Polygons per (layer, datatype) read with gdstk (one pass, vectorised after reading)."""
+def read_gds_layers(path: Path, only: set | None = None) -> dict[tuple[int, int], LayerPolygons]:
+    """Polygons per (layer, datatype) read with gdstk (``only``: read just these (layer, datatype) pairs)."""
     import gdstk
 
-    lib = gdstk.read_gds(str(path))
+    lib = gdstk.read_gds(str(path), filter=only)
     tops = lib.top_level()
     if len(tops) != 1:
         raise DoefabError(f"{path} must hold exactly one top cell, found {len(tops)}")
@@ -121,15 +122,19 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
     shape = tuple(man["shape"])
-    planes = bit_planes(levels)
+    levels = np.asarray(levels, np.uint8)
     gds = folder / man["files"]["gds"]
-    layers = read_gds_layers(gds)
+    mark_keys = {(CHROME_LAYER, 0), (OUTLINE_LAYER, 0)} | {(k, p) for k in (KEY_LAYER, VERNIER_LAYER)
+                                                           for p in range(N_MASKS + 1)}
+    layers = read_gds_layers(gds, only=mark_keys)  # chrome, marks and outline: small
     report: dict = {"gds": gds.name, "layers": {}, "ok": True}
     cap = int(man["vertex_cap"])
-    raster_planes = []
+    etch_sum = np.zeros(shape, np.uint8)
     for bit in range(N_MASKS):
         lay = etch_layer(bit)
-        polys = layers.get((lay, 0), LayerPolygons(np.zeros((0, 2), np.int64), np.zeros(0, np.int64)))
+        # one etch layer at a time keeps the peak memory to one layer's polygons
+        polys = read_gds_layers(gds, only={(lay, 0)}).get(
+            (lay, 0), LayerPolygons(np.zeros((0, 2), np.int64), np.zeros(0, np.int64)))
         if len(polys):
             pix, idx = _to_pixels(polys, origin_nm, pitch_nm)
             wind = rasterize_manhattan(pix, idx, shape)
@@ -138,7 +143,8 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         if np.any(wind < 0) or np.any(wind > 1):
             raise DoefabError(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()})")
         got = wind.astype(bool)
-        mism = int(np.count_nonzero(got != planes[bit]))
+        del wind
+        mism = int(np.count_nonzero(got != bit_plane(levels, bit)))
         maxv = polys.max_vertices
         report["layers"][str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
                                       "max_vertices": maxv, "mismatched_pixels_gdstk": mism}
@@ -146,8 +152,9 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
             raise DoefabError(f"layer {lay}: {mism} pixels differ between the GDS and the design's bit plane {bit}")
         if maxv > cap:
             raise DoefabError(f"layer {lay}: a polygon has {maxv} vertices, over the cap {cap}")
-        raster_planes.append(got)
-    if not np.array_equal(levels_from_planes(np.stack(raster_planes)), np.asarray(levels, np.uint8)):
+        etch_sum += got.astype(np.uint8) << bit
+        del got, polys
+    if not np.array_equal((N_LEVELS - 1) - etch_sum, levels):
         raise DoefabError("Σ 2^m·mask_m read back from the file does not reproduce the level map")
     report["levels_reproduced"] = True
     for key, need, what in (((CHROME_LAYER, 0), 1, "chrome aperture"), ((OUTLINE_LAYER, 0), 1, "die outline")):
@@ -163,11 +170,11 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         if p.max_vertices > cap:
             raise DoefabError(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
     if use_klayout:
-        report["klayout"] = _klayout_check(folder, man, planes, pitch_nm)
+        report["klayout"] = _klayout_check(folder, man, levels, pitch_nm)
     return report
 
 
-def _klayout_check(folder: Path, man: dict, planes: np.ndarray, pitch_nm: int) -> dict:
+def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -> dict:
     """Second reader: KLayout's areas per etch layer, and OASIS ≡ GDS by XOR (skipped if not installed)."""
     try:
         import klayout.db as kdb
@@ -186,7 +193,7 @@ def _klayout_check(folder: Path, man: dict, planes: np.ndarray, pitch_nm: int) -
         li = gds.find_layer(lay, 0)
         region = kdb.Region(top.begin_shapes_rec(li)) if li is not None else kdb.Region()
         area_px = region.area() * (gds.dbu * 1000) ** 2 / pitch_nm**2
-        expected = int(planes[bit].sum())
+        expected = int(bit_plane(levels, bit).sum())
         if abs(area_px - expected) > 1e-6:
             raise DoefabError(f"KLayout: layer {lay} covers {area_px:.1f} pixels, the bit plane {expected}")
         entry = {"area_px": int(round(area_px))}
