@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import argparse
 import csv
-import math
 import statistics
 import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 import doefab
 from doefab.errors import SamplingError

@@ -43,7 +43,8 @@ class DesignConfig:
         optimizer: adam, lbfgs or mma.  lr: Adam step in waves.  seed: RNG seed.
         sampling: DOE grid coarsening factor during the design (1 = the preset's grid, 2 = half).
         qat_fraction: last fraction of the steps run quantization-aware (0 = off).
-        batch: number of (depth, wavelength) pairs per Adam step (0 = all; a random subset otherwise).
+        batch: number of (depth, wavelength) pairs per Adam step (0 = all; a random subset otherwise;
+            -1 = every depth with one random wavelength each, so the worst depth is always seen).
         fab_weight: weight of the isolated-pixel regulariser (0 = off).
         checkpoint_every: steps between checkpoints.  eval_every: steps between full metric evaluations.
     """
@@ -209,7 +210,10 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         if optimizer == "adam":
             for step in range(step0, cfg.iterations):
                 batch_pairs = None
-                if 0 < cfg.batch < len(pairs):
+                if cfg.batch < 0:  # stratified: every depth, one random wavelength each
+                    wl = torch.randint(len(lams), (len(depths),), generator=gen).tolist()
+                    batch_pairs = [(d, wl[d]) for d in range(len(depths))]
+                elif 0 < cfg.batch < len(pairs):
                     idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
                     batch_pairs = [pairs[i] for i in sorted(idx)]
                 adam.zero_grad()

@@ -18,7 +18,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import N_MASKS, bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
-from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LABEL_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
+from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
                                        VERNIER_LAYER, etch_layer)
 from doefab.fabrication.levels import N_LEVELS, level_step, levels_sha256
 from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons

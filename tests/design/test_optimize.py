@@ -94,3 +94,9 @@ def test_bad_optimizer_inputs(tiny_camera):
         doefab.optimize("streak", iterations=0, camera=tiny_camera)
     with pytest.raises(DoefabError, match="unknown design settings"):
         doefab.optimize("streak", iterations=1, camera=tiny_camera, learning_rate=3)
+
+
+def test_stratified_batch_sees_every_depth(tiny_camera):
+    d = doefab.optimize("half-ring", iterations=2, camera=tiny_camera, progress=False, batch=-1,
+                        task_params={"z_step": 1.0})
+    assert len(d.history) == 2 and len(d.depths) == 5

@@ -72,7 +72,7 @@ def test_half_energy_and_blank_mirror():
 def test_quantized_blazed_grating_efficiency_and_position(levels):
     cam = doefab.Camera()
     lam, k = cam.design_wavelength, 41
-    s, p = cam.sensor_distance, cam.sensor_pitch
+    s = cam.sensor_distance
     period = 16 * cam.doe_pitch
     u1 = s * math.tan(math.asin(lam / period))  # grating equation + geometry
     h = doefab.blazed_grating_height(cam, 16, n_levels=levels)
