@@ -159,6 +159,11 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         if batch_pairs is None:
             psf = plan.half_psf("coded", h)
             loss = task_obj.loss(psf, dcam)
+        elif task_obj.loss_kind in ("band", "window"):
+            # one loss over the whole batch, so the window loss's soft minimum compares its entries
+            frac = torch.cat([task_obj.fractions(plan.half_psf("coded", h, depth_indices=[d], wavelength_indices=[w]),
+                                                 dcam, [d], [w]).flatten() for d, w in batch_pairs])
+            loss = task_obj.loss_from_fractions(frac)
         else:
             loss = 0.0
             for d, w in batch_pairs:

@@ -85,14 +85,19 @@ class Task:
             masks = masks[:, list(wl_idx)]
         return masked_fraction(psf, masks.to(psf.dtype))
 
+    def loss_from_fractions(self, frac: torch.Tensor) -> torch.Tensor:
+        """Band and window losses from in-band fractions of any set of (depth, wavelength) entries."""
+        flat = frac.flatten()
+        if self.loss_kind == "band":
+            return 1.0 - flat.mean()
+        if self.loss_kind == "window":
+            return (1.0 - flat.mean()) + (1.0 - softmin(flat))
+        raise ValueError(f"loss_kind {self.loss_kind!r} is not a fraction loss")
+
     def loss(self, psf: torch.Tensor, camera: Camera, depth_idx=None, wl_idx=None) -> torch.Tensor:
         """Scalar loss of a (subset of the) PSF stack."""
-        frac = self.fractions(psf, camera, depth_idx, wl_idx)
-        if self.loss_kind == "band":
-            return 1.0 - frac.mean()
-        if self.loss_kind == "window":
-            flat = frac.flatten()
-            return (1.0 - flat.mean()) + (1.0 - softmin(flat))
+        if self.loss_kind in ("band", "window"):
+            return self.loss_from_fractions(self.fractions(psf, camera, depth_idx, wl_idx))
         if self.loss_kind == "l1":
             tg = self.targets(camera)
             if depth_idx is not None:

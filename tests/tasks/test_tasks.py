@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
 import doefab
 from doefab.errors import DoefabError
@@ -74,3 +75,12 @@ def test_unknown_task_and_bad_params():
         get_task("blur")
     with pytest.raises(DoefabError, match="bad parameters"):
         get_task("streak", arm=3)
+
+
+def test_window_loss_weighs_the_worst_entry():
+    task = get_task("half-ring", loss_kind="window")
+    even = torch.tensor([0.5, 0.5, 0.5, 0.5])
+    uneven = torch.tensor([0.6, 0.6, 0.6, 0.2])  # same mean, one bad depth
+    assert float(task.loss_from_fractions(uneven)) > float(task.loss_from_fractions(even)) + 0.25
+    band = get_task("half-ring", loss_kind="band")
+    assert float(band.loss_from_fractions(uneven)) == pytest.approx(float(band.loss_from_fractions(even)))
