@@ -29,6 +29,8 @@ def register(sub) -> None:
                    help="every etch mask aligns to the chrome keys, or each to the previous plate")
     p.add_argument("--etch-order", type=int, nargs=4, default=[4, 3, 2, 1], help="etch layers in process order")
     p.add_argument("--resist", choices=["positive", "negative"], default="positive", help="resist tone")
+    p.add_argument("--pattern-faces", choices=["lens", "scene"], default="lens",
+                   help="which way the etched face points when mounted (lens: the layout is the design mirrored in x)")
     p.add_argument("--no-klayout", action="store_true", help="skip the KLayout cross-check")
     p.add_argument("--force", action="store_true", help="replace an existing mask-set folder")
     p.set_defaults(func=run)
@@ -51,7 +53,7 @@ def run(args) -> int:
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
                        align_chain=args.align_chain, etch_order=tuple(args.etch_order), resist=args.resist,
-                       use_klayout=not args.no_klayout)
+                       use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)
     report = export_masks(design.levels, design.camera, Path(args.out), opts, design_dir=args.design,
                           force=args.force)
     for lay, st in report["layers"].items():

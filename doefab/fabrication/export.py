@@ -26,7 +26,7 @@ from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import atomic_write_json, atomic_write_text, prepare_out_dir, staging_dir
 from doefab.optics.camera import Camera
 
-__all__ = ["MaskOptions", "export_masks"]
+__all__ = ["MaskOptions", "export_masks", "layout_levels"]
 
 
 @dataclass
@@ -43,6 +43,10 @@ class MaskOptions:
         resist: ``"positive"`` or ``"negative"``; sets the plate polarity stated in the manifest.
         depth_tolerance: relative etch-depth tolerance stated to the fab.
         use_klayout: verify with KLayout too (where installed).
+        pattern_faces: which way the etched face points once mounted: ``"lens"`` (the holder's default,
+            closest to the aperture) or ``"scene"``. The design is defined looking from the scene into the
+            camera while a layout is drawn as seen from its patterned face, so with the pattern toward the
+            lens the layout is the design mirrored in x (stated in the manifest).
     """
 
     name: str = "doe"
@@ -55,6 +59,7 @@ class MaskOptions:
     resist: str = "positive"
     depth_tolerance: float = 0.03
     use_klayout: bool = True
+    pattern_faces: str = "lens"
     extra: dict = field(default_factory=dict)
 
 
@@ -90,6 +95,8 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
     if sorted(opts.etch_order) != [etch_layer(b) for b in range(N_MASKS)]:
         raise DoefabError(f"etch_order must be a permutation of layers 1..4, got {opts.etch_order!r}")
+    if opts.pattern_faces not in ("lens", "scene"):
+        raise DoefabError(f"pattern_faces must be 'lens' or 'scene', got {opts.pattern_faces!r}")
     if opts.resist not in ("positive", "negative"):
         raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
     if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
@@ -103,10 +110,11 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
                           f"pattern for marks: enlarge die_m")
     out = prepare_out_dir(out_dir, force)
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
+    layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = {}
     for bit in range(N_MASKS):  # one plane at a time: the 8640² case stays within a few GB
-        r = plane_rectangles(bit_plane(lv, bit))
+        r = plane_rectangles(bit_plane(layout, bit))
         x0 = origin_nm[0] + r[:, 0] * pitch_nm
         x1 = origin_nm[0] + r[:, 2] * pitch_nm
         y1 = origin_nm[1] - r[:, 1] * pitch_nm
@@ -146,9 +154,9 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
             shutil.copy2(Path(design_dir) / "design.json", design_sub / "design.json")
         manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
-        report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout)
+        report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout)  # mirrors per the manifest
         cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
-        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(lv, b), cd_px, camera.doe_pitch,
+        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(layout, b), cd_px, camera.doe_pitch,
                                                                         (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
                                  for b in range(N_MASKS)}
         for lay, nrect in layer_stats.items():
@@ -156,10 +164,15 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
-        _previews(stage, lv, camera.doe_pitch)
+        _previews(stage, layout, camera.doe_pitch)
         atomic_write_text(stage / "README.txt", _fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
+
+
+def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
+    """The level map as drawn in the layout (seen from the patterned face): mirrored in x if it faces the lens."""
+    return np.ascontiguousarray(levels[:, ::-1]) if pattern_faces == "lens" else levels
 
 
 def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
@@ -211,6 +224,12 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
         "origin_m": [origin_nm[0] * 1e-9, origin_nm[1] * 1e-9],
         "origin_means": "layout position of the top-left corner of level-map pixel [0, 0]; x right, y up",
         "shape": [n, n], "row0": "top",
+        "layout_view": "drawn as seen from the patterned (etched) face, x right, y up",
+        "pattern_faces": opts.pattern_faces,
+        "mirrored_x": opts.pattern_faces == "lens",
+        "mirror_means": ("the design is defined looking from the scene into the camera; with the patterned face "
+                         "toward the lens the layout column j holds design column N−1−j (coded half x > 0 in "
+                         "the layout)") if opts.pattern_faces == "lens" else "layout column j = design column j",
         "die_m": die_nm * 1e-9,
         "clear_aperture_diameter_m": camera.aperture_diameter,
         "coded_half": "x < 0 (left columns of the level map)",
@@ -221,6 +240,7 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
         "level_to_height_nm": [round(k * d * 1e9, 3) for k in range(N_LEVELS)],
         "height_means": "material above the deepest etch; level 15 = unetched surface",
         "levels_sha256": levels_sha256(lv),
+        "levels_sha256_means": "SHA-256 of the design's level map (design.json), before any mirroring",
         "vertex_cap": opts.vertex_cap,
     }
 
@@ -283,6 +303,7 @@ def _fab_readme(man: dict) -> str:
         "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
         "keys of the plate it aligns to and carries its own cross).",
         "Level k = 15 − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
+        "The layout is drawn as seen from the patterned face. " + man["mirror_means"] + ".",
         "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
     ]
     return "\n".join(lines) + "\n"

@@ -122,7 +122,10 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
     shape = tuple(man["shape"])
+    # compare against the level map as drawn (mirrored in x when the pattern faces the lens)
     levels = np.asarray(levels, np.uint8)
+    if man.get("mirrored_x", False):
+        levels = np.ascontiguousarray(levels[:, ::-1])
     gds = folder / man["files"]["gds"]
     mark_keys = {(CHROME_LAYER, 0), (OUTLINE_LAYER, 0)} | {(k, p) for k in (KEY_LAYER, VERNIER_LAYER)
                                                            for p in range(N_MASKS + 1)}

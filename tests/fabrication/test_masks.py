@@ -33,7 +33,7 @@ def test_hand_made_4x4_polygons_exact(cam, tmp_path):
     assert plane_rectangles(planes[3]).tolist() == [[0, 0, 4, 2]]
     # bit 0 set for even levels: columns 0 and 2 of the 4x4 block, all four rows
     assert sorted(plane_rectangles(planes[0]).tolist()) == [[0, 0, 1, 4], [2, 0, 3, 4]]
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False, pattern_faces="scene"))
     lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     pitch, (x0, y0) = 5400, man["origin_m"]
@@ -150,3 +150,15 @@ def test_tampered_gds_fails_verification(cam, tmp_path):
     lib.write_gds(str(tmp_path / "m" / "doe.gds"))
     with pytest.raises(DoefabError, match="layer 2"):
         verify_mask_set(tmp_path / "m", use_klayout=False)
+
+
+def test_pattern_toward_the_lens_mirrors_the_layout(cam, tmp_path):
+    lv = np.full((100, 100), 15, np.uint8)
+    lv[10:20, 0:5] = 0  # a block at the design's far left (coded half, x < 0)
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))  # default: pattern faces the lens
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    assert man["mirrored_x"] and man["pattern_faces"] == "lens"
+    polys = gdstk.read_gds(str(tmp_path / "m" / "doe.gds")).top_level()[0].get_polygons(layer=4, datatype=0)
+    xs = np.concatenate([p.points[:, 0] for p in polys])
+    assert xs.min() == pytest.approx(270 - 5 * 5.4) and xs.max() == pytest.approx(270)  # µm: at the layout's right
+    assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
