@@ -27,7 +27,6 @@ def build_parts(p: HolderParams) -> dict:
 def assembly(parts: dict, p: HolderParams) -> list:
     """Both bodies in use position: lens side at z = 0, optical axis = z, scene toward +z."""
     base, cart = parts["base"], parts["cartridge"]
-    top_c = cart.bounding_box()[5]
     if p.mount == "thread":
         base_use = base
         seat = p.base_height_mm
@@ -35,7 +34,6 @@ def assembly(parts: dict, p: HolderParams) -> list:
         base_use = base.rotate((180.0, 0.0, 0.0)).translate((0.0, 0.0, p.flange_height_mm))
         seat = p.flange_height_mm
     cart_use = cart.rotate((180.0, 0.0, 0.0)).translate((0.0, 0.0, seat + p.cartridge_flange_mm))
-    del top_c
     return [base_use, cart_use]
 
 
