@@ -160,11 +160,6 @@ class HolderParams:
         return self.sleeve_length_mm + self.flange_height_mm
 
     @property
-    def lens_side_length_mm(self) -> float:
-        """How far the part reaches beyond the lens's filter face toward the glass."""
-        return self.thread_length_mm if self.mount == "thread" else 0.0
-
-    @property
     def doe_to_lens_mm(self) -> float:
         """Distance from the DOE's patterned face to the lens glass vertex.
 

@@ -103,8 +103,3 @@ def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
             x += 40_000
     polys.append(_rect(-h, -h, h, h, 100, 0))
     return polys
-
-
-def polygon_points(polys: list) -> list[tuple[np.ndarray, int, int]]:
-    """(points as int64 nm, layer, datatype) of gdstk polygons."""
-    return [(np.rint(p.points).astype(np.int64), p.layer, p.datatype) for p in polys]
