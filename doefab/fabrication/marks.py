@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import gdstk
-import numpy as np
 
 __all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site"]
 
