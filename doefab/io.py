@@ -1,17 +1,46 @@
-"""Atomic file and folder writes: nothing half-written survives a failure."""
+"""Files and folders the commands write: atomic, umask-respecting, and never someone else's folder.
+
+- ``atomic_write_bytes`` (and text/json): temporary file beside the target, fsync, atomic rename; the file
+  gets the permissions the user's umask gives any new file (``mkstemp`` alone would leave 0600).
+- ``staging_dir``: a folder built beside its target and swapped in only when complete; stale staging folders
+  of killed runs (their process is gone) are removed first.
+- ``OutputDir``: the output folder of one command run. It refuses, before any work starts, a path that is
+  a file, a folder that cannot be written, and a non-empty folder that is not this command's own kind of
+  output (a marker file says so), even with ``--force``; on failure it removes what the run created.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
 
 from doefab.errors import DoefabError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "prepare_out_dir"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
+           "MARKER", "SIGNATURES", "plain_name", "apply_umask"]
+
+MARKER = ".doefab-output.json"
+_UMASK: int | None = None
+
+
+def _umask() -> int:
+    global _UMASK
+    if _UMASK is None:
+        _UMASK = os.umask(0o022)
+        os.umask(_UMASK)
+    return _UMASK
+
+
+def apply_umask(path: str | Path) -> None:
+    """Give ``path`` the mode a plain ``open``/``mkdir`` would (0666/0777 less the umask)."""
+    path = Path(path)
+    base = 0o777 if path.is_dir() else 0o666
+    os.chmod(path, base & ~_umask())
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -20,6 +49,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
@@ -40,32 +70,175 @@ def atomic_write_json(path: str | Path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
 
 
-def prepare_out_dir(out: str | Path, force: bool) -> Path:
-    """Refuse an existing non-empty output folder unless ``force``."""
-    out = Path(out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
-        raise DoefabError(f"output path {out} already exists: choose another --out or pass --force to replace it")
-    return out
+_PLAIN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
+
+
+def plain_name(name: str, what: str = "--name") -> str:
+    """Return ``name`` if it is a plain file name (letters, digits, ``_ . -``; no path, no leading dot)."""
+    if not isinstance(name, str) or not _PLAIN.match(name) or ".." in name:
+        raise DoefabError(f"{what} {name!r} is not a plain file name: use letters, digits, '_', '-' and '.' only "
+                          f"(no '/', no '..', not starting with '.'), e.g. {what} streak")
+    return name
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+_STALE = re.compile(r"\.(staging|old)\.(\d+)\.")
+
+
+def clean_stale_staging(final: Path) -> list[Path]:
+    """Remove staging/old folders beside ``final`` left by runs whose process no longer exists."""
+    removed = []
+    parent = final.parent
+    if not parent.is_dir():
+        return removed
+    for p in parent.glob(f".{final.name}.*"):
+        m = _STALE.match(p.name[len(final.name) + 1:])
+        if not p.is_dir() or m is None:
+            continue
+        if not _pid_alive(int(m.group(2))) or int(m.group(2)) == os.getpid():
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
 
 
 @contextlib.contextmanager
 def staging_dir(final: str | Path):
-    """Yield a temporary folder beside ``final``; on success it replaces ``final`` atomically-ish.
+    """Yield a temporary folder beside ``final``; on success it replaces ``final`` (two renames).
 
-    On any exception the staging folder is removed and ``final`` is left as it was.
+    On any exception the staging folder is removed and ``final`` is left as it was. Staging folders of
+    killed runs are removed before a new one is made.
     """
     final = Path(final)
+    made = None  # the outermost parent folder this call creates (removed again on failure)
+    q = final.absolute().parent
+    while not q.exists():
+        made, q = q, q.parent
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.staging.", dir=final.parent))
+    clean_stale_staging(final)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.staging.{os.getpid()}.", dir=final.parent))
+    apply_umask(tmp)
     try:
         yield tmp
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        if made is not None:
+            shutil.rmtree(made, ignore_errors=True)
         raise
     old = None
     if final.exists():
-        old = final.with_name(f".{final.name}.old.{os.getpid()}")
+        old = final.parent / f".{final.name}.old.{os.getpid()}.x"
         os.replace(final, old)
     os.replace(tmp, final)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+
+
+def _nearest_existing(path: Path) -> Path:
+    p = path.absolute()
+    while not p.exists():
+        p = p.parent
+    return p
+
+
+def read_marker(folder: Path) -> dict | None:
+    try:
+        d = json.loads((folder / MARKER).read_text())
+        return d if isinstance(d, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+class OutputDir:
+    """The output folder of one run of a command of kind ``kind`` (``"masks"``, ``"design"``, ...).
+
+    Construction validates (no file is touched): ``path`` must not be a file; an existing non-empty folder
+    must carry this kind's marker (or one of ``signatures``, files only this kind writes) and then needs
+    ``replace=True`` (``--force``/``--resume``); the folder (or its nearest existing parent) must be
+    writable. ``create()`` makes it and writes the marker; ``discard()`` removes what ``create`` made.
+    """
+
+    def __init__(self, path: str | Path, kind: str, replace: bool = False, signatures: tuple = (),
+                 flag: str = "--out", replace_flag: str = "--force"):
+        self.path, self.kind = Path(path), kind
+        self.created: list[Path] = []
+        p = self.path
+        if str(path).strip() == "":
+            raise DoefabError(f"{flag} is empty: give a folder path")
+        if p.exists() and not p.is_dir():
+            raise DoefabError(f"{flag} {p} is an existing file, not a folder: give a new or empty folder path")
+        self.existing = p.is_dir() and any(p.iterdir())
+        if self.existing:
+            marker = read_marker(p)
+            ours = (marker is not None and marker.get("kind") == kind) or any(
+                _sig(p, s) for s in signatures)
+            if not ours:
+                other = f" (it holds a doefab {marker.get('kind')} output)" if marker else ""
+                raise DoefabError(f"{flag} {p} is a non-empty folder that is not a doefab {kind} output{other}: "
+                                  f"doefab never replaces other files, even with {replace_flag}; choose a new "
+                                  f"or empty folder")
+            if not replace:
+                raise DoefabError(f"{flag} {p} already holds a doefab {kind} output: pass {replace_flag} to "
+                                  f"replace it, or choose another folder")
+        anc = _nearest_existing(p)
+        if not anc.is_dir():
+            raise DoefabError(f"{flag} {p}: {anc} is a file, so no folder can be made under it")
+        try:
+            probe = tempfile.mkdtemp(prefix=".doefab-write-probe.", dir=anc)
+            os.rmdir(probe)
+        except OSError as exc:
+            raise DoefabError(f"{flag} {p}: cannot write in {anc} ({exc.strerror}): choose a writable folder") \
+                from None
+
+    def create(self) -> Path:
+        """Make the folder (recording which folders this run created) and write the marker."""
+        missing = []
+        q = self.path.absolute()
+        while not q.exists():
+            missing.append(q)
+            q = q.parent
+        for d in reversed(missing):
+            d.mkdir()
+            apply_umask(d)
+            self.created.append(d)
+        atomic_write_json(self.path / MARKER, {"kind": self.kind, "written_by": "doefab"})
+        return self.path
+
+    def discard(self) -> None:
+        """Remove the folders this run created (deepest first); a folder that existed before is kept."""
+        if self.created:
+            shutil.rmtree(self.created[0], ignore_errors=True)
+        self.created = []
+
+
+def _is_mask_manifest(text: str) -> bool:
+    return str(json.loads(text).get("format", "")).startswith("doefab mask set")
+
+
+# files only that kind of output holds (folders written before the marker file existed)
+SIGNATURES = {
+    "demo": ("summary.json",),
+    "psf": ("psf.npz",),
+    "design": ("design.json", "checkpoint.pt"),
+    "masks": (("manifest.json", _is_mask_manifest),),
+    "holder": ("holder.json", "holder.FAILED.json"),
+}
+
+
+def _sig(folder: Path, signature) -> bool:
+    """A signature is a file name, or (file name, predicate on its text)."""
+    if isinstance(signature, str):
+        return (folder / signature).is_file()
+    name, pred = signature
+    try:
+        return bool(pred((folder / name).read_text()))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False

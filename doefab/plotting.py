@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_psf_grid", "plot_height"]
+__all__ = ["plot_psf_grid", "plot_height", "psf_pair_figure", "depth_label", "core_window"]
 
 
 def _plt():
@@ -62,6 +62,74 @@ def plot_height(path: str | Path, height: np.ndarray, pitch: float, title: str =
     ax.set_title(title, fontsize=9)
     fig.colorbar(im, ax=ax, label="height (nm)")
     fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def depth_label(z: float) -> str:
+    """``"z = 2 m"``, or ``"z = ∞"`` for a point at infinity."""
+    import math
+
+    return f"z = {z:g} m" if math.isfinite(z) else "z = ∞"
+
+
+def core_window(images, energy: float = 0.995, minimum: int = 15) -> int:
+    """Half-width (pixels) of the centred square holding ``energy`` of every image's light in the window."""
+    best = minimum
+    for img in images:
+        k = img.shape[-1]
+        c = k // 2
+        total = float(img.sum())
+        if total <= 0:
+            continue
+        for r in range(minimum, c + 1):
+            if float(img[c - r:c + r + 1, c - r:c + r + 1].sum()) >= energy * total:
+                best = max(best, r)
+                break
+        else:
+            best = c
+    return best
+
+
+def psf_pair_figure(path: str | Path, coded: np.ndarray, uncoded: np.ndarray, depths, sensor_pitch: float,
+                    title: str = "", log: bool = True) -> Path:
+    """Coded (left) and uncoded (right) PSFs, one row per depth, on ONE colour scale, cropped to the core.
+
+    Args:
+        coded, uncoded: [n_depths, n_wavelengths, K, K] fractions of the aperture's light per pixel
+            (summed over wavelengths for display).
+    """
+    from matplotlib.colors import LogNorm, Normalize
+
+    plt = _plt()
+    c = coded.sum(axis=1)
+    u = uncoded.sum(axis=1)
+    k = c.shape[-1]
+    r = core_window(list(c) + list(u))
+    m = k // 2
+    sl = slice(m - r, m + r + 1)
+    c, u = c[:, sl, sl], u[:, sl, sl]
+    vmax = float(max(c.max(), u.max()))
+    norm = LogNorm(vmin=max(vmax * 1e-5, 1e-12), vmax=vmax) if log else Normalize(vmin=0, vmax=vmax)
+    nd = len(depths)
+    fig, axes = plt.subplots(nd, 2, figsize=(6.6, 3.0 * nd + 0.6), squeeze=False, layout="constrained")
+    half = (r + 0.5) * sensor_pitch * 1e6
+    im = None
+    for zi, z in enumerate(depths):
+        for col, (name, img) in enumerate((("coded (DOE half)", c[zi]), ("uncoded (plain half)", u[zi]))):
+            ax = axes[zi, col]
+            im = ax.imshow(np.maximum(img, norm.vmin) if log else img, extent=(-half, half, -half, half),
+                           cmap="inferno", norm=norm, origin="upper", interpolation="nearest")
+            ax.set_title(f"{name}, {depth_label(z)}", fontsize=8)
+            ax.set_xlabel("x on sensor (µm)", fontsize=7)
+            ax.set_ylabel("y on sensor (µm)", fontsize=7)
+            ax.tick_params(labelsize=6)
+    cb = fig.colorbar(im, ax=axes, shrink=0.8)
+    cb.set_label("fraction of the aperture's light per pixel" + (" (log scale)" if log else ""), fontsize=7)
+    cb.ax.tick_params(labelsize=6)
+    fig.suptitle(title + (" — " if title else "") + "both halves on one colour scale", fontsize=9)
     path = Path(path)
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -9,14 +9,16 @@ import numpy as np
 
 from holder_cad.checks import run_checks
 from holder_cad.mesh import build_manifold, to_trimesh
+from doefab.errors import CheckFailed
 from holder_cad.params import HolderError, HolderParams
 from holder_cad.recipe import base_body, cartridge_body, coupon_bodies
 
 __all__ = ["build_parts", "assembly", "write_holder", "HolderCheckError"]
 
 
-class HolderCheckError(HolderError):
-    """A built holder failed one of its checks (the report says which)."""
+class HolderCheckError(HolderError, CheckFailed):
+    """A built holder failed one of its checks (the message names the failing quantities; the full report is
+    ``holder.FAILED.json``). No printable file is written for a part that fails."""
 
 
 def build_parts(p: HolderParams) -> dict:
@@ -57,7 +59,11 @@ def _export_mesh(manifolds: list, path: Path, fmt: str) -> None:
 
 
 def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None, renders: bool = True) -> dict:
-    """Build, check and write every output; raise HolderCheckError (after writing holder.json) on a failed check."""
+    """Build and check the holder; only a part that passes every check gets printable files.
+
+    A failed check raises HolderCheckError naming the failing quantities, after writing the full report as
+    ``holder.FAILED.json`` (and no STL/3MF/STEP, so nothing printable looks finished).
+    """
     from doefab.io import atomic_write_json
 
     out = Path(out_dir)
@@ -67,15 +73,22 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
     asm = assembly(parts, p)
     checks = run_checks(parts, asm, p, expected_bodies=2)
     t_mesh = time.perf_counter() - t0
+    coupon = {b.name: build_manifold(b, p.segments) for b in coupon_bodies(p)}
+    coupon_checks = run_checks(coupon, [], p, expected_bodies=2)
+    report = {"units": "mm", "parameters": p.to_dict(), "checks": checks, "coupon_checks": coupon_checks,
+              "doe_to_lens_mm": checks["doe_to_lens_mm"], "mesh_seconds": round(t_mesh, 3), "files": []}
+    if not (checks["passed"] and coupon_checks["passed"]):
+        (out / "holder.json").unlink(missing_ok=True)
+        atomic_write_json(out / "holder.FAILED.json", report)
+        why = checks["failing"] + [f"coupon {w}" for w in coupon_checks["failing"]]
+        raise HolderCheckError(f"the holder fails its checks: {'; '.join(why) or 'see the report'} (full report: "
+                               f"{out / 'holder.FAILED.json'}; no printable file was written)")
+    (out / "holder.FAILED.json").unlink(missing_ok=True)
     printed = _layout_for_print([parts["base"], parts["cartridge"]])
     _export_mesh(printed, out / "holder.stl", "stl")
     _export_mesh(printed, out / "holder.3mf", "3mf")
-    coupon = {b.name: build_manifold(b, p.segments) for b in coupon_bodies(p)}
-    coupon_checks = run_checks(coupon, [], p, expected_bodies=2)
     _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")
-    report = {"units": "mm", "parameters": p.to_dict(), "checks": checks, "coupon_checks": coupon_checks,
-              "doe_to_lens_mm": round(p.doe_to_lens_mm, 3), "mesh_seconds": round(t_mesh, 3),
-              "files": ["holder.stl", "holder.3mf", "coupon.stl"]}
+    report["files"] = ["holder.stl", "holder.3mf", "coupon.stl"]
     if step is None:
         try:
             import cadquery  # noqa: F401
@@ -88,9 +101,6 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
 
         t1 = time.perf_counter()
         solids = build_brep(p)
-        export_step(solids, out / "holder.step")
-        report["files"].append("holder.step")
-        report["step_seconds"] = round(time.perf_counter() - t1, 3)
         report["brep_vs_mesh"] = {name: {"volume_mm3": round(s.Volume(), 3),
                                          "volume_rel_diff": abs(s.Volume() - parts[name].volume()) / parts[name].volume(),
                                          "bbox_max_diff_mm": float(np.max(np.abs(
@@ -98,14 +108,21 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
                                   for name, s in solids.items()}
         ok = all(v["volume_rel_diff"] <= 0.01 and v["bbox_max_diff_mm"] <= 0.05 for v in report["brep_vs_mesh"].values())
         checks["brep_agrees"] = ok
-        checks["passed"] &= ok
+        if not ok:
+            for f in report["files"]:
+                (out / f).unlink(missing_ok=True)
+            report["files"] = []
+            atomic_write_json(out / "holder.FAILED.json", report)
+            raise HolderCheckError(f"the cadquery B-rep and the mesh disagree (volume or bounding box): "
+                                   f"{report['brep_vs_mesh']}; no printable file was kept")
+        export_step(solids, out / "holder.step")
+        report["files"].append("holder.step")
+        report["step_seconds"] = round(time.perf_counter() - t1, 3)
     if renders:
         from holder_cad.render import render_views
 
         report["files"] += render_views(p, out)
     atomic_write_json(out / "holder.json", report)
-    if not (checks["passed"] and coupon_checks["passed"]):
-        raise HolderCheckError(f"holder checks failed: see {out / 'holder.json'}")
     return report
 
 

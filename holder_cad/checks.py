@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from holder_cad.params import HolderParams
+from holder_cad.params import HolderParams, fit_bounds
 from holder_cad.recipe import die_outline
 
 __all__ = ["wall_thickness", "overhang_area", "pocket_gap", "aperture_clear", "run_checks"]
@@ -154,9 +154,52 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
         gap = pocket_gap(c, p, z_mid)
         out["die_to_pocket_gap_mm"] = round(gap, 4)
         out["passed"] &= gap >= p.clearance_mm - 1e-3
+        if gap < p.clearance_mm - 1e-3:
+            out.setdefault("fit_failures", []).append(f"die_to_pocket_gap_mm = {gap:.3f} (needs ≥ {p.clearance_mm})")
     if assembly:
         blocked = aperture_clear(assembly, p.clear_aperture_mm / 2)
         out["aperture_rays_blocked"] = blocked
         out["passed"] &= blocked == 0
-    out["doe_to_lens_mm"] = round(p.doe_to_lens_mm, 3)
+    measured = doe_face_height(assembly, p) if assembly else None
+    if measured is not None:
+        reach = p.thread_length_mm if p.mount == "thread" else 0.0
+        out["doe_face_above_lens_side_end_mm"] = round(measured, 4)
+        d = p.lens_face_to_glass_mm - reach + measured
+    else:
+        d = p.doe_to_lens_mm
+    out["doe_to_lens_mm"] = round(d, 3)
+    out["fit_bounds"] = fit_bounds(p, doe_to_lens_mm=d)
+    out["passed"] &= all(b["ok"] for b in out["fit_bounds"])
+    out["failing"] = failing(out)
+    return out
+
+
+def doe_face_height(assembly_parts, p: HolderParams) -> float | None:
+    """Height (mm) of the DOE face above the assembly's lens-side end (z = 0), measured on the mesh: an axial
+    ray beside the aperture, inside the die pocket, meets the pocket ceiling (the die's back) first."""
+    x, y = 0.0, p.die_height_mm / 2 - 0.3
+    for m in assembly_parts[1:] or assembly_parts:
+        hits = m.ray_cast((x, y, -50.0), (x, y, 200.0))
+        if hits:
+            return -50.0 + hits[0].distance * 250.0 - p.die_thickness_mm
+    return None
+
+
+def failing(checks: dict) -> list[str]:
+    """Names (and values) of every failed check, for the one-line error."""
+    out = []
+    for name, b in checks.get("bodies", {}).items():
+        if not b.get("ok", True):
+            why = [k for k, bad in (("manifold status", b["status"] != "NoError"), ("not watertight", not b["watertight"]),
+                                    ("not a volume", not b["is_volume"]),
+                                    (f"min wall {b['min_wall_mm']} mm", True)) if bad]
+            out.append(f"{name}: {', '.join(why[:2])}; overhang {b['overhang_area_beyond_45deg_mm2']} mm²")
+    if checks.get("total_bodies") != checks.get("declared_bodies"):
+        out.append(f"bodies {checks.get('total_bodies')} (declared {checks.get('declared_bodies')})")
+    out += checks.get("fit_failures", [])
+    if checks.get("aperture_rays_blocked"):
+        out.append(f"aperture_rays_blocked = {checks['aperture_rays_blocked']}")
+    for b in checks.get("fit_bounds", []):
+        if not b["ok"]:
+            out.append(f"{b['quantity']} = {b['value']:.3g} {b['unit']} (allowed {b['min']:g}–{b['max']:g})")
     return out

@@ -20,9 +20,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "names: " + ", ".join(f.name for f in dataclasses.fields(HolderParams)))
     p.add_argument("--no-step", action="store_true", help="skip the cadquery STEP export (mesh path only)")
     p.add_argument("--no-renders", action="store_true", help="skip the PNG renders")
+    p.add_argument("--force", action="store_true", help="replace an earlier holder output in OUT")
 
 
 def params_from_sets(sets: list[str]) -> HolderParams:
+    """HolderParams from ``--set NAME=VALUE`` items; numbers must be finite (lengths in mm)."""
+    import math
+
     fields = {f.name: f for f in dataclasses.fields(HolderParams)}
     values = {}
     for item in sets:
@@ -30,20 +34,31 @@ def params_from_sets(sets: list[str]) -> HolderParams:
             raise HolderError(f"--set expects NAME=VALUE, got {item!r}")
         name, raw = item.split("=", 1)
         if name not in fields:
-            raise HolderError(f"unknown holder parameter {name!r}; known: {', '.join(fields)}")
+            raise HolderError(f"unknown holder parameter {name!r} in --set; known: {', '.join(fields)}")
+        if name in values:
+            raise HolderError(f"--set {name} is given twice: give each parameter once")
         default = getattr(HolderParams(), name)
+        unit = " in mm" if name.endswith("_mm") else ""
         try:
-            values[name] = type(default)(raw) if not isinstance(default, str) else raw
+            v = type(default)(raw) if not isinstance(default, str) else raw
         except ValueError:
-            raise HolderError(f"{name} expects a {type(default).__name__}, got {raw!r}") from None
+            raise HolderError(f"--set {name} expects {'an integer' if isinstance(default, int) else 'a number'}"
+                              f"{unit}, got {raw!r}") from None
+        if isinstance(v, float) and not math.isfinite(v):
+            raise HolderError(f"--set {name} must be a finite number{unit}, got {raw!r}")
+        values[name] = v
     return HolderParams(**values)
 
 
 def run(args) -> int:
+    from doefab.cli._output import claim_output
     from holder_cad.build import write_holder
 
     p = params_from_sets(args.set)
-    report = write_holder(p, args.out, step=False if args.no_step else None, renders=not args.no_renders)
+    out = claim_output(args, "holder", replace=getattr(args, "force", False),
+                       keep_on_failure=lambda: (args.outdir.path / "holder.FAILED.json").is_file())
+    out.create()
+    report = write_holder(p, out.path, step=False if args.no_step else None, renders=not args.no_renders)
     c = report["checks"]
     print(json.dumps({"checks_passed": c["passed"], "bodies": {k: {kk: v[kk] for kk in ("volume_mm3", "min_wall_mm",
                       "overhang_area_beyond_45deg_mm2")} for k, v in c["bodies"].items()},
@@ -61,4 +76,6 @@ def main(argv=None) -> int:
         return run(args)
     except HolderError as exc:
         print(f"holder: error: {exc}", file=sys.stderr)
-        return 2
+        if getattr(args, "outdir", None) is not None and not (args.outdir.path / "holder.FAILED.json").is_file():
+            args.outdir.discard()
+        return 3 if exc.__class__.__name__ == "HolderCheckError" else 2

@@ -17,7 +17,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-__all__ = ["HolderParams", "HolderError"]
+__all__ = ["HolderParams", "HolderError", "fit_bounds"]
 
 
 class HolderError(ValueError):
@@ -45,7 +45,12 @@ class HolderParams:
         flange_diameter_mm: outer diameter of both flanges.  flange_height_mm, cartridge_flange_mm: heights.
         screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
         washer_diameter_mm, washer_recess_mm: retention washers (recessed so nothing protrudes to the lens).
+        max_doe_to_lens_mm: the farthest the DOE may sit in front of the lens glass (the split-aperture optics
+            assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
+
+    Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter set that
+    violates one is refused before anything is built, with the quantity, its value and the limit.
     """
 
     mount: str = "thread"
@@ -72,6 +77,7 @@ class HolderParams:
     pilot_hole_mm: float = 1.7
     washer_diameter_mm: float = 6.0
     washer_recess_mm: float = 0.6
+    max_doe_to_lens_mm: float = 5.0
     segments: int = 128
 
     def __post_init__(self) -> None:
@@ -121,9 +127,10 @@ class HolderParams:
         if self.mount == "thread" and self.chamfer_height_mm + self.wall_mm > self.flange_height_mm:
             raise HolderError(f"flange_height_mm ({self.flange_height_mm}) is too low for the 45° chamfer "
                               f"({self.chamfer_height_mm:.2f} mm) plus wall_mm")
-        if self.doe_to_lens_mm < 0.2:
-            raise HolderError(f"the DOE would sit {self.doe_to_lens_mm:.2f} mm from the lens glass (< 0.2 mm): "
-                              f"shorten thread_length_mm or check lens_face_to_glass_mm")
+        bad = [b for b in fit_bounds(self) if not b["ok"]]
+        if bad:
+            raise HolderError("; ".join(f"{b['quantity']} = {b['value']:.3g} {b['unit']} is outside "
+                                        f"{b['min']:g}–{b['max']:g} {b['unit']} ({b['fix']})" for b in bad))
 
     # ---- derived dimensions (mm) --------------------------------------------------------------
     @property
@@ -190,3 +197,35 @@ class HolderParams:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def fit_bounds(p: HolderParams, doe_to_lens_mm: float | None = None) -> list[dict]:
+    """Bounds on the derived quantities that decide whether the holder fits and works (millimetres).
+
+    ``doe_to_lens_mm``: a measured value (from the built mesh) instead of the formula's. Each entry:
+    quantity, value, min, max, unit, ok, fix.
+    """
+    d = p.doe_to_lens_mm if doe_to_lens_mm is None else doe_to_lens_mm
+    cart_len = p.base_height_mm if p.mount == "thread" else p.flange_height_mm
+    rows = [
+        ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
+         "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
+         "lens_face_to_glass_mm"),
+        ("die_to_pocket_clearance_mm", p.clearance_mm, 0.05, 1.0, "mm",
+         "clearance_mm: below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
+        ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, 3.0, "mm",
+         "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
+        ("die_seat_thickness_mm", p.cartridge_flange_mm + cart_len - p.washer_recess_mm - p.die_thickness_mm,
+         p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
+                               "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),
+        ("wall_mm", p.wall_mm, p.nozzle_mm, 10.0, "mm", "wall_mm between one nozzle line and 10 mm"),
+    ]
+    if p.mount == "thread":
+        rows += [
+            ("thread_pitch_mm", p.thread_pitch_mm, 0.25, 1.5, "mm", "filter threads have pitches 0.5–1.0 mm"),
+            ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
+             "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
+            ("thread_depth_mm", p.thread_depth_mm, 0.1, 0.8, "mm", "a printable tooth of a filter thread"),
+        ]
+    return [{"quantity": q, "value": float(v), "min": lo, "max": hi, "unit": u, "ok": bool(lo <= v <= hi), "fix": fix}
+            for q, v, lo, hi, u, fix in rows]

@@ -1,38 +1,103 @@
-"""The ``doefab`` command line: one subcommand per stage (``doefab SUBCOMMAND --help``)."""
+"""The ``doefab`` command line: one subcommand per stage (``doefab SUBCOMMAND --help``).
+
+Every subcommand's failures pass through ``main``: one line on stderr and a distinct exit status —
+0 success, 1 internal error (a bug: ``--debug`` shows the traceback), 2 usage or input error, 3 a product
+that fails its own checks (mask verification, holder checks), 130 interrupted (with how to resume, where a
+run can). An output folder the run created is removed on failure (a design's checkpoint is kept).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 
-from doefab.errors import DoefabError
-from holder_cad.params import HolderError
+from doefab.cli._args import OneLineParser
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_CHECK", "EXIT_INTERRUPTED"]
+
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CHECK, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+# API names that may appear in a library message, and what a command-line user sets instead
+_CLI_NAMES = (
+    ("(pupil_oversample ≥", "(--pupil-oversample ≥"),
+    ("pupil_oversample ≥", "--pupil-oversample ≥"),
+    ("resample it or set Camera.doe_pixels", "resample it or choose the --preset whose grid it was made for"),
+    ("enlarge die_m", "raise --die-mm"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     from doefab.cli import demo, design, holder, masks, psf
 
-    parser = argparse.ArgumentParser(prog="doefab", description=__doc__)
+    parser = OneLineParser(prog="doefab", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND")
+    parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
+    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=OneLineParser)
     for module in (demo, psf, design, masks, holder):
         module.register(sub)
+    for name, subparser in sub.choices.items():
+        subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                               help="show the Python traceback of an error")
     return parser
 
 
+def _one_line(text: str) -> str:
+    line = " ".join(str(text).split())
+    for api, flag in _CLI_NAMES:
+        line = line.replace(api, flag)
+    return line
+
+
 def main(argv: list[str] | None = None) -> int:
+    from doefab.errors import CheckFailed, DoefabError
+    from holder_cad.params import HolderError
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
-        return 0
+        return EXIT_OK
+    prog = f"doefab {args.command}"
+    status, message, error = EXIT_OK, "", None
     try:
         return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        hint = getattr(args, "resume_hint", None)
+        status, message = EXIT_INTERRUPTED, "interrupted" + (f"; {hint}" if hint else "; nothing was kept")
+    except CheckFailed as exc:
+        error = exc
+        status, message = EXIT_CHECK, f"check failed: {exc}"
     except (DoefabError, HolderError) as exc:
-        print(f"doefab {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        error = exc
+        status, message = EXIT_USAGE, f"error: {exc}"
+    except OSError as exc:  # disk full, permissions, a path that vanished: the user's environment
+        error = exc
+        where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+        status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}"
+    except MemoryError:
+        status, message = EXIT_USAGE, "error: out of memory: use a smaller kernel, grid or fewer wavelengths"
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request
+        error = exc
+        status, message = EXIT_INTERNAL, (f"internal error: {exc.__class__.__name__}: {exc} (rerun with "
+                                          f"--debug for the traceback, and please report it)")
+    finally:
+        if status != EXIT_OK:
+            _discard_outputs(args)
+    if getattr(args, "debug", False) and error is not None:
+        traceback.print_exception(error)
+    print(f"{prog}: {_one_line(message)}", file=sys.stderr)
+    return status
+
+
+def _discard_outputs(args) -> None:
+    out = getattr(args, "outdir", None)
+    if out is None:
+        return
+    keep = getattr(args, "keep_on_failure", None)
+    if keep is not None and keep():
+        return
+    out.discard()
 
 
 if __name__ == "__main__":

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from pathlib import Path
 
 import numpy as np
+
+from doefab.cli._args import number
 
 RGB_M = (656e-9, 589e-9, 486e-9)
 
@@ -16,8 +17,10 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="compute and plot the default camera's coded/uncoded PSFs (blank DOE and "
                                     "a 16-level blazed grating)",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--out", default="out/demo", help="output folder")
-    p.add_argument("--kernel", type=int, default=255, help="PSF window K (sensor pixels)")
+    p.add_argument("--out", default="out/demo", help="output folder (an earlier demo output there is replaced; "
+                                                     "any other non-empty folder is refused)")
+    p.add_argument("--kernel", type=number(int, 15, 511, unit="sensor pixels"), default=255,
+                   help="PSF window K (sensor pixels)")
     p.set_defaults(func=run)
 
 
@@ -27,10 +30,10 @@ def run(args) -> int:
 
     import doefab
     from doefab.io import atomic_write_json
-    from doefab.plotting import plot_height, plot_psf_grid
+    from doefab.cli._output import claim_output
+    from doefab.plotting import plot_height, psf_pair_figure
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    claim = claim_output(args, "demo", replace=True)
     cam = doefab.Camera()
     depths = (cam.focus_distance, math.inf, 2.0)
     designs = {
@@ -38,6 +41,7 @@ def run(args) -> int:
         "grating16": doefab.quantize_height(doefab.blazed_grating_height(cam, 16), cam),
     }
     plan = doefab.PSFPlan(cam, RGB_M, depths, args.kernel)
+    out = claim.create()
     summary = {"camera": cam.to_dict(), "wavelengths_m": list(RGB_M),
                "depths_m": [d if math.isfinite(d) else "inf" for d in depths], "kernel_px": args.kernel,
                "results": {}}
@@ -51,13 +55,8 @@ def run(args) -> int:
         bar.set_postfix(design=name, seconds=f"{dt:.1f}", coded_sum=f"{coded.sum() / coded.shape[0] / 3:.3f}")
         np.save(out / f"{name}_coded.npy", coded)
         np.save(out / f"{name}_uncoded.npy", uncoded)
-        panels = []
-        for zi, z in enumerate(depths):
-            for half, arr in (("coded", coded), ("uncoded", uncoded)):
-                rgb_sum = arr[zi].sum(axis=0)
-                panels.append((f"{name} {half}, z = {z:g} m (R+G+B)", rgb_sum))
-        plot_psf_grid(out / f"{name}_psfs.png", panels, cam.sensor_pitch, ncols=2,
-                      suptitle=f"{name}: coded (x<0 half, DOE) and uncoded (x>0 half), log scale")
+        psf_pair_figure(out / f"{name}_psfs.png", coded, uncoded, depths, cam.sensor_pitch,
+                        title=f"{name}: R+G+B (656, 589, 486 nm)")
         plot_height(out / f"{name}_height.png", height, cam.doe_pitch, f"{name} height map")
         summary["results"][name] = {
             "seconds": round(dt, 3),

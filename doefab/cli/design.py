@@ -1,10 +1,14 @@
-"""``doefab design``: optimise a task's DOE and write a design folder (see doefab.design.design)."""
+"""``doefab design``: optimise a task's DOE and write a design folder (see doefab.design.design).
+
+Interrupted (Ctrl-C) or stopped runs keep OUT/checkpoint.pt: run the same command with --resume to continue
+(--resume may also raise --iterations).
+"""
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
+from doefab.cli._args import number
 from doefab.errors import DoefabError
 
 
@@ -13,16 +17,22 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", required=True, choices=["streak", "grating", "half-ring"], help="task")
     p.add_argument("--out", required=True, help="design folder to write")
-    p.add_argument("--iterations", type=int, default=None, help="optimiser steps (default: the task's)")
+    p.add_argument("--iterations", type=number(int, 1, 1_000_000, unit="steps"), default=None,
+                   help="optimiser steps (default: the task's)")
     p.add_argument("--optimizer", default="adam", choices=["adam", "lbfgs", "mma"], help="optimiser")
-    p.add_argument("--lr", type=float, default=None, help="Adam step in waves (default: the task's)")
-    p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--sampling", type=int, default=1, help="design on a DOE grid coarser by this factor "
-                                                          "(1 = the preset's full grid)")
-    p.add_argument("--batch", type=int, default=None, help="(depth, band) pairs per Adam step; 0 = all")
-    p.add_argument("--qat-fraction", type=float, default=0.2, help="last fraction of steps run quantization-aware")
-    p.add_argument("--fab-weight", type=float, default=0.0, help="isolated-pixel regulariser weight (0 = off)")
-    p.add_argument("--checkpoint-every", type=int, default=20, help="steps between checkpoints")
+    p.add_argument("--lr", type=number(float, 0, 10, lo_open=True, unit="waves per step"), default=None,
+                   help="Adam step in waves (default: the task's)")
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
+    p.add_argument("--sampling", type=number(int, 1, 16), default=1,
+                   help="design on a DOE grid coarser by this factor (1 = the preset's full grid; must divide it)")
+    p.add_argument("--batch", type=number(int, -1, 100_000), default=None,
+                   help="(depth, band) pairs per Adam step; 0 = all; -1 = every depth, one random band each")
+    p.add_argument("--qat-fraction", type=number(float, 0, 1, unit="fraction of the steps"), default=0.2,
+                   help="last fraction of steps run quantization-aware")
+    p.add_argument("--fab-weight", type=number(float, 0, 1000), default=0.0,
+                   help="isolated-pixel regulariser weight (0 = off)")
+    p.add_argument("--checkpoint-every", type=number(int, 1, 1_000_000, unit="steps"), default=20,
+                   help="steps between checkpoints")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="overwrite an existing design in OUT")
     p.set_defaults(func=run)
@@ -30,22 +40,36 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
+    from doefab.cli._output import claim_output
+    from doefab.tasks import get_task
 
-    out = Path(args.out)
-    if (out / "design.json").exists() and not (args.force or args.resume):
-        raise DoefabError(f"{out} already holds a design: choose another --out, or --force to overwrite")
+    task = get_task(args.task)
+    grid = doefab.Camera.preset(task.preset).doe_pixels
+    if grid % args.sampling:
+        raise DoefabError(f"--sampling {args.sampling} must divide the {args.task} preset's DOE grid ({grid} px): "
+                          f"use one of {[s for s in range(1, 17) if grid % s == 0]}")
+    if args.resume and args.force:
+        raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
+    out = claim_output(args, "design", replace=args.force or args.resume,
+                       replace_flag="--force (or --resume)",
+                       keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
+    if args.resume and not (out.path / "checkpoint.pt").is_file():
+        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
                 "checkpoint_every": args.checkpoint_every, "sampling": args.sampling}
     if args.lr is not None:
         settings["lr"] = args.lr
     if args.batch is not None:
         settings["batch"] = args.batch
-    out.mkdir(parents=True, exist_ok=True)
+    out.create()
     design = doefab.optimize(args.task, iterations=args.iterations, optimizer=args.optimizer, seed=args.seed,
-                             out_dir=out, resume=args.resume, **settings)
-    design.save(out)
+                             out_dir=out.path, resume=args.resume, **settings)
+    design.save(out.path)
     m = design.metrics
+    stop = design.extra.get("stop_reason")
     print(f"{design.task}: {m['name']}: continuous {m['continuous']:.4f} (worst {m['continuous_worst']:.4f}), "
           f"16-level {m['quantized']:.4f} (worst {m['quantized_worst']:.4f}); "
-          f"wall time {design.extra.get('wall_time_s', 0):.0f} s; wrote {out}/")
+          f"wall time {design.extra.get('wall_time_s', 0):.0f} s; wrote {out.path}/"
+          + (f"; optimiser: {stop}" if stop else ""))
     return 0

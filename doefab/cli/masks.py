@@ -11,6 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
+from doefab.cli._args import number, plain_name_arg
 from doefab.errors import DoefabError
 
 
@@ -20,14 +21,19 @@ def register(sub) -> None:
     p.add_argument("--design", help="design folder (design.json + levels.npy)")
     p.add_argument("--out", help="mask-set folder to write (must not exist unless --force)")
     p.add_argument("--verify", metavar="DIR", help="re-check an existing mask set instead of exporting")
-    p.add_argument("--name", default=None, help="base file name (default: the design's task)")
+    p.add_argument("--name", type=plain_name_arg, default=None,
+                   help="base file name, a plain name without '/' (default: the design's task)")
     p.add_argument("--oasis", action="store_true", help="also write OASIS (identical geometry, much smaller)")
-    p.add_argument("--die-mm", type=float, default=12.0, help="die size, square, in mm (default 12)")
-    p.add_argument("--cd-um", type=float, default=None, help="critical dimension in µm (default: the pixel pitch)")
-    p.add_argument("--vertex-cap", type=int, default=4000, help="max vertices per polygon (GDSII limit 8190)")
+    p.add_argument("--die-mm", type=number(float, 1, 300, unit="mm"), default=12.0,
+                   help="die size, square, in mm (default 12)")
+    p.add_argument("--cd-um", type=number(float, 0.1, 1000, unit="µm"), default=None,
+                   help="critical dimension in µm (default: the pixel pitch)")
+    p.add_argument("--vertex-cap", type=number(int, 5, 8190), default=4000,
+                   help="max vertices per polygon (GDSII limit 8190)")
     p.add_argument("--align-chain", choices=["chrome", "sequential"], default="chrome",
                    help="every etch mask aligns to the chrome keys, or each to the previous plate")
-    p.add_argument("--etch-order", type=int, nargs=4, default=[4, 3, 2, 1], help="etch layers in process order")
+    p.add_argument("--etch-order", type=int, nargs=4, default=[4, 3, 2, 1], choices=[1, 2, 3, 4], metavar="LAYER",
+                   help="etch layers in process order (a permutation of 1 2 3 4)")
     p.add_argument("--resist", choices=["positive", "negative"], default="positive", help="resist tone")
     p.add_argument("--pattern-faces", choices=["lens", "scene"], default="lens",
                    help="which way the etched face points when mounted (lens: the layout is the design mirrored in x)")
@@ -41,15 +47,22 @@ def run(args) -> int:
     from doefab.fabrication.verify import verify_mask_set
 
     if args.verify:
+        if args.design or args.out:
+            raise DoefabError("--verify DIR checks an existing set; --design/--out export one: give one or the other")
         report = verify_mask_set(args.verify, use_klayout=not args.no_klayout)
         print(json.dumps({k: v for k, v in report.items()}, indent=1))
         print(f"{args.verify}: verified (0 mismatched pixels on every etch layer, marks present)")
         return 0
     if not args.design or not args.out:
         raise DoefabError("give --design DIR and --out DIR (or --verify DIR)")
+    if sorted(args.etch_order) != [1, 2, 3, 4]:
+        raise DoefabError(f"--etch-order {' '.join(map(str, args.etch_order))} must name each etch layer 1..4 once, "
+                          f"e.g. --etch-order 4 3 2 1")
+    from doefab.cli._output import claim_output
     from doefab.design.design import Design
 
     design = Design.load(args.design)
+    out = claim_output(args, "masks", replace=args.force)
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
                        align_chain=args.align_chain, etch_order=tuple(args.etch_order), resist=args.resist,

@@ -21,8 +21,9 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def load_checkpoint(path: str | Path, config: dict) -> dict:
-    """Load a checkpoint and check that it belongs to a run with the same ``config``."""
+def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
+    """Load a checkpoint and check its fields and that it belongs to a run with the same ``config``
+    (keys in ``ignore`` may differ, e.g. a resumed run may raise ``iterations``)."""
     path = Path(path)
     if not path.is_file():
         raise DoefabError(f"no checkpoint at {path}: run without --resume first")
@@ -33,7 +34,19 @@ def load_checkpoint(path: str | Path, config: dict) -> dict:
                           f"delete it and start again without --resume") from None
     if not isinstance(state, dict) or "config" not in state or "theta" not in state:
         raise DoefabError(f"checkpoint {path} lacks doefab fields; delete it and start again without --resume")
-    saved = json.loads(state["config"])
+    try:
+        saved = json.loads(state["config"])
+        ok = (isinstance(saved, dict) and isinstance(state["theta"], torch.Tensor)
+              and bool(torch.isfinite(state["theta"]).all()) and isinstance(state.get("step"), int)
+              and state["step"] >= 0 and isinstance(state.get("elapsed"), float) and state["elapsed"] >= 0
+              and isinstance(state.get("history"), list) and isinstance(state.get("generator"), torch.Tensor))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise DoefabError(f"checkpoint {path} has missing or invalid fields (config, theta, step, elapsed, history, "
+                          f"generator); delete it and start again without --resume")
+    saved = {k: v for k, v in saved.items() if k not in ignore}
+    config = {k: v for k, v in config.items() if k not in ignore}
     if saved != config:
         diff = {k: (saved.get(k), config.get(k)) for k in set(saved) | set(config) if saved.get(k) != config.get(k)}
         raise DoefabError(f"checkpoint {path} was made with other settings {diff} (saved, asked): resume with the "

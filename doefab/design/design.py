@@ -144,16 +144,20 @@ class Design:
             meta = json.loads(meta_path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise DoefabError(f"{meta_path} is not valid JSON ({exc})") from None
-        for key in ("task", "camera", "wavelengths_m", "depths_m", "metrics", "seed", "levels_sha256"):
-            if key not in meta:
-                raise DoefabError(f"{meta_path} lacks the field {key!r}")
-        camera = Camera.from_dict(meta["camera"])
+        meta = _check_meta(meta, meta_path)
+        camera = Camera.from_dict(meta["camera"], where=f"{meta_path}: camera")
+        step = float(levels_to_height(np.array([1], np.uint8), camera)[0])
+        if abs(meta["level_step_m"] - step) > 1e-6 * step:
+            raise DoefabError(f"{meta_path}: level_step_m {meta['level_step_m']!r} disagrees with the camera's "
+                              f"material and design wavelength ({step:.6g} m = λ / (n − 1) / 16): the record was "
+                              f"edited or made by another process; re-run doefab design")
         n = camera.doe_pixels
         levels = _load_npy(path / "levels.npy")
         if levels.dtype != np.uint8:
             raise DoefabError(f"{path / 'levels.npy'} has dtype {levels.dtype}; expected uint8 levels 0..15")
-        if levels.shape != (n, n):
-            raise DoefabError(f"{path / 'levels.npy'} has shape {levels.shape} but the camera grid is ({n}, {n})")
+        if levels.shape != (n, n) or tuple(meta["shape"]) != levels.shape:
+            raise DoefabError(f"{path / 'levels.npy'} has shape {levels.shape}, design.json says {meta['shape']} and "
+                              f"the camera grid is ({n}, {n}): the folder is inconsistent")
         if levels.max(initial=0) >= N_LEVELS:
             raise DoefabError(f"{path / 'levels.npy'} holds level {int(levels.max())}; levels must be 0..15")
         if levels_sha256(levels) != meta["levels_sha256"]:
@@ -163,11 +167,73 @@ class Design:
         height = _load_npy(hp) if hp.is_file() else levels_to_height(levels, camera)
         if height.shape != (n, n) or not np.all(np.isfinite(height)):
             raise DoefabError(f"{hp} must be a finite ({n}, {n}) array of heights in metres")
-        depths = tuple(float("inf") if z == "inf" else float(z) for z in meta["depths_m"])
+        depths = tuple(meta["depths_m"])
         return cls(task=meta["task"], task_params=meta.get("task_params", {}), camera=camera,
                    wavelengths=tuple(meta["wavelengths_m"]), depths=depths, height=height, levels=levels,
-                   metrics=meta["metrics"], seed=int(meta["seed"]), optimizer=meta.get("optimizer", ""),
-                   iterations=int(meta.get("iterations", 0)), extra=meta.get("extra", {}))
+                   metrics=meta["metrics"], seed=meta["seed"], optimizer=meta.get("optimizer", ""),
+                   iterations=meta.get("iterations", 0), extra=meta.get("extra", {}))
+
+
+def _check_meta(meta, where: Path) -> dict:
+    """Every field of design.json that is used, checked for type, finiteness and unit plausibility."""
+    from doefab.tasks import TASKS
+
+    if not isinstance(meta, dict):
+        raise DoefabError(f"{where}: must hold a JSON object")
+    need = ("format_version", "task", "camera", "wavelengths_m", "depths_m", "metrics", "seed", "levels_sha256",
+            "n_levels", "level_step_m", "shape")
+    missing = [k for k in need if k not in meta]
+    if missing:
+        raise DoefabError(f"{where} lacks the fields {missing}: not a doefab design.json (format {FORMAT_VERSION})")
+    out = dict(meta)
+
+    def bad(key, what):
+        raise DoefabError(f"{where}: {key} {what}")
+
+    if meta["format_version"] != FORMAT_VERSION:
+        bad("format_version", f"is {meta['format_version']!r}; this doefab reads format {FORMAT_VERSION}")
+    if meta["task"] not in TASKS:
+        bad("task", f"{meta['task']!r} is not one of {sorted(TASKS)}")
+    if meta["n_levels"] != N_LEVELS or isinstance(meta["n_levels"], bool):
+        bad("n_levels", f"is {meta['n_levels']!r}; doefab's process has {N_LEVELS} levels (4 binary masks)")
+    lam = meta["wavelengths_m"]
+    if not isinstance(lam, list) or not lam:
+        bad("wavelengths_m", "must be a non-empty list of wavelengths in metres")
+    for v in lam:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 200e-9 <= v <= 2e-6:
+            bad("wavelengths_m", f"holds {v!r}: wavelengths are metres within 200 nm – 2 µm (550 nm is 5.5e-07)")
+    zs = meta["depths_m"]
+    if not isinstance(zs, list) or not zs:
+        bad("depths_m", "must be a non-empty list of depths in metres (or \"inf\")")
+    depths = []
+    for z in zs:
+        if z == "inf":
+            depths.append(math.inf)
+        elif isinstance(z, (int, float)) and not isinstance(z, bool) and math.isfinite(z) and 0 < z <= 1e6:
+            depths.append(float(z))
+        else:
+            bad("depths_m", f"holds {z!r}: depths are metres > 0 (or \"inf\")")
+    out["depths_m"] = depths
+    for key in ("seed", "iterations"):
+        v = meta.get(key, 0)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            bad(key, f"must be a non-negative integer, got {v!r}")
+    step = meta["level_step_m"]
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not math.isfinite(step) or not 1e-9 < step < 1e-5:
+        bad("level_step_m", f"= {step!r} is not a plausible level step in metres (tens of nanometres)")
+    shape = meta["shape"]
+    if not (isinstance(shape, list) and len(shape) == 2 and all(isinstance(x, int) and x > 0 for x in shape)):
+        bad("shape", f"must be [N, N] in pixels, got {shape!r}")
+    m = meta["metrics"]
+    if not isinstance(m, dict):
+        bad("metrics", "must be an object")
+    for key in ("continuous", "quantized", "continuous_worst", "quantized_worst"):
+        v = m.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1):
+            bad(f"metrics.{key}", f"= {v!r} is not a fraction in [0, 1]")
+    if not isinstance(meta.get("task_params", {}), dict) or not isinstance(meta.get("extra", {}), dict):
+        bad("task_params/extra", "must be objects")
+    return out
 
 
 def _load_npy(path: Path) -> np.ndarray:

@@ -142,7 +142,13 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     if resume:
         if ckpt is None:
             raise DoefabError("resume needs out_dir (where checkpoint.pt lives)")
-        state = load_checkpoint(ckpt, json.loads(config_json))
+        state = load_checkpoint(ckpt, json.loads(config_json), ignore=("iterations",))
+        if tuple(state["theta"].shape) != tuple(theta.shape):
+            raise DoefabError(f"checkpoint {ckpt} holds a {tuple(state['theta'].shape)} design, this run a "
+                              f"{tuple(theta.shape)} one: start a new --out folder")
+        if int(state["step"]) > cfg.iterations:
+            raise DoefabError(f"checkpoint {ckpt} is at step {int(state['step'])}, beyond --iterations "
+                              f"{cfg.iterations}: resume with at least that many iterations")
         with torch.no_grad():
             theta.copy_(state["theta"])
         if adam is not None and "adam" in state:
@@ -211,6 +217,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         if (step + 1) % cfg.checkpoint_every == 0:
             checkpoint(step + 1, time.perf_counter() - t_start)
 
+    stop_reason = None
     try:
         if optimizer == "adam":
             for step in range(step0, cfg.iterations):
@@ -229,7 +236,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
                 adam.step()
                 record(step, float(loss.detach()))
         else:
-            _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start)
+            stop_reason = _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start, mask)
     finally:
         if bar is not None:
             bar.close()
@@ -237,64 +244,115 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     design = _finish(task_obj, cfg, cam, dcam, theta.detach(), history, lams, depths)
     design.extra["wall_time_s"] = round(time.perf_counter() - t_start, 1)
     design.extra["optimizer_time_s"] = history[-1][1] if history else 0.0
+    design.extra["evaluations"] = len(history)
+    if stop_reason:
+        design.extra["stop_reason"] = stop_reason
     return design
 
 
-def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start):
-    """nlopt driven by torch gradients; the continuous and the quantization-aware stages are separate
-    nlopt runs (the straight-through objective is a different function), each keeping its best point."""
+NLOPT_MAX_VARIABLES = 2_000_000  # nlopt 2.x's L-BFGS fails (runtime_error) from about 2.1 M variables
+
+
+def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mask) -> str | None:
+    """nlopt driven by torch gradients, run to its evaluation budget.
+
+    The continuous and the quantization-aware stages are separate nlopt runs (the straight-through objective
+    is a different function), each keeping its best point. nlopt ends early when its line search cannot
+    progress (e.g. ``RoundoffLimited`` on these wrapped-phase objectives); doefab then restarts it from the
+    best point (a fresh L-BFGS memory / MMA model) while the budget lasts. A first attempt that does not
+    lower the loss at all is an error; a later restart without progress ends the run with a stated reason,
+    which is returned (None when the whole budget ran). Only the coded pixels (``mask``) are variables.
+    """
     import nlopt
 
-    algo = {"lbfgs": nlopt.LD_LBFGS, "mma": nlopt.LD_MMA}[name]
-    n = theta.numel()
-    counter = {"step": step0}
+    idx = torch.nonzero(mask.flatten() > 0).flatten()
+    if idx.numel() > NLOPT_MAX_VARIABLES:
+        raise DoefabError(f"{name}: this design has {idx.numel():,} coded DOE pixels but nlopt's optimisers take at "
+                          f"most {NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
+    flat = theta.data.view(-1)
 
-    def run_stage(n_evals: int) -> None:
-        if n_evals <= 0:
-            return
-        best = {"loss": float("inf"), "x": theta.detach().double().numpy().ravel().copy()}
-        failure: list = []
-        opt = nlopt.opt(algo, n)
+    algo = {"lbfgs": nlopt.LD_LBFGS, "mma": nlopt.LD_MMA}[name]
+    label = {"lbfgs": "L-BFGS", "mma": "MMA"}[name]
+    counter = {"step": step0}
+    reasons: list[str] = []
+
+    def attempt(end: int) -> tuple[bool, str]:
+        """One nlopt run from the current θ up to evaluation ``end``; returns (lowered the loss, outcome)."""
+        x0 = flat[idx].double().numpy().copy()
+        best = {"loss": float("inf"), "x": x0, "first": None}
+        stop: list = []
+        opt = nlopt.opt(algo, int(idx.numel()))
 
         def f(x, grad):
             step = counter["step"]
-            with torch.no_grad():
-                theta.copy_(torch.from_numpy(np.array(x, copy=True).reshape(theta.shape)).to(theta.dtype))
-            theta.grad = None
-            loss = objective(min(step, iterations - 1))
-            if torch.isfinite(loss):
-                loss.backward()
-            if grad.size > 0:
-                grad[:] = theta.grad.detach().double().numpy().ravel() if theta.grad is not None else 0.0
-            value = float(loss.detach())
+            if step >= end:  # nlopt may ask for one more than maxeval: the budget is ours to keep
+                raise nlopt.ForcedStop
             try:
+                with torch.no_grad():
+                    flat[idx] = torch.from_numpy(np.array(x, copy=True)).to(theta.dtype)
+                theta.grad = None
+                loss = objective(min(step, iterations - 1))
+                if torch.isfinite(loss):
+                    loss.backward()
+                if grad.size > 0:
+                    grad[:] = (theta.grad.detach().reshape(-1)[idx].double().numpy() if theta.grad is not None
+                               else 0.0)
+                value = float(loss.detach())
                 record(step, value)
-            except DoefabError as exc:  # nlopt would turn it into its own error: keep it and stop
-                failure.append(exc)
-                raise nlopt.ForcedStop from exc
+            except (DoefabError, KeyboardInterrupt) as exc:  # nlopt would swallow it: keep it and stop
+                stop.append(exc)
+                raise nlopt.ForcedStop from None
+            if best["first"] is None:
+                best["first"] = value
             if value < best["loss"]:
                 best["loss"], best["x"] = value, np.array(x, copy=True)
             counter["step"] += 1
             return value
 
         opt.set_min_objective(f)
-        opt.set_maxeval(n_evals)
+        opt.set_maxeval(max(end - counter["step"], 1))
         if name == "mma":  # MMA needs bounds; θ is periodic, so a wide box is no constraint in practice
-            x0 = theta.detach().double().numpy().ravel()
             opt.set_lower_bounds(x0 - 1e3)
             opt.set_upper_bounds(x0 + 1e3)
+        outcome = "budget reached"
         try:
-            opt.optimize(theta.detach().double().numpy().ravel())
-        except Exception:  # noqa: BLE001 - nlopt's own error types (roundoff, failure, forced stop)
-            # nlopt stops with an error when its line search cannot progress: the best point seen is the
-            # result. A non-finite loss is ours to report.
-            if failure:
-                raise failure[0] from None
+            opt.optimize(x0)
+            if counter["step"] < end:
+                outcome = f"returned code {opt.last_optimize_result()}"
+        except nlopt.ForcedStop:
+            if stop:
+                raise stop[0] from None
+        except Exception as exc:  # noqa: BLE001 - nlopt's own errors (RoundoffLimited, generic failure)
+            outcome = f"nlopt {exc.__class__.__name__}" + (f" ({exc})" if str(exc) else "")
         with torch.no_grad():
-            theta.copy_(torch.from_numpy(best["x"].reshape(theta.shape)).to(theta.dtype))
+            flat[idx] = torch.from_numpy(best["x"]).to(theta.dtype)
+        first = best["first"]
+        lowered = first is not None and best["loss"] < first - 1e-7 * max(1.0, abs(first))
+        return lowered, outcome
 
-    run_stage(min(qat_start, iterations) - counter["step"])
-    run_stage(iterations - counter["step"])
+    def run_stage(end: int, stage: str) -> bool:
+        tries = 0
+        while counter["step"] < end:
+            before = counter["step"]
+            lowered, outcome = attempt(end)
+            tries += 1
+            if counter["step"] >= end:
+                return True
+            if not lowered:
+                if tries == 1 and counter["step"] - before <= 3 and before == step0:
+                    raise DoefabError(f"{label} stopped after {counter['step'] - before} evaluations of {iterations} "
+                                      f"without lowering the loss ({outcome}): no design was made; use "
+                                      f"--optimizer adam")
+                reasons.append(f"{label} ({stage}) stopped at evaluation {counter['step']} of {iterations}: "
+                               f"{outcome}, and a restart from the best point did not lower the loss")
+                return False
+        return True
+
+    run_stage(min(qat_start, iterations), "continuous stage")
+    if qat_start < iterations:  # a continuous stage that gave up early leaves its budget unused; QAT still runs
+        counter["step"] = max(counter["step"], qat_start)
+        run_stage(iterations, "quantization-aware stage")
+    return "; ".join(reasons) or None
 
 
 def _finish(task_obj, cfg, cam, dcam, theta, history, lams, depths) -> Design:

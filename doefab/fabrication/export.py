@@ -23,7 +23,7 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, 
 from doefab.fabrication.levels import N_LEVELS, level_step, levels_sha256
 from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons
 from doefab.fabrication.verify import verify_mask_set, width_space_report
-from doefab.io import atomic_write_json, atomic_write_text, prepare_out_dir, staging_dir
+from doefab.io import MARKER, SIGNATURES, OutputDir, atomic_write_json, atomic_write_text, plain_name, staging_dir
 from doefab.optics.camera import Camera
 
 __all__ = ["MaskOptions", "export_masks", "layout_levels"]
@@ -101,14 +101,21 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
     if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
         raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
+    plain_name(opts.name, "mask-set name")
+    for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
+                            ("critical dimension cd_m", camera.doe_pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+            raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
+    if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
+        raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
     pitch_nm = _nm(camera.doe_pitch, "DOE pitch")
     die_nm = _nm(opts.die_m, "die size")
     cd_nm = _nm(opts.cd_m if opts.cd_m is not None else camera.doe_pitch, "critical dimension")
     extent_nm = n * pitch_nm
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
-                          f"pattern for marks: enlarge die_m")
-    out = prepare_out_dir(out_dir, force)
+                          f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
+    out = OutputDir(out_dir, "masks", replace=force, signatures=SIGNATURES["masks"]).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
@@ -151,10 +158,11 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         np.save(buf, lv)
         (design_sub / "levels.npy").write_bytes(buf.getvalue())
         if design_dir is not None and (Path(design_dir) / "design.json").is_file():
-            shutil.copy2(Path(design_dir) / "design.json", design_sub / "design.json")
+            shutil.copyfile(Path(design_dir) / "design.json", design_sub / "design.json")
+        atomic_write_json(stage / MARKER, {"kind": "masks", "written_by": "doefab"})
         manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
-        report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout)  # mirrors per the manifest
+        report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout, complete=False)  # mirrors per the manifest
         cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
         report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(layout, b), cd_px, camera.doe_pitch,
                                                                         (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
@@ -164,7 +172,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
-        _previews(stage, layout, camera.doe_pitch)
+        _previews(stage, layout, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
         atomic_write_text(stage / "README.txt", _fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
@@ -245,12 +253,14 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
     }
 
 
-def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000) -> None:
+def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000, mirrored: bool = False) -> None:
     """PNG previews (Pillow; at most ``size`` px wide) of each etch layer and the composite, with a scale bar."""
     from matplotlib import colormaps
     from PIL import Image, ImageDraw
 
     n = lv.shape[0]
+    view = ("layout view from the patterned face: the design MIRRORED in x (coded half on the right)" if mirrored
+            else "layout view from the patterned face: the design as seen from the scene (not mirrored)")
     step = max(1, int(np.ceil(n / size)))
     px_m = pitch * step  # metres per preview pixel
     bar_m = 10 ** np.floor(np.log10(n * pitch / 4))  # a round length, about a quarter of the width
@@ -261,6 +271,7 @@ def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000) -> No
         pad.paste(img, (0, 40))
         draw = ImageDraw.Draw(pad)
         draw.text((6, 4), title, fill="black")
+        draw.text((6, 20), view, fill="black")
         bar_px = int(round(bar_m / px_m))
         y = pad.height - 20
         draw.rectangle([20, y, 20 + bar_px, y + 6], fill="red")

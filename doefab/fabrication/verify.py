@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.errors import DoefabError
+from doefab.errors import CheckFailed, DoefabError
 from doefab.fabrication.bitplanes import N_MASKS, bit_plane, rasterize_manhattan
 from doefab.fabrication.levels import N_LEVELS
 from doefab.fabrication.levels import levels_sha256
@@ -44,7 +44,7 @@ def read_gds_layers(path: Path, only: set | None = None) -> dict[tuple[int, int]
     lib = gdstk.read_gds(str(path), filter=only)
     tops = lib.top_level()
     if len(tops) != 1:
-        raise DoefabError(f"{path} must hold exactly one top cell, found {len(tops)}")
+        raise CheckFailed(f"{path} must hold exactly one top cell, found {len(tops)}")
     cell = tops[0]
     scale = lib.unit / lib.precision
     out = {}
@@ -65,7 +65,7 @@ def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int):
     col = pts[:, 0] - origin_nm[0]
     row = origin_nm[1] - pts[:, 1]
     if np.any(col % pitch_nm) or np.any(row % pitch_nm):
-        raise DoefabError("a polygon vertex lies off the design grid (not an integer number of pixels)")
+        raise CheckFailed("a polygon vertex lies off the design grid (not an integer number of pixels)")
     return np.stack([col // pitch_nm, row // pitch_nm], axis=1), idx
 
 
@@ -105,20 +105,73 @@ def width_space_report(plane: np.ndarray, cd_px: int, pitch_m: float, origin_m: 
     return out
 
 
-def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_klayout: bool = True) -> dict:
-    """Verify the mask set in ``folder`` (manifest.json + GDS [+ OASIS]); raise DoefabError on any failure."""
+PREVIEWS = tuple(f"preview_layer{etch_layer(b)}.png" for b in range(N_MASKS)) + ("preview_composite.png",)
+
+
+def _check_manifest(man, mpath: Path) -> None:
+    """The manifest fields verification relies on, checked for type and range."""
+    def need(ok: bool, key: str, what: str):
+        if not ok:
+            raise CheckFailed(f"{mpath}: {key} {what}")
+
+    need(isinstance(man, dict), "(top level)", "must be a JSON object")
+    need(str(man.get("format", "")).startswith("doefab mask set"), "format", "is not 'doefab mask set 1'")
+    p = man.get("pitch_m")
+    need(isinstance(p, (int, float)) and 1e-7 <= p <= 1e-3, "pitch_m", f"= {p!r} is not a pitch in metres (1e-7–1e-3)")
+    sh = man.get("shape")
+    need(isinstance(sh, list) and len(sh) == 2 and all(isinstance(x, int) and 0 < x <= 100_000 for x in sh), "shape",
+         f"= {sh!r} is not [rows, columns]")
+    o = man.get("origin_m")
+    need(isinstance(o, list) and len(o) == 2 and all(isinstance(x, (int, float)) and abs(x) < 1 for x in o),
+         "origin_m", f"= {o!r} is not an (x, y) position in metres")
+    vc = man.get("vertex_cap")
+    need(isinstance(vc, int) and 5 <= vc <= 8190, "vertex_cap", f"= {vc!r} is not in 5..8190")
+    need(isinstance(man.get("levels_sha256"), str), "levels_sha256", "is missing")
+    need(isinstance(man.get("mirrored_x", False), bool), "mirrored_x", "must be true or false")
+    files = man.get("files")
+    need(isinstance(files, dict) and isinstance(files.get("gds"), str), "files", "must name the GDS file")
+    for v in files.values():
+        need(isinstance(v, str) and "/" not in v and "\\" not in v and not v.startswith("."), "files",
+             f"holds {v!r}, not a plain file name in the set")
+
+
+def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_klayout: bool = True,
+                    complete: bool = True) -> dict:
+    """Verify the mask set in ``folder`` (manifest.json + GDS [+ OASIS]); raise CheckFailed on any failure.
+
+    ``complete``: also require every file a finished set holds (README.txt, report.json, previews, the
+    design's level map); the export itself verifies its staging folder before those are written.
+    """
     folder = Path(folder)
+    if not folder.is_dir():
+        raise DoefabError(f"{folder} is not a folder: give the mask-set folder doefab masks wrote")
     mpath = folder / "manifest.json"
     if not mpath.is_file():
-        raise DoefabError(f"{folder} is not a mask set: manifest.json is missing")
-    man = json.loads(mpath.read_text())
+        raise CheckFailed(f"{folder} is not a mask set: manifest.json is missing")
+    try:
+        man = json.loads(mpath.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise CheckFailed(f"{mpath} is not valid JSON ({exc}): the set is corrupt; export it again") from None
+    _check_manifest(man, mpath)
+    if complete:
+        wanted = list(man["files"].values()) + ["README.txt", "report.json", "design/levels.npy", *PREVIEWS]
+        missing = [f for f in wanted if not (folder / f).is_file()]
+        if missing:
+            raise CheckFailed(f"{folder} is incomplete: {', '.join(missing)} missing (an interrupted export or a "
+                              f"copied-in-part set); export it again with doefab masks --force")
     if levels is None:
         lpath = folder / "design" / "levels.npy"
         if not lpath.is_file():
-            raise DoefabError(f"{lpath} is missing: the mask set must keep the level map it came from")
-        levels = np.load(lpath, allow_pickle=False)
+            raise CheckFailed(f"{lpath} is missing: the mask set must keep the level map it came from")
+        try:
+            levels = np.load(lpath, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise CheckFailed(f"{lpath} is not a readable .npy array ({exc})") from None
+    if getattr(levels, "shape", None) != tuple(man["shape"]):
+        raise CheckFailed(f"the level map's shape {getattr(levels, 'shape', None)} differs from manifest.json's "
+                          f"shape {man['shape']}")
     if levels_sha256(levels) != man["levels_sha256"]:
-        raise DoefabError("the level map's SHA-256 differs from manifest.json's levels_sha256: wrong or changed design")
+        raise CheckFailed("the level map's SHA-256 differs from manifest.json's levels_sha256: wrong or changed design")
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
     shape = tuple(man["shape"])
@@ -129,14 +182,14 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     gds = folder / man["files"]["gds"]
     mark_keys = {(CHROME_LAYER, 0), (OUTLINE_LAYER, 0)} | {(k, p) for k in (KEY_LAYER, VERNIER_LAYER)
                                                            for p in range(N_MASKS + 1)}
-    layers = read_gds_layers(gds, only=mark_keys)  # chrome, marks and outline: small
+    layers = _read(gds, mark_keys)  # chrome, marks and outline: small
     report: dict = {"gds": gds.name, "layers": {}, "ok": True}
     cap = int(man["vertex_cap"])
     etch_sum = np.zeros(shape, np.uint8)
     for bit in range(N_MASKS):
         lay = etch_layer(bit)
         # one etch layer at a time keeps the peak memory to one layer's polygons
-        polys = read_gds_layers(gds, only={(lay, 0)}).get(
+        polys = _read(gds, {(lay, 0)}).get(
             (lay, 0), LayerPolygons(np.zeros((0, 2), np.int64), np.zeros(0, np.int64)))
         if len(polys):
             pix, idx = _to_pixels(polys, origin_nm, pitch_nm)
@@ -144,7 +197,7 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         else:
             wind = np.zeros(shape, np.int32)
         if np.any(wind < 0) or np.any(wind > 1):
-            raise DoefabError(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()})")
+            raise CheckFailed(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()})")
         got = wind.astype(bool)
         del wind
         mism = int(np.count_nonzero(got != bit_plane(levels, bit)))
@@ -152,29 +205,39 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         report["layers"][str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
                                       "max_vertices": maxv, "mismatched_pixels_gdstk": mism}
         if mism:
-            raise DoefabError(f"layer {lay}: {mism} pixels differ between the GDS and the design's bit plane {bit}")
+            raise CheckFailed(f"layer {lay}: {mism} pixels differ between the GDS and the design's bit plane {bit}")
         if maxv > cap:
-            raise DoefabError(f"layer {lay}: a polygon has {maxv} vertices, over the cap {cap}")
+            raise CheckFailed(f"layer {lay}: a polygon has {maxv} vertices, over the cap {cap}")
         etch_sum += got.astype(np.uint8) << bit
         del got, polys
     if not np.array_equal((N_LEVELS - 1) - etch_sum, levels):
-        raise DoefabError("Σ 2^m·mask_m read back from the file does not reproduce the level map")
+        raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map")
     report["levels_reproduced"] = True
     for key, need, what in (((CHROME_LAYER, 0), 1, "chrome aperture"), ((OUTLINE_LAYER, 0), 1, "die outline")):
         if key not in layers or len(layers[key]) < need:
-            raise DoefabError(f"{what} (layer {key[0]}) is missing from {gds.name}")
+            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds.name}")
     for plate in range(N_MASKS + 1):
         keys = len(layers[(KEY_LAYER, plate)]) if (KEY_LAYER, plate) in layers else 0
         vern = len(layers[(VERNIER_LAYER, plate)]) if (VERNIER_LAYER, plate) in layers else 0
         if keys < 8 or vern < 31:
-            raise DoefabError(f"plate {plate}: alignment keys ({keys}) or verniers/CD ladder ({vern}) are missing")
+            raise CheckFailed(f"plate {plate}: alignment keys ({keys}) or verniers/CD ladder ({vern}) are missing")
     report["marks_present"] = True
     for key, p in layers.items():
         if p.max_vertices > cap:
-            raise DoefabError(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
+            raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
     if use_klayout:
         report["klayout"] = _klayout_check(folder, man, levels, pitch_nm)
     return report
+
+
+def _read(gds: Path, only: set) -> dict:
+    try:
+        return read_gds_layers(gds, only=only)
+    except CheckFailed:
+        raise
+    except Exception as exc:  # noqa: BLE001 - gdstk reports a damaged file as RuntimeError/OSError/...
+        raise CheckFailed(f"{gds} cannot be read as GDSII ({exc.__class__.__name__}: {exc}): the file is corrupt or "
+                          f"truncated; export the set again") from None
 
 
 def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -> dict:
@@ -183,14 +246,21 @@ def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -
         import klayout.db as kdb
     except ImportError:
         return {"checked": False, "reason": "klayout not installed"}
-    gds = kdb.Layout()
-    gds.read(str(folder / man["files"]["gds"]))
+    def load(name: str):
+        lay = kdb.Layout()
+        try:
+            lay.read(str(folder / name))
+        except RuntimeError as exc:
+            raise CheckFailed(f"KLayout cannot read {folder / name} ({' '.join(str(exc).split())[:200]}): the file "
+                              f"is corrupt or truncated; export the set again") from None
+        if lay.top_cell() is None:
+            raise CheckFailed(f"KLayout finds no top cell in {folder / name}: the file is empty or corrupt")
+        return lay
+
+    gds = load(man["files"]["gds"])
     top = gds.top_cell()
     out = {"checked": True, "layers": {}}
-    oas = None
-    if man["files"].get("oasis"):
-        oas = kdb.Layout()
-        oas.read(str(folder / man["files"]["oasis"]))
+    oas = load(man["files"]["oasis"]) if man["files"].get("oasis") else None
     for bit in range(N_MASKS):
         lay = etch_layer(bit)
         li = gds.find_layer(lay, 0)
@@ -198,14 +268,14 @@ def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -
         area_px = region.area() * (gds.dbu * 1000) ** 2 / pitch_nm**2
         expected = int(bit_plane(levels, bit).sum())
         if abs(area_px - expected) > 1e-6:
-            raise DoefabError(f"KLayout: layer {lay} covers {area_px:.1f} pixels, the bit plane {expected}")
+            raise CheckFailed(f"KLayout: layer {lay} covers {area_px:.1f} pixels, the bit plane {expected}")
         entry = {"area_px": int(round(area_px))}
         if oas is not None:
             lo = oas.find_layer(lay, 0)
             other = kdb.Region(oas.top_cell().begin_shapes_rec(lo)) if lo is not None else kdb.Region()
             xor = region ^ other
             if not xor.is_empty():
-                raise DoefabError(f"KLayout: OASIS layer {lay} differs from GDS (XOR area {xor.area()} dbu²)")
+                raise CheckFailed(f"KLayout: OASIS layer {lay} differs from GDS (XOR area {xor.area()} dbu²)")
             entry["oasis_identical"] = True
         out["layers"][str(lay)] = entry
     return out

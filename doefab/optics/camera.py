@@ -103,22 +103,60 @@ class Camera:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Camera":
+    def from_dict(cls, d: dict, where: str = "camera record") -> "Camera":
+        """A camera from :meth:`to_dict`'s record (e.g. read from design.json), every field checked for type,
+        finiteness and a plausible range in its unit; the error names the field, the file and the fix."""
+        if not isinstance(d, dict):
+            raise DoefabError(f"{where}: the camera must be a JSON object of Camera.to_dict() fields")
+        missing = [k for k in RECORD_RANGES if k not in d] + [k for k in ("focus_distance_m", "material") if k not in d]
+        if missing:
+            raise DoefabError(f"{where}: camera lacks {missing}; expected Camera.to_dict() fields")
+        vals = {k: record_number(d, k, lo, hi, unit, where, integer=(k == "doe_pixels"))
+                for k, (lo, hi, unit) in RECORD_RANGES.items()}
+        fd = d["focus_distance_m"]
+        focus = math.inf if fd == "inf" else record_number(d, "focus_distance_m", 1e-3, 1e6, "m", where)
+        material = Material.from_dict(d["material"], where=f"{where}: material")
+        n = float(material.index(vals["design_wavelength_m"]))
+        if not 1.0 < n < 4.0:
+            raise DoefabError(f"{where}: material {material.name!r} has index {n:g} at the design wavelength; a DOE "
+                              f"substrate lies between 1 and 4: check its Sellmeier coefficients")
         try:
-            fd = d["focus_distance_m"]
-            return cls(
-                aperture_diameter=float(d["aperture_diameter_m"]),
-                doe_pitch=float(d["doe_pitch_m"]),
-                doe_pixels=int(d["doe_pixels"]),
-                sensor_pitch=float(d["sensor_pitch_m"]),
-                sensor_distance=float(d["sensor_distance_m"]),
-                focus_distance=float("inf") if fd == "inf" else float(fd),
-                design_wavelength=float(d.get("design_wavelength_m", 550e-9)),
-                material=Material.from_dict(d["material"]),
-            )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise DoefabError(f"camera record is incomplete or malformed ({exc!r}); expected Camera.to_dict() "
-                              f"fields") from None
+            cam = cls(aperture_diameter=vals["aperture_diameter_m"], doe_pitch=vals["doe_pitch_m"],
+                      doe_pixels=int(vals["doe_pixels"]), sensor_pitch=vals["sensor_pitch_m"],
+                      sensor_distance=vals["sensor_distance_m"], focus_distance=focus,
+                      design_wavelength=vals["design_wavelength_m"], material=material)
+        except DoefabError as exc:
+            raise DoefabError(f"{where}: {exc}") from None
+        fl = d.get("focal_length_m")
+        if fl is not None and (not isinstance(fl, (int, float)) or abs(fl - cam.focal_length) > 1e-9 * cam.focal_length):
+            raise DoefabError(f"{where}: focal_length_m {fl!r} disagrees with sensor_distance_m and focus_distance_m "
+                              f"({cam.focal_length:.9g} m): the record was edited inconsistently")
+        return cam
+
+
+# plausible ranges of a camera record's fields (lo, hi, unit); a value outside is almost always a unit slip
+RECORD_RANGES = {
+    "aperture_diameter_m": (1e-4, 0.2, "m"),
+    "doe_pitch_m": (1e-7, 1e-3, "m"),
+    "doe_pixels": (2, 20000, "pixels"),
+    "sensor_pitch_m": (3e-7, 1e-4, "m"),
+    "sensor_distance_m": (1e-3, 2.0, "m"),
+    "design_wavelength_m": (200e-9, 2e-6, "m"),
+}
+
+
+def record_number(d: dict, key: str, lo: float, hi: float, unit: str, where: str, integer: bool = False) -> float:
+    """``d[key]`` as a finite number within [lo, hi] (unit ``unit``), or one clear error naming the field."""
+    v = d.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
+        kind = "an integer" if integer else "a number"
+        raise DoefabError(f"{where}: {key} must be {kind} ({unit}), got {v!r}")
+    if not math.isfinite(v) or not lo <= v <= hi:
+        hint = ""
+        if unit == "m" and v > hi:
+            hint = " — lengths here are in metres (550 nm is 5.5e-07)"
+        raise DoefabError(f"{where}: {key} = {v!r} is outside {lo:g}–{hi:g} {unit}{hint}")
+    return float(v)
 
 
 PRESETS: dict[str, dict] = {

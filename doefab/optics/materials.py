@@ -47,8 +47,25 @@ class Material:
         return {"name": self.name, "sellmeier_b": list(self.b), "sellmeier_c_um": list(self.c_um)}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Material":
-        return cls(d["name"], tuple(d["sellmeier_b"]), tuple(d["sellmeier_c_um"]))
+    def from_dict(cls, d: dict, where: str = "material record") -> "Material":
+        """A material from :meth:`to_dict`'s record, its fields checked (name, three finite B and C values)."""
+        import math
+
+        if not isinstance(d, dict) or not isinstance(d.get("name"), str) or not d["name"].strip():
+            raise DoefabError(f"{where}: needs a name and sellmeier_b, sellmeier_c_um (three numbers each)")
+        coeffs = []
+        for key in ("sellmeier_b", "sellmeier_c_um"):
+            v = d.get(key)
+            if (not isinstance(v, list) or len(v) != 3
+                    or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                               and x >= 0 for x in v)):
+                raise DoefabError(f"{where}: {key} must be three finite non-negative numbers, got {v!r}")
+            coeffs.append(tuple(float(x) for x in v))
+        known = _MATERIALS.get(d["name"].lower())
+        if known is not None and (known.b, known.c_um) != (coeffs[0], coeffs[1]):
+            raise DoefabError(f"{where}: {d['name']!r} is a built-in material but its Sellmeier coefficients differ "
+                              f"from the built-in ones: the record was edited; restore them or rename the material")
+        return cls(d["name"], coeffs[0], coeffs[1])
 
 
 FUSED_SILICA = Material(

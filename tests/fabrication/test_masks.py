@@ -124,11 +124,17 @@ def test_bad_pitch_existing_output_and_no_half_written_set(cam, tmp_path, monkey
     lv = np.zeros((100, 100), np.uint8)
     with pytest.raises(DoefabError, match="not an integer number of nanometres"):
         export_masks(lv, cam.replace(doe_pitch=5.4003e-6), tmp_path / "m")
-    (tmp_path / "m").mkdir()
-    (tmp_path / "m" / "x").write_text("keep")
-    with pytest.raises(DoefabError, match="already exists"):
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "x").write_text("keep")
+    for force in (False, True):  # a folder that is not a mask set is never replaced, even with force
+        with pytest.raises(DoefabError, match="not a doefab masks output"):
+            export_masks(lv, cam, tmp_path / "other", force=force)
+    assert (tmp_path / "other" / "x").read_text() == "keep"
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    with pytest.raises(DoefabError, match="already holds a doefab masks output"):
         export_masks(lv, cam, tmp_path / "m")
-    # a failure during verification leaves the old folder untouched and no staging debris
+    before = (tmp_path / "m" / "manifest.json").read_bytes()
+    # a failure during verification leaves the old set untouched and no staging debris
     import doefab.fabrication.export as ex
 
     def boom(*a, **k):
@@ -137,8 +143,8 @@ def test_bad_pitch_existing_output_and_no_half_written_set(cam, tmp_path, monkey
     monkeypatch.setattr(ex, "verify_mask_set", boom)
     with pytest.raises(DoefabError, match="injected"):
         export_masks(lv, cam, tmp_path / "m", force=True)
-    assert (tmp_path / "m" / "x").read_text() == "keep"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
+    assert (tmp_path / "m" / "manifest.json").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "other"]
 
 
 def test_tampered_gds_fails_verification(cam, tmp_path):

@@ -1,0 +1,81 @@
+"""Argument types for the command line: every numeric flag is checked for type, finiteness and range
+when it is parsed, and the error names the flag, the unit and the fix (argparse adds the flag's name)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg"]
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str):  # noqa: D401 - argparse's hook
+        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def number(kind=float, lo=None, hi=None, lo_open: bool = False, unit: str = "", hint: str = ""):
+    """An argparse type: ``kind`` (int or float) within [lo, hi] (``lo_open``: lo excluded), finite."""
+    unit_txt = f" ({unit})" if unit else ""
+    what = "an integer" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expects {what}{unit_txt}, got {text!r}") from None
+        if kind is float and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be a finite number{unit_txt}, got {text!r}")
+        low_bad = lo is not None and (v <= lo if lo_open else v < lo)
+        if low_bad or (hi is not None and v > hi):
+            lo_s = "" if lo is None else (f"> {lo:g}" if lo_open else f"≥ {lo:g}")
+            hi_s = "" if hi is None else f"≤ {hi:g}"
+            rng = " and ".join(s for s in (lo_s, hi_s) if s)
+            raise argparse.ArgumentTypeError(f"must be {rng}{unit_txt}, got {text}{hint}")
+        return v
+
+    parse.__name__ = "integer" if kind is int else "number"
+    return parse
+
+
+def wavelength_nm(text: str) -> float:
+    """A wavelength in nanometres (100–20000 nm); a value that looks like metres gets the unit hint."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a wavelength in nm, got {text!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive wavelength in nm, got {text!r}")
+    if v < 1.0:
+        raise argparse.ArgumentTypeError(f"{text} looks like metres: this flag takes nanometres "
+                                         f"(write {v * 1e9:.4g}, not {text})")
+    if not 100 <= v <= 20000:
+        raise argparse.ArgumentTypeError(f"{text} nm is outside 100–20000 nm (the flag takes nanometres)")
+    return v
+
+
+def depth_m(text: str) -> float:
+    """A point-source depth in metres (> 0, ≤ 1e6; 'inf' for a plane wave)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a depth in metres or 'inf', got {text!r}") from None
+    if math.isnan(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a depth > 0 m (or inf), got {text!r}")
+    if math.isfinite(v) and v > 1e6:
+        raise argparse.ArgumentTypeError(f"{text} m is beyond 1000 km: write inf for a point at infinity")
+    return v
+
+
+def plain_name_arg(text: str) -> str:
+    from doefab.errors import DoefabError
+    from doefab.io import plain_name
+
+    try:
+        return plain_name(text, "name")
+    except DoefabError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
