@@ -29,6 +29,11 @@ _EXPORTS = {
     "Design": "doefab.design.design",
     "get_task": "doefab.tasks",
     "TASKS": "doefab.tasks",
+    "mix_crosstalk": "doefab.imaging.crosstalk",
+    "unmix_crosstalk": "doefab.imaging.crosstalk",
+    "calibrate_crosstalk": "doefab.imaging.crosstalk",
+    "sensor_response": "doefab.imaging.sensor",
+    "simulate_captures": "doefab.imaging.captures",
     "DoefabError": "doefab.errors",
     "SamplingError": "doefab.errors",
 }

@@ -25,15 +25,13 @@ __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "stag
            "MARKER", "SIGNATURES", "plain_name", "apply_umask"]
 
 MARKER = ".doefab-output.json"
-_UMASK: int | None = None
 
 
 def _umask() -> int:
-    global _UMASK
-    if _UMASK is None:
-        _UMASK = os.umask(0o022)
-        os.umask(_UMASK)
-    return _UMASK
+    """The process umask (read by setting and restoring it; read every time, as the user may change it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def apply_umask(path: str | Path) -> None:
@@ -191,12 +189,10 @@ class OutputDir:
         anc = _nearest_existing(p)
         if not anc.is_dir():
             raise DoefabError(f"{flag} {p}: {anc} is a file, so no folder can be made under it")
-        try:
-            probe = tempfile.mkdtemp(prefix=".doefab-write-probe.", dir=anc)
-            os.rmdir(probe)
-        except OSError as exc:
-            raise DoefabError(f"{flag} {p}: cannot write in {anc} ({exc.strerror}): choose a writable folder") \
-                from None
+        read_only_fs = bool(os.statvfs(anc).f_flag & os.ST_RDONLY)
+        if read_only_fs or not os.access(anc, os.W_OK | os.X_OK):
+            why = "read-only file system" if read_only_fs else "permission denied"
+            raise DoefabError(f"{flag} {p}: cannot write in {anc} ({why}): choose a writable folder")
 
     def create(self) -> Path:
         """Make the folder (recording which folders this run created) and write the marker."""

@@ -10,8 +10,10 @@ from holder_cad.params import HolderParams
 
 __all__ = ["render_views"]
 
-# name: (elevation, azimuth, half-section?) — the side view is cut along the y = 0 plane to show the inside
-VIEWS = {"render_front.png": (90, -90, False), "render_side.png": (5, -90, True), "render_iso.png": (30, -60, False)}
+# name: (elevation, azimuth, half-section?, axis seen edge-on) — the side view is cut along the y = 0 plane to
+# show the inside; an axis seen edge-on gets no ticks or label (they would pile up on each other)
+VIEWS = {"render_front.png": (90, -90, False, "z"), "render_side.png": (5, -90, True, "y"),
+         "render_iso.png": (30, -60, False, None)}
 
 
 def render_views(p: HolderParams, out: Path) -> list[str]:
@@ -32,7 +34,7 @@ def render_views(p: HolderParams, out: Path) -> list[str]:
     names = []
     zmin = min(m.bounding_box()[2] for m in asm)
     zmax = max(m.bounding_box()[5] for m in asm)
-    for fname, (elev, azim, cut) in VIEWS.items():
+    for fname, (elev, azim, cut, edge_on) in VIEWS.items():
         fig = plt.figure(figsize=(6, 5))
         ax = fig.add_subplot(111, projection="3d")
         shown = [m.trim_by_plane((0.0, 1.0, 0.0), 0.0) for m in asm] if cut else asm
@@ -52,9 +54,14 @@ def render_views(p: HolderParams, out: Path) -> list[str]:
         ax.set_zlim(zmin, zmax)
         ax.set_box_aspect((2 * r, 2 * r, max(zmax - zmin, 1.0)))
         ax.view_init(elev=elev, azim=azim)
-        ax.set_xlabel("x (mm)")
-        ax.set_ylabel("y (mm)")
-        ax.set_zlabel("z (mm, toward the scene)")
+        labels = {"x": "x (mm)", "y": "y (mm)", "z": "z (mm, to the scene)"}
+        for axis, label in labels.items():
+            if axis == edge_on:
+                getattr(ax, f"set_{axis}ticks")([])
+                getattr(ax, f"set_{axis}label")("")
+            else:
+                getattr(ax, f"set_{axis}label")(label, labelpad=8)
+        ax.tick_params(labelsize=7)
         what = "half section, base blue, cartridge red" if cut else "base blue, cartridge red"
         ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view ({what})", fontsize=9)
         fig.tight_layout()

@@ -7,13 +7,14 @@ import time
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "doefab"
-HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya"}
+HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya", "colour", "skimage"}
 # a stage may import from the stages listed for it (and itself); lower layers never import upper ones
 ALLOWED = {
     "optics": {"optics"},
     "fabrication": {"optics", "fabrication"},
     "tasks": {"optics", "fabrication", "tasks"},
     "design": {"optics", "fabrication", "tasks", "design"},
+    "imaging": {"optics", "imaging"},
     "cli": None,  # the command line may use everything
 }
 

@@ -1,0 +1,87 @@
+"""Dual-pixel crosstalk (seed Eq. 29–31) and its exact inverse.
+
+Eq. 29 mixes the left and right views: ``L* = (1 − a) L + b R``, ``R* = a L + (1 − b) R`` with
+``a = α_l→r`` and ``b = α_r→l``; each ratio is a scalar or an array broadcastable to the images (per column
+is what real dual-pixel sensors show). The inverse solves this 2 × 2 system exactly — its determinant is
+``1 − a − b`` — instead of the seed's Eq. 32, whose printed denominator is not that of Eq. 29 (see
+../shared/DESIGN-NOTES.md). A determinant near zero would amplify noise without bound, so it is refused.
+Calibration (Eq. 30–31): with one aperture half blocked, a white wall's light reaches only one view, and the
+fraction that lands on the other one is the ratio.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT"]
+
+MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
+
+
+def _ratio(name: str, a, like):
+    """``a`` checked to be fractions in [0, 1), as the array type of ``like`` (torch tensor or numpy)."""
+    vals = np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)
+    if not np.all(np.isfinite(vals)) or np.any(vals < 0) or np.any(vals >= 1):
+        raise DoefabError(f"{name} must hold crosstalk fractions in [0, 1), got values in "
+                          f"[{np.nanmin(vals):g}, {np.nanmax(vals):g}]")
+    if hasattr(like, "detach"):
+        import torch
+
+        return torch.as_tensor(vals, dtype=like.dtype, device=like.device)
+    return vals
+
+
+def mix_crosstalk(left, right, alpha_lr, alpha_rl):
+    """Seed Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch)."""
+    a, b = _ratio("alpha_lr", alpha_lr, left), _ratio("alpha_rl", alpha_rl, left)
+    return (1 - a) * left + b * right, a * left + (1 - b) * right
+
+
+def unmix_crosstalk(left_star, right_star, alpha_lr, alpha_rl, min_determinant: float = MIN_DETERMINANT):
+    """The exact inverse of Eq. 29: clean ``(L, R)`` from recorded ``(L*, R*)``.
+
+    Raises DoefabError where ``1 − α_l→r − α_r→l < min_determinant`` (the inverse would amplify noise by more
+    than ``1 / min_determinant``).
+    """
+    a, b = _ratio("alpha_lr", alpha_lr, left_star), _ratio("alpha_rl", alpha_rl, left_star)
+    det = 1 - a - b
+    worst = float(det.min()) if hasattr(det, "min") else float(det)
+    if worst < min_determinant:
+        raise DoefabError(f"crosstalk inverse is near-singular: 1 − α_l→r − α_r→l = {worst:.3g} < {min_determinant:g} "
+                          f"(noise would be amplified {1 / max(worst, 1e-12):.0f}×); recalibrate: ratios this large mean "
+                          f"the views are not separated")
+    left = ((1 - b) * left_star - b * right_star) / det
+    right = ((1 - a) * right_star - a * left_star) / det
+    return left, right
+
+
+def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | None = 0):
+    """Eq. 30–31: crosstalk ratios from two white-wall captures, each with one aperture half blocked.
+
+    Args:
+        blocked_left_pair: ``(L*, R*)`` recorded with the LEFT aperture half (the DOE) blocked, as in the seed's
+            Eq. 30: the right view then gets no light of its own (I_R = 0), so α_l→r = R* / (L* + R*) (Eq. 31).
+            (The left aperture half images onto the right sub-pixels: coded = right view, uncoded = left.)
+        blocked_right_pair: ``(L*, R*)`` with the RIGHT aperture half blocked (I_L = 0): α_r→l = L* / (L* + R*).
+        axis_mean: average over this image axis (0: rows, giving one ratio per column, which is what dual-pixel
+            sensors show); None keeps per-pixel ratios.
+    Returns:
+        ``(alpha_lr, alpha_rl)``.
+    """
+    def ratio(pair, num_index):
+        l_s, r_s = (np.asarray(x, dtype=np.float64) for x in pair)
+        if l_s.shape != r_s.shape:
+            raise DoefabError(f"a calibration pair's two views differ in shape: {l_s.shape} vs {r_s.shape}")
+        total = l_s + r_s
+        if not np.all(np.isfinite(total)) or np.any(total <= 0):
+            raise DoefabError("calibration captures must be finite and lit everywhere (a white wall, not black)")
+        num = (l_s, r_s)[num_index]
+        if axis_mean is not None:
+            return num.mean(axis=axis_mean, keepdims=True) / total.mean(axis=axis_mean, keepdims=True)
+        return num / total
+
+    alpha_lr = ratio(blocked_left_pair, 1)
+    alpha_rl = ratio(blocked_right_pair, 0)
+    return alpha_lr, alpha_rl

@@ -1,0 +1,125 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.imaging.captures import convolve
+
+
+def _pair(psf_coded, psf_uncoded, wavelengths, depths):
+    return doefab.PSFPair(coded=torch.as_tensor(psf_coded, dtype=torch.float32),
+                          uncoded=torch.as_tensor(psf_uncoded, dtype=torch.float32),
+                          wavelengths=tuple(wavelengths), depths=tuple(depths), sensor_pitch=5.4e-6)
+
+
+def _blob_psf(k, sigma, weight=0.5, shift=0):
+    y, x = np.mgrid[:k, :k] - k // 2
+    g = np.exp(-((x - shift) ** 2 + y**2) / (2 * sigma**2))
+    return weight * g / g.sum()
+
+
+def test_convolution_matches_direct_sum():
+    rng = np.random.default_rng(0)
+    img = rng.random((1, 12, 10))
+    psf = rng.random((1, 5, 5))
+    got = convolve(torch.from_numpy(img), torch.from_numpy(psf)).numpy()[0]
+    ref = np.zeros((12, 10))
+    for i in range(12):
+        for j in range(10):
+            for u in range(5):
+                for v in range(5):
+                    ii, jj = i - (u - 2), j - (v - 2)
+                    if 0 <= ii < 12 and 0 <= jj < 10:
+                        ref[i, j] += psf[0, u, v] * img[0, ii, jj]
+    np.testing.assert_allclose(got, ref, atol=1e-10)
+
+
+def test_energy_is_conserved_before_clipping():
+    k = 15
+    psf = np.stack([_blob_psf(k, s) for s in (1.0, 2.0, 3.0)])[None]
+    pair = _pair(psf, psf * 0.9, (656e-9, 589e-9, 486e-9), (5.0,))
+    scene = np.zeros((3, 64, 64), np.float32)
+    scene[:, 24:40, 24:40] = 0.5  # compact: all blurred light stays in the frame, nothing reaches 1
+    coded, uncoded = doefab.simulate_captures(scene, pair, noise="none")
+    np.testing.assert_allclose(coded.sum(axis=(1, 2)), scene.sum(axis=(1, 2)) * psf[0].sum(axis=(1, 2)), rtol=1e-4)
+    np.testing.assert_allclose(uncoded.sum(), 0.9 * coded.sum(), rtol=1e-4)
+    assert coded.dtype == np.float32 and coded.shape == (3, 64, 64)
+    # a half-exposure: a uniform scene of 1 gives ~0.5 away from the borders
+    flat, _ = doefab.simulate_captures(np.ones((3, 64, 64), np.float32), pair, noise="none")
+    assert flat[:, 32, 32] == pytest.approx([0.5] * 3, abs=1e-4)
+
+
+def test_occluding_layer_hides_what_is_behind():
+    k = 9
+    psf_far, psf_near = _blob_psf(k, 1.0, 1.0), _blob_psf(k, 1.5, 1.0)
+    psf = np.stack([psf_near[None], psf_far[None]])  # planes: 1 m, 5 m
+    pair = _pair(psf, psf, (550e-9,), (1.0, 5.0))
+    h = w = 48
+    depth = np.full((h, w), 5.0, np.float32)
+    depth[:, : w // 2] = 1.0  # a near wall over the left half
+    scene = np.full((1, h, w), 0.2, np.float32)
+    scene[0, :, : w // 2] = 0.0  # the near wall is black
+    far_only = np.full((1, h, w), 0.2, np.float32)
+    # plain sum (Eq. 27 literally) would let the far plane's light spill into the black near wall; occlusion not
+    coded, _ = doefab.simulate_captures(np.repeat(scene, 1, 0), pair, depth_map=depth, response=np.ones((3, 1)),
+                                        noise="none")
+    assert coded[0, h // 2, 5] == pytest.approx(0.0, abs=1e-6)  # deep inside the black near wall
+    far_mask = torch.from_numpy((depth == 5.0).astype(np.float32))
+    plain = convolve(torch.from_numpy(far_only) * far_mask, torch.from_numpy(psf_far[None])).numpy()[0]
+    # at the wall's edge the plain sum lets far light spill onto the near wall; occlusion lets far less through
+    assert coded[0, h // 2, w // 2 - 1] < 0.5 * plain[h // 2, w // 2 - 1]
+    assert coded[0, h // 2, w - 5] == pytest.approx(0.2, abs=1e-4)
+
+
+def test_spectral_scene_uses_the_sensor_response():
+    lams = np.arange(400, 701, 50) * 1e-9
+    t = doefab.sensor_response(lams)
+    assert t.shape == (3, len(lams)) and t.min() >= 0 and t.sum(axis=1).max() == pytest.approx(1, abs=1e-6)
+    k = 7
+    psf = np.zeros((1, len(lams), k, k))
+    psf[0, :, k // 2, k // 2] = 0.5  # a delta: the capture is 0.5 · T @ spectrum
+    pair = _pair(psf, psf, lams, (math.inf,))
+    spectrum = np.linspace(0.2, 0.8, len(lams)).astype(np.float32)
+    scene = np.broadcast_to(spectrum[:, None, None], (len(lams), 16, 16)).copy()
+    coded, _ = doefab.simulate_captures(scene, pair, response=t, noise="none")
+    np.testing.assert_allclose(coded[:, 8, 8], 0.5 * t @ spectrum, rtol=1e-5)
+
+
+def test_noise_is_seeded_and_has_the_stated_size():
+    psf = np.zeros((1, 3, 3, 3))
+    psf[0, :, 1, 1] = 0.5
+    pair = _pair(psf, psf, (656e-9, 589e-9, 486e-9), (5.0,))
+    scene = np.full((3, 128, 128), 0.8, np.float32)  # capture 0.4
+    a = doefab.simulate_captures(scene, pair, seed=3)
+    b = doefab.simulate_captures(scene, pair, seed=3)
+    assert np.array_equal(a[0], b[0]) and not np.array_equal(a[0], doefab.simulate_captures(scene, pair, seed=4)[0])
+    # Poisson–Gaussian: variance of (0.4 · 25000 e⁻ shot + 3 e⁻ read) / 25000
+    expected = math.sqrt(0.4 * 25000 + 9) / 25000
+    assert a[0].std() == pytest.approx(expected, rel=0.05)
+    u, _ = doefab.simulate_captures(scene, pair, noise="authors")
+    assert np.abs(u - 0.4).max() <= 0.01 + 1e-6 and u.std() == pytest.approx(0.02 / math.sqrt(12), rel=0.05)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda s: s[:2], "2 bands"),
+    (lambda s: s[0], "3 dimensions"),
+    (lambda s: np.where(s > 0.5, np.nan, s), "NaN"),
+    (lambda s: s - 1.0, "negative radiance"),
+])
+def test_bad_scenes_give_one_clear_error(bad, match):
+    psf = np.zeros((1, 3, 3, 3))
+    psf[0, :, 1, 1] = 0.5
+    pair = _pair(psf, psf, (656e-9, 589e-9, 486e-9), (5.0,))
+    scene = np.random.default_rng(0).random((3, 8, 8)).astype(np.float32)
+    with pytest.raises(DoefabError, match=match):
+        doefab.simulate_captures(bad(scene), pair)
+
+
+def test_multi_depth_pair_needs_a_depth_map():
+    psf = np.zeros((2, 3, 3, 3))
+    pair = _pair(psf, psf, (656e-9, 589e-9, 486e-9), (1.0, 5.0))
+    with pytest.raises(DoefabError, match="depth_map"):
+        doefab.simulate_captures(np.zeros((3, 8, 8), np.float32), pair)

@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+
+
+def test_mixing_is_eq29():
+    rng = np.random.default_rng(0)
+    left, right = rng.random((3, 8, 8)), rng.random((3, 8, 8))
+    a, b = 0.12, 0.07
+    ls, rs = doefab.mix_crosstalk(left, right, a, b)
+    np.testing.assert_allclose(ls, (1 - a) * left + b * right)
+    np.testing.assert_allclose(rs, (1 - b) * right + a * left)
+    # light is redistributed, not created
+    np.testing.assert_allclose(ls + rs, left + right)
+
+
+@pytest.mark.parametrize("per_column", [False, True])
+def test_round_trip_is_exact(per_column):
+    rng = np.random.default_rng(1)
+    left, right = rng.random((3, 16, 16)), rng.random((3, 16, 16))
+    a = rng.uniform(0.02, 0.2, (1, 16)) if per_column else 0.15
+    b = rng.uniform(0.02, 0.2, (1, 16)) if per_column else 0.1
+    l2, r2 = doefab.unmix_crosstalk(*doefab.mix_crosstalk(left, right, a, b), a, b)
+    np.testing.assert_allclose(l2, left, atol=1e-12)
+    np.testing.assert_allclose(r2, right, atol=1e-12)
+    # torch, float32: float precision
+    lt, rt = torch.from_numpy(left).float(), torch.from_numpy(right).float()
+    l3, r3 = doefab.unmix_crosstalk(*doefab.mix_crosstalk(lt, rt, a, b), a, b)
+    assert float((l3 - lt).abs().max()) < 1e-6 and float((r3 - rt).abs().max()) < 1e-6
+
+
+def test_seed_eq32_is_not_the_inverse():
+    """The erratum: the printed Eq. 32 does not undo Eq. 29 (our inverse does, above)."""
+    left, right, a, b = 0.6, 0.3, 0.15, 0.1
+    ls, rs = doefab.mix_crosstalk(left, right, a, b)
+    r_eq32 = (rs - a * ls) / (1 - b**2 - a * b + a**2)
+    assert abs(r_eq32 - right) > 1e-3
+
+
+def test_calibration_recovers_known_per_column_ratios():
+    rng = np.random.default_rng(2)
+    a = rng.uniform(0.02, 0.25, (1, 32))
+    b = rng.uniform(0.02, 0.25, (1, 32))
+    wall = 0.8 + 0.05 * rng.random((24, 32))  # a white wall, slightly uneven
+    blocked_left = doefab.mix_crosstalk(wall, np.zeros_like(wall), a, b)  # DOE half blocked: I_R = 0
+    blocked_right = doefab.mix_crosstalk(np.zeros_like(wall), wall, a, b)  # plain half blocked: I_L = 0
+    a_hat, b_hat = doefab.calibrate_crosstalk(blocked_left, blocked_right)
+    np.testing.assert_allclose(a_hat, a, rtol=1e-10)
+    np.testing.assert_allclose(b_hat, b, rtol=1e-10)
+
+
+def test_near_singular_determinant_is_refused():
+    x = np.ones((2, 2))
+    with pytest.raises(DoefabError, match="near-singular"):
+        doefab.unmix_crosstalk(x, x, 0.5, 0.48)
+    with pytest.raises(DoefabError, match="fractions"):
+        doefab.mix_crosstalk(x, x, 1.2, 0.0)
+    with pytest.raises(DoefabError, match="lit everywhere"):
+        doefab.calibrate_crosstalk((x * 0, x * 0), (x, x))
