@@ -69,13 +69,7 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m holder_cad", description=__doc__)
-    add_arguments(parser)
-    args = parser.parse_args(argv)
-    try:
-        return run(args)
-    except HolderError as exc:
-        print(f"holder: error: {exc}", file=sys.stderr)
-        if getattr(args, "outdir", None) is not None and not (args.outdir.path / "holder.FAILED.json").is_file():
-            args.outdir.discard()
-        return 3 if exc.__class__.__name__ == "HolderCheckError" else 2
+    """``python -m holder_cad ...`` is ``doefab holder ...`` (the same checks, errors and exit statuses)."""
+    from doefab.cli import main as doefab_main
+
+    return doefab_main(["holder", *(sys.argv[1:] if argv is None else argv)])

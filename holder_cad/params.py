@@ -106,8 +106,8 @@ class HolderParams:
         if overlap < 0.5:
             raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm}) overlap the die "
                               f"edge by {overlap:.2f} mm (< 0.5 mm): use larger washers")
-        if self.segments < 32:
-            raise HolderError("segments must be ≥ 32")
+        if not isinstance(self.segments, int) or not 32 <= self.segments <= 1024:
+            raise HolderError(f"segments must be an integer in 32..1024 (facets per circle), got {self.segments!r}")
         # the cartridge body must hold the die pocket with walls around it
         if self.die_diagonal_mm / 2 + self.clearance_mm + self.wall_mm > self.cartridge_radius_mm:
             raise HolderError(f"the die ({self.die_width_mm} × {self.die_height_mm} mm) does not fit the cartridge "

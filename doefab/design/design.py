@@ -117,7 +117,7 @@ class Design:
         return out
 
     def _figures(self, out: Path) -> None:
-        from doefab.plotting import plot_psf_grid
+        from doefab.plotting import depth_label, plot_psf_grid
 
         psf, tg = self.psf_quantized, self.targets
         nd, nw = psf.shape[:2]
@@ -127,7 +127,7 @@ class Design:
             picks = [picks[i] for i in idx]
         panels = []
         for d, w in picks:
-            label = f"{self.wavelengths[w] * 1e9:.0f} nm, z = {self.depths[d]:g} m"
+            label = f"{self.wavelengths[w] * 1e9:.0f} nm, {depth_label(self.depths[d])}"
             panels.append((f"target {label}", tg[d, w]))
             panels.append((f"16-level design {label}", psf[d, w]))
         plot_psf_grid(out / "psf_target_vs_design.png", panels, self.camera.sensor_pitch, ncols=2, log=False,

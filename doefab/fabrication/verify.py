@@ -147,7 +147,7 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         raise DoefabError(f"{folder} is not a folder: give the mask-set folder doefab masks wrote")
     mpath = folder / "manifest.json"
     if not mpath.is_file():
-        raise CheckFailed(f"{folder} is not a mask set: manifest.json is missing")
+        raise DoefabError(f"{folder} is not a mask set (manifest.json is missing): give the folder doefab masks wrote")
     try:
         man = json.loads(mpath.read_text())
     except (ValueError, UnicodeDecodeError) as exc:

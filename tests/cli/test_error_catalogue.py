@@ -139,6 +139,8 @@ CASES = [
                                      str(t / "o")], 2, "NaN"),
     ("psf-height-in-nm", lambda f, t: ["psf", "--height", str(_npy(t, np.full((1600, 1600), 500.0))), "--out",
                                        str(t / "o")], 2, "metres"),
+    ("psf-point-too-near", lambda f, t: ["psf", "--depths-m", "0.005", "--kernel", "31", "--out", str(t / "o")], 2,
+     "--pupil-oversample"),
     ("psf-out-is-file", lambda f, t: ["psf", "--out", str(_file(t))], 2, "existing file"),
     ("psf-out-foreign-folder", lambda f, t: ["psf", "--out", str(_foreign(t)), "--force"], 2, "not a doefab psf output"),
     ("psf-out-under-a-file", lambda f, t: ["psf", "--out", str(_file(t) / "sub")], 2, "is a file"),
@@ -212,6 +214,7 @@ CASES = [
     ("verify-corrupt-gds-klayout", lambda f, t: ["masks", "--verify", str(_corrupt_gds(f, t))], 3, "corrupt"),
     ("verify-incomplete", lambda f, t: ["masks", "--verify", str(_incomplete_set(f, t)), "--no-klayout"], 3, "incomplete"),
     ("verify-garbled-manifest", lambda f, t: ["masks", "--verify", str(_garbled_manifest(f, t))], 3, "not valid JSON"),
+    ("verify-a-design-folder", lambda f, t: ["masks", "--verify", str(f / "design")], 2, "not a mask set"),
     ("verify-missing", lambda f, t: ["masks", "--verify", str(t / "nowhere")], 2, "not a folder"),
     ("verify-and-export", lambda f, t: ["masks", "--verify", str(f / "maskset"), "--out", str(t / "o")], 2, "one or the other"),
     # ---- holder
@@ -225,6 +228,8 @@ CASES = [
     ("holder-negative", lambda f, t: ["holder", "--out", str(t / "o"), "--set", "die_width_mm=-12"], 2, "die_width_mm"),
     ("holder-no-equals", lambda f, t: ["holder", "--out", str(t / "o"), "--set", "wall_mm"], 2, "NAME=VALUE"),
     ("holder-clearance", lambda f, t: ["holder", "--out", str(t / "o"), "--set", "clearance_mm=0.01"], 2, "die_to_pocket_clearance_mm"),
+    ("holder-segments", lambda f, t: ["holder", "--out", str(t / "o"), "--set", "segments=100000"], 2, "segments"),
+    ("holder-mount", lambda f, t: ["holder", "--out", str(t / "o"), "--set", "mount=magnet"], 2, "mount"),
     ("holder-out-is-file", lambda f, t: ["holder", "--out", str(_file(t))], 2, "existing file"),
     ("holder-foreign", lambda f, t: ["holder", "--out", str(_foreign(t)), "--force"], 2, "never replaces"),
     # ---- demo

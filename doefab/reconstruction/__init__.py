@@ -1,0 +1,1 @@
+"""Reconstruction: the feature-space Wiener deconvolution (DWDN) and the conditional networks."""

@@ -1,0 +1,71 @@
+"""Differentiable Wiener deconvolution (DWDN, Dong et al. 2020), usable on images or feature maps.
+
+``X = conj(K) · Y / (|K|² + λ)`` per channel in the Fourier domain, with ``K`` the optical transfer
+function of the PSF (its centre pixel moved to the origin) and ``λ > 0`` a regularisation per channel —
+fixed, learned (``WienerDeconvolution``, λ = softplus(θ)) or estimated from the signal-to-noise ratio. Because
+λ > 0 the division is bounded by ``|K| / (|K|² + λ) ≤ 1 / (2√λ)``: a PSF with spectral zeros gives a finite
+result. The input is padded by edge replication (half a PSF on each side) before the FFT, so the circular
+wrap of the FFT does not ring across the image borders, and cropped back afterwards.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from doefab.errors import DoefabError
+
+__all__ = ["wiener_deconvolve", "psf_to_otf", "WienerDeconvolution"]
+
+
+def psf_to_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
+    """OTF of [..., K, K] PSFs on an (H, W) grid: zero-padded, centre pixel (K//2, K//2) rolled to (0, 0)."""
+    k_h, k_w = psf.shape[-2:]
+    h, w = shape
+    if k_h > h or k_w > w:
+        raise DoefabError(f"PSF {k_h}×{k_w} is larger than the padded image {h}×{w}: crop the PSF")
+    pad = F.pad(psf, (0, w - k_w, 0, h - k_h))
+    pad = torch.roll(pad, shifts=(-(k_h // 2), -(k_w // 2)), dims=(-2, -1))
+    return torch.fft.rfft2(pad)
+
+
+def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam) -> torch.Tensor:
+    """Wiener-deconvolve [B, C, H, W] ``y`` with [B or 1, C or 1, K, K] ``psf``; ``lam`` > 0 scalar or [C].
+
+    The PSF is normalised to unit sum per channel (so the result keeps the image's scale whatever fraction of
+    the light the PSF carries).
+    """
+    if y.ndim != 4 or psf.ndim != 4:
+        raise DoefabError(f"wiener_deconvolve takes y [B, C, H, W] and psf [B, C, K, K], got {tuple(y.shape)} and "
+                          f"{tuple(psf.shape)}")
+    lam = torch.as_tensor(lam, dtype=y.dtype, device=y.device)
+    if bool((lam <= 0).any()) or not bool(torch.isfinite(lam).all()):
+        raise DoefabError("the Wiener regularisation λ must be positive and finite")
+    k_h, k_w = psf.shape[-2:]
+    ph, pw = k_h // 2 + 1, k_w // 2 + 1
+    yp = F.pad(y, (pw, pw, ph, ph), mode="replicate")
+    h, w = yp.shape[-2:]
+    p = psf.to(y.dtype)
+    p = p / p.sum(dim=(-2, -1), keepdim=True).clamp_min(1e-12)
+    otf = psf_to_otf(p, (h, w))
+    lam_b = lam.reshape(1, -1, 1, 1) if lam.ndim == 1 else lam
+    x = torch.fft.irfft2(torch.conj(otf) * torch.fft.rfft2(yp) / (otf.abs() ** 2 + lam_b), s=(h, w))
+    return x[..., ph:ph + y.shape[-2], pw:pw + y.shape[-1]]
+
+
+class WienerDeconvolution(torch.nn.Module):
+    """Wiener layer with a learned λ per channel (λ = softplus(θ) + 1e-6, initialised at ``lam0``)."""
+
+    def __init__(self, channels: int, lam0: float = 1e-2):
+        super().__init__()
+        if lam0 <= 0:
+            raise DoefabError("lam0 must be > 0")
+        init = torch.log(torch.expm1(torch.tensor(float(lam0))))
+        self.theta = torch.nn.Parameter(init.repeat(channels))
+
+    @property
+    def lam(self) -> torch.Tensor:
+        return F.softplus(self.theta) + 1e-6
+
+    def forward(self, y: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
+        return wiener_deconvolve(y, psf, self.lam)
