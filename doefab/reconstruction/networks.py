@@ -1,0 +1,151 @@
+"""The three conditional reconstruction networks (seed sections 4.2–4.5), scaled to train on a CPU.
+
+- ``DeconvNet`` (G_HDR, G_HS): DWDN-like. Features of the coded capture are Wiener-deconvolved in feature space
+  with the task's PSF(s) — one PSF for HDR (the coded RGB PSF, per colour channel of the raw capture and
+  their mean for the learned features), one per band for hyperspectral — concatenated with features of the
+  uncoded capture, and decoded by a small U-Net. The PSF is an input: a measured or fabricated PSF can be
+  swapped in at test time. Variants: ``proposed`` (both captures), ``coded_only``, ``uncoded_only`` (no
+  deconvolution branch: it sees what a conventional camera sees).
+- ``DepthNet`` (G_depth): a ResNet-18 trunk encodes each capture — the weights are shared between the two
+  captures, as in the authors' code: both are images of the same scene through the same lens, and sharing
+  halves the parameters a CPU has to train — and one decoder turns the concatenated features into metric
+  depth (softplus, metres). Loss L1 + gradient (Eq. 28, ``depth_loss``).
+
+Inputs are [B, 3, H, W] with H and W multiples of 32 (≥ 64).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from doefab.errors import DoefabError
+from doefab.reconstruction.resnet import ResNet18Trunk
+from doefab.reconstruction.wiener import WienerDeconvolution
+
+__all__ = ["DeconvNet", "DepthNet", "depth_loss", "VARIANTS", "check_input"]
+
+VARIANTS = ("proposed", "coded_only", "uncoded_only")
+
+
+def check_input(x: torch.Tensor, name: str) -> None:
+    if x.ndim != 4 or x.shape[1] != 3:
+        raise DoefabError(f"{name} must be [B, 3, H, W], got {tuple(x.shape)}")
+    h, w = x.shape[-2:]
+    if h % 32 or w % 32 or h < 64 or w < 64:
+        raise DoefabError(f"{name} is {h}×{w}: image sides must be multiples of 32 and at least 64 (crop or pad)")
+
+
+def _conv(cin, cout):
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, padding=1), nn.LeakyReLU(0.1), nn.Conv2d(cout, cout, 3, padding=1),
+                         nn.LeakyReLU(0.1))
+
+
+class UNet(nn.Module):
+    """A small U-Net: ``levels`` poolings, widths ``w·2^i``."""
+
+    def __init__(self, cin: int, cout: int, width: int = 16, levels: int = 3):
+        super().__init__()
+        self.down = nn.ModuleList([_conv(cin if i == 0 else width * 2 ** (i - 1), width * 2**i) for i in range(levels)])
+        self.mid = _conv(width * 2 ** (levels - 1), width * 2**levels)
+        self.up = nn.ModuleList([nn.ConvTranspose2d(width * 2 ** (i + 1), width * 2**i, 2, 2) for i in range(levels)])
+        self.dec = nn.ModuleList([_conv(width * 2 ** (i + 1), width * 2**i) for i in range(levels)])
+        self.out = nn.Conv2d(width, cout, 1)
+
+    def forward(self, x):
+        skips = []
+        for block in self.down:
+            x = block(x)
+            skips.append(x)
+            x = F.max_pool2d(x, 2)
+        x = self.mid(x)
+        for i in reversed(range(len(self.up))):
+            x = self.dec[i](torch.cat([self.up[i](x), skips[i]], dim=1))
+        return self.out(x)
+
+
+class DeconvNet(nn.Module):
+    """G_HDR / G_HS. ``out_channels``: 3 (HDR radiance) or the number of bands; ``n_psf``: PSFs given (3 RGB for
+    HDR, one per band for hyperspectral)."""
+
+    def __init__(self, out_channels: int, n_psf: int, variant: str = "proposed", features: int = 4, width: int = 16,
+                 log_output: bool = False):
+        super().__init__()
+        if variant not in VARIANTS:
+            raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+        self.variant, self.n_psf, self.log_output = variant, n_psf, log_output
+        self.features = features
+        cin = 0
+        if variant != "uncoded_only":
+            self.feat_coded = nn.Sequential(nn.Conv2d(3, features, 3, padding=1), nn.LeakyReLU(0.1),
+                                            nn.Conv2d(features, features, 3, padding=1))
+            n_dec = 3 + 3 * features if n_psf == 3 else n_psf * features
+            self.wiener = WienerDeconvolution(n_dec, lam0=1e-2)
+            cin += n_dec
+        if variant != "coded_only":
+            self.feat_uncoded = nn.Sequential(nn.Conv2d(3, 16, 3, padding=1), nn.LeakyReLU(0.1))
+            cin += 16
+        self.unet = UNet(cin, out_channels, width)
+
+    def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf: torch.Tensor | None = None) -> torch.Tensor:
+        """``psf``: [B or 1, n_psf, K, K] coded PSFs (needed unless the variant is uncoded_only)."""
+        parts = []
+        if self.variant != "uncoded_only":
+            check_input(coded, "coded")
+            if psf is None or psf.ndim != 4 or psf.shape[1] != self.n_psf:
+                raise DoefabError(f"psf must be [B, {self.n_psf}, K, K], got {None if psf is None else tuple(psf.shape)}")
+            f = self.feat_coded(coded)
+            b = coded.shape[0]
+            if self.n_psf == 3:  # HDR: raw colour channel c with PSF c, learned features with every colour's PSF
+                stack = torch.cat([coded, f.repeat(1, 3, 1, 1)], dim=1)
+                kern = torch.cat([psf, psf.repeat_interleave(self.features, dim=1)], dim=1)
+            else:  # hyperspectral: the features deconvolved with each band's PSF
+                stack = f.repeat(1, self.n_psf, 1, 1)
+                kern = psf.repeat_interleave(self.features, dim=1)
+            parts.append(self.wiener(stack, kern.expand(b, -1, -1, -1)))
+        if self.variant != "coded_only":
+            check_input(uncoded, "uncoded")
+            parts.append(self.feat_uncoded(uncoded))
+        y = self.unet(torch.cat(parts, dim=1))
+        return torch.exp(y) if self.log_output else F.softplus(y)
+
+
+class DepthNet(nn.Module):
+    """G_depth: shared ResNet-18 trunk for both captures, one decoder, metric depth (metres) out."""
+
+    def __init__(self, variant: str = "proposed", width: int = 16, max_depth_m: float = 6.0):
+        super().__init__()
+        if variant not in VARIANTS:
+            raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+        self.variant, self.max_depth = variant, max_depth_m
+        self.trunk = ResNet18Trunk(3, width)
+        n_in = 1 if variant != "proposed" else 2
+        ch = [c * n_in for c in self.trunk.channels]
+        self.up = nn.ModuleList()
+        prev = ch[-1]
+        for skip in reversed(ch[:-1]):
+            self.up.append(_conv(prev + skip, skip))
+            prev = skip
+        self.head = nn.Sequential(nn.Conv2d(prev, 16, 3, padding=1), nn.LeakyReLU(0.1), nn.Conv2d(16, 1, 1))
+
+    def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf=None) -> torch.Tensor:
+        inputs = {"proposed": (coded, uncoded), "coded_only": (coded,), "uncoded_only": (uncoded,)}[self.variant]
+        for x, name in zip(inputs, ("coded", "uncoded") if self.variant == "proposed" else (self.variant[:-5],)):
+            check_input(x, name)
+        feats = [self.trunk(x) for x in inputs]
+        levels = [torch.cat(fs, dim=1) for fs in zip(*feats)]
+        y = levels[-1]
+        for block, skip in zip(self.up, reversed(levels[:-1])):
+            y = F.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            y = block(torch.cat([y, skip], dim=1))
+        y = F.interpolate(self.head(y), size=coded.shape[-2:], mode="bilinear", align_corners=False)
+        return self.max_depth * torch.sigmoid(y[:, 0])
+
+
+def depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: float = 1.0) -> torch.Tensor:
+    """Seed Eq. 28: L1 on depth plus L1 on its horizontal and vertical gradients."""
+    l1 = (pred - target).abs().mean()
+    gx = ((pred[..., :, 1:] - pred[..., :, :-1]) - (target[..., :, 1:] - target[..., :, :-1])).abs().mean()
+    gy = ((pred[..., 1:, :] - pred[..., :-1, :]) - (target[..., 1:, :] - target[..., :-1, :])).abs().mean()
+    return l1 + weight * (gx + gy)

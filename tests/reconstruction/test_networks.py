@@ -1,0 +1,70 @@
+import pytest
+import torch
+
+from doefab.errors import DoefabError
+from doefab.reconstruction.networks import DeconvNet, DepthNet, depth_loss
+from doefab.reconstruction.resnet import ResNet18Trunk
+
+
+def _psf(b, n, k=15):
+    p = torch.rand(b, n, k, k)
+    return 0.5 * p / p.sum(dim=(-2, -1), keepdim=True)
+
+
+def test_resnet18_trunk_structure():
+    t = ResNet18Trunk(3, 8)
+    blocks = sum(len(s) for s in t.stages)
+    assert blocks == 8  # [2, 2, 2, 2] BasicBlocks
+    feats = t(torch.rand(1, 3, 64, 96))
+    assert [f.shape[-1] for f in feats] == [48, 24, 12, 6, 3]
+    assert [f.shape[1] for f in feats] == [8, 8, 16, 32, 64]
+
+
+@pytest.mark.parametrize("variant", ["proposed", "coded_only", "uncoded_only"])
+@pytest.mark.parametrize("out, n_psf", [(3, 3), (31, 31)])
+def test_deconv_net_shapes_and_gradients(variant, out, n_psf):
+    net = DeconvNet(out, n_psf, variant, features=2, width=4)
+    coded, uncoded = torch.rand(2, 3, 64, 96), torch.rand(2, 3, 64, 96)
+    y = net(coded, uncoded, _psf(1, n_psf))
+    assert y.shape == (2, out, 64, 96) and bool((y >= 0).all())
+    y.mean().backward()
+    assert all(p.grad is not None for p in net.parameters() if p.requires_grad)
+
+
+@pytest.mark.parametrize("variant", ["proposed", "coded_only", "uncoded_only"])
+def test_depth_net_shapes_and_gradients(variant):
+    net = DepthNet(variant, width=4)
+    y = net(torch.rand(2, 3, 64, 64), torch.rand(2, 3, 64, 64))
+    assert y.shape == (2, 64, 64) and bool((y > 0).all())
+    depth_loss(y, torch.full_like(y, 3.0)).backward()
+    assert all(p.grad is not None for p in net.parameters())
+
+
+def test_a_few_training_steps_lower_the_loss():
+    torch.manual_seed(0)
+    net = DeconvNet(3, 3, "proposed", features=2, width=8)
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    coded, uncoded = torch.rand(2, 3, 64, 64), torch.rand(2, 3, 64, 64)
+    psf = _psf(1, 3)
+    losses = []
+    for _ in range(60):
+        opt.zero_grad()
+        loss = (net(coded, uncoded, psf) - uncoded).abs().mean()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert min(losses[-5:]) < 0.85 * losses[0]
+
+
+def test_depth_loss_is_eq28():
+    t = torch.zeros(1, 4, 4)
+    p = torch.zeros(1, 4, 4)
+    p[0, :, 2:] = 1.0  # a step: L1 = 0.5, horizontal gradient term 4/12, vertical 0
+    assert float(depth_loss(p, t)) == pytest.approx(0.5 + 4 / 12)
+
+
+@pytest.mark.parametrize("shape", [(1, 3, 60, 64), (1, 3, 32, 32), (1, 1, 64, 64)])
+def test_bad_input_sizes_are_refused(shape):
+    net = DeconvNet(3, 3, "uncoded_only", width=4)
+    with pytest.raises(DoefabError, match="multiples of 32|\\[B, 3, H, W\\]"):
+        net(torch.rand(*shape), torch.rand(*shape))
