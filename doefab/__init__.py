@@ -34,6 +34,7 @@ _EXPORTS = {
     "calibrate_crosstalk": "doefab.imaging.crosstalk",
     "sensor_response": "doefab.imaging.sensor",
     "simulate_captures": "doefab.imaging.captures",
+    "load_reconstructor": "doefab.reconstruction.loader",
     "DoefabError": "doefab.errors",
     "SamplingError": "doefab.errors",
 }

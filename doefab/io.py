@@ -226,6 +226,8 @@ SIGNATURES = {
     "design": ("design.json", "checkpoint.pt"),
     "masks": (("manifest.json", _is_mask_manifest),),
     "holder": ("holder.json", "holder.FAILED.json"),
+    "train": ("checkpoint.pt", "history.csv"),
+    "evaluate": ("metrics.json",),
 }
 
 

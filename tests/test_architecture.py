@@ -15,7 +15,7 @@ ALLOWED = {
     "tasks": {"optics", "fabrication", "tasks"},
     "design": {"optics", "fabrication", "tasks", "design"},
     "imaging": {"optics", "imaging"},
-    "reconstruction": {"optics", "imaging", "reconstruction"},
+    "reconstruction": {"optics", "fabrication", "design", "imaging", "reconstruction"},
     "cli": None,  # the command line may use everything
 }
 

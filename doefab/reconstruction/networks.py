@@ -96,19 +96,22 @@ class DeconvNet(nn.Module):
             if psf is None or psf.ndim != 4 or psf.shape[1] != self.n_psf:
                 raise DoefabError(f"psf must be [B, {self.n_psf}, K, K], got {None if psf is None else tuple(psf.shape)}")
             f = self.feat_coded(coded)
-            b = coded.shape[0]
             if self.n_psf == 3:  # HDR: raw colour channel c with PSF c, learned features with every colour's PSF
                 stack = torch.cat([coded, f.repeat(1, 3, 1, 1)], dim=1)
                 kern = torch.cat([psf, psf.repeat_interleave(self.features, dim=1)], dim=1)
             else:  # hyperspectral: the features deconvolved with each band's PSF
                 stack = f.repeat(1, self.n_psf, 1, 1)
                 kern = psf.repeat_interleave(self.features, dim=1)
-            parts.append(self.wiener(stack, kern.expand(b, -1, -1, -1)))
+            parts.append(self.wiener(stack, kern))  # one OTF per PSF, broadcast over the batch
         if self.variant != "coded_only":
             check_input(uncoded, "uncoded")
             parts.append(self.feat_uncoded(uncoded))
         y = self.unet(torch.cat(parts, dim=1))
-        return torch.exp(y) if self.log_output else F.softplus(y)
+        # A linear output keeps the L1 gradient alive everywhere (a softplus head died on dark pixels); the
+        # result is clamped to ≥ 0 outside training. HDR: the network predicts log(1 + radiance).
+        if self.log_output:
+            y = torch.expm1(y.clamp(-5.0, 6.94))
+        return y if self.training else y.clamp_min(0.0)
 
 
 class DepthNet(nn.Module):

@@ -1,0 +1,42 @@
+"""``doefab evaluate``: the shipped networks of a task on the held-out test split (the seed's Tables 1–3).
+
+Writes OUT/metrics.json (every variant's mean metrics) and OUT/examples.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from doefab.cli._args import number
+
+
+def register(sub) -> None:
+    p = sub.add_parser("evaluate", help="score the shipped reconstruction networks on the held-out test set",
+                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--images", type=number(int, 1, 10_000), default=16, help="test scenes")
+    p.add_argument("--size", type=number(int, 64, 2048, unit="pixels; a multiple of 32"), default=256,
+                   help="test image side in pixels")
+    p.add_argument("--weights-dir", default=None, help="weights folder (default: the shipped ones)")
+    p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from doefab.cli._output import claim_output
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.evaluate import evaluate
+    from doefab.reconstruction.loader import load_reconstructor
+
+    if args.size % 32:
+        raise DoefabError(f"--size {args.size} must be a multiple of 32 (e.g. 256)")
+    for v in ("proposed", "coded_only", "uncoded_only"):
+        load_reconstructor(args.task, v, args.weights_dir)  # a bad weights file is refused before any output
+    out = claim_output(args, "evaluate", replace=args.force)
+    out.create()
+    res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir)
+    print(json.dumps(res["rows"], indent=1))
+    print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
+    return 0

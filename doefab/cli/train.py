@@ -1,0 +1,59 @@
+"""``doefab train``: train a reconstruction network for the committed design of a task (CPU, minutes).
+
+Writes the weights and their metadata record (default: the package's shipped weights folder,
+doefab/weights/<task>_<variant>.pt/.json), and OUT/checkpoint.pt + OUT/history.csv while running.
+Interrupted runs keep the checkpoint: rerun the same command with --resume (it may raise --minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from doefab.cli._args import number
+
+
+def register(sub) -> None:
+    p = sub.add_parser("train", help="train a reconstruction network (hdr, hyperspectral, depth) on this machine",
+                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
+    p.add_argument("--variant", default="proposed", choices=["proposed", "coded_only", "uncoded_only"],
+                   help="network variant (the ablations use the same architecture and budget)")
+    p.add_argument("--minutes", type=number(float, 0, 1440, lo_open=True, unit="minutes of wall time"), default=10.0,
+                   help="training budget in minutes of wall time")
+    p.add_argument("--out", default=None, help="run folder for checkpoint.pt and history.csv "
+                                               "(default out/train/<task>_<variant>)")
+    p.add_argument("--weights-dir", default=None, help="where to write the weights (default: the shipped ones)")
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
+    p.add_argument("--batch", type=number(int, 1, 64), default=4, help="scenes per step")
+    p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=96,
+                   help="training crop side in pixels")
+    p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from doefab.cli._output import claim_output
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.train import train
+
+    if args.crop % 32:
+        raise DoefabError(f"--crop {args.crop} must be a multiple of 32 (e.g. 96)")
+    if args.resume and args.force:
+        raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
+    args.out = args.out or f"out/train/{args.task}_{args.variant}"
+    out = claim_output(args, "train", replace=args.force or args.resume, replace_flag="--force (or --resume)",
+                       keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
+    if args.resume and not (out.path / "checkpoint.pt").is_file():
+        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
+    out.create()
+    meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
+                 batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir,
+                 command="doefab " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("doefab") else "doefab train")
+    v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
+    print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
+          f"validation {v}; wrote {meta['weights_file']} and its .json")
+    return 0

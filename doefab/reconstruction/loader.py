@@ -1,0 +1,107 @@
+"""``load_reconstructor``: the shipped networks of the committed designs, verified before use.
+
+A weights file is refused — with its path and the command that retrains it — when it is missing, when its
+SHA-256 differs from its metadata record (changed or corrupt), when the record names another design than the
+committed one, or when torch cannot read it (always ``torch.load(..., weights_only=True)``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from doefab.errors import DoefabError
+from doefab.reconstruction.models import build_model
+from doefab.reconstruction.networks import VARIANTS
+from doefab.reconstruction.specs import get_spec, psf_pair
+from doefab.reconstruction.train import model_inputs, weights_paths
+
+__all__ = ["load_reconstructor", "Reconstructor"]
+
+
+class Reconstructor:
+    """A trained network with the PSF pair and design it was trained for.
+
+    ``rec(coded, uncoded)`` → [3, H, W] HDR radiance | [31, H, W] spectra | [H, W] depth in metres (numpy in,
+    numpy out; torch in, torch out); ``rec(coded, uncoded, psf=pair)`` conditions the HDR / hyperspectral
+    networks on another (e.g. measured or fabricated) PSF pair instead.
+    """
+
+    def __init__(self, task: str, variant: str, model: torch.nn.Module, pair, design_sha256: str, meta: dict):
+        self.task, self.variant, self.model = task, variant, model.eval()
+        self.pair, self.design_sha256, self.meta = pair, design_sha256, meta
+
+    def _psf(self, psf):
+        if psf is None:
+            return model_inputs(self.task, self.pair)
+        coded = getattr(psf, "coded", psf)
+        t = torch.as_tensor(coded.detach() if isinstance(coded, torch.Tensor) else np.asarray(coded)).float()
+        if t.ndim == 4:
+            t = t[0]
+        want = len(self.pair.wavelengths)
+        if t.ndim != 3 or t.shape[0] != want or t.shape[-1] != t.shape[-2]:
+            raise DoefabError(f"psf must be a PSF pair (or [{want}, K, K] coded PSFs) for the {want} bands of the "
+                              f"{self.task} network, got {tuple(t.shape)}")
+        if hasattr(psf, "wavelengths") and not np.allclose(psf.wavelengths, self.pair.wavelengths):
+            raise DoefabError("the PSF pair's wavelengths differ from the ones the network was trained for")
+        if not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
+            raise DoefabError("psf must be finite and non-negative")
+        return t[None]
+
+    def __call__(self, coded, uncoded, psf=None):
+        torch_in = isinstance(coded, torch.Tensor)
+        views = []
+        for name, x in (("coded", coded), ("uncoded", uncoded)):
+            t = torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
+            if t.ndim != 3 or t.shape[0] != 3:
+                raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
+            if not bool(torch.isfinite(t).all()):
+                raise DoefabError(f"{name} contains NaN or infinite values")
+            views.append(t[None])
+        if views[0].shape != views[1].shape:
+            raise DoefabError(f"coded {tuple(views[0].shape[1:])} and uncoded {tuple(views[1].shape[1:])} differ in shape")
+        p = self._psf(psf) if self.task != "depth" else None
+        with torch.no_grad():
+            out = self.model(views[0], views[1], p)[0]
+        return out if torch_in else out.numpy()
+
+
+def _refuse(path: Path, why: str, task: str, variant: str):
+    raise DoefabError(f"{path}: {why}; retrain it with: doefab train --task {task} --variant {variant}")
+
+
+def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None) -> Reconstructor:
+    """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth")."""
+    get_spec(task)
+    if variant not in VARIANTS:
+        raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    pt, meta_path = weights_paths(task, variant, weights_dir)
+    if not pt.is_file() or not meta_path.is_file():
+        _refuse(pt, "no weights (or no metadata record beside them)", task, variant)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (ValueError, UnicodeDecodeError):
+        _refuse(meta_path, "the metadata record is not valid JSON", task, variant)
+    need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
+    if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != "doefab weights 1":
+        _refuse(meta_path, f"the metadata record lacks {list(need)}", task, variant)
+    if (meta["task"], meta["variant"]) != (task, variant):
+        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", task, variant)
+    data = pt.read_bytes()
+    if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
+        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", task, variant)
+    pair, sha = psf_pair(task)
+    if meta["design_levels_sha256"] != sha:
+        _refuse(pt, "the weights were trained for another design than the committed one", task, variant)
+    try:
+        state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
+        model = build_model(task, variant, meta["arch"])
+        model.load_state_dict(state)
+    except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
+        _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", task, variant)
+    return Reconstructor(task, variant, model, pair, sha, meta)

@@ -1,0 +1,119 @@
+"""What each reconstruction task is trained on: the committed design, its PSF pair, scenes and captures.
+
+The networks see the PSFs of what gets fabricated: the committed 16-level level maps
+(``masks/<task>/design/levels.npy``), not the continuous heights.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from doefab.errors import DoefabError
+
+__all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin"]
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """name: hdr / hyperspectral / depth.  design: the design task (streak / grating / half-ring).
+    kernel: PSF window (sensor pixels) used to simulate captures.  out_channels: network outputs."""
+
+    name: str
+    design: str
+    kernel: int
+    out_channels: int
+    metric: str  # the validation metric logged while training (higher is better unless it is MAE)
+
+
+SPECS = {
+    "hdr": TaskSpec("hdr", "streak", 95, 3, "psnr"),
+    "hyperspectral": TaskSpec("hyperspectral", "grating", 191, 31, "psnr"),
+    "depth": TaskSpec("depth", "half-ring", 95, 1, "mae"),
+}
+
+
+def get_spec(task: str) -> TaskSpec:
+    if task not in SPECS:
+        raise DoefabError(f"unknown reconstruction task {task!r}: choose one of {sorted(SPECS)}")
+    return SPECS[task]
+
+
+def design_dir(task: str) -> Path:
+    """The committed design a task's networks are trained for (``masks/<design>/design``)."""
+    return REPO / "masks" / get_spec(task).design / "design"
+
+
+@functools.lru_cache(maxsize=None)
+def _pair_cached(folder: str, kernel: int):
+    from doefab.design.design import Design
+    from doefab.fabrication.levels import levels_to_height
+    from doefab.optics.psf import PSFPlan
+
+    d = Design.load(folder)
+    plan = PSFPlan(d.camera, d.wavelengths, d.depths, kernel)
+    with torch.no_grad():
+        pair = plan(levels_to_height(d.levels, d.camera))
+    from doefab.fabrication.levels import levels_sha256
+
+    return pair, levels_sha256(d.levels)
+
+
+def psf_pair(task: str, folder: str | Path | None = None):
+    """(PSFPair of the 16-level design, its levels_sha256) for ``task`` (cached)."""
+    spec = get_spec(task)
+    return _pair_cached(str(folder or design_dir(task)), spec.kernel)
+
+
+def crop_margin(task: str) -> int:
+    return get_spec(task).kernel // 2
+
+
+def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default"):
+    """Scenes, targets and simulated captures for sample ``indices`` of ``split``.
+
+    Each scene is generated with a margin of half a PSF window on every side, blurred, and cropped back to
+    ``size``, so the captures hold the light that enters the crop from outside it.
+    Returns (coded [B, 3, S, S], uncoded [B, 3, S, S], target [B, C, S, S] or depth [B, S, S]) tensors.
+    """
+    from doefab.imaging.captures import plane_masks, render_layers
+    from doefab.imaging.sensor import noise_model
+    from doefab.reconstruction.data import depth_sample, hdr_sample, sample_rng, spectral_sample
+
+    m = crop_margin(task)
+    big = size + 2 * m
+    nm = noise_model(noise)
+    coded, uncoded, targets = [], [], []
+    psf_c = pair.coded.to(torch.float32)
+    psf_u = pair.uncoded.to(torch.float32)
+    t = None if response is None else torch.as_tensor(response, dtype=torch.float32)
+    for i in indices:
+        rng = sample_rng(split, i)
+        masks = None
+        if task == "hdr":
+            scene = hdr_sample(rng, big, split)
+        elif task == "hyperspectral":
+            scene = spectral_sample(rng, big, split)
+        else:
+            scene, depth = depth_sample(rng, big, split)
+            masks = plane_masks(torch.from_numpy(depth), pair.depths)
+        s = torch.from_numpy(scene)
+        views = []
+        for psf in (psf_c, psf_u):
+            b = render_layers(s, psf, masks, pair.depths)
+            if t is not None:
+                b = torch.einsum("rc,chw->rhw", t, b)
+            b = b[:, m:m + size, m:m + size].double().numpy()
+            views.append(torch.from_numpy(np.clip(nm.apply(b, rng), 0, 1).astype(np.float32)))
+        coded.append(views[0])
+        uncoded.append(views[1])
+        tgt = depth[m:m + size, m:m + size] if task == "depth" else scene[:, m:m + size, m:m + size]
+        targets.append(torch.from_numpy(np.ascontiguousarray(tgt)))
+    return torch.stack(coded), torch.stack(uncoded), torch.stack(targets)

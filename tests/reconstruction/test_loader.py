@@ -1,0 +1,77 @@
+"""Training writes weights + metadata; load_reconstructor verifies them (tiny network, seconds)."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.reconstruction.train import train
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory):
+    root = tmp_path_factory.mktemp("w")
+    meta = train("hdr", "proposed", minutes=0.03, out_dir=root / "run", weights_dir=root / "weights", crop=64,
+                 val_images=2, val_every=2, arch={"features": 1, "width": 4}, progress=False)
+    return root, meta
+
+
+def test_training_writes_weights_history_and_a_complete_record(weights):
+    root, meta = weights
+    assert meta["training"]["steps"] >= 1 and meta["design"] == "streak"
+    assert (root / "weights" / "hdr_proposed.pt").is_file()
+    rec = json.loads((root / "weights" / "hdr_proposed.json").read_text())
+    for key in ("design_levels_sha256", "psf", "training", "validation", "weights_sha256", "arch"):
+        assert key in rec
+    assert (root / "run" / "history.csv").read_text().startswith("step,wall_time_s,loss,val_psnr")
+
+
+def test_loaded_network_runs_on_any_multiple_of_32(weights):
+    root, _ = weights
+    rec = doefab.load_reconstructor("hdr", weights_dir=root / "weights")
+    assert rec.design_sha256 == rec.meta["design_levels_sha256"] and rec.pair.coded.shape[1] == 3
+    for h, w in ((64, 64), (96, 128)):
+        out = rec(np.random.rand(3, h, w).astype(np.float32), np.random.rand(3, h, w).astype(np.float32))
+        assert out.shape == (3, h, w) and np.all(out >= 0)
+    # a swapped-in PSF pair changes the output (the PSF is an input)
+    c, u = torch.rand(3, 64, 64), torch.rand(3, 64, 64)
+    other = rec.pair.coded.flip(-1)
+    assert not torch.allclose(rec(c, u), rec(c, u, psf=other))
+    with pytest.raises(DoefabError, match="multiples of 32"):
+        rec(np.zeros((3, 60, 64)), np.zeros((3, 60, 64)))
+    with pytest.raises(DoefabError, match="NaN"):
+        rec(np.full((3, 64, 64), np.nan), np.zeros((3, 64, 64)))
+
+
+def test_tampered_or_mismatched_weights_are_refused(weights, tmp_path):
+    root, _ = weights
+    import shutil
+
+    w = tmp_path / "w"
+    shutil.copytree(root / "weights", w)
+    data = bytearray((w / "hdr_proposed.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    (w / "hdr_proposed.pt").write_bytes(bytes(data))
+    with pytest.raises(DoefabError, match="SHA-256 .* doefab train --task hdr --variant proposed"):
+        doefab.load_reconstructor("hdr", weights_dir=w)
+    shutil.copy(root / "weights" / "hdr_proposed.pt", w / "hdr_proposed.pt")
+    meta = json.loads((w / "hdr_proposed.json").read_text())
+    meta["design_levels_sha256"] = "0" * 64
+    (w / "hdr_proposed.json").write_text(json.dumps(meta))
+    with pytest.raises(DoefabError, match="another design"):
+        doefab.load_reconstructor("hdr", weights_dir=w)
+    with pytest.raises(DoefabError, match="no weights"):
+        doefab.load_reconstructor("hdr", "coded_only", weights_dir=w)
+
+
+def test_resume_is_exact(tmp_path):
+    kw = dict(minutes=5, crop=64, val_images=1, val_every=100, arch={"features": 1, "width": 4}, progress=False)
+    train("hdr", "proposed", out_dir=tmp_path / "a", weights_dir=tmp_path / "wa", max_steps=4, **kw)
+    train("hdr", "proposed", out_dir=tmp_path / "b", weights_dir=tmp_path / "wb", max_steps=2, **kw)
+    train("hdr", "proposed", out_dir=tmp_path / "b", weights_dir=tmp_path / "wb", max_steps=4, resume=True, **kw)
+    a = torch.load(tmp_path / "wa" / "hdr_proposed.pt", weights_only=True)
+    b = torch.load(tmp_path / "wb" / "hdr_proposed.pt", weights_only=True)
+    assert all(torch.equal(a[k], b[k]) for k in a)
