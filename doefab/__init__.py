@@ -35,6 +35,7 @@ _EXPORTS = {
     "sensor_response": "doefab.imaging.sensor",
     "simulate_captures": "doefab.imaging.captures",
     "load_reconstructor": "doefab.reconstruction.loader",
+    "fabricated_height": "doefab.tolerance.fabricate",
     "DoefabError": "doefab.errors",
     "SamplingError": "doefab.errors",
 }

@@ -228,6 +228,7 @@ SIGNATURES = {
     "holder": ("holder.json", "holder.FAILED.json"),
     "train": ("checkpoint.pt", "history.csv"),
     "evaluate": ("metrics.json",),
+    "tolerance": ("tolerance.json", "samples.jsonl"),
 }
 
 

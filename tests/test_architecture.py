@@ -16,6 +16,7 @@ ALLOWED = {
     "design": {"optics", "fabrication", "tasks", "design"},
     "imaging": {"optics", "imaging"},
     "reconstruction": {"optics", "fabrication", "design", "imaging", "reconstruction"},
+    "tolerance": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance"},
     "cli": None,  # the command line may use everything
 }
 

@@ -235,6 +235,18 @@ CASES = [
     # ---- demo
     ("demo-zero-kernel", lambda f, t: ["demo", "--kernel", "0", "--out", str(t / "o")], 2, "--kernel"),
     ("demo-foreign", lambda f, t: ["demo", "--out", str(_foreign(t))], 2, "never replaces"),
+    # ---- train / evaluate
+    ("train-zero-minutes", lambda f, t: ["train", "--task", "hdr", "--minutes", "0", "--out", str(t / "o")], 2,
+     "--minutes"),
+    ("train-crop", lambda f, t: ["train", "--task", "hdr", "--crop", "100", "--out", str(t / "o")], 2, "multiple of 32"),
+    ("train-resume-nothing", lambda f, t: ["train", "--task", "hdr", "--resume", "--out", str(t / "o")], 2,
+     "checkpoint"),
+    ("train-foreign", lambda f, t: ["train", "--task", "hdr", "--force", "--out", str(_foreign(t))], 2,
+     "never replaces"),
+    ("evaluate-missing-weights", lambda f, t: ["evaluate", "--task", "hdr", "--weights-dir", str(t / "none"),
+                                               "--out", str(t / "o")], 2, "doefab train --task hdr"),
+    ("evaluate-size", lambda f, t: ["evaluate", "--task", "depth", "--size", "100", "--out", str(t / "o")], 2,
+     "multiple of 32"),
     # ---- usage
     ("unknown-flag", lambda f, t: ["psf", "--colour", "red", "--out", str(t / "o")], 2, "unrecognized"),
     ("missing-out", lambda f, t: ["psf"], 2, "--out"),

@@ -1,0 +1,70 @@
+"""``doefab tolerance``: fabrication and mounting tolerance of a design or mask set, judged on its PSFs.
+
+Examples:
+  doefab tolerance --design masks/grating --samples 40 --sweep --levels --out out/tol/grating
+  doefab tolerance --design masks/streak --budget my_budget.toml --samples 200 --scheduler local:2 --out out/tol/s
+
+Writes OUT/tolerance.json (every sample's errors and metrics, and a summary with each metric's mean, 95 %
+interval and the yield against the budget's [spec]), OUT/report.md and plots. Samples are checkpointed in
+OUT/samples.jsonl: rerun the same command with --resume to continue an interrupted study.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from doefab.cli._args import number
+
+
+def register(sub) -> None:
+    p = sub.add_parser("tolerance", help="Monte Carlo, sweeps and quantization study of a design's fabrication "
+                                         "and mounting tolerance", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--design", required=True, help="a design folder, or a mask set (its design/ is used)")
+    p.add_argument("--budget", default=None, help="tolerance budget TOML (default: the shipped one for the prototype)")
+    p.add_argument("--samples", type=number(int, 0, 100_000), default=20, help="Monte Carlo samples (0 = none)")
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
+    p.add_argument("--supersample", type=number(int, 1, 8), default=1,
+                   help="simulation grid refinement per DOE pixel (see the README's error-vs-time table)")
+    p.add_argument("--sweep", action="store_true", help="one-at-a-time sweeps and a tornado chart")
+    p.add_argument("--levels", action="store_true", help="quantization study: continuous, 16, 8, 4, 2 levels")
+    p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
+    p.add_argument("--scheduler", default=None, help="Dask: local:N (a LocalCluster) or tcp://HOST:PORT")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
+    p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from doefab.cli._output import claim_output
+    from doefab.design.design import Design
+    from doefab.errors import DoefabError
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.report import run_study
+
+    ddir = Path(args.design)
+    if (ddir / "design" / "design.json").is_file():
+        ddir = ddir / "design"
+    Design.load(ddir)  # validated before any output exists
+    budget = load_budget(args.budget)
+    if args.scheduler and not (args.scheduler.startswith("local:") or args.scheduler.startswith("tcp://")):
+        raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {args.scheduler!r}")
+    if args.resume and args.force:
+        raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
+    out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
+                       keep_on_failure=lambda: (args.outdir.path / "samples.jsonl").is_file())
+    args.resume_hint = f"finished samples are kept in {out.path}: rerun the same command with --resume"
+    out.create()
+    if args.force and (out.path / "samples.jsonl").is_file():
+        (out.path / "samples.jsonl").unlink()
+    res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, supersample=args.supersample,
+                    do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
+                    budget_path=args.budget)
+    s = res.get("summary")
+    if s:
+        print(f"metric mean {s['metric']['mean']:.4f} (95 % CI {s['metric']['ci95'][0]:.4f}–{s['metric']['ci95'][1]:.4f}), "
+              f"yield {s['yield']['value']:.2f} at metric ≥ {s['yield']['spec_metric_min']}")
+    print(f"wrote {out.path / 'tolerance.json'} and {out.path / 'report.md'}")
+    return 0

@@ -1,0 +1,45 @@
+import json
+import math
+
+import numpy as np
+import pytest
+
+from doefab.reconstruction.metrics import depth_metrics, hdr_metrics, spectral_metrics
+
+
+def test_hdr_metrics_use_peak_256_and_highlights():
+    t = np.ones((3, 8, 8))
+    t[:, 0, 0] = 100.0  # one highlight pixel
+    p = t.copy()
+    p[:, 0, 0] = 90.0
+    m = hdr_metrics(p, t)
+    mse = 100 * 3 / (3 * 64)
+    assert m["rmse"] == pytest.approx(math.sqrt(mse)) and m["psnr"] == pytest.approx(10 * math.log10(256**2 / mse))
+    assert m["rmse_highlight"] == pytest.approx(10.0)
+
+
+def test_spectral_and_depth_metrics():
+    rng = np.random.default_rng(0)
+    t = rng.random((31, 16, 16))
+    m = spectral_metrics(t, t)
+    assert m["sam"] == pytest.approx(0, abs=1e-6) and m["ssim"] == pytest.approx(1)
+    assert spectral_metrics(2 * t, t)["sam"] == pytest.approx(0, abs=1e-6)  # SAM ignores scale
+    d = np.full((4, 4), 2.0)
+    m = depth_metrics(d * 1.3, d)
+    assert m["mae"] == pytest.approx(0.6) and m["delta125"] == 0.0 and m["log10"] == pytest.approx(math.log10(1.3))
+
+
+def test_evaluate_writes_the_three_rows(tmp_path):
+    from doefab.reconstruction.evaluate import evaluate
+    from doefab.reconstruction.train import train
+
+    for v in ("proposed", "coded_only", "uncoded_only"):
+        train("hdr", v, minutes=1, out_dir=tmp_path / v, weights_dir=tmp_path / "w", crop=64, val_images=1,
+              val_every=100, arch={"features": 1, "width": 4}, progress=False, max_steps=1)
+    res = evaluate("hdr", tmp_path / "eval", images=2, size=64, weights_dir=tmp_path / "w", progress=False)
+    saved = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    assert saved["task"] == "hdr" and saved["test_images"] == 2 and set(saved["rows"]) == {
+        "proposed", "coded_only", "uncoded_only"}
+    assert set(saved["rows"]["proposed"]) == {"rmse", "psnr", "rmse_highlight", "psnr_highlight"}
+    assert (tmp_path / "eval" / "examples.png").stat().st_size > 10_000
+    assert res["rows"] == saved["rows"]
