@@ -29,6 +29,8 @@ def register(sub) -> None:
                    help="simulation grid refinement per DOE pixel (see the README's error-vs-time table)")
     p.add_argument("--sweep", action="store_true", help="one-at-a-time sweeps and a tornado chart")
     p.add_argument("--levels", action="store_true", help="quantization study: continuous, 16, 8, 4, 2 levels")
+    p.add_argument("--networks", action="store_true",
+                   help="also judge every sample through the shipped reconstruction network (nominal and measured PSF)")
     p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
     p.add_argument("--scheduler", default=None, help="Dask: local:N (a LocalCluster) or tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder")
@@ -61,7 +63,7 @@ def run(args) -> int:
         (out.path / "samples.jsonl").unlink()
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, supersample=args.supersample,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
-                    budget_path=args.budget)
+                    budget_path=args.budget, networks=args.networks)
     s = res.get("summary")
     if s:
         print(f"metric mean {s['metric']['mean']:.4f} (95 % CI {s['metric']['ci95'][0]:.4f}–{s['metric']['ci95'][1]:.4f}), "

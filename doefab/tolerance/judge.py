@@ -112,3 +112,61 @@ class PSFJudge:
         if any(not 0 <= v < 0.5 for v in err.crosstalk):
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
         return self.score(self._coded(err), err)
+
+
+RECON_TASK = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
+
+
+class NetworkJudge:
+    """Judge a part through the shipped reconstruction network of its design's task.
+
+    Captures of a fixed subset of the test split are simulated with the fabricated coded PSF (the uncoded
+    half has no DOE), then reconstructed by the shipped proposed network given (a) the nominal PSF it was
+    trained with and (b) the fabricated PSF, as a user gets after measuring the part's PSF. Scored with the
+    task's metrics (mean over the subset).
+    """
+
+    def __init__(self, psf_judge: PSFJudge, images: int = 4, size: int = 128, weights_dir=None):
+        from doefab.optics.psf import PSFPlan
+        from doefab.reconstruction.loader import load_reconstructor
+        from doefab.reconstruction.specs import get_spec
+
+        self.base = psf_judge
+        d = psf_judge.design
+        if d.task not in RECON_TASK:
+            raise DoefabError(f"no reconstruction network for design task {d.task!r}")
+        self.task = RECON_TASK[d.task]
+        self.rec = load_reconstructor(self.task, "proposed", weights_dir)
+        if self.rec.design_sha256 != _levels_sha(d.levels):
+            raise DoefabError("the shipped network was trained for another design than this one: network-level "
+                              "judgement needs weights trained for it (doefab train)")
+        self.images, self.size = images, size
+        self.plan = PSFPlan(psf_judge.fine, d.wavelengths, d.depths, get_spec(self.task).kernel, halves=("coded",))
+
+    def evaluate(self, err: PartErrors) -> dict:
+        import dataclasses
+
+        from doefab.reconstruction.metrics import metrics_for
+        from doefab.reconstruction.specs import make_batch
+        from doefab.reconstruction.train import _response
+
+        with torch.no_grad():
+            coded = self.plan(self.base.height(err)).coded.float()
+        nominal = self.rec.pair
+        if any(err.crosstalk) and not err.calibrated:
+            a, b = err.crosstalk
+            coded = (1 - b) * coded + a * nominal.uncoded
+        pair = dataclasses.replace(nominal, coded=coded)
+        batch = make_batch(self.task, "test", range(self.images), self.size, pair, _response(self.task, pair))
+        out = {}
+        for label, psf in (("nominal_psf", None), ("measured_psf", pair)):
+            rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf if self.task != "depth" else None)),
+                                t.numpy()) for c, u, t in zip(*batch)]
+            out[label] = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
+        return out
+
+
+def _levels_sha(levels) -> str:
+    from doefab.fabrication.levels import levels_sha256
+
+    return levels_sha256(levels)

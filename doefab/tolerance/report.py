@@ -25,7 +25,7 @@ def _plt():
 
 def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, supersample: int = 1,
               do_sweep: bool = False, do_levels: bool = False, workers: int = 1, scheduler=None,
-              budget_path=None) -> dict:
+              budget_path=None, networks: bool = False) -> dict:
     res: dict = {"design": str(design_dir), "supersample": supersample, "seed": seed,
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget}
     md = [f"# Tolerance study of `{design_dir}`", "",
@@ -65,7 +65,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     if samples > 0:
         t = time.perf_counter()
         rows = study.monte_carlo(design_dir, budget, samples, out, seed=seed, supersample=supersample,
-                                 scheduler=scheduler, workers=workers)
+                                 scheduler=scheduler, workers=workers, networks=networks)
         res["monte_carlo_seconds"] = round(time.perf_counter() - t, 1)
         res["samples"] = rows
         res["summary"] = study.summarize(rows, spec)
@@ -85,6 +85,15 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
                "| samples | metric CI width | yield CI width | wall time (s) |", "| --- | --- | --- | --- |"]
         md += [f"| {c['n']} | {c['metric_ci95_width']:.4f} | {c['yield_ci95_width']:.3f} | {c['seconds']:.0f} |"
                for c in conv]
+        if networks and rows and "network" in rows[0]:
+            net = {lab: {k: float(np.nanmean([r["network"][lab][k] for r in rows])) for k in rows[0]["network"][lab]}
+                   for lab in rows[0]["network"]}
+            res["summary"]["network"] = net
+            md += ["", "Through the shipped proposed network (mean over samples; a fixed test subset per sample):", "",
+                   "| network given | " + " | ".join(net["nominal_psf"]) + " |",
+                   "| --- |" + " --- |" * len(net["nominal_psf"])]
+            for lab, vals in net.items():
+                md.append(f"| {lab.replace('_', ' ')} | " + " | ".join(f"{v:.4g}" for v in vals.values()) + " |")
         _convergence_plot(out / "yield_vs_n.png", rows, spec)
         md += ["", "![yield against N](yield_vs_n.png)", ""]
     atomic_write_json(out / "tolerance.json", res)

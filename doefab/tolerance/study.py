@@ -39,8 +39,24 @@ def _judge(design_dir: str, supersample: int):
     return _JUDGES[key]
 
 
-def _evaluate(design_dir: str, supersample: int, errors: dict) -> dict:
-    return _judge(design_dir, supersample).evaluate(PartErrors(**errors))
+def _evaluate(design_dir: str, supersample: int, errors: dict, networks: bool = False) -> dict:
+    err = PartErrors(**errors)
+    res = _judge(design_dir, supersample).evaluate(err)
+    if networks:
+        res["network"] = _network_judge(design_dir, supersample).evaluate(err)
+    return res
+
+
+_NET_JUDGES: dict = {}
+
+
+def _network_judge(design_dir: str, supersample: int):
+    key = (str(design_dir), int(supersample))
+    if key not in _NET_JUDGES:
+        from doefab.tolerance.judge import NetworkJudge
+
+        _NET_JUDGES[key] = NetworkJudge(_judge(design_dir, supersample))
+    return _NET_JUDGES[key]
 
 
 # one-at-a-time sweeps: name -> (unit for the axis, magnitudes in that unit, builder(magnitude in SI) -> PartErrors)
@@ -124,7 +140,8 @@ def _bar(total, desc, progress):
 
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
-                scheduler: str | None = None, workers: int = 1, progress: bool = True) -> list[dict]:
+                scheduler: str | None = None, workers: int = 1, progress: bool = True,
+                networks: bool = False) -> list[dict]:
     """``n`` sampled parts; returns every sample's errors and metrics (ordered by index).
 
     scheduler: None (in process, or a local process pool of ``workers``), ``"local:N"`` (a Dask
@@ -164,17 +181,17 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     ddir = str(design_dir)
     try:
         if scheduler:
-            _run_dask(scheduler, ddir, supersample, todo, errs, record)
+            _run_dask(scheduler, ddir, supersample, todo, errs, record, networks)
         elif workers > 1:
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(workers, initializer=_worker_init) as ex:
-                futs = {ex.submit(_evaluate, ddir, supersample, errs[i].to_json()): i for i in todo}
+                futs = {ex.submit(_evaluate, ddir, supersample, errs[i].to_json(), networks): i for i in todo}
                 for f in as_completed(futs):
                     record(futs[f], f.result())
         else:
             for i in todo:
-                record(i, _evaluate(ddir, supersample, errs[i].to_json()))
+                record(i, _evaluate(ddir, supersample, errs[i].to_json(), networks))
     finally:
         if bar is not None:
             bar.close()
@@ -188,7 +205,7 @@ def _worker_init():
     torch.set_num_threads(1)
 
 
-def _run_dask(scheduler, ddir, supersample, todo, errs, record):
+def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False):
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
@@ -207,7 +224,7 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record):
     else:
         raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {scheduler!r}")
     try:
-        futs = {client.submit(_evaluate, ddir, supersample, errs[i].to_json(), key=f"doefab-sample-{i}",
+        futs = {client.submit(_evaluate, ddir, supersample, errs[i].to_json(), networks, key=f"doefab-sample-{i}",
                               retries=2, pure=False): i for i in todo}
         for f in as_completed(futs):
             record(futs[f], f.result())
