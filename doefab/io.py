@@ -229,6 +229,7 @@ SIGNATURES = {
     "train": ("checkpoint.pt", "history.csv"),
     "evaluate": ("metrics.json",),
     "tolerance": ("tolerance.json", "samples.jsonl"),
+    "run": ("run.json",),
 }
 
 

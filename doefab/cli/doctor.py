@@ -1,0 +1,35 @@
+"""``doefab doctor SCENE``: the scene's sampling conditions and numerical stiff spots, each with its margin
+and, where it fails, the fix (exit status 3 if any fails)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub) -> None:
+    p = sub.add_parser("doctor", help="check a scene's numerical conditions before running it", description=__doc__)
+    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("--out", default=None, help="also write the checks as JSON to this file")
+    p.add_argument("--no-precision", action="store_true", help="skip the float32 vs float64 PSF computation")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from doefab.errors import CheckFailed
+    from doefab.io import atomic_write_json
+    from doefab.pipeline.doctor import diagnose
+    from doefab.pipeline.scene import load_scene
+
+    scene = load_scene(args.scene)
+    rows = diagnose(scene, precision_check=not args.no_precision)
+    for r in rows:
+        val = f"{r['value']:.4g}" if isinstance(r["value"], float) else str(r["value"])
+        print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "
+              f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
+    if args.out:
+        atomic_write_json(args.out, rows)
+    bad = [r["check"] for r in rows if not r["ok"]]
+    if bad:
+        raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")
+    print(f"{args.scene}: every check passes")
+    return 0

@@ -1,0 +1,105 @@
+"""``doctor``: a scene's numerical stiff spots, before hours are spent on them.
+
+Every sampling condition the propagators check, with its margin (limit / value, ≥ 1 passes); the largest
+phase step per pupil sample at the nearest depth; float32 against float64 on the stiffest PSF entry; the
+spectral route's FFT memory; the condition of the crosstalk inverse; and whether the Wiener regularisation
+of the shipped network keeps the deconvolution bounded. Each failing row says the fix.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["diagnose"]
+
+
+def _row(check, value, limit, unit, ok, fix="", at_least: bool = False):
+    """``value`` must stay ≤ ``limit`` (or ≥ with ``at_least``); margin = how far inside (≥ 1 passes)."""
+    if at_least:
+        margin = value / limit if limit else math.inf
+    else:
+        margin = (limit / value) if value else math.inf
+    return {"check": check, "value": value, "limit": limit, "bound": "≥" if at_least else "≤", "unit": unit,
+            "margin": margin, "ok": bool(ok), "fix": "" if ok else fix}
+
+
+def diagnose(scene, precision_check: bool = True) -> list[dict]:
+    import torch
+
+    from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
+    from doefab.optics.pupil import source_path_difference
+    from doefab.pipeline.stages import resolve
+
+    res = resolve(scene)
+    cam = res["camera"]
+    s = res["settings"]
+    lams = s["wavelengths_m"]
+    depths = [math.inf if z == "inf" else z for z in s["depths_m"]]
+    k = s["kernel_px"]
+    rows = []
+    lam_min = min(lams)
+    alias_half = lam_min * cam.sensor_distance / (2 * cam.doe_pitch)
+    half = (k / 2 + 0.5) * cam.sensor_pitch
+    rows.append(_row("output window inside the alias-free field (shortest wavelength)", half, alias_half, "m",
+                     half <= alias_half, f"optics.kernel_px ≤ {int(2 * alias_half / cam.sensor_pitch - 1)} or a finer "
+                                         f"pupil sampling"))
+    z_near = min(depths)
+    r = np.linspace(0, cam.aperture_diameter / 2, 20001)
+    opd = source_path_difference(r**2, z_near, cam.focus_distance)
+    step = float(np.max(np.abs(np.diff(opd))) * (cam.doe_pitch / (r[1] - r[0])) * 2 * math.pi / lam_min)
+    rows.append(_row(f"source phase step per pupil sample at the nearest depth ({z_near:g} m)", step,
+                     SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
+                     f"pupil_oversample ≥ {math.ceil(step / SOURCE_PHASE_LIMIT)} (doefab psf --pupil-oversample) or "
+                     f"a nearest depth farther away"))
+    fft_bytes = (2 * cam.doe_pixels) ** 2 * 8 * 3
+    rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
+                     8e9, "bytes", fft_bytes <= 8e9, "a coarser design grid (design.sampling) or fewer pixels"))
+    if precision_check:
+        from doefab.fabrication.levels import levels_to_height
+
+        height = None
+        if res["reuse"]:
+            from doefab.design.design import Design
+
+            d = Design.load(res["committed_dir"])
+            height = levels_to_height(d.levels, d.camera)
+        psf = {}
+        for prec in ("float32", "float64"):
+            plan = PSFPlan(cam, [lam_min], [z_near], k, halves=("coded",), precision=prec)
+            with torch.no_grad():
+                psf[prec] = plan(height).coded.double()
+        diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
+        rows.append(_row(f"float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
+                         diff <= 1e-3, "precision = float64 (doefab psf --precision float64)"))
+    a, b = 0.05, 0.05
+    if scene.tolerance is not None:
+        from pathlib import Path
+
+        from doefab.tolerance.errors import load_budget
+
+        bud = scene.tolerance.get("budget", "default")
+        p = None if bud == "default" else (scene.path.parent / bud if (scene.path.parent / bud).is_file() else Path(bud))
+        sens = load_budget(p).get("sensor", {})
+        a, b = sens.get("crosstalk_lr_percent", 5) / 100, sens.get("crosstalk_rl_percent", 5) / 100
+    det = 1 - a - b
+    cond = float(np.linalg.cond(np.array([[1 - a, b], [a, 1 - b]])))
+    rows.append(_row(f"crosstalk inverse determinant 1 − α_l→r − α_r→l (α = {a:g}, {b:g}; matrix condition {cond:.2f})",
+                     det, 0.05, "", det >= 0.05, "recalibrate the sensor: ratios this large leave the views unseparated",
+                     at_least=True))
+    try:
+        from doefab.reconstruction.loader import load_reconstructor
+
+        if scene.task != "depth":
+            rec = load_reconstructor(scene.task)
+            lam_w = float(rec.model.wiener.lam.detach().min())
+            gain = 1 / (2 * math.sqrt(lam_w))
+            rows.append(_row(f"Wiener deconvolution gain bound 1/(2√λ), λ_min = {lam_w:.3g} (shipped network)", gain,
+                             1e3, "×", math.isfinite(gain) and gain <= 1e3, "retrain with a larger initial λ"))
+        else:
+            rows.append(_row("Wiener deconvolution: the depth network has none", 0.0, 1.0, "", True))
+    except Exception as exc:  # noqa: BLE001 - no weights is a finding, not a crash
+        rows.append(_row(f"Wiener regularisation: the shipped network cannot be checked ({str(exc)[:100]})", 1.0, 1.0,
+                         "", False, f"doefab train --task {scene.task}"))
+    return rows

@@ -1,0 +1,199 @@
+"""``report.md`` and ``report.html`` of a scene run: every stage's pictures and tables, what ran, what was
+reused or skipped and why, and an "error against run time" section for every stage that has a knob."""
+
+from __future__ import annotations
+
+import csv
+import html
+import json
+import shutil
+from pathlib import Path
+
+from doefab.io import atomic_write_text
+
+__all__ = ["write_report", "SECTIONS"]
+
+REPO = Path(__file__).resolve().parents[2]
+SECTIONS = ("Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
+    """(title, file, caption) of every error-against-run-time plot, each with the chosen setting marked."""
+    plt = _plt()
+    figs = []
+    rdir = out / "report_files"
+    rdir.mkdir(exist_ok=True)
+    csv_path = REPO / "benchmarks" / "results" / "psf_error_vs_time.csv"
+    if csv_path.is_file():
+        rows = list(csv.DictReader(open(csv_path)))
+        fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
+        for r in rows:
+            try:
+                t, e = float(r["time_s"]), float(r["rel_l2"])
+            except (KeyError, ValueError):
+                continue
+            chosen = r.get("route", "").startswith("spectral (default)")
+            ax.scatter(t, e, s=60 if chosen else 20, marker="*" if chosen else "o", color="red" if chosen else "C0")
+            if chosen:
+                ax.annotate("chosen: spectral, q = 1, float32", (t, e), textcoords="offset points", xytext=(8, 8),
+                            fontsize=8, color="red")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("time for a 31-band coded PSF (s, 2-core CPU)")
+        ax.set_ylabel("relative L2 error of the PSF")
+        ax.set_title("PSF sampling and route", fontsize=9)
+        fig.savefig(rdir / "knob_psf.png", dpi=100)
+        plt.close(fig)
+        figs.append(("PSF sampling", "report_files/knob_psf.png",
+                     "from benchmarks/results/psf_error_vs_time.csv (benchmarks/psf_error_vs_time.py)"))
+    hist = out / "design" / "history.csv"
+    if hist.is_file():
+        rows = list(csv.DictReader(open(hist)))
+        fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
+        t = [float(r["wall_time_s"]) for r in rows]
+        m = [float(r["metric"]) for r in rows]
+        ax.plot(t, m)
+        ax.plot(t[-1], m[-1], "r*", ms=12, label=f"chosen: {len(rows)} iterations")
+        ax.set_xlabel("optimisation wall time (s)")
+        ax.set_ylabel("task metric (fraction of coded light in band)")
+        ax.legend(fontsize=8)
+        fig.savefig(rdir / "knob_design.png", dpi=100)
+        plt.close(fig)
+        figs.append(("Optimiser iterations", "report_files/knob_design.png", "this run's design history"))
+    else:
+        src = REPO / "benchmarks" / "results" / "design_metric_vs_time.png"
+        if src.is_file():
+            shutil.copyfile(src, rdir / "knob_design.png")
+            figs.append(("Optimiser iterations", "report_files/knob_design.png",
+                         "the committed design was reused: metric against wall time measured by "
+                         "benchmarks/design_metric_vs_time.py (the full-grid Adam run is the committed design)"))
+    wdir = REPO / "doefab" / "weights"
+    curves = [(v, wdir / f"{scene.task}_{v}_history.csv") for v in ("proposed", "coded_only", "uncoded_only")]
+    if any(p.is_file() for _, p in curves):
+        fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
+        metric = None
+        for v, p in curves:
+            if not p.is_file():
+                continue
+            rows = [r for r in csv.reader(open(p))]
+            metric = rows[0][3]
+            pts = [(float(r[1]) / 60, float(r[3])) for r in rows[1:] if r[3] not in ("nan", "")]
+            ax.plot([a for a, _ in pts], [b for _, b in pts], label=v.replace("_", "-"))
+            if v == "proposed" and pts:
+                ax.plot(pts[-1][0], pts[-1][1], "r*", ms=12, label=f"shipped: {pts[-1][0]:.0f} min")
+        ax.set_xlabel("training wall time (minutes, 2-core CPU)")
+        ax.set_ylabel(f"{metric} on the validation split" + (" (m)" if metric and "mae" in metric else
+                                                             " (dB)" if metric and "psnr" in metric else ""))
+        ax.legend(fontsize=8)
+        fig.savefig(rdir / "knob_training.png", dpi=100)
+        plt.close(fig)
+        figs.append(("Training time", "report_files/knob_training.png", "doefab train history of the shipped weights"))
+    yv = out / "tolerance" / "yield_vs_n.png"
+    if yv.is_file():
+        figs.append(("Monte Carlo samples", "tolerance/yield_vs_n.png",
+                     "running yield and its 95 % interval; the chosen N is the right end"))
+    return figs
+
+
+def write_report(out: Path, scene, done: dict, res: dict) -> dict:
+    """Write report.md and report.html; returns the list of images referenced."""
+    blocks: list[tuple[str, list]] = []  # (section, [("p", text) | ("img", path, caption) | ("table", rows)])
+    stages = [["stage", "status", "why", "seconds"]]
+    for name, info in done.items():
+        st = info.get("status", "?") + (" (unchanged: kept from the previous run)" if info.get("reused_from_previous_run")
+                                        else "")
+        stages.append([name, st, info.get("why", ""), f"{info.get('seconds', 0):.1f}"])
+    for name in ("design", "masks", "holder", "reconstruction", "tolerance"):
+        if name not in done:
+            stages.append([name, "skipped", "not in the scene's stages", "0"])
+    s = res["settings"]
+    blocks.append(("Stages", [("p", f"Scene `{scene.path}` — task {scene.task}; design {s['design_task']}; "
+                                    f"{len(s['wavelengths_m'])} wavelength(s), {len(s['depths_m'])} depth plane(s), "
+                                    f"PSF window {s['kernel_px']} px. Only these samples were computed."),
+                              ("table", stages)]))
+    d = done.get("design")
+    if d:
+        m = d.get("metric", {})
+        blocks.append(("Design", [("p", f"Task metric ({m.get('name', '')}): 16-level {m.get('quantized', float('nan')):.4f}, "
+                                        f"worst entry {m.get('quantized_worst', float('nan')):.4f}."),
+                                  ("img", "design/psf_target_vs_design.png", "PSFs against their targets"),
+                                  ("img", "design/levels.png", "16-level height map")]))
+    mk = done.get("masks")
+    if mk and mk.get("status") != "skipped":
+        blocks.append(("Masks", [("p", f"Mask set: `{mk.get('mask_set')}`. {mk.get('why', '')}"),
+                                 ("img", "masks/preview_composite.png", "composite of the 4 etch layers (layout view)"),
+                                 ("img", "masks/preview_layer4.png", "layer 4 (deepest etch)")]))
+    ho = done.get("holder")
+    if ho:
+        blocks.append(("Holder", [("p", f"DOE {ho.get('doe_to_lens_mm')} mm from the lens glass; files: "
+                                        f"{', '.join(ho.get('files', []))}."),
+                                  ("img", "holder/render_iso.png", "holder, iso view"),
+                                  ("img", "holder/render_side.png", "holder, half section")]))
+    rc = done.get("reconstruction")
+    if rc and rc.get("status") != "skipped":
+        rows = rc.get("rows", {})
+        keys = list(next(iter(rows.values())).keys()) if rows else []
+        table = [["variant"] + keys] + [[v] + [f"{x:.4g}" for x in r.values()] for v, r in rows.items()]
+        blocks.append(("Reconstruction", [("p", rc.get("why", "")), ("table", table),
+                                          ("img", "reconstruction/examples.png", "a held-out test scene")]))
+    else:
+        blocks.append(("Reconstruction", [("p", (rc or {}).get("why", "not run"))]))
+    tl = done.get("tolerance")
+    if tl and tl.get("status") == "ran":
+        items = [("p", tl.get("why", ""))]
+        summ = tl.get("summary") or {}
+        if summ:
+            items.append(("table", [["quantity", "mean", "95 % interval"],
+                                    ["task metric", f"{summ['metric']['mean']:.4f}",
+                                     f"{summ['metric']['ci95'][0]:.4f}–{summ['metric']['ci95'][1]:.4f}"],
+                                    ["yield", f"{summ['yield']['value']:.3f}",
+                                     f"{summ['yield']['ci95'][0]:.3f}–{summ['yield']['ci95'][1]:.3f}"]]))
+        for f, cap in (("tolerance/quantization.png", "quantization study"),):
+            if (out / f).is_file():
+                items.append(("img", f, cap))
+        blocks.append(("Tolerance", items))
+    else:
+        blocks.append(("Tolerance", [("p", (tl or {}).get("why", "not run"))]))
+    blocks.append(("Error against run time", [("img", f, f"{t}: {c}") for t, f, c in _knob_plots(out, scene, done)]))
+    images = [it[1] for _, items in blocks for it in items if it[0] == "img" and (out / it[1]).is_file()]
+    md, body = [f"# doefab report — {scene.path.name}", ""], []
+    for sec, items in blocks:
+        md += [f"## {sec}", ""]
+        body.append(f'<section id="{sec.lower().replace(" ", "-")}"><h2>{html.escape(sec)}</h2>')
+        for it in items:
+            if it[0] == "p":
+                md += [it[1], ""]
+                body.append(f"<p>{html.escape(it[1])}</p>")
+            elif it[0] == "img":
+                if not (out / it[1]).is_file():
+                    continue
+                md += [f"![{it[2]}]({it[1]})", ""]
+                body.append(f'<figure><img src="{html.escape(it[1])}" alt="{html.escape(it[2])}">'
+                            f"<figcaption>{html.escape(it[2])}</figcaption></figure>")
+            else:
+                rows = it[1]
+                md += ["| " + " | ".join(rows[0]) + " |", "|" + " --- |" * len(rows[0])]
+                md += ["| " + " | ".join(map(str, r)) + " |" for r in rows[1:]] + [""]
+                body.append("<table><tr>" + "".join(f"<th>{html.escape(str(c))}</th>" for c in rows[0]) + "</tr>"
+                            + "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
+                                      for r in rows[1:]) + "</table>")
+        body.append("</section>")
+    page = ("<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>doefab report</title><style>"
+            "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
+            "img{max-width:100%;height:auto;border:1px solid #ddd}figure{margin:1em 0}"
+            "figcaption{font-size:.85em;color:#555}table{border-collapse:collapse;margin:1em 0;font-size:.9em}"
+            "td,th{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}</style></head><body>"
+            f"<h1>doefab report — {html.escape(scene.path.name)}</h1>" + "".join(body) + "</body></html>\n")
+    atomic_write_text(out / "report.md", "\n".join(md) + "\n")
+    atomic_write_text(out / "report.html", page)
+    atomic_write_text(out / "report_files" / "images.json", json.dumps(images))
+    return {"images": images, "sections": [b[0] for b in blocks]}

@@ -1,0 +1,238 @@
+"""The stages of ``doefab run``: each writes its own folder, records what it did and why, and is reused when
+its inputs (a content hash of its scene section and its upstream stages' hashes) have not changed.
+
+A scene whose design settings equal a committed design (``masks/<design>/design``) reuses that design, its
+verified mask set and its shipped networks instead of recomputing them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+from doefab.errors import DoefabError
+from doefab.io import atomic_write_json
+from doefab.pipeline.scene import TASK_DESIGN, Scene
+
+__all__ = ["resolve", "STAGE_FUNCS", "run_stage", "REPO"]
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _h(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def resolve(scene: Scene) -> dict:
+    """The design settings the scene asks for, and whether they equal the committed design's."""
+    from doefab.design.design import Design
+    from doefab.optics.camera import Camera
+    from doefab.tasks import get_task
+
+    dname = TASK_DESIGN[scene.task]
+    committed_dir = REPO / "masks" / dname / "design"
+    committed = Design.load(committed_dir)
+    cfg = committed.extra.get("config", {})
+    task = get_task(dname, **{k: v for k, v in committed.task_params.items() if k != "period_m"})
+    preset = scene.camera.get("preset", {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}[scene.task])
+    overrides = {k[:-2]: v for k, v in scene.camera.items() if k.endswith("_m")}
+    try:
+        cam = Camera.preset(preset, **overrides)
+    except DoefabError as exc:
+        raise DoefabError(f"{scene.path}: camera: {exc}") from None
+    task.bind(cam)
+    lams = tuple(task.wavelengths(cam))
+    depths = tuple(task.depths(cam))
+    kernel = int(scene.optics.get("kernel_px", task.kernel_size))
+    want_l = scene.optics.get("wavelengths_nm")
+    if want_l is not None and [round(w, 6) for w in want_l] != [round(x * 1e9, 6) for x in lams]:
+        raise DoefabError(f"{scene.path}: optics.wavelengths_nm: the {dname} task evaluates its own bands "
+                          f"({', '.join(f'{x * 1e9:g}' for x in lams)} nm); other bands are not supported yet")
+    want_z = scene.optics.get("depths_m")
+    if want_z is not None and [math.inf if z == "inf" else float(z) for z in want_z] != list(depths):
+        raise DoefabError(f"{scene.path}: optics.depths_m: the {dname} task evaluates depths {list(depths)} m for "
+                          f"this camera; other depth sets are not supported yet")
+    settings = {"design_task": dname, "camera": cam.to_dict(), "wavelengths_m": list(lams),
+                "depths_m": [z if math.isfinite(z) else "inf" for z in depths], "kernel_px": kernel,
+                "optimizer": scene.design.get("optimizer", cfg.get("optimizer", "adam")),
+                "iterations": scene.design.get("iterations", cfg.get("iterations")),
+                "sampling": scene.design.get("sampling", cfg.get("sampling", 1)),
+                "seed": scene.design.get("seed", cfg.get("seed", 0))}
+    committed_settings = {"design_task": dname, "camera": committed.camera.to_dict(),
+                          "wavelengths_m": list(committed.wavelengths),
+                          "depths_m": [z if math.isfinite(z) else "inf" for z in committed.depths],
+                          "kernel_px": committed.task_params.get("kernel_size"), "optimizer": cfg.get("optimizer"),
+                          "iterations": cfg.get("iterations"), "sampling": cfg.get("sampling", 1),
+                          "seed": cfg.get("seed", 0)}
+    differ = sorted(k for k in settings if settings[k] != committed_settings[k])
+    return {"settings": settings, "camera": cam, "task": task, "committed_dir": committed_dir,
+            "reuse": not differ, "differ": differ}
+
+
+def _copy_design(src: Path, dst: Path) -> None:
+    dst.mkdir(parents=True, exist_ok=True)
+    for f in ("design.json", "levels.npy", "height.npy", "history.csv"):
+        if (src / f).is_file():
+            shutil.copyfile(src / f, dst / f)
+
+
+def stage_design(scene, res, out: Path, quick: bool) -> dict:
+    import numpy as np
+    import torch
+
+    import doefab
+    from doefab.design.design import Design
+    from doefab.plotting import plot_height, plot_psf_grid
+
+    if res["reuse"]:
+        _copy_design(res["committed_dir"], out)
+        info = {"status": "reused", "why": f"the scene's design settings equal the committed design "
+                                          f"{res['committed_dir'].relative_to(REPO)}"}
+    else:
+        s = res["settings"]
+        iters = min(int(s["iterations"]), 10) if quick else int(s["iterations"])
+        d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
+                            camera=res["camera"], out_dir=out, sampling=max(int(s["sampling"]), 4 if quick else 1),
+                            task_params={"kernel_size": s["kernel_px"]}, progress=True)
+        d.save(out)
+        info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
+                + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}
+    d = Design.load(out)
+    task = res["task"]
+    plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
+    with torch.no_grad():
+        psf = plan(doefab.levels_to_height(d.levels, d.camera)).coded.numpy()
+    tg = task.targets(d.camera).numpy()
+    picks = [(z, w) for z in range(psf.shape[0]) for w in range(psf.shape[1])]
+    picks = [picks[i] for i in np.linspace(0, len(picks) - 1, min(4, len(picks))).round().astype(int)]
+    panels = []
+    for z, w in picks:
+        lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {'∞' if math.isinf(d.depths[z]) else f'{d.depths[z]:g} m'}"
+        panels += [(f"target, {lab}", tg[z, w]), (f"16-level design, {lab}", psf[z, w])]
+    plot_psf_grid(out / "psf_target_vs_design.png", panels, d.camera.sensor_pitch, ncols=2, log=False,
+                  suptitle=f"{d.task}: target (left) and fabricated 16-level design (right)")
+    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera), d.camera.doe_pitch,
+                "16-level height map")
+    info["metric"] = d.metrics
+    return info
+
+
+def stage_masks(scene, res, out: Path, quick: bool) -> dict:
+    from doefab.design.design import Design
+    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.verify import verify_mask_set
+
+    design_dir = out.parent / "design"
+    fab = scene.fabrication
+    committed_set = res["committed_dir"].parent
+    if res["reuse"] and fab.get("pattern_faces", "lens") == "lens":
+        t = time.perf_counter()
+        rep = verify_mask_set(committed_set, use_klayout=not quick)
+        out.mkdir(parents=True, exist_ok=True)
+        for f in committed_set.glob("preview_*.png"):
+            shutil.copyfile(f, out / f.name)
+        for f in ("manifest.json", "README.txt"):
+            shutil.copyfile(committed_set / f, out / f)
+        atomic_write_json(out / "verification.json", rep)
+        return {"status": "reused", "why": f"committed mask set {committed_set.relative_to(REPO)} (same design), "
+                                           f"re-verified in {time.perf_counter() - t:.1f} s",
+                "mask_set": str(committed_set.relative_to(REPO))}
+    d = Design.load(design_dir)
+    opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
+                       pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
+    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True)
+    return {"status": "ran", "why": "the design is new (or its pattern side differs)", "mask_set": str(out)}
+
+
+def stage_holder(scene, res, out: Path, quick: bool) -> dict:
+    from holder_cad.build import write_holder
+    from holder_cad.params import HolderParams
+
+    rep = write_holder(HolderParams(**scene.holder), out, step=False if quick else None, renders=True)
+    return {"status": "ran", "why": "parametric part (0.5 s mesh path)" + ("; STEP skipped (quick)" if quick else ""),
+            "doe_to_lens_mm": rep["doe_to_lens_mm"], "files": rep["files"]}
+
+
+def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
+    from doefab.reconstruction.evaluate import evaluate
+
+    rec = scene.reconstruction
+    if not res["reuse"] and rec.get("weights", "shipped") == "shipped":
+        return {"status": "skipped", "why": "the shipped networks are trained for the committed design; set "
+                                            "reconstruction.weights = \"train\" for a new design"}
+    weights_dir = None
+    if rec.get("weights", "shipped") == "train":
+        from doefab.reconstruction.train import train
+
+        weights_dir = out / "weights"
+        minutes = 0.2 if quick else float(rec.get("minutes", 6))
+        for v in ("proposed", "coded_only", "uncoded_only"):
+            train(scene.task, v, minutes, out / f"run_{v}", weights_dir=weights_dir)
+    images = 2 if quick else int(rec.get("images", 4))
+    size = 128 if quick else int(rec.get("size_px", 256))
+    r = evaluate(scene.task, out, images=images, size=size, weights_dir=weights_dir)
+    return {"status": "ran" if weights_dir else "reused",
+            "why": ("trained here" if weights_dir else "shipped networks of the committed design") +
+                   f"; evaluated on {images} held-out test scenes of {size}² px", "rows": r["rows"]}
+
+
+def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.report import run_study
+
+    tol = scene.tolerance
+    if tol is None:
+        return {"status": "skipped", "why": "the scene has no [tolerance] budget: no Monte Carlo"}
+    b = tol.get("budget", "default")
+    path = None if b == "default" else (scene.path.parent / b if (scene.path.parent / b).is_file() else Path(b))
+    budget = load_budget(path)
+    samples = 3 if quick else int(tol.get("samples", 20))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "samples.jsonl").unlink(missing_ok=True)
+    r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
+                  supersample=int(tol.get("supersample", 1)), do_levels=not quick, budget_path=path)
+    return {"status": "ran", "why": f"{samples} Monte Carlo parts" + ("" if quick else " and the quantization study"),
+            "summary": r.get("summary")}
+
+
+STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
+               "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
+UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
+            "tolerance": ("design",), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
+SECTION = {"design": ("camera", "optics", "design"), "masks": ("fabrication",), "holder": ("holder",),
+           "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
+
+
+def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
+    parts = {s: scene.raw.get(s) for s in SECTION[name]}
+    parts["task"] = scene.task
+    parts["quick"] = quick
+    parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
+    return _h(parts)
+
+
+def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, force: bool) -> dict:
+    """Run (or reuse) one stage; its record (status, why, seconds, hash) is kept in ``<stage>/stage.json``."""
+    out = out_root / name
+    h = stage_hash(scene, name, done, quick)
+    rec_path = out / "stage.json"
+    if not force and rec_path.is_file():
+        try:
+            old = json.loads(rec_path.read_text())
+        except ValueError:
+            old = {}
+        if old.get("hash") == h and old.get("complete"):
+            old["reused_from_previous_run"] = True
+            return old
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    t = time.perf_counter()
+    info = STAGE_FUNCS[name](scene, res, out, quick)
+    info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True)
+    atomic_write_json(rec_path, info)
+    return info

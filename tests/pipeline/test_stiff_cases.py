@@ -1,0 +1,58 @@
+"""Stiff and extreme cases (issue: scene pipeline): the nearest point the routes accept, both ends of
+300–1100 nm, and float32 against float64 where the phase step sits just under its limit."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import SamplingError
+from doefab.optics.psf import SOURCE_PHASE_LIMIT
+from doefab.optics.pupil import source_path_difference
+
+
+def _phase_step(cam, z, lam):
+    """Largest source-phase change between pupil samples one DOE pitch apart along a radius (independent)."""
+    r = np.arange(0, cam.aperture_diameter / 2 + cam.doe_pitch, cam.doe_pitch)
+    return float(np.max(np.abs(np.diff(source_path_difference(r**2, z, cam.focus_distance)))) * 2 * math.pi / lam)
+
+
+def _nearest_accepted(cam, lam):
+    lo, hi = 1e-3, 10.0  # bisection on the step = limit condition
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if _phase_step(cam, mid, lam) > SOURCE_PHASE_LIMIT else (lo, mid)
+    return hi
+
+
+def test_nearest_depth_boundary_and_precision_there(small_camera):
+    lam = 450e-9
+    z0 = _nearest_accepted(small_camera, lam)
+    assert 0.005 < z0 < 5
+    with pytest.raises(SamplingError, match="pupil_oversample"):
+        doefab.PSFPlan(small_camera, [lam], [0.8 * z0], 63)
+    z = 1.05 * z0  # phase step just under the limit
+    assert 0.85 * SOURCE_PHASE_LIMIT < _phase_step(small_camera, z, lam) < SOURCE_PHASE_LIMIT
+    psf = {}
+    for prec in ("float32", "float64"):
+        with torch.no_grad():
+            psf[prec] = doefab.PSFPlan(small_camera, [lam], [z], 151, precision=prec)(None).coded.double()
+    assert bool(torch.isfinite(psf["float32"]).all())
+    assert float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm()) < 1e-3
+    # a strongly defocused half still carries its half of the light (inside a large window)
+    assert float(psf["float64"].sum()) == pytest.approx(0.5, abs=0.03)
+
+
+@pytest.mark.parametrize("lam", [300e-9, 1100e-9])
+def test_wavelength_extremes(small_camera, lam):
+    psf = {}
+    for prec in ("float32", "float64"):
+        with torch.no_grad():
+            psf[prec] = doefab.PSFPlan(small_camera, [lam], [5.0], 101, precision=prec)(None).coded.double()
+    assert float(psf["float64"].sum()) == pytest.approx(0.5, abs=0.02)
+    assert float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm()) < 1e-4
+    # the Airy core scales with λ: the first zero of the full aperture at 1.22 λ s / D
+    first_zero = 1.22 * lam * small_camera.sensor_distance / small_camera.aperture_diameter
+    assert first_zero > small_camera.sensor_pitch * (0.5 if lam < 500e-9 else 2)
