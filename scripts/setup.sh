@@ -4,6 +4,12 @@
 # no multi-gigabyte CUDA build is ever pulled; pyproject.toml itself keeps a range (torch>=2.2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Debian's chromium checks the HTML report in a real browser (tests/pipeline); installed when missing and
+# when this machine allows it (root with apt-get); the browser test is skipped, and says so, otherwise.
+if ! command -v chromium > /dev/null 2>&1 && [ "$(id -u)" = "0" ] && command -v apt-get > /dev/null 2>&1; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) > /dev/null 2>&1 \
+        || echo "setup: could not install chromium; the browser test will be skipped" >&2
+fi
 PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
     "$PY" -m venv .venv

@@ -29,6 +29,11 @@ def run(args) -> int:
     from doefab.pipeline.run import run_scene
     from doefab.pipeline.scene import load_scene
 
+    from doefab.pipeline.scene import STAGES
+
+    bad = [f for f in args.force if f not in STAGES]
+    if bad:
+        raise DoefabError(f"--force {', '.join(bad)}: not a stage; stages are {', '.join(STAGES)}")
     scenes = [load_scene(s) for s in args.scene]  # every scene validated before any work
     if args.out and len(scenes) > 1:
         raise DoefabError("--out names one folder: give one scene, or leave --out out (out/run/<scene name>)")

@@ -192,7 +192,13 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
             "img{max-width:100%;height:auto;border:1px solid #ddd}figure{margin:1em 0}"
             "figcaption{font-size:.85em;color:#555}table{border-collapse:collapse;margin:1em 0;font-size:.9em}"
             "td,th{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}</style></head><body>"
-            f"<h1>doefab report — {html.escape(scene.path.name)}</h1>" + "".join(body) + "</body></html>\n")
+            f"<h1>doefab report — {html.escape(scene.path.name)}</h1>" + "".join(body) +
+            # after loading, the page records which images failed (a browser check reads it from the DOM)
+            "<script>window.addEventListener('load',function(){var b=[],im=document.images;"
+            "for(var i=0;i<im.length;i++){if(!im[i].complete||!im[i].naturalWidth){b.push(im[i].getAttribute('src'))}}"
+            "document.body.setAttribute('data-images',im.length);"
+            "document.body.setAttribute('data-broken-images',JSON.stringify(b));});</script>"
+            "</body></html>\n")
     atomic_write_text(out / "report.md", "\n".join(md) + "\n")
     atomic_write_text(out / "report.html", page)
     atomic_write_text(out / "report_files" / "images.json", json.dumps(images))

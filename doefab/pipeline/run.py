@@ -33,9 +33,9 @@ def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = Fa
         done[name] = run_stage(scene, res, name, out, done, quick, force=name in force)
         if progress:
             info = done[name]
-            print(f"[doefab run] {name}: {info['status']} ({info.get('why', '')}) "
-                  f"{'kept from the previous run' if info.get('reused_from_previous_run') else f'{info['seconds']:.1f} s'}",
-                  flush=True)
+            took = ("kept from the previous run" if info.get("reused_from_previous_run")
+                    else f"{info['seconds']:.1f} s")
+            print(f"[doefab run] {name}: {info['status']} ({info.get('why', '')}) {took}", flush=True)
     report = None
     if "report" in scene.stages:
         from doefab.pipeline.report import write_report

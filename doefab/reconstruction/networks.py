@@ -82,7 +82,7 @@ class DeconvNet(nn.Module):
                                             nn.Conv2d(features, features, 3, padding=1))
             n_dec = 3 + 3 * features if n_psf == 3 else n_psf * features
             self.wiener = WienerDeconvolution(n_dec, lam0=1e-2)
-            cin += n_dec
+            cin += n_dec + (3 if log_output else 0)
         if variant != "coded_only":
             self.feat_uncoded = nn.Sequential(nn.Conv2d(3, 16, 3, padding=1), nn.LeakyReLU(0.1))
             cin += 16
@@ -102,7 +102,13 @@ class DeconvNet(nn.Module):
             else:  # hyperspectral: the features deconvolved with each band's PSF
                 stack = f.repeat(1, self.n_psf, 1, 1)
                 kern = psf.repeat_interleave(self.features, dim=1)
-            parts.append(self.wiener(stack, kern))  # one OTF per PSF, broadcast over the batch
+            dec = self.wiener(stack, kern)  # one OTF per PSF, broadcast over the batch
+            parts.append(dec)
+            if self.log_output and self.n_psf == 3:
+                # HDR: the deconvolved raw colour channels estimate half the radiance (the PSF carries half the
+                # light) where the capture did not clip; handing their log to the network puts highlights of
+                # up to 2^8 on the scale of its log-radiance output
+                parts.append(torch.log1p(2.0 * dec[:, :3].clamp_min(0.0)))
         if self.variant != "coded_only":
             check_input(uncoded, "uncoded")
             parts.append(self.feat_uncoded(uncoded))

@@ -159,4 +159,6 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
             "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
     atomic_write_bytes(pt, data)
     atomic_write_json(meta_path, meta)
+    # the validation curve ships beside the weights (the report's "training time" plot)
+    atomic_write_bytes(pt.with_name(f"{task}_{variant}_history.csv"), (out / "history.csv").read_bytes())
     return meta

@@ -19,6 +19,8 @@ from doefab.cli import main
 from doefab.design.design import Design
 from doefab.fabrication.export import MaskOptions, export_masks
 
+REPO = Path(__file__).resolve().parents[2]
+
 
 @pytest.fixture(scope="module")
 def fixtures(tmp_path_factory):
@@ -108,6 +110,11 @@ def _file(tmp):
     f = tmp / "afile"
     f.write_text("x")
     return f
+
+
+def _text(tmp, name, text):
+    (tmp / name).write_text(text)
+    return tmp / name
 
 
 def _npy(tmp, arr, name="h.npy"):
@@ -247,6 +254,21 @@ CASES = [
                                                "--out", str(t / "o")], 2, "doefab train --task hdr"),
     ("evaluate-size", lambda f, t: ["evaluate", "--task", "depth", "--size", "100", "--out", str(t / "o")], 2,
      "multiple of 32"),
+    # ---- run / doctor / tolerance
+    ("run-missing-scene", lambda f, t: ["run", str(t / "nope.toml"), "--out", str(t / "o")], 2, "not found"),
+    ("run-bad-scene", lambda f, t: ["run", str(_text(t, "s.toml", 'task = "hdr"\n[optics]\ndepths_m = [-1]\n'
+                                                     'kernel_px = 4\n')), "--out", str(t / "o")], 2, "2 problem(s)"),
+    ("run-not-toml", lambda f, t: ["run", str(_text(t, "s.toml", "task = ")), "--out", str(t / "o")], 2,
+     "not valid TOML"),
+    ("run-bad-force", lambda f, t: ["run", str(REPO / "scenes" / "hdr.toml"), "--force", "paint", "--out", str(t / "o")], 2, "paint"),
+    ("doctor-missing", lambda f, t: ["doctor", str(t / "nope.toml")], 2, "not found"),
+    ("tolerance-missing-design", lambda f, t: ["tolerance", "--design", str(t / "none"), "--out", str(t / "o")], 2,
+     "design.json is missing"),
+    ("tolerance-bad-budget", lambda f, t: ["tolerance", "--design", str(f / "design"), "--budget",
+                                           str(_text(t, "b.toml", "[overlay]\nshift_sigma_um = 99\n")),
+                                           "--out", str(t / "o")], 2, "overlay.shift_sigma_um = 99"),
+    ("tolerance-bad-scheduler", lambda f, t: ["tolerance", "--design", str(f / "design"), "--scheduler", "mars",
+                                              "--out", str(t / "o")], 2, "--scheduler"),
     # ---- usage
     ("unknown-flag", lambda f, t: ["psf", "--colour", "red", "--out", str(t / "o")], 2, "unrecognized"),
     ("missing-out", lambda f, t: ["psf"], 2, "--out"),

@@ -1,0 +1,102 @@
+"""The main job end to end (--quick), reuse of unchanged stages, scene validation, and the report in a real
+browser (Debian's chromium, headless)."""
+
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from doefab.cli import main
+from doefab.errors import DoefabError
+from doefab.pipeline.scene import load_scene
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_scene_validation_lists_every_problem(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text('task = "hdr"\ncolour = 1\n[optics]\nwavelengths_nm = [250, 550e-9]\ndepths_m = [0, 2]\n'
+                 '[design]\noptimizer = "sgd"\n[holder]\nwall_mm = -1\n[tolerance]\nbudget = "nowhere.toml"\n')
+    with pytest.raises(DoefabError) as exc:
+        load_scene(p)
+    msg = str(exc.value)
+    for needle in ("unknown key colour", "optics.wavelengths_nm holds 250", "optics.wavelengths_nm holds 5.5e-07",
+                   "optics.depths_m holds 0", "design.optimizer", "holder:", "tolerance.budget"):
+        assert needle in msg, needle
+
+
+@pytest.mark.parametrize("scene", ["hdr", "hyperspectral", "depth"])
+def test_shipped_scenes_validate_and_resolve_to_the_committed_designs(scene):
+    from doefab.pipeline.stages import resolve
+
+    res = resolve(load_scene(REPO / "scenes" / f"{scene}.toml"))
+    assert res["reuse"], res["differ"]
+    n_l, n_z = len(res["settings"]["wavelengths_m"]), len(res["settings"]["depths_m"])
+    assert (n_l, n_z) == {"hdr": (3, 1), "hyperspectral": (31, 1), "depth": (3, 17)}[scene]
+
+
+def test_holder_stage_needs_no_torch(tmp_path):
+    code = ("import sys; from doefab.pipeline.scene import load_scene; from doefab.pipeline.stages import stage_holder;"
+            f"sc = load_scene({str(REPO / 'scenes' / 'hdr.toml')!r}); from pathlib import Path;"
+            f"stage_holder(sc, None, Path({str(tmp_path)!r}), True); print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out[-1] == "False"
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "hdr"
+    t = time.perf_counter()
+    assert main(["run", str(REPO / "scenes" / "hdr.toml"), "--quick", "--out", str(out)]) == 0
+    return out, time.perf_counter() - t
+
+
+def test_quick_run_end_to_end(quick_run):
+    out, seconds = quick_run
+    assert seconds < 180
+    run = json.loads((out / "run.json").read_text())
+    st = run["stages"]
+    assert st["design"]["status"] == "reused" and st["masks"]["status"] == "reused"
+    assert st["holder"]["status"] == "ran" and st["tolerance"]["status"] == "ran"
+    assert st["reconstruction"]["status"] == "reused"
+    html = (out / "report.html").read_text()
+    from doefab.pipeline.report import SECTIONS
+
+    for sec in SECTIONS:
+        assert f"<h2>{sec}</h2>" in html
+    for img in run["report"]["images"]:
+        assert (out / img).stat().st_size > 1000
+
+
+def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
+    out, _ = quick_run
+    assert main(["run", str(REPO / "scenes" / "hdr.toml"), "--quick", "--out", str(out), "--force", "holder"]) == 0
+    st = json.loads((out / "run.json").read_text())["stages"]
+    assert all(st[s]["reused_from_previous_run"] for s in ("design", "masks", "reconstruction", "tolerance"))
+    assert not st["holder"].get("reused_from_previous_run")
+
+
+def test_report_in_headless_chromium(quick_run):
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("Debian's chromium is not installed (scripts/setup.sh installs it as root)")
+    out, _ = quick_run
+    profile = out / "chromium-profile"
+    flags = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+             "--disable-background-networking", f"--user-data-dir={profile}", "--virtual-time-budget=10000"]
+    url = (out / "report.html").as_uri()
+    dom = subprocess.run(flags + ["--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
+    assert 'data-broken-images="[]"' in dom, dom[-500:]
+    n = int(dom.split('data-images="')[1].split('"')[0])
+    assert n == len(json.loads((out / "run.json").read_text())["report"]["images"]) and n >= 8
+    for sec in ("stages", "design", "masks", "holder", "reconstruction", "tolerance", "error-against-run-time"):
+        assert f'id="{sec}"' in dom
+    shot = out / "report_screenshot.png"
+    subprocess.run(flags + [f"--screenshot={shot}", "--window-size=1200,4000", url], capture_output=True,
+                   timeout=120)
+    assert shot.stat().st_size > 10_000
+    shutil.rmtree(profile, ignore_errors=True)
