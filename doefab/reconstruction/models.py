@@ -25,7 +25,22 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     if task == "depth":
         return DepthNet(variant, width=int(arch["width"]))
     return DeconvNet(spec.out_channels, spec.out_channels, variant, features=int(arch["features"]),
-                     width=int(arch["width"]), log_output=task == "hdr")
+                     width=int(arch["width"]), log_output=task == "hdr",
+                     baseline=spectral_baseline() if task == "hyperspectral" else None)
+
+
+def spectral_baseline(smooth: float = 1e-3, eps: float = 1e-6):
+    """[31, 3] smooth least-squares inverse of a half-exposure capture: s = argmin ‖½ T s − c‖² + μ‖D² s‖²
+    (T: the sensor response on 400–700 nm; D²: second differences along wavelength)."""
+    import numpy as np
+
+    from doefab.imaging.sensor import sensor_response
+    from doefab.reconstruction.data import HS_WAVELENGTHS_M
+
+    a = 0.5 * sensor_response(HS_WAVELENGTHS_M).astype(np.float64)
+    n = a.shape[1]
+    d2 = np.diff(np.eye(n), 2, axis=0)
+    return np.linalg.solve(a.T @ a + smooth * d2.T @ d2 + eps * np.eye(n), a.T)
 
 
 def loss_fn(task: str, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

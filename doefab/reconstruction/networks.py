@@ -70,8 +70,13 @@ class DeconvNet(nn.Module):
     HDR, one per band for hyperspectral)."""
 
     def __init__(self, out_channels: int, n_psf: int, variant: str = "proposed", features: int = 4, width: int = 16,
-                 log_output: bool = False):
+                 log_output: bool = False, baseline=None):
         super().__init__()
+        # optional linear baseline [out_channels, 3]: the network predicts a residual over baseline @ capture
+        # (hyperspectral: a smooth least-squares inverse of the sensor response), so even a briefly trained
+        # network starts from a physically sensible spectrum
+        self.register_buffer("baseline", None if baseline is None else torch.as_tensor(baseline, dtype=torch.float32),
+                             persistent=False)
         if variant not in VARIANTS:
             raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
         self.variant, self.n_psf, self.log_output = variant, n_psf, log_output
@@ -87,6 +92,9 @@ class DeconvNet(nn.Module):
             self.feat_uncoded = nn.Sequential(nn.Conv2d(3, 16, 3, padding=1), nn.LeakyReLU(0.1))
             cin += 16
         self.unet = UNet(cin, out_channels, width)
+        if baseline is not None:  # start exactly at the baseline: the residual head begins at zero
+            nn.init.zeros_(self.unet.out.weight)
+            nn.init.zeros_(self.unet.out.bias)
 
     def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf: torch.Tensor | None = None) -> torch.Tensor:
         """``psf``: [B or 1, n_psf, K, K] coded PSFs (needed unless the variant is uncoded_only)."""
@@ -113,6 +121,9 @@ class DeconvNet(nn.Module):
             check_input(uncoded, "uncoded")
             parts.append(self.feat_uncoded(uncoded))
         y = self.unet(torch.cat(parts, dim=1))
+        if self.baseline is not None:
+            src = coded if self.variant == "coded_only" else uncoded
+            y = y + torch.einsum("oc,bchw->bohw", self.baseline, src)
         # A linear output keeps the L1 gradient alive everywhere (a softplus head died on dark pixels); the
         # result is clamped to ≥ 0 outside training. HDR: the network predicts log(1 + radiance).
         if self.log_output:

@@ -143,7 +143,8 @@ class NetworkJudge:
         self.images, self.size = images, size
         self.plan = PSFPlan(psf_judge.fine, d.wavelengths, d.depths, get_spec(self.task).kernel, halves=("coded",))
 
-    def evaluate(self, err: PartErrors) -> dict:
+    def evaluate(self, err: PartErrors, height=None) -> dict:
+        """Network metrics for part ``err`` (or for an explicit fine-grid ``height`` map)."""
         import dataclasses
 
         from doefab.reconstruction.metrics import metrics_for
@@ -151,7 +152,7 @@ class NetworkJudge:
         from doefab.reconstruction.train import _response
 
         with torch.no_grad():
-            coded = self.plan(self.base.height(err)).coded.float()
+            coded = self.plan(self.base.height(err) if height is None else height).coded.float()
         nominal = self.rec.pair
         if any(err.crosstalk) and not err.calibrated:
             a, b = err.crosstalk

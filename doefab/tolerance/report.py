@@ -56,10 +56,19 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         md += [f"| {r['error']} | {r['metric']:.4f} | {r['delta']:+.4f} |" for r in res["tornado"]]
         md += ["", "![sweeps](sweeps.png)", "", "![tornado](tornado.png)", ""]
     if do_levels:
-        res["quantization"] = study.quantization_study(design_dir, supersample=supersample)
+        res["quantization"] = study.quantization_study(design_dir, supersample=supersample, networks=networks)
         md += ["## Quantization", "", "| levels | metric | worst | L1 to the 16-level PSF |", "| --- | --- | --- | --- |"]
         md += [f"| {r['levels']} | {r['metric']:.4f} | {r['worst']:.4f} | {r['l1_to_nominal']:.4f} |"
                for r in res["quantization"]]
+        if networks:
+            first = res["quantization"][0]["network"]["nominal_psf"]
+            md += ["", "Through the shipped proposed network (given the nominal PSF / the quantized design's PSF):", "",
+                   "| levels | " + " | ".join(f"{k} (nominal PSF) | {k} (measured PSF)" for k in first) + " |",
+                   "| --- |" + " --- |" * (2 * len(first))]
+            for r in res["quantization"]:
+                n = r["network"]
+                md.append(f"| {r['levels']} | " + " | ".join(f"{n['nominal_psf'][k]:.4g} | {n['measured_psf'][k]:.4g}"
+                                                            for k in first) + " |")
         _levels_plot(out / "quantization.png", res["quantization"])
         md += ["", "![quantization](quantization.png)", ""]
     if samples > 0:

@@ -251,8 +251,10 @@ def summarize(samples: list[dict], spec: float) -> dict:
     return out
 
 
-def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int = 1) -> list[dict]:
-    """The same design at continuous (None) and N-level quantization, on the PSF metric."""
+def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int = 1,
+                       networks: bool = False) -> list[dict]:
+    """The same design at continuous (None) and N-level quantization, on the PSF metric (and, with
+    ``networks``, through the shipped network given the nominal and the quantized design's PSF)."""
     from doefab.fabrication.levels import quantize_levels
 
     judge = _judge(str(design_dir), supersample)
@@ -267,5 +269,8 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
             h = lv.astype(np.float64) * h2pi / n
         if supersample > 1:
             h = np.kron(h, np.ones((supersample, supersample)))
-        rows.append({"levels": "continuous" if n is None else n, **judge.score(judge.psf_from_height(h))})
+        row = {"levels": "continuous" if n is None else n, **judge.score(judge.psf_from_height(h))}
+        if networks:
+            row["network"] = _network_judge(str(design_dir), supersample).evaluate(PartErrors(), height=h)
+        rows.append(row)
     return rows
