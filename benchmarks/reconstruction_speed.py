@@ -10,7 +10,6 @@ import statistics
 import time
 from pathlib import Path
 
-import numpy as np
 
 OUT = Path(__file__).parent / "results"
 
@@ -55,7 +54,6 @@ def main():
         print(rows[-1], flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "reconstruction_speed.md").write_text("\n".join(rows) + "\n")
-    del np
 
 
 if __name__ == "__main__":

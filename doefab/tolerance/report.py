@@ -60,12 +60,13 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         md += ["## Quantization", "", "| levels | metric | worst | L1 to the 16-level PSF |", "| --- | --- | --- | --- |"]
         md += [f"| {r['levels']} | {r['metric']:.4f} | {r['worst']:.4f} | {r['l1_to_nominal']:.4f} |"
                for r in res["quantization"]]
-        if networks:
-            first = res["quantization"][0]["network"]["nominal_psf"]
+        with_net = [r for r in res["quantization"] if "network" in r]
+        if networks and with_net:
+            first = with_net[0]["network"]["nominal_psf"]
             md += ["", "Through the shipped proposed network (given the nominal PSF / the quantized design's PSF):", "",
                    "| levels | " + " | ".join(f"{k} (nominal PSF) | {k} (measured PSF)" for k in first) + " |",
                    "| --- |" + " --- |" * (2 * len(first))]
-            for r in res["quantization"]:
+            for r in with_net:
                 n = r["network"]
                 md.append(f"| {r['levels']} | " + " | ".join(f"{n['nominal_psf'][k]:.4g} | {n['measured_psf'][k]:.4g}"
                                                             for k in first) + " |")

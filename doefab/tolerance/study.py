@@ -257,10 +257,18 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
     ``networks``, through the shipped network given the nominal and the quantized design's PSF)."""
     from doefab.fabrication.levels import quantize_levels
 
+    from doefab.fabrication.levels import levels_to_height
+
     judge = _judge(str(design_dir), supersample)
     d = judge.design
     rows = []
+    continuous_known = not np.allclose(d.height, levels_to_height(d.levels, d.camera), rtol=0, atol=1e-12)
     for n in levels:
+        if n is None and not continuous_known:
+            rows.append({"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
+                         "l1_to_nominal": float("nan"),
+                         "note": "n/a: the design folder keeps only the 16-level map (no height.npy)"})
+            continue
         h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
         if n is None:
             h = np.mod(d.height, h2pi)
