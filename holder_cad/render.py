@@ -54,16 +54,18 @@ def render_views(p: HolderParams, out: Path) -> list[str]:
         ax.set_zlim(zmin, zmax)
         ax.set_box_aspect((2 * r, 2 * r, max(zmax - zmin, 1.0)))
         ax.view_init(elev=elev, azim=azim)
-        labels = {"x": "x (mm)", "y": "y (mm)", "z": "z (mm, to the scene)"}
+        labels = {"x": "x (mm)", "y": "y (mm)", "z": "z (mm)"}
         for axis, label in labels.items():
             if axis == edge_on:
                 getattr(ax, f"set_{axis}ticks")([])
                 getattr(ax, f"set_{axis}label")("")
             else:
-                getattr(ax, f"set_{axis}label")(label, labelpad=8)
+                getattr(ax, f"set_{axis}label")(label, labelpad=12 if axis == "x" else 8)
+        if edge_on != "z":  # a short z range: three ticks, so the labels do not pile up
+            ax.set_zticks(np.round(np.linspace(zmin, zmax, 3), 1))
         ax.tick_params(labelsize=7)
         what = "half section, base blue, cartridge red" if cut else "base blue, cartridge red"
-        ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view ({what})", fontsize=9)
+        ax.set_title(f"DOE holder ({p.mount} mount), {fname[7:-4]} view\n({what}; +z toward the scene)", fontsize=9)
         fig.tight_layout()
         fig.savefig(out / fname, dpi=100)
         plt.close(fig)

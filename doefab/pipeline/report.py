@@ -142,7 +142,12 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     if rc and rc.get("status") != "skipped":
         rows = rc.get("rows", {})
         keys = list(next(iter(rows.values())).keys()) if rows else []
-        table = [["variant"] + keys] + [[v] + [f"{x:.4g}" for x in r.values()] for v, r in rows.items()]
+        units = {"psnr": " (dB)", "psnr_highlight": " (dB)", "sam": " (rad)", "mae": " (m)", "rmse": "", "ssim": "",
+                 "rmse_highlight": "", "log10": "", "delta125": ""}
+        if scene.task == "depth":
+            units["rmse"] = " (m)"
+        table = [["variant"] + [k + units.get(k, "") for k in keys]] + [[v] + [f"{x:.4g}" for x in r.values()]
+                                                                         for v, r in rows.items()]
         blocks.append(("Reconstruction", [("p", rc.get("why", "")), ("table", table),
                                           ("img", "reconstruction/examples.png", "a held-out test scene")]))
     else:
