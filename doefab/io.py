@@ -215,6 +215,19 @@ class OutputDir:
         self.created = []
 
 
+def read_toml(path: str | Path, what: str) -> dict:
+    """A TOML file as a dict, or one clear error (missing file, not TOML) naming ``what`` it was meant to be."""
+    import tomllib
+
+    p = Path(path)
+    if not p.is_file():
+        raise DoefabError(f"{what} {p} not found")
+    try:
+        return tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DoefabError(f"{p} is not valid TOML ({exc})") from None
+
+
 def _is_mask_manifest(text: str) -> bool:
     return str(json.loads(text).get("format", "")).startswith("doefab mask set")
 

@@ -32,11 +32,11 @@ Every key, its unit and default (the README documents the same table):
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from doefab.errors import DoefabError
+from doefab.io import read_toml
 
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
@@ -83,12 +83,7 @@ def _typed(v, typ) -> bool:
 def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
     p = Path(path)
-    if not p.is_file():
-        raise DoefabError(f"scene file {p} not found")
-    try:
-        raw = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise DoefabError(f"{p} is not valid TOML ({exc})") from None
+    raw = read_toml(p, "scene file")
     problems: list[str] = []
     for key, val in raw.items():
         if isinstance(val, dict):

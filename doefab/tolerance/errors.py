@@ -7,13 +7,13 @@ same seed gives the same parts, bit for bit, whatever the number of workers or t
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.io import read_toml
 
 __all__ = ["PartErrors", "load_budget", "sample_errors", "DEFAULT_BUDGET", "BUDGET_KEYS"]
 
@@ -56,12 +56,7 @@ class PartErrors:
 def load_budget(path: str | Path | None = None) -> dict:
     """Read and validate a budget file (every problem listed with its key)."""
     p = Path(path) if path is not None else DEFAULT_BUDGET
-    if not p.is_file():
-        raise DoefabError(f"budget file {p} not found")
-    try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise DoefabError(f"{p} is not valid TOML ({exc})") from None
+    data = read_toml(p, "budget file")
     problems = []
     for sec, val in data.items():
         if sec not in BUDGET_KEYS:
