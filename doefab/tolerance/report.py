@@ -169,6 +169,7 @@ def _convergence_plot(path: Path, rows: list, spec: float) -> None:
     fig, ax = plt.subplots(figsize=(5.5, 3.4), layout="constrained")
     ax.plot(n, y, label="running yield")
     ax.fill_between(n, np.clip(y - half, 0, 1), np.clip(y + half, 0, 1), alpha=0.3, label="95 % interval")
+    ax.axvline(len(ok), color="red", ls="--", lw=1, label=f"chosen: {len(ok)} samples")
     ax.set_xlabel("Monte Carlo samples (parts)")
     ax.set_ylabel(f"yield (fraction with metric ≥ {spec})")
     ax.set_ylim(-0.02, 1.02)
