@@ -3,8 +3,6 @@ and, where it fails, the fix (exit status 3 if any fails)."""
 
 from __future__ import annotations
 
-import argparse
-
 
 def register(sub) -> None:
     p = sub.add_parser("doctor", help="check a scene's numerical conditions before running it", description=__doc__)

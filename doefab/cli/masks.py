@@ -62,7 +62,7 @@ def run(args) -> int:
     from doefab.design.design import Design
 
     design = Design.load(args.design)
-    out = claim_output(args, "masks", replace=args.force)
+    claim_output(args, "masks", replace=args.force)  # validates --out before any work
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
                        align_chain=args.align_chain, etch_order=tuple(args.etch_order), resist=args.resist,

@@ -50,7 +50,8 @@ def render_layers(scene: torch.Tensor, psf: torch.Tensor, masks: torch.Tensor | 
     """
     if masks is None:
         return convolve(scene, psf[0])
-    order = sorted(range(psf.shape[0]), key=lambda d: -(1.0 / depths[d] if depths else d))[::-1]
+    # farthest plane first: ascending inverse depth (plane index order when no depths are given)
+    order = sorted(range(psf.shape[0]), key=(lambda d: 1.0 / depths[d]) if depths else (lambda d: d))
     acc = torch.zeros_like(scene)
     for d in order:  # farthest first
         m = masks[d].to(scene.dtype)

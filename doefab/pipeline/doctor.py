@@ -71,17 +71,13 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
             with torch.no_grad():
                 psf[prec] = plan(height).coded.double()
         diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
-        rows.append(_row(f"float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
+        rows.append(_row("float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
                          diff <= 1e-3, "precision = float64 (doefab psf --precision float64)"))
     a, b = 0.05, 0.05
     if scene.tolerance is not None:
-        from pathlib import Path
-
         from doefab.tolerance.errors import load_budget
 
-        bud = scene.tolerance.get("budget", "default")
-        p = None if bud == "default" else (scene.path.parent / bud if (scene.path.parent / bud).is_file() else Path(bud))
-        sens = load_budget(p).get("sensor", {})
+        sens = load_budget(scene.budget_path()).get("sensor", {})
         a, b = sens.get("crosstalk_lr_percent", 5) / 100, sens.get("crosstalk_rl_percent", 5) / 100
     det = 1 - a - b
     cond = float(np.linalg.cond(np.array([[1 - a, b], [a, 1 - b]])))

@@ -6,7 +6,6 @@ from __future__ import annotations
 import csv
 import html
 import json
-import shutil
 from pathlib import Path
 
 from doefab.io import atomic_write_text
@@ -102,8 +101,9 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
             figs.append(("Optimiser iterations", "report_files/knob_design.png",
                          "the committed design was reused; runs measured by benchmarks/design_metric_vs_time.py "
                          "and benchmarks/nlopt_optimizers.py (table in benchmarks/results)"))
-    wdir = REPO / "doefab" / "weights"
-    curves = [(v, wdir / f"{scene.task}_{v}_history.csv") for v in ("proposed", "coded_only", "uncoded_only")]
+    from doefab.reconstruction.train import history_path
+
+    curves = [(v, history_path(scene.task, v)) for v in ("proposed", "coded_only", "uncoded_only")]
     if any(p.is_file() for _, p in curves):
         fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
         metric = None

@@ -68,6 +68,13 @@ class Scene:
     tolerance: dict | None = None
     raw: dict = field(default_factory=dict)
 
+    def budget_path(self) -> Path | None:
+        """The tolerance budget file: None for the shipped default, else relative to the scene file or as given."""
+        b = (self.tolerance or {}).get("budget", "default")
+        if b == "default":
+            return None
+        return self.path.parent / b if (self.path.parent / b).is_file() else Path(b)
+
     def section(self, name: str) -> dict:
         return self.raw.get(name, {}) if name else {k: v for k, v in self.raw.items() if not isinstance(v, dict)}
 

@@ -187,8 +187,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     tol = scene.tolerance
     if tol is None:
         return {"status": "skipped", "why": "the scene has no [tolerance] budget: no Monte Carlo"}
-    b = tol.get("budget", "default")
-    path = None if b == "default" else (scene.path.parent / b if (scene.path.parent / b).is_file() else Path(b))
+    path = scene.budget_path()
     budget = load_budget(path)
     samples = 3 if quick else int(tol.get("samples", 20))
     out.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,6 @@ The networks see the PSFs of what gets fabricated: the committed 16-level level 
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 from pathlib import Path
 

@@ -25,7 +25,7 @@ from doefab.reconstruction.metrics import metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
-__all__ = ["train", "WEIGHTS_DIR", "weights_paths", "model_inputs", "evaluate_batch"]
+__all__ = ["train", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs", "evaluate_batch"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 
@@ -33,6 +33,11 @@ WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 def weights_paths(task: str, variant: str, folder: str | Path | None = None) -> tuple[Path, Path]:
     base = Path(folder) if folder is not None else WEIGHTS_DIR
     return base / f"{task}_{variant}.pt", base / f"{task}_{variant}.json"
+
+
+def history_path(task: str, variant: str, folder: str | Path | None = None) -> Path:
+    """The validation curve shipped beside the weights (the report's "training time" plot)."""
+    return weights_paths(task, variant, folder)[0].with_name(f"{task}_{variant}_history.csv")
 
 
 def model_inputs(task: str, pair) -> torch.Tensor | None:
@@ -159,6 +164,5 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
             "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
     atomic_write_bytes(pt, data)
     atomic_write_json(meta_path, meta)
-    # the validation curve ships beside the weights (the report's "training time" plot)
-    atomic_write_bytes(pt.with_name(f"{task}_{variant}_history.csv"), (out / "history.csv").read_bytes())
+    atomic_write_bytes(history_path(task, variant, weights_dir), (out / "history.csv").read_bytes())
     return meta

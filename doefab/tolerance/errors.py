@@ -15,7 +15,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 
-__all__ = ["PartErrors", "load_budget", "sample_errors", "DEFAULT_BUDGET", "BUDGET_KEYS"]
+__all__ = ["PartErrors", "load_budget", "sample_errors", "budget_value", "DEFAULT_BUDGET", "BUDGET_KEYS"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -78,28 +78,29 @@ def load_budget(path: str | Path | None = None) -> dict:
     return data
 
 
-def _g(budget, sec, key, default=0.0):
+def budget_value(budget: dict, sec: str, key: str, default: float = 0.0) -> float:
+    """``budget[sec][key]`` as a float (``default`` when absent)."""
     return float(budget.get(sec, {}).get(key, default))
 
 
 def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0) -> PartErrors:
     """One part's errors drawn from ``budget`` with ``rng``."""
-    sys_ = rng.normal(0, _g(budget, "etch", "systematic_sigma_percent") / 100)
-    rnd = rng.normal(0, _g(budget, "etch", "random_sigma_percent") / 100, 4)
+    sys_ = rng.normal(0, budget_value(budget, "etch", "systematic_sigma_percent") / 100)
+    rnd = rng.normal(0, budget_value(budget, "etch", "random_sigma_percent") / 100, 4)
     depth = tuple(float(np.clip(1 + sys_ + r, 0.5, 1.5)) for r in rnd)
-    sig = _g(budget, "overlay", "shift_sigma_um") * 1e-6
+    sig = budget_value(budget, "overlay", "shift_sigma_um") * 1e-6
     overlay = tuple((float(a), float(b)) for a, b in rng.normal(0, sig, (4, 2))) if sig > 0 else ((0.0, 0.0),) * 4
-    rot = tuple(float(v) for v in rng.normal(0, _g(budget, "overlay", "rotation_sigma_urad") * 1e-6, 4))
-    bias = float(rng.normal(0, _g(budget, "lithography", "edge_bias_sigma_um") * 1e-6))
-    dmax = _g(budget, "mounting", "decenter_max_mm") * 1e-3
+    rot = tuple(float(v) for v in rng.normal(0, budget_value(budget, "overlay", "rotation_sigma_urad") * 1e-6, 4))
+    bias = float(rng.normal(0, budget_value(budget, "lithography", "edge_bias_sigma_um") * 1e-6))
+    dmax = budget_value(budget, "mounting", "decenter_max_mm") * 1e-3
     shift = tuple(float(v) for v in rng.uniform(-dmax, dmax, 2))
-    mrot = float(rng.normal(0, math.radians(_g(budget, "mounting", "rotation_sigma_deg"))))
+    mrot = float(rng.normal(0, math.radians(budget_value(budget, "mounting", "rotation_sigma_deg"))))
     return PartErrors(depth_scale=depth, overlay=overlay, rotation=rot, edge_bias=bias,
-                      corner_rounding=_g(budget, "lithography", "corner_rounding_um") * 1e-6,
-                      roughness=_g(budget, "surface", "roughness_rms_nm") * 1e-9,
-                      roughness_corr=_g(budget, "surface", "correlation_length_um", 2.0) * 1e-6,
+                      corner_rounding=budget_value(budget, "lithography", "corner_rounding_um") * 1e-6,
+                      roughness=budget_value(budget, "surface", "roughness_rms_nm") * 1e-9,
+                      roughness_corr=budget_value(budget, "surface", "correlation_length_um", 2.0) * 1e-6,
                       mount_shift=shift, mount_rotation=mrot,
-                      crosstalk=(_g(budget, "sensor", "crosstalk_lr_percent") / 100,
-                                 _g(budget, "sensor", "crosstalk_rl_percent") / 100),
+                      crosstalk=(budget_value(budget, "sensor", "crosstalk_lr_percent") / 100,
+                                 budget_value(budget, "sensor", "crosstalk_rl_percent") / 100),
                       calibrated=bool(budget.get("sensor", {}).get("calibrated", True)),
                       seed=int(seed))

@@ -41,7 +41,7 @@ def refined_camera(camera, supersample: int):
     return camera.replace(doe_pixels=camera.doe_pixels * supersample, doe_pitch=camera.doe_pitch / supersample)
 
 
-def _tuple4(name, value, inner=None):
+def _tuple4(name, value):
     v = tuple(value)
     if len(v) != N_MASKS:
         raise DoefabError(f"{name} needs one entry per mask ({N_MASKS}), got {len(v)}")

@@ -14,12 +14,13 @@ import math
 import os
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.tolerance.errors import PartErrors, load_budget, sample_errors
+from doefab.tolerance.errors import PartErrors, budget_value, sample_errors
 
 __all__ = ["SWEEPS", "sweep", "monte_carlo", "summarize", "quantization_study", "budget_errors"]
 
@@ -83,7 +84,7 @@ SWEEPS = {
 
 def budget_errors(budget: dict) -> dict:
     """Each error at its budget value (1 sigma or the bound), for the tornado chart."""
-    g = lambda s, k: float(budget.get(s, {}).get(k, 0.0))  # noqa: E731
+    g = partial(budget_value, budget)
     e = g("etch", "systematic_sigma_percent") + g("etch", "random_sigma_percent")
     return {
         "etch depth (systematic)": replace(PartErrors(), depth_scale=(1 + e / 100,) * 4),
