@@ -3,6 +3,7 @@
 Examples:
   doefab tolerance --design masks/grating --samples 40 --sweep --levels --out out/tol/grating
   doefab tolerance --design masks/streak --budget my_budget.toml --samples 200 --scheduler local:2 --out out/tol/s
+  doefab tolerance --design masks/grating --holder out/holder/holder.json --samples 40 --out out/tol/g
 
 Writes OUT/tolerance.json (every sample's errors and metrics, and a summary with each metric's mean, 95 %
 interval and the yield against the budget's [spec]), OUT/report.md and plots. Samples are checkpointed in
@@ -23,6 +24,9 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", required=True, help="a design folder, or a mask set (its design/ is used)")
     p.add_argument("--budget", default=None, help="tolerance budget TOML (default: the shipped one for the prototype)")
+    p.add_argument("--holder", default=None,
+                   help="a built holder (holder.json or its folder): its clearances and DOE-to-glass distance "
+                        "replace the budget's [mounting] decenter, rotation and axial gap")
     p.add_argument("--samples", type=number(int, 0, 100_000), default=20, help="Monte Carlo samples (0 = none)")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
     p.add_argument("--supersample", type=number(int, 1, 8), default=1,
@@ -43,7 +47,7 @@ def run(args) -> int:
     from doefab.cli._output import claim_output
     from doefab.design.design import Design
     from doefab.errors import DoefabError
-    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import run_study
 
     ddir = Path(args.design)
@@ -51,6 +55,8 @@ def run(args) -> int:
         ddir = ddir / "design"
     Design.load(ddir)  # validated before any output exists
     budget = load_budget(args.budget)
+    if args.holder:
+        budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
     if args.scheduler and not (args.scheduler.startswith("local:") or args.scheduler.startswith("tcp://")):
         raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {args.scheduler!r}")
     if args.resume and args.force:
@@ -63,7 +69,8 @@ def run(args) -> int:
         (out.path / "samples.jsonl").unlink()
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, supersample=args.supersample,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
-                    budget_path=args.budget, networks=args.networks)
+                    budget_path=(args.budget or "doefab/tolerance/budget.toml (default)")
+                    + (f", [mounting] from {args.holder}" if args.holder else ""), networks=args.networks)
     s = res.get("summary")
     if s:
         print(f"metric mean {s['metric']['mean']:.4f} (95 % CI {s['metric']['ci95'][0]:.4f}–{s['metric']['ci95'][1]:.4f}), "

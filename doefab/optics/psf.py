@@ -177,11 +177,45 @@ class PSFPlan:
             out.append(self.route.intensity(pupil, i, setup, prepared))
         return torch.stack(out, dim=1) / geo.full_area
 
-    def __call__(self, height=None, height_right=None) -> PSFPair:
-        """PSFs for a full-grid height map (metres; None = blank DOE) and optional right-half map."""
+    def gap_psfs(self, doe: torch.Tensor, gap: float, halves=None) -> dict:
+        """PSFs of ``halves`` (default: the plan's) when the DOE ``doe`` (full-grid heights, metres) sits
+        ``gap`` metres in front of the aperture plane (``doefab.optics.gap``): {half: (D, W, K, K)}."""
+        from doefab.optics.gap import gap_transmittance
+
+        halves = self.halves if halves is None else tuple(halves)
+        didx = range(len(self.depths))
+        per_half = {h: [] for h in halves}
+        for i, lam in enumerate(self.wavelengths):
+            t_full = [gap_transmittance(doe, self.camera, lam, self.depths[j], gap) for j in didx]
+            for half in halves:
+                geo, cov, opd, _, _ = self._halves[half]
+                t = torch.stack([tf[geo.rows, geo.cols] for tf in t_full])
+                if geo.oversample > 1:
+                    t = t.repeat_interleave(geo.oversample, -2).repeat_interleave(geo.oversample, -1)
+                # the coded half is a pixelated DOE (pixel envelope, as at gap 0); the plain half sees the
+                # DOE's diffracted light as a smooth field, as its gap-0 PSF does
+                setup, prepared = self._prepared(half, half != "uncoded")
+                pupil = torch.polar(cov.expand_as(t.real), self._k[i] * opd) * t
+                per_half[half].append(self.route.intensity(pupil, i, setup, prepared) / geo.full_area)
+        return {h: torch.stack(v, dim=1) for h, v in per_half.items()}
+
+    def __call__(self, height=None, height_right=None, gap: float = 0.0) -> PSFPair:
+        """PSFs for a full-grid height map (metres; None = blank DOE) and optional right-half map.
+
+        ``gap`` (metres, default 0): the DOE sits that far in front of the aperture plane, so its diffraction
+        over the gap reaches both halves (``doefab.optics.gap``; ``height_right`` is then ignored: the DOE's
+        own map covers both halves).
+        """
         h = None if height is None else as_height_tensor(height, self.camera, "height", self.real_dtype)
         hr = None if height_right is None else as_height_tensor(height_right, self.camera, "height_right",
                                                                  self.real_dtype)
+        if gap:
+            from doefab.optics.gap import _check_gap
+
+            if _check_gap(gap) > 0 and h is not None:
+                got = self.gap_psfs(h, gap)
+                return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths,
+                               self.camera.sensor_pitch, got.get("full"))
         coded = self.half_psf("coded", h) if "coded" in self.halves else None
         uncoded = self.half_psf("uncoded", hr) if "uncoded" in self.halves else None
         full = self.half_psf("full", h) if "full" in self.halves else None

@@ -181,7 +181,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
 
 
 def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
-    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import run_study
 
     tol = scene.tolerance
@@ -189,19 +189,23 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
         return {"status": "skipped", "why": "the scene has no [tolerance] budget: no Monte Carlo"}
     path = scene.budget_path()
     budget = load_budget(path)
+    holder = out.parent / "holder" / "holder.json"
+    if holder.is_file():  # the mounting errors of the holder this scene built
+        budget.setdefault("mounting", {}).update(holder_mounting(holder))
     samples = 3 if quick else int(tol.get("samples", 20))
     out.mkdir(parents=True, exist_ok=True)
     (out / "samples.jsonl").unlink(missing_ok=True)
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
                   supersample=int(tol.get("supersample", 1)), do_levels=not quick, budget_path=path)
-    return {"status": "ran", "why": f"{samples} Monte Carlo parts" + ("" if quick else " and the quantization study"),
+    return {"status": "ran", "why": f"{samples} Monte Carlo parts" + ("" if quick else " and the quantization study")
+            + ("; mounting errors from this scene's holder" if holder.is_file() else ""),
             "summary": r.get("summary")}
 
 
 STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
-            "tolerance": ("design",), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
+            "tolerance": ("design", "holder"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
 SECTION = {"design": ("camera", "optics", "design"), "masks": ("fabrication",), "holder": ("holder",),
            "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 

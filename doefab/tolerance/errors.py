@@ -15,7 +15,8 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 
-__all__ = ["PartErrors", "load_budget", "sample_errors", "budget_value", "DEFAULT_BUDGET", "BUDGET_KEYS"]
+__all__ = ["PartErrors", "load_budget", "sample_errors", "budget_value", "DEFAULT_BUDGET", "BUDGET_KEYS",
+           "holder_mounting", "nominal_gap"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -25,7 +26,8 @@ BUDGET_KEYS = {
     "overlay": {"shift_sigma_um": (0, 20), "rotation_sigma_urad": (0, 5000)},
     "lithography": {"edge_bias_sigma_um": (0, 5), "corner_rounding_um": (0, 5)},
     "surface": {"roughness_rms_nm": (0, 200), "correlation_length_um": (0.1, 1000)},
-    "mounting": {"decenter_max_mm": (0, 5), "rotation_sigma_deg": (0, 30)},
+    "mounting": {"decenter_max_mm": (0, 5), "rotation_sigma_deg": (0, 30), "axial_gap_mm": (0, 50),
+                 "axial_gap_sigma_mm": (0, 10), "pupil_behind_glass_mm": (0, 45)},
     "sensor": {"crosstalk_lr_percent": (0, 45), "crosstalk_rl_percent": (0, 45), "calibrated": None},
     "spec": {"metric_min": (0, 1)},
 }
@@ -44,6 +46,7 @@ class PartErrors:
     roughness_corr: float = 2e-6
     mount_shift: tuple = (0.0, 0.0)  # metres: across (x) and along (y) the split line
     mount_rotation: float = 0.0
+    axial_gap: float = 0.0  # metres: DOE in front of the aperture plane (doefab.optics.gap)
     crosstalk: tuple = (0.0, 0.0)  # (α_l→r, α_r→l)
     calibrated: bool = True
     seed: int = 0
@@ -95,12 +98,51 @@ def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0) -> Part
     dmax = budget_value(budget, "mounting", "decenter_max_mm") * 1e-3
     shift = tuple(float(v) for v in rng.uniform(-dmax, dmax, 2))
     mrot = float(rng.normal(0, math.radians(budget_value(budget, "mounting", "rotation_sigma_deg"))))
+    gap = max(0.0, nominal_gap(budget) + float(rng.normal(0, budget_value(budget, "mounting", "axial_gap_sigma_mm")
+                                                            * 1e-3)))
     return PartErrors(depth_scale=depth, overlay=overlay, rotation=rot, edge_bias=bias,
                       corner_rounding=budget_value(budget, "lithography", "corner_rounding_um") * 1e-6,
                       roughness=budget_value(budget, "surface", "roughness_rms_nm") * 1e-9,
                       roughness_corr=budget_value(budget, "surface", "correlation_length_um", 2.0) * 1e-6,
-                      mount_shift=shift, mount_rotation=mrot,
+                      mount_shift=shift, mount_rotation=mrot, axial_gap=gap,
                       crosstalk=(budget_value(budget, "sensor", "crosstalk_lr_percent") / 100,
                                  budget_value(budget, "sensor", "crosstalk_rl_percent") / 100),
                       calibrated=bool(budget.get("sensor", {}).get("calibrated", True)),
                       seed=int(seed))
+
+
+def nominal_gap(budget: dict) -> float:
+    """Nominal DOE-to-aperture-plane distance (metres): the holder's DOE-to-glass distance plus the depth of the
+    lens's entrance pupil behind its front glass."""
+    return (budget_value(budget, "mounting", "axial_gap_mm")
+            + budget_value(budget, "mounting", "pupil_behind_glass_mm")) * 1e-3
+
+
+def holder_mounting(holder_json: str | Path) -> dict:
+    """The ``[mounting]`` entries a built holder implies (read from its ``holder.json``).
+
+    - decenter bound = the die-to-pocket clearance per side (the die can slide that far in its pocket);
+    - rotation: a square die of half-width a in a pocket with clearance c turns at most θ ≈ c / a before a corner
+      touches (a·(cos θ + sin θ) = a + c); the screws and index notches keep it well inside that, so θ/4 is 1 σ
+      (the same rule as the shipped budget);
+    - axial gap = the DOE-to-front-glass distance the holder's checks measured on its mesh.
+    """
+    p = Path(holder_json)
+    if p.is_dir():
+        p = p / "holder.json"
+    if not p.is_file():
+        raise DoefabError(f"{p}: no holder.json here (build one with doefab holder --out DIR)")
+    import json
+
+    try:
+        data = json.loads(p.read_text())
+        params, checks = data["parameters"], data["checks"]
+        clearance = float(checks.get("die_to_pocket_gap_mm", params["clearance_mm"]))
+        half_width = min(float(params["die_width_mm"]), float(params["die_height_mm"])) / 2
+        doe_to_glass = float(checks["doe_to_lens_mm"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise DoefabError(f"{p} is not a doefab holder.json (missing or bad {e}): rebuild it with doefab holder") from None
+    if not checks.get("passed", False):
+        raise DoefabError(f"{p}: this holder failed its checks; fix and rebuild it before judging its tolerances")
+    theta = math.atan2(clearance, half_width)
+    return {"decenter_max_mm": clearance, "rotation_sigma_deg": math.degrees(theta) / 4, "axial_gap_mm": doe_to_glass}

@@ -3,7 +3,8 @@
 ``PSFJudge`` is built once per design (per worker): it holds the PSF plan on the refined grid, the nominal
 (zero-error, same supersampling) coded PSF and the uncoded PSF (for crosstalk). Mounting errors move every
 mask together (a decenter across the split line is x, along it y; a rotation turns the whole DOE about the
-optical axis); dual-pixel crosstalk mixes the uncoded PSF into the coded view (Eq. 29) unless calibrated
+optical axis); an axial gap puts the DOE in front of the aperture plane (``doefab.optics.gap``: its diffraction
+over the gap blurs the coded pattern and leaks coded light into the plain half); dual-pixel crosstalk mixes the uncoded PSF into the coded view (Eq. 29) unless calibrated
 (the exact inverse restores the coded PSF).
 """
 
@@ -83,7 +84,7 @@ class PSFJudge:
 
     def _coded(self, err: PartErrors) -> torch.Tensor:
         with torch.no_grad():
-            return self.plan(self.height(err)).coded.double()
+            return self.plan(self.height(err), gap=err.axial_gap).coded.double()
 
     def uncoded(self) -> torch.Tensor:
         if self._uncoded is None:
@@ -141,7 +142,8 @@ class NetworkJudge:
             raise DoefabError("the shipped network was trained for another design than this one: network-level "
                               "judgement needs weights trained for it (doefab train)")
         self.images, self.size = images, size
-        self.plan = PSFPlan(psf_judge.fine, d.wavelengths, d.depths, get_spec(self.task).kernel, halves=("coded",))
+        self.plan = PSFPlan(psf_judge.fine, d.wavelengths, d.depths, get_spec(self.task).kernel,
+                            halves=("coded", "uncoded"))
 
     def evaluate(self, err: PartErrors, height=None) -> dict:
         """Network metrics for part ``err`` (or for an explicit fine-grid ``height`` map)."""
@@ -151,13 +153,21 @@ class NetworkJudge:
         from doefab.reconstruction.specs import make_batch
         from doefab.reconstruction.train import _response
 
-        with torch.no_grad():
-            coded = self.plan(self.base.height(err) if height is None else height).coded.float()
         nominal = self.rec.pair
+        from doefab.optics.psf import as_height_tensor
+
+        h = as_height_tensor(self.base.height(err) if height is None else height, self.plan.camera)
+        uncoded = nominal.uncoded
+        with torch.no_grad():
+            if err.axial_gap > 0:  # the DOE's diffraction over the gap reaches the plain half too
+                both = self.plan.gap_psfs(h, err.axial_gap)
+                coded, uncoded = both["coded"].float(), both["uncoded"].float()
+            else:
+                coded = self.plan.half_psf("coded", h).float()
         if any(err.crosstalk) and not err.calibrated:
             a, b = err.crosstalk
-            coded = (1 - b) * coded + a * nominal.uncoded
-        pair = dataclasses.replace(nominal, coded=coded)
+            coded = (1 - b) * coded + a * uncoded
+        pair = dataclasses.replace(nominal, coded=coded, uncoded=uncoded)
         batch = make_batch(self.task, "test", range(self.images), self.size, pair, _response(self.task, pair))
         out = {}
         for label, psf in (("nominal_psf", None), ("measured_psf", pair)):

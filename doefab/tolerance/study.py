@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.tolerance.errors import PartErrors, budget_value, sample_errors
+from doefab.tolerance.errors import PartErrors, budget_value, nominal_gap, sample_errors
 
 __all__ = ["SWEEPS", "sweep", "monte_carlo", "summarize", "quantization_study", "budget_errors"]
 
@@ -76,6 +76,7 @@ SWEEPS = {
     "decenter across split": ("mm", [0.05, 0.1, 0.25], 1e-3, lambda v: replace(PartErrors(), mount_shift=(v, 0.0))),
     "decenter along split": ("mm", [0.05, 0.1, 0.25], 1e-3, lambda v: replace(PartErrors(), mount_shift=(0.0, v))),
     "mount rotation": ("°", [0.25, 0.5, 1.0, 2.4], math.pi / 180, lambda v: replace(PartErrors(), mount_rotation=v)),
+    "axial gap": ("mm", [0.5, 1, 2, 5, 10], 1e-3, lambda v: replace(PartErrors(), axial_gap=v)),
     "crosstalk, uncalibrated": ("%", [2, 5, 10], 0.01,
                                 lambda v: replace(PartErrors(), crosstalk=(v, v), calibrated=False)),
     "crosstalk, calibrated": ("%", [2, 5, 10], 0.01, lambda v: replace(PartErrors(), crosstalk=(v, v), calibrated=True)),
@@ -95,6 +96,7 @@ def budget_errors(budget: dict) -> dict:
         "decenter across split": replace(PartErrors(), mount_shift=(g("mounting", "decenter_max_mm") * 1e-3, 0.0)),
         "decenter along split": replace(PartErrors(), mount_shift=(0.0, g("mounting", "decenter_max_mm") * 1e-3)),
         "mount rotation": replace(PartErrors(), mount_rotation=math.radians(g("mounting", "rotation_sigma_deg"))),
+        "axial gap": replace(PartErrors(), axial_gap=nominal_gap(budget) + g("mounting", "axial_gap_sigma_mm") * 1e-3),
         "crosstalk, uncalibrated": replace(PartErrors(), crosstalk=(g("sensor", "crosstalk_lr_percent") / 100,
                                                                     g("sensor", "crosstalk_rl_percent") / 100),
                                            calibrated=False),

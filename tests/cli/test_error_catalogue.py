@@ -267,6 +267,11 @@ CASES = [
     ("tolerance-bad-budget", lambda f, t: ["tolerance", "--design", str(f / "design"), "--budget",
                                            str(_text(t, "b.toml", "[overlay]\nshift_sigma_um = 99\n")),
                                            "--out", str(t / "o")], 2, "overlay.shift_sigma_um = 99"),
+    ("tolerance-missing-holder", lambda f, t: ["tolerance", "--design", str(f / "design"), "--holder",
+                                               str(t / "nope"), "--out", str(t / "o")], 2, "no holder.json"),
+    ("tolerance-not-a-holder", lambda f, t: ["tolerance", "--design", str(f / "design"), "--holder",
+                                             str(_text(t, "holder.json", "{}")), "--out", str(t / "o")], 2,
+     "not a doefab holder.json"),
     ("tolerance-bad-scheduler", lambda f, t: ["tolerance", "--design", str(f / "design"), "--scheduler", "mars",
                                               "--out", str(t / "o")], 2, "--scheduler"),
     # ---- usage

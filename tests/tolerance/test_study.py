@@ -89,3 +89,39 @@ def test_bad_budget_lists_every_problem(tmp_path):
     msg = str(exc.value)
     assert "overlay.shift_sigma_um must be a number" in msg and "unknown key overlay.shift_sigma_mm" in msg
     assert "etch.random_sigma_percent = 500" in msg
+
+
+def test_axial_gap_costs_and_leaks(design_dir):
+    """A DOE in front of the aperture plane: the larger the gap, the further the PSF moves from nominal."""
+    j = study._judge(str(design_dir), 1)
+    l1 = [j.evaluate(PartErrors(axial_gap=g))["l1_to_nominal"] for g in (0.0, 1e-3, 5e-3)]
+    assert l1[0] == 0.0 and 0 < l1[1] < l1[2]
+
+
+def _holder_json(path, clearance=0.25, doe_to_lens=1.6, passed=True):
+    path.write_text(json.dumps({"parameters": {"clearance_mm": clearance, "die_width_mm": 12.0, "die_height_mm": 12.0},
+                                "checks": {"passed": passed, "die_to_pocket_gap_mm": clearance,
+                                           "doe_to_lens_mm": doe_to_lens}}))
+    return path
+
+
+def test_mounting_ranges_come_from_the_holder(tmp_path):
+    from doefab.tolerance.errors import holder_mounting
+
+    m = holder_mounting(_holder_json(tmp_path / "holder.json", clearance=0.4, doe_to_lens=2.2))
+    assert m["decenter_max_mm"] == 0.4 and m["axial_gap_mm"] == 2.2
+    # a 12 mm square die turns until a corner meets the pocket wall: a (cos θ + sin θ) = a + c, θ ≈ c / a
+    theta = np.radians(4 * m["rotation_sigma_deg"])
+    assert 6 * (np.cos(theta) + np.sin(theta)) == pytest.approx(6.4, rel=0.01)
+    with pytest.raises(doefab.DoefabError, match="failed its checks"):
+        holder_mounting(_holder_json(tmp_path / "bad.json", passed=False))
+    with pytest.raises(doefab.DoefabError, match="no holder.json"):
+        holder_mounting(tmp_path / "missing")
+
+
+def test_sampled_parts_carry_the_budget_gap():
+    from doefab.tolerance.errors import sample_errors
+
+    budget = load_budget()
+    gaps = [sample_errors(budget, np.random.default_rng(i)).axial_gap for i in range(200)]
+    assert np.mean(gaps) == pytest.approx(1.6e-3, abs=3e-5) and 0.05e-3 < np.std(gaps) < 0.15e-3

@@ -50,7 +50,7 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
     if check:
         power = (spec.real**2 + spec.imag**2).detach()
         power = power.reshape(-1, n, n).sum(0).cpu().numpy()
-        cut = float(power[~keep].sum() / max(power.sum(), 1e-300))
+        cut = float(power[~keep].sum()) / max(float(power.sum()), 1e-300)
         if cut > max_cut:
             raise SamplingError(
                 f"[asm] transfer-function aliasing: {cut:.2%} of the field's energy lies beyond the band limit "

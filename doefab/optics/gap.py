@@ -1,0 +1,85 @@
+"""A DOE mounted a distance in front of the aperture plane (the prototype's add-on holder, seed Fig. 4).
+
+The seed designs the DOE for the aperture plane, but the prototype's holder puts it against the lens's front
+glass, some millimetres in front of the plane where the dual-pixel sensor splits the pupil. Over that gap the
+DOE's diffraction spreads: coded light crosses the split line into the uncoded half and the coded half's
+pattern blurs at its edges. ``gap_transmittance`` gives the DOE's effective complex transmittance *at the
+aperture plane*:
+
+    t_eff = 1 + ASM_g[ S_z · circ · (exp(i k Δn (h − h_ref)) − 1) ] / S_{z+g}
+
+with ``S_z`` the exact spherical wave of the on-axis point at depth z arriving at the DOE (plane wave for
+z = ∞), ``circ`` the DOE's chrome baffle (the clear aperture), ``h_ref`` the mean height of the plain (x > 0)
+half so that the plain glass is the phase reference, ``ASM_g`` the band-limited angular spectrum over the gap g
+(``doefab.angular_spectrum``, zero-padded: the modulation is confined to the baffle so the padding is exact)
+and ``S_{z+g} = z / (z + g) · exp(i k (sag(z + g) + g))`` the unmodulated wave at the aperture plane (paraxial
+amplitude). Writing the field as the plain wave plus the DOE's *change* keeps the plain wave analytic, so a
+blank DOE or g = 0 gives t_eff = exp(i k Δn (h − h_ref)) exactly, and the only numerical propagation is of the
+DOE's modulation. Valid while the incoming wave's curvature is resolved at the DOE pitch (it is, far beyond the
+depths doefab's PSFs allow) and the gap is a free-space path (no lens element between DOE and aperture plane —
+in a real compound lens the front elements refract the cone slightly; the model treats the gap as air).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from doefab.errors import DoefabError
+from doefab.optics.camera import Camera
+from doefab.optics.propagators.asm import angular_spectrum
+from doefab.optics.pupil import pupil_half, source_path_difference
+
+__all__ = ["gap_transmittance", "MAX_GAP"]
+
+MAX_GAP = 0.05  # metres: beyond this the DOE is not "in front of the aperture" but a separate element
+
+
+def _check_gap(gap: float) -> float:
+    g = float(gap)
+    if not math.isfinite(g) or not 0.0 <= g <= MAX_GAP:
+        raise DoefabError(f"DOE gap {gap!r} m is outside 0–{MAX_GAP} m (the gap is in metres: 2 mm is 2e-3)")
+    return g
+
+
+def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, depth: float, gap: float,
+                      pad: int = 2) -> torch.Tensor:
+    """(N, N) complex effective transmittance at the aperture plane of a DOE ``gap`` metres in front of it.
+
+    Args:
+        height: (N, N) heights in metres on the camera's DOE grid (both halves: the plain half is the
+            phase reference; ``doefab.as_height_tensor`` validates).
+        wavelength: metres.  depth: on-axis source distance in metres (``inf`` = plane wave).
+        gap: DOE-to-aperture-plane distance, metres (0 ≤ gap ≤ 5 cm).
+        pad: zero-padding factor of the angular spectrum (2: linear convolution).
+    """
+    g = _check_gap(gap)
+    n = camera.doe_pixels
+    if tuple(height.shape) != (n, n):
+        raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
+    real = height.dtype if height.is_floating_point() else torch.float64
+    cplx = torch.complex64 if real == torch.float32 else torch.complex128
+    k = 2 * math.pi / wavelength
+    dn = float(camera.material.index(wavelength)) - 1.0
+    full = pupil_half(camera, "full")
+    circ = np.zeros((n, n))
+    circ[full.rows, full.cols] = full.coverage > 0  # the baffle opening: every pixel the clear aperture touches
+    centres = (np.arange(n) - (n - 1) / 2) * camera.doe_pitch
+    plain = (centres > 0)[None, :] & (circ > 0)
+    h = height.to(real)
+    h_ref = h[torch.from_numpy(plain)].mean() if plain.any() else h.new_zeros(())
+    phase = (k * dn) * (h - h_ref)
+    if g == 0.0:
+        return torch.polar(torch.ones_like(phase), phase).to(cplx)
+    r2 = centres[None, :] ** 2 + centres[:, None] ** 2
+    s_in = source_path_difference(r2, depth, math.inf)  # exact sphere sag of the source at the DOE
+    s_out = source_path_difference(r2, depth + g if math.isfinite(depth) else depth, math.inf)
+    amp = depth / (depth + g) if math.isfinite(depth) else 1.0
+    wave_in = torch.from_numpy(np.exp(1j * k * s_in)).to(cplx)
+    # the plain wave at the aperture plane, with the angular spectrum's own piston exp(i k g)
+    wave_out = torch.from_numpy(amp * np.exp(1j * k * (s_out + g))).to(cplx)
+    change = (torch.polar(torch.ones_like(phase), phase).to(cplx) - 1) * torch.from_numpy(circ).to(real)
+    moved = angular_spectrum(wave_in * change, camera.doe_pitch, wavelength, g, pad=pad)
+    return 1 + moved / wave_out
