@@ -33,6 +33,17 @@ def register(sub) -> None:
                    help="isolated-pixel regulariser weight (0 = off)")
     p.add_argument("--checkpoint-every", type=number(int, 1, 1_000_000, unit="steps"), default=20,
                    help="steps between checkpoints")
+    p.add_argument("--parameterization", default="pixel", choices=["pixel", "radial"],
+                   help="pixel: one phase per DOE pixel; radial: a rotationally symmetric profile θ(r) (linear "
+                        "interpolation between --knots radii)")
+    p.add_argument("--knots", type=number(int, 2, 100_000, unit="knots"), default=None,
+                   help="radial knot count (default: one per DOE pixel along the radius)")
+    p.add_argument("--start", default=None, choices=["task", "lens"],
+                   help="starting map: the task's own, or the thin lens that refocuses the coded half to the task's "
+                        "farthest depth (default: task for pixel, lens for radial)")
+    p.add_argument("--ring-law", default=None, choices=["seed", "defocus"],
+                   help="half-ring only: ring radius linear in depth (seed Eq. 25) or in inverse depth (defocus)")
+    p.add_argument("--loss", default=None, choices=["band", "window", "l1"], help="task loss (default: the task's)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="overwrite an existing design in OUT")
     p.set_defaults(func=run)
@@ -62,6 +73,18 @@ def run(args) -> int:
         settings["lr"] = args.lr
     if args.batch is not None:
         settings["batch"] = args.batch
+    if args.knots is not None and args.parameterization != "radial":
+        raise DoefabError("--knots applies to --parameterization radial only")
+    if args.ring_law and args.task != "half-ring":
+        raise DoefabError(f"--ring-law applies to the half-ring task, not {args.task}")
+    settings.update(parameterization=args.parameterization, knots=args.knots or 0, start=args.start)
+    params = {}
+    if args.ring_law:
+        params["ring_law"] = args.ring_law
+    if args.loss:
+        params["loss_kind"] = args.loss
+    if params:
+        settings["task_params"] = params
     out.create()
     design = doefab.optimize(args.task, iterations=args.iterations, optimizer=args.optimizer, seed=args.seed,
                              out_dir=out.path, resume=args.resume, **settings)

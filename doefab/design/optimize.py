@@ -20,7 +20,8 @@ import torch
 
 from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 from doefab.design.design import Design
-from doefab.design.parameterization import isolated_pixel_penalty, quantize_ste, theta_to_height
+from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
+                                            theta_to_height)
 from doefab.errors import DoefabError
 from doefab.fabrication.levels import N_LEVELS, level_step, quantize_levels
 from doefab.optics.camera import Camera
@@ -47,6 +48,10 @@ class DesignConfig:
             -1 = every depth with one random wavelength each, so the worst depth is always seen).
         fab_weight: weight of the isolated-pixel regulariser (0 = off).
         checkpoint_every: steps between checkpoints.  eval_every: steps between full metric evaluations.
+        parameterization: ``"pixel"`` (one phase per DOE pixel) or ``"radial"`` (a rotationally symmetric
+            profile, ``doefab.design.parameterization.RadialParam``).  knots: radial knot count (0 = N/2).
+        start: ``"task"`` (the task's own starting map) or ``"lens"`` (the thin lens that refocuses the coded
+            half to the task's farthest depth); ``None`` = task for pixel, lens for radial.
     """
 
     task: str = "streak"
@@ -61,6 +66,9 @@ class DesignConfig:
     fab_weight: float = 0.0
     checkpoint_every: int = 20
     eval_every: int = 20
+    parameterization: str = "pixel"
+    knots: int = 0
+    start: str | None = None
 
     def key(self) -> dict:
         d = asdict(self)
@@ -124,13 +132,17 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     task_obj.bind(cam)
     cfg.task_params = task_obj.params()
     dcam = _design_camera(cam, cfg.sampling)
+    if cfg.start is None:
+        cfg.start = "lens" if cfg.parameterization == "radial" else "task"
+    if cfg.start not in STARTS:
+        raise DoefabError(f"unknown start {cfg.start!r}: choose one of {STARTS}")
+    param = make_parameterization(cfg.parameterization, dcam, cfg.knots)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     lams, depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
     plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",))
     mask = _coded_mask(dcam)
-    h2pi = dcam.material.height_2pi(dcam.design_wavelength)
-    theta = torch.from_numpy(task_obj.init_height(dcam, rng) / h2pi).float().requires_grad_(True)
+    theta = param.start(task_obj, rng, cfg.start).requires_grad_(True)
     pairs = [(d, w) for d in range(len(depths)) for w in range(len(lams))]
     gen = torch.Generator().manual_seed(cfg.seed)
     history: list = []
@@ -159,7 +171,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     qat_start = int(round(cfg.iterations * (1 - cfg.qat_fraction))) if cfg.qat_fraction > 0 else cfg.iterations
 
     def objective(step: int, batch_pairs=None):
-        h = theta_to_height(theta, dcam)
+        h = theta_to_height(param.waves(theta), dcam)
         if step >= qat_start:
             h = quantize_ste(h, dcam)
         if batch_pairs is None:
@@ -176,12 +188,12 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
                 psf = plan.half_psf("coded", h, depth_indices=[d], wavelength_indices=[w])
                 loss = loss + task_obj.loss(psf, dcam, [d], [w]) / len(batch_pairs)
         if cfg.fab_weight > 0:
-            loss = loss + cfg.fab_weight * isolated_pixel_penalty(theta, mask)
+            loss = loss + cfg.fab_weight * isolated_pixel_penalty(param.waves(theta), mask)
         return loss
 
     def full_metric(quantized: bool) -> dict:
         with torch.no_grad():
-            h = theta_to_height(theta, dcam)
+            h = theta_to_height(param.waves(theta), dcam)
             if quantized:
                 h = quantize_ste(h, dcam)
             return task_obj.metric(plan.half_psf("coded", h), dcam)
@@ -236,12 +248,13 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
                 adam.step()
                 record(step, float(loss.detach()))
         else:
-            stop_reason = _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start, mask)
+            stop_reason = _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start,
+                                     param.variable_mask(mask))
     finally:
         if bar is not None:
             bar.close()
     checkpoint(cfg.iterations, time.perf_counter() - t_start)
-    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), history, lams, depths)
+    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), param, history, lams, depths)
     design.extra["wall_time_s"] = round(time.perf_counter() - t_start, 1)
     design.extra["optimizer_time_s"] = history[-1][1] if history else 0.0
     design.extra["evaluations"] = len(history)
@@ -355,10 +368,18 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
     return "; ".join(reasons) or None
 
 
-def _finish(task_obj, cfg, cam, dcam, theta, history, lams, depths) -> Design:
-    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution."""
-    h_design = theta_to_height(theta, dcam).double().numpy()
-    if cfg.sampling > 1:
+def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> Design:
+    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution.
+
+    A radial profile is evaluated on the full grid (its knots sit at fixed radii), not repeated per coarse pixel."""
+    radial = cfg.parameterization == "radial"
+    with torch.no_grad():
+        if radial:
+            h_design = theta_to_height(make_parameterization("radial", cam, param.knots).waves(theta), cam)
+        else:
+            h_design = theta_to_height(param.waves(theta), dcam)
+    h_design = h_design.double().numpy()
+    if cfg.sampling > 1 and not radial:
         h_design = np.kron(h_design, np.ones((cfg.sampling, cfg.sampling)))
     levels = finalize_levels(h_design, cam)
     mask = _coded_mask(cam).numpy() > 0
@@ -380,4 +401,5 @@ def _finish(task_obj, cfg, cam, dcam, theta, history, lams, depths) -> Design:
                   depths=tuple(depths), height=height, levels=levels, metrics=metrics, seed=cfg.seed,
                   optimizer=cfg.optimizer, iterations=cfg.iterations, history=history,
                   psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(),
-                  extra={"config": cfg.key()})
+                  extra={"config": cfg.key(), **({"radial_knots_waves": [round(float(v), 6) for v in theta]}
+                                                 if radial else {})})

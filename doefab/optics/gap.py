@@ -45,7 +45,7 @@ def _check_gap(gap: float) -> float:
 
 
 def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, depth: float, gap: float,
-                      pad: int = 2) -> torch.Tensor:
+                      pad: float | None = None) -> torch.Tensor:
     """(N, N) complex effective transmittance at the aperture plane of a DOE ``gap`` metres in front of it.
 
     Args:
@@ -53,7 +53,9 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
             phase reference; ``doefab.as_height_tensor`` validates).
         wavelength: metres.  depth: on-axis source distance in metres (``inf`` = plane wave).
         gap: DOE-to-aperture-plane distance, metres (0 ≤ gap ≤ 5 cm).
-        pad: zero-padding factor of the angular spectrum (2: linear convolution).
+        pad: zero-padding factor of the angular spectrum grid. Default: just enough that light diffracted at
+            the grid's largest angle (sin θ = λ / 2b, b the DOE pitch) over the gap cannot wrap around into the
+            grid (linear, not circular, convolution), plus 16 pixels.
     """
     g = _check_gap(gap)
     n = camera.doe_pixels
@@ -81,5 +83,9 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     # the plain wave at the aperture plane, with the angular spectrum's own piston exp(i k g)
     wave_out = torch.from_numpy(amp * np.exp(1j * k * (s_out + g))).to(cplx)
     change = (torch.polar(torch.ones_like(phase), phase).to(cplx) - 1) * torch.from_numpy(circ).to(real)
+    if pad is None:
+        sin_max = min(wavelength / (2 * camera.doe_pitch), 0.99)
+        spread_px = g * sin_max / math.sqrt(1 - sin_max**2) / camera.doe_pitch
+        pad = 1.0 + (spread_px + 16) / n
     moved = angular_spectrum(wave_in * change, camera.doe_pitch, wavelength, g, pad=pad)
     return 1 + moved / wave_out

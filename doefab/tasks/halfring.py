@@ -16,7 +16,18 @@ __all__ = ["HalfRingTask"]
 
 @dataclass
 class HalfRingTask(Task):
-    """Semicircle of radius 25 − 5z pixels (z in metres) for points at 1–5 m in 0.25 m steps.
+    """Semicircle whose radius encodes depth, for points at 1–5 m in 0.25 m steps.
+
+    Ring laws (``ring_law``):
+
+    - ``"seed"`` (default, for comparison with the paper): r = 25 − 5z pixels, linear in depth (seed Eq. 25):
+      20, 15, 10, 5, 0 px at 1–5 m.
+    - ``"defocus"``: r linear in *inverse* depth between the nearest and the farthest plane,
+      r = r_near · (1/z − 1/z_far) / (1/z_near − 1/z_far) with r_near = the seed's radius at z_near (20 px).
+      A defocused (half-)aperture blurs to a radius ∝ |1/z − 1/z_sharp|, so a phase plate that makes the coded
+      half sharp at z_far follows this law at every depth at once; the seed's linear law asks for a
+      non-physical radius–depth relation that no single plate meets at all depths (the optimiser then
+      trades depths against each other).
 
     Choices: the semicircle opens toward +x (the arc lies on the x ≤ 0 side, ``side = -1``), the side of
     the coded half, where a plain defocused half-aperture already puts its blur for near points; ``side``
@@ -33,6 +44,7 @@ class HalfRingTask(Task):
     z_max: float = 5.0
     z_step: float = 0.25
     loss_kind: str = "window"
+    ring_law: str = "seed"
     name: str = field(default="half-ring", init=False)
     preset: str = field(default="depth", init=False)
     metric_name: str = field(default="fraction of coded light within 1 px of the half-ring", init=False)
@@ -44,9 +56,19 @@ class HalfRingTask(Task):
         n = int(round((self.z_max - self.z_min) / self.z_step)) + 1
         return tuple(float(self.z_min + i * self.z_step) for i in range(n))
 
-    @staticmethod
-    def radius_px(z: float) -> float:
-        """Target ring radius in pixels at depth z (metres): 25 − 5z (seed Eq. 25)."""
+    RING_LAWS = ("seed", "defocus")
+
+    def __post_init__(self):
+        from doefab.errors import DoefabError
+
+        if self.ring_law not in self.RING_LAWS:
+            raise DoefabError(f"unknown ring law {self.ring_law!r}: choose one of {self.RING_LAWS}")
+
+    def radius_px(self, z: float) -> float:
+        """Target ring radius in pixels at depth z (metres), by the task's ring law."""
+        r_near = max(25.0 - 5.0 * self.z_min, 0.0)
+        if self.ring_law == "defocus":
+            return r_near * (1.0 / z - 1.0 / self.z_max) / (1.0 / self.z_min - 1.0 / self.z_max)
         return max(25.0 - 5.0 * z, 0.0)
 
     def distance_to_arc(self, r: float) -> np.ndarray:
