@@ -239,6 +239,7 @@ SIGNATURES = {
     "design": ("design.json", "checkpoint.pt"),
     "masks": (("manifest.json", _is_mask_manifest),),
     "holder": ("holder.json", "holder.FAILED.json"),
+    "finetune": ("checkpoint.pt", "history.csv"),
     "train": ("checkpoint.pt", "history.csv"),
     "evaluate": ("metrics.json",),
     "tolerance": ("tolerance.json", "samples.jsonl"),

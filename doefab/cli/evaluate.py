@@ -20,6 +20,9 @@ def register(sub) -> None:
     p.add_argument("--size", type=number(int, 64, 2048, unit="pixels; a multiple of 32"), default=256,
                    help="test image side in pixels")
     p.add_argument("--weights-dir", default=None, help="weights folder (default: the shipped ones)")
+    p.add_argument("--design", default=None, help="evaluate networks trained for this design folder (with --weights-dir)")
+    p.add_argument("--variants", default="proposed,coded_only,uncoded_only",
+                   help="comma-separated variants to evaluate (default: all three)")
     p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
     p.set_defaults(func=run)
 
@@ -32,11 +35,18 @@ def run(args) -> int:
 
     if args.size % 32:
         raise DoefabError(f"--size {args.size} must be a multiple of 32 (e.g. 256)")
-    for v in ("proposed", "coded_only", "uncoded_only"):
-        load_reconstructor(args.task, v, args.weights_dir)  # a bad weights file is refused before any output
+    from doefab.cli.train import _design_arg
+
+    design = _design_arg(args)
+    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    bad = [v for v in variants if v not in ("proposed", "coded_only", "uncoded_only")]
+    if bad or not variants:
+        raise DoefabError(f"--variants: unknown {bad or 'empty list'}; choose from proposed, coded_only, uncoded_only")
+    for v in variants:
+        load_reconstructor(args.task, v, args.weights_dir, design)  # a bad weights file is refused before any output
     out = claim_output(args, "evaluate", replace=args.force)
     out.create()
-    res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir)
+    res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants)
     print(json.dumps(res["rows"], indent=1))
     print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
     return 0

@@ -29,6 +29,8 @@ def register(sub) -> None:
     p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=96,
                    help="training crop side in pixels")
     p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate")
+    p.add_argument("--design", default=None,
+                   help="train for this design folder (or mask set) instead of the committed one; use with --weights-dir")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
     p.set_defaults(func=run)
@@ -49,11 +51,30 @@ def run(args) -> int:
     if args.resume and not (out.path / "checkpoint.pt").is_file():
         raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
+    design = _design_arg(args)
     out.create()
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
-                 batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir,
+                 batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
                  command="doefab " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("doefab") else "doefab train")
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_file']} and its .json")
     return 0
+
+
+def _design_arg(args):
+    """--design as a design folder (a mask set's design/ is used); None for the committed design."""
+    from pathlib import Path
+
+    from doefab.design.design import Design
+    from doefab.errors import DoefabError
+
+    if not getattr(args, "design", None):
+        return None
+    d = Path(args.design)
+    if (d / "design" / "design.json").is_file():
+        d = d / "design"
+    Design.load(d)  # validated: a clear error before any work
+    if getattr(args, "weights_dir", None) is None:
+        raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
+    return d.resolve()

@@ -29,7 +29,7 @@ from doefab.optics.psf import PSFPlan
 from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
-__all__ = ["DesignConfig", "optimize", "PLAIN_LEVEL", "OPTIMIZERS"]
+__all__ = ["DesignConfig", "optimize", "design_from_theta", "PLAIN_LEVEL", "OPTIMIZERS"]
 
 PLAIN_LEVEL = N_LEVELS - 1  # the plain half and the area outside the clear aperture stay unetched
 OPTIMIZERS = ("adam", "lbfgs", "mma")
@@ -403,3 +403,20 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
                   psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(),
                   extra={"config": cfg.key(), **({"radial_knots_waves": [round(float(v), 6) for v in theta]}
                                                  if radial else {})})
+
+
+def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str, sampling: int, history=(),
+                      extra: dict | None = None) -> Design:
+    """A finished design (full-grid heights, 16 levels, full-grid metrics) of ``design``'s task and camera from
+    parameters θ found on its grid coarsened ``sampling`` times (e.g. by end-to-end fine-tuning)."""
+    task_obj = get_task(design.task, **design.task_params)
+    task_obj.bind(design.camera)
+    radial = parameterization == "radial"
+    cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=max(len(history), 1),
+                       seed=design.seed, sampling=sampling, parameterization=parameterization,
+                       knots=int(theta.numel()) if radial else 0, start="task")
+    dcam = _design_camera(design.camera, sampling)
+    param = make_parameterization(parameterization, dcam, cfg.knots)
+    out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths)
+    out.extra.update(extra or {})
+    return out

@@ -23,14 +23,14 @@ __all__ = ["evaluate"]
 
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
-             progress: bool = True) -> dict:
+             progress: bool = True, design=None, variants=VARIANTS) -> dict:
     from doefab.reconstruction.train import _response
 
     out = Path(out_dir)
-    recs = {v: load_reconstructor(task, v, weights_dir) for v in VARIANTS}  # refuse bad weights before work
-    pair, _ = psf_pair(task)
+    recs = {v: load_reconstructor(task, v, weights_dir, design) for v in variants}  # refuse bad weights first
+    pair, _ = psf_pair(task, design)
     response = _response(task, pair)
-    rows = {v: [] for v in VARIANTS}
+    rows = {v: [] for v in variants}
     example = None
     it = range(images)
     if progress:
@@ -78,9 +78,10 @@ def _figure(path: Path, task: str, coded, uncoded, target, preds) -> None:
     for v, p in preds.items():
         panels.append((f"{v.replace('_', '-')} output", _show(task, p), unit))
     panels.append(("ground truth", _show(task, target), unit))
-    err = np.abs(preds["proposed"] - target)
+    ref = "proposed" if "proposed" in preds else next(iter(preds))
+    err = np.abs(preds[ref] - target)
     err = err.mean(axis=0) if err.ndim == 3 else err
-    panels.append(("|proposed − truth|", err, {"hdr": "radiance", "hyperspectral": "radiance", "depth": "m"}[task]))
+    panels.append((f"|{ref.replace('_', '-')} − truth|", err, {"hdr": "radiance", "hyperspectral": "radiance", "depth": "m"}[task]))
     fig, axes = plt.subplots(2, 4, figsize=(13, 6.6), layout="constrained")
     for ax, (title, img, cb) in zip(axes.flat, panels):
         kw = {"cmap": "viridis"} if img.ndim == 2 else {}

@@ -75,8 +75,10 @@ def _refuse(path: Path, why: str, task: str, variant: str):
     raise DoefabError(f"{path}: {why}; retrain it with: doefab train --task {task} --variant {variant}")
 
 
-def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None) -> Reconstructor:
-    """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth")."""
+def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
+                       design: str | Path | None = None) -> Reconstructor:
+    """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth"), trained for the
+    committed design (or for the design folder ``design``: candidates under comparison)."""
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
@@ -95,9 +97,10 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     data = pt.read_bytes()
     if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
         _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", task, variant)
-    pair, sha = psf_pair(task)
+    pair, sha = psf_pair(task, design)
     if meta["design_levels_sha256"] != sha:
-        _refuse(pt, "the weights were trained for another design than the committed one", task, variant)
+        _refuse(pt, "the weights were trained for another design than " +
+                ("the committed one" if design is None else str(design)), task, variant)
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])

@@ -71,9 +71,11 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
-          progress: bool = True, command: str = "", max_steps: int | None = None) -> dict:
+          progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
+          init_weights=None) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
-    returns the metadata record written."""
+    returns the metadata record written. ``design``: a design folder other than the committed one (candidates);
+    ``init_weights``: a state dict to start from (fine-tuning) instead of a fresh network."""
     from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 
     spec = get_spec(task)
@@ -87,12 +89,14 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
-              "val_images": val_images}
-    pair, sha = psf_pair(task)
+              "val_images": val_images, "design": None if design is None else str(design)}
+    pair, sha = psf_pair(task, design)
     psf = model_inputs(task, pair)
     response = _response(task, pair)
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
+    if init_weights is not None:
+        model.load_state_dict(init_weights)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     step, elapsed, history = 0, 0.0, []
     if resume:
@@ -153,7 +157,8 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     torch.save(model.state_dict(), buf)
     data = buf.getvalue()
     pt, meta_path = weights_paths(task, variant, weights_dir)
-    meta = {"format": "doefab weights 1", "task": task, "variant": variant, "design": spec.design,
+    meta = {"format": "doefab weights 1", "task": task, "variant": variant,
+            "design": spec.design if design is None else str(design),
             "design_levels_sha256": sha, "arch": arch,
             "psf": {"kernel_px": spec.kernel, "wavelengths_m": list(pair.wavelengths),
                     "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",

@@ -260,23 +260,21 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
     ``networks``, through the shipped network given the nominal and the quantized design's PSF)."""
     from doefab.fabrication.levels import quantize_levels
 
-    from doefab.fabrication.levels import levels_to_height
-
     judge = _judge(str(design_dir), supersample)
     d = judge.design
     rows = []
-    continuous_known = not np.allclose(d.height, levels_to_height(d.levels, d.camera), rtol=0, atol=1e-12)
+    height = continuous_height(d)
     for n in levels:
-        if n is None and not continuous_known:
+        if n is None and height is None:
             rows.append({"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
                          "l1_to_nominal": float("nan"),
                          "note": "n/a: the design folder keeps only the 16-level map (no height.npy)"})
             continue
         h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
         if n is None:
-            h = np.mod(d.height, h2pi)
+            h = np.mod(height, h2pi)
         else:
-            lv = quantize_levels(d.height, d.camera, n)
+            lv = quantize_levels(d.height if height is None else height, d.camera, n)
             h = lv.astype(np.float64) * h2pi / n
         if supersample > 1:
             h = np.kron(h, np.ones((supersample, supersample)))
@@ -285,3 +283,25 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
             row["network"] = _network_judge(str(design_dir), supersample).evaluate(PartErrors(), height=h)
         rows.append(row)
     return rows
+
+
+def continuous_height(design):
+    """The design's continuous (unquantized) heights in metres, or None when the folder keeps only its 16-level map:
+    from ``height.npy``, or rebuilt from a radial design's knots (``extra.radial_knots_waves``)."""
+    import torch
+
+    from doefab.design.optimize import PLAIN_LEVEL, _coded_mask
+    from doefab.design.parameterization import RadialParam, theta_to_height
+    from doefab.fabrication.levels import level_step, levels_to_height
+
+    d = design
+    if not np.allclose(d.height, levels_to_height(d.levels, d.camera), rtol=0, atol=1e-12):
+        return d.height
+    knots = d.extra.get("radial_knots_waves")
+    if not knots:
+        return None
+    with torch.no_grad():
+        h = theta_to_height(RadialParam(d.camera, len(knots)).waves(torch.tensor(knots, dtype=torch.float64)),
+                            d.camera).numpy()
+    mask = _coded_mask(d.camera).numpy() > 0
+    return np.where(mask, h, PLAIN_LEVEL * level_step(d.camera))

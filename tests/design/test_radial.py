@@ -72,3 +72,16 @@ def test_a_tiny_radial_design_runs_and_records_its_knots(tmp_path):
     lv = d.levels[:, :800]
     assert (lv == lv[::-1]).mean() > 0.98
     assert not math.isnan(d.metrics["quantized"])
+
+
+def test_a_radial_design_keeps_its_continuous_heights(tmp_path):
+    """The knots in design.json rebuild the continuous heights, and quantizing them gives the stored levels."""
+    from doefab.design.optimize import finalize_levels
+    from doefab.tolerance.study import continuous_height
+
+    d = doefab.optimize("half-ring", iterations=1, parameterization="radial", knots=30, sampling=4, progress=False,
+                        task_params={"z_step": 2.0})
+    d.save(tmp_path / "d")
+    back = doefab.Design.load(tmp_path / "d")
+    h = continuous_height(back)
+    assert h is not None and np.array_equal(finalize_levels(h, back.camera), back.levels)
