@@ -79,3 +79,15 @@ def plain_name_arg(text: str) -> str:
         return plain_name(text, "name")
     except DoefabError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def design_folder(path):
+    """``(folder, Design)`` for a design folder or a mask set (its ``design/``), validated before any work."""
+    from pathlib import Path
+
+    from doefab.design.design import Design
+
+    d = Path(path)
+    if (d / "design" / "design.json").is_file():
+        d = d / "design"
+    return d, Design.load(d)

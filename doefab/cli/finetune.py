@@ -39,17 +39,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
-
+    from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output
-    from doefab.design.design import Design
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
 
-    d = Path(args.design)
-    if (d / "design" / "design.json").is_file():
-        d = d / "design"
-    if Design.load(d).task != "half-ring":
+    d, design = design_folder(args.design)
+    if design.task != "half-ring":
         raise DoefabError(f"{d}: end-to-end fine-tuning is for depth (half-ring) designs")
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")

@@ -13,7 +13,6 @@ OUT/samples.jsonl: rerun the same command with --resume to continue an interrupt
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from doefab.cli._args import number
 
@@ -44,16 +43,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output
-    from doefab.design.design import Design
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import run_study
 
-    ddir = Path(args.design)
-    if (ddir / "design" / "design.json").is_file():
-        ddir = ddir / "design"
-    Design.load(ddir)  # validated before any output exists
+    ddir, _ = design_folder(args.design)  # validated before any output exists
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))

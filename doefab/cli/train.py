@@ -64,17 +64,12 @@ def run(args) -> int:
 
 def _design_arg(args):
     """--design as a design folder (a mask set's design/ is used); None for the committed design."""
-    from pathlib import Path
-
-    from doefab.design.design import Design
+    from doefab.cli._args import design_folder
     from doefab.errors import DoefabError
 
     if not getattr(args, "design", None):
         return None
-    d = Path(args.design)
-    if (d / "design" / "design.json").is_file():
-        d = d / "design"
-    Design.load(d)  # validated: a clear error before any work
+    d, _ = design_folder(args.design)  # validated: a clear error before any work
     if getattr(args, "weights_dir", None) is None:
         raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
     return d.resolve()

@@ -16,6 +16,9 @@ Every key, its unit and default (the README documents the same table):
 | ``design.iterations`` | steps | the committed design's |
 | ``design.sampling`` | DOE pixels per design pixel | the committed design's |
 | ``design.seed`` | — | 0 |
+| ``design.parameterization`` | pixel or radial | the committed design's |
+| ``design.knots`` | radial knots (0 = one per DOE pixel along the radius) | the committed design's |
+| ``design.ring_law`` | half-ring only: seed or defocus | the committed design's |
 | ``fabrication.levels`` | 16 (4 binary masks) | 16 |
 | ``fabrication.material`` | fused silica | fused silica |
 | ``fabrication.pattern_faces`` | lens or scene | lens |
@@ -46,7 +49,8 @@ _SCHEMA = {
     "": {"task": str, "stages": list},
     "camera": {"preset": str, "focus_distance_m": float, "sensor_distance_m": float},
     "optics": {"wavelengths_nm": list, "depths_m": list, "kernel_px": int},
-    "design": {"optimizer": str, "iterations": int, "sampling": int, "seed": int},
+    "design": {"optimizer": str, "iterations": int, "sampling": int, "seed": int, "parameterization": str,
+               "knots": int, "ring_law": str},
     "fabrication": {"levels": int, "material": str, "pattern_faces": str, "oasis": bool},
     "holder": None,  # checked against HolderParams
     "reconstruction": {"weights": str, "minutes": float, "images": int, "size_px": int},

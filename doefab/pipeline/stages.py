@@ -61,13 +61,25 @@ def resolve(scene: Scene) -> dict:
                 "optimizer": scene.design.get("optimizer", cfg.get("optimizer", "adam")),
                 "iterations": scene.design.get("iterations", cfg.get("iterations")),
                 "sampling": scene.design.get("sampling", cfg.get("sampling", 1)),
-                "seed": scene.design.get("seed", cfg.get("seed", 0))}
+                "seed": scene.design.get("seed", cfg.get("seed", 0)),
+                "parameterization": scene.design.get("parameterization", cfg.get("parameterization", "pixel")),
+                "knots": scene.design.get("knots", cfg.get("knots", 0))}
+    if settings["parameterization"] not in ("pixel", "radial"):
+        raise DoefabError(f"{scene.path}: design.parameterization must be pixel or radial, got "
+                          f"{settings['parameterization']!r}")
+    if dname == "half-ring":
+        if scene.design.get("ring_law", "seed") not in ("seed", "defocus"):
+            raise DoefabError(f"{scene.path}: design.ring_law must be seed or defocus")
+        settings["ring_law"] = scene.design.get("ring_law", committed.task_params.get("ring_law", "seed"))
+    elif "ring_law" in scene.design:
+        raise DoefabError(f"{scene.path}: design.ring_law applies to depth scenes only")
     committed_settings = {"design_task": dname, "camera": committed.camera.to_dict(),
                           "wavelengths_m": list(committed.wavelengths),
                           "depths_m": [z if math.isfinite(z) else "inf" for z in committed.depths],
                           "kernel_px": committed.task_params.get("kernel_size"), "optimizer": cfg.get("optimizer"),
                           "iterations": cfg.get("iterations"), "sampling": cfg.get("sampling", 1),
-                          "seed": cfg.get("seed", 0)}
+                          "seed": cfg.get("seed", 0), "parameterization": cfg.get("parameterization", "pixel"),
+                          "knots": cfg.get("knots", 0), "ring_law": committed.task_params.get("ring_law", "seed")}
     differ = sorted(k for k in settings if settings[k] != committed_settings[k])
     return {"settings": settings, "camera": cam, "task": task, "committed_dir": committed_dir,
             "reuse": not differ, "differ": differ}
@@ -95,9 +107,11 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     else:
         s = res["settings"]
         iters = min(int(s["iterations"]), 10) if quick else int(s["iterations"])
+        params = {"kernel_size": s["kernel_px"], **({"ring_law": s["ring_law"]} if "ring_law" in s else {})}
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=max(int(s["sampling"]), 4 if quick else 1),
-                            task_params={"kernel_size": s["kernel_px"]}, progress=True)
+                            task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
+                            progress=True)
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
                 + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}

@@ -1,0 +1,164 @@
+"""Issue 12: the depth-DOE comparison table, the winner's PSFs at every plane and the end-to-end curve.
+
+Reads what ``bash scripts/depth_candidates.sh`` wrote under out/depthcand/ and writes
+benchmarks/results/depth_candidates.md, docs/depth_candidates_psfs.png and docs/depth_e2e_mae_vs_time.png.
+
+    .venv/bin/python benchmarks/depth_candidates_report.py
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+D = ROOT / "out" / "depthcand"
+CANDIDATES = [  # name, design folder, weights folder, label
+    ("committed", ROOT / "masks/half-ring/design", "committed", "committed pixel-wise (seed law, window loss)"),
+    ("radial-seed", D / "radial-seed", "radial-seed", "radial, seed law (r = 25 − 5z)"),
+    ("radial-defocus", D / "radial-defocus", "radial-defocus", "radial, defocus law (r ∝ 1/z − 1/5 m)"),
+    ("e2e", D / "e2e" / "design", "e2e-fresh", "end-to-end fine-tuned (from radial defocus)"),
+]
+
+
+def main() -> None:
+    import doefab
+    from doefab.imaging.depth_score import depth_encoding_score
+    from doefab.reconstruction.specs import psf_pair
+
+    rows = []
+    for name, design, wname, label in CANDIDATES:
+        if not (design / "design.json").is_file():
+            print(f"skip {name}: no design")
+            continue
+        d = doefab.Design.load(design)
+        pair, sha = psf_pair("depth", design)
+        score = depth_encoding_score(pair.coded, pair.depths)
+        ev = D / wname / "eval" / "metrics.json"
+        meta = D / wname / "weights" / "depth_proposed.json"
+        m = json.loads(ev.read_text())["rows"]["proposed"] if ev.is_file() else {}
+        t = json.loads(meta.read_text())["training"] if meta.is_file() else {}
+        rows.append({"name": name, "label": label, "metric": d.metrics["quantized"],
+                     "worst": d.metrics["quantized_worst"], "score": score["predicted_error_m"],
+                     "min_dprime": score["min_dprime"], "mae": m.get("mae", float("nan")),
+                     "delta": m.get("delta125", float("nan")), "rmse": m.get("rmse", float("nan")),
+                     "steps": t.get("steps", 0), "train_s": t.get("wall_time_s", 0.0),
+                     "design_s": d.extra.get("wall_time_s", float("nan")), "pair": pair})
+    joint = D / "e2e" / "eval" / "metrics.json"
+    lines = ["| candidate | ring metric mean / worst (16-level) | predicted confusion error (m) | min d′ | "
+             "network MAE (m) | δ<1.25 | RMSE (m) | network steps (6 min) | design wall time (s) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        lines.append(f"| {r['label']} | {r['metric']:.3f} / {r['worst']:.3f} | {r['score']:.4f} | "
+                     f"{r['min_dprime']:.2f} | {r['mae']:.3f} | {r['delta']:.3f} | {r['rmse']:.3f} | {r['steps']} | "
+                     f"{r['design_s']:.0f} |")
+    by_score = [r["name"] for r in sorted(rows, key=lambda r: r["score"])]
+    by_mae = [r["name"] for r in sorted(rows, key=lambda r: r["mae"])]
+    lines += ["", f"Order by predicted confusion error: {' < '.join(by_score)}.",
+              f"Order by network test MAE: {' < '.join(by_mae)}.",
+              f"Orders agree: {'yes' if by_score == by_mae else 'no'}."]
+    if joint.is_file():
+        j = json.loads(joint.read_text())["rows"]["proposed"]
+        lines.append(f"The jointly trained network of the end-to-end run itself (not the same budget): MAE "
+                     f"{j['mae']:.3f} m, δ<1.25 {j['delta125']:.3f}.")
+    hist = D / "e2e" / "history.csv"
+    if hist.is_file():
+        h = list(csv.DictReader(hist.open()))
+        t = np.array([float(r["wall_time_s"]) for r in h])
+        mae = np.array([float(r["val_mae_m"]) for r in h])
+        gain = (mae[0] - mae[-1]) / (t[-1] / 60)
+        lines.append(f"End-to-end run: validation MAE {mae[0]:.3f} → {mae[-1]:.3f} m in {t[-1] / 60:.1f} min "
+                     f"({gain * 1000:.1f} mm per minute, {len(h) - 2} steps).")
+        _curve(t, mae)
+    out = ROOT / "benchmarks" / "results" / "depth_candidates.md"
+    out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    best = min(rows, key=lambda r: r["mae"])
+    _psf_figure(rows, best["name"])
+    _all_planes(best)
+
+
+def _curve(t, mae) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.2), layout="constrained")
+    ax.plot(t / 60, mae, ".-")
+    ax.set_xlabel("wall time (min)")
+    ax.set_ylabel("validation depth MAE (m)")
+    ax.set_title("end-to-end fine-tuning (DOE + depth network)", fontsize=9)
+    ax.grid(alpha=0.3)
+    fig.savefig(ROOT / "docs" / "depth_e2e_mae_vs_time.png", dpi=110)
+    plt.close(fig)
+
+
+def _psf_figure(rows, best: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    planes = [0, 4, 8, 12, 16]
+    fig, axes = plt.subplots(len(rows), len(planes), figsize=(2.1 * len(planes), 2.2 * len(rows)),
+                             layout="constrained", squeeze=False)
+    for i, r in enumerate(rows):
+        pair = r["pair"]
+        c = pair.coded.numpy().sum(axis=1)  # R+G+B
+        k = c.shape[-1]
+        lo, hi = k // 2 - 31, k // 2 + 32
+        for j, p in enumerate(planes):
+            ax = axes[i, j]
+            img = c[p, lo:hi, lo:hi]
+            im = ax.imshow(img / img.max(), cmap="magma", vmin=0, vmax=1,
+                           extent=(-31.5, 31.5, -31.5, 31.5))
+            ax.set_title(f"{pair.depths[p]:.0f} m" + (f" — {r['name']}" + (" (winner)" if r["name"] == best else "")
+                                                      if j == 0 else ""), fontsize=8)
+            ax.tick_params(labelsize=6)
+            if j == 0:
+                ax.set_ylabel("y (sensor px)", fontsize=7)
+            if i == len(rows) - 1:
+                ax.set_xlabel("x (sensor px)", fontsize=7)
+    cb = fig.colorbar(im, ax=axes, shrink=0.6)
+    cb.set_label("coded PSF, R+G+B, / its peak", fontsize=8)
+    fig.savefig(ROOT / "docs" / "depth_candidates_psfs.png", dpi=100)
+    plt.close(fig)
+
+
+def _all_planes(r) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pair = r["pair"]
+    c = pair.coded.numpy().sum(axis=1)
+    k = c.shape[-1]
+    lo, hi = k // 2 - 31, k // 2 + 32
+    n = c.shape[0]
+    cols = 6
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.0 * cols, 2.1 * rows), layout="constrained", squeeze=False)
+    for i, ax in enumerate(axes.flat):
+        if i >= n:
+            ax.axis("off")
+            continue
+        img = c[i, lo:hi, lo:hi]
+        im = ax.imshow(img / img.max(), cmap="magma", vmin=0, vmax=1, extent=(-31.5, 31.5, -31.5, 31.5))
+        ax.set_title(f"z = {pair.depths[i]:.2f} m", fontsize=8)
+        ax.tick_params(labelsize=6)
+        ax.set_xlabel("x (sensor px)", fontsize=6)
+        ax.set_ylabel("y (sensor px)", fontsize=6)
+    cb = fig.colorbar(im, ax=axes, shrink=0.6)
+    cb.set_label("coded PSF, R+G+B, / its peak", fontsize=8)
+    fig.suptitle(f"{r['label']}: coded PSF at every depth plane (16-level, full grid)", fontsize=9)
+    fig.savefig(ROOT / "docs" / "depth_winner_psfs_all_planes.png", dpi=100)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
