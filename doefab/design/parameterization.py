@@ -112,8 +112,7 @@ class RadialParam:
         """The lens-difference profile (``start="lens"``, default for radial) or flat (``"task"``: a pixel
         task start has no radial form)."""
         if start == "lens":
-            r2 = self.radii() ** 2
-            return (-r2 * _extra_power(self.camera, task) / (2 * self.camera.design_wavelength)).float()
+            return torch.from_numpy(lens_difference_waves(self.camera, task, self.radii().numpy() ** 2)).float()
         return torch.zeros(self.knots)
 
 
@@ -126,14 +125,15 @@ def _extra_power(camera: Camera, task) -> float:
     return (0.0 if math.isinf(focus) else 1.0 / focus) - (0.0 if math.isinf(far) else 1.0 / far)
 
 
-def lens_difference_waves(camera: Camera, task):
-    """(N, N) unwrapped phase (waves) of the thin lens that refocuses the coded half to the task's farthest depth
-    (the seed's half-ring starts sharp at 5 m, ring radius 0, and blurs towards the near planes)."""
+def lens_difference_waves(camera: Camera, task, r2=None):
+    """Unwrapped phase (waves) of the thin lens that refocuses the coded half to the task's farthest depth (the
+    seed's half-ring starts sharp at 5 m, ring radius 0, and blurs towards the near planes), at squared radii
+    ``r2`` (m²; default the (N, N) DOE pixel centres)."""
     import numpy as np
 
-    n, a = camera.doe_pixels, camera.doe_pitch
-    c = (np.arange(n) - (n - 1) / 2) * a
-    r2 = c[None, :] ** 2 + c[:, None] ** 2
+    if r2 is None:
+        c = (np.arange(camera.doe_pixels) - (camera.doe_pixels - 1) / 2) * camera.doe_pitch
+        r2 = c[None, :] ** 2 + c[:, None] ** 2
     return -r2 * _extra_power(camera, task) / (2 * camera.design_wavelength)
 
 

@@ -22,6 +22,7 @@ in a real compound lens the front elements refract the cone slightly; the model 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -42,6 +43,19 @@ def _check_gap(gap: float) -> float:
     if not math.isfinite(g) or not 0.0 <= g <= MAX_GAP:
         raise DoefabError(f"DOE gap {gap!r} m is outside 0–{MAX_GAP} m (the gap is in metres: 2 mm is 2e-3)")
     return g
+
+
+@functools.lru_cache(maxsize=4)
+def _baffle(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(baffle opening, plain-half pixels inside it, squared radius) on the DOE grid: fixed per camera, so
+    computed once rather than for every wavelength, depth and sampled part."""
+    n = camera.doe_pixels
+    full = pupil_half(camera, "full")
+    circ = np.zeros((n, n))
+    circ[full.rows, full.cols] = full.coverage > 0  # the baffle opening: every pixel the clear aperture touches
+    centres = (np.arange(n) - (n - 1) / 2) * camera.doe_pitch
+    plain = (centres > 0)[None, :] & (circ > 0)
+    return circ, plain, centres[None, :] ** 2 + centres[:, None] ** 2
 
 
 def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, depth: float, gap: float,
@@ -65,17 +79,12 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     cplx = torch.complex64 if real == torch.float32 else torch.complex128
     k = 2 * math.pi / wavelength
     dn = float(camera.material.index(wavelength)) - 1.0
-    full = pupil_half(camera, "full")
-    circ = np.zeros((n, n))
-    circ[full.rows, full.cols] = full.coverage > 0  # the baffle opening: every pixel the clear aperture touches
-    centres = (np.arange(n) - (n - 1) / 2) * camera.doe_pitch
-    plain = (centres > 0)[None, :] & (circ > 0)
+    circ, plain, r2 = _baffle(camera)
     h = height.to(real)
     h_ref = h[torch.from_numpy(plain)].mean() if plain.any() else h.new_zeros(())
     phase = (k * dn) * (h - h_ref)
     if g == 0.0:
         return torch.polar(torch.ones_like(phase), phase).to(cplx)
-    r2 = centres[None, :] ** 2 + centres[:, None] ** 2
     s_in = source_path_difference(r2, depth, math.inf)  # exact sphere sag of the source at the DOE
     s_out = source_path_difference(r2, depth + g if math.isfinite(depth) else depth, math.inf)
     amp = depth / (depth + g) if math.isfinite(depth) else 1.0

@@ -64,12 +64,15 @@ def resolve(scene: Scene) -> dict:
                 "seed": scene.design.get("seed", cfg.get("seed", 0)),
                 "parameterization": scene.design.get("parameterization", cfg.get("parameterization", "pixel")),
                 "knots": scene.design.get("knots", cfg.get("knots", 0))}
-    if settings["parameterization"] not in ("pixel", "radial"):
-        raise DoefabError(f"{scene.path}: design.parameterization must be pixel or radial, got "
+    from doefab.design.parameterization import PARAMETERIZATIONS
+    from doefab.tasks.halfring import HalfRingTask
+
+    if settings["parameterization"] not in PARAMETERIZATIONS:
+        raise DoefabError(f"{scene.path}: design.parameterization must be one of {PARAMETERIZATIONS}, got "
                           f"{settings['parameterization']!r}")
     if dname == "half-ring":
-        if scene.design.get("ring_law", "seed") not in ("seed", "defocus"):
-            raise DoefabError(f"{scene.path}: design.ring_law must be seed or defocus")
+        if scene.design.get("ring_law", "seed") not in HalfRingTask.RING_LAWS:
+            raise DoefabError(f"{scene.path}: design.ring_law must be one of {HalfRingTask.RING_LAWS}")
         settings["ring_law"] = scene.design.get("ring_law", committed.task_params.get("ring_law", "seed"))
     elif "ring_law" in scene.design:
         raise DoefabError(f"{scene.path}: design.ring_law applies to depth scenes only")

@@ -71,11 +71,9 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
-          progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
-          init_weights=None) -> dict:
+          progress: bool = True, command: str = "", max_steps: int | None = None, design=None) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
-    returns the metadata record written. ``design``: a design folder other than the committed one (candidates);
-    ``init_weights``: a state dict to start from (fine-tuning) instead of a fresh network."""
+    returns the metadata record written. ``design``: a design folder other than the committed one (candidates)."""
     from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 
     spec = get_spec(task)
@@ -95,8 +93,6 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     response = _response(task, pair)
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
-    if init_weights is not None:
-        model.load_state_dict(init_weights)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     step, elapsed, history = 0, 0.0, []
     if resume:
