@@ -28,7 +28,9 @@ def register(sub) -> None:
     p.add_argument("--batch", type=number(int, 1, 64), default=4, help="scenes per step")
     p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=96,
                    help="training crop side in pixels")
-    p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate")
+    p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate at the start")
+    p.add_argument("--schedule", default="cosine", choices=["cosine", "constant"],
+                   help="learning rate over the wall-time budget: cosine decay to 5 %% of --lr, or constant")
     p.add_argument("--design", default=None,
                    help="train for this design folder (or mask set) instead of the committed one; use with --weights-dir")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
@@ -55,6 +57,7 @@ def run(args) -> int:
     out.create()
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
+                 schedule=args.schedule,
                  command="doefab " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("doefab") else "doefab train")
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "

@@ -3,7 +3,9 @@
 Every step draws its batch from the training split by sample index (``step · batch + b``), so a resumed run
 sees exactly the batches an uninterrupted one would; the model, the optimiser and the step are checkpointed
 (atomically, loaded with ``weights_only=True``). ``history.csv`` logs step, wall time, loss and the validation
-metric; a progress bar shows the loss and the metric. The finished weights and their metadata record
+metric; a progress bar shows the loss and the metric. The learning rate follows a cosine decay over the *wall-time*
+budget (``schedule="cosine"``, to 5 % of ``lr`` at the end): a fixed-minutes run cannot know its step count in
+advance, and a network trained for minutes gains most from annealing at the end (``"constant"`` turns it off). The finished weights and their metadata record
 (design ``levels_sha256``, PSF settings, training command, seed, wall time, validation metrics, the weights'
 SHA-256) are written atomically beside each other.
 """
@@ -25,9 +27,22 @@ from doefab.reconstruction.metrics import metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
-__all__ = ["train", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs", "evaluate_batch"]
+__all__ = ["train", "lr_factor", "SCHEDULES", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs", "evaluate_batch"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
+SCHEDULES = ("cosine", "constant")
+LR_FLOOR = 0.05
+
+
+def lr_factor(schedule: str, fraction: float) -> float:
+    """Learning-rate multiplier after ``fraction`` of the wall-time budget: 1 throughout for ``"constant"``;
+    for ``"cosine"`` from 1 down to ``LR_FLOOR`` along half a cosine, and ``LR_FLOOR`` past the budget."""
+    if schedule == "constant":
+        return 1.0
+    if schedule != "cosine":
+        raise DoefabError(f"unknown learning-rate schedule {schedule!r}: use one of {', '.join(SCHEDULES)}")
+    f = min(max(float(fraction), 0.0), 1.0)
+    return float(LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + np.cos(np.pi * f)))  # a Python float: checkpoints stay weights_only
 
 
 def weights_paths(task: str, variant: str, folder: str | Path | None = None) -> tuple[Path, Path]:
@@ -71,12 +86,14 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
-          progress: bool = True, command: str = "", max_steps: int | None = None, design=None) -> dict:
+          progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
+          schedule: str = "cosine") -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
     returns the metadata record written. ``design``: a design folder other than the committed one (candidates)."""
     from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 
     spec = get_spec(task)
+    lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     if crop % 32 or crop < 64:
@@ -87,7 +104,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
-              "val_images": val_images, "design": None if design is None else str(design)}
+              "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design)}
     pair, sha = psf_pair(task, design)
     psf = model_inputs(task, pair)
     response = _response(task, pair)
@@ -123,6 +140,8 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
         while time.perf_counter() - t0 < budget and (max_steps is None or step < max_steps):
             coded, uncoded, target = make_batch(task, "train", range(step * batch, (step + 1) * batch), crop, pair,
                                                 response)
+            for group in opt.param_groups:
+                group["lr"] = lr * lr_factor(schedule, (time.perf_counter() - t0) / budget)
             opt.zero_grad()
             loss = loss_fn(task, model(coded, uncoded, psf), target)
             if not torch.isfinite(loss):
@@ -160,6 +179,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                     "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",
                     "from": "the committed 16-level level map (levels.npy)"},
             "training": {"command": command, "seed": seed, "steps": step, "batch": batch, "crop_px": crop, "lr": lr,
+                         "schedule": schedule,
                          "wall_time_s": round(time.perf_counter() - t0, 1), "minutes_budget": minutes},
             "validation": {"images": val_images, "crop_px": crop, **final},
             "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
