@@ -1,0 +1,30 @@
+"""The wall-time learning-rate schedule of ``doefab train``."""
+
+import math
+
+import pytest
+import torch
+
+from doefab.errors import DoefabError
+from doefab.reconstruction.train import LR_FLOOR, lr_factor, train
+
+
+def test_cosine_factor_is_half_a_cosine_to_the_floor():
+    assert lr_factor("cosine", 0.0) == pytest.approx(1.0)
+    assert lr_factor("cosine", 0.5) == pytest.approx((1 + LR_FLOOR) / 2)
+    assert lr_factor("cosine", 0.25) == pytest.approx(LR_FLOOR + (1 - LR_FLOOR) * (1 + math.cos(math.pi / 4)) / 2)
+    assert lr_factor("cosine", 1.0) == pytest.approx(LR_FLOOR)
+    assert lr_factor("cosine", 3.0) == pytest.approx(LR_FLOOR)  # a resumed run past its budget
+    assert lr_factor("constant", 0.9) == 1.0
+    with pytest.raises(DoefabError, match="unknown learning-rate schedule"):
+        lr_factor("step", 0.5)
+
+
+def test_training_anneals_over_its_wall_time_budget(tmp_path):
+    meta = train("hdr", "proposed", minutes=0.2, out_dir=tmp_path / "run", weights_dir=tmp_path / "w", crop=64,
+                 val_images=1, val_every=1000, arch={"features": 1, "width": 4}, progress=False, lr=1e-3)
+    state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    last_lr = state["optimizer"]["param_groups"][0]["lr"]
+    assert meta["training"]["schedule"] == "cosine" and meta["training"]["steps"] >= 2
+    assert last_lr < 0.5e-3  # the last step ran in the second half of the budget, well below the start rate
+    assert last_lr >= LR_FLOOR * 1e-3 * (1 - 1e-9)
