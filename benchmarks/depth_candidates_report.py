@@ -17,7 +17,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 D = ROOT / "out" / "depthcand"
 CANDIDATES = [  # name, design folder, weights folder, label
-    ("committed", ROOT / "masks/half-ring/design", "committed", "committed pixel-wise (seed law, window loss)"),
+    ("pixelwise", D / "pixelwise", "pixelwise", "pixel-wise, the earlier default (seed law, window loss)"),
     ("radial-seed", D / "radial-seed", "radial-seed", "radial, seed law (r = 25 − 5z)"),
     ("radial-defocus", D / "radial-defocus", "radial-defocus", "radial, defocus law (r ∝ 1/z − 1/5 m)"),
     ("e2e", D / "e2e" / "design", "e2e-fresh", "end-to-end fine-tuned (from radial defocus)"),
