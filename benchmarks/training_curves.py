@@ -1,6 +1,7 @@
 """Validation metric against training wall time for every task and variant (what a 2-minute model buys against
-a longer one), from the run folders `doefab train` writes (out/train/<task>_<variant>/history.csv).
-Writes benchmarks/results/training_curves.png. Run: .venv/bin/python benchmarks/training_curves.py
+a longer one), from the validation curves shipped beside the weights (doefab/weights/<task>_<variant>_history.csv,
+copies of the history.csv that `doefab train` writes). Writes benchmarks/results/training_curves.png.
+Run: .venv/bin/python benchmarks/training_curves.py
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ LABELS = {"hdr": "validation PSNR (dB, peak 2^8)", "hyperspectral": "validation 
           "depth": "validation MAE (m, lower is better)"}
 
 
-def main(runs: Path = Path("out/train")):
+def main(weights: Path = Path(__file__).resolve().parents[1] / "doefab" / "weights"):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -22,17 +23,16 @@ def main(runs: Path = Path("out/train")):
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), layout="constrained")
     for ax, task in zip(axes, ("hdr", "hyperspectral", "depth")):
         for variant in ("proposed", "coded_only", "uncoded_only"):
-            f = runs / f"{task}_{variant}" / "history.csv"
+            f = weights / f"{task}_{variant}_history.csv"
             if not f.is_file():
                 continue
             rows = list(csv.reader(open(f)))[1:]
             pts = [(float(r[1]) / 60, float(r[3])) for r in rows if r[3] not in ("nan", "")]
-            seen, xs, ys = set(), [], []
-            for x, y in pts:
-                if y not in seen or True:
+            xs, ys = [], []
+            for x, y in pts:  # the metric is repeated on the rows between validations: keep one point each
+                if not ys or y != ys[-1]:
                     xs.append(x)
                     ys.append(y)
-                seen.add(y)
             ax.plot(xs, ys, marker=".", label=variant.replace("_", "-"))
         ax.axvline(2, color="grey", ls=":", lw=1)
         ax.set_xlabel("training wall time (minutes, 2-core CPU)")

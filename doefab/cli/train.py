@@ -58,7 +58,7 @@ def run(args) -> int:
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
                  schedule=args.schedule,
-                 command="doefab " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("doefab") else "doefab train")
+                 command=_command_line())
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_file']} and its .json")
@@ -76,3 +76,12 @@ def _design_arg(args):
     if getattr(args, "weights_dir", None) is None:
         raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
     return d.resolve()
+
+
+def _command_line() -> str:
+    """The command that trained the weights, for their metadata: ``doefab train ...`` whether it ran as the
+    ``doefab`` script or as ``python -m doefab``; ``doefab train`` alone when called from Python."""
+    argv0 = sys.argv[0].replace("\\", "/")
+    if argv0.endswith("/doefab") or argv0 == "doefab" or argv0.endswith("doefab/__main__.py"):
+        return "doefab " + " ".join(sys.argv[1:])
+    return "doefab train"

@@ -49,7 +49,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     summary = {v: {k: float(np.nanmean([r[k] for r in rs])) for k in rs[0]} for v, rs in rows.items()}
     result = {"task": task, "test_images": images, "seed": SPLIT_SEEDS["test"], "size_px": size,
               "noise": "default (Poisson–Gaussian)", "rows": summary,
-              "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"]}
+              "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
+                              "lr_schedule": r.meta["training"].get("schedule", "constant")}
                           for v, r in recs.items()}}
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "metrics.json", result)
