@@ -2,7 +2,8 @@
 
 Writes the weights and their metadata record (default: the package's shipped weights folder,
 doefab/weights/<task>_<variant>.pt/.json), and OUT/checkpoint.pt + OUT/history.csv while running.
-Interrupted runs keep the checkpoint: rerun the same command with --resume (it may raise --minutes).
+Interrupted runs keep the checkpoint: rerun the same command with --resume (it may raise --minutes; with the
+cosine schedule a larger budget stretches the decay, so the learning rate rises again).
 """
 
 from __future__ import annotations

@@ -3,9 +3,11 @@
 Every step draws its batch from the training split by sample index (``step · batch + b``), so a resumed run
 sees exactly the batches an uninterrupted one would; the model, the optimiser and the step are checkpointed
 (atomically, loaded with ``weights_only=True``). ``history.csv`` logs step, wall time, loss and the validation
-metric; a progress bar shows the loss and the metric. The learning rate follows a cosine decay over the *wall-time*
-budget (``schedule="cosine"``, to 5 % of ``lr`` at the end): a fixed-minutes run cannot know its step count in
-advance, and a network trained for minutes gains most from annealing at the end (``"constant"`` turns it off). The finished weights and their metadata record
+metric; a progress bar shows the loss and the metric. The learning rate follows a cosine decay over the
+*wall-time* budget (``schedule="cosine"``, to 5 % of ``lr`` at the end): a fixed-minutes run cannot know its
+step count in advance, and a network trained for minutes gains most from annealing at the end (``"constant"``
+turns it off); a resumed run continues the schedule from the checkpoint's elapsed time, and a larger budget on
+resume stretches it (the rate rises again). The finished weights and their metadata record
 (design ``levels_sha256``, PSF settings, training command, seed, wall time, validation metrics, the weights'
 SHA-256) are written atomically beside each other.
 """
@@ -27,7 +29,8 @@ from doefab.reconstruction.metrics import metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
-__all__ = ["train", "lr_factor", "SCHEDULES", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs", "evaluate_batch"]
+__all__ = ["train", "lr_factor", "SCHEDULES", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs",
+           "evaluate_batch"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 SCHEDULES = ("cosine", "constant")
@@ -42,7 +45,8 @@ def lr_factor(schedule: str, fraction: float) -> float:
     if schedule != "cosine":
         raise DoefabError(f"unknown learning-rate schedule {schedule!r}: use one of {', '.join(SCHEDULES)}")
     f = min(max(float(fraction), 0.0), 1.0)
-    return float(LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + np.cos(np.pi * f)))  # a Python float: checkpoints stay weights_only
+    # a Python float, not numpy's: the optimiser state goes into checkpoints loaded with weights_only=True
+    return float(LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + np.cos(np.pi * f)))
 
 
 def weights_paths(task: str, variant: str, folder: str | Path | None = None) -> tuple[Path, Path]:
