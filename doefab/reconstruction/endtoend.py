@@ -113,12 +113,16 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     psf_u = nominal.uncoded.to(torch.float32)
     plan = PSFPlan(dcam, design.wavelengths, design.depths, spec.kernel, halves=("coded",))
     torch.manual_seed(seed)
-    arch = default_arch("depth")
-    net = build_model("depth", "proposed", arch)
+    arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
     start_from = "a fresh network"
     if weights_dir is not None:
-        net.load_state_dict(load_reconstructor("depth", "proposed", weights_dir, design_dir).model.state_dict())
+        rec = load_reconstructor("depth", "proposed", weights_dir, design_dir)
+        arch = rec.meta["arch"]
+        net = build_model("depth", "proposed", arch)
+        net.load_state_dict(rec.model.state_dict())
         start_from = f"the network in {weights_dir}"
+    else:
+        net = build_model("depth", "proposed", arch)
     opt_net = torch.optim.Adam(net.parameters(), lr=lr_net)
     opt_doe = torch.optim.Adam([theta], lr=lr_doe)
     out = Path(out_dir)
@@ -148,7 +152,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
                                      noise_seed=seed + 1)
         net.eval()
         with torch.no_grad():
-            mae = float((net(c, u, None) - d).abs().mean())
+            mae = float((net(c, u, torch.stack([psf_c.detach().float(), psf_u])) - d).abs().mean())
         net.train()
         return mae
 
@@ -182,7 +186,8 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
                                          noise_seed=seed * 1_000_003 + step)
             opt_net.zero_grad()
             opt_doe.zero_grad()
-            loss = loss_fn("depth", net(c, u, None), d)
+            # the cost volume sees the coded PSF too (differentiable in it on joint steps)
+            loss = loss_fn("depth", net(c, u, torch.stack([(psf_c if joint else psf_c.detach()).float(), psf_u])), d)
             if not torch.isfinite(loss):
                 raise DoefabError(f"loss became {float(loss)} at step {step}; the last checkpoint is kept in {ckpt}")
             loss.backward()

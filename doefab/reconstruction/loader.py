@@ -28,8 +28,8 @@ class Reconstructor:
     """A trained network with the PSF pair and design it was trained for.
 
     ``rec(coded, uncoded)`` → [3, H, W] HDR radiance | [31, H, W] spectra | [H, W] depth in metres (numpy in,
-    numpy out; torch in, torch out); ``rec(coded, uncoded, psf=pair)`` conditions the HDR / hyperspectral
-    networks on another (e.g. measured or fabricated) PSF pair instead.
+    numpy out; torch in, torch out); ``rec(coded, uncoded, psf=pair)`` conditions the network on another (e.g.
+    measured or fabricated) PSF pair instead (depth: the proposed network's cost volume uses both halves).
     """
 
     def __init__(self, task: str, variant: str, model: torch.nn.Module, pair, design_sha256: str, meta: dict):
@@ -39,6 +39,8 @@ class Reconstructor:
     def _psf(self, psf):
         if psf is None:
             return model_inputs(self.task, self.pair)
+        if self.task == "depth":
+            return self._depth_psf(psf)
         coded = getattr(psf, "coded", psf)
         t = torch.as_tensor(coded.detach() if isinstance(coded, torch.Tensor) else np.asarray(coded)).float()
         if t.ndim == 4:
@@ -53,6 +55,18 @@ class Reconstructor:
             raise DoefabError("psf must be finite and non-negative")
         return t[None]
 
+    def _depth_psf(self, psf):
+        """A PSF pair (both halves, the network's depth planes and wavelengths) for the cost volume."""
+        if getattr(psf, "coded", None) is None or getattr(psf, "uncoded", None) is None:
+            raise DoefabError("the depth network takes psf=a PSF pair with both halves (coded and uncoded)")
+        if not np.allclose(psf.depths, self.pair.depths) or not np.allclose(psf.wavelengths, self.pair.wavelengths):
+            raise DoefabError(f"the PSF pair's depth planes or wavelengths differ from the network's "
+                              f"({len(self.pair.depths)} planes {self.pair.depths[0]:g}–{self.pair.depths[-1]:g} m)")
+        t = model_inputs("depth", psf)
+        if t.shape != model_inputs("depth", self.pair).shape or not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
+            raise DoefabError(f"psf must be finite, non-negative and {tuple(self.pair.coded.shape)} per half")
+        return t
+
     def __call__(self, coded, uncoded, psf=None):
         torch_in = isinstance(coded, torch.Tensor)
         views = []
@@ -65,7 +79,7 @@ class Reconstructor:
             views.append(t[None])
         if views[0].shape != views[1].shape:
             raise DoefabError(f"coded {tuple(views[0].shape[1:])} and uncoded {tuple(views[1].shape[1:])} differ in shape")
-        p = self._psf(psf) if self.task != "depth" else None
+        p = self._psf(psf)
         with torch.no_grad():
             out = self.model(views[0], views[1], p)[0]
         return out if torch_in else out.numpy()

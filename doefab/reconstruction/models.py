@@ -11,19 +11,22 @@ from doefab.reconstruction.specs import get_spec
 __all__ = ["default_arch", "build_model", "loss_fn"]
 
 
-def default_arch(task: str) -> dict:
-    """Sizes that train in minutes on a 2-core CPU (the authors' networks take seconds per step here)."""
-    return {"hdr": {"features": 4, "width": 16}, "hyperspectral": {"features": 2, "width": 16},
-            "depth": {"width": 16}}[get_spec(task).name]
+def default_arch(task: str, variant: str = "proposed") -> dict:
+    """Sizes that train in minutes on a 2-core CPU (the authors' networks take seconds per step here). The
+    proposed depth network adds the two captures' cross-blur cost volume (it needs both captures)."""
+    if get_spec(task).name == "depth":
+        return {"width": 16, "cost_volume": variant == "proposed", "planes": 17}
+    return {"hdr": {"features": 4, "width": 16}, "hyperspectral": {"features": 2, "width": 16}}[task]
 
 
 def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.Module:
     spec = get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
-    arch = arch or default_arch(task)
-    if task == "depth":
-        return DepthNet(variant, width=int(arch["width"]))
+    arch = arch or default_arch(task, variant)
+    if task == "depth":  # records without "cost_volume" predate it (networks without one)
+        return DepthNet(variant, width=int(arch["width"]), cost_volume=bool(arch.get("cost_volume", False)),
+                        planes=int(arch.get("planes", 17)))  # 17: the seed's planes, 1–5 m in 0.25 m steps
     return DeconvNet(spec.out_channels, spec.out_channels, variant, features=int(arch["features"]),
                      width=int(arch["width"]), log_output=task == "hdr",
                      baseline=spectral_baseline() if task == "hyperspectral" else None)

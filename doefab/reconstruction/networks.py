@@ -9,7 +9,12 @@
 - ``DepthNet`` (G_depth): a ResNet-18 trunk encodes each capture — the weights are shared between the two
   captures, as in the authors' code: both are images of the same scene through the same lens, and sharing
   halves the parameters a CPU has to train — and one decoder turns the concatenated features into metric
-  depth (softplus, metres). Loss L1 + gradient (Eq. 28, ``depth_loss``).
+  depth (sigmoid to 0–6 m). Loss L1 + gradient (Eq. 28, ``depth_loss``). The ``proposed`` variant also gets
+  the cross-blur cost volume of the two captures (``costvolume.py``: ``p_u(z)∗c − p_c(z)∗u`` vanishes at the
+  true depth plane), encoded by a small convolution and added to the decoder's input at every scale: the
+  physics of the two halves hands the network a per-pixel depth cue, and it learns to trust it where the
+  scene has texture and to fill in from context where it has none. Coded-only and uncoded-only cannot form it
+  (it needs both captures), so they see exactly one capture as before.
 
 Inputs are [B, 3, H, W] with H and W multiples of 32 (≥ 64).
 """
@@ -21,6 +26,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from doefab.errors import DoefabError
+from doefab.reconstruction.costvolume import cross_blur_cost, relative_log_cost
 from doefab.reconstruction.resnet import ResNet18Trunk
 from doefab.reconstruction.wiener import WienerDeconvolution
 
@@ -134,27 +140,43 @@ class DeconvNet(nn.Module):
 class DepthNet(nn.Module):
     """G_depth: shared ResNet-18 trunk for both captures, one decoder, metric depth (metres) out."""
 
-    def __init__(self, variant: str = "proposed", width: int = 16, max_depth_m: float = 6.0):
+    def __init__(self, variant: str = "proposed", width: int = 16, max_depth_m: float = 6.0,
+                 cost_volume: bool = False, planes: int = 17, window: int = 9):
         super().__init__()
         if variant not in VARIANTS:
             raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+        if cost_volume and variant != "proposed":
+            raise DoefabError("the cross-blur cost volume needs both captures: use it with the proposed variant only")
         self.variant, self.max_depth = variant, max_depth_m
+        self.cost_volume, self.planes, self.window = cost_volume, planes, window
         self.trunk = ResNet18Trunk(3, width)
         n_in = 1 if variant != "proposed" else 2
         ch = [c * n_in for c in self.trunk.channels]
+        cf = 16 if cost_volume else 0
+        if cost_volume:
+            self.cost_enc = nn.Sequential(nn.Conv2d(planes, 32, 3, padding=1), nn.LeakyReLU(0.1),
+                                          nn.Conv2d(32, cf, 3, padding=1), nn.LeakyReLU(0.1))
         self.up = nn.ModuleList()
-        prev = ch[-1]
+        prev = ch[-1] + cf
         for skip in reversed(ch[:-1]):
-            self.up.append(_conv(prev + skip, skip))
+            self.up.append(_conv(prev + skip + cf, skip))
             prev = skip
         self.head = nn.Sequential(nn.Conv2d(prev, 16, 3, padding=1), nn.LeakyReLU(0.1), nn.Conv2d(16, 1, 1))
 
     def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf=None) -> torch.Tensor:
+        """``psf``: [2, D, 3, K, K] (coded, uncoded) PSFs of the depth planes, needed with the cost volume."""
         inputs = {"proposed": (coded, uncoded), "coded_only": (coded,), "uncoded_only": (uncoded,)}[self.variant]
         for x, name in zip(inputs, ("coded", "uncoded") if self.variant == "proposed" else (self.variant[:-5],)):
             check_input(x, name)
         feats = [self.trunk(x) for x in inputs]
         levels = [torch.cat(fs, dim=1) for fs in zip(*feats)]
+        if self.cost_volume:
+            if psf is None or psf.ndim != 5 or psf.shape[0] != 2 or psf.shape[1] != self.planes:
+                raise DoefabError(f"the depth network needs psf [2, {self.planes}, 3, K, K] (coded and uncoded PSFs "
+                                  f"of its depth planes), got {None if psf is None else tuple(psf.shape)}")
+            cost = relative_log_cost(cross_blur_cost(coded, uncoded, psf[0], psf[1], self.window))
+            cf = self.cost_enc(cost)
+            levels = [torch.cat([lv, F.adaptive_avg_pool2d(cf, lv.shape[-2:])], dim=1) for lv in levels]
         y = levels[-1]
         for block, skip in zip(self.up, reversed(levels[:-1])):
             y = F.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)

@@ -60,9 +60,10 @@ def history_path(task: str, variant: str, folder: str | Path | None = None) -> P
 
 
 def model_inputs(task: str, pair) -> torch.Tensor | None:
-    """The PSF the network is conditioned on: the coded PSF per band, [1, C, K, K] (None for depth)."""
+    """The PSFs the network is conditioned on: the coded PSF per band, [1, C, K, K] (HDR, hyperspectral); the
+    coded and uncoded PSFs of every depth plane, [2, D, 3, K, K] (depth: its cross-blur cost volume)."""
     if task == "depth":
-        return None
+        return torch.stack([pair.coded, pair.uncoded]).to(torch.float32)
     return pair.coded[0][None].to(torch.float32)
 
 
@@ -103,13 +104,15 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     if crop % 32 or crop < 64:
         raise DoefabError(f"crop must be a multiple of 32 and at least 64, got {crop}")
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
-    arch = arch or default_arch(task)
+    arch = arch or default_arch(task, variant)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
               "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design)}
     pair, sha = psf_pair(task, design)
+    if arch.get("cost_volume"):  # the cost volume has one channel per depth plane of the design
+        arch = {**arch, "planes": len(pair.depths)}
     psf = model_inputs(task, pair)
     response = _response(task, pair)
     torch.manual_seed(seed)

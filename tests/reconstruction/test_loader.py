@@ -77,3 +77,23 @@ def test_resume_is_exact(tmp_path):
     a = torch.load(tmp_path / "wa" / "hdr_proposed.pt", weights_only=True)
     b = torch.load(tmp_path / "wb" / "hdr_proposed.pt", weights_only=True)
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_depth_network_takes_its_cost_volume_psfs_and_a_swapped_pair(tmp_path):
+    from types import SimpleNamespace
+
+    meta = train("depth", "proposed", minutes=5, out_dir=tmp_path / "run", weights_dir=tmp_path / "w", crop=64,
+                 val_images=1, val_every=100, max_steps=1, arch={"width": 4, "cost_volume": True}, progress=False)
+    assert meta["arch"]["cost_volume"] is True
+    rec = doefab.load_reconstructor("depth", weights_dir=tmp_path / "w")
+    c, u = torch.rand(3, 64, 64), torch.rand(3, 64, 64)
+    d = rec(c, u)
+    assert d.shape == (64, 64) and torch.equal(d, rec(c, u, psf=rec.pair))  # default = its own pair
+    p = rec.pair
+    swapped = SimpleNamespace(coded=p.uncoded, uncoded=p.coded, depths=p.depths, wavelengths=p.wavelengths)
+    assert not torch.allclose(d, rec(c, u, psf=swapped))  # the cost volume reads the PSFs it is given
+    other = SimpleNamespace(coded=p.coded[:1], uncoded=p.uncoded[:1], depths=p.depths[:1], wavelengths=p.wavelengths)
+    with pytest.raises(DoefabError, match="depth planes"):
+        rec(c, u, psf=other)
+    with pytest.raises(DoefabError, match="both halves"):
+        rec(c, u, psf=p.coded)

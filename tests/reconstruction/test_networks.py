@@ -46,6 +46,24 @@ def test_depth_net_shapes_and_gradients(variant):
     assert all(p.grad is not None for p in net.parameters())
 
 
+def test_depth_net_with_cost_volume_uses_the_psfs():
+    torch.manual_seed(0)
+    net = DepthNet("proposed", width=4, cost_volume=True, planes=3)
+    psf = torch.rand(2, 3, 3, 9, 9)
+    psf = psf / psf.sum(dim=(-2, -1), keepdim=True)
+    coded, uncoded = torch.rand(2, 3, 64, 64), torch.rand(2, 3, 64, 64)
+    y = net(coded, uncoded, psf)
+    assert y.shape == (2, 64, 64)
+    depth_loss(y, torch.full_like(y, 3.0)).backward()
+    assert all(p.grad is not None for p in net.parameters())
+    with torch.no_grad():  # the output depends on the PSFs it is given (the cost volume is an input)
+        assert not torch.allclose(net(coded, uncoded, psf), net(coded, uncoded, psf.flip(1)))
+    with pytest.raises(DoefabError, match="needs psf"):
+        net(coded, uncoded)
+    with pytest.raises(DoefabError, match="both captures"):
+        DepthNet("coded_only", width=4, cost_volume=True)
+
+
 def test_a_few_training_steps_lower_the_loss():
     torch.manual_seed(0)
     net = DeconvNet(3, 3, "proposed", features=2, width=8)
