@@ -171,8 +171,8 @@ class NetworkJudge:
         batch = make_batch(self.task, "test", range(self.images), self.size, pair, _response(self.task, pair))
         out = {}
         for label, psf in (("nominal_psf", None), ("measured_psf", pair)):
-            rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf if self.task != "depth" else None)),
-                                t.numpy()) for c, u, t in zip(*batch)]
+            rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf)), t.numpy())
+                    for c, u, t in zip(*batch)]
             out[label] = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
         return out
 
