@@ -42,10 +42,13 @@ def main(samples: int = 4):
         t = time.perf_counter()
         b = study.monte_carlo(ddir, budget, n, Path(tmp) / "b", seed=3, progress=False, scheduler="local:2")
         t_b = time.perf_counter() - t
-    same = [r["metric"] for r in a] == [r["metric"] for r in b]
+    # in process torch uses both cores, a worker one thread: float32 sums may round differently
+    diff = max(abs(x["metric"] - y["metric"]) for x, y in zip(a, b))
+    same = "yes, bit for bit" if diff == 0 else (f"yes to {diff:.1e} (float32 rounding)" if diff < 1e-6 else
+                                                 f"NO: differ by up to {diff:.2e}")
     rows.append(f"| in process (judge already built) | {n} | {t_a:.1f} | — |")
     rows.append(f"| Dask LocalCluster, 2 workers (includes start-up and each worker's PSF set-up) | {n} | {t_b:.1f} | "
-                f"{'yes' if same else 'NO'} |")
+                f"{same} |")
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "tolerance_speed.md").write_text("\n".join(rows) + "\n")
     print("\n".join(rows))
