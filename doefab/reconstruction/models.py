@@ -16,7 +16,9 @@ def default_arch(task: str, variant: str = "proposed") -> dict:
     proposed depth network adds the two captures' cross-blur cost volume (it needs both captures)."""
     if get_spec(task).name == "depth":
         return {"width": 16, "cost_volume": variant == "proposed", "planes": 17}
-    return {"hdr": {"features": 4, "width": 16}, "hyperspectral": {"features": 2, "width": 16}}[task]
+    if task == "hyperspectral":
+        return {"features": 2, "width": 16, "illuminant_search": variant == "proposed"}
+    return {"hdr": {"features": 4, "width": 16}}[task]
 
 
 def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.Module:
@@ -29,7 +31,18 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
                         planes=int(arch.get("planes", 17)))  # 17: the seed's planes, 1–5 m in 0.25 m steps
     return DeconvNet(spec.out_channels, spec.out_channels, variant, features=int(arch["features"]),
                      width=int(arch["width"]), log_output=task == "hdr",
-                     baseline=spectral_baseline() if task == "hyperspectral" else None)
+                     baseline=spectral_baseline() if task == "hyperspectral" else None,
+                     illuminant=_illuminant_search() if arch.get("illuminant_search") else None)
+
+
+def _illuminant_search():
+    """(response [3, 31], inverses [J, 31, 3]) for the proposed hyperspectral network's illuminant search."""
+    from doefab.imaging.sensor import sensor_response
+    from doefab.reconstruction.data import HS_WAVELENGTHS_M
+    from doefab.reconstruction.illuminant import illuminant_inverses, illuminant_library
+
+    t = sensor_response(HS_WAVELENGTHS_M)
+    return t, illuminant_inverses(t, illuminant_library())
 
 
 def spectral_baseline(smooth: float = 1e-3, eps: float = 1e-6):

@@ -5,7 +5,10 @@
   their mean for the learned features), one per band for hyperspectral — concatenated with features of the
   uncoded capture, and decoded by a small U-Net. The PSF is an input: a measured or fabricated PSF can be
   swapped in at test time. Variants: ``proposed`` (both captures), ``coded_only``, ``uncoded_only`` (no
-  deconvolution branch: it sees what a conventional camera sees).
+  deconvolution branch: it sees what a conventional camera sees). The hyperspectral networks predict a
+  residual over a linear spectral estimate from one capture; for the proposed one that estimate is the
+  smooth inverse under the illuminant the grating's dispersion points to (``illuminant.py``), for the
+  ablations one fixed smooth inverse of the sensor response.
 - ``DepthNet`` (G_depth): a ResNet-18 trunk encodes each capture — the weights are shared between the two
   captures, as in the authors' code: both are images of the same scene through the same lens, and sharing
   halves the parameters a CPU has to train — and one decoder turns the concatenated features into metric
@@ -27,6 +30,7 @@ from torch import nn
 
 from doefab.errors import DoefabError
 from doefab.reconstruction.costvolume import cross_blur_cost, relative_log_cost
+from doefab.reconstruction.illuminant import search_illuminant
 from doefab.reconstruction.resnet import ResNet18Trunk
 from doefab.reconstruction.wiener import WienerDeconvolution
 
@@ -76,8 +80,15 @@ class DeconvNet(nn.Module):
     HDR, one per band for hyperspectral)."""
 
     def __init__(self, out_channels: int, n_psf: int, variant: str = "proposed", features: int = 4, width: int = 16,
-                 log_output: bool = False, baseline=None):
+                 log_output: bool = False, baseline=None, illuminant=None):
         super().__init__()
+        # optional (response [3, C], inverses [J, C, 3]): the proposed hyperspectral network replaces the fixed
+        # baseline by the smooth inverse of the illuminant whose predicted coded capture matches the measured
+        # one best (``illuminant.py``) — the dispersion tells illuminants apart that RGB cannot
+        self.register_buffer("response", None if illuminant is None else torch.as_tensor(illuminant[0]).float(),
+                             persistent=False)
+        self.register_buffer("inverses", None if illuminant is None else torch.as_tensor(illuminant[1]).float(),
+                             persistent=False)
         # optional linear baseline [out_channels, 3]: the network predicts a residual over baseline @ capture
         # (hyperspectral: a smooth least-squares inverse of the sensor response), so even a briefly trained
         # network starts from a physically sensible spectrum
@@ -127,7 +138,10 @@ class DeconvNet(nn.Module):
             check_input(uncoded, "uncoded")
             parts.append(self.feat_uncoded(uncoded))
         y = self.unet(torch.cat(parts, dim=1))
-        if self.baseline is not None:
+        if self.inverses is not None and self.variant == "proposed":
+            idx, _ = search_illuminant(coded, uncoded, psf[0], self.response, self.inverses)
+            y = y + torch.einsum("boc,bchw->bohw", self.inverses[idx], uncoded)
+        elif self.baseline is not None:
             src = coded if self.variant == "coded_only" else uncoded
             y = y + torch.einsum("oc,bchw->bohw", self.baseline, src)
         # A linear output keeps the L1 gradient alive everywhere (a softplus head died on dark pixels); the

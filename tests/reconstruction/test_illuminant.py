@@ -1,0 +1,108 @@
+"""Illuminant search: the smooth inverses are exact for smooth reflectances, the search finds the illuminant
+from a dispersed capture, and the proposed hyperspectral network starts from the inverse it picks."""
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from doefab.errors import DoefabError
+from doefab.imaging.sensor import sensor_response
+from doefab.reconstruction.data import HS_WAVELENGTHS_M
+from doefab.reconstruction.illuminant import illuminant_inverses, illuminant_library, search_illuminant
+
+T = sensor_response(HS_WAVELENGTHS_M).astype(np.float64)
+LAM = np.arange(31)
+
+
+def _library():
+    flat = np.ones(31)
+    spiky_blue = 0.2 + np.exp(-0.5 * ((LAM - 6) / 0.8) ** 2)
+    spiky_red = 0.2 + np.exp(-0.5 * ((LAM - 22) / 0.8) ** 2)
+    return np.stack([flat, spiky_blue, spiky_red])
+
+
+def test_inverse_solves_its_regularised_least_squares_and_reproduces_the_capture():
+    lib = _library()
+    inv = illuminant_inverses(T, lib, smooth=1e-3, eps=1e-6)
+    assert inv.shape == (3, 31, 3)
+    rho = 0.2 + 0.6 * LAM / 30
+    d2 = np.diff(np.eye(31), 2, axis=0)
+    for j, e in enumerate(lib):
+        c = 0.5 * T @ (e * rho)
+        # independent: the stacked least-squares system [A; √μ D²; √ε I] ρ = [c; 0; 0], solved by lstsq
+        a = 0.5 * T * e[None, :]
+        big = np.vstack([a, np.sqrt(1e-3) * d2, np.sqrt(1e-6) * np.eye(31)])
+        rho_ls = np.linalg.lstsq(big, np.concatenate([c, np.zeros(29 + 31)]), rcond=None)[0]
+        np.testing.assert_allclose(inv[j] @ c, e * rho_ls, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(0.5 * T @ (inv[j] @ c), c, rtol=3e-2)  # reproduces the capture (regularised)
+
+
+def _dispersed_scene(e, size=64, seed=0):
+    """Half-exposure captures of regions with linear-in-wavelength reflectances under ``e``; the coded PSF of
+    band l is a delta shifted by l // 3 − 5 pixels (a synthetic grating)."""
+    rng = np.random.default_rng(seed)
+    regions = (np.add.outer(np.arange(size) // 9, np.arange(size) // 13) % 4)
+    a, b = rng.uniform(0.1, 0.5, 4), rng.uniform(-0.3, 0.3, 4)
+    rho = np.clip(a[regions][None] + b[regions][None] * (LAM[:, None, None] / 30), 0.02, 1)
+    s = torch.from_numpy(e[:, None, None] * rho)
+    k = 15
+    psf = torch.zeros(31, k, k, dtype=torch.float64)
+    for band in range(31):
+        psf[band, k // 2, k // 2 + band // 3 - 5] = 0.5
+    pad = k // 2
+    sp = F.pad(s[None], (pad, pad, pad, pad), mode="replicate")[0]
+    bands = torch.stack([F.conv2d(sp[i][None, None], psf[i].flip(-1, -2)[None, None])[0, 0] for i in range(31)])
+    tt = torch.from_numpy(T)
+    coded = torch.einsum("rl,lhw->rhw", tt, bands)
+    uncoded = 0.5 * torch.einsum("rl,lhw->rhw", tt, s)
+    return coded[None], uncoded[None], psf
+
+
+@pytest.mark.parametrize("true_j", [0, 1, 2])
+def test_search_finds_the_illuminant_rgb_cannot_tell(true_j):
+    lib = _library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    coded, uncoded, psf = _dispersed_scene(lib[true_j])
+    idx, cost = search_illuminant(coded, uncoded, psf, torch.from_numpy(T), inv)
+    assert int(idx[0]) == true_j
+    others = torch.cat([cost[0, :true_j], cost[0, true_j + 1:]])
+    assert float(cost[0, true_j]) < 0.1 * float(others.min())  # the smooth inverse is not exact: not 0
+
+
+def test_library_is_colour_sciences_illuminants_at_peak_one():
+    lib = illuminant_library()
+    assert lib.shape[1] == 31 and lib.shape[0] >= 20
+    np.testing.assert_allclose(lib.max(axis=1), 1.0)
+
+
+def test_bad_shapes_are_refused():
+    with pytest.raises(DoefabError, match="response"):
+        illuminant_inverses(T[:2], _library())
+    with pytest.raises(DoefabError, match="inverses"):
+        search_illuminant(torch.rand(1, 3, 64, 64), torch.rand(1, 3, 64, 64), torch.rand(31, 5, 5),
+                          torch.rand(3, 31), torch.rand(2, 30, 3))
+
+
+def test_proposed_network_starts_from_the_inverse_it_picks():
+    from doefab.reconstruction.networks import DeconvNet
+
+    lib = _library()
+    inv = illuminant_inverses(T, lib)
+    net = DeconvNet(31, 31, "proposed", features=1, width=4, baseline=np.zeros((31, 3)),
+                    illuminant=(T, inv)).eval()
+    coded, uncoded, psf = _dispersed_scene(lib[1])
+    with torch.no_grad():
+        y = net(coded.float(), uncoded.float(), psf[None].float())
+    expect = torch.einsum("oc,bchw->bohw", torch.from_numpy(inv[1]).float(), uncoded.float()).clamp_min(0)
+    assert torch.allclose(y, expect, atol=1e-5)  # zero-initialised residual head: exactly the picked inverse
+
+
+def test_large_captures_are_searched_on_their_centre():
+    lib = _library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    coded, uncoded, psf = _dispersed_scene(lib[2], size=96)
+    t = torch.from_numpy(T)
+    _, cost_big = search_illuminant(coded, uncoded, psf, t, inv, max_side=64)
+    _, cost_crop = search_illuminant(coded[..., 16:80, 16:80], uncoded[..., 16:80, 16:80], psf, t, inv)
+    assert torch.allclose(cost_big, cost_crop)
