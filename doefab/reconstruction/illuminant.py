@@ -23,6 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
+from doefab.imaging.captures import convolve
 
 __all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant"]
 
@@ -77,15 +78,10 @@ def search_illuminant(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: tor
             coded = coded[..., y0:y0 + max_side, x0:x0 + max_side]
             uncoded = uncoded[..., y0:y0 + max_side, x0:x0 + max_side]
             b, _, h, w = coded.shape
-        k = psf_coded.shape[-1]
-        pad = k // 2
+        pad = psf_coded.shape[-1] // 2
         u = F.pad(uncoded.float(), (pad, pad, pad, pad), mode="replicate")  # light from just outside the frame
-        fh, fw = h + 2 * pad + k - 1, w + 2 * pad + k - 1
-        spec_u = torch.fft.rfft2(u, s=(fh, fw))  # [B, 3, f]
-        otf = torch.fft.rfft2(psf_coded.float(), s=(fh, fw))  # [C, f]
-        y = torch.fft.irfft2(otf[None, :, None] * spec_u[:, None], s=(fh, fw))  # [B, C, 3, fh, fw]
-        c0 = 2 * pad
-        y = y[..., c0:c0 + h, c0:c0 + w].reshape(b, c_bands * 3, h * w)
+        y = convolve(u[:, None], psf_coded.float()[:, None])  # [B, C, 3, H + 2 pad, W + 2 pad]: Y_{λk} = p_λ ∗ u_k
+        y = y[..., pad:pad + h, pad:pad + w].reshape(b, c_bands * 3, h * w)
         # candidate j predicts coded channel r as Σ_{λ,k} T[r,λ] N_j[λ,k] Y_{λk}
         wts = torch.einsum("rl,jlk->jrlk", response.float(), inverses.float()).reshape(-1, c_bands * 3)
         pred = torch.einsum("mq,bqp->bmp", wts, y).reshape(b, -1, 3, h * w)  # [B, J, 3, HW]

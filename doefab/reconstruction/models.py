@@ -47,16 +47,16 @@ def _illuminant_search():
 
 def spectral_baseline(smooth: float = 1e-3, eps: float = 1e-6):
     """[31, 3] smooth least-squares inverse of a half-exposure capture: s = argmin ‖½ T s − c‖² + μ‖D² s‖²
-    (T: the sensor response on 400–700 nm; D²: second differences along wavelength)."""
+    (T: the sensor response on 400–700 nm; D²: second differences along wavelength) — the illuminant
+    search's inverse under a flat illuminant."""
     import numpy as np
 
     from doefab.imaging.sensor import sensor_response
     from doefab.reconstruction.data import HS_WAVELENGTHS_M
+    from doefab.reconstruction.illuminant import illuminant_inverses
 
-    a = 0.5 * sensor_response(HS_WAVELENGTHS_M).astype(np.float64)
-    n = a.shape[1]
-    d2 = np.diff(np.eye(n), 2, axis=0)
-    return np.linalg.solve(a.T @ a + smooth * d2.T @ d2 + eps * np.eye(n), a.T)
+    t = sensor_response(HS_WAVELENGTHS_M)
+    return illuminant_inverses(t, np.ones((1, t.shape[1])), smooth, eps)[0]
 
 
 def loss_fn(task: str, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
