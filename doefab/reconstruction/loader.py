@@ -59,11 +59,13 @@ class Reconstructor:
         """A PSF pair (both halves, the network's depth planes and wavelengths) for the cost volume."""
         if getattr(psf, "coded", None) is None or getattr(psf, "uncoded", None) is None:
             raise DoefabError("the depth network takes psf=a PSF pair with both halves (coded and uncoded)")
-        if not np.allclose(psf.depths, self.pair.depths) or not np.allclose(psf.wavelengths, self.pair.wavelengths):
+        if any(len(a) != len(b) or not np.allclose(a, b) for a, b in ((psf.depths, self.pair.depths),
+                                                                     (psf.wavelengths, self.pair.wavelengths))):
             raise DoefabError(f"the PSF pair's depth planes or wavelengths differ from the network's "
                               f"({len(self.pair.depths)} planes {self.pair.depths[0]:g}–{self.pair.depths[-1]:g} m)")
-        t = model_inputs("depth", psf)
-        if t.shape != model_inputs("depth", self.pair).shape or not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
+        same = tuple(psf.coded.shape) == tuple(self.pair.coded.shape) == tuple(psf.uncoded.shape)
+        t = model_inputs("depth", psf) if same else None
+        if t is None or not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
             raise DoefabError(f"psf must be finite, non-negative and {tuple(self.pair.coded.shape)} per half")
         return t
 

@@ -92,8 +92,10 @@ def test_depth_network_takes_its_cost_volume_psfs_and_a_swapped_pair(tmp_path):
     p = rec.pair
     swapped = SimpleNamespace(coded=p.uncoded, uncoded=p.coded, depths=p.depths, wavelengths=p.wavelengths)
     assert not torch.allclose(d, rec(c, u, psf=swapped))  # the cost volume reads the PSFs it is given
-    other = SimpleNamespace(coded=p.coded[:1], uncoded=p.uncoded[:1], depths=p.depths[:1], wavelengths=p.wavelengths)
-    with pytest.raises(DoefabError, match="depth planes"):
-        rec(c, u, psf=other)
+    for n in (1, 3):  # fewer planes than the network's: one clear error, not a broadcasting failure
+        other = SimpleNamespace(coded=p.coded[:n], uncoded=p.uncoded[:n], depths=p.depths[:n],
+                                wavelengths=p.wavelengths)
+        with pytest.raises(DoefabError, match="depth planes"):
+            rec(c, u, psf=other)
     with pytest.raises(DoefabError, match="both halves"):
         rec(c, u, psf=p.coded)
