@@ -24,8 +24,8 @@ import functools
 
 import numpy as np
 
-__all__ = ["SPLIT_SEEDS", "sample_rng", "texture", "hdr_sample", "spectral_sample", "depth_sample",
-           "HS_WAVELENGTHS_M"]
+__all__ = ["SPLIT_SEEDS", "sample_rng", "texture", "hdr_sample", "spectral_sample",
+           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M"]
 
 SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017}
 HS_WAVELENGTHS_M = tuple(float(x) * 1e-9 for x in range(400, 701, 10))
@@ -141,11 +141,22 @@ def _spectra(split: str) -> tuple[np.ndarray, np.ndarray]:
     if split == "test":
         sets = [SDS_COLOURCHECKERS["ISO 17321-1"], SDS_VS["NIST CQS 7.4"]]
     refl = np.clip(np.array([arr(sd) for s in sets for sd in s.values()]), 0, 1)
-    names = [n for n in colour.SDS_ILLUMINANTS if not n.startswith("ISO")]
-    illum = np.array([arr(colour.SDS_ILLUMINANTS[n]) for n in names])
-    illum = illum[np.all(np.isfinite(illum), axis=1) & (illum.max(axis=1) > 0)]
-    illum /= illum.max(axis=1, keepdims=True)
-    return refl, illum
+    return refl, illuminant_spectra()[1]
+
+
+@functools.lru_cache(maxsize=None)
+def illuminant_spectra() -> tuple[list[str], np.ndarray]:
+    """(names, [I, 31]) colour-science's illuminants on 400–700 nm, ISO ones excluded, normalised to peak 1."""
+    import colour
+
+    shape = colour.SpectralShape(400, 700, 10)
+    names, rows = [], []
+    for n in colour.SDS_ILLUMINANTS:
+        e = np.asarray(colour.SDS_ILLUMINANTS[n].copy().align(shape).values, np.float64)
+        if not n.startswith("ISO") and np.all(np.isfinite(e)) and e.max() > 0:
+            names.append(n)
+            rows.append(e / e.max())
+    return names, np.array(rows)
 
 
 def spectral_sample(rng: np.random.Generator, size: int, split: str) -> np.ndarray:

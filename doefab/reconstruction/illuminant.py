@@ -11,12 +11,16 @@ compared with the measured coded capture (unclipped pixels); the best ``N_j`` is
 
 Rendering is linear in the capture: with ``Y_{λk} = p_λ ∗ u_k`` (31 × 3 convolutions, once per image) every
 candidate is a 3 × 93 matrix product, so the search over the library costs little more than one rendering.
-The library is colour-science's measured illuminants (CIE standard illuminants and light sources).
+The library is colour-science's measured illuminants (CIE standard illuminants and light sources), shipped as
+``doefab/weights/illuminants.csv`` (names and spectra, written from colour-science 0.4.7 by
+:func:`write_illuminant_library`): the shipped network's candidates must not change when a colour-science
+release adds, drops or renames an illuminant.
 """
 
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -25,15 +29,52 @@ import torch.nn.functional as F
 from doefab.errors import DoefabError
 from doefab.imaging.captures import convolve
 
-__all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant"]
+__all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "colour_illuminants",
+           "write_illuminant_library", "LIBRARY_PATH"]
+
+LIBRARY_PATH = Path(__file__).resolve().parents[1] / "weights" / "illuminants.csv"
+
+
+def colour_illuminants() -> tuple[list[str], np.ndarray]:
+    """(names, [J, 31] spectra on 400–700 nm in 10 nm steps, each normalised to peak 1) of the installed
+    colour-science's illuminants (ISO ones excluded, as the scene generator does)."""
+    from doefab.reconstruction.data import illuminant_spectra
+
+    return illuminant_spectra()
+
+
+def write_illuminant_library(path: str | Path = LIBRARY_PATH) -> Path:
+    """Write the installed colour-science's illuminants as the shipped library (``name,400nm,...,700nm``)."""
+    from doefab.io import atomic_write_text
+
+    names, spectra = colour_illuminants()
+    head = "name," + ",".join(f"{w}nm" for w in range(400, 701, 10))
+    rows = [f'"{n}",' + ",".join(f"{v:.10g}" for v in e) for n, e in zip(names, spectra)]
+    atomic_write_text(Path(path), "\n".join([head, *rows]) + "\n")
+    return Path(path)
 
 
 @functools.lru_cache(maxsize=None)
-def illuminant_library() -> np.ndarray:
-    """[J, 31] measured illuminants on 400–700 nm (10 nm), each normalised to peak 1 (colour-science)."""
-    from doefab.reconstruction.data import _spectra
+def _read_library(path: str) -> tuple[tuple[str, ...], np.ndarray]:
+    import csv
 
-    return _spectra("train")[1].copy()
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+        names = tuple(r[0] for r in rows[1:])
+        spectra = np.array([[float(v) for v in r[1:]] for r in rows[1:]], np.float64)
+    except (OSError, ValueError, IndexError) as exc:
+        raise DoefabError(f"cannot read the illuminant library {path}: {exc}; restore it from the package "
+                          "(git checkout doefab/weights/illuminants.csv) or rewrite it with "
+                          "doefab.reconstruction.illuminant.write_illuminant_library()") from None
+    if spectra.ndim != 2 or spectra.shape[1] != 31 or not np.all(np.isfinite(spectra)):
+        raise DoefabError(f"the illuminant library {path} must hold 31 finite values (400–700 nm) per row")
+    return names, spectra
+
+
+def illuminant_library(path: str | Path = LIBRARY_PATH) -> np.ndarray:
+    """[J, 31] measured illuminants on 400–700 nm (10 nm), each normalised to peak 1: the shipped library."""
+    return _read_library(str(path))[1].copy()
 
 
 def illuminant_inverses(response: np.ndarray, library: np.ndarray, smooth: float = 1e-3,

@@ -70,10 +70,28 @@ def test_search_finds_the_illuminant_rgb_cannot_tell(true_j):
     assert float(cost[0, true_j]) < 0.1 * float(others.min())  # the smooth inverse is not exact: not 0
 
 
-def test_library_is_colour_sciences_illuminants_at_peak_one():
-    lib = illuminant_library()
-    assert lib.shape[1] == 31 and lib.shape[0] >= 20
+def test_shipped_library_is_colour_sciences_illuminants_at_peak_one():
+    from doefab.reconstruction.illuminant import LIBRARY_PATH, _read_library, colour_illuminants
+
+    names, lib = _read_library(str(LIBRARY_PATH))
+    assert lib.shape == (len(names), 31) and len(names) >= 20
     np.testing.assert_allclose(lib.max(axis=1), 1.0)
+    installed = dict(zip(*colour_illuminants()))
+    common = [n for n in names if n in installed]
+    assert len(common) >= 0.9 * len(names)  # the installed colour-science still has (almost) all of them
+    for n in common:  # ... with the same spectra (the file stores 10 significant digits)
+        np.testing.assert_allclose(lib[names.index(n)], installed[n], rtol=1e-8, atol=1e-10)
+
+
+def test_library_round_trip_and_corrupt_file(tmp_path):
+    from doefab.reconstruction.illuminant import write_illuminant_library
+
+    path = write_illuminant_library(tmp_path / "lib.csv")
+    np.testing.assert_allclose(illuminant_library(path), illuminant_library(), rtol=1e-8, atol=1e-10)
+    bad = tmp_path / "bad.csv"
+    bad.write_text(path.read_text().replace(",", ";", 40))
+    with pytest.raises(DoefabError, match="illuminant library"):
+        illuminant_library(bad)
 
 
 def test_bad_shapes_are_refused():
