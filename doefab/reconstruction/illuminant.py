@@ -47,10 +47,15 @@ def write_illuminant_library(path: str | Path = LIBRARY_PATH) -> Path:
     """Write the installed colour-science's illuminants as the shipped library (``name,400nm,...,700nm``)."""
     from doefab.io import atomic_write_text
 
+    import csv
+    import io
+
     names, spectra = colour_illuminants()
-    head = "name," + ",".join(f"{w}nm" for w in range(400, 701, 10))
-    rows = [f'"{n}",' + ",".join(f"{v:.10g}" for v in e) for n, e in zip(names, spectra)]
-    atomic_write_text(Path(path), "\n".join([head, *rows]) + "\n")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["name", *(f"{nm}nm" for nm in range(400, 701, 10))])
+    w.writerows([n, *(f"{v:.10g}" for v in e)] for n, e in zip(names, spectra))
+    atomic_write_text(Path(path), buf.getvalue())
     return Path(path)
 
 
