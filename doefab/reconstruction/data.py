@@ -127,36 +127,36 @@ def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: 
 @functools.lru_cache(maxsize=None)
 def _spectra(split: str) -> tuple[np.ndarray, np.ndarray]:
     """(reflectances [R, 31], illuminants [I, 31]) on 400–700 nm; the ISO 17321-1 chart is held out for test."""
-    import colour
     from colour.characterisation import SDS_COLOURCHECKERS
     from colour.quality import SDS_TCS, SDS_VS
-
-    shape = colour.SpectralShape(400, 700, 10)
-
-    def arr(sd):
-        return np.asarray(sd.copy().align(shape).values, np.float64)
 
     sets = [SDS_COLOURCHECKERS["BabelColor Average"], SDS_COLOURCHECKERS["ColorChecker N Ohta"],
             SDS_TCS["CIE 1995"], SDS_TCS["CIE 2024"], SDS_VS["NIST CQS 9.0"]]
     if split == "test":
         sets = [SDS_COLOURCHECKERS["ISO 17321-1"], SDS_VS["NIST CQS 7.4"]]
-    refl = np.clip(np.array([arr(sd) for s in sets for sd in s.values()]), 0, 1)
+    refl = np.clip(np.array([_on_bands(sd) for s in sets for sd in s.values()]), 0, 1)
     return refl, illuminant_spectra()[1]
 
 
+def _on_bands(sd) -> np.ndarray:
+    """A colour-science spectral distribution on the 31 bands 400–700 nm (10 nm)."""
+    import colour
+
+    return np.asarray(sd.copy().align(colour.SpectralShape(400, 700, 10)).values, np.float64)
+
+
 @functools.lru_cache(maxsize=None)
-def illuminant_spectra() -> tuple[list[str], np.ndarray]:
+def illuminant_spectra() -> tuple[tuple[str, ...], np.ndarray]:
     """(names, [I, 31]) colour-science's illuminants on 400–700 nm, ISO ones excluded, normalised to peak 1."""
     import colour
 
-    shape = colour.SpectralShape(400, 700, 10)
     names, rows = [], []
     for n in colour.SDS_ILLUMINANTS:
-        e = np.asarray(colour.SDS_ILLUMINANTS[n].copy().align(shape).values, np.float64)
+        e = _on_bands(colour.SDS_ILLUMINANTS[n])
         if not n.startswith("ISO") and np.all(np.isfinite(e)) and e.max() > 0:
             names.append(n)
             rows.append(e / e.max())
-    return names, np.array(rows)
+    return tuple(names), np.array(rows)
 
 
 def spectral_sample(rng: np.random.Generator, size: int, split: str) -> np.ndarray:

@@ -29,31 +29,25 @@ import torch.nn.functional as F
 from doefab.errors import DoefabError
 from doefab.imaging.captures import convolve
 
-__all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "colour_illuminants",
-           "write_illuminant_library", "LIBRARY_PATH"]
+__all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "write_illuminant_library",
+           "LIBRARY_PATH"]
 
 LIBRARY_PATH = Path(__file__).resolve().parents[1] / "weights" / "illuminants.csv"
 
 
-def colour_illuminants() -> tuple[list[str], np.ndarray]:
-    """(names, [J, 31] spectra on 400–700 nm in 10 nm steps, each normalised to peak 1) of the installed
-    colour-science's illuminants (ISO ones excluded, as the scene generator does)."""
-    from doefab.reconstruction.data import illuminant_spectra
-
-    return illuminant_spectra()
-
-
 def write_illuminant_library(path: str | Path = LIBRARY_PATH) -> Path:
-    """Write the installed colour-science's illuminants as the shipped library (``name,400nm,...,700nm``)."""
-    from doefab.io import atomic_write_text
-
+    """Write the installed colour-science's illuminants (``data.illuminant_spectra``) as the shipped library
+    (``name,400nm,...,700nm``)."""
     import csv
     import io
 
-    names, spectra = colour_illuminants()
+    from doefab.io import atomic_write_text
+    from doefab.reconstruction.data import HS_WAVELENGTHS_M, illuminant_spectra
+
+    names, spectra = illuminant_spectra()
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["name", *(f"{nm}nm" for nm in range(400, 701, 10))])
+    w.writerow(["name", *(f"{round(lam * 1e9)}nm" for lam in HS_WAVELENGTHS_M)])
     w.writerows([n, *(f"{v:.10g}" for v in e)] for n, e in zip(names, spectra))
     atomic_write_text(Path(path), buf.getvalue())
     return Path(path)
@@ -72,8 +66,11 @@ def _read_library(path: str) -> tuple[tuple[str, ...], np.ndarray]:
         raise DoefabError(f"cannot read the illuminant library {path}: {exc}; restore it from the package "
                           "(git checkout doefab/weights/illuminants.csv) or rewrite it with "
                           "doefab.reconstruction.illuminant.write_illuminant_library()") from None
-    if spectra.ndim != 2 or spectra.shape[1] != 31 or not np.all(np.isfinite(spectra)):
-        raise DoefabError(f"the illuminant library {path} must hold 31 finite values (400–700 nm) per row")
+    from doefab.reconstruction.data import HS_WAVELENGTHS_M
+
+    bands = len(HS_WAVELENGTHS_M)
+    if spectra.ndim != 2 or spectra.shape[1] != bands or not np.all(np.isfinite(spectra)):
+        raise DoefabError(f"the illuminant library {path} must hold {bands} finite values (400–700 nm) per row")
     return names, spectra
 
 

@@ -71,12 +71,13 @@ def test_search_finds_the_illuminant_rgb_cannot_tell(true_j):
 
 
 def test_shipped_library_is_colour_sciences_illuminants_at_peak_one():
-    from doefab.reconstruction.illuminant import LIBRARY_PATH, _read_library, colour_illuminants
+    from doefab.reconstruction.data import illuminant_spectra
+    from doefab.reconstruction.illuminant import LIBRARY_PATH, _read_library
 
     names, lib = _read_library(str(LIBRARY_PATH))
     assert lib.shape == (len(names), 31) and len(names) >= 20
     np.testing.assert_allclose(lib.max(axis=1), 1.0)
-    installed = dict(zip(*colour_illuminants()))
+    installed = dict(zip(*illuminant_spectra()))
     common = [n for n in names if n in installed]
     assert len(common) >= 0.9 * len(names)  # the installed colour-science still has (almost) all of them
     for n in common:  # ... with the same spectra (the file stores 10 significant digits)
