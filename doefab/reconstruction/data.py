@@ -98,29 +98,51 @@ def texture(rng: np.random.Generator, size: int, split: str) -> np.ndarray:
     return np.clip(np.ascontiguousarray(t), 0, 1).astype(np.float32)
 
 
-def _disc(size, cy, cx, r):
+def _highlight(rng, size: int, split: str) -> tuple[np.ndarray, np.ndarray]:
+    """One highlight: (mask [S, S], radiance [3, S, S] inside it). Three kinds, because real highlights are
+    rarely flat: a flat disc (a uniformly bright source), a lamp whose radiance falls off from a peak of up to
+    2^8 (a bulb, the sun through haze), and a window or sunlit patch that keeps a texture's structure at
+    2^1.5–2^7 times the scene's exposure."""
     yy, xx = np.ogrid[:size, :size]
-    return (yy - cy) ** 2 + (xx - cx) ** 2 <= r * r
+    cy, cx = rng.uniform(0, size, 2)
+    tint = rng.uniform(0.7, 1.0, (3, 1, 1))
+    kind = rng.random()
+    if kind < 0.3:  # flat disc, as small as a point
+        r = rng.uniform(0.5, max(1.0, 0.06 * size)) if rng.random() < 0.7 else rng.uniform(0.3, 1.2)
+        m = (yy - cy) ** 2 + (xx - cx) ** 2 <= r * r
+        if not m.any():
+            m = np.zeros((size, size), bool)
+            m[int(cy) % size, int(cx) % size] = True
+        return m, np.broadcast_to(2.0 ** rng.uniform(1.2, 8.0) * tint, (3, size, size))
+    if kind < 0.65:  # lamp: peak · (1 + (r / r0)²)^-1.5, cut where it falls below the scene's exposure
+        r0 = rng.uniform(0.5, max(1.0, 0.03 * size))
+        peak = 2.0 ** rng.uniform(3.0, 8.0)
+        prof = peak * (1.0 + ((yy - cy) ** 2 + (xx - cx) ** 2) / r0 ** 2) ** -1.5
+        return prof > 0.5, prof[None] * tint
+    h, w = rng.uniform(0.02, 0.12, 2) * size  # textured window
+    m = (np.abs(yy - cy) <= h / 2) & (np.abs(xx - cx) <= w / 2)
+    if not m.any():
+        m = np.zeros((size, size), bool)
+        m[int(cy) % size, int(cx) % size] = True
+    gain = 2.0 ** rng.uniform(1.5, 7.0)
+    return m, gain * (0.15 + 0.85 * texture(rng, size, split)) * tint
 
 
 def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: float = 2.0) -> np.ndarray:
-    """[3, S, S] HDR radiance: texture at ordinary exposure plus highlights, 1–5 % of pixels above
-    ``saturate_above`` (2.0: where a half-exposure capture of value 1 clips), peaks up to 2^8."""
+    """[3, S, S] HDR radiance: texture at ordinary exposure plus highlights (``_highlight``), 1–5 % of pixels
+    above ``saturate_above`` (2.0: where a half-exposure capture of value 1 clips), peaks up to 2^8."""
     scene = texture(rng, size, split) * rng.uniform(0.3, 1.0)
     target = rng.uniform(0.01, 0.05) * size * size
     covered = np.zeros((size, size), bool)
-    tries = 0
-    while covered.sum() < target and tries < 40:
+    tries, max_tries = 0, 40 * max(1, (size // 128) ** 2)
+    while covered.sum() < target and tries < max_tries:
         tries += 1
-        r = rng.uniform(0.5, max(1.0, 0.06 * size)) if rng.random() < 0.7 else rng.uniform(0.3, 1.2)
-        cy, cx = rng.uniform(0, size, 2)
-        m = _disc(size, cy, cx, r)
-        if not m.any():
-            m[int(cy) % size, int(cx) % size] = True
-        peak = 2.0 ** rng.uniform(1.2, 8.0)
-        tint = rng.uniform(0.7, 1.0, (3, 1, 1))
-        scene = np.where(m[None], np.maximum(scene, peak * tint), scene)
-        covered |= (scene > saturate_above).any(axis=0)
+        m, value = _highlight(rng, size, split)
+        lit = np.where(m[None], np.maximum(scene, value), scene)
+        now = (lit > saturate_above).any(axis=0)
+        if now.mean() > 0.05 and covered.any():  # too large for what is left: draw another
+            continue
+        scene, covered = lit, now
     return np.minimum(scene, 256.0).astype(np.float32)
 
 

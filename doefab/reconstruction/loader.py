@@ -53,7 +53,18 @@ class Reconstructor:
             raise DoefabError("the PSF pair's wavelengths differ from the ones the network was trained for")
         if not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
             raise DoefabError("psf must be finite and non-negative")
-        return t[None]
+        if self.task != "hdr":
+            return t[None]
+        # HDR: the least-squares solve needs the plain half too — the pair's, or the network's own when only
+        # coded PSFs are given (the plain half carries no DOE)
+        unc = getattr(psf, "uncoded", None)
+        u = self.pair.uncoded[0] if unc is None else torch.as_tensor(
+            unc.detach() if isinstance(unc, torch.Tensor) else np.asarray(unc)).float()
+        u = u[0] if u.ndim == 4 else u
+        if tuple(u.shape) != tuple(t.shape) or not bool(torch.isfinite(u).all()) or bool((u < 0).any()):
+            raise DoefabError(f"the uncoded PSF must be finite, non-negative and {tuple(t.shape)} like the coded "
+                              f"one, got {tuple(u.shape)}")
+        return torch.cat([t, u.float()])[None]
 
     def _depth_psf(self, psf):
         """A PSF pair (both halves, the network's depth planes and wavelengths) for the cost volume."""

@@ -8,7 +8,11 @@
   deconvolution branch: it sees what a conventional camera sees). The hyperspectral networks predict a
   residual over a linear spectral estimate from one capture; for the proposed one that estimate is the
   smooth inverse under the illuminant the grating's dispersion points to (``illuminant.py``), for the
-  ablations one fixed smooth inverse of the sensor response.
+  ablations one fixed smooth inverse of the sensor response. The HDR networks built with ``highlight_iters``
+  (the shipped ones) first solve for the radiance by least squares from the captures their variant sees
+  (``highlights.py``: the streak's unclipped copies of what the plain capture clips), take its log as an
+  input and predict a residual over it in log radiance; they are conditioned on both halves' RGB PSFs,
+  ``psf`` [B or 1, 6, K, K] (coded, then uncoded).
 - ``DepthNet`` (G_depth): a ResNet-18 trunk encodes each capture — the weights are shared between the two
   captures, as in the authors' code: both are images of the same scene through the same lens, and sharing
   halves the parameters a CPU has to train — and one decoder turns the concatenated features into metric
@@ -30,6 +34,7 @@ from torch import nn
 
 from doefab.errors import DoefabError
 from doefab.reconstruction.costvolume import cross_blur_cost, relative_log_cost
+from doefab.reconstruction.highlights import solve_highlights
 from doefab.reconstruction.illuminant import search_illuminant
 from doefab.reconstruction.resnet import ResNet18Trunk
 from doefab.reconstruction.wiener import WienerDeconvolution
@@ -80,8 +85,11 @@ class DeconvNet(nn.Module):
     HDR, one per band for hyperspectral)."""
 
     def __init__(self, out_channels: int, n_psf: int, variant: str = "proposed", features: int = 4, width: int = 16,
-                 log_output: bool = False, baseline=None, illuminant=None):
+                 log_output: bool = False, baseline=None, illuminant=None, highlight_iters: int = 0):
         super().__init__()
+        if highlight_iters and not (log_output and n_psf == 3):
+            raise DoefabError("highlight_iters is for HDR networks (3 RGB PSFs, log-radiance output)")
+        self.highlight_iters = int(highlight_iters)
         # optional (response [3, C], inverses [J, C, 3]): the proposed hyperspectral network replaces the fixed
         # baseline by the smooth inverse of the illuminant whose predicted coded capture matches the measured
         # one best (``illuminant.py``) — the dispersion tells illuminants apart that RGB cannot
@@ -108,14 +116,26 @@ class DeconvNet(nn.Module):
         if variant != "coded_only":
             self.feat_uncoded = nn.Sequential(nn.Conv2d(3, 16, 3, padding=1), nn.LeakyReLU(0.1))
             cin += 16
+        if self.highlight_iters:
+            cin += 3  # log(1 + least-squares radiance)
         self.unet = UNet(cin, out_channels, width)
-        if baseline is not None:  # start exactly at the baseline: the residual head begins at zero
+        if baseline is not None or self.highlight_iters:  # start exactly at the baseline: zero residual head
             nn.init.zeros_(self.unet.out.weight)
             nn.init.zeros_(self.unet.out.bias)
 
     def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf: torch.Tensor | None = None) -> torch.Tensor:
-        """``psf``: [B or 1, n_psf, K, K] coded PSFs (needed unless the variant is uncoded_only)."""
+        """``psf``: [B or 1, n_psf, K, K] coded PSFs (needed unless the variant is uncoded_only); HDR also takes
+        [B or 1, 6, K, K], the coded then the uncoded RGB PSFs, which networks with ``highlight_iters`` need."""
         parts = []
+        psf_uncoded = None
+        if self.n_psf == 3 and psf is not None and psf.ndim == 4 and psf.shape[1] == 6:
+            psf, psf_uncoded = psf[:, :3], psf[:, 3:]
+        if self.highlight_iters:
+            if psf_uncoded is None:
+                raise DoefabError(f"psf must be [B, 6, K, K] (coded then uncoded RGB PSFs) for an HDR network with "
+                                  f"a highlight solve, got {None if psf is None else tuple(psf.shape)}")
+            base = self._solve(coded, uncoded, psf[0], psf_uncoded[0])
+            parts.append(base)
         if self.variant != "uncoded_only":
             check_input(coded, "coded")
             if psf is None or psf.ndim != 4 or psf.shape[1] != self.n_psf:
@@ -144,11 +164,22 @@ class DeconvNet(nn.Module):
         elif self.baseline is not None:
             src = coded if self.variant == "coded_only" else uncoded
             y = y + torch.einsum("oc,bchw->bohw", self.baseline, src)
+        elif self.highlight_iters:
+            y = y + base
         # A linear output keeps the L1 gradient alive everywhere (a softplus head died on dark pixels); the
         # result is clamped to ≥ 0 outside training. HDR: the network predicts log(1 + radiance).
         if self.log_output:
             y = torch.expm1(y.clamp(-5.0, 6.94))
         return y if self.training else y.clamp_min(0.0)
+
+    def _solve(self, coded, uncoded, psf_coded, psf_uncoded) -> torch.Tensor:
+        """log(1 + radiance) of the least-squares solve from the captures this variant sees."""
+        views = {"proposed": ("coded", "uncoded"), "coded_only": ("coded",), "uncoded_only": ("uncoded",)}[self.variant]
+        seen = coded if self.variant == "coded_only" else uncoded
+        check_input(seen, views[-1])
+        c = coded if "coded" in views else uncoded  # a capture the variant does not see is never read
+        u = uncoded if "uncoded" in views else coded
+        return torch.log1p(solve_highlights(c, u, psf_coded, psf_uncoded, self.highlight_iters, views))
 
 
 class DepthNet(nn.Module):

@@ -60,10 +60,13 @@ def history_path(task: str, variant: str, folder: str | Path | None = None) -> P
 
 
 def model_inputs(task: str, pair) -> torch.Tensor | None:
-    """The PSFs the network is conditioned on: the coded PSF per band, [1, C, K, K] (HDR, hyperspectral); the
-    coded and uncoded PSFs of every depth plane, [2, D, 3, K, K] (depth: its cross-blur cost volume)."""
+    """The PSFs the network is conditioned on: the coded PSF per band, [1, C, K, K] (hyperspectral); the coded
+    then the uncoded RGB PSF, [1, 6, K, K] (HDR: its least-squares solve uses both halves); the coded and
+    uncoded PSFs of every depth plane, [2, D, 3, K, K] (depth: its cross-blur cost volume)."""
     if task == "depth":
         return torch.stack([pair.coded, pair.uncoded]).to(torch.float32)
+    if task == "hdr":
+        return torch.cat([pair.coded[0], pair.uncoded[0]])[None].to(torch.float32)
     return pair.coded[0][None].to(torch.float32)
 
 

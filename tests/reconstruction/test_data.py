@@ -33,3 +33,15 @@ def test_spectral_and_depth_samples_stay_in_range():
     scene, depth = depth_sample(sample_rng("val", 3), 64, "val")
     assert scene.shape == (3, 64, 64) and depth.shape == (64, 64)
     assert depth.min() >= 1.0 and depth.max() <= 5.0
+
+
+def test_hdr_highlights_carry_structure_not_only_flat_discs():
+    # lamps fall off and windows keep a texture: inside a highlight, neighbouring pixels differ (a flat disc's
+    # interior would not)
+    varied = []
+    for i in range(6):
+        hl = hdr_sample(sample_rng("train", i), 128, "train").max(axis=0)
+        pairs = (hl[:, 1:] > 2.0) & (hl[:, :-1] > 2.0)
+        step = np.abs(hl[:, 1:] - hl[:, :-1]) / np.minimum(hl[:, 1:], hl[:, :-1])
+        varied.append(float(np.mean(step[pairs] > 0.05)))
+    assert np.mean(varied) > 0.2, varied

@@ -1,3 +1,4 @@
+import numpy as np
 import pytest
 import torch
 
@@ -92,3 +93,18 @@ def test_bad_input_sizes_are_refused(shape):
     net = DeconvNet(3, 3, "uncoded_only", width=4)
     with pytest.raises(DoefabError, match="multiples of 32|\\[B, 3, H, W\\]"):
         net(torch.rand(*shape), torch.rand(*shape))
+
+
+def test_hdr_loss_adds_the_relative_highlight_error():
+    from doefab.reconstruction.models import loss_fn
+
+    target = torch.full((1, 3, 4, 4), 0.5)
+    target[0, :, 1, 1] = torch.tensor([100.0, 50.0, 1.0])  # one highlight pixel (any channel above 2)
+    assert float(loss_fn("hdr", target.clone(), target)) == 0.0
+    pred = target.clone()
+    pred[0, 0, 1, 1] = 80.0   # −20 in the highlight's red channel
+    pred[0, 2, 3, 3] = 0.25   # a dark pixel off by half
+    t, p = target.numpy().astype(np.float64), pred.numpy().astype(np.float64)
+    log_l1 = np.abs(np.log1p(p) - np.log1p(t)).mean()
+    want = log_l1 + 20.0 / (100.0 + 50.0 + 1.0)  # linear L1 over the highlight pixel's channels / their radiance
+    assert abs(float(loss_fn("hdr", pred, target)) - want) < 1e-6

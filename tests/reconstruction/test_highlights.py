@@ -1,0 +1,140 @@
+"""The least-squares radiance solve: against a dense least-squares solution built independently, and what the
+streak recovers that the plain capture alone cannot."""
+
+import numpy as np
+import pytest
+import torch
+from scipy.signal import convolve2d
+
+from doefab.errors import DoefabError
+from doefab.reconstruction.highlights import highlight_support, solve_highlights
+
+K = 9
+M = K // 2
+
+
+def _psfs():
+    """A plain half (compact, 0.5 of the light) and a streak half (a weak cross, 0.5 of the light)."""
+    plain = np.zeros((K, K))
+    plain[M, M], plain[M, M - 1], plain[M, M + 1], plain[M - 1, M], plain[M + 1, M] = 0.4, 0.025, 0.025, 0.025, 0.025
+    streak = np.zeros((K, K))
+    streak[M, :] = 0.005
+    streak[:, M] = 0.005
+    streak[M, M] = 0.5 - 16 * 0.005
+    return (torch.from_numpy(np.repeat(streak[None], 3, 0)).float(),
+            torch.from_numpy(np.repeat(plain[None], 3, 0)).float())
+
+
+def _render(scene, psf):
+    """'same' convolution of a [3, H, W] scene on a canvas with M px of replicated border, cropped back."""
+    out = []
+    for c in range(3):
+        big = np.pad(scene[c], M, mode="edge")
+        out.append(convolve2d(big, psf[c].numpy(), mode="same")[M:-M, M:-M])
+    return np.stack(out)
+
+
+def _scene(size=32):
+    rng = np.random.default_rng(4)
+    s = 0.2 + 0.6 * rng.random((3, size, size))
+    yy, xx = np.mgrid[:size, :size]
+    blob = (yy - 15) ** 2 + (xx - 17) ** 2 <= 4
+    s[:, blob] = (30.0 * 2.0 ** (-((yy - 15) ** 2 + (xx - 17) ** 2) / 4.0))[blob]  # a lamp, 5 stops of fall-off
+    return s
+
+
+def _captures(scene):
+    pc, pu = _psfs()
+    coded, uncoded = (np.clip(_render(scene, p), 0, 1) for p in (pc, pu))
+    return pc, pu, coded, uncoded
+
+
+def test_cgls_converges_to_the_dense_least_squares_solution():
+    scene = _scene()
+    pc, pu, coded, uncoded = _captures(scene)
+    c_t, u_t = (torch.from_numpy(x)[None] for x in (coded, uncoded))
+    got = solve_highlights(c_t, u_t, pc.double(), pu.double(), iters=400, dtype=torch.float64)[0].numpy()
+    # independent: every pixel of the frame and of an M-px margin is an unknown; rows are the unclipped
+    # pixels of both captures; columns built by convolving unit impulses; Jacobi scaling from the dense
+    # columns; numpy's minimum-norm least squares from the same start
+    size = scene.shape[-1]
+    big = size + 2 * M
+    support = highlight_support(u_t)[0, 0].numpy() > 0
+    share = pu.sum(dim=(-2, -1)).numpy()
+    for c in range(3):
+        x0 = np.pad(np.where(support, 1.0 / share[c], uncoded[c] / share[c]), M, mode="edge")
+        cols, rhs = [], []
+        for psf, y in ((pc, coded), (pu, uncoded)):
+            keep = (y[c] < 0.98).ravel()
+            a = np.empty((size * size, big * big))
+            for j in range(big * big):
+                e = np.zeros(big * big)
+                e[j] = 1.0
+                a[:, j] = convolve2d(e.reshape(big, big), psf[c].numpy(), mode="same")[M:-M, M:-M].ravel()
+            cols.append(a[keep])
+            rhs.append((y[c].ravel() - a @ x0.ravel())[keep])
+        a, r = np.concatenate(cols), np.concatenate(rhs)
+        norm = np.linalg.norm(a, axis=0)
+        scale = np.where(norm ** 2 > 1e-6 * (norm ** 2).max(), 1.0 / np.maximum(norm, 1e-300), 0.0)
+        z = np.linalg.lstsq(a * scale, r, rcond=None)[0]
+        want = np.clip(x0.ravel() + scale * z, 0, 256).reshape(big, big)[M:-M, M:-M]
+        np.testing.assert_allclose(got[c], want, rtol=1e-3, atol=1e-3)
+
+
+def test_the_streak_recovers_what_the_plain_capture_clips():
+    scene = _scene()
+    pc, pu, coded, uncoded = _captures(scene)
+    c_t, u_t = (torch.from_numpy(x)[None].float() for x in (coded, uncoded))
+    hl = scene.max(axis=0) > 2.0
+    start = solve_highlights(c_t, u_t, pc, pu, iters=0)[0].numpy()  # the clipping level
+    both = solve_highlights(c_t, u_t, pc, pu)[0].numpy()
+    plain = solve_highlights(c_t, u_t, pc, pu, views=("uncoded",))[0].numpy()
+
+    def err(x):
+        return np.abs(x - scene)[:, hl].mean()
+
+    assert err(both) < 0.1 * err(start)
+    assert err(both) < 0.1 * err(plain)  # the plain capture alone sees its clipped interior only through glow
+    assert err(both) < 0.1 * scene[:, hl].mean()
+
+
+def test_start_and_fit_without_clipping():
+    pc, pu = _psfs()
+    scene = 0.5 + 0.4 * np.random.default_rng(1).random((3, 24, 24))
+    coded, uncoded = (torch.from_numpy(_render(scene, p))[None].float() for p in (pc, pu))
+    start = solve_highlights(coded, uncoded, pc, pu, iters=0)
+    torch.testing.assert_close(start, uncoded / pu.sum(dim=(-2, -1)).view(1, 3, 1, 1))
+    solved = solve_highlights(coded, uncoded, pc, pu, iters=20)
+    frame = (slice(None), slice(None), slice(M, -M), slice(M, -M))  # away from the unknown margin
+    e0 = (start - torch.from_numpy(scene)[None].float())[frame].abs().mean()
+    e1 = (solved - torch.from_numpy(scene)[None].float())[frame].abs().mean()
+    assert e1 < 0.5 * e0  # the solve also undoes the blur of the unclipped scene
+
+
+def test_bad_inputs_are_refused():
+    pc, pu = _psfs()
+    with pytest.raises(DoefabError, match="captures"):
+        solve_highlights(torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 9), pc, pu)
+    with pytest.raises(DoefabError, match="PSFs"):
+        solve_highlights(torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 8), pc, pu[:2])
+    with pytest.raises(DoefabError, match="views"):
+        solve_highlights(torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 8), pc, pu, views=("plain",))
+
+
+@pytest.mark.parametrize("variant,views", [("proposed", ("coded", "uncoded")), ("coded_only", ("coded",)),
+                                           ("uncoded_only", ("uncoded",))])
+def test_hdr_networks_start_from_the_solve_of_the_captures_they_see(variant, views):
+    from doefab.reconstruction.networks import DeconvNet
+
+    scene = np.pad(_scene(), ((0, 0), (16, 16), (16, 16)), mode="reflect")  # 64²
+    pc, pu, coded, uncoded = _captures(scene)
+    coded, uncoded = (torch.from_numpy(x)[None].float() for x in (coded, uncoded))
+    net = DeconvNet(3, 3, variant, features=1, width=4, log_output=True, highlight_iters=20).eval()
+    with torch.no_grad():
+        y = net(coded, uncoded, torch.cat([pc, pu])[None])
+    expect = solve_highlights(coded, uncoded, pc, pu, iters=20, views=views)
+    torch.testing.assert_close(y, expect, rtol=1e-4, atol=1e-4)  # zero-initialised head: exactly the solve
+    with pytest.raises(DoefabError, match=r"psf must be \[B, 6"):
+        net(coded, uncoded, pc[None])
+    with pytest.raises(DoefabError, match="HDR networks"):
+        DeconvNet(31, 31, variant, highlight_iters=20)
