@@ -15,12 +15,12 @@ __all__ = ["default_arch", "build_model", "loss_fn"]
 def default_arch(task: str, variant: str = "proposed") -> dict:
     """Sizes that train in minutes on a 2-core CPU (the authors' networks take seconds per step here). The
     proposed depth network adds the two captures' cross-blur cost volume (it needs both captures); the HDR
-    networks start from a 20-iteration least-squares solve of the captures their variant sees."""
+    networks start from a 40-iteration least-squares solve of the captures their variant sees."""
     if get_spec(task).name == "depth":
         return {"width": 16, "cost_volume": variant == "proposed", "planes": 17}
     if task == "hyperspectral":
         return {"features": 2, "width": 16, "illuminant_search": variant == "proposed"}
-    return {"hdr": {"features": 4, "width": 16, "highlight_iters": 20}}[task]
+    return {"hdr": {"features": 4, "width": 16, "highlight_iters": 40}}[task]
 
 
 def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.Module:
