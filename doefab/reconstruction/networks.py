@@ -125,7 +125,8 @@ class DeconvNet(nn.Module):
 
     def forward(self, coded: torch.Tensor, uncoded: torch.Tensor, psf: torch.Tensor | None = None) -> torch.Tensor:
         """``psf``: [B or 1, n_psf, K, K] coded PSFs (needed unless the variant is uncoded_only); HDR also takes
-        [B or 1, 6, K, K], the coded then the uncoded RGB PSFs, which networks with ``highlight_iters`` need."""
+        [B or 1, 6, K, K], the coded then the uncoded RGB PSFs, which networks with ``highlight_iters`` need
+        (their least-squares solve uses the batch's first PSF pair for every image)."""
         parts = []
         psf_uncoded = None
         if self.n_psf == 3 and psf is not None and psf.ndim == 4 and psf.shape[1] == 6:
