@@ -54,7 +54,7 @@ def main() -> None:
                   f"PSNR {row['psnr']:.2f} dB, {row['seconds_per_image']:.3f} s/image", flush=True)
     out = Path(__file__).parent / "results" / "hdr_solve.json"
     atomic_write_json(out, {"images": args.images, "size_px": args.size, "split": "test",
-                                       "design_levels_sha256": sha, "psnr_peak": 256, "rows": rows})
+                            "design_levels_sha256": sha, "psnr_peak": 256, "rows": rows})
     print(f"wrote {out}")
 
 

@@ -110,22 +110,20 @@ def _highlight(rng, size: int, split: str) -> tuple[np.ndarray, np.ndarray]:
     if kind < 0.3:  # flat disc, as small as a point
         r = rng.uniform(0.5, max(1.0, 0.06 * size)) if rng.random() < 0.7 else rng.uniform(0.3, 1.2)
         m = (yy - cy) ** 2 + (xx - cx) ** 2 <= r * r
-        if not m.any():
-            m = np.zeros((size, size), bool)
-            m[int(cy) % size, int(cx) % size] = True
-        return m, np.broadcast_to(2.0 ** rng.uniform(1.2, 8.0) * tint, (3, size, size))
-    if kind < 0.65:  # lamp: peak · (1 + (r / r0)²)^-1.5, cut where it falls below the scene's exposure
+        value = np.broadcast_to(2.0 ** rng.uniform(1.2, 8.0) * tint, (3, size, size))
+    elif kind < 0.65:  # lamp: peak · (1 + (r / r0)²)^-1.5, cut where it falls below the scene's exposure
         r0 = rng.uniform(0.5, max(1.0, 0.03 * size))
         peak = 2.0 ** rng.uniform(3.0, 8.0)
         prof = peak * (1.0 + ((yy - cy) ** 2 + (xx - cx) ** 2) / r0 ** 2) ** -1.5
-        return prof > 0.5, prof[None] * tint
-    h, w = rng.uniform(0.02, 0.12, 2) * size  # textured window
-    m = (np.abs(yy - cy) <= h / 2) & (np.abs(xx - cx) <= w / 2)
-    if not m.any():
+        m, value = prof > 0.5, prof[None] * tint
+    else:  # textured window
+        h, w = rng.uniform(0.02, 0.12, 2) * size
+        m = (np.abs(yy - cy) <= h / 2) & (np.abs(xx - cx) <= w / 2)
+        value = 2.0 ** rng.uniform(1.5, 7.0) * (0.15 + 0.85 * texture(rng, size, split)) * tint
+    if not m.any():  # smaller than a pixel: the pixel under its centre
         m = np.zeros((size, size), bool)
         m[int(cy) % size, int(cx) % size] = True
-    gain = 2.0 ** rng.uniform(1.5, 7.0)
-    return m, gain * (0.15 + 0.85 * texture(rng, size, split)) * tint
+    return m, value
 
 
 def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: float = 2.0) -> np.ndarray:

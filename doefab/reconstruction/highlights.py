@@ -62,7 +62,7 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
     if not views or any(v not in VIEWS for v in views):
         raise DoefabError(f"views must be a non-empty subset of {VIEWS}, got {views!r}")
     with torch.no_grad():
-        b, _, h, w = coded.shape
+        h, w = coded.shape[-2:]
         m = psf_coded.shape[-1] // 2
         big = (h + 2 * m, w + 2 * m)
         caps = {"coded": coded.to(dtype), "uncoded": uncoded.to(dtype)}
@@ -91,7 +91,7 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
             return {k: torch.fft.irfft2(fx * otf[k], s=big) * keep[k] for k in views}
 
         def adj(r):
-            acc = sum(torch.fft.rfft2(r[k] * keep[k]) * otf[k].conj() for k in views)
+            acc = sum(torch.fft.rfft2(r[k]) * otf[k].conj() for k in views)  # r is zero where a view clips
             return torch.fft.irfft2(acc, s=big) * scale
 
         def dot(a, c):
