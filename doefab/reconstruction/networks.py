@@ -10,7 +10,8 @@
   smooth inverse under the illuminant the grating's dispersion points to (``illuminant.py``), for the
   ablations one fixed smooth inverse of the sensor response. The HDR networks built with ``highlight_iters``
   (the shipped ones) first solve for the radiance by least squares from the captures their variant sees
-  (``highlights.py``: the streak's unclipped copies of what the plain capture clips), take its log as an
+  (``highlights.py``: the streak's unclipped copies of what the plain capture clips, then the bound that a
+  clipped coded pixel received at least full well), take its log as an
   input and predict a residual over it in log radiance; they are conditioned on both halves' RGB PSFs,
   ``psf`` [B or 1, 6, K, K] (coded, then uncoded).
 - ``DepthNet`` (G_depth): a ResNet-18 trunk encodes each capture — the weights are shared between the two
@@ -85,11 +86,13 @@ class DeconvNet(nn.Module):
     HDR, one per band for hyperspectral)."""
 
     def __init__(self, out_channels: int, n_psf: int, variant: str = "proposed", features: int = 4, width: int = 16,
-                 log_output: bool = False, baseline=None, illuminant=None, highlight_iters: int = 0):
+                 log_output: bool = False, baseline=None, illuminant=None, highlight_iters: int = 0,
+                 bound_iters: int = 0, bound_rounds: int = 8):
         super().__init__()
         if highlight_iters and not (log_output and n_psf == 3):
             raise DoefabError("highlight_iters is for HDR networks (3 RGB PSFs, log-radiance output)")
         self.highlight_iters = int(highlight_iters)
+        self.bound_iters, self.bound_rounds = int(bound_iters), int(bound_rounds)  # the solve's bounded stage
         # optional (response [3, C], inverses [J, C, 3]): the proposed hyperspectral network replaces the fixed
         # baseline by the smooth inverse of the illuminant whose predicted coded capture matches the measured
         # one best (``illuminant.py``) — the dispersion tells illuminants apart that RGB cannot
@@ -180,7 +183,8 @@ class DeconvNet(nn.Module):
         check_input(seen, views[-1])
         c = coded if "coded" in views else uncoded  # a capture the variant does not see is never read
         u = uncoded if "uncoded" in views else coded
-        return torch.log1p(solve_highlights(c, u, psf_coded, psf_uncoded, self.highlight_iters, views))
+        return torch.log1p(solve_highlights(c, u, psf_coded, psf_uncoded, self.highlight_iters, views,
+                                            bound_iters=self.bound_iters, bound_rounds=self.bound_rounds))
 
 
 class DepthNet(nn.Module):
