@@ -15,7 +15,8 @@ from doefab.reconstruction.train import train
 def weights(tmp_path_factory):
     root = tmp_path_factory.mktemp("w")
     meta = train("hdr", "proposed", minutes=0.03, out_dir=root / "run", weights_dir=root / "weights", crop=64,
-                 val_images=2, val_every=2, arch={"features": 1, "width": 4, "highlight_iters": 5},
+                 val_images=2, val_every=2,
+                 arch={"features": 1, "width": 4, "highlight_iters": 5, "bound_iters": 4, "bound_rounds": 2},
                  progress=False)
     return root, meta
 
