@@ -15,7 +15,7 @@ import torch
 from doefab.io import atomic_write_json
 from doefab.reconstruction.data import SPLIT_SEEDS
 from doefab.reconstruction.loader import load_reconstructor
-from doefab.reconstruction.metrics import metrics_for
+from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import make_batch, psf_pair
 
@@ -46,7 +46,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
             rows[v].append(metrics_for(task, preds[v], target[0].numpy()))
         if example is None:
             example = (coded[0].numpy(), uncoded[0].numpy(), target[0].numpy(), preds)
-    summary = {v: {k: float(np.nanmean([r[k] for r in rs])) for k in rs[0]} for v, rs in rows.items()}
+    summary = {v: mean_metrics(rs) for v, rs in rows.items()}
     result = {"task": task, "test_images": images, "seed": SPLIT_SEEDS["test"], "size_px": size,
               "noise": "default (Poisson–Gaussian)", "rows": summary,
               "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],

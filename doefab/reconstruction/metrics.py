@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "metrics_for", "HDR_PEAK", "HIGHLIGHT_ABOVE"]
+__all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "metrics_for", "mean_metrics", "HDR_PEAK",
+           "HIGHLIGHT_ABOVE"]
 
 HDR_PEAK = 256.0  # Table 1: PSNR with a maximum value of 2^8
 HIGHLIGHT_ABOVE = 2.0  # highlight pixels: radiance that saturates the plain half-exposure capture
@@ -52,3 +53,14 @@ def depth_metrics(pred: np.ndarray, target: np.ndarray) -> dict:
 
 def metrics_for(task: str, pred: np.ndarray, target: np.ndarray) -> dict:
     return {"hdr": hdr_metrics, "hyperspectral": spectral_metrics, "depth": depth_metrics}[task](pred, target)
+
+
+def mean_metrics(rows: list[dict]) -> dict:
+    """Per metric, the mean over images that define it (the highlight metrics of an image without highlights
+    are nan); nan if none does."""
+    out = {}
+    for k in rows[0]:
+        v = np.array([r[k] for r in rows], dtype=np.float64)
+        v = v[~np.isnan(v)]
+        out[k] = float(v.mean()) if v.size else float("nan")
+    return out

@@ -25,7 +25,7 @@ import torch
 
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text
-from doefab.reconstruction.metrics import metrics_for
+from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
@@ -88,7 +88,7 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
             for p, t in zip(pred.numpy(), target[i:i + chunk].numpy()):
                 rows.append(metrics_for(task, p, t))
     model.train()
-    return {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
+    return mean_metrics(rows)
 
 
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",

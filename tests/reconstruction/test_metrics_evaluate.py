@@ -43,3 +43,16 @@ def test_evaluate_writes_the_three_rows(tmp_path):
     assert set(saved["rows"]["proposed"]) == {"rmse", "psnr", "rmse_highlight", "psnr_highlight"}
     assert (tmp_path / "eval" / "examples.png").stat().st_size > 10_000
     assert res["rows"] == saved["rows"]
+
+
+def test_mean_metrics_skips_images_without_the_metric_quietly():
+    import warnings
+
+    from doefab.reconstruction.metrics import mean_metrics
+
+    rows = [{"psnr": 30.0, "psnr_highlight": float("nan")}, {"psnr": 40.0, "psnr_highlight": 20.0}]
+    assert mean_metrics(rows) == {"psnr": 35.0, "psnr_highlight": 20.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "Mean of empty slice" when no image has highlights
+        out = mean_metrics([{"psnr": 30.0, "psnr_highlight": float("nan")}])
+    assert out["psnr"] == 30.0 and np.isnan(out["psnr_highlight"])
