@@ -102,7 +102,8 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
         x = _cgls(x, {k: keep[k] for k in first}, {k: ys[k] for k in first}, {k: cols[k] for k in first}, otf,
                   big, iters, dtype)
         if bound_iters:
-            over = {k: F.pad((caps[k] >= clipped).to(dtype), pad) for k in views if k == "coded"}
+            # bounds from the coded capture only (module docstring: the plain one's bound nothing the start does not)
+            over = {"coded": F.pad((caps["coded"] >= clipped).to(dtype), pad)} if "coded" in views else {}
             per = [bound_iters // bound_rounds + (r < bound_iters % bound_rounds) for r in range(bound_rounds)]
             for n in per:
                 x = x.clamp(0.0, 256.0)

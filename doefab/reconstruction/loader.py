@@ -42,7 +42,7 @@ class Reconstructor:
         if self.task == "depth":
             return self._depth_psf(psf)
         coded = getattr(psf, "coded", psf)
-        t = torch.as_tensor(coded.detach() if isinstance(coded, torch.Tensor) else np.asarray(coded)).float()
+        t = _float_tensor(coded)
         if t.ndim == 4:
             t = t[0]
         want = len(self.pair.wavelengths)
@@ -58,13 +58,12 @@ class Reconstructor:
         # HDR: the least-squares solve needs the plain half too — the pair's, or the network's own when only
         # coded PSFs are given (the plain half carries no DOE)
         unc = getattr(psf, "uncoded", None)
-        u = self.pair.uncoded[0] if unc is None else torch.as_tensor(
-            unc.detach() if isinstance(unc, torch.Tensor) else np.asarray(unc)).float()
+        u = self.pair.uncoded[0].float() if unc is None else _float_tensor(unc)
         u = u[0] if u.ndim == 4 else u
         if tuple(u.shape) != tuple(t.shape) or not bool(torch.isfinite(u).all()) or bool((u < 0).any()):
             raise DoefabError(f"the uncoded PSF must be finite, non-negative and {tuple(t.shape)} like the coded "
                               f"one, got {tuple(u.shape)}")
-        return torch.cat([t, u.float()])[None]
+        return torch.cat([t, u])[None]
 
     def _depth_psf(self, psf):
         """A PSF pair (both halves, the network's depth planes and wavelengths) for the cost volume."""
@@ -84,7 +83,7 @@ class Reconstructor:
         torch_in = isinstance(coded, torch.Tensor)
         views = []
         for name, x in (("coded", coded), ("uncoded", uncoded)):
-            t = torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
+            t = _float_tensor(x)
             if t.ndim != 3 or t.shape[0] != 3:
                 raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
             if not bool(torch.isfinite(t).all()):
@@ -96,6 +95,11 @@ class Reconstructor:
         with torch.no_grad():
             out = self.model(views[0], views[1], p)[0]
         return out if torch_in else out.numpy()
+
+
+def _float_tensor(x) -> torch.Tensor:
+    """A float32 tensor of an array or a tensor (detached: inference only)."""
+    return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
 
 
 def _refuse(path: Path, why: str, task: str, variant: str):
