@@ -7,6 +7,12 @@ is what real dual-pixel sensors show). The inverse solves this 2 × 2 system exa
 ../shared/DESIGN-NOTES.md). A determinant near zero would amplify noise without bound, so it is refused.
 Calibration (Eq. 30–31): with one aperture half blocked, a white wall's light reaches only one view, and the
 fraction that lands on the other one is the ratio.
+
+Crosstalk depends on the angle at which light reaches the sensor (seed Fig. 5), so the ratios change across
+the sensor's columns: :func:`crosstalk_profile` models them as linear in the column's position, rising toward
+one edge for l→r and toward the other for r→l. :func:`simulate_calibration` makes the two blocked-aperture
+white-wall captures with sensor noise and estimates the ratios from them (Eq. 31, averaged over rows), so a
+calibrated pipeline carries the calibration's own error.
 """
 
 from __future__ import annotations
@@ -15,7 +21,8 @@ import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT"]
+__all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "crosstalk_profile",
+           "simulate_calibration", "DualPixelCrosstalk"]
 
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
 
@@ -85,3 +92,53 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
     alpha_lr = ratio(blocked_left_pair, 1)
     alpha_rl = ratio(blocked_right_pair, 0)
     return alpha_lr, alpha_rl
+
+
+def crosstalk_profile(columns, centre: float, slope: float, half_width: float):
+    """Ratios at sensor ``columns`` (pixels from the sensor's centre column): ``centre + slope · x / half_width``
+    clipped to [0, 0.45]; ``slope`` is the change from the centre to ``half_width`` columns away (the edge of
+    the calibrated region; seed 5.1: 3072 px wide)."""
+    x = np.asarray(columns, np.float64)
+    return np.clip(centre + slope * x / float(half_width), 0.0, 0.45)
+
+
+def simulate_calibration(alpha_lr, alpha_rl, rows: int, noise, rng: np.random.Generator, level: float = 0.5):
+    """(α̂_l→r, α̂_r→l) per column from two simulated white-wall captures of ``rows`` rows, each with one aperture
+    half blocked (Eq. 30), exposed so the open half's view reaches ``level`` of full scale, with ``noise`` (a
+    ``doefab.imaging.sensor`` model) on each recorded view, estimated by :func:`calibrate_crosstalk`."""
+    a = np.asarray(alpha_lr, np.float64).reshape(1, -1)
+    b = np.asarray(alpha_rl, np.float64).reshape(1, -1)
+    if a.shape != b.shape or rows < 1 or not 0 < level <= 1:
+        raise DoefabError("simulate_calibration needs ratio profiles of one shape, rows ≥ 1 and 0 < level ≤ 1")
+    white = np.full((rows, a.shape[1]), float(level))
+    dark = np.zeros_like(white)
+    pairs = []
+    for left, right in ((white, dark), (dark, white)):  # left aperture half blocked → only the left view lit
+        l_s, r_s = mix_crosstalk(left, right, a, b)
+        pairs.append((np.clip(noise.apply(l_s, rng), 1e-9, None), np.clip(noise.apply(r_s, rng), 1e-9, None)))
+    a_hat, b_hat = calibrate_crosstalk(pairs[0], pairs[1])
+    return a_hat.ravel(), b_hat.ravel()
+
+
+class DualPixelCrosstalk:
+    """What a dual-pixel camera does to a pair of clean views, and what its pipeline undoes (seed 5.1).
+
+    ``record(coded, uncoded, noise, rng)``: the optical mix of Eq. 29 with the true per-column ratios (light
+    lands on the wrong photodiode before it is counted), the sensor's noise, clipping to [0, 1], then — when the
+    camera is calibrated — the exact unmix with the *estimated* ratios. Views are [..., H, W] arrays (numpy);
+    ratios are scalars or per-column arrays of length W. The coded capture is the right view.
+    """
+
+    def __init__(self, alpha_lr, alpha_rl, estimate=None):
+        self.alpha_lr, self.alpha_rl = alpha_lr, alpha_rl
+        self.estimate = estimate  # (α̂_l→r, α̂_r→l), or None: the pipeline leaves the mix in
+
+    def record(self, coded, uncoded, noise, rng):
+        """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first)."""
+        left, right = mix_crosstalk(uncoded, coded, self.alpha_lr, self.alpha_rl)
+        right = np.clip(noise.apply(right, rng), 0.0, 1.0)
+        left = np.clip(noise.apply(left, rng), 0.0, 1.0)
+        if self.estimate is not None:
+            left, right = unmix_crosstalk(left, right, *self.estimate)
+            left, right = np.clip(left, 0.0, 1.0), np.clip(right, 0.0, 1.0)
+        return right, left

@@ -30,6 +30,9 @@ class Camera:
         focus_distance: object distance imaged sharply on the sensor, metres; ``inf`` means s = f (5.0).
         material: DOE substrate (fused silica).
         design_wavelength: wavelength whose 2π height sets the 16-level etch depths, metres (550e-9).
+        lens_f_number: the lens's own f-number wide open (1.8, the EF 50 mm f/1.8 STM); its entrance pupil is
+            focal_length / lens_f_number across. It decides which element is the aperture stop
+            (:attr:`doe_is_stop`).
     """
 
     aperture_diameter: float = 8.64e-3
@@ -40,9 +43,11 @@ class Camera:
     focus_distance: float = 5.0
     material: Material = field(default=FUSED_SILICA)
     design_wavelength: float = 550e-9
+    lens_f_number: float = 1.8
 
     def __post_init__(self) -> None:
-        for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength"):
+        for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength",
+                     "lens_f_number"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise DoefabError(f"Camera.{name} must be a positive finite length in metres, got {v!r}")
@@ -75,6 +80,19 @@ class Camera:
         """Working f-number s / D (dimensionless)."""
         return self.sensor_distance / self.aperture_diameter
 
+    @property
+    def lens_pupil_diameter(self) -> float:
+        """Diameter of the lens's own entrance pupil wide open, focal_length / lens_f_number (metres)."""
+        return self.focal_length / self.lens_f_number
+
+    @property
+    def doe_is_stop(self) -> bool:
+        """True when the DOE's chrome baffle is narrower than the lens's entrance pupil: the baffle is then the
+        aperture stop, the exit pupil is the lens's image of the DOE and the dual-pixel split is conjugate to
+        the DOE itself, so an axial gap between DOE and lens moves nothing (seed prototype: 8.64 mm against
+        27.5 mm)."""
+        return self.aperture_diameter <= self.lens_pupil_diameter
+
     def replace(self, **changes) -> "Camera":
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
@@ -99,6 +117,7 @@ class Camera:
             "focus_distance_m": self.focus_distance if math.isfinite(self.focus_distance) else "inf",
             "design_wavelength_m": self.design_wavelength,
             "focal_length_m": self.focal_length,
+            "lens_f_number": self.lens_f_number,
             "material": self.material.to_dict(),
         }
 
@@ -120,11 +139,13 @@ class Camera:
         if not 1.0 < n < 4.0:
             raise DoefabError(f"{where}: material {material.name!r} has index {n:g} at the design wavelength; a DOE "
                               f"substrate lies between 1 and 4: check its Sellmeier coefficients")
+        lens_n = _lens_f_number(d, where)
         try:
             cam = cls(aperture_diameter=vals["aperture_diameter_m"], doe_pitch=vals["doe_pitch_m"],
                       doe_pixels=int(vals["doe_pixels"]), sensor_pitch=vals["sensor_pitch_m"],
                       sensor_distance=vals["sensor_distance_m"], focus_distance=focus,
-                      design_wavelength=vals["design_wavelength_m"], material=material)
+                      design_wavelength=vals["design_wavelength_m"], material=material,
+                      lens_f_number=lens_n)
         except DoefabError as exc:
             raise DoefabError(f"{where}: {exc}") from None
         fl = d.get("focal_length_m")
@@ -132,6 +153,13 @@ class Camera:
             raise DoefabError(f"{where}: focal_length_m {fl!r} disagrees with sensor_distance_m and focus_distance_m "
                               f"({cam.focal_length:.9g} m): the record was edited inconsistently")
         return cam
+
+
+def _lens_f_number(d: dict, where: str) -> float:
+    """The record's lens f-number; records written before it was kept describe the prototype's f/1.8 lens."""
+    if "lens_f_number" not in d:
+        return 1.8
+    return record_number(d, "lens_f_number", 0.5, 64.0, "", where)
 
 
 # plausible ranges of a camera record's fields (lo, hi, unit); a value outside is almost always a unit slip

@@ -33,12 +33,13 @@ from doefab.optics.camera import Camera
 from doefab.optics.propagators.asm import angular_spectrum
 from doefab.optics.pupil import pupil_half, source_path_difference
 
-__all__ = ["gap_transmittance", "MAX_GAP"]
+__all__ = ["gap_transmittance", "gap_field", "MAX_GAP", "check_gap"]
 
 MAX_GAP = 0.05  # metres: beyond this the DOE is not "in front of the aperture" but a separate element
 
 
-def _check_gap(gap: float) -> float:
+def check_gap(gap: float) -> float:
+    """``gap`` in metres, checked to lie within 0 – MAX_GAP."""
     g = float(gap)
     if not math.isfinite(g) or not 0.0 <= g <= MAX_GAP:
         raise DoefabError(f"DOE gap {gap!r} m is outside 0–{MAX_GAP} m (the gap is in metres: 2 mm is 2e-3)")
@@ -71,27 +72,42 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
             the grid's largest angle (sin θ = λ / 2b, b the DOE pitch) over the gap cannot wrap around into the
             grid (linear, not circular, convolution), plus 16 pixels.
     """
-    g = _check_gap(gap)
+    g = check_gap(gap)
     n = camera.doe_pixels
     if tuple(height.shape) != (n, n):
         raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
     real = height.dtype if height.is_floating_point() else torch.float64
-    cplx = torch.complex64 if real == torch.float32 else torch.complex128
     k = 2 * math.pi / wavelength
     dn = float(camera.material.index(wavelength)) - 1.0
-    circ, plain, r2 = _baffle(camera)
+    _, plain, _ = _baffle(camera)
     h = height.to(real)
     h_ref = h[torch.from_numpy(plain)].mean() if plain.any() else h.new_zeros(())
     phase = (k * dn) * (h - h_ref)
+    return gap_field(torch.polar(torch.ones_like(phase), phase), camera, wavelength, depth, g, pad)
+
+
+def gap_field(relative: torch.Tensor, camera: Camera, wavelength: float, depth: float, gap: float,
+              pad: float | None = None) -> torch.Tensor:
+    """(N, N) complex effective transmittance at the aperture plane of a DOE whose own complex transmittance,
+    relative to the plain glass, is ``relative`` (on the camera's DOE grid), ``gap`` metres in front of it
+    (see :func:`gap_transmittance`, which builds ``relative`` from heights)."""
+    g = check_gap(gap)
+    n = camera.doe_pixels
+    if tuple(relative.shape) != (n, n) or not relative.is_complex():
+        raise DoefabError(f"relative transmittance must be complex ({n}, {n}), got {tuple(relative.shape)}")
     if g == 0.0:
-        return torch.polar(torch.ones_like(phase), phase).to(cplx)
+        return relative
+    cplx = relative.dtype
+    real = torch.float32 if cplx == torch.complex64 else torch.float64
+    k = 2 * math.pi / wavelength
+    circ, _, r2 = _baffle(camera)
     s_in = source_path_difference(r2, depth, math.inf)  # exact sphere sag of the source at the DOE
     s_out = source_path_difference(r2, depth + g if math.isfinite(depth) else depth, math.inf)
     amp = depth / (depth + g) if math.isfinite(depth) else 1.0
     wave_in = torch.from_numpy(np.exp(1j * k * s_in)).to(cplx)
     # the plain wave at the aperture plane, with the angular spectrum's own piston exp(i k g)
     wave_out = torch.from_numpy(amp * np.exp(1j * k * (s_out + g))).to(cplx)
-    change = (torch.polar(torch.ones_like(phase), phase).to(cplx) - 1) * torch.from_numpy(circ).to(real)
+    change = (relative - 1) * torch.from_numpy(circ).to(real)
     if pad is None:
         sin_max = min(wavelength / (2 * camera.doe_pitch), 0.99)
         spread_px = g * sin_max / math.sqrt(1 - sin_max**2) / camera.doe_pitch

@@ -210,9 +210,9 @@ class PSFPlan:
         hr = None if height_right is None else as_height_tensor(height_right, self.camera, "height_right",
                                                                  self.real_dtype)
         if gap:
-            from doefab.optics.gap import _check_gap
+            from doefab.optics.gap import check_gap
 
-            if _check_gap(gap) > 0 and h is not None:
+            if check_gap(gap) > 0 and h is not None:
                 got = self.gap_psfs(h, gap)
                 return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths,
                                self.camera.sensor_pitch, got.get("full"))

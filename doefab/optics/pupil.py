@@ -8,6 +8,7 @@ camera (x right, y up). The coded half is x < 0 (seed Eq. 3), i.e. the left colu
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -16,7 +17,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
-__all__ = ["PupilHalf", "pupil_half", "source_path_difference", "HALVES", "APERTURES"]
+__all__ = ["PupilHalf", "pupil_half", "source_path_difference", "cell_coverage", "HALVES", "APERTURES"]
 
 HALVES = ("coded", "uncoded")
 APERTURES = HALVES + ("full",)  # "full": the whole clear aperture, one coherent pupil (reference cases)
@@ -53,11 +54,13 @@ class PupilHalf:
         return self.y[:, None] ** 2 + self.x[None, :] ** 2
 
 
-def _coverage(xc: np.ndarray, yc: np.ndarray, b: float, radius: float, side: int) -> np.ndarray:
-    """Fraction of each b × b cell (centres xc × yc) inside the disk and the half-plane side·x > 0.
+def cell_coverage(xc: np.ndarray, yc: np.ndarray, b: float, radius: float, side: int, split: float = 0.0) -> np.ndarray:
+    """Fraction of each b × b cell (centres xc × yc) inside the disk and the half-plane side·(x − split) > 0.
 
-    ``side`` is -1 (x < 0), +1 (x > 0) or 0 (no half-plane). Interior and exterior cells are exact;
-    cells cut by the rim or the split line are integrated with 16 × 16 sub-samples.
+    ``side`` is -1 (x < split), +1 (x > split) or 0 (no half-plane). Cells inside or outside the disk are
+    exact, and so is the split line's cut of an interior cell (its area fraction, a linear function of
+    ``split``); rim cells are integrated with 16 × 16 sub-samples, each sub-column weighted by the exact
+    fraction of it on this side of the split.
     """
     r = np.sqrt(yc[:, None] ** 2 + xc[None, :] ** 2)
     half_diag = b / math.sqrt(2.0)
@@ -65,42 +68,46 @@ def _coverage(xc: np.ndarray, yc: np.ndarray, b: float, radius: float, side: int
     outside = r - half_diag >= radius
     cov = inside.astype(np.float64)
     if side != 0:
-        x0, x1 = xc - b / 2, xc + b / 2
-        col_in = (x1 <= 0) if side < 0 else (x0 >= 0)
-        col_out = (x0 >= 0) if side < 0 else (x1 <= 0)
-        cov[:, col_out] = 0.0
-        edge_cols = ~(col_in | col_out)
-    else:
-        edge_cols = np.zeros(xc.shape, bool)
-    edge = (~inside & ~outside) | (edge_cols[None, :] & ~outside)
-    if side != 0:
-        edge &= ~col_out[None, :]
+        x0 = xc - b / 2
+        frac = np.clip((split - x0) / b, 0.0, 1.0) if side < 0 else np.clip(1.0 - (split - x0) / b, 0.0, 1.0)
+        cov *= frac[None, :]
+    edge = ~inside & ~outside
     ii, jj = np.nonzero(edge)
     if ii.size:
         s = (np.arange(_EDGE_SUBSAMPLES) + 0.5) / _EDGE_SUBSAMPLES - 0.5
         sy = yc[ii][:, None, None] + b * s[None, :, None]
         sx = xc[jj][:, None, None] + b * s[None, None, :]
-        ok = sx**2 + sy**2 < radius**2
-        if side != 0:
-            ok &= (sx < 0) if side < 0 else (sx > 0)
+        ok = (sx**2 + sy**2 < radius**2).astype(np.float64)
+        if side != 0:  # exact share of each sub-column on this side
+            w = b / _EDGE_SUBSAMPLES
+            f = np.clip((split - (sx - w / 2)) / w, 0.0, 1.0)
+            ok *= f if side < 0 else 1.0 - f
         cov[ii, jj] = ok.mean(axis=(1, 2))
     return cov
 
 
-def pupil_half(camera: Camera, half: str, oversample: int = 1) -> PupilHalf:
-    """Sample geometry of one half of the pupil at ``oversample`` samples per DOE pixel and axis."""
+def pupil_half(camera: Camera, half: str, oversample: int = 1, split: float = 0.0, margin: float = 0.0) -> PupilHalf:
+    """Sample geometry of one half of the pupil at ``oversample`` samples per DOE pixel and axis.
+
+    ``split`` (metres): where the dual-pixel split line crosses the DOE grid (x = 0 when the DOE is centred on
+    the lens axis; a decentered die moves it). ``margin`` (metres): also sample the columns up to this far
+    beyond the centre line, so that splits within ±margin share one sample grid (and one set of transform
+    matrices).
+    """
     if half not in APERTURES:
         raise DoefabError(f"half must be one of {APERTURES}, got {half!r}")
     if not isinstance(oversample, int) or oversample < 1:
         raise DoefabError(f"pupil oversample must be an integer ≥ 1, got {oversample!r}")
+    if not (math.isfinite(split) and math.isfinite(margin) and margin >= 0 and abs(split) <= margin + 1e-15):
+        raise DoefabError(f"the split line at {split:g} m must lie within the sampled margin ±{margin:g} m")
     n, a, radius = camera.doe_pixels, camera.doe_pitch, camera.aperture_diameter / 2
     centres = (np.arange(n) - (n - 1) / 2) * a  # DOE pixel centres, metres (x ascending)
     # DOE pixels that can hold light of this half (touching the disk and the half-plane)
     touch = np.abs(centres) - a / 2 < radius
     if half == "coded":
-        cols_ok = touch & (centres - a / 2 < 0)
+        cols_ok = touch & (centres - a / 2 < margin)
     elif half == "uncoded":
-        cols_ok = touch & (centres + a / 2 > 0)
+        cols_ok = touch & (centres + a / 2 > -margin)
     else:
         cols_ok = touch
     cidx = np.nonzero(cols_ok)[0]
@@ -112,11 +119,18 @@ def pupil_half(camera: Camera, half: str, oversample: int = 1) -> PupilHalf:
     x = (centres[cols][:, None] + sub[None, :]).ravel()
     y = (-(centres[rows])[:, None] + sub[None, ::-1]).ravel()  # row 0 = top = largest y
     side = {"coded": -1, "uncoded": 1, "full": 0}[half]
-    cov = _coverage(x, y, b, radius, side)
-    # The sample grid is symmetric about x = 0, so the other half's sampled area equals this one's:
-    # the whole aperture (energy normalisation) is twice this half.
-    full_area = float((1.0 if side == 0 else 2.0) * cov.sum() * b * b)
-    return PupilHalf(half, rows, cols, q, b, x, y, cov, full_area)
+    cov = cell_coverage(x, y, b, radius, side, split)
+    return PupilHalf(half, rows, cols, q, b, x, y, cov, _disk_area(camera, q))
+
+
+@functools.lru_cache(maxsize=16)
+def _disk_area(camera: Camera, oversample: int) -> float:
+    """The whole clear aperture's area as sampled (m²): both halves together normalise the energy to 1."""
+    n, a = camera.doe_pixels, camera.doe_pitch
+    b = a / oversample
+    sub = (np.arange(oversample) - (oversample - 1) / 2) * b
+    x = (((np.arange(n) - (n - 1) / 2) * a)[:, None] + sub[None, :]).ravel()
+    return float(cell_coverage(x, -x, b, camera.aperture_diameter / 2, 0).sum() * b * b)
 
 
 def source_path_difference(r2: np.ndarray, depth: float, focus_distance: float) -> np.ndarray:

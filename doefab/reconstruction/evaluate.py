@@ -24,12 +24,12 @@ __all__ = ["evaluate"]
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
              progress: bool = True, design=None, variants=VARIANTS) -> dict:
-    from doefab.reconstruction.train import _response
+    from doefab.reconstruction.train import sensor_response_for
 
     out = Path(out_dir)
     recs = {v: load_reconstructor(task, v, weights_dir, design) for v in variants}  # refuse bad weights first
     pair, _ = psf_pair(task, design)
-    response = _response(task, pair)
+    response = sensor_response_for(task, pair)
     rows = {v: [] for v in variants}
     example = None
     it = range(images)

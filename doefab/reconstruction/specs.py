@@ -75,14 +75,16 @@ def crop_margin(task: str) -> int:
     return get_spec(task).kernel // 2
 
 
-def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default"):
+def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", crosstalk=None):
     """Scenes, targets and simulated captures for sample ``indices`` of ``split``.
 
     Each scene is generated with a margin of half a PSF window on every side, blurred, and cropped back to
-    ``size``, so the captures hold the light that enters the crop from outside it.
+    ``size``, so the captures hold the light that enters the crop from outside it. ``crosstalk(i)``: the
+    ``DualPixelCrosstalk`` of image i (the camera's mix, noise, and its pipeline's unmix), or None: clean views.
     Returns (coded [B, 3, S, S], uncoded [B, 3, S, S], target [B, C, S, S] or depth [B, S, S]) tensors.
     """
     from doefab.imaging.captures import plane_masks, render_layers
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.imaging.sensor import noise_model
     from doefab.reconstruction.data import depth_sample, hdr_sample, sample_rng, spectral_sample
 
@@ -109,10 +111,11 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
             b = render_layers(s, psf, masks, pair.depths)
             if t is not None:
                 b = torch.einsum("rc,chw->rhw", t, b)
-            b = b[:, m:m + size, m:m + size].double().numpy()
-            views.append(torch.from_numpy(np.clip(nm.apply(b, rng), 0, 1).astype(np.float32)))
-        coded.append(views[0])
-        uncoded.append(views[1])
+            views.append(b[:, m:m + size, m:m + size].double().numpy())
+        xt = (crosstalk(i) if crosstalk is not None else None) or DualPixelCrosstalk(0.0, 0.0)
+        c_view, u_view = xt.record(views[0], views[1], nm, rng)
+        coded.append(torch.from_numpy(c_view.astype(np.float32)))
+        uncoded.append(torch.from_numpy(u_view.astype(np.float32)))
         tgt = depth[m:m + size, m:m + size] if task == "depth" else scene[:, m:m + size, m:m + size]
         targets.append(torch.from_numpy(np.ascontiguousarray(tgt)))
     return torch.stack(coded), torch.stack(uncoded), torch.stack(targets)

@@ -30,7 +30,7 @@ from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
 __all__ = ["train", "lr_factor", "SCHEDULES", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs",
-           "evaluate_batch"]
+           "evaluate_batch", "sensor_response_for"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 SCHEDULES = ("cosine", "constant")
@@ -70,7 +70,8 @@ def model_inputs(task: str, pair) -> torch.Tensor | None:
     return pair.coded[0][None].to(torch.float32)
 
 
-def _response(task: str, pair):
+def sensor_response_for(task: str, pair):
+    """The [3, C] RGB response that forms a task's captures from its bands (hyperspectral), or None (RGB)."""
     if task != "hyperspectral":
         return None
     from doefab.imaging.sensor import sensor_response
@@ -117,7 +118,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     if arch.get("cost_volume"):  # the cost volume has one channel per depth plane of the design
         arch = {**arch, "planes": len(pair.depths)}
     psf = model_inputs(task, pair)
-    response = _response(task, pair)
+    response = sensor_response_for(task, pair)
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
     opt = torch.optim.Adam(model.parameters(), lr=lr)

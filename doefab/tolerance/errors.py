@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from doefab.errors import DoefabError
 from doefab.io import read_toml
 
 __all__ = ["PartErrors", "load_budget", "sample_errors", "budget_value", "DEFAULT_BUDGET", "BUDGET_KEYS",
-           "holder_mounting", "nominal_gap"]
+           "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -28,7 +29,9 @@ BUDGET_KEYS = {
     "surface": {"roughness_rms_nm": (0, 200), "correlation_length_um": (0.1, 1000)},
     "mounting": {"decenter_max_mm": (0, 5), "rotation_sigma_deg": (0, 30), "axial_gap_mm": (0, 50),
                  "axial_gap_sigma_mm": (0, 10), "pupil_behind_glass_mm": (0, 45)},
-    "sensor": {"crosstalk_lr_percent": (0, 45), "crosstalk_rl_percent": (0, 45), "calibrated": None},
+    "sensor": {"crosstalk_lr_percent": (0, 45), "crosstalk_rl_percent": (0, 45), "crosstalk_slope_percent": (0, 20),
+               "calibrated": None, "calibration_rows": (1, 100000), "calibration_level": (0.01, 1),
+               "calibrated_width_px": (16, 100000)},
     "spec": {"metric_min": (0, 1)},
 }
 
@@ -47,8 +50,12 @@ class PartErrors:
     mount_shift: tuple = (0.0, 0.0)  # metres: across (x) and along (y) the split line
     mount_rotation: float = 0.0
     axial_gap: float = 0.0  # metres: DOE in front of the aperture plane (doefab.optics.gap)
-    crosstalk: tuple = (0.0, 0.0)  # (α_l→r, α_r→l)
-    calibrated: bool = True
+    crosstalk: tuple = (0.0, 0.0)  # (α_l→r, α_r→l) at the sensor's centre column
+    crosstalk_slope: float = 0.0  # change of α_l→r (up) and α_r→l (down) from the centre to the calibrated edge
+    calibrated: bool = True  # unmixed with ratios estimated from simulated noisy white-wall captures
+    calibration_rows: int = 3072  # rows averaged per column by that calibration (seed 5.1: 3072 × 3072)
+    calibration_level: float = 0.5  # the white wall's exposure, fraction of full scale
+    calibrated_width_px: int = 3072
     seed: int = 0
     extra: dict = field(default_factory=dict)
 
@@ -105,10 +112,34 @@ def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0) -> Part
                       roughness=budget_value(budget, "surface", "roughness_rms_nm") * 1e-9,
                       roughness_corr=budget_value(budget, "surface", "correlation_length_um", 2.0) * 1e-6,
                       mount_shift=shift, mount_rotation=mrot, axial_gap=gap,
-                      crosstalk=(budget_value(budget, "sensor", "crosstalk_lr_percent") / 100,
-                                 budget_value(budget, "sensor", "crosstalk_rl_percent") / 100),
-                      calibrated=bool(budget.get("sensor", {}).get("calibrated", True)),
-                      seed=int(seed))
+                      **sensor_errors(budget), seed=int(seed))
+
+
+def sensor_errors(budget: dict) -> dict:
+    """The ``PartErrors`` fields of the budget's ``[sensor]`` section (dual-pixel crosstalk and its calibration)."""
+    g = partial(budget_value, budget, "sensor")
+    return {"crosstalk": (g("crosstalk_lr_percent") / 100, g("crosstalk_rl_percent") / 100),
+            "crosstalk_slope": g("crosstalk_slope_percent") / 100,
+            "calibrated": bool(budget.get("sensor", {}).get("calibrated", True)),
+            "calibration_rows": int(g("calibration_rows", 3072)), "calibration_level": g("calibration_level", 0.5),
+            "calibrated_width_px": int(g("calibrated_width_px", 3072))}
+
+
+def crosstalk_ratios(err: PartErrors, columns) -> tuple:
+    """(α_l→r, α_r→l, α̂_l→r, α̂_r→l) at sensor ``columns`` (pixels from the centre column): the part's camera's
+    crosstalk profile, and the estimate its calibration gives (simulated noisy white-wall captures, seeded by
+    the part; the estimate is the true profile when the camera is not calibrated — it is then not used)."""
+    from doefab.imaging.crosstalk import crosstalk_profile, simulate_calibration
+    from doefab.imaging.sensor import noise_model
+
+    half = err.calibrated_width_px / 2
+    a = crosstalk_profile(columns, err.crosstalk[0], err.crosstalk_slope, half)
+    b = crosstalk_profile(columns, err.crosstalk[1], -err.crosstalk_slope, half)
+    if not err.calibrated:
+        return a, b, a, b
+    rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
+    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, noise_model("default"), rng, err.calibration_level)
+    return a, b, a_hat, b_hat
 
 
 def nominal_gap(budget: dict) -> float:

@@ -1,16 +1,23 @@
-"""Judge a fabricated part on its PSF: the design's task metric and the L1 distance to the nominal PSF.
+"""Judge a fabricated and mounted part on its PSF: the design's task metric and the L1 distance to nominal.
 
-``PSFJudge`` is built once per design (per worker): it holds the PSF plan on the refined grid, the nominal
-(zero-error, same supersampling) coded PSF and the uncoded PSF (for crosstalk). Mounting errors move every
-mask together (a decenter across the split line is x, along it y; a rotation turns the whole DOE about the
-optical axis); an axial gap puts the DOE in front of the aperture plane (``doefab.optics.gap``: its diffraction
-over the gap blurs the coded pattern and leaks coded light into the plain half); dual-pixel crosstalk mixes the uncoded PSF into the coded view (Eq. 29) unless calibrated
-(the exact inverse restores the coded PSF).
+``PSFJudge`` is built once per design and simulation grid (per worker). A part's PSF comes from:
+
+- its relief as its masks made it (``relief.ReliefModel``: overlay and mask rotation composed along the mask
+  set's alignment chain, edge bias, corner rounding, etch depth per mask, roughness), each cell sending the
+  mean complex transmittance of the heights it holds; the mount rotation turns the relief against the sensor;
+- its mount (``mounted.MountedPlan``): a decenter moves the split line and the lens, never the relief; an
+  axial gap is propagated only when the lens, not the DOE, is the aperture stop;
+- dual-pixel crosstalk (``doefab.imaging.crosstalk``, Eq. 29) mixing the plain half's PSF into the coded view,
+  unmixed — when the budget says the camera is calibrated — with ratios estimated from simulated noisy
+  white-wall captures (Eq. 30–31), so the calibration's own error reaches the result. At PSF level the plain
+  half is the nominal one (the part's differs only by relief slivers that cross the split, and it enters
+  weighted by the crosstalk ratio); the network judge uses both halves of the part.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -19,9 +26,11 @@ import torch
 
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
-from doefab.tolerance.fabricate import fabricated_height, refined_camera
+from doefab.tolerance.fabricate import refined_camera, roughness_field
 
-__all__ = ["PSFJudge", "alignment_chain"]
+__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "DEFAULT_MARGIN"]
+
+DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
 
 def alignment_chain(design_dir: Path) -> dict:
@@ -35,11 +44,12 @@ def alignment_chain(design_dir: Path) -> dict:
     return {1: 0, 2: 0, 3: 0, 4: 0}
 
 
-def compose_overlay(err: PartErrors, chain: dict) -> tuple[list, list]:
-    """Absolute shift/rotation of each mask: its own error relative to the plate it aligns to, accumulated
-    along the alignment chain, plus the mounting error that moves the whole DOE."""
+def compose_overlay(err: PartErrors, chain: dict, n_masks: int = 4) -> tuple[list, list]:
+    """Where each mask landed on the die: its own error relative to the plate it aligns to, accumulated along
+    the alignment chain (the chrome layer, plate 0, is the die's frame). Mounting errors are not here: they
+    move the die, not the masks on it."""
     shifts, rots = [], []
-    for m in range(4):
+    for m in range(n_masks):
         plate, dx, dy, th = m + 1, 0.0, 0.0, 0.0
         seen = set()
         while plate != 0 and plate not in seen:
@@ -47,137 +57,141 @@ def compose_overlay(err: PartErrors, chain: dict) -> tuple[list, list]:
             k = plate - 1
             dx, dy, th = dx + err.overlay[k][0], dy + err.overlay[k][1], th + err.rotation[k]
             plate = chain.get(plate, 0)
-        shifts.append((dx + err.mount_shift[0], dy + err.mount_shift[1]))
-        rots.append(th + err.mount_rotation)
+        shifts.append((dx, dy))
+        rots.append(th)
     return shifts, rots
 
 
 class PSFJudge:
-    """PSF-level judge of one design folder (``design.json`` + ``levels.npy``)."""
+    """PSF-level judge of one design folder (``design.json`` + ``levels.npy``) on the design grid refined
+    ``supersample``× (cells per DOE pixel and axis)."""
 
-    def __init__(self, design_dir: str | Path, supersample: int = 2, threads: int | None = None):
+    def __init__(self, design_dir: str | Path, supersample: int = 1, threads: int | None = None,
+                 margin: float = DEFAULT_MARGIN):
         from doefab.design.design import Design
-        from doefab.optics.psf import PSFPlan
+        from doefab.fabrication.bitplanes import bit_planes
+        from doefab.fabrication.levels import level_step
         from doefab.tasks import get_task
+        from doefab.tolerance.relief import ReliefModel, corner_bias
 
         if threads:
             torch.set_num_threads(threads)
         self.design_dir = Path(design_dir)
         d = Design.load(self.design_dir)
-        self.design, self.supersample = d, supersample
+        self.design, self.supersample, self.margin = d, supersample, float(margin)
         self.task = get_task(d.task, **d.task_params)
         self.task.bind(d.camera)
         self.fine = refined_camera(d.camera, supersample)
-        self.plan = PSFPlan(self.fine, d.wavelengths, d.depths, self.task.kernel_size, halves=("coded",))
+        planes = bit_planes(d.levels)
+        self.n_masks = planes.shape[0]
+        self.relief = ReliefModel(planes, d.camera.doe_pitch, supersample)
+        self.corner_px2 = [corner_bias(p, 1.0) for p in planes]  # bias (px) per px² of corner radius
+        self.step = level_step(d.camera)
         self.chain = alignment_chain(self.design_dir)
-        t = time.perf_counter()
-        self.nominal = self._coded(PartErrors())
-        self.seconds_per_psf = time.perf_counter() - t
+        self._plans: dict = {}
         self._uncoded = None
+        t = time.perf_counter()
+        self.nominal = self.psfs(PartErrors())["coded"].double()
+        self.seconds_per_psf = time.perf_counter() - t
 
-    def height(self, err: PartErrors) -> np.ndarray:
-        shifts, rots = compose_overlay(err, self.chain)
-        return fabricated_height(self.design.levels, self.design.camera, self.design.camera.design_wavelength,
-                                 depth_scale=err.depth_scale, overlay=shifts, rotation=rots, edge_bias=err.edge_bias,
-                                 roughness=err.roughness, supersample=self.supersample, seed=err.seed,
-                                 corner_rounding=err.corner_rounding, roughness_corr=err.roughness_corr)
+    def plan(self, halves=("coded",), decenter: float = 0.0, kernel: int | None = None):
+        """The mounted-part PSF model for these halves, reaching at least ``decenter`` beyond the centre line."""
+        from doefab.tolerance.mounted import MountedPlan
 
-    def _coded(self, err: PartErrors) -> torch.Tensor:
-        with torch.no_grad():
-            return self.plan(self.height(err), gap=err.axial_gap).coded.double()
+        margin = self.margin
+        while abs(decenter) > margin:
+            margin *= 2
+        k = kernel or self.task.kernel_size
+        key = (tuple(halves), margin, k)
+        if key not in self._plans:
+            d = self.design
+            self._plans[key] = MountedPlan(self.fine, d.wavelengths, d.depths, k, halves, margin)
+        return self._plans[key]
+
+    def mask_errors(self, err: PartErrors):
+        """The part's errors as the relief model takes them (SI units)."""
+        from doefab.tolerance.relief import MaskErrors
+
+        shifts, rots = compose_overlay(err, self.chain, self.n_masks)
+        pitch = self.design.camera.doe_pitch
+        r_px = err.corner_rounding / pitch
+        bias = tuple(err.edge_bias + c * r_px ** 2 * pitch for c in self.corner_px2)
+        return MaskErrors(tuple(shifts), tuple(rots), bias, err.mount_rotation)
+
+    def field(self, err: PartErrors, plan):
+        """``field(i)``: the part's relief transmittance at wavelength i on the plan's window, relative to the
+        plain glass."""
+        from doefab.tolerance.relief import pattern_heights, transmittance
+
+        (r0, r1), (c0, c1) = plan.window
+        hist = self.relief.histogram(self.mask_errors(err), (r0, r1), (c0, c1))
+        full = (1 << self.n_masks) - 1
+        heights = pattern_heights(self.n_masks, self.step, err.depth_scale) - full * self.step
+        rough, resid = None, 0.0
+        if err.roughness > 0:
+            rough, resid = roughness_field((r1 - r0, c1 - c0), self.relief.cell, err.roughness, err.roughness_corr,
+                                           err.seed)
+            rough = torch.from_numpy(rough.reshape(-1)).float()
+
+        phases = [plan.phase_per_metre(i) for i in range(len(self.design.wavelengths))]
+        fields = transmittance(hist, heights, phases)
+        del hist
+        if rough is not None:
+            for i, c in enumerate(phases):
+                fields[i] *= torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
+
+        def at(i: int) -> torch.Tensor:
+            return fields[i]
+        return at
+
+    def psfs(self, err: PartErrors, halves=("coded",), kernel: int | None = None) -> dict:
+        """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""
+        if any(not 0 <= v < 0.5 for v in err.crosstalk):
+            raise DoefabError("crosstalk ratios must be in [0, 0.5)")
+        plan = self.plan(halves, err.mount_shift[0], kernel)
+        return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
 
     def uncoded(self) -> torch.Tensor:
+        """The nominal plain half's PSF (crosstalk at PSF level)."""
         if self._uncoded is None:
-            from doefab.optics.psf import PSFPlan
-
-            plan = PSFPlan(self.fine, self.design.wavelengths, self.design.depths, self.task.kernel_size,
-                           halves=("uncoded",))
-            with torch.no_grad():
-                self._uncoded = plan(None).uncoded.double()
+            self._uncoded = self.psfs(PartErrors(), halves=("uncoded",))["uncoded"].double()
         return self._uncoded
 
     def psf_from_height(self, height) -> torch.Tensor:
+        """Coded PSF of an explicit height map (metres) on the judge's grid (the quantization study)."""
+        h = torch.as_tensor(np.asarray(height, np.float64))
+        plan = self.plan()
+        (r0, r1), (c0, c1) = plan.window
+        rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
+
+        def at(i: int) -> torch.Tensor:
+            ph = (plan.phase_per_metre(i) * rel).float()
+            return torch.polar(torch.ones_like(ph), ph)
         with torch.no_grad():
-            return self.plan(height).coded.double()
+            return plan.psfs(at)["coded"].double()
+
+    def coded_view(self, coded: torch.Tensor, err: PartErrors) -> torch.Tensor:
+        """The coded view the camera delivers: Eq. 29's mix with the plain half, unmixed with the calibrated
+        estimate when the camera is calibrated (ratios at the sensor's centre column, where the PSF is)."""
+        if not any(err.crosstalk):
+            return coded
+        from doefab.imaging.crosstalk import mix_crosstalk, unmix_crosstalk
+        from doefab.tolerance.errors import crosstalk_ratios
+
+        a, b, a_hat, b_hat = (float(v[0]) for v in crosstalk_ratios(err, [0.0]))
+        left, right = mix_crosstalk(self.uncoded(), coded, a, b)  # left view = plain half, right = coded half
+        if not err.calibrated:
+            return right
+        return unmix_crosstalk(left, right, a_hat, b_hat)[1]
 
     def score(self, coded: torch.Tensor, err: PartErrors | None = None) -> dict:
         """Task metric (mean, worst) and L1 distance to the nominal PSF (summed over pixels, mean over entries)."""
-        if err is not None and any(err.crosstalk) and not err.calibrated:
-            a, b = err.crosstalk
-            coded = (1 - b) * coded + a * self.uncoded()  # the right (coded) view of Eq. 29
+        if err is not None:
+            coded = self.coded_view(coded, err)
         m = self.task.metric(coded.float(), self.fine)
         l1 = float((coded - self.nominal).abs().sum(dim=(-1, -2)).mean())
         return {"metric": m["value"], "worst": m["worst"], "l1_to_nominal": l1}
 
     def evaluate(self, err: PartErrors) -> dict:
-        if any(not 0 <= v < 0.5 for v in err.crosstalk):
-            raise DoefabError("crosstalk ratios must be in [0, 0.5)")
-        return self.score(self._coded(err), err)
-
-
-RECON_TASK = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
-
-
-class NetworkJudge:
-    """Judge a part through the shipped reconstruction network of its design's task.
-
-    Captures of a fixed subset of the test split are simulated with the fabricated coded PSF (the uncoded
-    half has no DOE), then reconstructed by the shipped proposed network given (a) the nominal PSF it was
-    trained with and (b) the fabricated PSF, as a user gets after measuring the part's PSF. Scored with the
-    task's metrics (mean over the subset).
-    """
-
-    def __init__(self, psf_judge: PSFJudge, images: int = 4, size: int = 128, weights_dir=None):
-        from doefab.optics.psf import PSFPlan
-        from doefab.reconstruction.loader import load_reconstructor
-        from doefab.reconstruction.specs import get_spec
-
-        self.base = psf_judge
-        d = psf_judge.design
-        if d.task not in RECON_TASK:
-            raise DoefabError(f"no reconstruction network for design task {d.task!r}")
-        self.task = RECON_TASK[d.task]
-        self.rec = load_reconstructor(self.task, "proposed", weights_dir)
-        if self.rec.design_sha256 != _levels_sha(d.levels):
-            raise DoefabError("the shipped network was trained for another design than this one: network-level "
-                              "judgement needs weights trained for it (doefab train)")
-        self.images, self.size = images, size
-        self.plan = PSFPlan(psf_judge.fine, d.wavelengths, d.depths, get_spec(self.task).kernel,
-                            halves=("coded", "uncoded"))
-
-    def evaluate(self, err: PartErrors, height=None) -> dict:
-        """Network metrics for part ``err`` (or for an explicit fine-grid ``height`` map)."""
-        import dataclasses
-
-        from doefab.reconstruction.metrics import metrics_for
-        from doefab.reconstruction.specs import make_batch
-        from doefab.reconstruction.train import _response
-
-        nominal = self.rec.pair
-        from doefab.optics.psf import as_height_tensor
-
-        h = as_height_tensor(self.base.height(err) if height is None else height, self.plan.camera)
-        uncoded = nominal.uncoded
         with torch.no_grad():
-            if err.axial_gap > 0:  # the DOE's diffraction over the gap reaches the plain half too
-                both = self.plan.gap_psfs(h, err.axial_gap)
-                coded, uncoded = both["coded"].float(), both["uncoded"].float()
-            else:
-                coded = self.plan.half_psf("coded", h).float()
-        if any(err.crosstalk) and not err.calibrated:
-            a, b = err.crosstalk
-            coded = (1 - b) * coded + a * uncoded
-        pair = dataclasses.replace(nominal, coded=coded, uncoded=uncoded)
-        batch = make_batch(self.task, "test", range(self.images), self.size, pair, _response(self.task, pair))
-        out = {}
-        for label, psf in (("nominal_psf", None), ("measured_psf", pair)):
-            rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf)), t.numpy())
-                    for c, u, t in zip(*batch)]
-            out[label] = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
-        return out
-
-
-def _levels_sha(levels) -> str:
-    from doefab.fabrication.levels import levels_sha256
-
-    return levels_sha256(levels)
+            return self.score(self.psfs(err)["coded"].double(), err)

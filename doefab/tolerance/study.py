@@ -54,7 +54,7 @@ _NET_JUDGES: dict = {}
 def _network_judge(design_dir: str, supersample: int):
     key = (str(design_dir), int(supersample))
     if key not in _NET_JUDGES:
-        from doefab.tolerance.judge import NetworkJudge
+        from doefab.tolerance.netjudge import NetworkJudge
 
         _NET_JUDGES[key] = NetworkJudge(_judge(design_dir, supersample))
     return _NET_JUDGES[key]

@@ -131,9 +131,14 @@ def test_edge_bias_roughness_and_bad_units(cam):
     h0 = fabricated_height(lv, cam, LAM, supersample=4)
     grown = fabricated_height(lv, cam, LAM, supersample=4, edge_bias=0.5e-6)
     assert grown.mean() < h0.mean()  # etched regions grew: less material
-    rough = fabricated_height(lv, cam, LAM, supersample=2, roughness=10e-9, seed=3)
+    rough = fabricated_height(lv, cam, LAM, supersample=2, roughness=10e-9, seed=3, roughness_corr=2e-6)
     diff = rough - fabricated_height(lv, cam, LAM, supersample=2)
-    assert diff.std() == pytest.approx(10e-9, rel=1e-6)
+    # a cell holds the surface's mean over its area: variance σ²·G², G = (1/w²)∬ exp(−(x − x')²/ℓ²) dx dx'
+    # over the cell (w = 2.7 µm), integrated here numerically
+    w, ell = PITCH / 2, 2e-6
+    x = (np.arange(400) + 0.5) / 400 * w
+    g = np.exp(-((x[:, None] - x[None, :]) / ell) ** 2).mean()
+    assert diff.std() == pytest.approx(10e-9 * g, rel=1e-4)
     from doefab.errors import DoefabError
 
     with pytest.raises(DoefabError, match="unit"):

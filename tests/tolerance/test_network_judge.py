@@ -5,7 +5,8 @@ import pytest
 
 from doefab.reconstruction.specs import REPO
 from doefab.tolerance.errors import PartErrors
-from doefab.tolerance.judge import NetworkJudge, PSFJudge
+from doefab.tolerance.judge import PSFJudge
+from doefab.tolerance.netjudge import NetworkJudge
 
 
 @pytest.fixture(scope="module")

@@ -74,7 +74,10 @@ class SpectralRoute:
                 sc = setup.pitch / (lam * s)
                 env = torch.from_numpy(np.outer(np.sinc(vc * sc) ** 2, np.sinc(uc * sc) ** 2)).to(setup.real_dtype)
             rd = setup.real_dtype
-            out.append((torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
+            # pupil rows are stored top (largest y) first; rather than flipping every pupil, read the FFT of the
+            # unflipped one at −j: flipping the input flips the intensity's index (up to a phase)
+            wy = wy[:, (-np.arange(ly)) % ly]
+            out.append((torch.from_numpy(np.ascontiguousarray(wy)).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
         return (ly, lx), out
 
     def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared) -> torch.Tensor:
@@ -82,8 +85,7 @@ class SpectralRoute:
         wy, wxt, env = mats[index]
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)
-        # rows are stored top (largest y) first; flip so that FFT row j is at +j·δ along y
-        field = torch.fft.fft2(torch.flip(pupil, dims=(-2,)), s=(ly, lx))
-        inten = (field.real**2 + field.imag**2) * scale**2
-        out = wy @ inten @ wxt
+        field = torch.fft.fft2(pupil, s=(ly, lx))
+        inten = field.real.square() + field.imag.square()
+        out = (wy @ inten @ wxt) * scale**2
         return out * env if env is not None else out

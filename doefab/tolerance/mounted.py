@@ -1,0 +1,140 @@
+"""PSFs of a mounted part: its die decentered against the lens axis and the dual-pixel split, its relief as made.
+
+A decenter moves the whole relief and the chrome baffle on it rigidly against the lens and the split; it never
+changes the relief. So the relief stays on its own grid (the die frame, with the sensor's axes: a die
+rotation is applied to the relief, ``relief.ReliefModel``) and what is smooth moves instead:
+
+- the split line crosses the die frame at x = −dx; each half's coverage is its exact area on its side
+  (``doefab.optics.pupil``), the baffle's disk stays centred on the die;
+- the source's wavefront, relative to the plane in focus, is evaluated at the lens-frame radius |p + d|;
+- a translation of the whole pupil only multiplies the sensor field by a phase ramp, so the sample grid's own
+  position does not matter.
+
+A whole-pixel decenter is thus exactly the part with the pattern moved by whole pixels, and a sub-pixel one
+lies between them. The sample grid reaches ``margin`` beyond the centre line, so every decenter within it
+shares one set of transform matrices.
+
+**Which plane splits the aperture.** When the DOE's baffle is narrower than the lens's entrance pupil
+(``Camera.doe_is_stop``), the baffle is the aperture stop, the exit pupil is the lens's image of the DOE and
+the dual-pixel split is conjugate to the DOE itself: a gap between the DOE and the lens then moves nothing and
+is not propagated. Only when the lens's own stop is narrower does the DOE sit in front of the stop; its
+diffraction over the gap is then propagated (``doefab.optics.gap``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from doefab.optics.camera import Camera
+from doefab.optics.propagators import make_route
+from doefab.optics.propagators.base import FocalSetup
+from doefab.optics.pupil import pupil_half, source_path_difference
+
+__all__ = ["MountedPlan", "stop_case"]
+
+
+def stop_case(camera: Camera) -> str:
+    """One sentence for reports: which element is the aperture stop and what that means for the gap."""
+    doe, lens = camera.aperture_diameter * 1e3, camera.lens_pupil_diameter * 1e3
+    if camera.doe_is_stop:
+        return (f"the DOE's {doe:.2f} mm baffle is narrower than the lens's {lens:.1f} mm entrance pupil "
+                f"(f/{camera.lens_f_number:g}): it is the aperture stop, the dual-pixel split is conjugate to "
+                f"the DOE, and the DOE-to-lens gap moves nothing")
+    return (f"the lens's {lens:.2f} mm entrance pupil (f/{camera.lens_f_number:g}) is narrower than the DOE's "
+            f"{doe:.2f} mm baffle: the lens is the stop, the DOE sits in front of it, and its diffraction over "
+            f"the gap is propagated")
+
+
+class MountedPlan:
+    """Precomputed PSF model of mounted parts of one design grid (``camera``: the simulation grid's camera).
+
+    ``psfs(field, decenter, gap)`` → {half: (n_depths, n_wavelengths, K, K)} energy fractions of the whole
+    aperture, with ``field(i)`` the relief's complex transmittance at wavelength i on the window
+    ``self.window`` (rows, cols) of the grid, relative to the plain glass (heights above the unetched level:
+    ``relief.pattern_heights(...) − (L − 1)·d``).
+    """
+
+    def __init__(self, camera: Camera, wavelengths, depths, kernel: int, halves=("coded",), margin: float = 0.0,
+                 route: str = "spectral"):
+        self.camera, self.wavelengths, self.depths = camera, tuple(wavelengths), tuple(depths)
+        self.kernel, self.halves, self.margin = int(kernel), tuple(halves), float(margin)
+        self.route = make_route(route)
+        self._k = [2 * math.pi / lam for lam in self.wavelengths]
+        self._dn = [float(camera.material.index(lam)) - 1.0 for lam in self.wavelengths]
+        self.geo, self._prepared = {}, {}
+        for half in self.halves:
+            geo = pupil_half(camera, half, 1, 0.0, self.margin)
+            setup = FocalSetup(geo.x, geo.y, geo.pitch, half == "coded", self.wavelengths, camera.sensor_distance,
+                               camera.sensor_pitch, self.kernel, (0.0, 0.0), torch.float32, None)
+            self.route.check(setup)
+            self.geo[half] = geo
+            self._prepared[half] = (setup, self.route.prepare(setup))
+        rows = [g.rows for g in self.geo.values()]
+        cols = [g.cols for g in self.geo.values()]
+        self.window = ((min(r.start for r in rows), max(r.stop for r in rows)),
+                       (min(c.start for c in cols), max(c.stop for c in cols)))
+        self._cov: dict = {}
+
+    def phase_per_metre(self, i: int) -> float:
+        """k·Δn at wavelength i: the phase a metre of relief adds (radians per metre)."""
+        return self._k[i] * self._dn[i]
+
+    def covers(self, decenter) -> bool:
+        return abs(float(decenter[0])) <= self.margin
+
+    def _coverage(self, half: str, dx: float) -> torch.Tensor:
+        key = (half, round(dx, 15))
+        if key not in self._cov:
+            geo = pupil_half(self.camera, half, 1, -dx, self.margin)
+            self._cov[key] = torch.from_numpy(geo.coverage).float()
+            if len(self._cov) > 8:
+                self._cov.pop(next(iter(self._cov)))
+        return self._cov[key]
+
+    def psfs(self, field, decenter=(0.0, 0.0), gap: float = 0.0, halves=None) -> dict:
+        """PSFs of the part whose relief transmittance is ``field(i)`` ([rows × cols] of ``self.window``, complex)
+        and whose die centre sits ``decenter`` = (dx, dy) metres from the lens axis (x across the split)."""
+        dx, dy = float(decenter[0]), float(decenter[1])
+        halves = self.halves if halves is None else tuple(halves)
+        (r0, r1), (c0, c1) = self.window
+        propagate = gap > 0 and not self.camera.doe_is_stop
+        out = {h: [] for h in halves}
+        opd = {h: self._opd(h, dx, dy) for h in halves}
+        d = len(self.depths)
+        for i in range(len(self.wavelengths)):
+            t = field(i).reshape(r1 - r0, c1 - c0)
+            t = torch.stack([self._through_gap(t, i, j, gap) for j in range(d)]) if propagate else t[None]
+            for half in halves:
+                geo = self.geo[half]
+                sub = t[:, geo.rows.start - r0:geo.rows.stop - r0, geo.cols.start - c0:geo.cols.stop - c0]
+                pupil = self._coverage(half, dx) * sub
+                if opd[half] is not None:
+                    pupil = pupil * torch.polar(torch.ones_like(opd[half]), self._k[i] * opd[half])
+                setup, prepared = self._prepared[half]
+                inten = self.route.intensity(pupil, i, setup, prepared) / geo.full_area
+                out[half].append(inten.expand(d, self.kernel, self.kernel))
+        return {h: torch.stack(v, dim=1) for h, v in out.items()}
+
+    def _opd(self, half: str, dx: float, dy: float):
+        """[D, rows, cols] the source's optical path relative to the plane in focus, at lens-frame radii, or None
+        when every depth is the focus distance (a plane of zeros)."""
+        if all(z == self.camera.focus_distance for z in self.depths):
+            return None
+        geo = self.geo[half]
+        r2 = (geo.y[:, None] + dy) ** 2 + (geo.x[None, :] + dx) ** 2
+        return torch.from_numpy(np.stack([source_path_difference(r2, z, self.camera.focus_distance)
+                                          for z in self.depths])).float()
+
+    def _through_gap(self, t: torch.Tensor, i: int, j: int, gap: float) -> torch.Tensor:
+        """The window's transmittance carried over the gap to the lens's stop for the source at depth j
+        (lens-limited case only; ``t`` is relative to the plain glass, which is 1 outside the window)."""
+        from doefab.optics.gap import gap_field
+
+        n = self.camera.doe_pixels
+        (r0, r1), (c0, c1) = self.window
+        full = torch.ones((n, n), dtype=torch.complex64)
+        full[r0:r1, c0:c1] = t[0]
+        return gap_field(full, self.camera, self.wavelengths[i], self.depths[j], gap)[r0:r1, c0:c1]
