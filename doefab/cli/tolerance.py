@@ -1,13 +1,16 @@
-"""``doefab tolerance``: fabrication and mounting tolerance of a design or mask set, judged on its PSFs.
+"""``doefab tolerance``: fabrication and mounting tolerance of a design or mask set: what its parts deliver and
+what fraction meets the spec.
 
 Examples:
-  doefab tolerance --design masks/grating --samples 40 --sweep --levels --out out/tol/grating
+  doefab tolerance --design masks/grating --samples 300 --out out/tol/grating
+  doefab tolerance --design masks/grating --samples 40 --surrogate --sweep --levels --out out/tol/g
+  doefab tolerance --design masks/half-ring --samples 24 --networks --out out/tol/depth
   doefab tolerance --design masks/streak --budget my_budget.toml --samples 200 --scheduler local:2 --out out/tol/s
-  doefab tolerance --design masks/grating --holder out/holder/holder.json --samples 40 --out out/tol/g
 
-Writes OUT/tolerance.json (every sample's errors and metrics, and a summary with each metric's mean, 95 %
-interval and the yield against the budget's [spec]), OUT/report.md and plots. Samples are checkpointed in
-OUT/samples.jsonl: rerun the same command with --resume to continue an interrupted study.
+Writes OUT/tolerance.json (every part's errors and metrics; means with 95 % intervals; yield against the
+budget's [spec.<task>] with its Wilson interval), OUT/report.md (opening with what the part delivers, its
+yield, what limits it and what would buy the most) and figures. The grid each error needs is measured on the
+design (--grid auto). Parts are checkpointed in OUT/samples.jsonl: rerun with --resume to continue.
 """
 
 from __future__ import annotations
@@ -28,18 +31,42 @@ def register(sub) -> None:
                         "replace the budget's [mounting] decenter, rotation and axial gap")
     p.add_argument("--samples", type=number(int, 0, 100_000), default=20, help="Monte Carlo samples (0 = none)")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
-    p.add_argument("--supersample", type=number(int, 1, 8), default=1,
-                   help="simulation grid refinement per DOE pixel (see the README's error-vs-time table)")
-    p.add_argument("--sweep", action="store_true", help="one-at-a-time sweeps and a tornado chart")
+    p.add_argument("--grid", type=_grid, default="auto",
+                   help="simulation grid: auto (the coarsest each error needs, measured on the design) or a "
+                        "refinement per DOE pixel, 1–8")
+    p.add_argument("--sweep", action="store_true", help="one-at-a-time sweeps of every error kind")
     p.add_argument("--levels", action="store_true", help="quantization study: continuous, 16, 8, 4, 2 levels")
     p.add_argument("--networks", action="store_true",
-                   help="also judge every sample through the shipped reconstruction network (nominal and measured PSF)")
+                   help="judge every part through the task's reconstruction network: delivered quality and its "
+                        "yield (nominal and measured PSF)")
+    p.add_argument("--weights-dir", default=None, help="networks trained for this design (default: the shipped ones)")
+    p.add_argument("--surrogate", action="store_true",
+                   help="also a sensitivity surrogate: fitted on simulated parts, Monte Carlo on it, checked on "
+                        "held-out parts, compared with the direct Monte Carlo")
     p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
-    p.add_argument("--scheduler", default=None, help="Dask: local:N (a LocalCluster) or tcp://HOST:PORT")
+    p.add_argument("--scheduler", type=_scheduler, default=None,
+                   help="Dask: local:N (a LocalCluster of N ≥ 1 workers) or tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
     p.set_defaults(func=run)
+
+
+def _grid(text: str):
+    if text == "auto":
+        return text
+    return number(int, 1, 8, unit="cells per DOE pixel", hint=" (or auto)")(text)
+
+
+def _scheduler(text: str) -> str:
+    from doefab.errors import DoefabError
+    from doefab.tolerance.montecarlo import parse_scheduler
+
+    try:
+        parse_scheduler(text)
+    except DoefabError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def run(args) -> int:
@@ -53,8 +80,6 @@ def run(args) -> int:
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
-    if args.scheduler and not (args.scheduler.startswith("local:") or args.scheduler.startswith("tcp://")):
-        raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {args.scheduler!r}")
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
@@ -63,13 +88,14 @@ def run(args) -> int:
     out.create()
     if args.force and (out.path / "samples.jsonl").is_file():
         (out.path / "samples.jsonl").unlink()
-    res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, supersample=args.supersample,
+    res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
                     budget_path=(args.budget or "doefab/tolerance/budget.toml (default)")
-                    + (f", [mounting] from {args.holder}" if args.holder else ""), networks=args.networks)
-    s = res.get("summary")
-    if s:
-        print(f"metric mean {s['metric']['mean']:.4f} (95 % CI {s['metric']['ci95'][0]:.4f}–{s['metric']['ci95'][1]:.4f}), "
-              f"yield {s['yield']['value']:.2f} at metric ≥ {s['yield']['spec_metric_min']}")
+                    + (f", [mounting] from {args.holder}" if args.holder else ""), networks=args.networks,
+                    surrogate=args.surrogate, weights_dir=args.weights_dir)
+    from doefab.tolerance.report import summary_lines
+
+    for line in summary_lines(res):
+        print(line.replace("**", ""))
     print(f"wrote {out.path / 'tolerance.json'} and {out.path / 'report.md'}")
     return 0

@@ -29,7 +29,7 @@ from doefab.optics.psf import PSFPlan
 from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
-__all__ = ["DesignConfig", "optimize", "design_from_theta", "PLAIN_LEVEL", "OPTIMIZERS"]
+__all__ = ["DesignConfig", "optimize", "design_from_theta", "PLAIN_LEVEL", "OPTIMIZERS", "coded_mask"]
 
 PLAIN_LEVEL = N_LEVELS - 1  # the plain half and the area outside the clear aperture stay unetched
 OPTIMIZERS = ("adam", "lbfgs", "mma")
@@ -85,7 +85,7 @@ def _design_camera(camera: Camera, sampling: int) -> Camera:
     return camera.replace(doe_pixels=camera.doe_pixels // sampling, doe_pitch=camera.doe_pitch * sampling)
 
 
-def _coded_mask(camera: Camera) -> torch.Tensor:
+def coded_mask(camera: Camera) -> torch.Tensor:
     """(N, N) float mask of DOE pixels that carry coded light (inside the aperture, x < 0)."""
     geo = pupil_half(camera, "coded")
     m = np.zeros((camera.doe_pixels,) * 2)
@@ -96,7 +96,7 @@ def _coded_mask(camera: Camera) -> torch.Tensor:
 def finalize_levels(height: np.ndarray, camera: Camera) -> np.ndarray:
     """Levels of a design: nearest level in the coded aperture, PLAIN_LEVEL elsewhere."""
     lv = quantize_levels(height, camera)
-    mask = _coded_mask(camera).numpy() > 0
+    mask = coded_mask(camera).numpy() > 0
     lv[~mask] = PLAIN_LEVEL
     return lv
 
@@ -141,7 +141,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     rng = np.random.default_rng(cfg.seed)
     lams, depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
     plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",))
-    mask = _coded_mask(dcam)
+    mask = coded_mask(dcam)
     theta = param.start(task_obj, rng, cfg.start).requires_grad_(True)
     pairs = [(d, w) for d in range(len(depths)) for w in range(len(lams))]
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -382,7 +382,7 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
     if cfg.sampling > 1 and not radial:
         h_design = np.kron(h_design, np.ones((cfg.sampling, cfg.sampling)))
     levels = finalize_levels(h_design, cam)
-    mask = _coded_mask(cam).numpy() > 0
+    mask = coded_mask(cam).numpy() > 0
     height = np.where(mask, h_design, PLAIN_LEVEL * level_step(cam))
     plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",))
     with torch.no_grad():

@@ -96,10 +96,10 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
 
 def crosstalk_profile(columns, centre: float, slope: float, half_width: float):
     """Ratios at sensor ``columns`` (pixels from the sensor's centre column): ``centre + slope · x / half_width``
-    clipped to [0, 0.45]; ``slope`` is the change from the centre to ``half_width`` columns away (the edge of
+    clipped to [0, 0.499]; ``slope`` is the change from the centre to ``half_width`` columns away (the edge of
     the calibrated region; seed 5.1: 3072 px wide)."""
     x = np.asarray(columns, np.float64)
-    return np.clip(centre + slope * x / float(half_width), 0.0, 0.45)
+    return np.clip(centre + slope * x / float(half_width), 0.0, 0.499)
 
 
 def simulate_calibration(alpha_lr, alpha_rl, rows: int, noise, rng: np.random.Generator, level: float = 0.5):

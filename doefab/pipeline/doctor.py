@@ -73,12 +73,15 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
         diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
         rows.append(_row("float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
                          diff <= 1e-3, "precision = float64 (doefab psf --precision float64)"))
-    a, b = 0.05, 0.05
-    if scene.tolerance is not None:
-        from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.errors import load_budget, sensor_errors
 
-        sens = load_budget(scene.budget_path()).get("sensor", {})
-        a, b = sens.get("crosstalk_lr_percent", 5) / 100, sens.get("crosstalk_rl_percent", 5) / 100
+    sens = sensor_errors(load_budget(scene.budget_path() if scene.tolerance is not None else None))
+    # the worst column: l→r rises toward one edge of the calibrated region and r→l toward the other
+    a = max(sens["crosstalk"][0] + sens["crosstalk_slope"], 0.0)
+    b = max(sens["crosstalk"][1] - sens["crosstalk_slope"], 0.0)
+    a2, b2 = max(sens["crosstalk"][0] - sens["crosstalk_slope"], 0.0), sens["crosstalk"][1] + sens["crosstalk_slope"]
+    if 1 - a2 - b2 < 1 - a - b:
+        a, b = a2, b2
     det = 1 - a - b
     cond = float(np.linalg.cond(np.array([[1 - a, b], [a, 1 - b]])))
     rows.append(_row(f"crosstalk inverse determinant 1 − α_l→r − α_r→l (α = {a:g}, {b:g}; matrix condition {cond:.2f})",

@@ -13,7 +13,7 @@ from doefab.io import atomic_write_text
 __all__ = ["write_report", "SECTIONS"]
 
 REPO = Path(__file__).resolve().parents[2]
-SECTIONS = ("Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
+SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
 
 
 def _plt():
@@ -133,7 +133,10 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
 
 def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     """Write report.md and report.html; returns the list of images referenced."""
+    from doefab.pipeline.summary import summary_items, tolerance_items
+
     blocks: list[tuple[str, list]] = []  # (section, [("p", text) | ("img", path, caption) | ("table", rows)])
+    blocks.append(("Summary", summary_items(out, done)))
     stages = [["stage", "status", "why", "seconds"]]
     for name, info in done.items():
         st = info.get("status", "?") + (" (unchanged: kept from the previous run)" if info.get("reused_from_previous_run")
@@ -181,18 +184,7 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
         blocks.append(("Reconstruction", [("p", (rc or {}).get("why", "not run"))]))
     tl = done.get("tolerance")
     if tl and tl.get("status") == "ran":
-        items = [("p", tl.get("why", ""))]
-        summ = tl.get("summary") or {}
-        if summ:
-            items.append(("table", [["quantity", "mean", "95 % interval"],
-                                    ["task metric", f"{summ['metric']['mean']:.4f}",
-                                     f"{summ['metric']['ci95'][0]:.4f}–{summ['metric']['ci95'][1]:.4f}"],
-                                    ["yield", f"{summ['yield']['value']:.3f}",
-                                     f"{summ['yield']['ci95'][0]:.3f}–{summ['yield']['ci95'][1]:.3f}"]]))
-        for f, cap in (("tolerance/quantization.png", "quantization study"),):
-            if (out / f).is_file():
-                items.append(("img", f, cap))
-        blocks.append(("Tolerance", items))
+        blocks.append(("Tolerance", [("p", tl.get("why", ""))] + tolerance_items(out)))
     else:
         blocks.append(("Tolerance", [("p", (tl or {}).get("why", "not run"))]))
     blocks.append(("Error against run time", [("img", f, f"{t}: {c}") for t, f, c in _knob_plots(out, scene, done)]))

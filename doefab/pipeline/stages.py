@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import shutil
 import time
 from pathlib import Path
@@ -198,6 +199,9 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
 
 
 def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
+    """The scene's part judged through its task's network: delivered quality, its yield against the budget's
+    [spec], a tornado in delivered terms for the errors that matter most, the grid each error needs; the
+    quantization study at PSF level. A rerun after an interruption continues from the saved parts."""
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import run_study
 
@@ -210,15 +214,21 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     if holder.is_file():  # the mounting errors of the holder this scene built
         budget.setdefault("mounting", {}).update(holder_mounting(holder))
     samples = 3 if quick else int(tol.get("samples", 20))
+    weights = out.parent / "reconstruction" / "weights"
+    networks = res["reuse"] or weights.is_dir()
     out.mkdir(parents=True, exist_ok=True)
-    (out / "samples.jsonl").unlink(missing_ok=True)
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
-                  supersample=int(tol.get("supersample", 1)), do_levels=not quick, budget_path=path)
-    return {"status": "ran", "why": f"{samples} Monte Carlo parts" + ("" if quick else " and the quantization study")
+                  grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
+                  budget_path=path, networks=networks, weights_dir=None if res["reuse"] else weights,
+                  network_top=2 if quick else 5)
+    return {"status": "ran", "why": f"{samples} Monte Carlo parts " + ("through the network" if networks else
+                                                                      "at PSF level (no network for this design)")
+            + ("" if quick else " and the quantization study")
             + ("; mounting errors from this scene's holder" if holder.is_file() else ""),
-            "summary": r.get("summary")}
+            "summary": r.get("summary"), "level": r["level"]}
 
 
+RESUMABLE = "samples.jsonl"  # what a stage keeps from an interrupted run of the same inputs
 STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
@@ -240,17 +250,27 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     out = out_root / name
     h = stage_hash(scene, name, done, quick)
     rec_path = out / "stage.json"
-    if not force and rec_path.is_file():
+    old = {}
+    if rec_path.is_file():
         try:
             old = json.loads(rec_path.read_text())
         except ValueError:
             old = {}
-        if old.get("hash") == h and old.get("complete"):
-            old["reused_from_previous_run"] = True
-            return old
+    if not force and old.get("hash") == h and old.get("complete"):
+        old["reused_from_previous_run"] = True
+        return old
+    # an interrupted run of the same inputs keeps its finished Monte Carlo parts (samples.jsonl checks its run)
+    keep = out / RESUMABLE if not force and old.get("hash") == h and (out / RESUMABLE).is_file() else None
+    saved = None
+    if keep is not None:
+        saved = out_root / f".{name}.{RESUMABLE}"
+        os.replace(keep, saved)
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
+    if saved is not None:
+        os.replace(saved, out / RESUMABLE)
+    atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False})
     t = time.perf_counter()
     info = STAGE_FUNCS[name](scene, res, out, quick)
     info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True)

@@ -29,10 +29,10 @@ BUDGET_KEYS = {
     "surface": {"roughness_rms_nm": (0, 200), "correlation_length_um": (0.1, 1000)},
     "mounting": {"decenter_max_mm": (0, 5), "rotation_sigma_deg": (0, 30), "axial_gap_mm": (0, 50),
                  "axial_gap_sigma_mm": (0, 10), "pupil_behind_glass_mm": (0, 45)},
-    "sensor": {"crosstalk_lr_percent": (0, 45), "crosstalk_rl_percent": (0, 45), "crosstalk_slope_percent": (0, 20),
+    "sensor": {"crosstalk_lr_percent": (0, 49.9), "crosstalk_rl_percent": (0, 49.9), "crosstalk_slope_percent": (0, 20),
                "calibrated": None, "calibration_rows": (1, 100000), "calibration_level": (0.01, 1),
                "calibrated_width_px": (16, 100000)},
-    "spec": {"metric_min": (0, 1)},
+    "spec": None,  # per-task tables, checked by doefab.tolerance.spec
 }
 
 
@@ -64,13 +64,41 @@ class PartErrors:
 
 
 def load_budget(path: str | Path | None = None) -> dict:
-    """Read and validate a budget file (every problem listed with its key)."""
+    """Read and validate a budget file (every problem listed with its key). A key the file leaves out takes the
+    shipped default budget's value; ``budget["defaults_used"]`` lists those keys (a ``[spec.<task>]`` table the
+    file gives replaces the default's table of that task as a whole)."""
     p = Path(path) if path is not None else DEFAULT_BUDGET
     data = read_toml(p, "budget file")
+    problems = _problems(data)
+    if problems:
+        raise DoefabError(f"{p}: " + "; ".join(problems))
+    if path is None or p.resolve() == DEFAULT_BUDGET.resolve():
+        return {**data, "defaults_used": []}
+    base = read_toml(DEFAULT_BUDGET, "default budget")
+    used = []
+    merged = {sec: dict(val) for sec, val in data.items()}
+    for sec, val in base.items():
+        have = merged.setdefault(sec, {})
+        for key, v in val.items():
+            if key not in have:
+                have[key] = v
+                used.append(f"{sec}.{key}")
+    return {**merged, "defaults_used": used}
+
+
+def _problems(data: dict) -> list[str]:
+    from doefab.tolerance.spec import check_spec
+
     problems = []
     for sec, val in data.items():
         if sec not in BUDGET_KEYS:
             problems.append(f"unknown section [{sec}]")
+            continue
+        if not isinstance(val, dict):
+            problems.append(f"{sec} must be a table [{sec}]")
+            continue
+        if BUDGET_KEYS[sec] is None:
+            problems += check_spec(val)
             continue
         for key, v in val.items():
             if key not in BUDGET_KEYS[sec]:
@@ -83,9 +111,7 @@ def load_budget(path: str | Path | None = None) -> dict:
             elif not BUDGET_KEYS[sec][key][0] <= v <= BUDGET_KEYS[sec][key][1]:
                 lo, hi = BUDGET_KEYS[sec][key]
                 problems.append(f"{sec}.{key} = {v} is outside {lo}–{hi} (check the unit in the key's name)")
-    if problems:
-        raise DoefabError(f"{p}: " + "; ".join(problems))
-    return data
+    return problems
 
 
 def budget_value(budget: dict, sec: str, key: str, default: float = 0.0) -> float:

@@ -63,21 +63,25 @@ def compose_overlay(err: PartErrors, chain: dict, n_masks: int = 4) -> tuple[lis
 
 
 class PSFJudge:
-    """PSF-level judge of one design folder (``design.json`` + ``levels.npy``) on the design grid refined
-    ``supersample``× (cells per DOE pixel and axis)."""
+    """PSF-level judge of one design folder (``design.json`` + ``levels.npy``, or a ``Design``) on the design grid
+    refined ``supersample``× (cells per DOE pixel and axis). ``chain``: the mask set's alignment chain (default:
+    read from the manifest beside the design folder)."""
 
-    def __init__(self, design_dir: str | Path, supersample: int = 1, threads: int | None = None,
-                 margin: float = DEFAULT_MARGIN):
+    def __init__(self, design_dir, supersample: int = 1, threads: int | None = None, margin: float = DEFAULT_MARGIN,
+                 chain: dict | None = None):
         from doefab.design.design import Design
         from doefab.fabrication.bitplanes import bit_planes
         from doefab.fabrication.levels import level_step
         from doefab.tasks import get_task
-        from doefab.tolerance.relief import ReliefModel, corner_bias
+        from doefab.tolerance.relief import ReliefModel, corner_bias, plain_columns
 
         if threads:
             torch.set_num_threads(threads)
-        self.design_dir = Path(design_dir)
-        d = Design.load(self.design_dir)
+        if isinstance(design_dir, Design):  # an in-memory design (a block of one, for the grid study)
+            d, self.design_dir = design_dir, None
+        else:
+            self.design_dir = Path(design_dir)
+            d = Design.load(self.design_dir)
         self.design, self.supersample, self.margin = d, supersample, float(margin)
         self.task = get_task(d.task, **d.task_params)
         self.task.bind(d.camera)
@@ -86,8 +90,9 @@ class PSFJudge:
         self.n_masks = planes.shape[0]
         self.relief = ReliefModel(planes, d.camera.doe_pitch, supersample)
         self.corner_px2 = [corner_bias(p, 1.0) for p in planes]  # bias (px) per px² of corner radius
+        self.plain_from = plain_columns(planes) * supersample  # grid column from which the design is plain
         self.step = level_step(d.camera)
-        self.chain = alignment_chain(self.design_dir)
+        self.chain = chain or (alignment_chain(self.design_dir) if self.design_dir else {1: 0, 2: 0, 3: 0, 4: 0})
         self._plans: dict = {}
         self._uncoded = None
         t = time.perf_counter()
@@ -120,25 +125,42 @@ class PSFJudge:
 
     def field(self, err: PartErrors, plan):
         """``field(i)``: the part's relief transmittance at wavelength i on the plan's window, relative to the
-        plain glass."""
-        from doefab.tolerance.relief import pattern_heights, transmittance
+        plain glass. Only the columns the relief can reach are computed (beyond the design's plain boundary,
+        moved by the masks' and the mount's errors, the glass is plain); a mount rotation turns whichever is
+        smaller, the pattern areas or the wavelengths' transmittances."""
+        from doefab.tolerance.relief import pattern_heights, rotate_fields, transmittance
 
         (r0, r1), (c0, c1) = plan.window
-        hist = self.relief.histogram(self.mask_errors(err), (r0, r1), (c0, c1))
+        th = float(err.mount_rotation)
+        me = self.mask_errors(err)
+        cells = self.relief.n
+        reach = abs(th) * cells + max(abs(v) for s in me.shifts for v in s) / self.relief.cell + 4
+        c_end = min(c1, max(c0 + 1, int(self.plain_from + reach)))
         full = (1 << self.n_masks) - 1
         heights = pattern_heights(self.n_masks, self.step, err.depth_scale) - full * self.step
-        rough, resid = None, 0.0
-        if err.roughness > 0:
-            rough, resid = roughness_field((r1 - r0, c1 - c0), self.relief.cell, err.roughness, err.roughness_corr,
-                                           err.seed)
-            rough = torch.from_numpy(rough.reshape(-1)).float()
-
         phases = [plan.phase_per_metre(i) for i in range(len(self.design.wavelengths))]
-        fields = transmittance(hist, heights, phases)
-        del hist
-        if rough is not None:
+        if th == 0.0:
+            fields = transmittance(self.relief.die_histogram(me, (r0, r1), (c0, c_end)), heights, phases)
+        else:
+            big, bigc = self.relief.rotation_window(th, (r0, r1), (c0, c_end))
+            die = self.relief.die_histogram(me, big, bigc)
+            if 2 * len(phases) < die.shape[0]:
+                fields = rotate_fields(transmittance(die, heights, phases), th, (r0, r1), (c0, c_end), big, bigc,
+                                       cells, torch.ones(len(phases), dtype=torch.complex64))
+            else:
+                plain = torch.zeros(die.shape[0])
+                plain[0] = 1.0
+                fields = transmittance(rotate_fields(die, th, (r0, r1), (c0, c_end), big, bigc, cells, plain),
+                                       heights, phases)
+        if err.roughness > 0:
+            rough, resid = roughness_field((r1 - r0, c_end - c0), self.relief.cell, err.roughness,
+                                           err.roughness_corr, err.seed)
+            rough = torch.from_numpy(rough.reshape(-1)).float()
             for i, c in enumerate(phases):
                 fields[i] *= torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
+        fields = fields.reshape(len(phases), r1 - r0, c_end - c0)
+        if c_end < c1:  # plain glass beyond the relief's reach
+            fields = torch.cat([fields, torch.ones(len(phases), r1 - r0, c1 - c_end, dtype=fields.dtype)], dim=2)
 
         def at(i: int) -> torch.Tensor:
             return fields[i]
@@ -157,10 +179,10 @@ class PSFJudge:
             self._uncoded = self.psfs(PartErrors(), halves=("uncoded",))["uncoded"].double()
         return self._uncoded
 
-    def psf_from_height(self, height) -> torch.Tensor:
-        """Coded PSF of an explicit height map (metres) on the judge's grid (the quantization study)."""
+    def height_psfs(self, height, halves=("coded",), kernel: int | None = None) -> dict:
+        """{half: PSF} of an explicit height map (metres, on the judge's grid; the quantization study)."""
         h = torch.as_tensor(np.asarray(height, np.float64))
-        plan = self.plan()
+        plan = self.plan(halves, 0.0, kernel)
         (r0, r1), (c0, c1) = plan.window
         rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
 
@@ -168,7 +190,11 @@ class PSFJudge:
             ph = (plan.phase_per_metre(i) * rel).float()
             return torch.polar(torch.ones_like(ph), ph)
         with torch.no_grad():
-            return plan.psfs(at)["coded"].double()
+            return plan.psfs(at, halves=halves)
+
+    def psf_from_height(self, height) -> torch.Tensor:
+        """Coded PSF of an explicit height map (metres) on the judge's grid."""
+        return self.height_psfs(height)["coded"].double()
 
     def coded_view(self, coded: torch.Tensor, err: PartErrors) -> torch.Tensor:
         """The coded view the camera delivers: Eq. 29's mix with the plain half, unmixed with the calibrated

@@ -47,12 +47,14 @@ class NetworkJudge:
                               "needs weights trained for it (doefab train --design ...)")
         self.images, self.size = images, size
 
-    def pair(self, err: PartErrors):
-        """The part's PSF pair (both halves) at the network's kernel."""
+    def pair(self, err: PartErrors, height=None):
+        """The part's PSF pair (both halves) at the network's kernel (or that of an explicit ``height`` map)."""
         import dataclasses
 
+        halves, k = ("coded", "uncoded"), self.rec.pair.coded.shape[-1]
         with torch.no_grad():
-            got = self.base.psfs(err, halves=("coded", "uncoded"), kernel=self.rec.pair.coded.shape[-1])
+            got = (self.base.psfs(err, halves=halves, kernel=k) if height is None
+                   else self.base.height_psfs(height, halves, k))
         return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float())
 
     def crosstalk(self, err: PartErrors):
@@ -67,13 +69,14 @@ class NetworkJudge:
             return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
         return at
 
-    def evaluate(self, err: PartErrors) -> dict:
-        """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes)."""
+    def evaluate(self, err: PartErrors, height=None) -> dict:
+        """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes); ``height``: an
+        explicit height map instead of the part's relief (the quantization study)."""
         from doefab.reconstruction.metrics import mean_metrics, metrics_for
         from doefab.reconstruction.specs import make_batch
         from doefab.reconstruction.train import sensor_response_for
 
-        pair = self.pair(err)
+        pair = self.pair(err, height)
         coded, uncoded, target = make_batch(self.task, "val", range(self.images), self.size, pair,
                                             sensor_response_for(self.task, pair), crosstalk=self.crosstalk(err))
         out = {}

@@ -32,7 +32,7 @@ import torch
 from doefab.errors import DoefabError
 
 __all__ = ["ReliefModel", "MaskErrors", "pattern_heights", "transmittance", "mean_height", "ZONE_REACH",
-           "corner_bias"]
+           "corner_bias", "rotate_fields", "plain_columns"]
 
 # A mask's edges within one cell, along one axis: the boundary nearest the cell's leading edge at ρ ∈ (−½, ½],
 # the next at ρ + 1, each widened by the bias β (|β| ≤ ½) into [b − β, b + β]. Zone z of the five these four
@@ -268,6 +268,12 @@ class ReliefModel:
                     flat.index_add_(0, pattern * n + idx, torch.full((idx.numel(),), wy * wx))
         return h
 
+    def rotation_window(self, theta: float, rows: tuple[int, int], cols: tuple[int, int]) -> tuple:
+        """The die window whose cells a rotation by ``theta`` brings into ``rows × cols``."""
+        reach = abs(theta) * math.hypot(self.n, self.n) / 2 + 2
+        return ((max(0, int(rows[0] - reach)), min(self.n, int(rows[1] + reach) + 1)),
+                (max(0, int(cols[0] - reach)), min(self.n, int(cols[1] + reach) + 1)))
+
     def histogram(self, err: MaskErrors, rows: tuple[int, int] | None = None,
                   cols: tuple[int, int] | None = None) -> torch.Tensor:
         """[2^M, cells] pattern areas of the cells ``rows × cols`` of the sensor-aligned grid centred on the
@@ -277,23 +283,24 @@ class ReliefModel:
         th = float(err.mount_rotation)
         if th == 0.0:
             return self.die_histogram(err, rows, cols)
-        reach = abs(th) * math.hypot(self.n, self.n) / 2 + 2
-        big = (max(0, int(rows[0] - reach)), min(self.n, int(rows[1] + reach) + 1))
-        bigc = (max(0, int(cols[0] - reach)), min(self.n, int(cols[1] + reach) + 1))
+        big, bigc = self.rotation_window(th, rows, cols)
         die = self.die_histogram(err, big, bigc)
-        return _rotate_histogram(die, th, rows, cols, big, bigc, self.n)
+        plain = torch.zeros(die.shape[0])
+        plain[0] = 1.0
+        return rotate_fields(die, th, rows, cols, big, bigc, self.n, plain)
 
 
-def _rotate_histogram(die: torch.Tensor, theta: float, rows, cols, big, bigc, n: int) -> torch.Tensor:
-    """Stage 2: the die's pattern areas turned by θ about the die centre onto the sensor-aligned grid.
+def rotate_fields(die: torch.Tensor, theta: float, rows, cols, big, bigc, n: int, outside) -> torch.Tensor:
+    """Stage 2: fields [C, cells of the die window big × bigc] (real or complex) turned by θ about the die
+    centre onto the sensor-aligned window rows × cols; ``outside`` [C]: their value beyond the window.
 
     What a pixelated relief sends into the window is its samples' array factor times one pixel's far field; a
     turned lattice's array factor within the band is that of its samples moved by band-limited interpolation,
     which three shears do exactly (Unser et al. 1995: each shear shifts every row, or column, by a Fourier
-    phase ramp). Each pattern's area field is linear in the transmittance, so the (wavelength-independent)
-    fields are turned once. Content the shears push past the band's edge wraps to the far edge, never into the
-    window the PSFs use. (Area-weighted resampling instead would attenuate the window's light by up to
-    f(1 − f)(2πua)², several per cent at a grating's first order.)
+    phase ramp). The pattern-area fields and the transmittance are linear in each other, so either may be
+    turned (the judge turns whichever has fewer channels). Content the shears push past the band's edge wraps
+    to the far edge, never into the window the PSFs use. (Area-weighted resampling instead would attenuate the
+    window's light by up to f(1 − f)(2πua)², several per cent at a grating's first order.)
     """
     wr, wc = big[1] - big[0], bigc[1] - bigc[0]
     f = die.reshape(die.shape[0], wr, wc)
@@ -302,9 +309,8 @@ def _rotate_histogram(die: torch.Tensor, theta: float, rows, cols, big, bigc, n:
     y = c - torch.arange(big[0], big[1], dtype=torch.float64)  # cells from the die centre, y up
     x = torch.arange(bigc[0], bigc[1], dtype=torch.float64) - c
     pad = int(math.ceil(max(abs(a) * float(y.abs().max()), abs(b) * float(x.abs().max())))) + 4
-    plain = torch.zeros(f.shape[0], 1, 1)
-    plain[0] = 1.0
-    f = torch.nn.functional.pad(f - plain, (pad, pad, pad, pad)) + plain  # plain glass around the window
+    out = torch.as_tensor(outside).to(f.dtype).reshape(-1, 1, 1)
+    f = torch.nn.functional.pad(f - out, (pad, pad, pad, pad)) + out
     yp = torch.cat([y[0] + torch.arange(pad, 0, -1.0), y, y[-1] - torch.arange(1.0, pad + 1)])
     xp = torch.cat([x[0] - torch.arange(pad, 0, -1.0), x, x[-1] + torch.arange(1.0, pad + 1)])
     f = _shear(f, a * yp, dim=2)  # each row moves a·y along x
@@ -315,20 +321,31 @@ def _rotate_histogram(die: torch.Tensor, theta: float, rows, cols, big, bigc, n:
 
 
 def _shear(f: torch.Tensor, shift: torch.Tensor, dim: int) -> torch.Tensor:
-    """Move each line of ``f`` [C, H, W] along ``dim`` (1: rows, 2: columns) by ``shift`` cells (one value per
-    line; content moves toward increasing index) with a Fourier phase ramp; the Nyquist bin is dropped."""
+    """Move each line of ``f`` [C, H, W] (real or complex) along ``dim`` (1: rows, 2: columns) by ``shift``
+    cells (one value per line; content moves toward increasing index) with a Fourier phase ramp; the Nyquist bin
+    of an even length is dropped."""
     length = f.shape[dim]
-    spec = torch.fft.rfft(f, dim=dim)
-    k = torch.arange(spec.shape[dim], dtype=torch.float64)
-    if length % 2 == 0:
-        k[-1] = float("nan")  # the Nyquist bin: no shift of it is real; dropped below
+    real = not f.is_complex()
+    spec = torch.fft.rfft(f, dim=dim) if real else torch.fft.fft(f, dim=dim)
+    k = torch.fft.rfftfreq(length, 1.0 / length) if real else torch.fft.fftfreq(length, 1.0 / length)
+    k = k.double()
+    nyq = (k.abs() == length / 2) if length % 2 == 0 else torch.zeros_like(k, dtype=torch.bool)
     if dim == 2:
-        phase = shift[None, :, None] * k[None, None, :]
+        phase, drop = shift[None, :, None] * k[None, None, :], nyq[None, None, :]
     else:
-        phase = k[None, :, None] * shift[None, None, :]
+        phase, drop = k[None, :, None] * shift[None, None, :], nyq[None, :, None]
     ramp = torch.exp(-2j * math.pi * phase / length).to(torch.complex64)
-    ramp = torch.where(torch.isnan(phase), torch.zeros((), dtype=ramp.dtype), ramp)
-    return torch.fft.irfft(spec * ramp, n=length, dim=dim)
+    ramp = torch.where(drop, torch.zeros((), dtype=ramp.dtype), ramp)
+    if real:
+        return torch.fft.irfft(spec * ramp, n=length, dim=dim)
+    return torch.fft.ifft(spec * ramp, dim=dim)
+
+
+def plain_columns(planes: np.ndarray) -> int:
+    """The first design column from which every column is unetched by every mask (the plain half)."""
+    any_etch = np.asarray(planes).any(axis=(0, 1))
+    idx = np.nonzero(any_etch)[0]
+    return int(idx[-1]) + 1 if idx.size else 0
 
 
 def pattern_heights(n_masks: int, step: float, depth_scale=None) -> np.ndarray:

@@ -1,178 +1,217 @@
-"""Run the requested studies and write tolerance.json, report.md and the plots (units on every axis)."""
+"""Run the requested studies and write tolerance.json, report.md and the figures.
+
+The report opens with what a user acts on: what the part delivers (mean and interval), its yield against the
+spec (Wilson interval), the errors that limit it and what would buy the most; then the grid each error was
+judged on, the tornado, the Monte Carlo, the surrogate and the quantization study.
+"""
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
 from doefab.io import atomic_write_json, atomic_write_text
-from doefab.tolerance import study
+from doefab.tolerance import plots, study
+from doefab.tolerance.errors import PartErrors
 
-__all__ = ["run_study"]
+__all__ = ["run_study", "REMEDY", "summary_lines"]
+
+HOLDOUT_SEED = 987_654  # the surrogate's own held-out parts when there is no direct Monte Carlo to check against
+# what would remove each error, for the summary
+REMEDY = {
+    "etch depth (systematic)": "tighter etch-depth control (monitor wafers, an etch-stop layer)",
+    "mask overlay": "a better aligner (a stepper holds ≤ 0.2 µm; contact aligners 0.5–2 µm)",
+    "mask rotation": "a better aligner",
+    "edge bias": "CD control (exposure dose and etch calibrated on the CD ladder)",
+    "corner rounding": "a finer mask writer",
+    "surface roughness": "a smoother etch",
+    "decenter across split": "a tighter die pocket in the holder (holder clearance_mm) or an alignment pin",
+    "decenter along split": "a tighter die pocket in the holder (clearance_mm)",
+    "mount rotation": "index pins or a tighter pocket (holder clearance_mm), or turning the die to the split",
+    "axial gap": "mounting the DOE at the lens's stop",
+    "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, seed Eq. 30–31)",
+    "crosstalk, calibrated": "more rows or frames in the crosstalk calibration",
+}
 
 
-def _plt():
-    import matplotlib
+def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, grid="auto",
+              do_sweep: bool = False, do_levels: bool = False, workers: int = 1, scheduler=None, budget_path=None,
+              networks: bool = False, surrogate: bool = False, weights_dir=None, progress: bool = True,
+              network_top: int | None = None) -> dict:
+    """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
+    the tornado's largest errors (at PSF level) through the network."""
+    from doefab.tolerance.mounted import stop_case
+    from doefab.tolerance.spec import TASK_OF_DESIGN, limits_text, nominal_failures
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, supersample: int = 1,
-              do_sweep: bool = False, do_levels: bool = False, workers: int = 1, scheduler=None,
-              budget_path=None, networks: bool = False) -> dict:
-    res: dict = {"design": str(design_dir), "supersample": supersample, "seed": seed,
-                 "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget}
-    md = [f"# Tolerance study of `{design_dir}`", "",
-          f"PSF-level judgement (task metric = fraction of the coded light in the task's band; L1 = summed absolute "
-          f"difference to the nominal 16-level PSF, mean over bands and depths). Simulation grid: {supersample}× the "
-          f"DOE pixel. Budget: `{res['budget_file']}`.", ""]
-    spec = float(budget.get("spec", {}).get("metric_min", 0.0))
-    judge = study._judge(str(design_dir), supersample)
-    res["nominal"] = judge.score(judge.nominal)
-    md += [f"Nominal (16-level, no errors): metric {res['nominal']['metric']:.4f}, worst entry "
-           f"{res['nominal']['worst']:.4f}.", ""]
+    out = Path(out)
+    judge = study.judge_for(str(design_dir), 1)
+    task = TASK_OF_DESIGN.get(judge.design.task, judge.design.task)
+    spec = budget.get("spec", {})
+    res: dict = {"design": str(design_dir), "task": task, "seed": seed, "stop": stop_case(judge.fine),
+                 "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
+                 "level": "network" if networks else "psf"}
+    res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
+    if networks:
+        res["nominal"]["network"] = study.evaluate_part(str(design_dir), 1, PartErrors().to_json(), True,
+                                                         weights_dir)["network"]
+    res["warnings"] = [f"the nominal part already fails the spec ({w}): no part can meet it"
+                       for lvl in ("psf", "network") if lvl in res["nominal"] or lvl == "psf"
+                       for w in nominal_failures(spec, task, lvl, _flat_nominal(res["nominal"], lvl))]
+    res["spec"] = {lvl: _limits(spec, task, lvl, res["nominal"], limits_text) for lvl in ("psf", "network")}
+    grids = _grids(judge, budget, grid, res, progress)
+    mc_grid = res["grid"]["monte_carlo_grid"]
+    t = time.perf_counter()
+    res["tornado"] = study.tornado(design_dir, budget, grids, networks, weights_dir, progress, network_top)
+    res["tornado_seconds"] = round(time.perf_counter() - t, 1)
     if do_sweep:
         t = time.perf_counter()
-        sw = study.sweep(design_dir, supersample)
-        res["sweeps"] = sw["sweeps"]
-        res["tornado"] = study.tornado(design_dir, budget, supersample)
+        res["sweeps"] = study.sweep(design_dir, grids, progress=progress)["sweeps"]
         res["sweep_seconds"] = round(time.perf_counter() - t, 1)
-        _sweep_plots(out, sw, res["nominal"]["metric"])
-        _tornado_plot(out / "tornado.png", res["tornado"], res["nominal"]["metric"])
-        md += ["## One error at a time", "", "| error | magnitude | metric | worst | L1 to nominal |",
-               "| --- | --- | --- | --- | --- |"]
-        for name, s in sw["sweeps"].items():
-            for r in s["rows"]:
-                md.append(f"| {name} | {r['magnitude']} {s['unit']} | {r['metric']:.4f} | {r['worst']:.4f} | "
-                          f"{r['l1_to_nominal']:.4f} |")
-        md += ["", "Tornado at the budget's values (each error alone):", "", "| error | metric | change |",
-               "| --- | --- | --- |"]
-        md += [f"| {r['error']} | {r['metric']:.4f} | {r['delta']:+.4f} |" for r in res["tornado"]]
-        md += ["", "![sweeps](sweeps.png)", "", "![tornado](tornado.png)", ""]
-    if do_levels:
-        res["quantization"] = study.quantization_study(design_dir, supersample=supersample, networks=networks)
-        md += ["## Quantization", "", "| levels | metric | worst | L1 to the 16-level PSF |", "| --- | --- | --- | --- |"]
-        md += [f"| {r['levels']} | {r['metric']:.4f} | {r['worst']:.4f} | {r['l1_to_nominal']:.4f} |"
-               for r in res["quantization"]]
-        with_net = [r for r in res["quantization"] if "network" in r]
-        if networks and with_net:
-            first = with_net[0]["network"]["nominal_psf"]
-            md += ["", "Through the shipped proposed network (given the nominal PSF / the quantized design's PSF):", "",
-                   "| levels | " + " | ".join(f"{k} (nominal PSF) | {k} (measured PSF)" for k in first) + " |",
-                   "| --- |" + " --- |" * (2 * len(first))]
-            for r in with_net:
-                n = r["network"]
-                md.append(f"| {r['levels']} | " + " | ".join(f"{n['nominal_psf'][k]:.4g} | {n['measured_psf'][k]:.4g}"
-                                                            for k in first) + " |")
-        _levels_plot(out / "quantization.png", res["quantization"])
-        md += ["", "![quantization](quantization.png)", ""]
     if samples > 0:
-        t = time.perf_counter()
-        rows = study.monte_carlo(design_dir, budget, samples, out, seed=seed, supersample=supersample,
-                                 scheduler=scheduler, workers=workers, networks=networks)
-        res["monte_carlo_seconds"] = round(time.perf_counter() - t, 1)
-        res["samples"] = rows
-        res["summary"] = study.summarize(rows, spec)
-        conv = []
-        for n in sorted({k for k in (5, 10, 20, 40, 80, 160, 320, 640, samples) if 2 <= k <= samples}):
-            s = study.summarize(rows[:n], spec)
-            conv.append({"n": n, "metric_ci95_width": s["metric"]["ci95_width"],
-                         "yield_ci95_width": s["yield"]["ci95"][1] - s["yield"]["ci95"][0],
-                         "seconds": max(r["seconds"] for r in rows[:n])})
-        res["convergence"] = conv
-        s = res["summary"]
-        md += ["## Monte Carlo", "",
-               f"{samples} parts (seed {seed}); metric mean {s['metric']['mean']:.4f}, 95 % interval of the mean "
-               f"{s['metric']['ci95'][0]:.4f}–{s['metric']['ci95'][1]:.4f}; yield (metric ≥ {spec}) "
-               f"{s['yield']['value']:.3f}, 95 % interval {s['yield']['ci95'][0]:.3f}–{s['yield']['ci95'][1]:.3f}; "
-               f"{res['monte_carlo_seconds']} s.", "",
-               "| samples | metric CI width | yield CI width | wall time (s) |", "| --- | --- | --- | --- |"]
-        md += [f"| {c['n']} | {c['metric_ci95_width']:.4f} | {c['yield_ci95_width']:.3f} | {c['seconds']:.0f} |"
-               for c in conv]
-        if networks and rows and "network" in rows[0]:
-            net = {lab: {k: float(np.nanmean([r["network"][lab][k] for r in rows])) for k in rows[0]["network"][lab]}
-                   for lab in rows[0]["network"]}
-            res["summary"]["network"] = net
-            md += ["", "Through the shipped proposed network (mean over samples; a fixed test subset per sample):", "",
-                   "| network given | " + " | ".join(net["nominal_psf"]) + " |",
-                   "| --- |" + " --- |" * len(net["nominal_psf"])]
-            for lab, vals in net.items():
-                md.append(f"| {lab.replace('_', ' ')} | " + " | ".join(f"{v:.4g}" for v in vals.values()) + " |")
-        _convergence_plot(out / "yield_vs_n.png", rows, spec)
-        md += ["", "![yield against N](yield_vs_n.png)", ""]
+        _monte_carlo(res, design_dir, budget, out, samples, seed, mc_grid, scheduler, workers, networks, spec,
+                     task, progress)
+    if surrogate:
+        _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
+    if do_levels:
+        res["quantization"] = study.quantization_study(design_dir, supersample=mc_grid, networks=networks,
+                                                       weights_dir=weights_dir)
+    _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)
-    atomic_write_text(out / "report.md", "\n".join(md) + "\n")
+    atomic_write_text(out / "report.md", "\n".join(_markdown(res)) + "\n")
     return res
 
 
-def _sweep_plots(out: Path, sw: dict, nominal: float) -> None:
-    plt = _plt()
-    names = list(sw["sweeps"])
-    cols = 3
-    rows = math.ceil(len(names) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), layout="constrained", squeeze=False)
-    for ax, name in zip(axes.flat, names):
-        s = sw["sweeps"][name]
-        x = [r["magnitude"] for r in s["rows"]]
-        ax.plot(x, [r["metric"] for r in s["rows"]], "o-", label="mean")
-        ax.plot(x, [r["worst"] for r in s["rows"]], "s--", label="worst entry")
-        ax.axhline(nominal, color="grey", ls=":", lw=1, label="nominal")
-        ax.set_xlabel(f"{name} ({s['unit']})", fontsize=8)
-        ax.set_ylabel("fraction of coded light in band", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6)
-    for ax in list(axes.flat)[len(names):]:
-        ax.axis("off")
-    fig.savefig(out / "sweeps.png", dpi=100)
-    plt.close(fig)
+def _flat_nominal(nominal: dict, level: str) -> dict:
+    """The nominal part's values a spec at ``level`` compares with (network: given the nominal PSF)."""
+    if level == "psf":
+        return nominal["psf"]
+    return nominal.get("network", {}).get("nominal_psf", {})
 
 
-def _tornado_plot(path: Path, rows: list, nominal: float) -> None:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.2), layout="constrained")
-    names = [r["error"] for r in rows][::-1]
-    ax.barh(names, [r["delta"] for r in rows][::-1], color=["#d65f5f" if r["delta"] < 0 else "#4878cf"
-                                                             for r in rows][::-1])
-    ax.axvline(0, color="black", lw=0.8)
-    ax.set_xlabel(f"change of the task metric (fraction of coded light) from the nominal {nominal:.3f}")
-    ax.set_title("each error alone at its budget value", fontsize=9)
-    ax.tick_params(labelsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def _limits(spec, task, level, nominal, limits_text) -> str | None:
+    from doefab.errors import DoefabError
+
+    try:
+        return limits_text(spec, task, level, _flat_nominal(nominal, level))
+    except DoefabError:
+        return None
 
 
-def _levels_plot(path: Path, rows: list) -> None:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(5, 3.4), layout="constrained")
-    labels = [str(r["levels"]) for r in rows]
-    ax.plot(labels, [r["metric"] for r in rows], "o-", label="mean")
-    ax.plot(labels, [r["worst"] for r in rows], "s--", label="worst entry")
-    ax.set_xlabel("quantization (levels)")
-    ax.set_ylabel("fraction of coded light in band")
-    ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def _grids(judge, budget, grid, res, progress) -> dict:
+    """Per-kind grids: measured on the design (``grid="auto"``) or one grid for all."""
+    from doefab.tolerance.grid import grid_study
+
+    if grid == "auto":
+        t = time.perf_counter()
+        res["grid"] = grid_study(judge, budget, progress=progress)
+        res["grid"]["seconds"] = round(time.perf_counter() - t, 1)
+        return {k: v["grid"] for k, v in res["grid"]["kinds"].items()}
+    res["grid"] = {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
+    from doefab.tolerance.kinds import KINDS
+
+    return {k.name: int(grid) for k in KINDS}
 
 
-def _convergence_plot(path: Path, rows: list, spec: float) -> None:
-    plt = _plt()
-    ok = np.array([r["metric"] >= spec for r in rows], float)
-    n = np.arange(1, len(ok) + 1)
-    y = np.cumsum(ok) / n
-    half = 1.96 * np.sqrt(np.maximum(y * (1 - y), 1e-12) / n)
-    fig, ax = plt.subplots(figsize=(5.5, 3.4), layout="constrained")
-    ax.plot(n, y, label="running yield")
-    ax.fill_between(n, np.clip(y - half, 0, 1), np.clip(y + half, 0, 1), alpha=0.3, label="95 % interval")
-    ax.axvline(len(ok), color="red", ls="--", lw=1, label=f"chosen: {len(ok)} samples")
-    ax.set_xlabel("Monte Carlo samples (parts)")
-    ax.set_ylabel(f"yield (fraction with metric ≥ {spec})")
-    ax.set_ylim(-0.02, 1.02)
-    ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, workers, networks, spec, task,
+                 progress) -> None:
+    from doefab.tolerance.montecarlo import monte_carlo, summarize, wilson
+    from doefab.tolerance.spec import meets
+
+    t = time.perf_counter()
+    rows = monte_carlo(design_dir, budget, samples, out, seed=seed, supersample=grid, scheduler=scheduler,
+                       workers=workers, progress=progress, networks=networks)
+    res["monte_carlo_seconds"] = round(time.perf_counter() - t, 1)
+    res["parts_per_minute"] = round(samples * 60 / max(res["monte_carlo_seconds"], 1e-9), 2)
+    res["samples"] = rows
+    nominal = {"psf": res["nominal"]["psf"], "network": res["nominal"].get("network", {})}
+    res["summary"] = summarize(rows, spec, task, nominal)
+    conv = []
+    for n in sorted({k for k in (5, 10, 20, 40, 80, 160, 320, 640, samples) if 2 <= k <= samples}):
+        ok = [meets({"psf_metric": r["metric"]}, spec, task, "psf", res["nominal"]["psf"]) for r in rows[:n]]
+        lo, hi = wilson(sum(ok), n)
+        conv.append({"n": n, "yield": float(np.mean(ok)), "yield_ci95": [lo, hi], "yield_ci95_width": hi - lo,
+                     "seconds": max(r["seconds"] for r in rows[:n])})
+    res["convergence"] = conv
+
+
+def _surrogate(res, design_dir, budget, grid, spec, task, progress) -> None:
+    from doefab.tolerance.errors import sample_errors
+    from doefab.tolerance.spec import meets
+    from doefab.tolerance.surrogate import fit_surrogate, surrogate_yield
+
+    judge = study.judge_for(str(design_dir), grid)
+    model = fit_surrogate(lambda p: judge.evaluate(p)["metric"], budget, judge.chain, progress)
+    held = [(PartErrors(**{k: _tup(v) for k, v in r["errors"].items()}), r["metric"]) for r in res.get("samples", [])]
+    if len(held) < 8:  # no direct run to check against: draw held-out parts of its own
+        children = np.random.SeedSequence(HOLDOUT_SEED).spawn(16)
+        held = [(p, judge.evaluate(p)["metric"]) for p in
+                (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0])) for c in children)]
+    t = time.perf_counter()
+    y = surrogate_yield(model, budget, judge.chain, held,
+                        lambda m: meets({"psf_metric": m}, spec, task, "psf", res["nominal"]["psf"]))
+    model["seconds_total"] = round(model["seconds"] + time.perf_counter() - t, 1)
+    res["surrogate"] = {"model": model, "yield": y}
+    direct = res.get("summary", {}).get("yield")
+    if direct:
+        a, b = direct["ci95"], y["ci95"]
+        res["surrogate"]["agrees_with_direct"] = bool(a[0] <= b[1] and b[0] <= a[1])
+
+
+def _tup(v):
+    """JSON lists back to the tuples ``PartErrors`` holds."""
+    if isinstance(v, list):
+        return tuple(_tup(x) for x in v)
+    return v
+
+
+def _figures(out: Path, res: dict) -> None:
+    from doefab.tolerance.spec import meets
+
+    nominal = res["nominal"]["psf"]["psf_metric"]
+    plots.tornado_plot(out / "tornado.png", res["tornado"], nominal)
+    if "sweeps" in res:
+        plots.sweep_plots(out / "sweeps.png", res["sweeps"], nominal)
+    if "quantization" in res:
+        plots.levels_plot(out / "quantization.png", res["quantization"])
+    if "samples" in res:
+        spec = res["budget"].get("spec", {})
+        ok = [meets({"psf_metric": r["metric"]}, spec, res["task"], "psf", res["nominal"]["psf"])
+              for r in res["samples"]]
+        plots.yield_plot(out / "yield_vs_n.png", ok, f"PSF level: {res['spec']['psf'] or 'no limit'}")
+
+
+def summary_lines(res: dict) -> list[str]:
+    """The report's opening: what the part delivers, its yield, what limits it and what would buy the most."""
+    lines = []
+    s = res.get("summary")
+    if s:
+        m = s["metric"]
+        lines.append(f"- **PSF metric** {m['mean']:.3f} (95 % interval of the mean {m['ci95'][0]:.3f}–"
+                     f"{m['ci95'][1]:.3f}; nominal {res['nominal']['psf']['psf_metric']:.3f}), {s['yield']['n']} parts.")
+        y = s["yield"]
+        lines.append(f"- **Yield at PSF level** ({res['spec']['psf'] or 'no limit'}): {y['value']:.2f}, 95 % Wilson "
+                     f"interval {y['ci95'][0]:.2f}–{y['ci95'][1]:.2f}.")
+        for label, v in s.get("network", {}).items():
+            ms = ", ".join(f"{k} {d['mean']:.4g} ({d['ci95'][0]:.4g}–{d['ci95'][1]:.4g})"
+                           for k, d in v["metrics"].items())
+            lines.append(f"- **Delivered, network given the {label.replace('_', ' ')}**: {ms}; yield "
+                         f"({res['spec']['network'] or 'no limit'}) {v['yield']['value']:.2f} "
+                         f"({v['yield']['ci95'][0]:.2f}–{v['yield']['ci95'][1]:.2f}).")
+    top = [r for r in res["tornado"] if r["delta"] < 0][:3]
+    if top:
+        lines.append("- **Limited by** " + "; ".join(
+            f"{r['error']} at {r['value']:.3g} {r['unit']} ({r['delta']:+.3f})" for r in top) + ".")
+        lines.append(f"- **Would buy the most:** {REMEDY.get(top[0]['error'], top[0]['error'])} "
+                     f"(recovers up to {-top[0]['delta']:.3f} of the PSF metric).")
+    lines += [f"- **Warning:** {w}" for w in res.get("warnings", [])]
+    lines.append(f"- Aperture stop: {res['stop']}.")
+    return lines
+
+
+def _markdown(res: dict) -> list[str]:
+    from doefab.tolerance.reporttext import body_lines
+
+    return [f"# Tolerance study of {res['design']}", "", *summary_lines(res), "", *body_lines(res)]
+

@@ -56,3 +56,22 @@ def test_wavelength_extremes(small_camera, lam):
     # the Airy core scales with λ: the first zero of the full aperture at 1.22 λ s / D
     first_zero = 1.22 * lam * small_camera.sensor_distance / small_camera.aperture_diameter
     assert first_zero > small_camera.sensor_pitch * (0.5 if lam < 500e-9 else 2)
+
+
+def test_doctor_fails_a_crosstalk_calibration_that_cannot_separate_the_views(tmp_path):
+    """At 47 % crosstalk each way, ±2 % across the sensor, the worst column's determinant is 1 − 0.49 − 0.45 =
+    0.06 (passes); at 48.5 % it is 0.03 (< 0.05: the doctor must say so and how to fix it)."""
+    from doefab.pipeline.doctor import diagnose
+    from doefab.pipeline.scene import load_scene
+
+    rows = {}
+    for pct in (47.0, 48.5):
+        budget = tmp_path / f"b{pct}.toml"
+        budget.write_text(f"[sensor]\ncrosstalk_lr_percent = {pct}\ncrosstalk_rl_percent = {pct}\n"
+                          "crosstalk_slope_percent = 2.0\n")
+        scene_file = tmp_path / f"s{pct}.toml"
+        scene_file.write_text(open("scenes/hdr.toml").read().replace('budget = "default"', f'budget = "{budget}"'))
+        checks = [r for r in diagnose(load_scene(scene_file), precision_check=False) if "crosstalk" in r["check"]]
+        rows[pct] = checks[0]
+    assert rows[47.0]["ok"] and rows[47.0]["value"] == pytest.approx(0.06, abs=1e-9)
+    assert not rows[48.5]["ok"] and rows[48.5]["value"] == pytest.approx(0.03, abs=1e-9) and rows[48.5]["fix"]

@@ -9,7 +9,7 @@ import pytest
 import doefab
 from doefab.cli import main
 from doefab.design.design import Design
-from doefab.tolerance import study
+from doefab.tolerance import montecarlo, study
 from doefab.tolerance.errors import PartErrors, load_budget
 
 
@@ -34,7 +34,7 @@ def test_a_noisy_calibration_leaves_its_own_error_and_no_more(design_dir):
     times the two halves — which vanishes as the calibration gets exact."""
     from doefab.tolerance.errors import crosstalk_ratios
 
-    j = study._judge(str(design_dir), 1)
+    j = study.judge_for(str(design_dir), 1)
     coded, plain = j.nominal, j.uncoded()
     assert j.evaluate(PartErrors(crosstalk=(0.1, 0.1), calibrated=False))["l1_to_nominal"] > 0.01
     gaps = []
@@ -54,43 +54,59 @@ def test_a_noisy_calibration_leaves_its_own_error_and_no_more(design_dir):
 
 def test_same_seed_same_numbers_in_process_pool_and_dask(design_dir, tmp_path):
     budget = load_budget()
-    a = study.monte_carlo(design_dir, budget, 4, tmp_path / "a", seed=7, progress=False)
-    b = study.monte_carlo(design_dir, budget, 4, tmp_path / "b", seed=7, workers=2, progress=False)
+    a = montecarlo.monte_carlo(design_dir, budget, 4, tmp_path / "a", seed=7, progress=False)
+    b = montecarlo.monte_carlo(design_dir, budget, 4, tmp_path / "b", seed=7, workers=2, progress=False)
     pytest.importorskip("dask.distributed")
-    c = study.monte_carlo(design_dir, budget, 4, tmp_path / "c", seed=7, scheduler="local:2", progress=False)
+    c = montecarlo.monte_carlo(design_dir, budget, 4, tmp_path / "c", seed=7, scheduler="local:2", progress=False)
     key = lambda rows: [(r["index"], r["metric"], r["worst"], r["l1_to_nominal"], r["errors"]) for r in rows]  # noqa: E731
     assert key(a) == key(b) == key(c)
-    d = study.monte_carlo(design_dir, budget, 4, tmp_path / "d", seed=8, progress=False)
+    d = montecarlo.monte_carlo(design_dir, budget, 4, tmp_path / "d", seed=8, progress=False)
     assert key(d) != key(a)
 
 
 def test_interrupted_study_resumes(design_dir, tmp_path):
     budget = load_budget()
-    full = study.monte_carlo(design_dir, budget, 4, tmp_path / "full", seed=1, progress=False)
+    full = montecarlo.monte_carlo(design_dir, budget, 4, tmp_path / "full", seed=1, progress=False)
     part = tmp_path / "part"
-    study.monte_carlo(design_dir, budget, 4, part, seed=1, progress=False)
+    montecarlo.monte_carlo(design_dir, budget, 4, part, seed=1, progress=False)
     lines = (part / "samples.jsonl").read_text().splitlines()
     (part / "samples.jsonl").write_text("\n".join(lines[:2]) + "\n" + lines[2][:20])  # killed mid-write
-    again = study.monte_carlo(design_dir, budget, 4, part, seed=1, progress=False)
+    again = montecarlo.monte_carlo(design_dir, budget, 4, part, seed=1, progress=False)
     assert [r["metric"] for r in again] == [r["metric"] for r in full]
 
 
 def test_summary_statistics():
     rows = [{"metric": m, "worst": m, "l1_to_nominal": 0.0} for m in (0.4, 0.6, 0.6, 0.8)]
-    s = study.summarize(rows, 0.5)
+    s = montecarlo.summarize(rows, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
     assert s["metric"]["mean"] == pytest.approx(0.6)
     half = 1.96 * np.std([0.4, 0.6, 0.6, 0.8], ddof=1) / 2
     assert s["metric"]["ci95"] == pytest.approx([0.6 - half, 0.6 + half])
     assert s["yield"]["value"] == 0.75 and 0 < s["yield"]["ci95"][0] < 0.75 < s["yield"]["ci95"][1] <= 1
+    # relative limit: at most 0.25 below the nominal 0.9 → 0.65: two of four parts pass
+    s = montecarlo.summarize(rows, {"hdr": {"psf_metric_loss_max": 0.25}}, "hdr", {"psf": {"psf_metric": 0.9}})
+    assert s["yield"]["value"] == 0.25
+
+
+def test_wilson_interval_against_its_formula_and_at_the_edges():
+    lo, hi = montecarlo.wilson(24, 24)
+    assert hi == 1.0 and lo == pytest.approx(24 / (24 + 1.96**2), rel=1e-9)  # all pass: (n/(n + z²), 1)
+    lo, hi = montecarlo.wilson(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(1.96**2 / (10 + 1.96**2), rel=1e-9)
+    lo, hi = montecarlo.wilson(5, 10)
+    assert lo < 0.5 < hi and hi - 0.5 == pytest.approx(0.5 - lo)
 
 
 def test_command_writes_json_report_and_plots(design_dir, tmp_path, capsys):
     out = tmp_path / "o"
-    assert main(["tolerance", "--design", str(design_dir), "--samples", "3", "--sweep", "--levels",
+    assert main(["tolerance", "--design", str(design_dir), "--samples", "3", "--sweep", "--levels", "--surrogate",
                  "--out", str(out)]) == 0
     res = json.loads((out / "tolerance.json").read_text())
     assert len(res["samples"]) == 3 and "yield" in res["summary"] and res["tornado"]
     assert [r["levels"] for r in res["quantization"]] == ["continuous", 16, 8, 4, 2]
+    assert res["grid"]["monte_carlo_grid"] in (1, 2, 4, 8) and res["grid"]["kinds"]
+    assert "surrogate" in res and "agrees_with_direct" in res["surrogate"]
+    text = (out / "report.md").read_text()
+    assert "Yield at PSF level" in text and "Would buy the most" in text
     for f in ("report.md", "sweeps.png", "tornado.png", "quantization.png", "yield_vs_n.png"):
         assert (out / f).stat().st_size > 500
 
@@ -134,3 +150,59 @@ def test_sampled_parts_carry_the_budget_gap():
     budget = load_budget()
     gaps = [sample_errors(budget, np.random.default_rng(i)).axial_gap for i in range(200)]
     assert np.mean(gaps) == pytest.approx(1.6e-3, abs=3e-5) and 0.05e-3 < np.std(gaps) < 0.15e-3
+
+
+def test_resume_refuses_samples_of_another_run(design_dir, tmp_path):
+    budget = load_budget()
+    montecarlo.monte_carlo(design_dir, budget, 2, tmp_path / "r", seed=1, progress=False)
+    with pytest.raises(doefab.DoefabError, match="written for another run.*seed"):
+        montecarlo.monte_carlo(design_dir, budget, 3, tmp_path / "r", seed=2, progress=False)
+    other = {**budget, "overlay": {**budget["overlay"], "shift_sigma_um": 1.0}}
+    with pytest.raises(doefab.DoefabError, match="budget_sha256"):
+        montecarlo.monte_carlo(design_dir, other, 3, tmp_path / "r", seed=1, progress=False)
+    assert len(montecarlo.monte_carlo(design_dir, budget, 3, tmp_path / "r", seed=1, progress=False)) == 3
+
+
+def test_a_partial_budget_takes_the_defaults_and_lists_them(tmp_path):
+    """Issue 21, row 4: an empty budget file is the default budget, every key listed as taken from it."""
+    p = tmp_path / "e.toml"
+    p.write_text("")
+    b = load_budget(p)
+    assert b["mounting"] == load_budget()["mounting"] and "mounting.decenter_max_mm" in b["defaults_used"]
+    p.write_text("[overlay]\nshift_sigma_um = 2.0\n")
+    b = load_budget(p)
+    assert b["overlay"]["shift_sigma_um"] == 2.0 and "overlay.shift_sigma_um" not in b["defaults_used"]
+    assert "overlay.rotation_sigma_urad" in b["defaults_used"]
+
+
+def test_specs_are_per_task_and_a_spec_the_design_cannot_meet_is_said(design_dir, tmp_path):
+    """Issue 21, row 5: the depth design's own nominal must not fall under a global limit silently."""
+    from doefab.tolerance.report import run_study
+
+    p = tmp_path / "b.toml"
+    p.write_text("[spec.hdr]\npsf_metric_min = 0.99\n")
+    res = run_study(design_dir, load_budget(p), tmp_path / "o", samples=2, grid=1, progress=False)
+    assert any("nominal part already fails" in w and "psf_metric_min" in w for w in res["warnings"])
+    assert res["summary"]["yield"]["value"] == 0.0
+    text = (tmp_path / "o" / "report.md").read_text()
+    assert "Warning" in text and "0.99" in text
+
+
+def test_the_yield_band_is_wilsons_everywhere(design_dir, tmp_path):
+    """Issue 21, row 6: when every part passes, Wald's band collapses to zero width at 1.0; Wilson's does not,
+    and the table and the figure use the same interval."""
+    from doefab.tolerance.report import run_study
+
+    p = tmp_path / "b.toml"
+    p.write_text("[spec.hdr]\npsf_metric_min = 0.0\n")
+    res = run_study(design_dir, load_budget(p), tmp_path / "w", samples=5, grid=1, progress=False)
+    conv = res["convergence"][-1]
+    assert conv["yield"] == 1.0 and conv["yield_ci95"] == pytest.approx(list(montecarlo.wilson(5, 5)))
+    assert conv["yield_ci95"][0] < 0.6 and res["summary"]["yield"]["ci95"] == conv["yield_ci95"]
+    assert (tmp_path / "w" / "yield_vs_n.png").stat().st_size > 1000
+
+
+def test_quantization_rows_say_what_they_were_quantized_from(design_dir):
+    rows = study.quantization_study(design_dir, levels=(None, 16, 8))
+    assert rows[0]["levels"] == "continuous" and "n/a" in rows[0]["source"]  # this folder has no continuous design
+    assert rows[1]["source"] == "the committed 16-level map" and "re-quantized" in rows[2]["source"]

@@ -1,0 +1,102 @@
+"""Which simulation grid each error kind needs, measured on the design itself.
+
+Errors whose simulation depends on the grid (``kinds.Kind.grid``: mask-level slivers, a turned relief) are
+judged on a block of the design — ``block``² DOE pixels from the middle of its coded half, with its own
+aperture — on grids refined s = 1, 2, 4 times and on a reference s = 8 times, each part carrying only that error
+at the budget's value. The task metric is a sum of the coded PSF over the task's metric pixels divided by the
+coded half's light (0.5), so twice the summed absolute PSF difference to the reference over those pixels bounds
+the metric's error; the grid chosen for a kind is the coarsest whose bound is within ``tolerance``, and a Monte Carlo part is simulated on the finest
+grid any of its errors needs — and no finer.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from doefab.tolerance.kinds import KINDS
+
+__all__ = ["grid_study", "judge_grid", "GRIDS", "REFERENCE", "TOLERANCE", "block_design"]
+
+GRIDS = (1, 2, 4)
+REFERENCE = 8
+TOLERANCE = 0.005  # bound on the task metric's error from the grid
+
+
+def block_design(design, block: int):
+    """A ``block``² piece of ``design`` around the middle of its coded half (x < 0), as a design of its own
+    (aperture = the block; three bands — first, middle, last — and the middle depth)."""
+    from doefab.design.design import Design
+
+    n = design.camera.doe_pixels
+    b = int(min(block, n // 2))
+    r0, c0 = (n - b) // 2, max(0, n // 4 - b // 2)
+    levels = np.ascontiguousarray(design.levels[r0:r0 + b, c0:c0 + b])
+    cam = design.camera.replace(doe_pixels=b, aperture_diameter=b * design.camera.doe_pitch)
+    w = design.wavelengths
+    pick = sorted({0, len(w) // 2, len(w) - 1})
+    z = len(design.depths) // 2
+    return Design(task=design.task, task_params=design.task_params, camera=cam,
+                  wavelengths=tuple(w[i] for i in pick), depths=(design.depths[z],),
+                  height=design.height[r0:r0 + b, c0:c0 + b], levels=levels, metrics=design.metrics,
+                  extra={"bands": pick, "depth": z})
+
+
+def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERANCE, progress: bool = False) -> dict:
+    """{kind: {"value", "unit", "bound": {s: metric-error bound}, "seconds": {s: ...}, "grid": chosen s}} for the
+    grid-dependent kinds present in ``budget``, and "monte_carlo_grid": the finest of the chosen grids
+    (``judge``: the design's ``PSFJudge``; its alignment chain is used on the block too)."""
+    from doefab.tolerance.judge import PSFJudge
+
+    kinds = [k for k in KINDS if k.grid and k.from_budget(budget) != 0.0]
+    out: dict = {"block_px": block, "tolerance": tolerance, "reference_grid": REFERENCE, "kinds": {}}
+    if not kinds:
+        out["monte_carlo_grid"] = 1
+        return out
+    piece = block_design(judge.design, block)
+    kernel = judge.task.kernel_size
+    judges = {s: PSFJudge(piece, s, chain=judge.chain, margin=0.0) for s in (*GRIDS, REFERENCE)}
+    # the metric sums the coded PSF over these pixels (fractions of the coded half's 0.5): twice the summed
+    # absolute PSF error inside them bounds the metric's error
+    masks = judge.task.band_masks(judge.fine)[[piece.extra["depth"]]][:, piece.extra["bands"]].double()
+
+    def bound_of(diff):
+        return float(2 * (diff.abs() * masks).sum(dim=(-1, -2)).max())
+    for k in kinds:
+        part = k.budget_part(budget)
+        psf = {}
+        secs = {}
+        for s, j in judges.items():
+            t = time.perf_counter()
+            with torch.no_grad():
+                psf[s] = j.psfs(part, kernel=kernel)["coded"].double()
+            secs[s] = round(time.perf_counter() - t, 3)
+        ref = psf[REFERENCE]
+        bound = {s: bound_of(psf[s] - ref) for s in GRIDS}
+        chosen = next((s for s in GRIDS if bound[s] <= tolerance), REFERENCE)
+        effect = bound_of(ref - judges[REFERENCE].nominal)
+        out["kinds"][k.name] = {"value": k.from_budget(budget) / k.si, "unit": k.unit, "bound": bound,
+                                "effect_bound": effect, "seconds": secs, "grid": chosen}
+    out["monte_carlo_grid"] = max(v["grid"] for v in out["kinds"].values())
+    return out
+
+
+def judge_grid(study: dict, part) -> int:
+    """The grid a part needs: the finest any of its (nonzero) grid-dependent errors was given."""
+    from doefab.tolerance.errors import PartErrors
+
+    need = 1
+    for k in KINDS:
+        if k.grid and k.name in study.get("kinds", {}) and _has(part, k, PartErrors()):
+            need = max(need, study["kinds"][k.name]["grid"])
+    return need
+
+
+def _has(part, k, nominal) -> bool:
+    """Whether ``part`` carries error kind ``k`` (it differs from the nominal part where ``k`` would)."""
+    probe = k.build(k.sweep[-1] * k.si)
+    fields = [f for f in probe.__dataclass_fields__ if getattr(probe, f) != getattr(nominal, f)]
+    return any(getattr(part, f) != getattr(nominal, f) for f in fields)
+

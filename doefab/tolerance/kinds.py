@@ -1,0 +1,112 @@
+"""The kinds of error a tolerance study knows, in one table: unit, sweep, the part with that error alone, the
+budget's value of it, and whether its simulation depends on the grid (and so enters the grid study).
+
+``grid = False`` for errors that are exact on any grid: an etch depth scales the heights, a decenter moves the
+split line and the lens (``mounted``), a gap is propagated analytically or not at all, crosstalk mixes views.
+Mask-level errors cut cells into slivers (exact areas, flat-tile far field) and a mount rotation turns the
+relief (band-limited interpolation): their error against finer grids is measured per design (``grid``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Callable
+
+from doefab.tolerance.errors import PartErrors, budget_value, nominal_gap, sensor_errors
+
+__all__ = ["Kind", "KINDS", "kind", "budget_part"]
+
+
+def _overlay(v: float) -> PartErrors:
+    """Every plate off by v relative to the one it aligns to, in four diagonal directions."""
+    s = v / math.sqrt(2)
+    return replace(PartErrors(), overlay=((s, s), (-s, s), (-s, -s), (s, -s)))
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One error kind. ``build(v)``: the part with only this error, of magnitude v (SI); ``from_budget``: the
+    budget's magnitude (1 σ, or the bound of a uniform error; SI), 0 when the budget has none of it."""
+
+    name: str
+    unit: str
+    si: float  # SI units per ``unit``
+    sweep: tuple
+    build: Callable[[float], PartErrors]
+    from_budget: Callable[[dict], float]
+    grid: bool
+    part_from_budget: Callable[[dict], PartErrors] | None = None
+
+    def budget_part(self, budget: dict) -> PartErrors:
+        if self.part_from_budget is not None:
+            return self.part_from_budget(budget)
+        return self.build(self.from_budget(budget))
+
+
+def _g(budget, sec, key, default=0.0):
+    return budget_value(budget, sec, key, default)
+
+
+def _crosstalk(calibrated: bool):
+    def build(v):
+        return replace(PartErrors(), crosstalk=(v, v), calibrated=calibrated)
+    return build
+
+
+def _crosstalk_part(calibrated: bool):
+    """The budget's sensor (ratios, their slope across the sensor, its calibration), calibrated or not."""
+    def part(b):
+        return replace(PartErrors(), **{**sensor_errors(b), "calibrated": calibrated})
+    return part
+
+
+def _crosstalk_value(b) -> float:
+    return max(sensor_errors(b)["crosstalk"])
+
+
+KINDS = (
+    Kind("etch depth (systematic)", "%", 0.01, (-10, -5, -2, 2, 5, 10),
+         lambda v: replace(PartErrors(), depth_scale=(1 + v,) * 4),
+         lambda b: (_g(b, "etch", "systematic_sigma_percent") + _g(b, "etch", "random_sigma_percent")) / 100, False),
+    Kind("mask overlay", "µm", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
+         lambda b: _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
+    Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300),
+         lambda v: replace(PartErrors(), rotation=(v, -v, v, -v)),
+         lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True),
+    Kind("edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
+         lambda v: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
+         True),
+    Kind("corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0), lambda v: replace(PartErrors(), corner_rounding=v),
+         lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True),
+    Kind("surface roughness", "nm rms", 1e-9, (5, 10, 20),
+         lambda v: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
+         lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True),
+    Kind("decenter across split", "mm", 1e-3, (0.05, 0.1, 0.25),
+         lambda v: replace(PartErrors(), mount_shift=(v, 0.0)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
+         False),
+    Kind("decenter along split", "mm", 1e-3, (0.05, 0.1, 0.25),
+         lambda v: replace(PartErrors(), mount_shift=(0.0, v)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
+         False),
+    Kind("mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
+         lambda v: replace(PartErrors(), mount_rotation=v),
+         lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
+    Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v: replace(PartErrors(), axial_gap=v),
+         lambda b: nominal_gap(b) + _g(b, "mounting", "axial_gap_sigma_mm") * 1e-3, False),
+    Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value, False,
+         _crosstalk_part(False)),
+    Kind("crosstalk, calibrated", "%", 0.01, (2, 5, 10), _crosstalk(True), _crosstalk_value, False,
+         _crosstalk_part(True)),
+)
+
+
+def kind(name: str) -> Kind:
+    for k in KINDS:
+        if k.name == name:
+            return k
+    raise KeyError(name)
+
+
+def budget_part(budget: dict, name: str) -> PartErrors:
+    """The part with the budget's value of error ``name`` alone."""
+    return kind(name).budget_part(budget)

@@ -1,0 +1,214 @@
+"""Monte Carlo over a budget: in process, in a local process pool, or on a Dask cluster; resumable; yield.
+
+Sample i draws its errors from ``SeedSequence(seed).spawn(n)[i]``, so the numbers are the same bit for bit
+whatever the number of workers or the backend. ``samples.jsonl`` opens with the run's identity (design
+checksum, budget, seed, grid, level) and then one line per finished part, so an interrupted run resumes where
+it stopped — and a file written for another run is refused instead of mixed in. A lost Dask worker's parts are
+recomputed by Dask (futures are retried), never lost.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+from doefab.tolerance.errors import sample_errors
+
+__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci"]
+
+
+def run_identity(design, budget: dict, seed: int, grid: int, networks: bool) -> dict:
+    """What a samples.jsonl must have been written for to be resumed."""
+    b = {k: v for k, v in budget.items() if k != "defaults_used"}
+    return {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),
+            "budget_sha256": hashlib.sha256(json.dumps(b, sort_keys=True).encode()).hexdigest()[:16],
+            "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf"}
+
+
+def _levels_sha(levels) -> str:
+    from doefab.fabrication.levels import levels_sha256
+
+    return levels_sha256(levels)
+
+
+def _read_log(log: Path, identity: dict) -> dict:
+    done: dict = {}
+    if not log.is_file():
+        return done
+    lines = log.read_text().splitlines()
+    try:
+        head = json.loads(lines[0])["run"] if lines else None
+    except (ValueError, KeyError, TypeError):
+        head = None
+    if head != identity:
+        diff = sorted(k for k in identity if head is None or head.get(k) != identity[k])
+        raise DoefabError(f"{log} was written for another run (differs in {', '.join(diff) or 'its header'}): "
+                          f"use a new --out, or --force to start again")
+    for line in lines[1:]:
+        try:
+            r = json.loads(line)
+            done[int(r["index"])] = r
+        except (ValueError, KeyError):
+            continue  # a line cut by an interruption: recomputed
+    return done
+
+
+def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
+                scheduler: str | None = None, workers: int = 1, progress: bool = True,
+                networks: bool = False) -> list[dict]:
+    """``n`` sampled parts; returns every sample's errors and metrics (ordered by index).
+
+    scheduler: None (in process, or a local process pool of ``workers``), ``"local:N"`` (a Dask
+    ``LocalCluster`` of N workers) or ``"tcp://HOST:PORT"`` (an existing Dask scheduler).
+    """
+    from doefab.tolerance.study import evaluate_part, judge_for
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "samples.jsonl"
+    identity = run_identity(judge_for(design_dir, supersample).design, budget, seed, supersample, networks)
+    done = _read_log(log, identity)
+    if not log.is_file():
+        log.write_text(json.dumps({"run": identity}) + "\n")
+    children = np.random.SeedSequence(seed).spawn(n)
+    todo = [i for i in range(n) if i not in done]
+    errs = {i: sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]))
+            for i in todo}
+    bar = _bar(n, "Monte Carlo" + (" (networks)" if networks else ""), progress)
+    if bar is not None:
+        bar.update(len(done))
+    t0 = time.perf_counter()
+
+    def record(i, res):
+        row = {"index": i, "errors": errs[i].to_json(), **res, "seconds": round(time.perf_counter() - t0, 3)}
+        done[i] = row
+        with open(log, "a") as fh:
+            fh.write(json.dumps(row) + "\n")
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(metric=f"{res['metric']:.3f}",
+                            parts_per_min=f"{bar.n * 60 / max(time.perf_counter() - t0, 1e-9):.1f}")
+
+    ddir = str(design_dir)
+    try:
+        if scheduler:
+            _run_dask(scheduler, ddir, supersample, todo, errs, record, networks)
+        elif workers > 1:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(workers, initializer=_worker_init) as ex:
+                futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks): i for i in todo}
+                for f in as_completed(futs):
+                    record(futs[f], f.result())
+        else:
+            for i in todo:
+                record(i, evaluate_part(ddir, supersample, errs[i].to_json(), networks))
+    finally:
+        if bar is not None:
+            bar.close()
+    return [done[i] for i in range(n)]
+
+
+def _bar(total, desc, progress):
+    if not progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="part")
+
+
+def _worker_init():
+    os.environ["DOEFAB_WORKER"] = "1"
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def parse_scheduler(scheduler: str) -> int | None:
+    """Worker count of ``local:N`` (N ≥ 1), None for ``tcp://HOST:PORT``; anything else is refused."""
+    if scheduler.startswith("local:"):
+        try:
+            nw = int(scheduler.split(":", 1)[1])
+        except ValueError:
+            nw = 0
+        if nw < 1:
+            raise DoefabError(f"--scheduler local:N needs a worker count N ≥ 1, got {scheduler!r}")
+        return nw
+    if scheduler.startswith("tcp://") and len(scheduler) > len("tcp://"):
+        return None
+    raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {scheduler!r}")
+
+
+def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False):
+    from doefab.tolerance.study import evaluate_part
+
+    nw = parse_scheduler(scheduler)
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise DoefabError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
+    cluster = None
+    if nw is not None:
+        cluster = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None,
+                               env={"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1"})
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
+                              key=f"doefab-sample-{i}", retries=2, pure=False): i for i in todo}
+        for f in as_completed(futs):
+            record(futs[f], f.result())
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a proportion k / n (95 % for z = 1.96): honest at 0 and 1, unlike Wald's."""
+    if n <= 0:
+        return (float("nan"), float("nan"))
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    w = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (max(0.0, centre - w), min(1.0, centre + w))
+
+
+def mean_ci(values) -> dict:
+    """Mean and 95 % interval of the mean (normal approximation; nan below two values)."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return {"mean": float("nan"), "ci95": [float("nan")] * 2, "ci95_width": float("nan")}
+    half = 1.96 * v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
+    m = float(v.mean())
+    return {"mean": m, "ci95": [m - half, m + half], "ci95_width": float(2 * half)}
+
+
+def summarize(samples: list[dict], spec: dict, task: str, nominal: dict) -> dict:
+    """Mean and interval of every metric, and yield (Wilson interval) against ``spec`` at PSF level and, when
+    the parts were judged through the network, for each PSF it was given. ``nominal``: the error-free part's
+    values ({"psf": {"psf_metric": ...}, "network": {label: metrics}}) for the spec's relative limits."""
+    from doefab.tolerance.spec import meets
+
+    out = {k: mean_ci([s[k] for s in samples]) for k in ("metric", "worst", "l1_to_nominal")}
+    ok = [meets({"psf_metric": s["metric"]}, spec, task, "psf", nominal.get("psf", {})) for s in samples]
+    out["yield"] = {"level": "psf", "value": float(np.mean(ok)) if ok else float("nan"),
+                    "ci95": list(wilson(sum(ok), len(ok))), "n": len(ok)}
+    if samples and "network" in samples[0]:
+        out["network"] = {}
+        for label in samples[0]["network"]:
+            rows = [s["network"][label] for s in samples]
+            good = [meets(r, spec, task, "network", nominal.get("network", {}).get(label, {})) for r in rows]
+            out["network"][label] = {"metrics": {k: mean_ci([r[k] for r in rows]) for k in rows[0]},
+                                     "yield": {"value": float(np.mean(good)), "ci95": list(wilson(sum(good), len(good))),
+                                               "n": len(good)}}
+    return out

@@ -1,0 +1,112 @@
+"""What a part must deliver: per-task specs on the PSF metric and on the delivered quality, and yield.
+
+A budget's ``[spec.<task>]`` table (task: hdr, hyperspectral, depth) holds limits, each key naming the metric,
+its unit and the limit's kind:
+
+- ``psf_metric_min``: the design's PSF metric (fraction of the coded light in the task's band);
+- absolute delivered limits, e.g. ``psnr_highlight_db_min = 28``, ``sam_rad_max = 0.45``, ``mae_m_max = 0.3``;
+- limits relative to the nominal (error-free) part, e.g. ``psnr_highlight_db_loss_max = 1.0`` (at most 1 dB
+  below what the nominal part delivers), ``mae_m_increase_max = 0.05``.
+
+A part meets spec when it meets every limit that applies at the level it was judged on (PSF level: the PSF
+metric; network level: the delivered metrics, reconstructed with the nominal PSF and with the part's own).
+"""
+
+from __future__ import annotations
+
+import math
+
+from doefab.errors import DoefabError
+
+__all__ = ["DELIVERED", "TASK_OF_DESIGN", "spec_keys", "check_spec", "meets", "nominal_failures", "limits_text"]
+
+# delivered metrics per task: name → (unit, better): "+" higher is better, "-" lower is better
+DELIVERED = {
+    "hdr": {"psnr_highlight": ("db", "+"), "psnr": ("db", "+"), "rmse_highlight": ("", "-"), "rmse": ("", "-")},
+    "hyperspectral": {"psnr": ("db", "+"), "sam": ("rad", "-"), "ssim": ("", "+")},
+    "depth": {"mae": ("m", "-"), "rmse": ("m", "-"), "delta125": ("", "+"), "log10": ("", "-")},
+}
+TASK_OF_DESIGN = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
+
+
+def _key_parts(task: str) -> dict:
+    """{spec key: (metric, kind)} for a task; kind: min, max (absolute), loss (relative, higher is better),
+    increase (relative, lower is better)."""
+    out = {"psf_metric_min": ("psf_metric", "min"), "psf_metric_loss_max": ("psf_metric", "loss")}
+    for name, (unit, better) in DELIVERED[task].items():
+        u = f"_{unit}" if unit else ""
+        if better == "+":
+            out[f"{name}{u}_min"] = (name, "min")
+            out[f"{name}{u}_loss_max"] = (name, "loss")
+        else:
+            out[f"{name}{u}_max"] = (name, "max")
+            out[f"{name}{u}_increase_max"] = (name, "increase")
+    return out
+
+
+def spec_keys(task: str) -> list[str]:
+    return list(_key_parts(task))
+
+
+def check_spec(spec: dict, where: str = "[spec]") -> list[str]:
+    """Problems of a budget's ``[spec]`` section (per-task tables; every key of a known task, a finite number)."""
+    problems = []
+    for task, table in spec.items():
+        if task not in DELIVERED:
+            problems.append(f"{where}: unknown table spec.{task} (tables: {', '.join(DELIVERED)})")
+            continue
+        if not isinstance(table, dict):
+            problems.append(f"spec.{task} must be a table of limits")
+            continue
+        keys = _key_parts(task)
+        for k, v in table.items():
+            if k not in keys:
+                problems.append(f"unknown key spec.{task}.{k} (keys: {', '.join(keys)})")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                problems.append(f"spec.{task}.{k} must be a number")
+            elif keys[k][1] in ("loss", "increase") and v < 0:
+                problems.append(f"spec.{task}.{k} = {v} must be ≥ 0 (a margin below the nominal part)")
+    return problems
+
+
+def _limits(spec: dict, task: str, level: str, nominal: dict) -> list[tuple[str, str, float, str]]:
+    """[(key, metric, limit, "≥"/"≤")] that apply at ``level`` ("psf" or "network"), relative limits turned
+    absolute against the nominal part's values."""
+    out = []
+    table = spec.get(task, {})
+    for k, (metric, kind) in _key_parts(task).items():
+        if k not in table or (metric == "psf_metric") != (level == "psf"):
+            continue
+        v = float(table[k])
+        if kind in ("loss", "increase"):
+            if metric not in nominal:
+                continue
+            base = float(nominal[metric])
+            out.append((k, metric, base - v if kind == "loss" else base + v, "≥" if kind == "loss" else "≤"))
+        else:
+            out.append((k, metric, v, "≥" if kind == "min" else "≤"))
+    return out
+
+
+def meets(values: dict, spec: dict, task: str, level: str, nominal: dict) -> bool:
+    """Whether a part with metric ``values`` meets every limit of ``spec`` that applies at ``level``."""
+    for _, metric, limit, op in _limits(spec, task, level, nominal):
+        v = values.get(metric, float("nan"))
+        if not math.isfinite(v) or (v < limit if op == "≥" else v > limit):
+            return False
+    return True
+
+
+def nominal_failures(spec: dict, task: str, level: str, nominal: dict) -> list[str]:
+    """The limits the nominal (error-free) part already misses: a spec the design cannot meet."""
+    return [f"{k}: nominal {nominal[m]:.4g} {'<' if op == '≥' else '>'} {lim:.4g}"
+            for k, m, lim, op in _limits(spec, task, level, nominal)
+            if m in nominal and (nominal[m] < lim if op == "≥" else nominal[m] > lim)]
+
+
+def limits_text(spec: dict, task: str, level: str, nominal: dict) -> str:
+    """The limits as people read them, e.g. "psnr_highlight ≥ 30.7 (nominal − 1 dB)"."""
+    lim = _limits(spec, task, level, nominal)
+    if not lim:
+        raise DoefabError(f"the budget's [spec.{task}] sets no limit judged at {level} level")
+    return ", ".join(f"{m} {op} {v:.4g}" for _, m, v, op in lim)
