@@ -72,7 +72,7 @@ def plane_masks(depth_map: torch.Tensor, depths) -> torch.Tensor:
     return torch.stack([idx == d for d in range(len(depths))]).to(torch.float32)
 
 
-def simulate_captures(scene, pair, depth_map=None, response=None, noise="default", seed: int = 0):
+def simulate_captures(scene, pair, depth_map=None, response=None, noise="default", seed: int = 0, crosstalk=None):
     """``(coded, uncoded)`` captures: two [3, H, W] float32 arrays in [0, 1] (numpy in, numpy out; torch in,
     torch out).
 
@@ -85,6 +85,10 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             None for RGB scenes (C = 3).
         noise: ``"default"`` (Poisson–Gaussian), ``"authors"`` (uniform ±0.01), ``"none"`` or a model.
         seed: seeds the noise (coded first, then uncoded).
+        crosstalk: None (each view records only its own half), or a ``doefab.imaging.crosstalk.DualPixelCrosstalk``
+            — the camera's per-column ratios mix the two views (Eq. 29) before the noise, and, when it carries a
+            calibration's estimate, its pipeline unmixes them after (the captures a user's pipeline delivers).
+            A ``(α_l→r, α_r→l)`` pair mixes without unmixing.
     """
     torch_in = isinstance(scene, torch.Tensor)
     s = _check_array("scene", scene, 3)
@@ -119,17 +123,31 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
                           f"computed for one depth")
     noise_obj = noise_model(noise)
     rng = np.random.default_rng(seed)
-    out = []
+    views = []
     with torch.no_grad():
         for half in ("coded", "uncoded"):
             psf = pair[half].detach().to(torch.float32)
             blurred = render_layers(s, psf, masks, pair.depths)
             rgb = torch.einsum("rc,chw->rhw", t, blurred) if t is not None else blurred
-            img = noise_obj.apply(rgb.double().numpy(), rng)
-            out.append(np.clip(img, 0.0, 1.0).astype(np.float32))
+            views.append(rgb.double().numpy())
+    out = [v.astype(np.float32) for v in _camera(crosstalk).record(views[0], views[1], noise_obj, rng)]
     if torch_in:
         return torch.from_numpy(out[0]), torch.from_numpy(out[1])
     return out[0], out[1]
+
+
+def _camera(crosstalk):
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    if crosstalk is None:
+        return DualPixelCrosstalk(0.0, 0.0)
+    if isinstance(crosstalk, DualPixelCrosstalk):
+        return crosstalk
+    try:
+        a, b = crosstalk
+    except (TypeError, ValueError):
+        raise DoefabError("crosstalk must be a DualPixelCrosstalk or an (α_l→r, α_r→l) pair of fractions") from None
+    return DualPixelCrosstalk(a, b)
 
 
 def _check_array(name: str, x, ndim: int) -> torch.Tensor:

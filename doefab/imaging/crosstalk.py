@@ -130,6 +130,10 @@ class DualPixelCrosstalk:
     """
 
     def __init__(self, alpha_lr, alpha_rl, estimate=None):
+        probe = np.zeros(1)
+        _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
+        if estimate is not None:
+            _ratio("estimated alpha_lr", estimate[0], probe), _ratio("estimated alpha_rl", estimate[1], probe)
         self.alpha_lr, self.alpha_rl = alpha_lr, alpha_rl
         self.estimate = estimate  # (α̂_l→r, α̂_r→l), or None: the pipeline leaves the mix in
 
