@@ -95,6 +95,7 @@ class PSFJudge:
         self.chain = chain or (alignment_chain(self.design_dir) if self.design_dir else {1: 0, 2: 0, 3: 0, 4: 0})
         self._plans: dict = {}
         self._uncoded = None
+        self._relief_cache: tuple = (None, None)
         t = time.perf_counter()
         self.nominal = self.psfs(PartErrors())["coded"].double()
         self.seconds_per_psf = time.perf_counter() - t
@@ -128,14 +129,30 @@ class PSFJudge:
         plain glass. Only the columns the relief can reach are computed (beyond the design's plain boundary,
         moved by the masks' and the mount's errors, the glass is plain); a mount rotation turns whichever is
         smaller, the pattern areas or the wavelengths' transmittances."""
-        from doefab.tolerance.relief import pattern_heights, rotate_fields, transmittance
-
         (r0, r1), (c0, c1) = plan.window
         th = float(err.mount_rotation)
         me = self.mask_errors(err)
         cells = self.relief.n
         reach = abs(th) * cells + max(abs(v) for s in me.shifts for v in s) / self.relief.cell + 4
         c_end = min(c1, max(c0 + 1, int(self.plain_from + reach)))
+        key = (json.dumps(err.to_json(), sort_keys=True, default=str), r0, r1, c0, c_end)
+        if self._relief_cache[0] != key:  # one part's relief serves its coded-only and its two-half PSFs
+            self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)))
+        fields = self._relief_cache[1].reshape(-1, r1 - r0, c_end - c0)
+        if c_end < c1:  # plain glass beyond the relief's reach
+            fields = torch.cat([fields, torch.ones(fields.shape[0], r1 - r0, c1 - c_end, dtype=fields.dtype)], dim=2)
+
+        def at(i: int) -> torch.Tensor:
+            return fields[i]
+        return at
+
+    def _relief_fields(self, err: PartErrors, me, plan, rows, cols) -> torch.Tensor:
+        """[W, cells] the part's relief transmittance of the window rows × cols, relative to the plain glass."""
+        from doefab.tolerance.relief import pattern_heights, rotate_fields, transmittance
+
+        (r0, r1), (c0, c_end) = rows, cols
+        th = float(err.mount_rotation)
+        cells = self.relief.n
         full = (1 << self.n_masks) - 1
         heights = pattern_heights(self.n_masks, self.step, err.depth_scale) - full * self.step
         phases = [plan.phase_per_metre(i) for i in range(len(self.design.wavelengths))]
@@ -158,13 +175,7 @@ class PSFJudge:
             rough = torch.from_numpy(rough.reshape(-1)).float()
             for i, c in enumerate(phases):
                 fields[i] *= torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
-        fields = fields.reshape(len(phases), r1 - r0, c_end - c0)
-        if c_end < c1:  # plain glass beyond the relief's reach
-            fields = torch.cat([fields, torch.ones(len(phases), r1 - r0, c1 - c_end, dtype=fields.dtype)], dim=2)
-
-        def at(i: int) -> torch.Tensor:
-            return fields[i]
-        return at
+        return fields
 
     def psfs(self, err: PartErrors, halves=("coded",), kernel: int | None = None) -> dict:
         """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""
