@@ -83,18 +83,33 @@ class Reconstructor:
         torch_in = isinstance(coded, torch.Tensor)
         views = []
         for name, x in (("coded", coded), ("uncoded", uncoded)):
-            t = _float_tensor(x)
-            if t.ndim != 3 or t.shape[0] != 3:
-                raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
-            if not bool(torch.isfinite(t).all()):
-                raise DoefabError(f"{name} contains NaN or infinite values")
-            views.append(t[None])
+            views.append(_capture(name, x)[None])
         if views[0].shape != views[1].shape:
             raise DoefabError(f"coded {tuple(views[0].shape[1:])} and uncoded {tuple(views[1].shape[1:])} differ in shape")
         p = self._psf(psf)
         with torch.no_grad():
             out = self.model(views[0], views[1], p)[0]
         return out if torch_in else out.numpy()
+
+
+def _capture(name: str, x) -> torch.Tensor:
+    """A [3, H, W] capture as float32, refused (with the fix) unless it holds floats in [0, 1]: the networks
+    are trained on captures normalised to the sensor's white level."""
+    dtype = x.dtype if isinstance(x, torch.Tensor) else np.asarray(x).dtype
+    if not (dtype.is_floating_point if isinstance(dtype, torch.dtype) else dtype.kind == "f"):
+        raise DoefabError(f"{name} is an integer ({dtype}) image: captures are floats in [0, 1]; divide by the "
+                          f"white level (255 for 8 bits, 2**bits − 1 for raw data) first")
+    t = _float_tensor(x)
+    if t.ndim != 3 or t.shape[0] != 3:
+        raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
+    if not bool(torch.isfinite(t).all()):
+        raise DoefabError(f"{name} contains NaN or infinite values")
+    lo, hi = float(t.min()), float(t.max())
+    if lo < -1e-6 or hi > 1 + 1e-6:
+        raise DoefabError(f"{name} holds values {lo:.4g}–{hi:.4g}: captures are in [0, 1] (0 = black, 1 = the "
+                          f"sensor's clipping level); subtract the black level, divide by the white level and "
+                          f"clip to [0, 1] first")
+    return t
 
 
 def _float_tensor(x) -> torch.Tensor:

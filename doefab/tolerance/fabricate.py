@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from doefab._validate import wavelength_m
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import N_MASKS, bit_plane
 from doefab.fabrication.levels import N_LEVELS
@@ -88,6 +89,7 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
         camera: the design camera (its pitch and material).
         design_wavelength: metres; sets the level step d = λ / (n(λ) − 1) / 16.
     """
+    design_wavelength = wavelength_m("design_wavelength", design_wavelength)
     lv = np.asarray(levels)
     if lv.ndim != 2 or lv.shape[0] != lv.shape[1] or lv.shape[0] != camera.doe_pixels:
         raise DoefabError(f"levels must be ({camera.doe_pixels}, {camera.doe_pixels}) on the camera's grid, got "
