@@ -23,7 +23,7 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, 
 from doefab.fabrication.levels import N_LEVELS, level_step, levels_sha256
 from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons
 from doefab.fabrication.verify import verify_mask_set, width_space_report
-from doefab.io import MARKER, SIGNATURES, OutputDir, atomic_write_json, atomic_write_text, plain_name, staging_dir
+from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
 from doefab.optics.camera import Camera
 
 __all__ = ["MaskOptions", "export_masks", "layout_levels"]
@@ -115,7 +115,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
                           f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
-    out = OutputDir(out_dir, "masks", replace=force, signatures=SIGNATURES["masks"]).path
+    out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
@@ -159,7 +159,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         (design_sub / "levels.npy").write_bytes(buf.getvalue())
         if design_dir is not None and (Path(design_dir) / "design.json").is_file():
             shutil.copyfile(Path(design_dir) / "design.json", design_sub / "design.json")
-        atomic_write_json(stage / MARKER, {"kind": "masks", "written_by": "doefab"})
+        mark_folder(stage, "masks")
         manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
         report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout, complete=False)  # mirrors per the manifest

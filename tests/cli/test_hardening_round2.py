@@ -48,6 +48,67 @@ def _run(argv, capsys) -> tuple[int, str, str]:
     return rc, cap.out, cap.err
 
 
+# ---- row 1: only the ownership marker proves a folder is doefab's
+
+def test_row01_a_users_run_json_is_not_a_signature(tmp_path, capsys):
+    u = tmp_path / "u"
+    (u / "holder").mkdir(parents=True)
+    (u / "run.json").write_text('{"mine":1}\n')
+    (u / "holder" / "my_part.scad").write_text("cad\n")
+    scene = _holder_scene(tmp_path)
+    before = _snapshot(tmp_path)
+    rc, _, err = _run(["run", scene, "--out", u], capsys)
+    assert rc == 2 and "ownership marker" in err
+    assert _snapshot(tmp_path) == before
+
+
+def test_row01_a_users_summary_json_is_not_a_demo_output(tmp_path, capsys):
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "summary.json").write_text("{}\n")
+    rc, _, err = _run(["demo", "--out", tmp_path / "d"], capsys)
+    assert rc == 2 and "not a doefab demo output" in err
+    assert [p.name for p in (tmp_path / "d").iterdir()] == ["summary.json"]
+
+
+def test_row01_a_stage_folder_is_replaced_only_if_doefab_made_it(tmp_path, capsys):
+    from doefab.io import mark_folder
+
+    out = tmp_path / "run"
+    out.mkdir()
+    mark_folder(out, "run")  # doefab's run folder, holding a folder of the user's named like a stage
+    (out / "holder").mkdir()
+    (out / "holder" / "my_part.scad").write_text("cad\n")
+    scene = _holder_scene(tmp_path)
+    before = _snapshot(tmp_path)
+    rc, _, err = _run(["run", scene, "--out", out], capsys)
+    assert rc == 2 and "holder" in err and "ownership marker" in err
+    assert _snapshot(tmp_path) == before
+
+
+def test_row01_doefab_stage_folders_carry_their_marker_and_are_replaced(tmp_path, monkeypatch):
+    from doefab.io import MARKER, read_marker
+    from doefab.pipeline import stages
+    from doefab.pipeline.run import foreign_stage_folders
+    from doefab.pipeline.scene import load_scene
+
+    calls = []
+
+    def fake_holder(scene, res, out, quick):
+        calls.append(sorted(p.name for p in out.iterdir()))
+        (out / f"part{len(calls)}.stl").write_text("solid\n")
+        return {"status": "ran", "why": "test"}
+
+    monkeypatch.setitem(stages.STAGE_FUNCS, "holder", fake_holder)
+    scene = load_scene(_holder_scene(tmp_path))
+    for _ in range(2):
+        stages.run_stage(scene, None, "holder", tmp_path / "run", {}, quick=True, force=True)
+    assert calls == [[MARKER], [MARKER]]  # the second run started from an empty (marked) folder
+    assert sorted(p.name for p in (tmp_path / "run" / "holder").iterdir()) == [MARKER, "part2.stl", "stage.json"]
+    assert read_marker(tmp_path / "run" / "holder") == {"kind": "run stage", "written_by": "doefab",
+                                                         "stage": "holder"}
+    assert foreign_stage_folders(scene, tmp_path / "run") == []
+
+
 # ---- rows 7 and 8: units and ranges at the API
 
 def test_row07_fabricated_height_gives_the_unit_error(tiny_camera):
@@ -69,3 +130,90 @@ def test_row08_reconstructor_refuses_captures_outside_0_1():
     with pytest.raises(DoefabError, match="subtract the black level"):
         rec(coded - 0.5, uncoded)
 
+
+# ---- rows 14–16: the run command
+
+@pytest.mark.parametrize("edit", [{"depths_m": "depths_m = [5000.0]"}, {"preset": 'preset = "depth"'},
+                                  {"stages": 'stages = ["tolerance", "report"]'}])
+def test_row14_every_scene_check_before_the_folder_is_created(tmp_path, capsys, edit):
+    rc, _, err = _run(["run", _scene(tmp_path, **edit), "--out", tmp_path / "o"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_row15_no_stages_says_no_report_was_written(tmp_path, capsys):
+    rc, out, _ = _run(["run", _scene(tmp_path, stages="stages = []"), "--out", tmp_path / "o"], capsys)
+    assert rc == 0 and "no report written" in out and "report.html" not in out
+    assert not (tmp_path / "o" / "report.html").exists()
+
+
+def test_row16_empty_out_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc, _, err = _run(["run", _holder_scene(tmp_path), "--out", ""], capsys)
+    assert rc == 2 and "--out is empty" in err and sorted(p.name for p in tmp_path.iterdir()) == ["S.toml"]
+
+
+# ---- row 17: a long redesign is announced
+
+
+def test_row17_a_redesign_says_why_and_roughly_how_long(tmp_path, capsys, monkeypatch):
+    def stop(*a, **k):
+        raise DoefabError("stopped by the test")
+
+    monkeypatch.setattr(doefab, "optimize", stop)
+    scene = _scene(tmp_path, kernel_px="kernel_px = 96", stages='stages = ["design"]')
+    rc, out, err = _run(["run", scene, "--out", tmp_path / "o"], capsys)
+    assert rc == 2 and "stopped by the test" in err
+    line = [ln for ln in out.splitlines() if "is not reused" in ln]
+    assert len(line) == 1 and "kernel_px 96 (committed 95)" in line[0]
+    assert re.search(r"roughly \d+\.\d min", line[0]) and "checkpoint ~123 MB" in line[0]
+    assert not (tmp_path / "o").exists()  # a failed run removes what it created
+
+
+# ---- row 18: messages
+
+def test_row18_a_folder_is_named_as_a_folder(tmp_path, capsys):
+    (tmp_path / "somedir.toml").mkdir()
+    rc, _, err = _run(["doctor", tmp_path / "somedir.toml"], capsys)
+    assert rc == 2 and "is a folder" in err and "not found" not in err
+
+
+def test_row18_wavelengths_in_metres_get_one_message_with_the_hint(tmp_path):
+    from doefab.pipeline.scene import load_scene
+
+    p = _scene(tmp_path, wavelengths_nm="wavelengths_nm = [6.56e-07, 5.89e-07, 4.86e-07]")
+    with pytest.raises(DoefabError) as exc:
+        load_scene(p)
+    msg = str(exc.value)
+    assert "1 problem(s)" in msg and msg.count("optics.wavelengths_nm") == 1 and "write 656" in msg
+
+
+# ---- row 20: the report
+
+def test_row20_report_text_renders_and_says_what_is_a_benchmark(tmp_path):
+    from doefab.pipeline.report import BENCHMARK, write_report
+    from doefab.pipeline.scene import load_scene
+
+    scene = load_scene(REPO / "scenes" / "hyperspectral.toml")
+    res = {"settings": {"design_task": "grating", "wavelengths_m": [5e-7] * 31, "depths_m": [5.0], "kernel_px": 191}}
+    write_report(tmp_path, scene, {}, res)
+    page = (tmp_path / "report.html").read_text()
+    assert "`" not in page and f"<code>{scene.path}</code>" in page
+    assert page.count(BENCHMARK) >= 3  # the PSF and design benchmark captions, and the section's note
+    assert "not in this run" in page  # the shipped weights' training curves
+
+
+def test_row20_design_psf_panels_are_drawn_on_a_log_scale(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    import doefab.plotting
+    from doefab.pipeline.stages import design_psf_figure
+
+    seen = {}
+    monkeypatch.setattr(doefab.plotting, "plot_psf_grid", lambda path, panels, pitch, **kw: seen.update(kw))
+    d = SimpleNamespace(wavelengths=[5e-7, 6e-7], depths=[5.0], camera=SimpleNamespace(sensor_pitch=5.4e-6),
+                        task="grating")
+    psf = np.zeros((1, 2, 15, 15))
+    psf[0, :, 7, 7] = 1.0
+    design_psf_figure(tmp_path / "f.png", d, psf, psf)
+    assert seen["log"] is True and "log scale" in seen["suptitle"]
