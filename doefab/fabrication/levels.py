@@ -16,7 +16,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
-__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
+__all__ = ["N_LEVELS", "level_step", "material_level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
            "levels_sha256"]
 
 N_LEVELS = 16
@@ -24,9 +24,14 @@ N_LEVELS = 16
 
 def level_step(camera: Camera, n_levels: int = N_LEVELS) -> float:
     """Height of one level d (metres) = h_2π(design wavelength) / n_levels."""
-    if not isinstance(n_levels, (int, np.integer)) or n_levels < 2:
+    return material_level_step(camera.material, camera.design_wavelength, n_levels)
+
+
+def material_level_step(material, design_wavelength: float, n_levels: int = N_LEVELS) -> float:
+    """Height of one level d (metres) of ``material`` (a ``doefab.Material``) at ``design_wavelength`` (m)."""
+    if isinstance(n_levels, bool) or not isinstance(n_levels, (int, np.integer)) or n_levels < 2:
         raise DoefabError(f"n_levels must be an integer ≥ 2, got {n_levels!r}")
-    return camera.material.height_2pi(camera.design_wavelength) / n_levels
+    return material.height_2pi(design_wavelength) / n_levels
 
 
 def wrap_height(height, camera: Camera):

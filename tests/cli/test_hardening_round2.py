@@ -109,6 +109,76 @@ def test_row01_doefab_stage_folders_carry_their_marker_and_are_replaced(tmp_path
     assert foreign_stage_folders(scene, tmp_path / "run") == []
 
 
+# ---- row 2: masks --verify re-derives every depth
+
+def _half_ring_copy(tmp: Path) -> Path:
+    dst = tmp / "COPY"
+    shutil.copytree(REPO / "masks" / "half-ring", dst)
+    return dst
+
+
+def _edit_manifest(folder: Path, edit) -> None:
+    man = json.loads((folder / "manifest.json").read_text())
+    edit(man)
+    (folder / "manifest.json").write_text(json.dumps(man, indent=2))
+
+
+def test_row02_verify_names_every_inconsistent_depth_field(tmp_path, capsys):
+    copy = _half_ring_copy(tmp_path)
+
+    def edit(man):
+        assert man["layers"][4]["etch_depth_nm"] == 597.942
+        man["layers"][4]["etch_depth_nm"] = 1000
+        man["level_step_nm"] *= 1.1
+
+    _edit_manifest(copy, edit)
+    rc, out, err = _run(["masks", "--verify", copy], capsys)
+    assert rc == 3 and "verified" not in out
+    assert "layers[4].etch_depth_nm = 1000 (expected 597.942" in err and "level_step_nm = 82.2" in err
+
+
+def test_row02_rounding_passes_and_a_ten_percent_step_fails():
+    from doefab.fabrication.manifest import depth_fields, depth_problems
+
+    man = json.loads((REPO / "masks" / "half-ring" / "manifest.json").read_text())
+    assert depth_problems(man) == []
+    exact = depth_fields(doefab.FUSED_SILICA, man["design_wavelength_m"])
+    rounded = dict(man, level_to_height_nm=[h + 0.0005 for h in exact["level_to_height_nm"]])
+    assert depth_problems(rounded) == []  # float rounding of the written values passes
+    step = dict(man, level_step_nm=man["level_step_nm"] * 1.1)
+    assert [p.split(" =")[0] for p in depth_problems(step)] == ["level_step_nm"]
+    table = dict(man, level_to_height_nm=[*man["level_to_height_nm"][:15], 1200.0])
+    assert [p.split(" =")[0] for p in depth_problems(table)] == ["level_to_height_nm[15]"]
+    assert "unknown material 'BK7'" in " ".join(depth_problems(dict(man, material={**man["material"], "name": "BK7"})))
+
+
+def test_row02_a_consistently_edited_wavelength_differs_from_the_design(tmp_path, capsys):
+    from doefab.fabrication.manifest import depth_fields
+
+    copy = _half_ring_copy(tmp_path)
+
+    def edit(man):  # every depth re-derived for 600 nm: self-consistent, but not the design's wavelength
+        f = depth_fields(doefab.FUSED_SILICA, 600e-9)
+        man.update(design_wavelength_m=600e-9, level_step_nm=f["level_step_nm"],
+                   level_to_height_nm=f["level_to_height_nm"],
+                   refractive_index_at_design_wavelength=f["refractive_index_at_design_wavelength"])
+        for layer in man["layers"]:
+            if layer["purpose"] == "etch":
+                layer["etch_depth_nm"] = f["etch_depth_nm"][layer["bit"]]
+
+    _edit_manifest(copy, edit)
+    rc, _, err = _run(["masks", "--verify", copy, "--no-klayout"], capsys)
+    assert rc == 3 and "differs from the design's 5.5e-07" in err
+
+
+def test_row02_a_hand_edited_readme_fails(tmp_path, capsys):
+    copy = _half_ring_copy(tmp_path)
+    text = (copy / "README.txt").read_text()
+    (copy / "README.txt").write_text(text.replace("etch depth 597.942 nm", "etch depth 1000 nm"))
+    rc, _, err = _run(["masks", "--verify", copy, "--no-klayout"], capsys)
+    assert rc == 3 and "README.txt differs" in err
+
+
 # ---- rows 7 and 8: units and ranges at the API
 
 def test_row07_fabricated_height_gives_the_unit_error(tiny_camera):
