@@ -19,7 +19,7 @@ from doefab.errors import DoefabError
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import get_spec, psf_pair
-from doefab.reconstruction.train import model_inputs, weights_paths
+from doefab.reconstruction.train import is_shipped, model_inputs, weights_paths
 
 __all__ = ["load_reconstructor", "Reconstructor"]
 
@@ -117,8 +117,19 @@ def _float_tensor(x) -> torch.Tensor:
     return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
 
 
-def _refuse(path: Path, why: str, task: str, variant: str):
-    raise DoefabError(f"{path}: {why}; retrain it with: doefab train --task {task} --variant {variant}")
+def _retrain(task: str, variant: str, weights_dir, design) -> str:
+    """The command that makes the network the loader looks for, writing where it looks."""
+    cmd = f"doefab train --task {task} --variant {variant}" + (f" --design {design}" if design is not None else "")
+    if not is_shipped(weights_dir):
+        return f"retrain it with: {cmd} --weights-dir {weights_dir}"
+    if design is not None:
+        return (f"the shipped weights belong to the committed design: train one for {design} with: {cmd} "
+                f"--weights-dir NEW_FOLDER, and pass that --weights-dir")
+    return f"restore it (git checkout doefab/weights) or retrain it with: {cmd} --replace-shipped"
+
+
+def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, design=None):
+    raise DoefabError(f"{path}: {why}; {_retrain(task, variant, weights_dir, design)}")
 
 
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
@@ -129,28 +140,29 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
     pt, meta_path = weights_paths(task, variant, weights_dir)
+    who = (task, variant, weights_dir, design)
     if not pt.is_file() or not meta_path.is_file():
-        _refuse(pt, "no weights (or no metadata record beside them)", task, variant)
+        _refuse(pt, "no weights (or no metadata record beside them)", *who)
     try:
         meta = json.loads(meta_path.read_text())
     except (ValueError, UnicodeDecodeError):
-        _refuse(meta_path, "the metadata record is not valid JSON", task, variant)
+        _refuse(meta_path, "the metadata record is not valid JSON", *who)
     need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
     if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != "doefab weights 1":
-        _refuse(meta_path, f"the metadata record lacks {list(need)}", task, variant)
+        _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
     if (meta["task"], meta["variant"]) != (task, variant):
-        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", task, variant)
+        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
     data = pt.read_bytes()
     if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
-        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", task, variant)
+        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)
     pair, sha = psf_pair(task, design)
     if meta["design_levels_sha256"] != sha:
         _refuse(pt, "the weights were trained for another design than " +
-                ("the committed one" if design is None else str(design)), task, variant)
+                ("the committed one" if design is None else str(design)), *who)
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])
         model.load_state_dict(state)
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
-        _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", task, variant)
+        _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta)

@@ -179,6 +179,37 @@ def test_row02_a_hand_edited_readme_fails(tmp_path, capsys):
     assert rc == 3 and "README.txt differs" in err
 
 
+# ---- row 3: shipped weights are never replaced by accident
+
+def _digest(folder: Path, pattern: str) -> dict:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.glob(pattern))}
+
+
+def test_row03_train_writes_to_out_and_prints_the_path(tmp_path, capsys, monkeypatch):
+    import doefab.reconstruction.train as train_mod
+
+    shipped = train_mod.WEIGHTS_DIR
+    before = _digest(shipped, "hdr_uncoded_only*")
+    real = train_mod.train
+    monkeypatch.setattr(train_mod, "train", lambda *a, **k: real(*a, max_steps=1, val_images=1, **k))
+    rc, out, _ = _run(["train", "--task", "hdr", "--variant", "uncoded_only", "--minutes", "0.1", "--crop", "64",
+                       "--out", tmp_path / "tr"], capsys)
+    assert rc == 0
+    assert _digest(shipped, "hdr_uncoded_only*") == before
+    written = (tmp_path / "tr" / "hdr_uncoded_only.pt").resolve()
+    assert written.is_file() and f"wrote {written} and its .json" in out
+
+
+def test_row03_the_shipped_folder_needs_the_explicit_flag(tmp_path, capsys):
+    from doefab.reconstruction.train import WEIGHTS_DIR, weights_target
+
+    rc, _, err = _run(["train", "--task", "hdr", "--weights-dir", WEIGHTS_DIR, "--out", tmp_path / "tr"], capsys)
+    assert rc == 2 and "--replace-shipped" in err and not (tmp_path / "tr").exists()
+    assert weights_target(None, tmp_path, replace_shipped=True) == WEIGHTS_DIR
+    with pytest.raises(DoefabError, match="committed design"):
+        weights_target(None, tmp_path, replace_shipped=True, design=tmp_path)
+
+
 # ---- rows 7 and 8: units and ranges at the API
 
 def test_row07_fabricated_height_gives_the_unit_error(tiny_camera):
@@ -199,6 +230,30 @@ def test_row08_reconstructor_refuses_captures_outside_0_1():
         rec((coded * 255).astype(np.uint8), (uncoded * 255).astype(np.uint8))
     with pytest.raises(DoefabError, match="subtract the black level"):
         rec(coded - 0.5, uncoded)
+
+
+# ---- rows 11 and 12: a design of another task is named as such, at once
+
+def test_row11_train_names_the_task_design_mismatch(tmp_path, capsys):
+    rc, _, err = _run(["train", "--task", "hdr", "--design", "masks/grating", "--weights-dir", tmp_path / "w",
+                       "--minutes", "0.1", "--out", tmp_path / "trw"], capsys)
+    assert rc == 2
+    assert "masks/grating is a hyperspectral (grating) design; --task hdr needs a streak design" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_row12_evaluate_names_the_task_design_mismatch(tmp_path, capsys):
+    rc, _, err = _run(["evaluate", "--task", "depth", "--design", "masks/grating", "--weights-dir", "doefab/weights",
+                       "--images", "1", "--size", "64", "--out", tmp_path / "ev"], capsys)
+    assert rc == 2 and "--task depth needs a half-ring design" in err and "doefab train" not in err
+
+
+def test_row12_the_loader_never_suggests_overwriting_the_shipped_weights(tmp_path):
+    from doefab.reconstruction.loader import _retrain
+
+    hint = _retrain("depth", "proposed", None, tmp_path / "cand")
+    assert "--weights-dir NEW_FOLDER" in hint and "--replace-shipped" not in hint
+    assert _retrain("depth", "proposed", tmp_path / "w", None).endswith(f"--weights-dir {tmp_path / 'w'}")
 
 
 # ---- rows 14–16: the run command
