@@ -35,11 +35,26 @@ def register(sub) -> None:
     p.add_argument("--networks", action="store_true",
                    help="also judge every sample through the shipped reconstruction network (nominal and measured PSF)")
     p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
-    p.add_argument("--scheduler", default=None, help="Dask: local:N (a LocalCluster) or tcp://HOST:PORT")
+    p.add_argument("--scheduler", type=scheduler_arg, default=None,
+                   help="Dask: local:N (a LocalCluster of N = 1..64 workers) or tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
     p.set_defaults(func=run)
+
+
+def scheduler_arg(text: str) -> str:
+    """``local:N`` (N = 1..64 workers) or ``tcp://HOST:PORT`` (PORT 1..65535), checked when the flag is parsed."""
+    kind, _, rest = text.partition(":")
+    if kind == "local" and rest.isdigit() and 1 <= int(rest) <= 64:
+        return text
+    if kind == "local":
+        raise argparse.ArgumentTypeError(f"local:N takes a worker count N = 1..64, got {text!r} (e.g. local:2)")
+    host, _, port = rest.removeprefix("//").rpartition(":")
+    if kind == "tcp" and rest.startswith("//") and host and port.isdigit() and 1 <= int(port) <= 65535:
+        return text
+    raise argparse.ArgumentTypeError(f"expects local:N or tcp://HOST:PORT, got {text!r} (e.g. local:2 or "
+                                     f"tcp://127.0.0.1:8786)")
 
 
 def run(args) -> int:
@@ -53,8 +68,6 @@ def run(args) -> int:
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
-    if args.scheduler and not (args.scheduler.startswith("local:") or args.scheduler.startswith("tcp://")):
-        raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {args.scheduler!r}")
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",

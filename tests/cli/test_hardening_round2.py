@@ -232,6 +232,15 @@ def test_row08_reconstructor_refuses_captures_outside_0_1():
         rec(coded - 0.5, uncoded)
 
 
+# ---- row 9: the scheduler is checked when the flags are parsed
+
+@pytest.mark.parametrize("scheduler", ["local:0", "local:abc", "tcp://nohost"])
+def test_row09_scheduler_checked_at_parse_time(tmp_path, capsys, scheduler):
+    rc, _, err = _run(["tolerance", "--design", REPO / "masks" / "grating", "--samples", "1", "--scheduler",
+                       scheduler, "--out", tmp_path / "t0"], capsys)
+    assert rc == 2 and "--scheduler" in err and not (tmp_path / "t0").exists()
+
+
 # ---- rows 11 and 12: a design of another task is named as such, at once
 
 def test_row11_train_names_the_task_design_mismatch(tmp_path, capsys):
