@@ -265,6 +265,15 @@ def test_row12_the_loader_never_suggests_overwriting_the_shipped_weights(tmp_pat
     assert _retrain("depth", "proposed", tmp_path / "w", None).endswith(f"--weights-dir {tmp_path / 'w'}")
 
 
+# ---- row 13: the holder's stated bounds come first
+
+@pytest.mark.parametrize("setting, needle", [("clearance_mm=10", "clearance_mm 10 is outside 0.05–1 mm"),
+                                             ("thread_diameter_mm=1e9", "thread_diameter_mm 1e+09 is outside 20–150 mm")])
+def test_row13_holder_names_the_parameter_and_its_bound(tmp_path, capsys, setting, needle):
+    rc, _, err = _run(["holder", "--out", tmp_path / "h1", "--set", setting], capsys)
+    assert rc == 2 and needle in err and "washers" not in err and "flange" not in err
+
+
 # ---- rows 14–16: the run command
 
 @pytest.mark.parametrize("edit", [{"depths_m": "depths_m = [5000.0]"}, {"preset": 'preset = "depth"'},
