@@ -331,6 +331,24 @@ def test_row18_wavelengths_in_metres_get_one_message_with_the_hint(tmp_path):
     assert "1 problem(s)" in msg and msg.count("optics.wavelengths_nm") == 1 and "write 656" in msg
 
 
+# ---- row 19: SIGTERM is handled like Ctrl-C
+
+def test_row19_sigterm_cleans_up_like_ctrl_c(tmp_path):
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "doefab", "run", str(_holder_scene(tmp_path)), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    for line in proc.stdout:
+        if "[doefab run] holder …" in line:
+            break
+    assert out.is_dir()  # the run is under way
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 143
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "terminated (SIGTERM)" in lines[0] and "nothing was kept" in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["S.toml"]
+
+
 # ---- row 20: the report
 
 def test_row20_report_text_renders_and_says_what_is_a_benchmark(tmp_path):
