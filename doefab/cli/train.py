@@ -44,7 +44,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from doefab.cli._args import task_design_arg
-    from doefab.cli._output import claim_output
+    from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.train import train, weights_target
 
@@ -55,8 +55,8 @@ def run(args) -> int:
     args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out
     out = claim_output(args, "train", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
-    if args.resume and not (out.path / "checkpoint.pt").is_file():
-        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    if args.resume:
+        check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     design = task_design_arg(args, need_weights_dir=False)
     weights_target(args.weights_dir, out.path, args.replace_shipped, design)  # refused before any work

@@ -13,6 +13,7 @@ import hashlib
 import numpy as np
 import torch
 
+from doefab._validate import heights, number_in
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
@@ -29,8 +30,7 @@ def level_step(camera: Camera, n_levels: int = N_LEVELS) -> float:
 
 def material_level_step(material, design_wavelength: float, n_levels: int = N_LEVELS) -> float:
     """Height of one level d (metres) of ``material`` (a ``doefab.Material``) at ``design_wavelength`` (m)."""
-    if isinstance(n_levels, bool) or not isinstance(n_levels, (int, np.integer)) or n_levels < 2:
-        raise DoefabError(f"n_levels must be an integer ≥ 2, got {n_levels!r}")
+    number_in("n_levels", n_levels, 2, 256, integer=True)  # level maps are uint8
     return material.height_2pi(design_wavelength) / n_levels
 
 
@@ -48,8 +48,7 @@ def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndar
     A height within half a step below h_2π rounds to level n_levels ≡ 0 (it is the same phase).
     """
     h = height.detach().cpu().numpy() if isinstance(height, torch.Tensor) else np.asarray(height, np.float64)
-    if not np.all(np.isfinite(h)):
-        raise DoefabError("height contains NaN or infinite values: cannot quantize")
+    heights("height", h)
     d = level_step(camera, n_levels)
     k = np.rint(np.mod(h, d * n_levels) / d).astype(np.int64) % n_levels
     return k.astype(np.uint8)

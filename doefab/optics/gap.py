@@ -28,6 +28,7 @@ import math
 import numpy as np
 import torch
 
+from doefab._validate import depths, heights, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.propagators.asm import angular_spectrum
@@ -72,9 +73,12 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
             grid (linear, not circular, convolution), plus 16 pixels.
     """
     g = _check_gap(gap)
+    wavelength = wavelength_m("wavelength", wavelength)
+    depth = depths([depth])[0]
     n = camera.doe_pixels
     if tuple(height.shape) != (n, n):
         raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
+    heights("height", height)
     real = height.dtype if height.is_floating_point() else torch.float64
     cplx = torch.complex64 if real == torch.float32 else torch.complex128
     k = 2 * math.pi / wavelength

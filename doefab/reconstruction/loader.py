@@ -139,6 +139,8 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if weights_dir is not None and Path(weights_dir).is_file():
+        raise DoefabError(f"weights_dir {weights_dir} is a file: give the folder holding {task}_{variant}.pt")
     pt, meta_path = weights_paths(task, variant, weights_dir)
     who = (task, variant, weights_dir, design)
     if not pt.is_file() or not meta_path.is_file():
