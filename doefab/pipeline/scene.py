@@ -92,11 +92,9 @@ def _typed(v, typ) -> bool:
     return isinstance(v, typ)
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
-    p = Path(path)
-    raw = read_toml(p, "scene file")
-    problems: list[str] = []
+def _schema_problems(raw: dict) -> list[str]:
+    """Unknown sections and keys, and values of the wrong type."""
+    problems = []
     for key, val in raw.items():
         if isinstance(val, dict):
             if key not in _SCHEMA or key == "":
@@ -114,17 +112,29 @@ def load_scene(path: str | Path) -> Scene:
             problems.append(f"unknown key {key}")
         elif not _typed(val, _SCHEMA[""][key]):
             problems.append(f"{key} must be {_SCHEMA[''][key].__name__}")
-    task = raw.get("task")
-    if task not in TASK_DESIGN:
-        problems.append(f"task must be one of {sorted(TASK_DESIGN)}, got {task!r}")
-    stages = tuple(raw.get("stages", STAGES))
-    for s in stages:
-        if s not in STAGES:
-            problems.append(f"stages: unknown stage {s!r} (choose from {list(STAGES)})")
+    return problems
+
+
+def _stage_problems(stages: tuple) -> list[str]:
+    """Unknown stages, and stages listed without the design stage they need."""
+    problems = [f"stages: unknown stage {s!r} (choose from {list(STAGES)})" for s in stages if s not in STAGES]
     needy = [s for s in ("masks", "reconstruction", "tolerance") if s in stages and "design" not in stages]
     if needy:
         problems.append(f"stages: {', '.join(needy)} need{'s' if len(needy) == 1 else ''} the design stage: add "
                         f"\"design\" to stages")
+    return problems
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
+    p = Path(path)
+    raw = read_toml(p, "scene file")
+    problems = _schema_problems(raw)
+    task = raw.get("task")
+    if task not in TASK_DESIGN:
+        problems.append(f"task must be one of {sorted(TASK_DESIGN)}, got {task!r}")
+    stages = tuple(raw.get("stages", STAGES))
+    problems += _stage_problems(stages)
     cam = raw.get("camera", {})
     if "preset" in cam and cam["preset"] not in ("default", "hdr", "hyperspectral", "depth"):
         problems.append(f"camera.preset {cam['preset']!r} is not one of default, hdr, hyperspectral, depth")

@@ -110,7 +110,8 @@ def redesign_note(res: dict, quick: bool) -> str:
         ckpt = f", checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
     return (f"the committed design {res['committed_dir'].relative_to(REPO)} is not reused: the scene sets {why}; "
             f"a new design is optimised ({iters} {s['optimizer']} iterations on a {grid}² grid: roughly "
-            f"{max(minutes, 0.1):.1f} min, scaled from the committed design's {took:.0f} s{ckpt})")
+            f"{max(minutes, 0.1):.1f} min at the pace of the committed design's run ({took:.0f} s), longer on a "
+            f"loaded machine{ckpt})")
 
 
 def _copy_design(src: Path, dst: Path) -> None:
