@@ -1,4 +1,5 @@
-"""Small input checks shared by the public API (one clear error per problem)."""
+"""Small input checks shared by the public API (one clear error per problem, naming the argument, its unit and
+the fix; a length typed in the wrong unit gets the conversion: "550 nm is 5.5e-07 m")."""
 
 from __future__ import annotations
 
@@ -16,25 +17,90 @@ def positive_finite(name: str, value: float, unit: str) -> float:
         v = float(value)
     except (TypeError, ValueError):
         raise DoefabError(f"{name} must be a number in {unit}, got {value!r}") from None
+    if isinstance(value, bool):
+        raise DoefabError(f"{name} must be a number in {unit}, got {value!r}")
     if not math.isfinite(v) or v <= 0:
         raise DoefabError(f"{name} must be positive and finite (in {unit}), got {value!r}")
     return v
 
 
+def number_in(name: str, value, lo: float, hi: float, integer: bool = False, unit: str = "",
+              lo_open: bool = False):
+    """``value`` as an int (``integer``) or a finite float within [lo, hi] (lo excluded with ``lo_open``), or
+    one error naming the argument, its unit and its range."""
+    unit_txt = f" {unit}" if unit else ""
+    ok_type = isinstance(value, (int, np.integer)) if integer else isinstance(value, (int, float, np.number))
+    if isinstance(value, bool) or not ok_type:
+        raise DoefabError(f"{name} must be {'an integer' if integer else 'a number'}{unit_txt}, got {value!r}")
+    v = int(value) if integer else float(value)
+    if not math.isfinite(v) or (v <= lo if lo_open else v < lo) or v > hi:
+        raise DoefabError(f"{name} must be {'>' if lo_open else '≥'} {lo:g} and ≤ {hi:g}{unit_txt}, got {value!r}")
+    return v
+
+
+_METRE_PREFIXES = (("nm", 1e-9), ("µm", 1e-6), ("mm", 1e-3))
+
+
+def metres_hint(value: float, lo: float, hi: float) -> str:
+    """`` (550 nm is 5.5e-07 m)`` when ``value`` read in nm, µm or mm lies within [lo, hi] metres (the likely unit
+    slip), else ''."""
+    for unit, factor in _METRE_PREFIXES:
+        if lo <= value * factor <= hi:
+            return f" ({value:g} {unit} is {value * factor:.4g} m)"
+    return ""
+
+
+def length_m(name: str, value: float, lo: float, hi: float, what: str = "lengths") -> float:
+    """``value`` as a float within [lo, hi] metres, or one error with the unit hint."""
+    v = positive_finite(name, value, "metres")
+    if not lo <= v <= hi:
+        raise DoefabError(f"{name} = {value!r} m is outside {lo:g}–{hi:g} m: {what} are in metres"
+                          f"{metres_hint(v, lo, hi)}")
+    return v
+
+
+def wavelength_m(name: str, value: float) -> float:
+    """A wavelength in metres (sanity range 100 nm – 20 µm)."""
+    return length_m(name, value, 100e-9, 20e-6, "wavelengths")
+
+
 def wavelengths(values: Iterable[float]) -> tuple[float, ...]:
     """Validate a non-empty list of wavelengths in metres (sanity range 100 nm – 20 µm)."""
-    vals = _as_tuple("wavelengths", values)
-    for v in vals:
-        positive_finite("wavelength", v, "metres")
-        if not 100e-9 <= v <= 20e-6:
-            raise DoefabError(
-                f"wavelength {v!r} m is outside 100 nm – 20 µm: wavelengths are in metres "
-                f"(write 550e-9, not 550)")
-    return tuple(float(v) for v in vals)
+    return tuple(wavelength_m("wavelength", v) for v in _as_tuple("wavelengths", values))
+
+
+def seed(name: str, value) -> int:
+    """A random seed: an integer 0 ≤ seed < 2**63."""
+    return number_in(name, value, 0, 2**63 - 1, integer=True)
+
+
+def heights(name: str, values) -> None:
+    """A height map (metres; numpy or torch) must be finite and within ±1 mm (a DOE step is ~1e-7 m)."""
+    a = np.asarray(values.detach().cpu() if hasattr(values, "detach") else values, dtype=np.float64)
+    if not np.all(np.isfinite(a)):
+        raise DoefabError(f"{name} contains {int((~np.isfinite(a)).sum())} NaN or infinite values: every height must "
+                          f"be finite (metres)")
+    top = float(np.abs(a).max(initial=0.0))
+    if top > 1e-3:
+        raise DoefabError(f"{name} holds heights up to {top:g} m: heights are in metres (a DOE step is ~1e-7 m)"
+                          f"{metres_hint(top, 0.0, 1e-3)}")
+
+
+def sensor_position(name: str, value) -> tuple[float, float]:
+    """A (u, v) position on the sensor in metres (within ±10 cm of the axis)."""
+    try:
+        u, v = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise DoefabError(f"{name} must be a (u, v) sensor position in metres, got {value!r}") from None
+    for x in (u, v):
+        if not math.isfinite(x) or abs(x) > 0.1:
+            raise DoefabError(f"{name} {value!r} is not on a sensor (|u|, |v| ≤ 0.1 m): positions are in metres"
+                              f"{metres_hint(abs(x), 0.0, 0.1) if math.isfinite(x) else ''}")
+    return u, v
 
 
 def depths(values: Iterable[float]) -> tuple[float, ...]:
-    """Validate a non-empty list of point-source depths in metres (> 0, ``inf`` allowed)."""
+    """Validate a non-empty list of point-source depths in metres (> 0 and ≤ 1000 km, ``inf`` allowed)."""
     vals = _as_tuple("depths", values)
     out = []
     for v in vals:
@@ -44,6 +110,8 @@ def depths(values: Iterable[float]) -> tuple[float, ...]:
             raise DoefabError(f"depth must be a number in metres or inf, got {v!r}") from None
         if math.isnan(f) or f <= 0:
             raise DoefabError(f"depth must be > 0 m (or inf for a plane wave), got {v!r}")
+        if math.isfinite(f) and f > 1e6:
+            raise DoefabError(f"depth {v!r} m is beyond 1000 km: write inf for a point at infinity")
         out.append(f)
     return tuple(out)
 

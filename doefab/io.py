@@ -6,7 +6,9 @@
   of killed runs (their process is gone) are removed first.
 - ``OutputDir``: the output folder of one command run. It refuses, before any work starts, a path that is
   a file, a folder that cannot be written, and a non-empty folder that is not this command's own kind of
-  output (a marker file says so), even with ``--force``; on failure it removes what the run created.
+  output, even with ``--force``; on failure it removes what the run created.
+- Ownership: only the marker file ``.doefab-output.json`` (written by ``mark_folder``) proves that a folder
+  is doefab's; file names inside a folder never do (a user's ``run.json`` or ``summary.json`` is theirs).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
-           "MARKER", "SIGNATURES", "plain_name", "apply_umask"]
+           "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
 
@@ -148,38 +150,52 @@ def _nearest_existing(path: Path) -> Path:
 
 
 def read_marker(folder: Path) -> dict | None:
+    """The ownership marker of ``folder`` (a dict with ``kind``), or None when it has none (or a broken one)."""
     try:
-        d = json.loads((folder / MARKER).read_text())
-        return d if isinstance(d, dict) else None
+        d = json.loads((Path(folder) / MARKER).read_text())
+        return d if isinstance(d, dict) and d.get("written_by") == "doefab" else None
     except (OSError, ValueError):
         return None
+
+
+def mark_folder(folder: str | Path, kind: str, **extra) -> None:
+    """Write the ownership marker: ``folder`` is doefab's output of ``kind`` (``extra``: more fields)."""
+    atomic_write_json(Path(folder) / MARKER, {"kind": kind, "written_by": "doefab", **extra})
+
+
+def owned_by_doefab(folder: str | Path, kind: str, **fields) -> bool:
+    """True when ``folder`` is empty or missing, or carries a marker of ``kind`` whose ``fields`` match: the
+    only condition under which doefab may replace it."""
+    folder = Path(folder)
+    if not folder.exists() or (folder.is_dir() and not any(folder.iterdir())):
+        return True
+    marker = read_marker(folder)
+    return marker is not None and marker.get("kind") == kind and all(marker.get(k) == v for k, v in fields.items())
 
 
 class OutputDir:
     """The output folder of one run of a command of kind ``kind`` (``"masks"``, ``"design"``, ...).
 
     Construction validates (no file is touched): ``path`` must not be a file; an existing non-empty folder
-    must carry this kind's marker (or one of ``signatures``, files only this kind writes) and then needs
-    ``replace=True`` (``--force``/``--resume``); the folder (or its nearest existing parent) must be
+    must carry this kind's ownership marker and then needs ``replace=True`` (``--force``/``--resume``); the folder (or its nearest existing parent) must be
     writable. ``create()`` makes it and writes the marker; ``discard()`` removes what ``create`` made.
     """
 
-    def __init__(self, path: str | Path, kind: str, replace: bool = False, signatures: tuple = (),
-                 flag: str = "--out", replace_flag: str = "--force"):
+    def __init__(self, path: str | Path, kind: str, replace: bool = False, flag: str = "--out",
+                 replace_flag: str = "--force"):
         self.path, self.kind = Path(path), kind
         self.created: list[Path] = []
         p = self.path
-        if str(path).strip() == "":
+        if path is None or str(path).strip() == "":
             raise DoefabError(f"{flag} is empty: give a folder path")
         if p.exists() and not p.is_dir():
             raise DoefabError(f"{flag} {p} is an existing file, not a folder: give a new or empty folder path")
         self.existing = p.is_dir() and any(p.iterdir())
         if self.existing:
             marker = read_marker(p)
-            ours = (marker is not None and marker.get("kind") == kind) or any(
-                _sig(p, s) for s in signatures)
-            if not ours:
-                other = f" (it holds a doefab {marker.get('kind')} output)" if marker else ""
+            if not owned_by_doefab(p, kind):
+                other = (f" (it holds a doefab {marker.get('kind')} output)" if marker else
+                         f" (it has no {MARKER} ownership marker)")
                 raise DoefabError(f"{flag} {p} is a non-empty folder that is not a doefab {kind} output{other}: "
                                   f"doefab never replaces other files, even with {replace_flag}; choose a new "
                                   f"or empty folder")
@@ -205,7 +221,8 @@ class OutputDir:
             d.mkdir()
             apply_umask(d)
             self.created.append(d)
-        atomic_write_json(self.path / MARKER, {"kind": self.kind, "written_by": "doefab"})
+        if read_marker(self.path) != {"kind": self.kind, "written_by": "doefab"}:
+            mark_folder(self.path, self.kind)
         return self.path
 
     def discard(self) -> None:
@@ -220,39 +237,11 @@ def read_toml(path: str | Path, what: str) -> dict:
     import tomllib
 
     p = Path(path)
+    if p.is_dir():
+        raise DoefabError(f"{what} {p} is a folder: give the path of a TOML file")
     if not p.is_file():
         raise DoefabError(f"{what} {p} not found")
     try:
         return tomllib.loads(p.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DoefabError(f"{p} is not valid TOML ({exc})") from None
-
-
-def _is_mask_manifest(text: str) -> bool:
-    return str(json.loads(text).get("format", "")).startswith("doefab mask set")
-
-
-# files only that kind of output holds (folders written before the marker file existed)
-SIGNATURES = {
-    "demo": ("summary.json",),
-    "psf": ("psf.npz",),
-    "design": ("design.json", "checkpoint.pt"),
-    "masks": (("manifest.json", _is_mask_manifest),),
-    "holder": ("holder.json", "holder.FAILED.json"),
-    "finetune": ("checkpoint.pt", "history.csv"),
-    "train": ("checkpoint.pt", "history.csv"),
-    "evaluate": ("metrics.json",),
-    "tolerance": ("tolerance.json", "samples.jsonl"),
-    "run": ("run.json",),
-}
-
-
-def _sig(folder: Path, signature) -> bool:
-    """A signature is a file name, or (file name, predicate on its text)."""
-    if isinstance(signature, str):
-        return (folder / signature).is_file()
-    name, pred = signature
-    try:
-        return bool(pred((folder / name).read_text()))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return False

@@ -17,11 +17,43 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-__all__ = ["HolderParams", "HolderError", "fit_bounds"]
+__all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES"]
 
 
 class HolderError(ValueError):
     """Impossible or unprintable holder parameters (the message names the parameters)."""
+
+
+# every length parameter's range (mm), checked first so a value out of range is named before anything derived
+# from it; the fit bounds the README states (die clearance 0.05–1 mm, thread pitch 0.25–1.5 mm, tooth depth
+# 0.1–0.8 mm, wall up to 10 mm, washer recess up to 3 mm) and sanity bounds on the rest (filter threads and lens
+# barrels of 20–150 mm, parts that fit a printer bed)
+PARAM_RANGES = {
+    "thread_diameter_mm": (20.0, 150.0, "filter threads; 49 for the EF 50 mm f/1.8 STM"),
+    "thread_pitch_mm": (0.25, 1.5, "filter threads have pitches 0.5–1.0 mm"),
+    "thread_depth_mm": (0.1, 0.8, "a printable tooth of a filter thread"),
+    "thread_length_mm": (0.5, 30.0, "the engaged thread length"),
+    "barrel_diameter_mm": (20.0, 150.0, "a lens front barrel"),
+    "sleeve_length_mm": (1.0, 100.0, "the slip-fit sleeve"),
+    "lens_face_to_glass_mm": (0.01, 50.0, "filter face to front glass: measure your lens"),
+    "die_width_mm": (2.0, 100.0, "the fused-silica die"),
+    "die_height_mm": (2.0, 100.0, "the fused-silica die"),
+    "die_thickness_mm": (0.1, 10.0, "the fused-silica die"),
+    "die_chamfer_mm": (0.1, 50.0, "the keyed die corner"),
+    "clear_aperture_mm": (0.5, 100.0, "the DOE clear aperture"),
+    "aperture_margin_mm": (0.01, 10.0, "extra radius of the hole"),
+    "clearance_mm": (0.05, 1.0, "below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
+    "wall_mm": (0.1, 10.0, "between one nozzle line and 10 mm"),
+    "nozzle_mm": (0.1, 2.0, "a printer nozzle"),
+    "flange_diameter_mm": (20.0, 250.0, "fits a printer bed"),
+    "flange_height_mm": (0.5, 50.0, "the base flange"),
+    "cartridge_flange_mm": (0.5, 50.0, "the cartridge flange"),
+    "screw_clearance_mm": (0.5, 10.0, "an M2 clearance hole is 2.4 mm"),
+    "pilot_hole_mm": (0.3, 10.0, "an M2 pilot hole is 1.7 mm"),
+    "washer_diameter_mm": (1.0, 30.0, "an M2 washer is 5–6 mm"),
+    "washer_recess_mm": (0.05, 3.0, "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
+    "max_doe_to_lens_mm": (0.2, 50.0, "the farthest the DOE may sit from the lens"),
+}
 
 
 @dataclass(frozen=True)
@@ -88,6 +120,10 @@ class HolderParams:
                 errs.append(f"{f.name} must be a positive length in mm, got {v!r}")
         if errs:
             raise HolderError("; ".join(errs))
+        out = [f"{k} {getattr(self, k):g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in
+               PARAM_RANGES.items() if not lo <= getattr(self, k) <= hi]
+        if out:
+            raise HolderError("; ".join(out))
         if self.mount not in ("thread", "slip"):
             raise HolderError(f"mount must be 'thread' or 'slip', got {self.mount!r}")
         if self.wall_mm < self.nozzle_mm:
@@ -199,6 +235,11 @@ class HolderParams:
         return dataclasses.asdict(self)
 
 
+def _param_row(p: HolderParams, name: str) -> tuple:
+    lo, hi, why = PARAM_RANGES[name]
+    return name, getattr(p, name), lo, hi, "mm", why
+
+
 def fit_bounds(p: HolderParams, doe_to_lens_mm: float | None = None) -> list[dict]:
     """Bounds on the derived quantities that decide whether the holder fits and works (millimetres).
 
@@ -211,10 +252,10 @@ def fit_bounds(p: HolderParams, doe_to_lens_mm: float | None = None) -> list[dic
         ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
          "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
          "lens_face_to_glass_mm"),
-        ("die_to_pocket_clearance_mm", p.clearance_mm, 0.05, 1.0, "mm",
-         "clearance_mm: below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
-        ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, 3.0, "mm",
-         "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
+        ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",
+         "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
+        ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",
+         PARAM_RANGES["washer_recess_mm"][2]),
         ("die_seat_thickness_mm", p.cartridge_flange_mm + cart_len - p.washer_recess_mm - p.die_thickness_mm,
          p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
                                "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),
@@ -222,10 +263,10 @@ def fit_bounds(p: HolderParams, doe_to_lens_mm: float | None = None) -> list[dic
     ]
     if p.mount == "thread":
         rows += [
-            ("thread_pitch_mm", p.thread_pitch_mm, 0.25, 1.5, "mm", "filter threads have pitches 0.5–1.0 mm"),
+            _param_row(p, "thread_pitch_mm"),
             ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
              "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
-            ("thread_depth_mm", p.thread_depth_mm, 0.1, 0.8, "mm", "a printable tooth of a filter thread"),
+            _param_row(p, "thread_depth_mm"),
         ]
     return [{"quantity": q, "value": float(v), "min": lo, "max": hi, "unit": u, "ok": bool(lo <= v <= hi), "fix": fix}
             for q, v, lo, hi, u, fix in rows]

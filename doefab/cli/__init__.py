@@ -2,21 +2,41 @@
 
 Every subcommand's failures pass through ``main``: one line on stderr and a distinct exit status —
 0 success, 1 internal error (a bug: ``--debug`` shows the traceback), 2 usage or input error, 3 a product
-that fails its own checks (mask verification, holder checks), 130 interrupted (with how to resume, where a
-run can). An output folder the run created is removed on failure (a design's checkpoint is kept).
+that fails its own checks (mask verification, holder checks), 130 interrupted by Ctrl-C and 143 stopped by
+SIGTERM (``timeout``, a cancelled CI job, ``kill``), both with how to resume where a run can. An output
+folder the run created is removed on failure (a design's checkpoint is kept).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import traceback
 
 from doefab.cli._args import OneLineParser
 
-__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_CHECK", "EXIT_INTERRUPTED"]
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_CHECK", "EXIT_INTERRUPTED",
+           "EXIT_TERMINATED", "Terminated"]
 
-EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CHECK, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CHECK, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so it unwinds (staging folders, partial outputs) like Ctrl-C."""
+
+
+def _on_sigterm(signum, frame):
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second SIGTERM must not cut the clean-up short
+    raise Terminated()
+
+
+def _handle_sigterm():
+    """Route SIGTERM to ``Terminated``; returns the previous handler (None outside the main thread)."""
+    try:
+        return signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread: leave signals alone
+        return None
 
 # API names that may appear in a library message, and what a command-line user sets instead
 _CLI_NAMES = (
@@ -60,11 +80,14 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_OK
     prog = f"doefab {args.command}"
     status, message, error = EXIT_OK, "", None
+    previous = _handle_sigterm()
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        status, what = ((EXIT_TERMINATED, "terminated (SIGTERM)") if isinstance(exc, Terminated)
+                        else (EXIT_INTERRUPTED, "interrupted"))
         hint = getattr(args, "resume_hint", None)
-        status, message = EXIT_INTERRUPTED, "interrupted" + (f"; {hint}" if hint else "; nothing was kept")
+        message = what + "; " + (hint if hint and not _will_discard(args) else "nothing was kept")
     except CheckFailed as exc:
         error = exc
         status, message = EXIT_CHECK, f"check failed: {exc}"
@@ -84,20 +107,23 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if status != EXIT_OK:
             _discard_outputs(args)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     if getattr(args, "debug", False) and error is not None:
         traceback.print_exception(error)
     print(f"{prog}: {_one_line(message)}", file=sys.stderr)
     return status
 
 
+def _will_discard(args) -> bool:
+    """Whether a failed run's output goes: it made a folder, and it has nothing to resume from."""
+    out, keep = getattr(args, "outdir", None), getattr(args, "keep_on_failure", None)
+    return out is not None and bool(out.created) and not (keep is not None and keep())
+
+
 def _discard_outputs(args) -> None:
-    out = getattr(args, "outdir", None)
-    if out is None:
-        return
-    keep = getattr(args, "keep_on_failure", None)
-    if keep is not None and keep():
-        return
-    out.discard()
+    if _will_discard(args):
+        args.outdir.discard()
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import argparse
 import math
 import sys
 
-__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg"]
+__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder", "task_design_arg"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -91,3 +91,19 @@ def design_folder(path):
     if (d / "design" / "design.json").is_file():
         d = d / "design"
     return d, Design.load(d)
+
+
+def task_design_arg(args, need_weights_dir: bool):
+    """``--design`` of train/evaluate as a resolved design folder (a mask set's ``design/``), checked to be a design
+    of ``--task``'s kind before any work; None for the committed design. ``need_weights_dir``: the command reads
+    networks, which for another design than the committed one cannot be the shipped ones."""
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.specs import check_design_task
+
+    if not getattr(args, "design", None):
+        return None
+    d, design = design_folder(args.design)  # validated: a clear error before any work
+    check_design_task(args.task, design.task, args.design, flag="--task")
+    if need_weights_dir and getattr(args, "weights_dir", None) is None:
+        raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
+    return d.resolve()

@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
-from doefab.io import SIGNATURES, OutputDir
+from doefab.io import OutputDir
+
+
+def check_resume(out: OutputDir) -> None:
+    """``--resume``: the earlier run's checkpoint must be there and readable, before any work."""
+    from doefab.design.checkpoint import read_checkpoint
+    from doefab.errors import DoefabError
+
+    ckpt = out.path / "checkpoint.pt"
+    if not ckpt.is_file():
+        raise DoefabError(f"--resume: {ckpt} does not exist: run without --resume first")
+    read_checkpoint(ckpt)
 
 
 def claim_output(args, kind: str, replace: bool, keep_on_failure=None, replace_flag: str = "--force") -> OutputDir:
     """Validate ``args.out`` for a ``kind`` output and register it so a failed run removes what it created."""
-    out = OutputDir(args.out, kind, replace=replace, signatures=SIGNATURES.get(kind, ()), replace_flag=replace_flag)
+    out = OutputDir(args.out, kind, replace=replace, replace_flag=replace_flag)
     args.outdir = out
     args.keep_on_failure = keep_on_failure
     return out

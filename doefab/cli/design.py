@@ -51,7 +51,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
-    from doefab.cli._output import claim_output
+    from doefab.cli._output import check_resume, claim_output
     from doefab.tasks import get_task
 
     task = get_task(args.task)
@@ -64,8 +64,8 @@ def run(args) -> int:
     out = claim_output(args, "design", replace=args.force or args.resume,
                        replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
-    if args.resume and not (out.path / "checkpoint.pt").is_file():
-        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    if args.resume:
+        check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
                 "checkpoint_every": args.checkpoint_every, "sampling": args.sampling}

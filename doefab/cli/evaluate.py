@@ -28,6 +28,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from doefab.cli._args import task_design_arg
     from doefab.cli._output import claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.evaluate import evaluate
@@ -35,9 +36,7 @@ def run(args) -> int:
 
     if args.size % 32:
         raise DoefabError(f"--size {args.size} must be a multiple of 32 (e.g. 256)")
-    from doefab.cli.train import _design_arg
-
-    design = _design_arg(args)
+    design = task_design_arg(args, need_weights_dir=True)
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     bad = [v for v in variants if v not in ("proposed", "coded_only", "uncoded_only")]
     if bad or not variants:

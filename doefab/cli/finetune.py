@@ -40,7 +40,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from doefab.cli._args import design_folder
-    from doefab.cli._output import claim_output
+    from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
 
@@ -51,8 +51,8 @@ def run(args) -> int:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     out = claim_output(args, "finetune", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
-    if args.resume and not (out.path / "checkpoint.pt").is_file():
-        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    if args.resume:
+        check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     out.create()
     res = finetune_end_to_end(d, out.path, minutes=args.minutes, weights_dir=args.weights_dir,

@@ -33,6 +33,8 @@ def register(sub) -> None:
 
 
 def _load_height(path: Path, n: int, preset: str) -> np.ndarray:
+    if path.is_dir():
+        raise DoefabError(f"--height {path} is a folder: pass a .npy file (heights in metres)")
     if not path.is_file():
         raise DoefabError(f"--height {path} not found: pass an existing .npy file (heights in metres)")
     try:

@@ -25,26 +25,24 @@ def run(args) -> int:
     from pathlib import Path
 
     from doefab.errors import DoefabError
-    from doefab.io import OutputDir, SIGNATURES
-    from doefab.pipeline.run import run_scene
+    from doefab.io import OutputDir
+    from doefab.pipeline.run import prepare_scene, run_scene
     from doefab.pipeline.scene import load_scene
 
-    from doefab.pipeline.scene import STAGES
-
-    bad = [f for f in args.force if f not in STAGES]
-    if bad:
-        raise DoefabError(f"--force {', '.join(bad)}: not a stage; stages are {', '.join(STAGES)}")
     scenes = [load_scene(s) for s in args.scene]  # every scene validated before any work
-    if args.out and len(scenes) > 1:
+    if args.out is not None and len(scenes) > 1:
         raise DoefabError("--out names one folder: give one scene, or leave --out out (out/run/<scene name>)")
     args.resume_hint = "finished stages are kept: rerun the same command to continue"
-    outs = []
-    for sc in scenes:
-        out = Path(args.out) if args.out else Path("out/run") / sc.path.stem
-        od = OutputDir(out, "run", replace=True, signatures=SIGNATURES.get("run", ()))
-        outs.append(od)
-    for sc, od in zip(scenes, outs):
+    runs = []
+    for sc in scenes:  # every check of every scene before the first folder is created
+        od = OutputDir(Path("out/run") / sc.path.stem if args.out is None else args.out, "run", replace=True)
+        runs.append((sc, od, prepare_scene(sc, od.path, tuple(args.force))))
+    for sc, od, res in runs:
+        args.outdir = od  # a failure removes what this scene's run created, unless a stage finished
+        args.keep_on_failure = lambda od=od, sc=sc: any((od.path / s / "stage.json").is_file() for s in sc.stages)
         od.create()
-        res = run_scene(sc, od.path, force=tuple(args.force), quick=args.quick)
-        print(f"{sc.path}: {res['seconds']:.0f} s; report {od.path / 'report.html'}")
+        summary = run_scene(sc, od.path, force=tuple(args.force), quick=args.quick, res=res)
+        report = (f"report {od.path / 'report.html'}" if summary["report"] else
+                  "no report written (\"report\" is not in the scene's stages)")
+        print(f"{sc.path}: {summary['seconds']:.0f} s; {report}")
     return 0

@@ -44,8 +44,8 @@ def register(sub) -> None:
                    help="also a sensitivity surrogate: fitted on simulated parts, Monte Carlo on it, checked on "
                         "held-out parts, compared with the direct Monte Carlo")
     p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
-    p.add_argument("--scheduler", type=_scheduler, default=None,
-                   help="Dask: local:N (a LocalCluster of N ≥ 1 workers) or tcp://HOST:PORT")
+    p.add_argument("--scheduler", type=scheduler_arg, default=None,
+                   help="Dask: local:N (a LocalCluster of N = 1..64 workers) or tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
@@ -58,15 +58,18 @@ def _grid(text: str):
     return number(int, 1, 8, unit="cells per DOE pixel", hint=" (or auto)")(text)
 
 
-def _scheduler(text: str) -> str:
-    from doefab.errors import DoefabError
-    from doefab.tolerance.montecarlo import parse_scheduler
-
-    try:
-        parse_scheduler(text)
-    except DoefabError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
+def scheduler_arg(text: str) -> str:
+    """``local:N`` (N = 1..64 workers) or ``tcp://HOST:PORT`` (PORT 1..65535), checked when the flag is parsed."""
+    kind, _, rest = text.partition(":")
+    if kind == "local" and rest.isdigit() and 1 <= int(rest) <= 64:
+        return text
+    if kind == "local":
+        raise argparse.ArgumentTypeError(f"local:N takes a worker count N = 1..64, got {text!r} (e.g. local:2)")
+    host, _, port = rest.removeprefix("//").rpartition(":")
+    if kind == "tcp" and rest.startswith("//") and host and port.isdigit() and 1 <= int(port) <= 65535:
+        return text
+    raise argparse.ArgumentTypeError(f"expects local:N or tcp://HOST:PORT, got {text!r} (e.g. local:2 or "
+                                     f"tcp://127.0.0.1:8786)")
 
 
 def run(args) -> int:

@@ -1,7 +1,8 @@
 """``doefab train``: train a reconstruction network for the committed design of a task (CPU, minutes).
 
-Writes the weights and their metadata record (default: the package's shipped weights folder,
-doefab/weights/<task>_<variant>.pt/.json), and OUT/checkpoint.pt + OUT/history.csv while running.
+Writes the weights and their metadata record (<task>_<variant>.pt/.json) into OUT, or into --weights-dir;
+the shipped weights in doefab/weights/ are replaced only with --replace-shipped. OUT/checkpoint.pt and
+OUT/history.csv are written while running.
 Interrupted runs keep the checkpoint: rerun the same command with --resume (it may raise --minutes; with the
 cosine schedule a larger budget stretches the decay, so the learning rate rises again).
 """
@@ -24,7 +25,9 @@ def register(sub) -> None:
                    help="training budget in minutes of wall time")
     p.add_argument("--out", default=None, help="run folder for checkpoint.pt and history.csv "
                                                "(default out/train/<task>_<variant>)")
-    p.add_argument("--weights-dir", default=None, help="where to write the weights (default: the shipped ones)")
+    p.add_argument("--weights-dir", default=None, help="where to write the weights (default: OUT)")
+    p.add_argument("--replace-shipped", action="store_true",
+                   help="write the weights over the shipped ones in doefab/weights/ (the committed design only)")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
     p.add_argument("--batch", type=number(int, 1, 64), default=4, help="scenes per step")
     p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=96,
@@ -33,50 +36,38 @@ def register(sub) -> None:
     p.add_argument("--schedule", default="cosine", choices=["cosine", "constant"],
                    help="learning rate over the wall-time budget: cosine decay to 5 %% of --lr, or constant")
     p.add_argument("--design", default=None,
-                   help="train for this design folder (or mask set) instead of the committed one; use with --weights-dir")
+                   help="train for this design folder (or mask set) instead of the committed one")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from doefab.cli._output import claim_output
+    from doefab.cli._args import task_design_arg
+    from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
-    from doefab.reconstruction.train import train
+    from doefab.reconstruction.train import train, weights_target
 
     if args.crop % 32:
         raise DoefabError(f"--crop {args.crop} must be a multiple of 32 (e.g. 96)")
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
-    args.out = args.out or f"out/train/{args.task}_{args.variant}"
+    args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out
     out = claim_output(args, "train", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
-    if args.resume and not (out.path / "checkpoint.pt").is_file():
-        raise DoefabError(f"--resume: {out.path / 'checkpoint.pt'} does not exist: run without --resume first")
+    if args.resume:
+        check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
-    design = _design_arg(args)
+    design = task_design_arg(args, need_weights_dir=False)
+    weights_target(args.weights_dir, out.path, args.replace_shipped, design)  # refused before any work
     out.create()
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
-                 schedule=args.schedule,
-                 command=_command_line())
+                 schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line())
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
-          f"validation {v}; wrote {meta['weights_file']} and its .json")
+          f"validation {v}; wrote {meta['weights_path']} and its .json")
     return 0
-
-
-def _design_arg(args):
-    """--design as a design folder (a mask set's design/ is used); None for the committed design."""
-    from doefab.cli._args import design_folder
-    from doefab.errors import DoefabError
-
-    if not getattr(args, "design", None):
-        return None
-    d, _ = design_folder(args.design)  # validated: a clear error before any work
-    if getattr(args, "weights_dir", None) is None:
-        raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
-    return d.resolve()
 
 
 def _command_line() -> str:

@@ -11,7 +11,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
 
-__all__ = ["save_checkpoint", "load_checkpoint"]
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint"]
 
 
 def save_checkpoint(path: str | Path, state: dict) -> None:
@@ -24,7 +24,22 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
 def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
     """Load a checkpoint and check its fields and that it belongs to a run with the same ``config``
     (keys in ``ignore`` may differ, e.g. a resumed run may raise ``iterations``)."""
-    path = Path(path)
+    state, saved = _read(Path(path))
+    saved = {k: v for k, v in saved.items() if k not in ignore}
+    config = {k: v for k, v in config.items() if k not in ignore}
+    if saved != config:
+        diff = {k: (saved.get(k), config.get(k)) for k in set(saved) | set(config) if saved.get(k) != config.get(k)}
+        raise DoefabError(f"checkpoint {path} was made with other settings {diff} (saved, asked): resume with the "
+                          f"same settings or start a new --out folder")
+    return state
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    """A checkpoint whose file and fields are sound, whatever run made it (a resume checks this before any work)."""
+    return _read(Path(path))[0]
+
+
+def _read(path: Path) -> tuple[dict, dict]:
     if not path.is_file():
         raise DoefabError(f"no checkpoint at {path}: run without --resume first")
     try:
@@ -45,10 +60,4 @@ def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
     if not ok:
         raise DoefabError(f"checkpoint {path} has missing or invalid fields (config, theta, step, elapsed, history, "
                           f"generator); delete it and start again without --resume")
-    saved = {k: v for k, v in saved.items() if k not in ignore}
-    config = {k: v for k, v in config.items() if k not in ignore}
-    if saved != config:
-        diff = {k: (saved.get(k), config.get(k)) for k in set(saved) | set(config) if saved.get(k) != config.get(k)}
-        raise DoefabError(f"checkpoint {path} was made with other settings {diff} (saved, asked): resume with the "
-                          f"same settings or start a new --out folder")
-    return state
+    return state, saved

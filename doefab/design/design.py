@@ -138,6 +138,8 @@ class Design:
         """Read and validate a design folder."""
         path = Path(path)
         meta_path = path / "design.json"
+        if path.is_file():
+            raise DoefabError(f"{path} is a file, not a design folder (give the folder holding design.json)")
         if not meta_path.is_file():
             raise DoefabError(f"{path} is not a design folder: design.json is missing")
         try:

@@ -70,6 +70,19 @@ class DesignConfig:
     knots: int = 0
     start: str | None = None
 
+    def check(self) -> None:
+        """Every numeric setting within its range (one error naming it), before any work."""
+        from doefab._validate import number_in
+
+        for name, lo, hi, integer in (("iterations", 1, 1_000_000, True), ("lr", 0, 10, False),
+                                      ("seed", 0, 2**32 - 1, True), ("sampling", 1, 16, True),
+                                      ("qat_fraction", 0, 1, False), ("batch", -1, 100_000, True),
+                                      ("fab_weight", 0, 1000, False), ("checkpoint_every", 1, 10**9, True),
+                                      ("eval_every", 1, 10**9, True), ("knots", 0, 100_000, True)):
+            number_in(name, getattr(self, name), lo, hi, integer, lo_open=name == "lr")
+        if self.knots == 1:
+            raise DoefabError("knots must be 0 (one per DOE pixel along the radius) or at least 2")
+
     def key(self) -> dict:
         d = asdict(self)
         d.pop("eval_every")
@@ -121,13 +134,12 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     settings.setdefault("batch", task_obj.default_batch if optimizer == "adam" else 0)
     if optimizer not in OPTIMIZERS:
         raise DoefabError(f"unknown optimizer {optimizer!r}: choose one of {OPTIMIZERS}")
-    if not isinstance(iterations, int) or iterations < 1:
-        raise DoefabError(f"iterations must be a positive integer, got {iterations!r}")
     unknown = set(settings) - set(DesignConfig.__dataclass_fields__)
     if unknown:
         raise DoefabError(f"unknown design settings {sorted(unknown)}")
     cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=iterations, optimizer=optimizer,
                        seed=seed, **settings)
+    cfg.check()
     cam = camera or Camera.preset(task_obj.preset)
     task_obj.bind(cam)
     cfg.task_params = task_obj.params()

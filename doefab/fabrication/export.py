@@ -20,10 +20,11 @@ from doefab.fabrication.bitplanes import N_MASKS, bit_plane, plane_rectangles, v
 from doefab.fabrication.gdsii import GDSWriter
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
                                        VERNIER_LAYER, etch_layer)
-from doefab.fabrication.levels import N_LEVELS, level_step, levels_sha256
+from doefab.fabrication.levels import levels_sha256
+from doefab.fabrication.manifest import depth_fields, fab_readme
 from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons
 from doefab.fabrication.verify import verify_mask_set, width_space_report
-from doefab.io import MARKER, SIGNATURES, OutputDir, atomic_write_json, atomic_write_text, plain_name, staging_dir
+from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
 from doefab.optics.camera import Camera
 
 __all__ = ["MaskOptions", "export_masks", "layout_levels"]
@@ -115,7 +116,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
                           f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
-    out = OutputDir(out_dir, "masks", replace=force, signatures=SIGNATURES["masks"]).path
+    out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
@@ -159,7 +160,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         (design_sub / "levels.npy").write_bytes(buf.getvalue())
         if design_dir is not None and (Path(design_dir) / "design.json").is_file():
             shutil.copyfile(Path(design_dir) / "design.json", design_sub / "design.json")
-        atomic_write_json(stage / MARKER, {"kind": "masks", "written_by": "doefab"})
+        mark_folder(stage, "masks")
         manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
         report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout, complete=False)  # mirrors per the manifest
@@ -173,7 +174,7 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
         _previews(stage, layout, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
-        atomic_write_text(stage / "README.txt", _fab_readme(manifest))
+        atomic_write_text(stage / "README.txt", fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
 
@@ -184,16 +185,16 @@ def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
 
 
 def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
-    d = level_step(camera)
+    depths = depth_fields(camera.material, camera.design_wavelength)
     positive = opts.resist == "positive"
     layers = []
     for bit in range(N_MASKS):
         lay = etch_layer(bit)
-        depth_nm = (1 << bit) * d * 1e9
+        depth_nm = depths["etch_depth_nm"][bit]
         plate = bit + 1
         layers.append({
             "layer": lay, "datatype": 0, "purpose": "etch", "bit": bit, "plate": plate,
-            "etch_depth_nm": round(depth_nm, 3),
+            "etch_depth_nm": depth_nm,
             "etch_depth_tolerance_nm": round(max(opts.depth_tolerance * depth_nm, 2.0), 3),
             "critical_dimension_nm": cd_nm,
             "polygons_mean": "pixels this mask etches (material removed): level = 15 − Σ 2^bit·etched",
@@ -243,9 +244,9 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
         "coded_half": "x < 0 (left columns of the level map)",
         "design_wavelength_m": camera.design_wavelength,
         "material": camera.material.to_dict(),
-        "refractive_index_at_design_wavelength": float(camera.material.index(camera.design_wavelength)),
-        "level_step_nm": round(d * 1e9, 4),
-        "level_to_height_nm": [round(k * d * 1e9, 3) for k in range(N_LEVELS)],
+        "refractive_index_at_design_wavelength": depths["refractive_index_at_design_wavelength"],
+        "level_step_nm": depths["level_step_nm"],
+        "level_to_height_nm": depths["level_to_height_nm"],
         "height_means": "material above the deepest etch; level 15 = unetched surface",
         "levels_sha256": levels_sha256(lv),
         "levels_sha256_means": "SHA-256 of the design's level map (design.json), before any mirroring",
@@ -287,34 +288,3 @@ def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000, mirro
              f"layer {etch_layer(bit)}: white = etched {1 << bit}*d deep ({pitch * 1e6:g} um pixels, 1:{step})")
     rgb = (colormaps["viridis"](lv[::step, ::step] / 15.0)[..., :3] * 255).astype(np.uint8)
     save("preview_composite.png", rgb, "composite: level 0 (deepest, dark) ... 15 (unetched, yellow)")
-
-
-def _fab_readme(man: dict) -> str:
-    lines = [
-        "doefab mask set — instructions for the fab",
-        "",
-        f"Files: {', '.join(man['files'].values())} (GDSII, 1 nm database unit, 1 µm user unit), manifest.json "
-        "(machine-readable), preview_*.png, report.json (verification).",
-        f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
-        f"16 levels, step d = {man['level_step_nm']} nm.",
-        f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
-        f"{man['die_m'] * 1e3:g} mm; clear aperture {man['clear_aperture_diameter_m'] * 1e3:g} mm.",
-        "",
-        "Layers (one plate each; keys on layer 10 and verniers/CD ladder on layer 11 carry the plate number "
-        "as datatype and go on the same plate):",
-    ]
-    for L in man["layers"]:
-        depth = f", etch depth {L['etch_depth_nm']} nm ± {L['etch_depth_tolerance_nm']} nm" if "etch_depth_nm" in L else ""
-        lines.append(f"  layer {L['layer']} (plate {L['plate']}, step {L['process_step']}): {L['purpose']}{depth}; "
-                     f"{L['polygons_mean']}; {L['mask_polarity']} for {L['resist_tone']} resist; aligns to plate "
-                     f"{L['aligns_to_plate']}.")
-    lines += [
-        "",
-        f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
-        "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
-        "keys of the plate it aligns to and carries its own cross).",
-        "Level k = 15 − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
-        "The layout is drawn as seen from the patterned face. " + man["mirror_means"] + ".",
-        "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
-    ]
-    return "\n".join(lines) + "\n"

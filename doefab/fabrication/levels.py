@@ -13,10 +13,11 @@ import hashlib
 import numpy as np
 import torch
 
+from doefab._validate import heights, number_in
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
-__all__ = ["N_LEVELS", "level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
+__all__ = ["N_LEVELS", "level_step", "material_level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
            "levels_sha256"]
 
 N_LEVELS = 16
@@ -24,9 +25,13 @@ N_LEVELS = 16
 
 def level_step(camera: Camera, n_levels: int = N_LEVELS) -> float:
     """Height of one level d (metres) = h_2π(design wavelength) / n_levels."""
-    if not isinstance(n_levels, (int, np.integer)) or n_levels < 2:
-        raise DoefabError(f"n_levels must be an integer ≥ 2, got {n_levels!r}")
-    return camera.material.height_2pi(camera.design_wavelength) / n_levels
+    return material_level_step(camera.material, camera.design_wavelength, n_levels)
+
+
+def material_level_step(material, design_wavelength: float, n_levels: int = N_LEVELS) -> float:
+    """Height of one level d (metres) of ``material`` (a ``doefab.Material``) at ``design_wavelength`` (m)."""
+    number_in("n_levels", n_levels, 2, 256, integer=True)  # level maps are uint8
+    return material.height_2pi(design_wavelength) / n_levels
 
 
 def wrap_height(height, camera: Camera):
@@ -43,8 +48,7 @@ def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndar
     A height within half a step below h_2π rounds to level n_levels ≡ 0 (it is the same phase).
     """
     h = height.detach().cpu().numpy() if isinstance(height, torch.Tensor) else np.asarray(height, np.float64)
-    if not np.all(np.isfinite(h)):
-        raise DoefabError("height contains NaN or infinite values: cannot quantize")
+    heights("height", h)
     d = level_step(camera, n_levels)
     k = np.rint(np.mod(h, d * n_levels) / d).astype(np.int64) % n_levels
     return k.astype(np.uint8)

@@ -1,7 +1,9 @@
 """Read a mask set back and prove it: every etch layer, rasterised from the file, equals its bit plane.
 
 Checks (all in the report; any failure fails the export or ``doefab masks --verify``):
-zero mismatched pixels per etch layer (gdstk reader; KLayout's too where installed), Σ 2^m·mask_m
+every etch depth, the level step and the level → height table re-derived from the manifest's material and
+design wavelength (``manifest.depth_problems``), README.txt equal to what the manifest says, zero mismatched
+pixels per etch layer (gdstk reader; KLayout's too where installed), Σ 2^m·mask_m
 reproduces the level map, every polygon within the vertex cap and on the design grid, every plate's marks
 present, the level map's checksum equals the manifest's, OASIS geometry identical to GDS (where written).
 A width/space report at the critical dimension lists features below it and isolated single pixels.
@@ -19,6 +21,7 @@ from doefab.fabrication.bitplanes import N_MASKS, bit_plane, rasterize_manhattan
 from doefab.fabrication.levels import N_LEVELS
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import CHROME_LAYER, KEY_LAYER, OUTLINE_LAYER, VERNIER_LAYER, etch_layer
+from doefab.fabrication.manifest import depth_problems, fab_readme
 
 __all__ = ["verify_mask_set", "read_gds_layers", "width_space_report"]
 
@@ -135,6 +138,30 @@ def _check_manifest(man, mpath: Path) -> None:
              f"holds {v!r}, not a plain file name in the set")
 
 
+def _check_depths(man: dict, mpath: Path, design_json: Path) -> None:
+    """Every depth the fab reads, re-derived from the material and design wavelength (CheckFailed naming each
+    inconsistent field)."""
+    problems = depth_problems(man, design_json)
+    if problems:
+        raise CheckFailed(f"{mpath}: {len(problems)} field(s) disagree with the depths re-derived from the "
+                          f"manifest's material and design wavelength: {'; '.join(problems)} — the fab would etch "
+                          f"these depths; export the set again from its design")
+
+
+def _check_readme(man: dict, path: Path) -> None:
+    try:
+        want = fab_readme(man)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise CheckFailed(f"{path.parent / 'manifest.json'} lacks what README.txt states ({exc!r})") from None
+    try:
+        same = path.read_text() == want
+    except (OSError, UnicodeDecodeError):
+        same = False
+    if not same:
+        raise CheckFailed(f"{path} differs from what manifest.json says (edited by hand?): the fab reads both; "
+                          f"export the set again")
+
+
 def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_klayout: bool = True,
                     complete: bool = True) -> dict:
     """Verify the mask set in ``folder`` (manifest.json + GDS [+ OASIS]); raise CheckFailed on any failure.
@@ -153,12 +180,14 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     except (ValueError, UnicodeDecodeError) as exc:
         raise CheckFailed(f"{mpath} is not valid JSON ({exc}): the set is corrupt; export it again") from None
     _check_manifest(man, mpath)
+    _check_depths(man, mpath, folder / "design" / "design.json")
     if complete:
         wanted = list(man["files"].values()) + ["README.txt", "report.json", "design/levels.npy", *PREVIEWS]
         missing = [f for f in wanted if not (folder / f).is_file()]
         if missing:
             raise CheckFailed(f"{folder} is incomplete: {', '.join(missing)} missing (an interrupted export or a "
                               f"copied-in-part set); export it again with doefab masks --force")
+        _check_readme(man, folder / "README.txt")
     if levels is None:
         lpath = folder / "design" / "levels.npy"
         if not lpath.is_file():

@@ -22,6 +22,7 @@ import math
 import numpy as np
 import torch
 
+from doefab import _validate
 from doefab.errors import DoefabError
 from doefab.imaging.sensor import noise_model
 
@@ -91,6 +92,7 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             A ``(α_l→r, α_r→l)`` pair mixes without unmixing.
     """
     torch_in = isinstance(scene, torch.Tensor)
+    seed = _validate.seed("seed", seed)
     s = _check_array("scene", scene, 3)
     if bool((s < 0).any()):
         raise DoefabError(f"scene holds negative radiance (min {float(s.min()):g}): radiance is ≥ 0 (linear, not "

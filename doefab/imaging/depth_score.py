@@ -29,6 +29,8 @@ import math
 import numpy as np
 import torch
 
+from doefab._validate import depths as _validate_depths
+from doefab._validate import number_in
 from doefab.errors import DoefabError
 
 __all__ = ["depth_encoding_score", "texture_spectrum"]
@@ -61,10 +63,17 @@ def depth_encoding_score(psf, depths, signal: float = 0.25, contrast: float = 0.
     Returns:
         {"predicted_error_m", "min_dprime", "mean_log10_dprime", "dprime": [...], "pairs_m": [[z_i, z_i+1], ...]}
     """
+    for name, v, lo, hi in (("signal", signal, 0, 1), ("contrast", contrast, 0, 1)):
+        number_in(name, v, lo, hi, unit="(a fraction of full scale, not a percentage)", lo_open=True)
+    patch = number_in("patch", patch, 1, 4096, integer=True, unit="pixels")
+    number_in("full_well", full_well, 0, 1e7, unit="electrons", lo_open=True)
+    number_in("read_noise", read_noise, 0, 1e4, unit="electrons")
     p = torch.as_tensor(psf).detach().to(torch.float64)
     if p.ndim != 4:
         raise DoefabError(f"psf must be (depths, wavelengths, K, K), got shape {tuple(p.shape)}")
-    z = np.asarray(depths, dtype=float)
+    if not bool(torch.isfinite(p).all()) or bool((p < 0).any()):
+        raise DoefabError("psf must hold finite, non-negative energy fractions")
+    z = np.asarray(_validate_depths(depths), dtype=float)
     if len(z) != p.shape[0] or len(z) < 2:
         raise DoefabError(f"need one PSF per depth and at least 2 depths: {p.shape[0]} PSFs, {len(z)} depths")
     order = np.argsort(z)

@@ -11,6 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from doefab._validate import metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
@@ -46,16 +47,20 @@ class Camera:
     lens_f_number: float = 1.8
 
     def __post_init__(self) -> None:
-        for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength",
-                     "lens_f_number"):
+        record_number({"lens_f_number": self.lens_f_number}, "lens_f_number", 0.5, 64.0, "", where="Camera")
+        for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise DoefabError(f"Camera.{name} must be a positive finite length in metres, got {v!r}")
+            record_number({name: v}, name, *SANE_RANGES[name], where="Camera")
         fd = self.focus_distance
-        if not isinstance(fd, (int, float)) or math.isnan(fd) or fd <= 0:
+        if isinstance(fd, bool) or not isinstance(fd, (int, float)) or math.isnan(fd) or fd <= 0:
             raise DoefabError(f"Camera.focus_distance must be > 0 m (or inf), got {fd!r}")
-        if not isinstance(self.doe_pixels, int) or isinstance(self.doe_pixels, bool) or self.doe_pixels < 2:
-            raise DoefabError(f"Camera.doe_pixels must be an integer ≥ 2, got {self.doe_pixels!r}")
+        if math.isfinite(fd) and not 1e-3 <= fd <= 1e6:
+            raise DoefabError(f"Camera.focus_distance = {fd!r} m is outside 1 mm – 1000 km: lengths are in metres "
+                              f"(write inf to focus at infinity)")
+        if not isinstance(self.doe_pixels, int) or isinstance(self.doe_pixels, bool) or not 2 <= self.doe_pixels <= 65536:
+            raise DoefabError(f"Camera.doe_pixels must be an integer in 2..65536, got {self.doe_pixels!r}")
         if not isinstance(self.material, Material):
             raise DoefabError(f"Camera.material must be a doefab.Material, got {self.material!r}")
         extent = self.doe_pixels * self.doe_pitch
@@ -162,6 +167,16 @@ def _lens_f_number(d: dict, where: str) -> float:
     return record_number(d, "lens_f_number", 0.5, 64.0, "", where)
 
 
+# what a Camera accepts at all (metres): wide enough for test optics and simulations, narrow enough that a
+# length typed in mm, µm or nm is caught
+SANE_RANGES = {
+    "aperture_diameter": (1e-6, 1.0, "m"),
+    "doe_pitch": (1e-8, 1e-2, "m"),
+    "sensor_pitch": (1e-8, 1e-2, "m"),
+    "sensor_distance": (1e-4, 10.0, "m"),
+    "design_wavelength": (100e-9, 20e-6, "m"),
+}
+
 # plausible ranges of a camera record's fields (lo, hi, unit); a value outside is almost always a unit slip
 RECORD_RANGES = {
     "aperture_diameter_m": (1e-4, 0.2, "m"),
@@ -180,9 +195,8 @@ def record_number(d: dict, key: str, lo: float, hi: float, unit: str, where: str
         kind = "an integer" if integer else "a number"
         raise DoefabError(f"{where}: {key} must be {kind} ({unit}), got {v!r}")
     if not math.isfinite(v) or not lo <= v <= hi:
-        hint = ""
-        if unit == "m" and v > hi:
-            hint = " — lengths here are in metres (550 nm is 5.5e-07)"
+        hint = metres_hint(v, lo, hi) if unit == "m" and math.isfinite(v) else ""
+        hint = f" — lengths here are in metres{hint}" if hint else ""
         raise DoefabError(f"{where}: {key} = {v!r} is outside {lo:g}–{hi:g} {unit}{hint}")
     return float(v)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from doefab._validate import number_in, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 
@@ -29,11 +30,12 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
         (N, N) float64 heights, metres. Pixel j's phase is sampled at its centre for the continuous
         blaze, and equals floor(N_steps · frac(x/Λ)) / N_steps of a wave for the staircase.
     """
-    if period_pixels <= 0:
-        raise DoefabError(f"period_pixels must be positive, got {period_pixels!r}")
+    period_pixels = number_in("period_pixels", period_pixels, 2, 1e6, unit="DOE pixels (not metres)")
+    if n_levels is not None:
+        n_levels = number_in("n_levels", n_levels, 2, 256, integer=True)
     if direction not in (-1, 1):
         raise DoefabError(f"direction must be +1 or -1, got {direction!r}")
-    lam = camera.design_wavelength if wavelength is None else float(wavelength)
+    lam = camera.design_wavelength if wavelength is None else wavelength_m("wavelength", wavelength)
     h2pi = camera.material.height_2pi(lam)
     j = np.arange(camera.doe_pixels, dtype=np.float64)
     if n_levels is None:

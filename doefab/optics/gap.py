@@ -28,6 +28,7 @@ import math
 import numpy as np
 import torch
 
+from doefab._validate import depths, heights, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.propagators.asm import angular_spectrum
@@ -73,9 +74,12 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
             grid (linear, not circular, convolution), plus 16 pixels.
     """
     g = check_gap(gap)
+    wavelength = wavelength_m("wavelength", wavelength)
+    depth = depths([depth])[0]
     n = camera.doe_pixels
     if tuple(height.shape) != (n, n):
         raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
+    heights("height", height)
     real = height.dtype if height.is_floating_point() else torch.float64
     k = 2 * math.pi / wavelength
     dn = float(camera.material.index(wavelength)) - 1.0

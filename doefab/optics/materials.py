@@ -7,6 +7,7 @@ and return SI units (metres).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,21 @@ class Material:
     b: tuple[float, float, float]
     c_um: tuple[float, float, float]
 
+    def __post_init__(self) -> None:
+        """Three finite, non-negative B (≤ 100, not all 0) and C coefficients; a C below 1e-4 µm is a resonance
+        typed in metres."""
+        for key, vals, hi in (("sellmeier_b", self.b, 100.0), ("sellmeier_c_um", self.c_um, 1e4)):
+            ok = isinstance(vals, (tuple, list)) and len(vals) == 3 and all(
+                isinstance(x, (int, float, np.number)) and not isinstance(x, bool) and math.isfinite(x)
+                and 0 <= x <= hi for x in vals)
+            if not ok:
+                raise DoefabError(f"Material {key} must be three finite numbers in 0–{hi:g}, got {vals!r}")
+        if not any(self.b):
+            raise DoefabError("Material sellmeier_b are all 0: the index would be 1 (no phase delay)")
+        if any(0 < c < 1e-4 for c in self.c_um):
+            raise DoefabError(f"Material sellmeier_c_um {self.c_um!r}: resonance wavelengths are in micrometres "
+                              f"(0.068 for fused silica), not metres")
+
     def index(self, wavelength_m):
         """Refractive index at ``wavelength_m`` (metres; scalar or array) -> same shape, float64."""
         lam_um = np.asarray(wavelength_m, dtype=np.float64) * 1e6
@@ -49,23 +65,23 @@ class Material:
     @classmethod
     def from_dict(cls, d: dict, where: str = "material record") -> "Material":
         """A material from :meth:`to_dict`'s record, its fields checked (name, three finite B and C values)."""
-        import math
-
         if not isinstance(d, dict) or not isinstance(d.get("name"), str) or not d["name"].strip():
             raise DoefabError(f"{where}: needs a name and sellmeier_b, sellmeier_c_um (three numbers each)")
         coeffs = []
         for key in ("sellmeier_b", "sellmeier_c_um"):
             v = d.get(key)
-            if (not isinstance(v, list) or len(v) != 3
-                    or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                               and x >= 0 for x in v)):
-                raise DoefabError(f"{where}: {key} must be three finite non-negative numbers, got {v!r}")
+            if not isinstance(v, list) or len(v) != 3 or not all(isinstance(x, (int, float)) for x in v):
+                raise DoefabError(f"{where}: {key} must be three numbers, got {v!r}")
             coeffs.append(tuple(float(x) for x in v))
+        try:
+            made = cls(d["name"], coeffs[0], coeffs[1])
+        except DoefabError as exc:
+            raise DoefabError(f"{where}: {exc}") from None
         known = _MATERIALS.get(d["name"].lower())
         if known is not None and (known.b, known.c_um) != (coeffs[0], coeffs[1]):
             raise DoefabError(f"{where}: {d['name']!r} is a built-in material but its Sellmeier coefficients differ "
                               f"from the built-in ones: the record was edited; restore them or rename the material")
-        return cls(d["name"], coeffs[0], coeffs[1])
+        return made
 
 
 FUSED_SILICA = Material(

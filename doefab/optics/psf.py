@@ -72,11 +72,7 @@ def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.f
         raise DoefabError(
             f"{name} has shape {tuple(t.shape)} but the camera's DOE grid is ({n}, {n}); resample it or set "
             f"Camera.doe_pixels")
-    if not bool(torch.isfinite(t.detach()).all()):
-        bad = int((~torch.isfinite(t.detach())).sum())
-        raise DoefabError(f"{name} contains {bad} NaN or infinite values: every height must be finite (metres)")
-    if float(t.detach().abs().max()) > 1e-3:
-        raise DoefabError(f"{name} holds heights above 1 mm: heights are in metres (a DOE step is ~1e-7 m)")
+    _validate.heights(name, t)
     return t.to(dtype)
 
 
@@ -117,7 +113,8 @@ class PSFPlan:
         self.halves = halves
         self.kernel_size = int(kernel_size)
         self.route = make_route(route, **route_options)
-        self.center = (float(center[0]), float(center[1]))
+        pupil_oversample = _validate.number_in("pupil_oversample", pupil_oversample, 1, 64, integer=True)
+        self.center = _validate.sensor_position("center", center)
         self.check = check
         n_idx = camera.material.index(np.asarray(self.wavelengths))
         self._k = [2 * math.pi / lam for lam in self.wavelengths]

@@ -1,19 +1,31 @@
 """``report.md`` and ``report.html`` of a scene run: every stage's pictures and tables, what ran, what was
-reused or skipped and why, and an "error against run time" section for every stage that has a knob."""
+reused or skipped and why, and an "error against run time" section for every stage that has a knob (each
+caption says whether the plot is this run's or a repository-wide benchmark).
+
+Text is written once, in Markdown's inline form (`code`); the HTML renders it (``html_text``)."""
 
 from __future__ import annotations
 
 import csv
 import html
 import json
+import re
 from pathlib import Path
 
 from doefab.io import atomic_write_text
 
-__all__ = ["write_report", "SECTIONS"]
+__all__ = ["write_report", "SECTIONS", "html_text"]
 
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
+
+
+BENCHMARK = "repository-wide benchmark, not this run"
+
+
+def html_text(text: str) -> str:
+    """Markdown-style inline text as HTML: escaped, with `code` spans rendered as <code>."""
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
 
 
 def _plt():
@@ -49,11 +61,12 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
         ax.set_yscale("log")
         ax.set_xlabel("time for a 31-band coded PSF (s, 2-core CPU)")
         ax.set_ylabel("relative L2 error of the PSF")
-        ax.set_title("PSF sampling and route", fontsize=9)
+        ax.set_title(f"PSF sampling and route ({BENCHMARK})", fontsize=9)
         fig.savefig(rdir / "knob_psf.png", dpi=100)
         plt.close(fig)
         figs.append(("PSF sampling", "report_files/knob_psf.png",
-                     "from benchmarks/results/psf_error_vs_time.csv (benchmarks/psf_error_vs_time.py)"))
+                     f"{BENCHMARK}: the 31-band hyperspectral case measured by `benchmarks/psf_error_vs_time.py` "
+                     f"(`benchmarks/results/psf_error_vs_time.csv`); the star marks the setting every run uses"))
     hist = out / "design" / "history.csv"
     if hist.is_file():
         rows = list(csv.DictReader(open(hist)))
@@ -96,12 +109,13 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
                             fontsize=7, color="red" if chosen else "black")
             ax.set_xlabel("design wall time (s, 2-core CPU)")
             ax.set_ylabel("16-level task metric (full grid)")
-            ax.set_title("optimiser and grid against run time", fontsize=9)
+            ax.set_title(f"optimiser and grid against run time ({BENCHMARK})", fontsize=9)
             fig.savefig(rdir / "knob_design.png", dpi=100)
             plt.close(fig)
             figs.append(("Optimiser iterations", "report_files/knob_design.png",
-                         "the committed design was reused; runs measured by benchmarks/design_metric_vs_time.py "
-                         "and benchmarks/nlopt_optimizers.py (table in benchmarks/results)" + note))
+                         f"{BENCHMARK}: this run reused the committed design; the design runs measured by "
+                         "`benchmarks/design_metric_vs_time.py` and `benchmarks/nlopt_optimizers.py` (table in "
+                         "`benchmarks/results`)" + note))
     from doefab.reconstruction.train import history_path
 
     curves = [(v, history_path(scene.task, v)) for v in ("proposed", "coded_only", "uncoded_only")]
@@ -123,11 +137,13 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
         ax.legend(fontsize=8)
         fig.savefig(rdir / "knob_training.png", dpi=100)
         plt.close(fig)
-        figs.append(("Training time", "report_files/knob_training.png", "doefab train history of the shipped weights"))
+        figs.append(("Training time", "report_files/knob_training.png",
+                     "the shipped weights' validation curves, recorded when they were trained (`doefab train`), not "
+                     "in this run"))
     yv = out / "tolerance" / "yield_vs_n.png"
     if yv.is_file():
         figs.append(("Monte Carlo samples", "tolerance/yield_vs_n.png",
-                     "running yield and its 95 % interval; the chosen N is the right end"))
+                     "this run's running yield and its 95 % interval; the chosen N is the right end"))
     return figs
 
 
@@ -155,7 +171,9 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
         m = d.get("metric", {})
         blocks.append(("Design", [("p", f"Task metric ({m.get('name', '')}): 16-level {m.get('quantized', float('nan')):.4f}, "
                                         f"worst entry {m.get('quantized_worst', float('nan')):.4f}."),
-                                  ("img", "design/psf_target_vs_design.png", "PSFs against their targets"),
+                                  ("img", "design/psf_target_vs_design.png",
+                                   "PSFs against their targets, log scale (log10 of the light per pixel, 6 decades "
+                                   "below each panel's peak)"),
                                   ("img", "design/levels.png", "16-level height map")]))
     mk = done.get("masks")
     if mk and mk.get("status") != "skipped":
@@ -187,7 +205,10 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
         blocks.append(("Tolerance", [("p", tl.get("why", ""))] + tolerance_items(out)))
     else:
         blocks.append(("Tolerance", [("p", (tl or {}).get("why", "not run"))]))
-    blocks.append(("Error against run time", [("img", f, f"{t}: {c}") for t, f, c in _knob_plots(out, scene, done)]))
+    blocks.append(("Error against run time", [("p", "Each knob's error against its run time, with the chosen setting "
+                                                    "marked; the caption says whether a plot is this run's or a "
+                                                    f"{BENCHMARK}.")]
+                   + [("img", f, f"{t}: {c}") for t, f, c in _knob_plots(out, scene, done)]))
     images = [it[1] for _, items in blocks for it in items if it[0] == "img" and (out / it[1]).is_file()]
     md, body = [f"# doefab report — {scene.path.name}", ""], []
     for sec, items in blocks:
@@ -196,19 +217,19 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
         for it in items:
             if it[0] == "p":
                 md += [it[1], ""]
-                body.append(f"<p>{html.escape(it[1])}</p>")
+                body.append(f"<p>{html_text(it[1])}</p>")
             elif it[0] == "img":
                 if not (out / it[1]).is_file():
                     continue
                 md += [f"![{it[2]}]({it[1]})", ""]
-                body.append(f'<figure><img src="{html.escape(it[1])}" alt="{html.escape(it[2])}">'
-                            f"<figcaption>{html.escape(it[2])}</figcaption></figure>")
+                body.append(f'<figure><img src="{html.escape(it[1])}" alt="{html.escape(it[2].replace("`", ""))}">'
+                            f"<figcaption>{html_text(it[2])}</figcaption></figure>")
             else:
                 rows = it[1]
                 md += ["| " + " | ".join(rows[0]) + " |", "|" + " --- |" * len(rows[0])]
                 md += ["| " + " | ".join(map(str, r)) + " |" for r in rows[1:]] + [""]
                 body.append("<table><tr>" + "".join(f"<th>{html.escape(str(c))}</th>" for c in rows[0]) + "</tr>"
-                            + "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
+                            + "".join("<tr>" + "".join(f"<td>{html_text(str(c))}</td>" for c in r) + "</tr>"
                                       for r in rows[1:]) + "</table>")
         body.append("</section>")
     page = ("<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>doefab report</title><style>"

@@ -1,4 +1,8 @@
-"""``run_scene``: the stages of a scene in order, each reused when its inputs are unchanged; then the report."""
+"""``run_scene``: the stages of a scene in order, each reused when its inputs are unchanged; then the report.
+
+``prepare_scene`` does every check a scene run needs (the scene's settings against the committed design, and
+that every stage folder the run would replace is doefab's) before any folder is created.
+"""
 
 from __future__ import annotations
 
@@ -6,27 +10,44 @@ import time
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_json
+from doefab.io import MARKER, atomic_write_json, owned_by_doefab
 from doefab.pipeline.scene import STAGES, Scene
-from doefab.pipeline.stages import resolve, run_stage
+from doefab.pipeline.stages import STAGE_FUNCS, STAGE_KIND, resolve, run_stage
 
-__all__ = ["run_scene"]
+__all__ = ["run_scene", "prepare_scene", "foreign_stage_folders"]
 
 
-def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = False, progress: bool = True) -> dict:
+def foreign_stage_folders(scene: Scene, out: str | Path) -> list[Path]:
+    """The stage folders under ``out`` that this scene's run would replace but that are not doefab's (they lack
+    the stage's ownership marker)."""
     out = Path(out)
+    return [out / s for s in scene.stages if s in STAGE_FUNCS and not owned_by_doefab(out / s, STAGE_KIND, stage=s)]
+
+
+def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> dict:
+    """Every check of a run of ``scene`` into ``out`` (no file is touched); returns ``resolve(scene)``."""
     bad = [f for f in force if f not in STAGES]
     if bad:
-        raise DoefabError(f"--force {bad}: stages are {list(STAGES)}")
-    t0 = time.perf_counter()
+        raise DoefabError(f"--force {', '.join(bad)}: not a stage; stages are {', '.join(STAGES)}")
     res = resolve(scene)  # validates the camera and the design settings before any work
+    foreign = foreign_stage_folders(scene, out)
+    if foreign:
+        raise DoefabError(f"{', '.join(map(str, foreign))}: a stage folder without doefab's ownership marker "
+                          f"({MARKER}) is never replaced: move it away or choose another --out")
+    return res
+
+
+def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = False, progress: bool = True,
+              res: dict | None = None) -> dict:
+    """Run ``scene`` into ``out`` (``res``: ``prepare_scene``'s result, computed here when not given)."""
+    out = Path(out)
+    t0 = time.perf_counter()
+    res = res if res is not None else prepare_scene(scene, out, force)
     out.mkdir(parents=True, exist_ok=True)
     done: dict = {}
     for name in STAGES[:-1]:
         if name not in scene.stages:
             continue
-        if name in ("masks", "reconstruction", "tolerance") and "design" not in done:
-            raise DoefabError(f"stage {name} needs the design stage: add \"design\" to stages")
         if progress:
             print(f"[doefab run] {name} …", flush=True)
         done[name] = run_stage(scene, res, name, out, done, quick, force=name in force)

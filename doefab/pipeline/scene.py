@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from doefab._validate import metres_hint
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 
@@ -91,11 +92,9 @@ def _typed(v, typ) -> bool:
     return isinstance(v, typ)
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
-    p = Path(path)
-    raw = read_toml(p, "scene file")
-    problems: list[str] = []
+def _schema_problems(raw: dict) -> list[str]:
+    """Unknown sections and keys, and values of the wrong type."""
+    problems = []
     for key, val in raw.items():
         if isinstance(val, dict):
             if key not in _SCHEMA or key == "":
@@ -113,23 +112,44 @@ def load_scene(path: str | Path) -> Scene:
             problems.append(f"unknown key {key}")
         elif not _typed(val, _SCHEMA[""][key]):
             problems.append(f"{key} must be {_SCHEMA[''][key].__name__}")
+    return problems
+
+
+def _stage_problems(stages: tuple) -> list[str]:
+    """Unknown stages, and stages listed without the design stage they need."""
+    problems = [f"stages: unknown stage {s!r} (choose from {list(STAGES)})" for s in stages if s not in STAGES]
+    needy = [s for s in ("masks", "reconstruction", "tolerance") if s in stages and "design" not in stages]
+    if needy:
+        problems.append(f"stages: {', '.join(needy)} need{'s' if len(needy) == 1 else ''} the design stage: add "
+                        f"\"design\" to stages")
+    return problems
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
+    p = Path(path)
+    raw = read_toml(p, "scene file")
+    problems = _schema_problems(raw)
     task = raw.get("task")
     if task not in TASK_DESIGN:
         problems.append(f"task must be one of {sorted(TASK_DESIGN)}, got {task!r}")
     stages = tuple(raw.get("stages", STAGES))
-    for s in stages:
-        if s not in STAGES:
-            problems.append(f"stages: unknown stage {s!r} (choose from {list(STAGES)})")
+    problems += _stage_problems(stages)
     cam = raw.get("camera", {})
     if "preset" in cam and cam["preset"] not in ("default", "hdr", "hyperspectral", "depth"):
         problems.append(f"camera.preset {cam['preset']!r} is not one of default, hdr, hyperspectral, depth")
-    for k in ("focus_distance_m", "sensor_distance_m"):
-        if k in cam and _typed(cam[k], float) and not (0 < cam[k] < 1e6):
-            problems.append(f"camera.{k} = {cam[k]} must be > 0 m")
+    for k, lo, hi in (("focus_distance_m", 1e-3, 1e6), ("sensor_distance_m", 1e-3, 2.0)):
+        if k in cam and _typed(cam[k], float) and not lo <= cam[k] <= hi:
+            hint = metres_hint(cam[k], lo, hi) if math.isfinite(cam[k]) else ""
+            problems.append(f"camera.{k} = {cam[k]} is outside {lo:g}–{hi:g} m{hint}")
     opt = raw.get("optics", {})
-    for w in opt.get("wavelengths_nm", []) if isinstance(opt.get("wavelengths_nm", []), list) else []:
-        if not _typed(w, float) or not 300 <= w <= 1100:
-            problems.append(f"optics.wavelengths_nm holds {w!r}: wavelengths are nm within 300–1100")
+    lams = opt.get("wavelengths_nm", []) if isinstance(opt.get("wavelengths_nm", []), list) else []
+    bad = [w for w in lams if not _typed(w, float) or not 300 <= w <= 1100]
+    if bad:
+        metres = [w for w in bad if _typed(w, float) and 0 < w < 1]
+        hint = f" ({metres[0]!r} looks like metres: write {metres[0] * 1e9:.4g}, not {metres[0]!r})" if metres else ""
+        problems.append(f"optics.wavelengths_nm holds {', '.join(map(repr, bad))}: wavelengths are nm within "
+                        f"300–1100{hint}")
     for z in opt.get("depths_m", []) if isinstance(opt.get("depths_m", []), list) else []:
         if not (z == "inf" or (_typed(z, float) and z > 0 and math.isfinite(z))):
             problems.append(f"optics.depths_m holds {z!r}: depths are metres > 0 (or \"inf\")")
@@ -138,7 +158,7 @@ def load_scene(path: str | Path) -> Scene:
     des = raw.get("design", {})
     if "optimizer" in des and des["optimizer"] not in ("adam", "lbfgs", "mma"):
         problems.append(f"design.optimizer {des['optimizer']!r} is not adam, lbfgs or mma")
-    for k, lo, hi in (("iterations", 1, 100000), ("sampling", 1, 16), ("seed", 0, 2**32 - 1)):
+    for k, lo, hi in (("iterations", 1, 100000), ("sampling", 1, 16), ("seed", 0, 2**32 - 1), ("knots", 0, 100000)):
         if k in des and _typed(des[k], int) and not lo <= des[k] <= hi:
             problems.append(f"design.{k} = {des[k]} must be {lo}–{hi}")
     fab = raw.get("fabrication", {})
@@ -166,8 +186,10 @@ def load_scene(path: str | Path) -> Scene:
     rec = raw.get("reconstruction", {})
     if rec.get("weights", "shipped") not in ("shipped", "train"):
         problems.append("reconstruction.weights must be shipped or train")
-    if "size_px" in rec and _typed(rec["size_px"], int) and (rec["size_px"] % 32 or rec["size_px"] < 64):
-        problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32, ≥ 64")
+    if "size_px" in rec and _typed(rec["size_px"], int) and (rec["size_px"] % 32 or not 64 <= rec["size_px"] <= 2048):
+        problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32 in 64–2048")
+    if "images" in rec and _typed(rec["images"], int) and not 1 <= rec["images"] <= 10000:
+        problems.append(f"reconstruction.images = {rec['images']} must be 1–10000 test scenes")
     if "minutes" in rec and _typed(rec["minutes"], float) and not 0 < rec["minutes"] <= 600:
         problems.append("reconstruction.minutes must be in (0, 600]")
     tol = raw.get("tolerance")

@@ -16,10 +16,12 @@ import time
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_json
+from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 
-__all__ = ["resolve", "STAGE_FUNCS", "run_stage", "REPO"]
+__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note"]
+
+STAGE_KIND = "run stage"  # the ownership marker's kind of a stage folder (its ``stage`` field names the stage)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -86,7 +88,31 @@ def resolve(scene: Scene) -> dict:
                           "knots": cfg.get("knots", 0), "ring_law": committed.task_params.get("ring_law", "seed")}
     differ = sorted(k for k in settings if settings[k] != committed_settings[k])
     return {"settings": settings, "camera": cam, "task": task, "committed_dir": committed_dir,
-            "reuse": not differ, "differ": differ}
+            "reuse": not differ, "differ": differ, "committed": committed, "committed_settings": committed_settings}
+
+
+def _design_run(settings: dict, quick: bool) -> tuple[int, int]:
+    """(iterations, sampling) of the design stage's run for these settings (quick: 10 on a 4× coarser grid)."""
+    iters = min(int(settings["iterations"]), 10) if quick else int(settings["iterations"])
+    return iters, max(int(settings["sampling"]), 4 if quick else 1)
+
+
+def redesign_note(res: dict, quick: bool) -> str:
+    """One line: why the committed design is not reused, and roughly how long the new one takes (scaled from the
+    committed design's own wall time by iterations and grid pixels) and how large its checkpoint grows."""
+    s, c = res["settings"], res["committed_settings"]
+    why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c[k]})" for k in res["differ"])
+    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick), _design_run(c, False)
+    grid, c_grid = s["camera"]["doe_pixels"] // sampling, c["camera"]["doe_pixels"] // c_sampling
+    took = float(res["committed"].extra.get("wall_time_s") or 0.0)
+    minutes = took * iters / max(c_iters, 1) * (grid / max(c_grid, 1)) ** 2 / 60
+    ckpt = ""
+    if s["parameterization"] == "pixel":  # the phase map and Adam's two moments, float32
+        ckpt = f", checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
+    return (f"the committed design {res['committed_dir'].relative_to(REPO)} is not reused: the scene sets {why}; "
+            f"a new design is optimised ({iters} {s['optimizer']} iterations on a {grid}² grid: roughly "
+            f"{max(minutes, 0.1):.1f} min at the pace of the committed design's run ({took:.0f} s), longer on a "
+            f"loaded machine{ckpt})")
 
 
 def _copy_design(src: Path, dst: Path) -> None:
@@ -97,12 +123,11 @@ def _copy_design(src: Path, dst: Path) -> None:
 
 
 def stage_design(scene, res, out: Path, quick: bool) -> dict:
-    import numpy as np
     import torch
 
     import doefab
     from doefab.design.design import Design
-    from doefab.plotting import plot_height, plot_psf_grid
+    from doefab.plotting import plot_height
 
     if res["reuse"]:
         _copy_design(res["committed_dir"], out)
@@ -110,10 +135,11 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
                                           f"{res['committed_dir'].relative_to(REPO)}"}
     else:
         s = res["settings"]
-        iters = min(int(s["iterations"]), 10) if quick else int(s["iterations"])
+        print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
+        iters, sampling = _design_run(s, quick)
         params = {"kernel_size": s["kernel_px"], **({"ring_law": s["ring_law"]} if "ring_law" in s else {})}
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
-                            camera=res["camera"], out_dir=out, sampling=max(int(s["sampling"]), 4 if quick else 1),
+                            camera=res["camera"], out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
                             progress=True)
         d.save(out)
@@ -124,19 +150,28 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
         psf = plan(doefab.levels_to_height(d.levels, d.camera)).coded.numpy()
-    tg = task.targets(d.camera).numpy()
+    design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())
+    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera), d.camera.doe_pitch,
+                "16-level height map")
+    info["metric"] = d.metrics
+    return info
+
+
+def design_psf_figure(path: Path, d, psf, targets) -> Path:
+    """Up to 4 (depth, band) entries of a design's coded PSFs beside their targets, on a log scale: a grating's
+    orders and a streak's arms are a few bright pixels in a large window, invisible on a linear one."""
+    import numpy as np
+
+    from doefab.plotting import plot_psf_grid
+
     picks = [(z, w) for z in range(psf.shape[0]) for w in range(psf.shape[1])]
     picks = [picks[i] for i in np.linspace(0, len(picks) - 1, min(4, len(picks))).round().astype(int)]
     panels = []
     for z, w in picks:
         lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {'∞' if math.isinf(d.depths[z]) else f'{d.depths[z]:g} m'}"
-        panels += [(f"target, {lab}", tg[z, w]), (f"16-level design, {lab}", psf[z, w])]
-    plot_psf_grid(out / "psf_target_vs_design.png", panels, d.camera.sensor_pitch, ncols=2, log=False,
-                  suptitle=f"{d.task}: target (left) and fabricated 16-level design (right)")
-    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera), d.camera.doe_pitch,
-                "16-level height map")
-    info["metric"] = d.metrics
-    return info
+        panels += [(f"target, {lab}", targets[z, w]), (f"16-level design, {lab}", psf[z, w])]
+    return plot_psf_grid(path, panels, d.camera.sensor_pitch, ncols=2, log=True,
+                         suptitle=f"{d.task}: target (left) and fabricated 16-level design (right), log scale")
 
 
 def stage_masks(scene, res, out: Path, quick: bool) -> dict:
@@ -160,6 +195,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                                            f"re-verified in {time.perf_counter() - t:.1f} s",
                 "mask_set": str(committed_set.relative_to(REPO))}
     d = Design.load(design_dir)
+    (out / MARKER).unlink()  # the export takes the (otherwise empty) folder as its own; run_stage marks it again
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
     export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True)
@@ -259,6 +295,8 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     if not force and old.get("hash") == h and old.get("complete"):
         old["reused_from_previous_run"] = True
         return old
+    if not owned_by_doefab(out, STAGE_KIND, stage=name):  # prepare_scene refuses this before any work
+        raise DoefabError(f"{out} is not a doefab {name} stage folder (no ownership marker): move it away")
     # an interrupted run of the same inputs keeps its finished Monte Carlo parts (samples.jsonl checks its run)
     keep = out / RESUMABLE if not force and old.get("hash") == h and (out / RESUMABLE).is_file() else None
     saved = None
@@ -268,11 +306,13 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
+    mark_folder(out, STAGE_KIND, stage=name)
     if saved is not None:
         os.replace(saved, out / RESUMABLE)
     atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False})
     t = time.perf_counter()
     info = STAGE_FUNCS[name](scene, res, out, quick)
+    mark_folder(out, STAGE_KIND, stage=name)
     info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True)
     atomic_write_json(rec_path, info)
     return info

@@ -19,7 +19,7 @@ from doefab.errors import DoefabError
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import get_spec, psf_pair
-from doefab.reconstruction.train import model_inputs, weights_paths
+from doefab.reconstruction.train import is_shipped, model_inputs, weights_paths
 
 __all__ = ["load_reconstructor", "Reconstructor"]
 
@@ -83,12 +83,7 @@ class Reconstructor:
         torch_in = isinstance(coded, torch.Tensor)
         views = []
         for name, x in (("coded", coded), ("uncoded", uncoded)):
-            t = _float_tensor(x)
-            if t.ndim != 3 or t.shape[0] != 3:
-                raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
-            if not bool(torch.isfinite(t).all()):
-                raise DoefabError(f"{name} contains NaN or infinite values")
-            views.append(t[None])
+            views.append(_capture(name, x)[None])
         if views[0].shape != views[1].shape:
             raise DoefabError(f"coded {tuple(views[0].shape[1:])} and uncoded {tuple(views[1].shape[1:])} differ in shape")
         p = self._psf(psf)
@@ -97,13 +92,44 @@ class Reconstructor:
         return out if torch_in else out.numpy()
 
 
+def _capture(name: str, x) -> torch.Tensor:
+    """A [3, H, W] capture as float32, refused (with the fix) unless it holds floats in [0, 1]: the networks
+    are trained on captures normalised to the sensor's white level."""
+    dtype = x.dtype if isinstance(x, torch.Tensor) else np.asarray(x).dtype
+    if not (dtype.is_floating_point if isinstance(dtype, torch.dtype) else dtype.kind == "f"):
+        raise DoefabError(f"{name} is an integer ({dtype}) image: captures are floats in [0, 1]; divide by the "
+                          f"white level (255 for 8 bits, 2**bits − 1 for raw data) first")
+    t = _float_tensor(x)
+    if t.ndim != 3 or t.shape[0] != 3:
+        raise DoefabError(f"{name} must be a [3, H, W] capture, got {tuple(t.shape)}")
+    if not bool(torch.isfinite(t).all()):
+        raise DoefabError(f"{name} contains NaN or infinite values")
+    lo, hi = float(t.min()), float(t.max())
+    if lo < -1e-6 or hi > 1 + 1e-6:
+        raise DoefabError(f"{name} holds values {lo:.4g}–{hi:.4g}: captures are in [0, 1] (0 = black, 1 = the "
+                          f"sensor's clipping level); subtract the black level, divide by the white level and "
+                          f"clip to [0, 1] first")
+    return t
+
+
 def _float_tensor(x) -> torch.Tensor:
     """A float32 tensor of an array or a tensor (detached: inference only)."""
     return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
 
 
-def _refuse(path: Path, why: str, task: str, variant: str):
-    raise DoefabError(f"{path}: {why}; retrain it with: doefab train --task {task} --variant {variant}")
+def _retrain(task: str, variant: str, weights_dir, design) -> str:
+    """The command that makes the network the loader looks for, writing where it looks."""
+    cmd = f"doefab train --task {task} --variant {variant}" + (f" --design {design}" if design is not None else "")
+    if not is_shipped(weights_dir):
+        return f"retrain it with: {cmd} --weights-dir {weights_dir}"
+    if design is not None:
+        return (f"the shipped weights belong to the committed design: train one for {design} with: {cmd} "
+                f"--weights-dir NEW_FOLDER, and pass that --weights-dir")
+    return f"restore it (git checkout doefab/weights) or retrain it with: {cmd} --replace-shipped"
+
+
+def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, design=None):
+    raise DoefabError(f"{path}: {why}; {_retrain(task, variant, weights_dir, design)}")
 
 
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
@@ -113,29 +139,32 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if weights_dir is not None and Path(weights_dir).is_file():
+        raise DoefabError(f"weights_dir {weights_dir} is a file: give the folder holding {task}_{variant}.pt")
     pt, meta_path = weights_paths(task, variant, weights_dir)
+    who = (task, variant, weights_dir, design)
     if not pt.is_file() or not meta_path.is_file():
-        _refuse(pt, "no weights (or no metadata record beside them)", task, variant)
+        _refuse(pt, "no weights (or no metadata record beside them)", *who)
     try:
         meta = json.loads(meta_path.read_text())
     except (ValueError, UnicodeDecodeError):
-        _refuse(meta_path, "the metadata record is not valid JSON", task, variant)
+        _refuse(meta_path, "the metadata record is not valid JSON", *who)
     need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
     if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != "doefab weights 1":
-        _refuse(meta_path, f"the metadata record lacks {list(need)}", task, variant)
+        _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
     if (meta["task"], meta["variant"]) != (task, variant):
-        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", task, variant)
+        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
     data = pt.read_bytes()
     if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
-        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", task, variant)
+        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)
     pair, sha = psf_pair(task, design)
     if meta["design_levels_sha256"] != sha:
         _refuse(pt, "the weights were trained for another design than " +
-                ("the committed one" if design is None else str(design)), task, variant)
+                ("the committed one" if design is None else str(design)), *who)
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])
         model.load_state_dict(state)
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
-        _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", task, variant)
+        _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta)

@@ -15,7 +15,8 @@ import torch
 
 from doefab.errors import DoefabError
 
-__all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin"]
+__all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin",
+           "check_design_task"]
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -45,18 +46,30 @@ def get_spec(task: str) -> TaskSpec:
     return SPECS[task]
 
 
+def check_design_task(task: str, design_task: str, where, flag: str = "task") -> None:
+    """Refuse a design of another task than ``task``'s networks take (a grating design for the HDR network)."""
+    spec = get_spec(task)
+    if design_task != spec.design:
+        owner = {s.design: s.name for s in SPECS.values()}.get(design_task)
+        kind = f"a {owner} ({design_task})" if owner else f"a {design_task!r}"
+        raise DoefabError(f"{where} is {kind} design; {flag} {task} needs a {spec.design} design")
+
+
 def design_dir(task: str) -> Path:
     """The committed design a task's networks are trained for (``masks/<design>/design``)."""
     return REPO / "masks" / get_spec(task).design / "design"
 
 
 @functools.lru_cache(maxsize=None)
-def _pair_cached(folder: str, kernel: int):
+def _pair_cached(folder: str, design_task: str, kernel: int):
+    """(pair, levels_sha256) of the design in ``folder``, or (None, its task) when it is not a ``design_task``."""
     from doefab.design.design import Design
     from doefab.fabrication.levels import levels_to_height
     from doefab.optics.psf import PSFPlan
 
     d = Design.load(folder)
+    if d.task != design_task:
+        return None, d.task
     plan = PSFPlan(d.camera, d.wavelengths, d.depths, kernel)
     with torch.no_grad():
         pair = plan(levels_to_height(d.levels, d.camera))
@@ -66,9 +79,13 @@ def _pair_cached(folder: str, kernel: int):
 
 
 def psf_pair(task: str, folder: str | Path | None = None):
-    """(PSFPair of the 16-level design, its levels_sha256) for ``task`` (cached)."""
+    """(PSFPair of the 16-level design, its levels_sha256) for ``task`` (cached); a design folder of another
+    task is refused."""
     spec = get_spec(task)
-    return _pair_cached(str(folder or design_dir(task)), spec.kernel)
+    pair, sha = _pair_cached(str(folder or design_dir(task)), spec.design, spec.kernel)
+    if pair is None:
+        check_design_task(task, sha, folder)
+    return pair, sha
 
 
 def crop_margin(task: str) -> int:

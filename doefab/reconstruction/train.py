@@ -9,7 +9,8 @@ step count in advance, and a network trained for minutes gains most from anneali
 turns it off); a resumed run continues the schedule from the checkpoint's elapsed time, and a larger budget on
 resume stretches it (the rate rises again). The finished weights and their metadata record
 (design ``levels_sha256``, PSF settings, training command, seed, wall time, validation metrics, the weights'
-SHA-256) are written atomically beside each other.
+SHA-256) are written atomically beside each other, into ``weights_dir`` or else the run folder ``out_dir``;
+the shipped weights (``doefab/weights``) are replaced only when ``replace_shipped=True`` asks for it.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 
 __all__ = ["train", "lr_factor", "SCHEDULES", "WEIGHTS_DIR", "weights_paths", "history_path", "model_inputs",
-           "evaluate_batch", "sensor_response_for"]
+           "evaluate_batch", "sensor_response_for", "weights_target", "is_shipped"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 SCHEDULES = ("cosine", "constant")
@@ -52,6 +53,32 @@ def lr_factor(schedule: str, fraction: float) -> float:
 def weights_paths(task: str, variant: str, folder: str | Path | None = None) -> tuple[Path, Path]:
     base = Path(folder) if folder is not None else WEIGHTS_DIR
     return base / f"{task}_{variant}.pt", base / f"{task}_{variant}.json"
+
+
+def is_shipped(folder: str | Path | None) -> bool:
+    """Whether ``folder`` (None: the default) is the package's shipped weights folder."""
+    return folder is None or Path(folder).resolve() == WEIGHTS_DIR.resolve()
+
+
+def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_shipped: bool = False,
+                   design=None) -> Path:
+    """Where training writes its weights: ``weights_dir``, else the run folder ``out_dir``; the shipped folder
+    only with ``replace_shipped`` (and only for the committed design). Checked before any work."""
+    if replace_shipped:
+        if design is not None:
+            raise DoefabError("--replace-shipped: the shipped weights belong to the committed design; a network "
+                              "for --design goes to --out or --weights-dir")
+        if weights_dir is not None and not is_shipped(weights_dir):
+            raise DoefabError(f"--replace-shipped writes to {WEIGHTS_DIR}; --weights-dir {weights_dir} names "
+                              f"another folder: give one of them")
+        return WEIGHTS_DIR
+    target = Path(out_dir if weights_dir is None else weights_dir)
+    if is_shipped(target):
+        raise DoefabError(f"--weights-dir {target} is the shipped weights folder: pass --replace-shipped to replace "
+                          f"the shipped networks (or give another folder)")
+    if target.exists() and not target.is_dir():
+        raise DoefabError(f"--weights-dir {target} is a file: give a folder")
+    return target
 
 
 def history_path(task: str, variant: str, folder: str | Path | None = None) -> Path:
@@ -96,12 +123,15 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
           progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
-          schedule: str = "cosine") -> dict:
+          schedule: str = "cosine", replace_shipped: bool = False) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
-    returns the metadata record written. ``design``: a design folder other than the committed one (candidates)."""
+    returns the metadata record written (``weights_path``: where the weights went). ``design``: a design folder
+    other than the committed one (candidates). Weights go to ``weights_dir`` or else ``out_dir``; the shipped
+    ones are replaced only with ``replace_shipped=True``."""
     from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 
     spec = get_spec(task)
+    weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design)
     lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
@@ -197,4 +227,4 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     atomic_write_bytes(pt, data)
     atomic_write_json(meta_path, meta)
     atomic_write_bytes(history_path(task, variant, weights_dir), (out / "history.csv").read_bytes())
-    return meta
+    return {**meta, "weights_path": str(pt.resolve())}

@@ -57,6 +57,16 @@ class Task:
     default_lr: float = field(default=0.02, init=False)
     default_batch: int = field(default=0, init=False)
 
+    # numeric parameters: name → (low, high, integer, unit); subclasses add their own
+    RANGES = {"kernel_size": (3, 4095, True, "sensor pixels")}
+
+    def __post_init__(self) -> None:
+        from doefab._validate import number_in
+
+        for name, (lo, hi, integer, unit) in self.RANGES.items():
+            if getattr(self, name) is not None:
+                number_in(name, getattr(self, name), lo, hi, integer, unit)
+
     def bind(self, camera: Camera) -> None:
         """Fix physical (metre) parameters from the camera the design is for, before any resampling."""
 

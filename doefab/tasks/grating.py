@@ -45,6 +45,8 @@ class GratingTask(Task):
     default_iterations: int = field(default=300, init=False)
     default_lr: float = field(default=0.01, init=False)
     default_batch: int = field(default=8, init=False)
+    RANGES = {**Task.RANGES, "period_pixels": (2, 1e6, False, "DOE pixels"), "period_m": (1e-7, 1e-2, False, "m"),
+              "n_bands": (1, 1000, True, "bands")}
 
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
         return tuple(float(v) for v in np.linspace(400e-9, 700e-9, self.n_bands))

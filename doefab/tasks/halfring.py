@@ -51,6 +51,8 @@ class HalfRingTask(Task):
     default_iterations: int = field(default=600, init=False)
     default_lr: float = field(default=0.03, init=False)
     default_batch: int = field(default=8, init=False)
+    RANGES = {**Task.RANGES, "delta_px": (0.01, 100, False, "sensor pixels"), "z_min": (0.01, 1e4, False, "m"),
+              "z_max": (0.01, 1e4, False, "m"), "z_step": (1e-4, 1e4, False, "m")}
 
     def depths(self, camera: Camera) -> tuple[float, ...]:
         n = int(round((self.z_max - self.z_min) / self.z_step)) + 1
@@ -61,6 +63,11 @@ class HalfRingTask(Task):
     def __post_init__(self):
         from doefab.errors import DoefabError
 
+        super().__post_init__()
+        if not self.z_min < self.z_max:
+            raise DoefabError(f"z_min {self.z_min} m must be below z_max {self.z_max} m")
+        if self.side not in (-1, 1):
+            raise DoefabError(f"side must be -1 or +1, got {self.side!r}")
         if self.ring_law not in self.RING_LAWS:
             raise DoefabError(f"unknown ring law {self.ring_law!r}: choose one of {self.RING_LAWS}")
 

@@ -34,6 +34,7 @@ class StreakTask(Task):
     default_iterations: int = field(default=60, init=False)
     default_lr: float = field(default=0.02, init=False)
     default_batch: int = field(default=0, init=False)
+    RANGES = {**Task.RANGES, "arm_px": (1, 2047, True, "sensor pixels"), "band_px": (0, 64, True, "sensor pixels")}
 
     def _cross(self, width: int) -> torch.Tensor:
         k, c = self.kernel_size, self.kernel_size // 2

@@ -24,7 +24,8 @@ import math
 
 import numpy as np
 
-from doefab import _validate
+from doefab._validate import length_m, wavelength_m
+from doefab._validate import seed as seed_value
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import N_MASKS, bit_planes
 from doefab.fabrication.levels import N_LEVELS
@@ -114,7 +115,8 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     """
     from doefab.tolerance.relief import MaskErrors, ReliefModel, corner_bias, mean_height, pattern_heights
 
-    _validate.wavelengths([design_wavelength])
+    design_wavelength = wavelength_m("design_wavelength", design_wavelength)
+    roughness_corr, seed = length_m("roughness_corr", roughness_corr, 1e-9, 1e-2), seed_value("seed", seed)
     lv = np.asarray(levels)
     if lv.ndim != 2 or lv.shape[0] != lv.shape[1] or lv.shape[0] != camera.doe_pixels:
         raise DoefabError(f"levels must be ({camera.doe_pixels}, {camera.doe_pixels}) on the camera's grid, got "

@@ -24,7 +24,7 @@ def test_scene_validation_lists_every_problem(tmp_path):
     with pytest.raises(DoefabError) as exc:
         load_scene(p)
     msg = str(exc.value)
-    for needle in ("unknown key colour", "optics.wavelengths_nm holds 250", "optics.wavelengths_nm holds 5.5e-07",
+    for needle in ("unknown key colour", "optics.wavelengths_nm holds 250, 5.5e-07", "looks like metres",
                    "optics.depths_m holds 0", "design.optimizer", "holder:", "tolerance.budget"):
         assert needle in msg, needle
 

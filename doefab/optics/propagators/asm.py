@@ -14,6 +14,7 @@ import numpy as np
 import scipy.fft
 import torch
 
+from doefab._validate import length_m, number_in, wavelength_m
 from doefab.errors import SamplingError
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, pixel_integration_matrix
 
@@ -39,6 +40,10 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
     Returns:
         (..., Ny, Nx) complex field at the new plane, same grid.
     """
+    pitch = length_m("pitch", pitch, 1e-8, 1e-2)
+    wavelength = wavelength_m("wavelength", wavelength)
+    distance = number_in("distance", distance, -1e3, 1e3, unit="m")
+    pad = number_in("pad", pad, 1, 64)  # a padding factor (the grid grows to pad × its size)
     ny, nx = field.shape[-2:]
     n = scipy.fft.next_fast_len(int(pad * max(ny, nx)))
     spec = torch.fft.fft2(field, s=(n, n))

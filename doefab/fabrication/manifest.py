@@ -1,0 +1,144 @@
+"""What a mask set tells the fab about depths, derived in one place and re-derived on verification.
+
+The fab reads the etch depths from ``manifest.json`` (and its human copy ``README.txt``): every depth, the
+level step and the level → height table follow from the substrate and the design wavelength alone
+(d = λ / (n(λ) − 1) / 16, mask m etches 2^m·d, level k stands k·d above the deepest etch).
+``depth_fields`` writes them; ``depth_problems`` recomputes them from the manifest's own material (looked up
+by name among the built-in substrates) and design wavelength and names every field that disagrees.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from doefab.errors import DoefabError
+from doefab.fabrication.bitplanes import N_MASKS
+from doefab.fabrication.levels import N_LEVELS, material_level_step
+from doefab.optics.materials import Material, material_by_name
+
+__all__ = ["depth_fields", "depth_problems", "fab_readme", "DEPTH_TOLERANCE_NM"]
+
+# the manifest rounds depths to 0.001 nm; a field further than this from its re-derived value was edited
+DEPTH_TOLERANCE_NM = 0.002
+
+
+def depth_fields(material: Material, design_wavelength: float) -> dict:
+    """The manifest's depth fields (nm) for ``material`` at ``design_wavelength`` (m): index, level step, level
+    → height table, and the etch depth of each mask (``etch_depth_nm[bit]``)."""
+    d_nm = material_level_step(material, design_wavelength) * 1e9
+    return {"refractive_index_at_design_wavelength": float(material.index(design_wavelength)),
+            "level_step_nm": round(d_nm, 4),
+            "level_to_height_nm": [round(k * d_nm, 3) for k in range(N_LEVELS)],
+            "etch_depth_nm": [round((1 << bit) * d_nm, 3) for bit in range(N_MASKS)]}
+
+
+def _off(got, want: float, tol: float) -> bool:
+    return isinstance(got, bool) or not isinstance(got, (int, float)) or not abs(got - want) <= tol
+
+
+def _material(man: dict) -> tuple[Material | None, list[str]]:
+    rec = man.get("material")
+    name = rec.get("name") if isinstance(rec, dict) else None
+    if not isinstance(name, str):
+        return None, [f"material = {rec!r} does not name a substrate"]
+    try:
+        material = material_by_name(name)
+        Material.from_dict(rec, where="material")  # a built-in name with edited coefficients is refused
+    except DoefabError as exc:
+        return None, [f"material: {exc}"]
+    return material, []
+
+
+def depth_problems(man: dict, design_json: Path | None = None) -> list[str]:
+    """Every depth field of the manifest ``man`` that disagrees with its material and design wavelength (and,
+    given the set's ``design/design.json``, every disagreement with the design's camera); [] when consistent."""
+    material, problems = _material(man)
+    lam = man.get("design_wavelength_m")
+    if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not 200e-9 <= lam <= 2e-6:
+        problems.append(f"design_wavelength_m = {lam!r} is not a wavelength in metres within 200 nm – 2 µm")
+        lam = None
+    if design_json is not None and design_json.is_file():
+        problems += _against_design(man, design_json)
+    if material is None or lam is None:
+        return problems
+    want = depth_fields(material, lam)
+    if _off(man.get("refractive_index_at_design_wavelength"), want["refractive_index_at_design_wavelength"], 1e-9):
+        problems.append(f"refractive_index_at_design_wavelength = {man.get('refractive_index_at_design_wavelength')!r}"
+                        f" (expected {want['refractive_index_at_design_wavelength']:.10g})")
+    if _off(man.get("level_step_nm"), want["level_step_nm"], DEPTH_TOLERANCE_NM):
+        problems.append(f"level_step_nm = {man.get('level_step_nm')!r} (expected {want['level_step_nm']})")
+    table = man.get("level_to_height_nm")
+    if not isinstance(table, list) or len(table) != N_LEVELS:
+        problems.append(f"level_to_height_nm must list {N_LEVELS} heights, got {table!r}")
+    else:
+        problems += [f"level_to_height_nm[{k}] = {h!r} (expected {w})" for k, (h, w) in
+                     enumerate(zip(table, want["level_to_height_nm"])) if _off(h, w, DEPTH_TOLERANCE_NM)]
+    return problems + _etch_problems(man.get("layers"), want["etch_depth_nm"])
+
+
+def _etch_problems(layers, depths_nm: list[float]) -> list[str]:
+    if not isinstance(layers, list) or not all(isinstance(L, dict) for L in layers):
+        return ["layers must be a list of layer records"]
+    etch = [(i, L) for i, L in enumerate(layers) if L.get("purpose") == "etch"]
+    bits = sorted(L.get("bit") for _, L in etch if isinstance(L.get("bit"), int))
+    if bits != list(range(N_MASKS)):
+        return [f"layers: the etch layers must carry bits 0..{N_MASKS - 1} once each, got {bits}"]
+    problems = []
+    for i, L in etch:
+        want, got, tol = depths_nm[L["bit"]], L.get("etch_depth_nm"), L.get("etch_depth_tolerance_nm")
+        if _off(got, want, DEPTH_TOLERANCE_NM):
+            problems.append(f"layers[{i}].etch_depth_nm = {got!r} (expected {want} for bit {L['bit']})")
+        if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol <= max(0.5 * want, 2.0):
+            problems.append(f"layers[{i}].etch_depth_tolerance_nm = {tol!r} is not a tolerance of a {want} nm "
+                            f"etch (0 < tolerance ≤ half the depth)")
+    return problems
+
+
+def _against_design(man: dict, design_json: Path) -> list[str]:
+    try:
+        cam = json.loads(design_json.read_text())["camera"]
+        lam, name = float(cam["design_wavelength_m"]), cam["material"]["name"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return [f"{design_json} is not a readable design record (camera.design_wavelength_m, camera.material)"]
+    problems = []
+    if isinstance(man.get("design_wavelength_m"), (int, float)) and not math.isclose(
+            man["design_wavelength_m"], lam, rel_tol=1e-9):
+        problems.append(f"design_wavelength_m = {man['design_wavelength_m']!r} differs from the design's {lam!r} "
+                        f"({design_json})")
+    if isinstance(man.get("material"), dict) and man["material"].get("name") != name:
+        problems.append(f"material {man['material'].get('name')!r} differs from the design's {name!r}")
+    return problems
+
+
+def fab_readme(man: dict) -> str:
+    """``README.txt`` of a mask set: the manifest in words, for the fab (verification compares the two)."""
+    lines = [
+        "doefab mask set — instructions for the fab",
+        "",
+        f"Files: {', '.join(man['files'].values())} (GDSII, 1 nm database unit, 1 µm user unit), manifest.json "
+        "(machine-readable), preview_*.png, report.json (verification).",
+        f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
+        f"16 levels, step d = {man['level_step_nm']} nm.",
+        f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
+        f"{man['die_m'] * 1e3:g} mm; clear aperture {man['clear_aperture_diameter_m'] * 1e3:g} mm.",
+        "",
+        "Layers (one plate each; keys on layer 10 and verniers/CD ladder on layer 11 carry the plate number "
+        "as datatype and go on the same plate):",
+    ]
+    for L in man["layers"]:
+        depth = f", etch depth {L['etch_depth_nm']} nm ± {L['etch_depth_tolerance_nm']} nm" if "etch_depth_nm" in L else ""
+        lines.append(f"  layer {L['layer']} (plate {L['plate']}, step {L['process_step']}): {L['purpose']}{depth}; "
+                     f"{L['polygons_mean']}; {L['mask_polarity']} for {L['resist_tone']} resist; aligns to plate "
+                     f"{L['aligns_to_plate']}.")
+    lines += [
+        "",
+        f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
+        "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
+        "keys of the plate it aligns to and carries its own cross).",
+        "Level k = 15 − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
+        "The layout is drawn as seen from the patterned face. " + man["mirror_means"] + ".",
+        "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
+    ]
+    return "\n".join(lines) + "\n"
