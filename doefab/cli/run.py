@@ -27,6 +27,7 @@ def run(args) -> int:
     from doefab.errors import DoefabError
     from doefab.io import OutputDir
     from doefab.pipeline.run import prepare_scene, run_scene
+    from doefab.pipeline.stages import has_progress
     from doefab.pipeline.scene import load_scene
 
     scenes = [load_scene(s) for s in args.scene]  # every scene validated before any work
@@ -39,7 +40,7 @@ def run(args) -> int:
         runs.append((sc, od, prepare_scene(sc, od.path, tuple(args.force))))
     for sc, od, res in runs:
         args.outdir = od  # a failure removes what this scene's run created, unless a stage finished
-        args.keep_on_failure = lambda od=od, sc=sc: any((od.path / s / "stage.json").is_file() for s in sc.stages)
+        args.keep_on_failure = lambda od=od, sc=sc: has_progress(od.path, sc.stages)
         od.create()
         summary = run_scene(sc, od.path, force=tuple(args.force), quick=args.quick, res=res)
         report = (f"report {od.path / 'report.html'}" if summary["report"] else

@@ -30,9 +30,11 @@ MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20�
 def _ratio(name: str, a, like):
     """``a`` checked to be fractions in [0, 1), as the array type of ``like`` (torch tensor or numpy)."""
     vals = np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)
-    if not np.all(np.isfinite(vals)) or np.any(vals < 0) or np.any(vals >= 1):
+    if not np.all(np.isfinite(vals)):
+        raise DoefabError(f"{name} holds NaN or infinite values: crosstalk ratios are fractions in [0, 1)")
+    if np.any(vals < 0) or np.any(vals >= 1):
         raise DoefabError(f"{name} must hold crosstalk fractions in [0, 1), got values in "
-                          f"[{np.nanmin(vals):g}, {np.nanmax(vals):g}]")
+                          f"[{vals.min():g}, {vals.max():g}]")
     if hasattr(like, "detach"):
         import torch
 

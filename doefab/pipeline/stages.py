@@ -19,7 +19,7 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 
-__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note"]
+__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress"]
 
 STAGE_KIND = "run stage"  # the ownership marker's kind of a stage folder (its ``stage`` field names the stage)
 
@@ -265,6 +265,20 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
 
 
 RESUMABLE = "samples.jsonl"  # what a stage keeps from an interrupted run of the same inputs
+
+
+def has_progress(folder: Path, stages) -> bool:
+    """Whether a run folder holds work worth keeping after a failure: a finished stage, or a stage's saved
+    Monte Carlo parts."""
+    for s in stages:
+        try:
+            if json.loads((Path(folder) / s / "stage.json").read_text()).get("complete"):
+                return True
+        except (OSError, ValueError):
+            pass
+        if (Path(folder) / s / RESUMABLE).is_file():
+            return True
+    return False
 STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),

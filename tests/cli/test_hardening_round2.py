@@ -102,7 +102,8 @@ def test_row01_doefab_stage_folders_carry_their_marker_and_are_replaced(tmp_path
     scene = load_scene(_holder_scene(tmp_path))
     for _ in range(2):
         stages.run_stage(scene, None, "holder", tmp_path / "run", {}, quick=True, force=True)
-    assert calls == [[MARKER], [MARKER]]  # the second run started from an empty (marked) folder
+    # the second run started from an empty folder: the marker and the stage's "started" record only
+    assert calls == [[MARKER, "stage.json"], [MARKER, "stage.json"]]
     assert sorted(p.name for p in (tmp_path / "run" / "holder").iterdir()) == [MARKER, "part2.stl", "stage.json"]
     assert read_marker(tmp_path / "run" / "holder") == {"kind": "run stage", "written_by": "doefab",
                                                          "stage": "holder"}
