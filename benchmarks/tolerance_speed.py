@@ -1,58 +1,88 @@
-"""Samples per minute of PSF-level and network-level tolerance studies per task, and a 2-worker Dask
-LocalCluster against the in-process run (same seed, same numbers, measured side by side).
-Writes benchmarks/results/tolerance_speed.md. Run: .venv/bin/python benchmarks/tolerance_speed.py
+"""How fast a tolerance study decides, and whether its surrogate agrees with the direct Monte Carlo (issue 22).
+
+``psf``: ``doefab tolerance --design masks/grating --samples 300`` (PSF level, default budget, grid chosen by the
+study), in process and with 2 worker processes; then ``--samples 0 --surrogate`` (the sensitivity surrogate,
+checked on held-out parts of its own) — its yield interval against the direct run's.
+``network``: parts per minute through each task's network (``--networks``, 6 parts each).
+Writes benchmarks/results/tolerance_speed.{md,json}. Run with nothing else on the machine:
+    .venv/bin/python benchmarks/tolerance_speed.py psf network
 """
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 OUT = Path(__file__).parent / "results"
+DOEFAB = [sys.executable, "-m", "doefab"]
 
 
-def main(samples: int = 4):
-    from doefab.tolerance import study
-    from doefab.tolerance.errors import load_budget
+def run(args: list[str], out: Path) -> tuple[dict, float]:
+    t = time.perf_counter()
+    subprocess.run(DOEFAB + ["tolerance", *args, "--out", str(out)], check=True, stdout=subprocess.DEVNULL)
+    return json.loads((out / "tolerance.json").read_text()), time.perf_counter() - t
 
-    budget = load_budget()
-    rows = ["| design | level | samples | wall time (s) | samples / minute |", "| --- | --- | --- | --- | --- |"]
-    for design in ("streak", "grating", "half-ring"):
-        ddir = f"masks/{design}/design"
-        study._judge(ddir, 1)  # set-up (PSF plan, nominal PSF) not counted
-        for networks in (False, True):
-            with tempfile.TemporaryDirectory() as tmp:
-                if networks:
-                    study._network_judge(ddir, 1)
-                t = time.perf_counter()
-                study.monte_carlo(ddir, budget, samples, tmp, seed=0, progress=False, networks=networks)
-                dt = time.perf_counter() - t
-            rows.append(f"| {design} | {'network' if networks else 'PSF'} | {samples} | {dt:.1f} | "
-                        f"{60 * samples / dt:.1f} |")
-            print(rows[-1], flush=True)
-    rows += ["", "| backend (grating, PSF level) | samples | wall time (s) | same numbers as in process |",
-             "| --- | --- | --- | --- |"]
-    ddir = "masks/grating/design"
-    n = 8
-    with tempfile.TemporaryDirectory() as tmp:
-        t = time.perf_counter()
-        a = study.monte_carlo(ddir, budget, n, Path(tmp) / "a", seed=3, progress=False)
-        t_a = time.perf_counter() - t
-        t = time.perf_counter()
-        b = study.monte_carlo(ddir, budget, n, Path(tmp) / "b", seed=3, progress=False, scheduler="local:2")
-        t_b = time.perf_counter() - t
-    # in process torch uses both cores, a worker one thread: float32 sums may round differently
-    diff = max(abs(x["metric"] - y["metric"]) for x, y in zip(a, b))
-    same = "yes, bit for bit" if diff == 0 else (f"yes to {diff:.1e} (float32 rounding)" if diff < 1e-6 else
-                                                 f"NO: differ by up to {diff:.2e}")
-    rows.append(f"| in process (judge already built) | {n} | {t_a:.1f} | — |")
-    rows.append(f"| Dask LocalCluster, 2 workers (includes start-up and each worker's PSF set-up) | {n} | {t_b:.1f} | "
-                f"{same} |")
+
+def psf_rows(tmp: Path) -> tuple[list[str], dict]:
+    rows = ["| command | parts | wall time (s) | Monte Carlo (s) | parts / minute | yield (95 % interval) |",
+            "| --- | --- | --- | --- | --- | --- |"]
+    data = {}
+    for label, extra in (("in process", []), ("--workers 2", ["--workers", "2"])):
+        res, wall = run(["--design", "masks/grating", "--samples", "300", *extra], tmp / label.replace(" ", "_"))
+        y = res["summary"]["yield"]
+        data[label] = {"wall_s": wall, "mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"],
+                       "yield": y, "grid": res["grid"]["monte_carlo_grid"]}
+        rows.append(f"| doefab tolerance --design masks/grating --samples 300 {' '.join(extra)} | 300 | {wall:.0f} | "
+                    f"{res['monte_carlo_seconds']:.0f} | {res['parts_per_minute']:.1f} | {y['value']:.3f} "
+                    f"({y['ci95'][0]:.3f}–{y['ci95'][1]:.3f}) |")
+        print(rows[-1], flush=True)
+    res, wall = run(["--design", "masks/grating", "--samples", "0", "--surrogate"], tmp / "surrogate")
+    s = res["surrogate"]
+    d = data["in process"]["yield"]["ci95"]
+    agree = s["yield"]["ci95"][0] <= d[1] and d[0] <= s["yield"]["ci95"][1]
+    data["surrogate"] = {"wall_s": wall, **s, "agrees_with_direct": agree}
+    h = s["yield"]["held_out"]
+    rows.append(f"| doefab tolerance --design masks/grating --samples 0 --surrogate | {s['model']['parts']} fitted + "
+                f"{h['n']} held out | {wall:.0f} | — | — | {s['yield']['value']:.3f} ({s['yield']['ci95'][0]:.3f}–"
+                f"{s['yield']['ci95'][1]:.3f}) |")
+    rows += ["", f"Surrogate: held-out RMSE {h['rmse']:.4f}, mean residual {h['bias']:+.4f} ± {h['bias_se']:.4f}; its "
+                 f"yield interval {'overlaps' if agree else 'does NOT overlap'} the direct run's ({d[0]:.3f}–{d[1]:.3f})."]
+    return rows, data
+
+
+def network_rows(tmp: Path) -> tuple[list[str], dict]:
+    rows = ["| design | parts through the network | Monte Carlo (s) | parts / minute |", "| --- | --- | --- | --- |"]
+    data = {}
+    for name in ("streak", "grating", "half-ring"):
+        res, _ = run(["--design", f"masks/{name}", "--samples", "6", "--networks", "--grid", "1"], tmp / name)
+        data[name] = {"mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"]}
+        rows.append(f"| {name} | 6 | {res['monte_carlo_seconds']:.0f} | {res['parts_per_minute']:.2f} |")
+        print(rows[-1], flush=True)
+    return rows, data
+
+
+def main(parts: list[str]):
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "tolerance_speed.md").write_text("\n".join(rows) + "\n")
-    print("\n".join(rows))
+    old = OUT / "tolerance_speed.json"
+    data = json.loads(old.read_text()) if old.is_file() else {}
+    text = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for part, fn in (("psf", psf_rows), ("network", network_rows)):
+            if part in parts:
+                rows, data[part] = fn(Path(tmp))
+                data[part + "_rows"] = rows
+    for part in ("psf", "network"):
+        text[part] = data.get(part + "_rows", [])
+    old.write_text(json.dumps(data, indent=1) + "\n")
+    md = ["PSF level, committed grating design, default budget (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
+          "", *text["psf"], "", "Through the networks (`... tolerance_speed.py network`):", "", *text["network"]]
+    (OUT / "tolerance_speed.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:] or ["psf", "network"])

@@ -1,19 +1,19 @@
 """Seeded procedural training data for the three tasks (nothing is downloaded at run time).
 
 Every sample is drawn from its own ``numpy.random.SeedSequence([split seed, index])``, and the three splits
-have different seeds, so train, validation and test never share a sample. Textures are real photographs that
-scikit-image ships (``skimage.data``), converted to linear radiance; a few of them are held out for the test
-split only, and a third of the textures are procedural (smooth noise, stripes, checkers), so the networks see
-natural image statistics and sharp synthetic edges.
+never share content: each of scikit-image's photographs (``skimage.data``, converted to linear radiance)
+belongs to one split only (``IMAGES``), and so does each measured reflectance family and each family of light
+but the illuminant library the proposed network searches (``spectra``; ``tests/reconstruction/test_splits.py``
+checks every pair of splits). A third of the textures are procedural (smooth noise, stripes, checkers), so the
+networks see natural image statistics and sharp synthetic edges.
 
 Why these are fair stand-ins for the seed's datasets:
 - HDR (seed 4.3 uses HDR photographs): textured scenes at ordinary exposure plus highlights — light sources,
   specular blobs and small bright points — scaled so 1–5 % of the pixels saturate the plain (uncoded)
   half-exposure capture, with values up to 2^8, the seed's peak.
 - Hyperspectral (seed 4.4 uses measured hyperspectral images): 31 bands 400–700 nm built from measured
-  reflectance spectra (ColorChecker, CIE test colour samples and NIST CQS samples shipped by colour-science)
-  under measured illuminants (CIE standard illuminants and light sources shipped by colour-science), laid out
-  in regions following the edges of real photographs, with shading.
+  reflectance spectra shipped by colour-science (and smooth synthetic ones in training) under measured and
+  synthesised light (``spectra``), laid out in regions following the edges of real photographs, with shading.
 - Depth (seed 4.5 uses rendered scenes, 1–5 m): layered scenes — a far background, often a receding ground
   plane, and 2–6 occluding textured objects at random depths — with a metric depth map.
 """
@@ -25,13 +25,15 @@ import functools
 import numpy as np
 
 __all__ = ["SPLIT_SEEDS", "sample_rng", "texture", "hdr_sample", "spectral_sample",
-           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M"]
+           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images"]
 
 SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017}
 HS_WAVELENGTHS_M = tuple(float(x) * 1e-9 for x in range(400, 701, 10))
-_TRAIN_IMAGES = ("astronaut", "camera", "rocket", "coins", "moon", "brick", "grass", "gravel", "hubble_deep_field",
-                 "immunohistochemistry", "stereo_motorcycle", "page", "clock", "cell")
-_TEST_IMAGES = ("coffee", "chelsea", "colorwheel", "retina")
+# scikit-image's photographs, each in one split only (cat and chelsea are the same picture: chelsea, test)
+IMAGES = {"train": ("astronaut", "camera", "rocket", "coins", "moon", "brick", "grass", "hubble_deep_field", "page",
+                    "clock", "cell", "text"),
+          "val": ("immunohistochemistry", "gravel", "stereo_motorcycle"),
+          "test": ("coffee", "chelsea", "colorwheel", "retina")}
 
 
 def sample_rng(split: str, index: int) -> np.random.Generator:
@@ -39,11 +41,16 @@ def sample_rng(split: str, index: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([SPLIT_SEEDS[split], int(index)]))
 
 
+def split_images(split: str) -> tuple:
+    """The split's photographs as linear-radiance [H, W, 3] arrays (for content checks and benchmarks)."""
+    return _images(split)
+
+
 @functools.lru_cache(maxsize=None)
 def _images(split: str) -> tuple:
     import skimage.data as skd
 
-    names = _TEST_IMAGES if split == "test" else _TRAIN_IMAGES
+    names = IMAGES[split]
     out = []
     for name in names:
         a = getattr(skd, name)()
@@ -144,25 +151,11 @@ def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: 
     return np.minimum(scene, 256.0).astype(np.float32)
 
 
-@functools.lru_cache(maxsize=None)
-def _spectra(split: str) -> tuple[np.ndarray, np.ndarray]:
-    """(reflectances [R, 31], illuminants [I, 31]) on 400–700 nm; the ISO 17321-1 chart is held out for test."""
-    from colour.characterisation import SDS_COLOURCHECKERS
-    from colour.quality import SDS_TCS, SDS_VS
-
-    sets = [SDS_COLOURCHECKERS["BabelColor Average"], SDS_COLOURCHECKERS["ColorChecker N Ohta"],
-            SDS_TCS["CIE 1995"], SDS_TCS["CIE 2024"], SDS_VS["NIST CQS 9.0"]]
-    if split == "test":
-        sets = [SDS_COLOURCHECKERS["ISO 17321-1"], SDS_VS["NIST CQS 7.4"]]
-    refl = np.clip(np.array([_on_bands(sd) for s in sets for sd in s.values()]), 0, 1)
-    return refl, illuminant_spectra()[1]
-
-
 def _on_bands(sd) -> np.ndarray:
     """A colour-science spectral distribution on the 31 bands 400–700 nm (10 nm)."""
-    import colour
+    from doefab.reconstruction.spectra import on_bands
 
-    return np.asarray(sd.copy().align(colour.SpectralShape(400, 700, 10)).values, np.float64)
+    return on_bands(sd)
 
 
 @functools.lru_cache(maxsize=None)
@@ -179,17 +172,22 @@ def illuminant_spectra() -> tuple[tuple[str, ...], np.ndarray]:
     return tuple(names), np.array(rows)
 
 
-def spectral_sample(rng: np.random.Generator, size: int, split: str) -> np.ndarray:
-    """[31, S, S] spectral radiance (400–700 nm): measured reflectances in regions that follow a real image's
-    edges, shaded, under one measured illuminant (normalised to peak 1)."""
-    refl, illum = _spectra(split)
+def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str | None = None) -> np.ndarray:
+    """[31, S, S] spectral radiance (400–700 nm): reflectances of the split (measured, and in training also
+    synthetic) in regions that follow a real image's edges, shaded, under one light (peak 1): ``light`` is
+    "in-library" or "out-of-library" (``spectra.light_kind``; default: the split's library light)."""
+    from doefab.reconstruction.spectra import reflectances, scene_illuminant, synthetic_reflectance
+
+    refl = reflectances(split)
     k = int(rng.integers(3, 9))
     lum = texture(rng, size, split).mean(axis=0)
     edges = np.quantile(lum, np.linspace(0, 1, k + 1)[1:-1])
     regions = np.digitize(lum, edges)
     picks = refl[rng.choice(len(refl), size=k, replace=len(refl) < k)]
+    if split == "train":  # half the regions synthetic: the networks must not learn a few dozen spectra
+        picks = np.array([synthetic_reflectance(rng) if rng.random() < 0.5 else p for p in picks])
     shading = 0.4 + 0.6 * _smooth_noise(rng, size, rng.uniform(2, 10))
-    e = illum[rng.integers(len(illum))]
+    e = scene_illuminant(rng, split, light or "in-library")
     scene = picks[regions].transpose(2, 0, 1) * shading[None] * e[:, None, None]
     # exposure: the brightest pixel's band-mean radiance is 0.6–1.2 (a flat spectrum of 1 fills an RGB channel)
     return (scene * rng.uniform(0.6, 1.2) / max(scene.mean(axis=0).max(), 1e-6)).astype(np.float32)

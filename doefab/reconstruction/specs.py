@@ -15,7 +15,7 @@ import torch
 
 from doefab.errors import DoefabError
 
-__all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin",
+__all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
            "check_design_task"]
 
 REPO = Path(__file__).resolve().parents[2]
@@ -92,47 +92,59 @@ def crop_margin(task: str) -> int:
     return get_spec(task).kernel // 2
 
 
-def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", crosstalk=None):
+def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", crosstalk=None,
+               conditions=None):
     """Scenes, targets and simulated captures for sample ``indices`` of ``split``.
 
     Each scene is generated with a margin of half a PSF window on every side, blurred, and cropped back to
-    ``size``, so the captures hold the light that enters the crop from outside it. ``crosstalk(i)``: the
-    ``DualPixelCrosstalk`` of image i (the camera's mix, noise, and its pipeline's unmix), or None: clean views.
+    ``size``, so the captures hold the light that enters the crop from outside it. ``conditions``
+    (``reconstruction.conditions``): what the camera adds — scene i rendered through ``conditions.pair_for(i)``
+    (a fabricated part's PSFs, for depth at finer planes), its views mixed by crosstalk and unmixed by a
+    calibrated pipeline; default: ``pair`` and clean views. ``crosstalk(i)`` overrides the views' camera
+    (``DualPixelCrosstalk``). Hyperspectral scenes are lit per ``spectra.light_kind(split, i)``.
     Returns (coded [B, 3, S, S], uncoded [B, 3, S, S], target [B, C, S, S] or depth [B, S, S]) tensors.
     """
-    from doefab.imaging.captures import plane_masks, render_layers
     from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.imaging.sensor import noise_model
-    from doefab.reconstruction.data import depth_sample, hdr_sample, sample_rng, spectral_sample
+    from doefab.reconstruction.data import sample_rng
 
     m = crop_margin(task)
-    big = size + 2 * m
     nm = noise_model(noise)
     coded, uncoded, targets = [], [], []
-    psf_c = pair.coded.to(torch.float32)
-    psf_u = pair.uncoded.to(torch.float32)
     t = None if response is None else torch.as_tensor(response, dtype=torch.float32)
+    n = len(indices) if hasattr(indices, "__len__") else 8
     for i in indices:
         rng = sample_rng(split, i)
-        masks = None
-        if task == "hdr":
-            scene = hdr_sample(rng, big, split)
-        elif task == "hyperspectral":
-            scene = spectral_sample(rng, big, split)
-        else:
-            scene, depth = depth_sample(rng, big, split)
-            masks = plane_masks(torch.from_numpy(depth), pair.depths)
-        s = torch.from_numpy(scene)
-        views = []
-        for psf in (psf_c, psf_u):
-            b = render_layers(s, psf, masks, pair.depths)
-            if t is not None:
-                b = torch.einsum("rc,chw->rhw", t, b)
-            views.append(b[:, m:m + size, m:m + size].double().numpy())
-        xt = (crosstalk(i) if crosstalk is not None else None) or DualPixelCrosstalk(0.0, 0.0)
-        c_view, u_view = xt.record(views[0], views[1], nm, rng)
+        p = conditions.pair_for(i, pair) if conditions is not None else pair
+        scene, target, views = render_scene(task, split, i, rng, size + 2 * m, p, t)
+        xt = crosstalk(i) if crosstalk is not None else (conditions.crosstalk_for(i, n, size)
+                                                         if conditions is not None else None)
+        c_view, u_view = (xt or DualPixelCrosstalk(0.0, 0.0)).record(
+            *(v[:, m:m + size, m:m + size].double().numpy() for v in views), nm, rng)
         coded.append(torch.from_numpy(c_view.astype(np.float32)))
         uncoded.append(torch.from_numpy(u_view.astype(np.float32)))
-        tgt = depth[m:m + size, m:m + size] if task == "depth" else scene[:, m:m + size, m:m + size]
+        tgt = target[m:m + size, m:m + size] if task == "depth" else scene[:, m:m + size, m:m + size]
         targets.append(torch.from_numpy(np.ascontiguousarray(tgt)))
     return torch.stack(coded), torch.stack(uncoded), torch.stack(targets)
+
+
+def render_scene(task: str, split: str, index: int, rng, big: int, pair, response):
+    """(scene, target, (coded, uncoded) clean views before noise) of one generated scene of side ``big``."""
+    from doefab.imaging.captures import plane_masks, render_layers
+    from doefab.reconstruction.data import depth_sample, hdr_sample, spectral_sample
+    from doefab.reconstruction.spectra import light_kind
+
+    masks, target = None, None
+    if task == "hdr":
+        scene = hdr_sample(rng, big, split)
+    elif task == "hyperspectral":
+        scene = spectral_sample(rng, big, split, light_kind(split, index))
+    else:
+        scene, target = depth_sample(rng, big, split)
+        masks = plane_masks(torch.from_numpy(target), pair.depths)
+    s = torch.from_numpy(scene)
+    views = []
+    for psf in (pair.coded.to(torch.float32), pair.uncoded.to(torch.float32)):
+        b = render_layers(s, psf, masks, pair.depths)
+        views.append(torch.einsum("rc,chw->rhw", response, b) if response is not None else b)
+    return scene, target, views

@@ -38,7 +38,7 @@ __all__ = ["ReliefModel", "MaskErrors", "pattern_heights", "transmittance", "mea
 # the next at ρ + 1, each widened by the bias β (|β| ≤ ½) into [b − β, b + β]. Zone z of the five these four
 # breakpoints make is reached by the block columns (relative to the one right of ρ) listed here.
 ZONE_REACH = ((-1,), (-1, 0), (0,), (0, 1), (1,))
-MAX_TILE_ERROR = 0.02  # cells: a mask rotation is applied per tile, as the translation at the tile's centre
+MAX_TILE_ERROR = 0.05  # cells: a mask rotation is applied per tile, as the translation at the tile's centre
 MIN_GROUP = 20000  # cells: smaller groups of alike cells are merged (fewer, larger array operations)
 
 

@@ -86,6 +86,7 @@ class SpectralRoute:
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)
         field = torch.fft.fft2(pupil, s=(ly, lx))
-        inten = field.real.square() + field.imag.square()
+        re_im = torch.view_as_real(field)
+        inten = torch.addcmul(re_im[..., 0] * re_im[..., 0], re_im[..., 1], re_im[..., 1])
         out = (wy @ inten @ wxt) * scale**2
         return out * env if env is not None else out

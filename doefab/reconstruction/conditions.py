@@ -1,0 +1,144 @@
+"""Captures the networks did not make: what a real camera adds that the reconstruction does not model exactly.
+
+``Conditions`` says how a batch's captures are rendered:
+
+- ``parts``: PSF pairs of as-fabricated parts drawn from the tolerance budget (relief as its masks made it,
+  mount errors; ``doefab.tolerance``), one per scene in turn — while the network is told the nominal PSF (or
+  the part's, when a user measured it);
+- ``crosstalk``: per-column dual-pixel crosstalk mixed per Eq. 29 at each scene's place on the sensor, then
+  unmixed with ratios a simulated noisy white-wall calibration estimated (the user's pipeline);
+- ``depth_planes``: depth scenes rendered through PSFs at planes ``depth_refine`` times finer (in inverse
+  depth) than the network's cost volume scans, so depths fall between them;
+- the sensor's noise (always).
+
+``honest(task, design, split)`` draws them for a split (its own parts: training, validation and test never
+share one; cached on disk, as the PSFs of dozens of fine planes cost minutes); ``clean()`` is the old,
+inverse-crime setting: the nominal PSF at the network's planes, no crosstalk.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes"]
+
+PART_SEEDS = {"train": 11, "val": 22, "test": 33}  # parts of one split are never another's
+DEPTH_REFINE = 4
+# fabricated parts' PSFs take minutes: kept between runs under $DOEFAB_CACHE (default ~/.cache/doefab)
+CACHE = Path(os.environ.get("DOEFAB_CACHE", Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "doefab"))
+CACHE = CACHE / "conditions"
+
+
+@dataclass
+class Conditions:
+    name: str = "clean"
+    parts: list = field(default_factory=list)  # PSFPairs (both halves); empty: the nominal pair
+    crosstalk: object = None  # PartErrors carrying the budget's sensor, or None
+    split: str = "test"
+
+    def pair_for(self, index: int, nominal):
+        return self.parts[index % len(self.parts)] if self.parts else nominal
+
+    def crosstalk_for(self, index: int, images: int, size: int):
+        """The DualPixelCrosstalk of scene ``index`` (its crop spread across the calibrated width), or None."""
+        if self.crosstalk is None:
+            return None
+        from dataclasses import replace
+
+        from doefab.imaging.crosstalk import DualPixelCrosstalk
+        from doefab.tolerance.errors import crosstalk_ratios
+        from doefab.tolerance.netjudge import crop_columns
+
+        err = replace(self.crosstalk, seed=int(np.random.SeedSequence([PART_SEEDS[self.split], index])
+                                               .generate_state(1)[0]))
+        a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(index % max(images, 1), images, size,
+                                                                err.calibrated_width_px))
+        return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
+
+    def describe(self) -> dict:
+        return {"name": self.name, "parts": len(self.parts), "crosstalk": self.crosstalk is not None,
+                "depth_planes": len(self.parts[0].depths) if self.parts else None}
+
+
+def clean() -> Conditions:
+    return Conditions()
+
+
+def fine_planes(depths, refine: int = DEPTH_REFINE) -> tuple:
+    """Planes ``refine`` times finer than ``depths`` (uniform in inverse depth between the nearest and farthest)."""
+    inv = np.linspace(1 / min(depths), 1 / max(depths), (len(depths) - 1) * refine + 1)
+    return tuple(float(1 / v) for v in inv)
+
+
+def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | None = None,
+           progress: bool = False) -> Conditions:
+    """A split's honest conditions: ``parts`` fabricated parts from ``budget`` (default: the shipped one), the
+    budget's crosstalk with calibration, and for depth PSFs at ``DEPTH_REFINE``× finer planes."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import load_budget, sensor_errors
+    from doefab.tolerance.surrogate import base_part
+
+    budget = budget or load_budget()
+    pairs = _parts(task, Path(design_dir), split, parts, budget, progress)
+    sensor = replace(base_part(budget), **sensor_errors(budget))
+    return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split)
+
+
+def _key(task, design, split, n, budget) -> str:
+    from doefab.fabrication.levels import levels_sha256
+
+    b = {k: v for k, v in budget.items() if k != "defaults_used"}
+    text = json.dumps([task, levels_sha256(design.levels), split, n, b, DEPTH_REFINE, PART_SEEDS[split],
+                       list(design.depths), list(design.wavelengths)], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: bool) -> list:
+    """PSF pairs of ``n`` parts sampled from the budget (seeded by the split), at the network's kernel; cached."""
+    from dataclasses import replace
+
+    from doefab.design.design import Design
+    from doefab.io import atomic_write_bytes
+    from doefab.optics.psf import PSFPair
+    from doefab.reconstruction.specs import get_spec
+    from doefab.tolerance.errors import sample_errors
+    from doefab.tolerance.judge import PSFJudge, alignment_chain
+
+    design = Design.load(design_dir)
+    depths = fine_planes(design.depths) if task == "depth" else design.depths
+    path = CACHE / f"{task}-{_key(task, design, split, n, budget)}.pt"
+    if path.is_file():
+        try:
+            data = torch.load(path, weights_only=True)
+            return [PSFPair(c, u, tuple(design.wavelengths), depths, design.camera.sensor_pitch)
+                    for c, u in zip(data["coded"], data["uncoded"])]
+        except Exception:  # noqa: BLE001 - a damaged cache is recomputed
+            path.unlink(missing_ok=True)
+    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir))
+    children = np.random.SeedSequence(PART_SEEDS[split]).spawn(n)
+    coded, uncoded = [], []
+    it = range(n)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc=f"fabricated parts ({split})", unit="part")
+    for i in it:
+        err = sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]))
+        err = replace(err, crosstalk=(0.0, 0.0))  # crosstalk acts on the captures, not on the PSF
+        with torch.no_grad():
+            got = judge.psfs(err, halves=("coded", "uncoded"), kernel=get_spec(task).kernel)
+        coded.append(got["coded"].float())
+        uncoded.append(got["uncoded"].float())
+    buf = io.BytesIO()
+    torch.save({"coded": coded, "uncoded": uncoded}, buf)
+    atomic_write_bytes(path, buf.getvalue())  # atomic_write_bytes makes the cache folder
+    return [PSFPair(c, u, tuple(design.wavelengths), depths, design.camera.sensor_pitch) for c, u in zip(coded, uncoded)]
