@@ -1,5 +1,10 @@
 """``doefab train``: train a reconstruction network for the committed design of a task (CPU, minutes).
 
+Training captures are made as a real camera makes them — through fabricated parts drawn from the default
+tolerance budget, with per-column dual-pixel crosstalk unmixed by a noisy calibration and depth between the
+network's planes (each split its own parts) — while the network is told the nominal PSF; --clean trains on the
+nominal model's own captures.
+
 Writes the weights and their metadata record (<task>_<variant>.pt/.json) into OUT, or into --weights-dir;
 the shipped weights in doefab/weights/ are replaced only with --replace-shipped. OUT/checkpoint.pt and
 OUT/history.csv are written while running.
@@ -37,6 +42,9 @@ def register(sub) -> None:
                    help="learning rate over the wall-time budget: cosine decay to 5 %% of --lr, or constant")
     p.add_argument("--design", default=None,
                    help="train for this design folder (or mask set) instead of the committed one")
+    p.add_argument("--clean", action="store_true",
+                   help="train on the nominal model's own captures instead of each split's fabricated parts, "
+                        "crosstalk and off-plane depth")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
     p.set_defaults(func=run)
@@ -46,7 +54,8 @@ def run(args) -> int:
     from doefab.cli._args import task_design_arg
     from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
-    from doefab.reconstruction.train import train, weights_target
+    from doefab.reconstruction.train import train
+    from doefab.reconstruction.weights import weights_target
 
     if args.crop % 32:
         raise DoefabError(f"--crop {args.crop} must be a multiple of 32 (e.g. 96)")
@@ -61,9 +70,13 @@ def run(args) -> int:
     design = task_design_arg(args, need_weights_dir=False)
     weights_target(args.weights_dir, out.path, args.replace_shipped, design)  # refused before any work
     out.create()
+    from doefab.tolerance.conditions import for_splits
+
+    cond = None if args.clean else for_splits(args.task, design, "honest", progress=True)
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
-                 schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line())
+                 schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line(),
+                 conditions=cond)
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_path']} and its .json")

@@ -47,12 +47,14 @@ def _read(path: Path) -> tuple[dict, dict]:
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
         raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
                           f"delete it and start again without --resume") from None
-    if not isinstance(state, dict) or "config" not in state or "theta" not in state:
+    if not isinstance(state, dict) or "config" not in state:
         raise DoefabError(f"checkpoint {path} lacks doefab fields; delete it and start again without --resume")
     try:
         saved = json.loads(state["config"])
-        ok = (isinstance(saved, dict) and isinstance(state["theta"], torch.Tensor)
-              and bool(torch.isfinite(state["theta"]).all()) and isinstance(state.get("step"), int)
+        theta = state.get("theta")  # a design's (or an end-to-end run's) parameters, when the run has any
+        ok = (isinstance(saved, dict) and (theta is None or (isinstance(theta, torch.Tensor)
+                                                             and bool(torch.isfinite(theta).all())))
+              and isinstance(state.get("step"), int)
               and state["step"] >= 0 and isinstance(state.get("elapsed"), float) and state["elapsed"] >= 0
               and isinstance(state.get("history"), list) and isinstance(state.get("generator"), torch.Tensor))
     except (TypeError, ValueError):

@@ -134,7 +134,8 @@ def lens_difference_waves(camera: Camera, task, r2=None):
     if r2 is None:
         c = (np.arange(camera.doe_pixels) - (camera.doe_pixels - 1) / 2) * camera.doe_pitch
         r2 = c[None, :] ** 2 + c[:, None] ** 2
-    return -r2 * _extra_power(camera, task) / (2 * camera.design_wavelength)
+    # a point at z arrives with path r²/2z; in focus it would be r²/2z_f: the DOE adds r²/2·(1/z_f − 1/z_far)
+    return r2 * _extra_power(camera, task) / (2 * camera.design_wavelength)
 
 
 def make_parameterization(name: str, camera: Camera, knots: int = 0):

@@ -116,7 +116,7 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
                          f"{BENCHMARK}: this run reused the committed design; the design runs measured by "
                          "`benchmarks/design_metric_vs_time.py` and `benchmarks/nlopt_optimizers.py` (table in "
                          "`benchmarks/results`)" + note))
-    from doefab.reconstruction.train import history_path
+    from doefab.reconstruction.weights import history_path
 
     curves = [(v, history_path(scene.task, v)) for v in ("proposed", "coded_only", "uncoded_only")]
     if any(p.is_file() for _, p in curves):

@@ -16,16 +16,13 @@ Checkpoints every ``val_every`` steps; ``resume`` continues exactly.
 
 from __future__ import annotations
 
-import json
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_text
 
 __all__ = ["finetune_end_to_end", "render_depth_batch"]
 
@@ -83,12 +80,12 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     wall time, loss, validation MAE in metres) and ``checkpoint.pt``. Returns a summary with the MAE gained per
     minute.
     """
-    from doefab.design.checkpoint import load_checkpoint, save_checkpoint
     from doefab.design.design import Design
     from doefab.design.optimize import design_from_theta
     from doefab.design.parameterization import quantize_ste, theta_to_height
     from doefab.optics.psf import PSFPlan
     from doefab.reconstruction.loader import load_reconstructor
+    from doefab.reconstruction.loop import run_loop
     from doefab.reconstruction.models import build_model, default_arch, loss_fn
     from doefab.reconstruction.specs import crop_margin, get_spec, psf_pair
 
@@ -126,122 +123,68 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     opt_net = torch.optim.Adam(net.parameters(), lr=lr_net)
     opt_doe = torch.optim.Adam([theta], lr=lr_doe)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt = out / "checkpoint.pt"
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
-    step, elapsed, history = 0, 0.0, []
-    if resume:
-        state = load_checkpoint(ckpt, {"config": config}, ignore=())
-        with torch.no_grad():
-            theta.copy_(state["theta"])
-        net.load_state_dict(state["model"])
-        opt_net.load_state_dict(state["optimizer"])
-        opt_doe.load_state_dict(state["optimizer_doe"])
-        step, elapsed, history = int(state["step"]), float(state["elapsed"]), [list(r) for r in state["history"]]
     margin = crop_margin("depth")
+    current = {}
 
     def coded_psf(grad: bool) -> torch.Tensor:
         with torch.set_grad_enabled(grad):
             h = quantize_ste(theta_to_height(param.waves(theta), dcam), dcam)
             return plan.half_psf("coded", h)
 
-    def validate(psf_c) -> float:
-        c, u, d = render_depth_batch(range(val_images), "val", crop, psf_c.detach(), psf_u, design.depths, margin,
+    def validate() -> float:
+        psf_c = coded_psf(False)
+        current["psf"] = psf_c
+        c, u, d = render_depth_batch(range(val_images), "val", crop, psf_c, psf_u, design.depths, margin,
                                      noise_seed=seed + 1)
         net.eval()
         with torch.no_grad():
-            mae = float((net(c, u, torch.stack([psf_c.detach().float(), psf_u])) - d).abs().mean())
+            mae = float((net(c, u, torch.stack([psf_c.float(), psf_u])) - d).abs().mean())
         net.train()
         return mae
 
-    def save(step_now: int) -> None:
-        save_checkpoint(ckpt, {"config": json.dumps({"config": config}, sort_keys=True), "theta": theta.detach().clone(),
-                               "model": net.state_dict(), "optimizer": opt_net.state_dict(),
-                               "optimizer_doe": opt_doe.state_dict(), "step": step_now,
-                               "elapsed": float(time.perf_counter() - t0), "history": history,
-                               "generator": torch.get_rng_state()})
-        lines = ["step,wall_time_s,loss,val_mae_m"] + [",".join(f"{v:.6g}" for v in r) for r in history]
-        atomic_write_text(out / "history.csv", "\n".join(lines) + "\n")
-
-    budget = minutes * 60.0
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=int(budget), initial=int(min(elapsed, budget)), desc="end-to-end depth", unit="s")
-    t0 = time.perf_counter() - elapsed
-    psf_c = coded_psf(False)
-    if not history:
-        history.append([0, 0.0, float("nan"), validate(psf_c)])
-    last = history[-1][3]
-    try:
-        while time.perf_counter() - t0 < budget and (max_steps is None or step < max_steps):
-            joint = step % doe_every == 0
-            if joint:
-                psf_c = coded_psf(True)
-            c, u, d = render_depth_batch(range(step * batch, (step + 1) * batch), "train", crop,
-                                         psf_c if joint else psf_c.detach(), psf_u, design.depths, margin,
-                                         noise_seed=seed * 1_000_003 + step)
-            opt_net.zero_grad()
-            opt_doe.zero_grad()
-            # the cost volume sees the coded PSF too (differentiable in it on joint steps)
-            loss = loss_fn("depth", net(c, u, torch.stack([(psf_c if joint else psf_c.detach()).float(), psf_u])), d)
-            if not torch.isfinite(loss):
-                raise DoefabError(f"loss became {float(loss)} at step {step}; the last checkpoint is kept in {ckpt}")
+    def step_fn(step: int) -> float:
+        joint = step % doe_every == 0
+        if joint:
+            psf_c = coded_psf(True)
+        else:
+            if "psf" not in current:
+                current["psf"] = coded_psf(False)
+            psf_c = current["psf"]
+        c, u, d = render_depth_batch(range(step * batch, (step + 1) * batch), "train", crop, psf_c, psf_u,
+                                     design.depths, margin, noise_seed=seed * 1_000_003 + step)
+        opt_net.zero_grad()
+        opt_doe.zero_grad()
+        # the cost volume sees the coded PSF too (differentiable in it on joint steps)
+        loss = loss_fn("depth", net(c, u, torch.stack([psf_c.float(), psf_u])), d)
+        if torch.isfinite(loss):
             loss.backward()
             opt_net.step()
             if joint:
                 opt_doe.step()
-                psf_c = psf_c.detach()
-            step += 1
-            if step % val_every == 0:
-                psf_c = coded_psf(False)
-                last = validate(psf_c)
-            history.append([step, round(time.perf_counter() - t0, 2), float(loss.detach()), last])
-            if step % val_every == 0:
-                save(step)
-            if bar is not None:
-                bar.n = int(min(time.perf_counter() - t0, budget))
-                bar.set_postfix(step=step, loss=f"{float(loss.detach()):.4f}", val_mae_m=f"{last:.3f}")
-                bar.refresh()
-    finally:
-        if bar is not None:
-            bar.close()
-    psf_c = coded_psf(False)
-    final = validate(psf_c)
-    history.append([step, round(time.perf_counter() - t0, 2), float("nan"), final])
-    save(step)
-    wall = time.perf_counter() - t0
+                current["psf"] = coded_psf(False)
+        return float(loss.detach())
+
+    steps, history, wall = run_loop(out, config, minutes, step_fn, validate,
+                                    {"model": net, "optimizer": opt_net, "optimizer_doe": opt_doe},
+                                    [(opt_net, lr_net), (opt_doe, lr_doe)], "constant", "mae_m", val_every, resume,
+                                    progress, "end-to-end depth", max_steps, tensors={"theta": theta},
+                                    validate_first=True)
+    start_mae, final = history[0][3], history[-1][3]
     new = design_from_theta(design, theta.detach(), pname, sampling, history=[],
                             extra={"end_to_end": {"from_design": str(Path(design_dir).resolve()), "minutes": minutes,
-                                                  "steps": step, "doe_steps": math.ceil(step / doe_every),
+                                                  "steps": steps, "doe_steps": math.ceil(steps / doe_every),
                                                   "start_network": start_from}})
     new.save(out / "design")
-    _save_weights(net, arch, out / "weights", new, spec, config, step, wall)
-    start_mae = history[0][3]
-    return {"steps": step, "wall_time_s": round(wall, 1), "val_mae_start_m": start_mae, "val_mae_end_m": final,
+    from doefab.fabrication.levels import levels_sha256
+    from doefab.reconstruction.weights import write_weights
+
+    write_weights(out / "weights", "depth", "proposed", net,
+                  {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": arch,
+                   "training": {"end_to_end": config, "steps": steps, "wall_time_s": round(wall, 1)}},
+                  (out / "history.csv").read_bytes())
+    return {"steps": steps, "wall_time_s": round(wall, 1), "val_mae_start_m": start_mae, "val_mae_end_m": final,
             "mae_gain_per_minute_m": (start_mae - final) / (wall / 60.0), "design": str(out / "design"),
             "metric": new.metrics}
-
-
-def _save_weights(net, arch, folder: Path, design, spec, config, steps, wall) -> None:
-    import hashlib
-    import io
-
-    from doefab.fabrication.levels import levels_sha256
-    from doefab.io import atomic_write_bytes, atomic_write_json
-    from doefab.reconstruction.train import weights_paths
-
-    folder.mkdir(parents=True, exist_ok=True)
-    buf = io.BytesIO()
-    torch.save(net.state_dict(), buf)
-    data = buf.getvalue()
-    pt, meta_path = weights_paths("depth", "proposed", folder)
-    meta = {"format": "doefab weights 1", "task": "depth", "variant": "proposed", "design": "end-to-end",
-            "design_levels_sha256": levels_sha256(design.levels), "arch": arch,
-            "training": {"end_to_end": config, "steps": steps, "wall_time_s": round(wall, 1)},
-            "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
-    atomic_write_bytes(pt, data)
-    atomic_write_json(meta_path, meta)

@@ -27,7 +27,7 @@ highlight, so with the coded capture the highlight radiance is the solution of a
 Measured on 12 held-out HDR test scenes of 256² (``benchmarks/hdr_solve.py``, highlight PSNR with peak 2^8):
 see ``benchmarks/results/hdr_solve.json`` and the README.
 The HDR networks take the solve from the captures their variant sees as their input and the baseline their
-output refines (``DeconvNet(highlight_iters=N, bound_iters=…, bound_rounds=…)``).
+output refines (``hdrnet.HDRNet(highlight_iters=N, bound_iters=…, bound_rounds=…)``).
 """
 
 from __future__ import annotations

@@ -19,7 +19,8 @@ from doefab.errors import DoefabError
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import get_spec, psf_pair
-from doefab.reconstruction.train import is_shipped, model_inputs, weights_paths
+from doefab.reconstruction.train import model_inputs
+from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, weights_paths
 
 __all__ = ["load_reconstructor", "Reconstructor"]
 
@@ -117,6 +118,12 @@ def _float_tensor(x) -> torch.Tensor:
     return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
 
 
+def _renamed(state: dict) -> dict:
+    """Weights saved before the coded branch had its own module (``coded.``) load under today's names."""
+    old = ("feat_coded.", "wiener.")
+    return {("coded." + k if k.startswith(old) else k): v for k, v in state.items()}
+
+
 def _retrain(task: str, variant: str, weights_dir, design) -> str:
     """The command that makes the network the loader looks for, writing where it looks."""
     cmd = f"doefab train --task {task} --variant {variant}" + (f" --design {design}" if design is not None else "")
@@ -150,7 +157,7 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     except (ValueError, UnicodeDecodeError):
         _refuse(meta_path, "the metadata record is not valid JSON", *who)
     need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
-    if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != "doefab weights 1":
+    if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != WEIGHTS_FORMAT:
         _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
     if (meta["task"], meta["variant"]) != (task, variant):
         _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
@@ -164,7 +171,7 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])
-        model.load_state_dict(state)
+        model.load_state_dict(_renamed(state))
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta)

@@ -6,7 +6,7 @@ import torch
 
 from doefab.errors import DoefabError
 from doefab.reconstruction.metrics import HIGHLIGHT_ABOVE
-from doefab.reconstruction.networks import VARIANTS, DeconvNet, DepthNet, depth_loss
+from doefab.reconstruction.networks import VARIANTS, DepthNet, depth_loss
 from doefab.reconstruction.specs import get_spec
 
 __all__ = ["default_arch", "build_model", "loss_fn"]
@@ -32,13 +32,17 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     if task == "depth":  # records without "cost_volume" predate it (networks without one)
         return DepthNet(variant, width=int(arch["width"]), cost_volume=bool(arch.get("cost_volume", False)),
                         planes=int(arch.get("planes", 17)))  # 17: the seed's planes, 1–5 m in 0.25 m steps
-    return DeconvNet(spec.out_channels, spec.out_channels, variant, features=int(arch["features"]),
-                     width=int(arch["width"]), log_output=task == "hdr",
-                     baseline=spectral_baseline() if task == "hyperspectral" else None,
-                     illuminant=_illuminant_search() if arch.get("illuminant_search") else None,
-                     # records without these keys predate the solve / its bounded stage
-                     highlight_iters=int(arch.get("highlight_iters", 0)), bound_iters=int(arch.get("bound_iters", 0)),
-                     bound_rounds=int(arch.get("bound_rounds", 8)))
+    if task == "hdr":
+        from doefab.reconstruction.hdrnet import HDRNet
+
+        return HDRNet(variant, features=int(arch["features"]), width=int(arch["width"]),
+                      highlight_iters=int(arch.get("highlight_iters", 40)), bound_iters=int(arch.get("bound_iters", 40)),
+                      bound_rounds=int(arch.get("bound_rounds", 8)))
+    from doefab.reconstruction.spectralnet import SpectralNet
+
+    return SpectralNet(spec.out_channels, variant, features=int(arch["features"]), width=int(arch["width"]),
+                       baseline=spectral_baseline(),
+                       illuminant=_illuminant_search() if arch.get("illuminant_search") else None)
 
 
 def _illuminant_search():

@@ -115,6 +115,6 @@ class HalfRingTask(Task):
         lam = camera.design_wavelength
         z_point = 25.0 / 5.0
         power = (0.0 if math.isinf(camera.focus_distance) else 1.0 / camera.focus_distance) - 1.0 / z_point
-        waves = -(xx**2 + yy**2) * power / (2 * lam)
+        waves = (xx**2 + yy**2) * power / (2 * lam)
         waves = waves + rng.uniform(0, 0.02, size=(n, n))
         return np.mod(waves, 1.0) * camera.material.height_2pi(lam)

@@ -188,13 +188,15 @@ def _digest(folder: Path, pattern: str) -> dict:
 
 def test_row03_train_writes_to_out_and_prints_the_path(tmp_path, capsys, monkeypatch):
     import doefab.reconstruction.train as train_mod
+    from doefab.reconstruction.weights import WEIGHTS_DIR
 
-    shipped = train_mod.WEIGHTS_DIR
+    shipped = WEIGHTS_DIR
     before = _digest(shipped, "hdr_uncoded_only*")
     real = train_mod.train
-    monkeypatch.setattr(train_mod, "train", lambda *a, **k: real(*a, max_steps=1, val_images=1, **k))
+    monkeypatch.setattr(train_mod, "train", lambda *a, **k: real(*a, max_steps=1, val_images=1,
+                                                                 **{**k, "conditions": None}))
     rc, out, _ = _run(["train", "--task", "hdr", "--variant", "uncoded_only", "--minutes", "0.1", "--crop", "64",
-                       "--out", tmp_path / "tr"], capsys)
+                       "--clean", "--out", tmp_path / "tr"], capsys)
     assert rc == 0
     assert _digest(shipped, "hdr_uncoded_only*") == before
     written = (tmp_path / "tr" / "hdr_uncoded_only.pt").resolve()
@@ -202,7 +204,7 @@ def test_row03_train_writes_to_out_and_prints_the_path(tmp_path, capsys, monkeyp
 
 
 def test_row03_the_shipped_folder_needs_the_explicit_flag(tmp_path, capsys):
-    from doefab.reconstruction.train import WEIGHTS_DIR, weights_target
+    from doefab.reconstruction.weights import WEIGHTS_DIR, weights_target
 
     rc, _, err = _run(["train", "--task", "hdr", "--weights-dir", WEIGHTS_DIR, "--out", tmp_path / "tr"], capsys)
     assert rc == 2 and "--replace-shipped" in err and not (tmp_path / "tr").exists()

@@ -38,9 +38,31 @@ def test_lens_start_is_the_refocusing_lens():
     inside = np.hypot(*np.meshgrid(np.arange(64) - 31.5, np.arange(64) - 31.5)) < 31
     # r²-profile, linearly interpolated between knots one pixel apart: error ≤ Δr² curvature / 8
     assert np.abs(w - full)[inside].max() < 0.01 * np.abs(full).max() + 1e-3
-    # the lens makes the coded half sharp at the farthest plane: power 1/3.5 − 1/5 m⁻¹
-    r2 = (31.5 * cam.doe_pitch) ** 2
-    assert full[0, 0] == pytest.approx(-2 * r2 * (1 / 3.5 - 1 / 5) / (2 * cam.design_wavelength), rel=1e-9)
+
+
+def test_the_lens_start_focuses_the_coded_half_at_the_farthest_depth():
+    """Through the PSF pipeline (not the formula): the lens start's coded PSF peaks at 5 m, sharper there than at
+    3 m or at the camera's own focus (3.5 m), and about as sharp as a half aperture in focus; its mirror image
+    (the other sign) focuses nearer, not farther."""
+    import torch
+
+    from doefab.design.parameterization import theta_to_height
+
+    cam = doefab.Camera(aperture_diameter=6e-3, doe_pitch=20e-6, doe_pixels=300, sensor_pitch=4e-6,
+                        sensor_distance=50e-3, focus_distance=3.5)  # ~0.8 waves of defocus between 3.5 and 5 m
+    task = get_task("half-ring")
+    p = RadialParam(cam)
+    with torch.no_grad():
+        h = theta_to_height(p.waves(p.start(task, None, "lens")), cam).numpy()
+        h_wrong = theta_to_height(-p.waves(p.start(task, None, "lens")), cam).numpy()
+    depths = [3.0, 3.5, 5.0]
+    peak = {}
+    for name, height in (("lens", h), ("wrong sign", h_wrong), ("blank", None)):
+        psf = doefab.split_aperture_psf(height, cam, [550e-9], depths, 31, halves=("coded",)).coded
+        peak[name] = {z: float(psf[i, 0].max()) for i, z in enumerate(depths)}
+    assert peak["lens"][5.0] > peak["lens"][3.5] > peak["lens"][3.0]
+    assert peak["lens"][5.0] > 0.8 * peak["blank"][3.5]  # sharp: a half aperture in focus
+    assert peak["wrong sign"][5.0] < 0.5 * peak["lens"][5.0]
 
 
 def test_parameterization_names_are_checked():

@@ -126,21 +126,20 @@ def test_bad_inputs_are_refused():
 @pytest.mark.parametrize("variant,views", [("proposed", ("coded", "uncoded")), ("coded_only", ("coded",)),
                                            ("uncoded_only", ("uncoded",))])
 def test_hdr_networks_start_from_the_solve_of_the_captures_they_see(variant, views):
-    from doefab.reconstruction.networks import DeconvNet
+    from doefab.reconstruction.hdrnet import HDRNet
 
     scene = np.pad(_scene(), ((0, 0), (16, 16), (16, 16)), mode="reflect")  # 64²
     pc, pu, coded, uncoded = _captures(scene)
     coded, uncoded = (torch.from_numpy(x)[None].float() for x in (coded, uncoded))
-    net = DeconvNet(3, 3, variant, features=1, width=4, log_output=True, highlight_iters=20, bound_iters=8,
-                    bound_rounds=2).eval()
+    net = HDRNet(variant, features=1, width=4, highlight_iters=20, bound_iters=8, bound_rounds=2).eval()
     with torch.no_grad():
         y = net(coded, uncoded, torch.cat([pc, pu])[None])
     expect = solve_highlights(coded, uncoded, pc, pu, iters=20, views=views, bound_iters=8, bound_rounds=2)
     torch.testing.assert_close(y, expect, rtol=1e-4, atol=1e-4)  # zero-initialised head: exactly the solve
     with pytest.raises(DoefabError, match=r"psf must be \[B, 6"):
         net(coded, uncoded, pc[None])
-    with pytest.raises(DoefabError, match="HDR networks"):
-        DeconvNet(31, 31, variant, highlight_iters=20)
+    with pytest.raises(DoefabError, match="least-squares solve"):
+        HDRNet(variant, highlight_iters=0)
 
 
 def _bright_disc(size=32, radiance=60.0, radius=3.0):

@@ -104,12 +104,11 @@ def test_bad_shapes_are_refused():
 
 
 def test_proposed_network_starts_from_the_inverse_it_picks():
-    from doefab.reconstruction.networks import DeconvNet
+    from doefab.reconstruction.spectralnet import SpectralNet
 
     lib = _library()
     inv = illuminant_inverses(T, lib)
-    net = DeconvNet(31, 31, "proposed", features=1, width=4, baseline=np.zeros((31, 3)),
-                    illuminant=(T, inv)).eval()
+    net = SpectralNet(31, "proposed", features=1, width=4, baseline=np.zeros((31, 3)), illuminant=(T, inv)).eval()
     coded, uncoded, psf = _dispersed_scene(lib[1])
     with torch.no_grad():
         y = net(coded.float(), uncoded.float(), psf[None].float())

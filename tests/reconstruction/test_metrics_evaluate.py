@@ -35,10 +35,11 @@ def test_evaluate_writes_the_three_rows(tmp_path):
 
     for v in ("proposed", "coded_only", "uncoded_only"):
         train("hdr", v, minutes=1, out_dir=tmp_path / v, weights_dir=tmp_path / "w", crop=64, val_images=1,
-              val_every=100, arch={"features": 1, "width": 4}, progress=False, max_steps=1)
+              val_every=100, arch={"features": 1, "width": 4}, progress=False,
+              max_steps=1)
     res = evaluate("hdr", tmp_path / "eval", images=2, size=64, weights_dir=tmp_path / "w", progress=False)
     saved = json.loads((tmp_path / "eval" / "metrics.json").read_text())
-    assert saved["task"] == "hdr" and saved["test_images"] == 2 and set(saved["rows"]) == {
+    assert saved["task"] == "hdr" and saved["images"] == 2 and saved["split"] == "test" and set(saved["rows"]) == {
         "proposed", "coded_only", "uncoded_only"}
     assert set(saved["rows"]["proposed"]) == {"rmse", "psnr", "rmse_highlight", "psnr_highlight"}
     assert (tmp_path / "eval" / "examples.png").stat().st_size > 10_000

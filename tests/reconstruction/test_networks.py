@@ -3,7 +3,9 @@ import pytest
 import torch
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.networks import DeconvNet, DepthNet, depth_loss
+from doefab.reconstruction.hdrnet import HDRNet
+from doefab.reconstruction.networks import DepthNet, depth_loss
+from doefab.reconstruction.spectralnet import SpectralNet
 from doefab.reconstruction.resnet import ResNet18Trunk
 
 
@@ -21,21 +23,30 @@ def test_resnet18_trunk_structure():
     assert [f.shape[1] for f in feats] == [8, 8, 16, 32, 64]
 
 
+def _spectral(variant, width=4):
+    return SpectralNet(31, variant, features=2, width=width, baseline=np.full((31, 3), 0.1))
+
+
+def _hdr(variant, width=4):
+    return HDRNet(variant, features=2, width=width, highlight_iters=2, bound_iters=2, bound_rounds=1)
+
+
 @pytest.mark.parametrize("variant", ["proposed", "coded_only", "uncoded_only"])
-@pytest.mark.parametrize("out, n_psf", [(3, 3), (31, 31)])
-def test_deconv_net_shapes_and_gradients(variant, out, n_psf):
-    net = DeconvNet(out, n_psf, variant, features=2, width=4)
-    coded, uncoded = torch.rand(2, 3, 64, 96), torch.rand(2, 3, 64, 96)
+@pytest.mark.parametrize("task", ["hdr", "hyperspectral"])
+def test_networks_shapes_and_gradients(variant, task):
+    net, out, n_psf = (_hdr(variant), 3, 6) if task == "hdr" else (_spectral(variant), 31, 31)
+    coded, uncoded = torch.rand(2, 3, 64, 96) * 0.5, torch.rand(2, 3, 64, 96) * 0.5
     y = net(coded, uncoded, _psf(1, n_psf))
     assert y.shape == (2, out, 64, 96)
     y.mean().backward()
+    # the residual heads start at zero: every parameter still gets a gradient through the head's weights
     assert all(p.grad is not None for p in net.parameters() if p.requires_grad)
 
 
 def test_outputs_are_non_negative_at_inference():
-    net = DeconvNet(3, 3, "proposed", features=2, width=4, log_output=True).eval()
+    net = _hdr("proposed").eval()
     with torch.no_grad():
-        assert bool((net(torch.rand(1, 3, 64, 64), torch.rand(1, 3, 64, 64), _psf(1, 3)) >= 0).all())
+        assert bool((net(torch.rand(1, 3, 64, 64) * 0.5, torch.rand(1, 3, 64, 64) * 0.5, _psf(1, 6)) >= 0).all())
 
 
 @pytest.mark.parametrize("variant", ["proposed", "coded_only", "uncoded_only"])
@@ -67,14 +78,14 @@ def test_depth_net_with_cost_volume_uses_the_psfs():
 
 def test_a_few_training_steps_lower_the_loss():
     torch.manual_seed(0)
-    net = DeconvNet(3, 3, "proposed", features=2, width=8)
+    net = _spectral("proposed", width=8)
     opt = torch.optim.Adam(net.parameters(), lr=3e-3)
     coded, uncoded = torch.rand(2, 3, 64, 64), torch.rand(2, 3, 64, 64)
-    psf = _psf(1, 3)
+    psf = _psf(1, 31)
     losses = []
     for _ in range(60):
         opt.zero_grad()
-        loss = (net(coded, uncoded, psf) - uncoded).abs().mean()
+        loss = (net(coded, uncoded, psf) - uncoded.mean(1, keepdim=True)).abs().mean()
         loss.backward()
         opt.step()
         losses.append(loss.item())
@@ -90,9 +101,9 @@ def test_depth_loss_is_eq28():
 
 @pytest.mark.parametrize("shape", [(1, 3, 60, 64), (1, 3, 32, 32), (1, 1, 64, 64)])
 def test_bad_input_sizes_are_refused(shape):
-    net = DeconvNet(3, 3, "uncoded_only", width=4)
+    net = _spectral("uncoded_only")
     with pytest.raises(DoefabError, match="multiples of 32|\\[B, 3, H, W\\]"):
-        net(torch.rand(*shape), torch.rand(*shape))
+        net(torch.rand(*shape), torch.rand(*shape), _psf(1, 31))
 
 
 def test_hdr_loss_adds_the_relative_highlight_error():
@@ -108,3 +119,21 @@ def test_hdr_loss_adds_the_relative_highlight_error():
     log_l1 = np.abs(np.log1p(p) - np.log1p(t)).mean()
     want = log_l1 + 20.0 / (100.0 + 50.0 + 1.0)  # linear L1 over the highlight pixel's channels / their radiance
     assert abs(float(loss_fn("hdr", pred, target)) - want) < 1e-6
+
+
+def test_the_coded_only_spectral_baseline_reads_each_band_where_its_light_landed():
+    """A grating moves band λ to its first order; the coded-only ablation's estimate of band λ must read the
+    capture there (independent check: a band's PSF is a single off-centre pixel, the capture a bright dot)."""
+    k, n = 31, 5
+    psf = torch.zeros(1, n, k, k)
+    offs = [(0, 3), (0, 5), (1, 7), (0, 9), (-2, 11)]
+    for lam, (dy, dx) in enumerate(offs):
+        psf[0, lam, k // 2 + dy, k // 2 + dx] = 0.5
+    net = SpectralNet(n, "coded_only", features=1, width=4, baseline=torch.eye(n, 3) + 0.0).eval()
+    coded = torch.zeros(1, 3, 64, 64)
+    coded[0, 0, 30 + offs[0][0], 20 + offs[0][1]] = 1.0  # band 0's light from the scene point (30, 20)
+    coded[0, 1, 30 + offs[1][0], 20 + offs[1][1]] = 1.0
+    with torch.no_grad():
+        base = net._baseline(coded, None, psf)
+    assert float(base[0, 0, 30, 20]) == 1.0 and float(base[0, 1, 30, 20]) == 1.0  # registered back to (30, 20)
+    assert float(base[0, 0].sum()) == 1.0

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.train import LR_FLOOR, lr_factor, train
+from doefab.reconstruction.loop import LR_FLOOR, lr_factor
+from doefab.reconstruction.train import train
 
 
 def test_cosine_factor_is_half_a_cosine_to_the_floor():
@@ -22,7 +23,8 @@ def test_cosine_factor_is_half_a_cosine_to_the_floor():
 
 def test_training_anneals_over_its_wall_time_budget(tmp_path):
     meta = train("hdr", "proposed", minutes=0.2, out_dir=tmp_path / "run", weights_dir=tmp_path / "w", crop=64,
-                 val_images=1, val_every=1000, arch={"features": 1, "width": 4}, progress=False, lr=1e-3)
+                 val_images=1, val_every=1000, arch={"features": 1, "width": 4}, progress=False,
+                 lr=1e-3)
     state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     last_lr = state["optimizer"]["param_groups"][0]["lr"]
     assert meta["training"]["schedule"] == "cosine" and meta["training"]["steps"] >= 2

@@ -13,7 +13,9 @@
 
 ``honest(task, design, split)`` draws them for a split (its own parts: training, validation and test never
 share one; cached on disk, as the PSFs of dozens of fine planes cost minutes); ``clean()`` is the old,
-inverse-crime setting: the nominal PSF at the network's planes, no crosstalk.
+inverse-crime setting: the nominal PSF at the network's planes, no crosstalk. ``doefab train`` and ``doefab
+evaluate`` hand them to ``reconstruction.train`` / ``reconstruction.evaluate``, which render through whatever
+they are given (``specs.make_batch``).
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes"]
+__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits", "CONDITIONS"]
+
+CONDITIONS = ("honest", "clean")
 
 PART_SEEDS = {"train": 11, "val": 22, "test": 33}  # parts of one split are never another's
 DEPTH_REFINE = 4
@@ -142,3 +146,15 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     torch.save({"coded": coded, "uncoded": uncoded}, buf)
     atomic_write_bytes(path, buf.getvalue())  # atomic_write_bytes makes the cache folder
     return [PSFPair(c, u, tuple(design.wavelengths), depths, design.camera.sensor_pitch) for c, u in zip(coded, uncoded)]
+
+
+def for_splits(task: str, design, kind: str, splits=("train", "val"), parts: int = 6, progress: bool = False) -> dict:
+    """{split: Conditions} of a kind ("honest" or "clean") for a task's design (None: the committed one)."""
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.specs import design_dir
+
+    if kind not in CONDITIONS:
+        raise DoefabError(f"conditions must be one of {CONDITIONS}, got {kind!r}")
+    if kind == "clean":
+        return {s: clean() for s in splits}
+    return {s: honest(task, design or design_dir(task), s, parts, progress=progress) for s in splits}

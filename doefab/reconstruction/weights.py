@@ -1,0 +1,73 @@
+"""Where a network's weights live and how they are written: the file, its metadata record (design checksum,
+architecture, PSF settings, training, validation, the weights' SHA-256) and its validation curve, written
+atomically side by side. The shipped weights (``doefab/weights``) are replaced only on explicit request."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from pathlib import Path
+
+import torch
+
+from doefab.errors import DoefabError
+from doefab.io import atomic_write_bytes, atomic_write_json
+
+__all__ = ["WEIGHTS_DIR", "weights_paths", "history_path", "is_shipped", "weights_target", "write_weights",
+           "WEIGHTS_FORMAT"]
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
+WEIGHTS_FORMAT = "doefab weights 1"
+
+
+def weights_paths(task: str, variant: str, folder: str | Path | None = None) -> tuple[Path, Path]:
+    base = Path(folder) if folder is not None else WEIGHTS_DIR
+    return base / f"{task}_{variant}.pt", base / f"{task}_{variant}.json"
+
+
+def history_path(task: str, variant: str, folder: str | Path | None = None) -> Path:
+    """The validation curve kept beside the weights (the report's "training time" plot)."""
+    return weights_paths(task, variant, folder)[0].with_name(f"{task}_{variant}_history.csv")
+
+
+def is_shipped(folder: str | Path | None) -> bool:
+    """Whether ``folder`` (None: the default) is the package's shipped weights folder."""
+    return folder is None or Path(folder).resolve() == WEIGHTS_DIR.resolve()
+
+
+def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_shipped: bool = False,
+                   design=None) -> Path:
+    """Where training writes its weights: ``weights_dir``, else the run folder ``out_dir``; the shipped folder
+    only with ``replace_shipped`` (and only for the committed design). Checked before any work."""
+    if replace_shipped:
+        if design is not None:
+            raise DoefabError("--replace-shipped: the shipped weights belong to the committed design; a network "
+                              "for --design goes to --out or --weights-dir")
+        if weights_dir is not None and not is_shipped(weights_dir):
+            raise DoefabError(f"--replace-shipped writes to {WEIGHTS_DIR}; --weights-dir {weights_dir} names "
+                              f"another folder: give one of them")
+        return WEIGHTS_DIR
+    target = Path(out_dir if weights_dir is None else weights_dir)
+    if is_shipped(target):
+        raise DoefabError(f"--weights-dir {target} is the shipped weights folder: pass --replace-shipped to replace "
+                          f"the shipped networks (or give another folder)")
+    if target.exists() and not target.is_dir():
+        raise DoefabError(f"--weights-dir {target} is a file: give a folder")
+    return target
+
+
+def write_weights(folder: str | Path, task: str, variant: str, model: torch.nn.Module, record: dict,
+                  history_csv: bytes | None = None) -> dict:
+    """Write ``model``'s weights, their metadata (``record`` plus format, task, variant, SHA-256 and file name)
+    and the validation curve into ``folder``; returns the metadata with ``weights_path``."""
+    buf = io.BytesIO()
+    torch.save(model.state_dict(), buf)
+    data = buf.getvalue()
+    pt, meta_path = weights_paths(task, variant, folder)
+    meta = {"format": WEIGHTS_FORMAT, "task": task, "variant": variant, **record,
+            "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
+    atomic_write_bytes(pt, data)
+    atomic_write_json(meta_path, meta)
+    if history_csv is not None:
+        atomic_write_bytes(history_path(task, variant, folder), history_csv)
+    return {**meta, "weights_path": str(pt.resolve())}

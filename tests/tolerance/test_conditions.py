@@ -1,0 +1,66 @@
+"""Honest capture conditions: each split's own fabricated parts, depth between the network's planes, crosstalk
+calibrated from noisy white walls — the captures a network did not make (issue 23)."""
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.design.design import Design
+from doefab.tolerance import conditions as C
+from doefab.reconstruction.specs import make_batch
+
+
+@pytest.fixture(scope="module")
+def depth_design(tmp_path_factory):
+    cam = doefab.Camera(aperture_diameter=0.54e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=20e-3, focus_distance=3.5)
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    lv[:, 50:] = 15
+    d = Design(task="half-ring", task_params={"kernel_size": 63, "ring_law": "defocus"}, camera=cam,
+               wavelengths=(656e-9, 589e-9, 486e-9), depths=(1.0, 2.0, 5.0), height=doefab.levels_to_height(lv, cam),
+               levels=lv, metrics={"name": "m", "continuous": 0.1, "quantized": 0.1})
+    root = tmp_path_factory.mktemp("cond")
+    d.save(root / "design")
+    return root / "design"
+
+
+@pytest.fixture(scope="module")
+def honest(depth_design, tmp_path_factory):
+    C.CACHE = tmp_path_factory.mktemp("cache")
+    return {s: C.honest("depth", depth_design, s, parts=2) for s in ("train", "val", "test")}
+
+
+def test_every_split_has_its_own_fabricated_parts(honest):
+    psfs = {s: torch.stack([p.coded for p in c.parts]) for s, c in honest.items()}
+    for a, b in (("train", "val"), ("train", "test"), ("val", "test")):
+        assert float((psfs[a] - psfs[b]).abs().max()) > 1e-4
+    assert float((psfs["test"][0] - psfs["test"][1]).abs().max()) > 1e-4  # two parts, not one twice
+
+
+def test_depth_is_rendered_between_the_networks_planes(honest, depth_design):
+    planes = honest["test"].parts[0].depths
+    net = Design.load(depth_design).depths
+    assert len(planes) == (len(net) - 1) * C.DEPTH_REFINE + 1
+    inv = np.array([1 / z for z in planes])
+    assert np.allclose(np.diff(inv), np.diff(inv)[0])  # uniform in inverse depth
+    assert sum(any(abs(z - w) < 1e-9 for w in net) for z in planes) == len(net)  # the rest lie between them
+
+
+def test_honest_captures_differ_from_clean_ones_of_the_same_scene(honest, depth_design):
+    from doefab.reconstruction.specs import psf_pair
+
+    pair, _ = psf_pair("depth", depth_design)
+    clean = make_batch("depth", "test", [1], 64, pair)
+    real = make_batch("depth", "test", [1], 64, pair, conditions=honest["test"])
+    assert torch.equal(clean[2], real[2])  # the same scene and depth map
+    assert float((clean[0] - real[0]).abs().mean()) > 1e-3
+    xt = honest["test"].crosstalk_for(1, 4, 64)
+    assert xt is not None and xt.estimate is not None  # the default budget's camera is calibrated
+    assert not np.allclose(xt.estimate[0], xt.alpha_lr)  # with a calibration error of its own
+
+
+def test_parts_come_back_from_the_cache(honest, depth_design):
+    again = C.honest("depth", depth_design, "val", parts=2)
+    assert all(torch.equal(a.coded, b.coded) for a, b in zip(again.parts, honest["val"].parts))
+    assert len(list(C.CACHE.glob("depth-*.pt"))) == 3
