@@ -253,10 +253,11 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
 def _committed_run(design_name: str) -> tuple[str | None, str]:
     """Which row of the pixel-wise optimiser/grid benchmark the committed design is (None when it is not one of
     them, e.g. the radial half-ring, whose metric follows another ring law), and a caption note saying so."""
+    from doefab.design.committed import committed_dir
     from doefab.design.design import Design
 
     try:
-        cfg = Design.load(REPO / "masks" / design_name / "design").extra.get("config", {})
+        cfg = Design.load(committed_dir(design_name)).extra.get("config", {})
     except Exception:  # noqa: BLE001 - the figure is a courtesy; a missing design only drops the star
         return None, ""
     if cfg.get("parameterization", "pixel") != "pixel":

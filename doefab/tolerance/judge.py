@@ -34,8 +34,11 @@ DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid 
 
 
 def alignment_chain(design_dir: Path) -> dict:
-    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (chrome = 0)."""
+    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (a mask set's
+    ``design/``) or in a run's ``masks/`` beside it (chrome = 0); every plate to chrome when there is none."""
     man = Path(design_dir).parent / "manifest.json"
+    if not man.is_file():
+        man = Path(design_dir).parent / "masks" / "manifest.json"
     if man.is_file():
         try:
             return {int(k): int(v) for k, v in json.loads(man.read_text())["alignment_chain"].items()}
