@@ -451,6 +451,7 @@ API = [
     ("optimize", "checkpoint_every", lambda v: _opt(checkpoint_every=v),
      {NAN: nan, NEG: -1, ZERO: 0, UNIT: NA, BIG: VALID}),
     ("optimize", "batch", lambda v: _opt(batch=v), {NAN: nan, NEG: -2, ZERO: VALID, UNIT: NA, BIG: 10**12}),
+    ("optimize", "n_levels", lambda v: _opt(n_levels=v), {NAN: nan, NEG: -16, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "kernel_size", lambda v: doefab.get_task("streak", kernel_size=v),
      {NAN: nan, NEG: -95, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "period_m", lambda v: doefab.get_task("grating", period_m=v),
