@@ -17,6 +17,7 @@ from doefab.fabrication.bitplanes import bit_planes, levels_from_planes
 from doefab.fabrication.export import MaskOptions, export_masks
 from doefab.fabrication.process import check_levels, check_min_feature, mask_count
 from doefab.fabrication.verify import verify_mask_set
+from doefab.optics.materials import N_BK7
 
 N = 100
 PITCH = 5.4e-6
@@ -25,7 +26,7 @@ PITCH = 5.4e-6
 @pytest.fixture(scope="module")
 def cam():
     return doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=PITCH, doe_pixels=N, sensor_pitch=5.4e-6,
-                         sensor_distance=50e-3, focus_distance=5.0)
+                         sensor_distance=50e-3, focus_distance=5.0, material=N_BK7)
 
 
 def design_folder(cam, n_levels: int, path, seed: int = 0):
@@ -83,9 +84,10 @@ def test_eight_level_design_makes_three_layers_that_rebuild_the_map(cam, tmp_pat
     assert man["n_levels"] == 8 and man["n_masks"] == 3 and [L["layer"] for L in etch] == [1, 2, 3]
     assert sorted(rep["layers"]) == ["1", "2", "3"] and man["process_order"] == [5, 3, 2, 1]
     # depths from the substrate alone: d = λ / (n(λ) − 1) / 8, mask m etches 2^m·d, level k stands k·d high
-    d_nm = 550e-9 / (float(doefab.FUSED_SILICA.index(550e-9)) - 1) / 8 * 1e9
+    d_nm = 550e-9 / (float(N_BK7.index(550e-9)) - 1) / 8 * 1e9
     assert [L["etch_depth_nm"] for L in etch] == pytest.approx([d_nm, 2 * d_nm, 4 * d_nm], abs=1e-3)
     assert man["level_to_height_nm"] == pytest.approx([k * d_nm for k in range(8)], abs=1e-3)
+    assert man["material"]["name"] == "N-BK7"
     etched = etched_by_gds(tmp_path / "m")
     total = sum(etched[lay].astype(int) << bit for bit, lay in enumerate((1, 2, 3)))
     assert np.array_equal(7 - total, d.levels)  # Σ 2^m·mask_m read back reproduces the level map
@@ -103,7 +105,7 @@ def test_thirty_two_level_design_makes_five_layers_and_marks_for_six_plates(cam,
     etch = {L["bit"]: L for L in man["layers"] if L["purpose"] == "etch"}
     assert sorted(etch) == [0, 1, 2, 3, 4] and [etch[b]["layer"] for b in range(5)] == [1, 2, 3, 4, 6]
     d_nm = man["level_step_nm"]
-    assert d_nm == pytest.approx(550e-9 / (float(doefab.FUSED_SILICA.index(550e-9)) - 1) / 32 * 1e9, abs=1e-4)
+    assert d_nm == pytest.approx(550e-9 / (float(N_BK7.index(550e-9)) - 1) / 32 * 1e9, abs=1e-4)
     assert [etch[b]["etch_depth_nm"] for b in range(5)] == pytest.approx([d_nm * 2**b for b in range(5)], abs=2e-3)
     assert man["process_order"] == [5, 6, 4, 3, 2, 1]
     assert man["alignment_chain"] == {"5": 0, "4": 5, "3": 4, "2": 3, "1": 2}
