@@ -94,31 +94,12 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     t0 = time.perf_counter()
     n_levels = _levels_of(n_levels, design_dir)
     n_masks = mask_count(n_levels)
-    etch_layers = [etch_layer(b) for b in range(n_masks)]
-    order = list(opts.etch_order) if opts.etch_order is not None else etch_layers[::-1]
     lv = validate_levels(levels, n_levels)
     n = camera.doe_pixels
     if lv.shape != (n, n):
         raise DoefabError(f"level map shape {lv.shape} does not match the camera grid ({n}, {n}) at pitch "
                           f"{camera.doe_pitch:g} m: wrong design or camera")
-    if opts.align_chain not in ("chrome", "sequential"):
-        raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
-    if sorted(order) != etch_layers:
-        raise DoefabError(f"etch_order must name each of the {n_masks} etch layers {etch_layers} once (a {n_levels}-level "
-                          f"set), got {opts.etch_order!r}")
-    if opts.pattern_faces not in ("lens", "scene"):
-        raise DoefabError(f"pattern_faces must be 'lens' or 'scene', got {opts.pattern_faces!r}")
-    if opts.resist not in ("positive", "negative"):
-        raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
-    if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
-        raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
-    plain_name(opts.name, "mask-set name")
-    for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
-                            ("critical dimension cd_m", camera.doe_pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
-            raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
-    if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
-        raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
+    order = _check_options(opts, n_levels, camera.doe_pitch)
     pitch_nm = _nm(camera.doe_pitch, "DOE pitch")
     die_nm = _nm(opts.die_m, "die size")
     cd_nm = _nm(opts.cd_m if opts.cd_m is not None else camera.doe_pitch, "critical dimension")
@@ -186,6 +167,31 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         atomic_write_text(stage / "README.txt", fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
+
+
+def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
+    """Every mask option in its range (one error naming it); returns the etch layers in process order."""
+    etch_layers = [etch_layer(b) for b in range(mask_count(n_levels))]
+    order = list(opts.etch_order) if opts.etch_order is not None else etch_layers[::-1]
+    if opts.align_chain not in ("chrome", "sequential"):
+        raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
+    if sorted(order) != etch_layers:
+        raise DoefabError(f"etch_order must name each of the {len(etch_layers)} etch layers {etch_layers} once (a "
+                          f"{n_levels}-level set), got {opts.etch_order!r}")
+    if opts.pattern_faces not in ("lens", "scene"):
+        raise DoefabError(f"pattern_faces must be 'lens' or 'scene', got {opts.pattern_faces!r}")
+    if opts.resist not in ("positive", "negative"):
+        raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
+    if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
+        raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
+    plain_name(opts.name, "mask-set name")
+    for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
+                            ("critical dimension cd_m", pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+            raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
+    if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
+        raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
+    return order
 
 
 def _levels_of(n_levels, design_dir) -> int:

@@ -250,21 +250,27 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     if not np.array_equal((n_levels - 1) - etch_sum.astype(np.int64), levels):
         raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map")
     report["levels_reproduced"] = True
-    for key, need, what in (((CHROME_LAYER, 0), 1, "chrome aperture"), ((OUTLINE_LAYER, 0), 1, "die outline")):
-        if key not in layers or len(layers[key]) < need:
-            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds.name}")
+    _check_marks(layers, n_masks, gds.name, cap)
+    report["marks_present"] = True
+    if use_klayout:
+        report["klayout"] = _klayout_check(folder, man, levels, n_levels, pitch_nm)
+    return report
+
+
+def _check_marks(layers: dict, n_masks: int, gds_name: str, cap: int) -> None:
+    """Chrome aperture, die outline, and keys, verniers and CD ladder on the chrome plate and each of the
+    ``n_masks`` etch plates, every polygon within the vertex cap."""
+    for key, what in (((CHROME_LAYER, 0), "chrome aperture"), ((OUTLINE_LAYER, 0), "die outline")):
+        if key not in layers or len(layers[key]) < 1:
+            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds_name}")
     for plate in range(n_masks + 1):
         keys = len(layers[(KEY_LAYER, plate)]) if (KEY_LAYER, plate) in layers else 0
         vern = len(layers[(VERNIER_LAYER, plate)]) if (VERNIER_LAYER, plate) in layers else 0
         if keys < 8 or vern < 31:
             raise CheckFailed(f"plate {plate}: alignment keys ({keys}) or verniers/CD ladder ({vern}) are missing")
-    report["marks_present"] = True
     for key, p in layers.items():
         if p.max_vertices > cap:
             raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
-    if use_klayout:
-        report["klayout"] = _klayout_check(folder, man, levels, n_levels, pitch_nm)
-    return report
 
 
 def _read(gds: Path, only: set) -> dict:

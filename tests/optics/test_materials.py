@@ -106,3 +106,28 @@ def test_wavelengths_outside_a_published_fit_are_named():
     note = fit_range_warning(pmma, [400e-9, 550e-9, 1100e-9])
     assert "400 nm" in note and "1100 nm" in note and "550 nm" not in note and "Sultanova" in note
     assert fit_range_warning(doefab.Material("mine", (1.0, 0.0, 0.0), (0.1, 0.0, 0.0)), [100e-9]) is None
+
+
+@pytest.mark.parametrize("name", list(PRINTED))
+def test_a_mask_set_on_each_substrate_states_and_verifies_its_depths(name, tmp_path):
+    """The manifest records the substrate; verification looks it up by name and re-derives every depth from it."""
+    from doefab.errors import CheckFailed
+    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.verify import verify_mask_set
+
+    lam, n = PRINTED[name][0]
+    cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=50e-3, focus_distance=5.0, material=material_by_name(name),
+                        design_wavelength=lam * 1e-6)
+    lv = np.random.default_rng(1).integers(0, 4, (100, 100)).astype(np.uint8)
+    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False), n_levels=4)
+    path = tmp_path / "m" / "manifest.json"
+    man = json.loads(path.read_text())
+    assert man["material"]["name"] == name and man["n_levels"] == 4
+    step_nm = lam * 1e3 / (published(lam, n) - 1) / 4
+    assert man["level_step_nm"] == pytest.approx(step_nm, rel=1e-4 / (published(lam, n) - 1))
+    assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
+    other = "CaF2" if name != "CaF2" else "N-BK7"
+    path.write_text(json.dumps(dict(man, material=material_by_name(other).to_dict())))
+    with pytest.raises(CheckFailed, match="level_step_nm"):  # another substrate needs other depths
+        verify_mask_set(tmp_path / "m", use_klayout=False)
