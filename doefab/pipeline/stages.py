@@ -81,7 +81,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
-                            progress=True)
+                            n_levels=int(s["levels"]), progress=True)
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
                 + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}
@@ -89,10 +89,10 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     task = res["task"]
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
-        psf = plan(doefab.levels_to_height(d.levels, d.camera)).coded.numpy()
+        psf = plan(doefab.levels_to_height(d.levels, d.camera, d.n_levels)).coded.numpy()
     design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())
-    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera), d.camera.doe_pitch,
-                "16-level height map")
+    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera, d.n_levels), d.camera.doe_pitch,
+                f"{d.n_levels}-level height map")
     info["metric"] = d.metrics
     return info
 
@@ -109,9 +109,9 @@ def design_psf_figure(path: Path, d, psf, targets) -> Path:
     panels = []
     for z, w in picks:
         lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {'∞' if math.isinf(d.depths[z]) else f'{d.depths[z]:g} m'}"
-        panels += [(f"target, {lab}", targets[z, w]), (f"16-level design, {lab}", psf[z, w])]
+        panels += [(f"target, {lab}", targets[z, w]), (f"{d.n_levels}-level design, {lab}", psf[z, w])]
     return plot_psf_grid(path, panels, d.camera.sensor_pitch, ncols=2, log=True,
-                         suptitle=f"{d.task}: target (left) and fabricated 16-level design (right), log scale")
+                         suptitle=f"{d.task}: target (left) and fabricated {d.n_levels}-level design (right), log scale")
 
 
 def stage_masks(scene, res, out: Path, quick: bool) -> dict:
@@ -138,7 +138,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
     (out / MARKER).unlink()  # the export takes the (otherwise empty) folder as its own; run_stage marks it again
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
-    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True)
+    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True, n_levels=d.n_levels)
     why = ("the design is new (or its pattern side differs)" if not res["reuse"] else
            "the committed mask set is not in this installation (it lives in the repository): exported afresh")
     return {"status": "ran", "why": why, "mask_set": str(out)}

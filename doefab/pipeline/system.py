@@ -112,15 +112,18 @@ def defocus_ring_px(cam, params: dict) -> float:
 
 def _checks(scene: Scene, cam, task) -> list[str]:
     """Physics guards: each problem with its key and fix."""
+    from doefab.fabrication.process import check_min_feature
     from doefab.tasks.grating import GratingTask, grating_spot_px
     from doefab.tasks.halfring import HalfRingTask
     from doefab.tasks.streak import StreakTask
 
     out = []
     k = task.kernel_size
-    if "min_feature_um" in scene.fabrication and cam.doe_pitch < scene.fabrication["min_feature_um"] * 1e-6:
-        out.append(f"camera.doe_pitch_um {cam.doe_pitch * 1e6:g} is below fabrication.min_feature_um "
-                   f"{scene.fabrication['min_feature_um']:g}: the fab cannot write it; raise doe_pitch_um")
+    if "min_feature_um" in scene.fabrication:
+        try:
+            check_min_feature(cam.doe_pitch, scene.fabrication["min_feature_um"] * 1e-6)
+        except DoefabError as exc:
+            out.append(f"camera.doe_pitch_um / fabrication.min_feature_um: {exc}")
     lam_min = min(task.wavelengths(cam))
     alias = lam_min * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
     if k / 2 + 0.5 > alias:
@@ -160,7 +163,7 @@ def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -
          "sampling": design.get("sampling", cfg.get("sampling", 1)), "seed": design.get("seed", cfg.get("seed", 0)),
          "parameterization": design.get("parameterization", cfg.get("parameterization", "pixel")),
          "knots": design.get("knots", cfg.get("knots", 0)),
-         "levels": int(fab.get("levels", getattr(committed, "n_levels", 16)))}
+         "levels": int(fab.get("levels", committed.n_levels))}
     if dname == "half-ring":
         s["ring_law"] = task.ring_law
     return s

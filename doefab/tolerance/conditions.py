@@ -107,6 +107,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from dataclasses import replace
 
     from doefab.design.design import Design
+    from doefab.fabrication.process import mask_count
     from doefab.io import atomic_write_bytes, cache_root
     from doefab.optics.psf import PSFPair
     from doefab.reconstruction.specs import get_spec
@@ -124,7 +125,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
                     for c, u in zip(data["coded"], data["uncoded"])]
         except Exception:  # noqa: BLE001 - a damaged cache is recomputed
             path.unlink(missing_ok=True)
-    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir))
+    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir, mask_count(design.n_levels)))
     children = np.random.SeedSequence(PART_SEEDS[split]).spawn(n)
     coded, uncoded = [], []
     it = range(n)
@@ -133,7 +134,8 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
 
         it = tqdm(it, desc=f"fabricated parts ({split})", unit="part")
     for i in it:
-        err = sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]))
+        err = sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]),
+                            n_masks=judge.n_masks)
         err = replace(err, crosstalk=(0.0, 0.0))  # crosstalk acts on the captures, not on the PSF
         with torch.no_grad():
             got = judge.psfs(err, halves=("coded", "uncoded"), kernel=get_spec(task).kernel)
