@@ -130,8 +130,20 @@ def explain(res: dict) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
-    rows += _task_rows(cam, task, lams)
+    rows += _task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"])
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
+
+
+def _fab_rows(cam, n_levels: int) -> list[tuple]:
+    from doefab.fabrication.levels import level_step
+    from doefab.fabrication.process import mask_count
+
+    lam = cam.design_wavelength
+    step = level_step(cam, n_levels)
+    return [("substrate index", cam.material.index(lam), "", f"{cam.material.name} at the design wavelength "
+             f"{lam * 1e9:.0f} nm"),
+            ("etch depth of 2π", step * n_levels * 1e9, "nm", f"λ / (n − 1): {n_levels} levels of {step * 1e9:.1f} nm on "
+             f"{mask_count(n_levels)} binary masks")]
 
 
 def _task_rows(cam, task, lams) -> list[tuple]:
