@@ -95,7 +95,7 @@ KEYS = (
     Key("reconstruction", "weights", "choice", choices=("shipped", "train", "shipped-anyway"), default="shipped",
         help="shipped networks (the committed designs'), networks trained for this design, or the shipped ones "
              "given this design's PSF (with a warning)"),
-    Key("reconstruction", "minutes", "float", "min", 0.0, 600.0, default="6",
+    Key("reconstruction", "minutes", "float", "min", 0.05, 600.0, default="6",
         help="training time per network (weights = train)"),
     Key("reconstruction", "images", "int", "scenes", 1, 10000, default="4", help="held-out test scenes"),
     Key("reconstruction", "size_px", "int", "px", 64, 2048, default="256", help="test image side (a multiple of 32)"),

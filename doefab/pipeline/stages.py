@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
+from doefab.io import atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 from doefab.pipeline.system import resolve
 
@@ -135,10 +135,16 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                                            f"re-verified in {time.perf_counter() - t:.1f} s",
                 "mask_set": str(committed_set)}
     d = Design.load(design_dir)
-    (out / MARKER).unlink()  # the export takes the (otherwise empty) folder as its own; run_stage marks it again
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
-    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True, n_levels=d.n_levels)
+    # the export writes a fresh folder of its own beside the stage folder, then moves in (run_stage marks it again)
+    tmp = out.parent / f".{out.name}.export"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    export_masks(d.levels, d.camera, tmp, opts, design_dir=design_dir, n_levels=d.n_levels)
+    for f in tmp.iterdir():
+        os.replace(f, out / f.name)
+    tmp.rmdir()
     why = ("the design is new (or its pattern side differs)" if not res["reuse"] else
            "the committed mask set is not in this installation (it lives in the repository): exported afresh")
     return {"status": "ran", "why": why, "mask_set": str(out)}

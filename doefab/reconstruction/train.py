@@ -76,7 +76,8 @@ def arch_for_design(task: str, pair) -> dict:
         from doefab.reconstruction.data import HS_WAVELENGTHS_M
 
         lams = [float(w) for w in pair.wavelengths]
-        return {} if np.allclose(lams, HS_WAVELENGTHS_M, rtol=0, atol=1e-12) else {"wavelengths_m": lams}
+        same = len(lams) == len(HS_WAVELENGTHS_M) and np.allclose(lams, HS_WAVELENGTHS_M, rtol=0, atol=1e-12)
+        return {} if same else {"wavelengths_m": lams}
     return {}
 
 

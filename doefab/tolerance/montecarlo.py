@@ -62,8 +62,9 @@ def _read_log(log: Path, identity: dict) -> dict:
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
                 scheduler: str | None = None, workers: int = 1, progress: bool = True,
-                networks: bool = False) -> list[dict]:
-    """``n`` sampled parts; returns every sample's errors and metrics (ordered by index).
+                networks: bool = False, weights_dir=None) -> list[dict]:
+    """``n`` sampled parts; returns every sample's errors and metrics (ordered by index). ``networks``: judge
+    each part through its task's proposed network too (from ``weights_dir``; None: the shipped one).
 
     scheduler: None (in process, or a local process pool of ``workers``), ``"local:N"`` (a Dask
     ``LocalCluster`` of N workers) or ``"tcp://HOST:PORT"`` (an existing Dask scheduler).
@@ -98,19 +99,20 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
                             parts_per_min=f"{bar.n * 60 / max(time.perf_counter() - t0, 1e-9):.1f}")
 
     ddir = str(design_dir)
+    wdir = None if weights_dir is None else str(weights_dir)
     try:
         if scheduler:
-            _run_dask(scheduler, ddir, supersample, todo, errs, record, networks)
+            _run_dask(scheduler, ddir, supersample, todo, errs, record, networks, weights_dir)
         elif workers > 1:
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(workers, initializer=_worker_init) as ex:
-                futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks): i for i in todo}
+                futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks, wdir): i for i in todo}
                 for f in as_completed(futs):
                     record(futs[f], f.result())
         else:
             for i in todo:
-                record(i, evaluate_part(ddir, supersample, errs[i].to_json(), networks))
+                record(i, evaluate_part(ddir, supersample, errs[i].to_json(), networks, wdir))
     finally:
         if bar is not None:
             bar.close()
@@ -147,7 +149,7 @@ def parse_scheduler(scheduler: str) -> int | None:
     raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {scheduler!r}")
 
 
-def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False):
+def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, weights_dir=None):
     from doefab.tolerance.study import evaluate_part
 
     nw = parse_scheduler(scheduler)
@@ -164,6 +166,7 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False):
         client = Client(scheduler)
     try:
         futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
+                              None if weights_dir is None else str(weights_dir),
                               key=f"doefab-sample-{i}", retries=2, pure=False): i for i in todo}
         for f in as_completed(futs):
             record(futs[f], f.result())

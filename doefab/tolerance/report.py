@@ -72,7 +72,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         res["sweep_seconds"] = round(time.perf_counter() - t, 1)
     if samples > 0:
         _monte_carlo(res, design_dir, budget, out, samples, seed, mc_grid, scheduler, workers, networks, spec,
-                     task, progress)
+                     task, progress, weights_dir)
     if surrogate:
         _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
     if do_levels:
@@ -116,13 +116,13 @@ def _grids(judge, budget, grid, res, progress) -> dict:
 
 
 def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, workers, networks, spec, task,
-                 progress) -> None:
+                 progress, weights_dir=None) -> None:
     from doefab.tolerance.montecarlo import monte_carlo, summarize, wilson
     from doefab.tolerance.spec import meets
 
     t = time.perf_counter()
     rows = monte_carlo(design_dir, budget, samples, out, seed=seed, supersample=grid, scheduler=scheduler,
-                       workers=workers, progress=progress, networks=networks)
+                       workers=workers, progress=progress, networks=networks, weights_dir=weights_dir)
     res["monte_carlo_seconds"] = round(time.perf_counter() - t, 1)
     res["parts_per_minute"] = round(samples * 60 / max(res["monte_carlo_seconds"], 1e-9), 2)
     res["samples"] = rows
