@@ -60,6 +60,7 @@ class Material:
         return float(wavelength_m / (self.index(wavelength_m) - 1.0))
 
     def to_dict(self) -> dict:
+        """JSON-ready record: ``name``, ``sellmeier_b`` and ``sellmeier_c_um`` (micrometres)."""
         return {"name": self.name, "sellmeier_b": list(self.b), "sellmeier_c_um": list(self.c_um)}
 
     @classmethod
@@ -84,6 +85,7 @@ class Material:
         return made
 
 
+#: Fused silica by Malitson's Sellmeier formula (C coefficients in micrometres): the default DOE substrate.
 FUSED_SILICA = Material(
     name="fused silica",
     b=(0.6961663, 0.4079426, 0.8974794),

@@ -1,6 +1,6 @@
 """Scene files (TOML): what the user wants, validated as a whole before any work starts.
 
-Every key, its unit and default (the README documents the same table):
+Every key, its unit and default (the documentation's scene page shows this table):
 
 | key | unit | default |
 | --- | --- | --- |
