@@ -73,6 +73,7 @@ sphinx_gallery_conf = {
     "show_memory": False,
     "capture_repr": ("_repr_html_",),
     "min_reported_time": 0,
+    "write_computation_times": False,  # its page loads scripts from the web; each tutorial states its time
 }
 
 html_theme = "pydata_sphinx_theme"

@@ -188,7 +188,7 @@ def write_pages() -> list[str]:
             path.write_text(text)
     shown = {o for m in MEASUREMENTS for o in m.outputs}
     for f in sorted(RESULTS.iterdir()):
-        rel = f.relative_to(ROOT).as_posix()
+        rel = R + f.name
         if f.suffix in (".md", ".png") and rel not in shown:
             problems.append(f"results: {rel} is on no results page: add it to MEASUREMENTS in "
                             f"docs/_ext/doefab_results.py and include it in a page of docs/results/")
