@@ -216,8 +216,10 @@ class DoefabHelp(SphinxDirective):
             text = _parser_help(sub)
         except StopIteration:
             raise self.error(f"doefab has no subcommand {sub!r}") from None
+        text = f"$ doefab {sub + ' ' if sub else ''}--help\n{text}"
         block = nodes.literal_block(text, text)
         block["language"] = "text"
+        block["classes"].append("doefab-command")
         return [block]
 
 
@@ -277,6 +279,7 @@ class DoefabCommand(SphinxDirective):
             text += "\n\nwritten:\n" + "\n".join(f"  {f}" for f in files if ".doefab-output" not in f and f != given)
         block = nodes.literal_block(text, text)
         block["language"] = "text"
+        block["classes"].append("doefab-command")  # long lines wrap (_static/doefab.css)
         caption = nodes.paragraph(text=f"Run while this page was built ({seconds:.1f} s).")
         caption["classes"].append("doefab-command-caption")
         return [block, caption]
