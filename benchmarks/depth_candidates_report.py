@@ -1,14 +1,14 @@
-"""Issue 12: the depth-DOE comparison table, the winner's PSFs at every plane and the end-to-end curve.
+"""The depth-DOE comparison on validation scenes: the table and the winner's PSFs at every plane.
 
-Reads what ``bash scripts/depth_candidates.sh`` wrote under out/depthcand/ and writes
-benchmarks/results/depth_candidates.md, docs/depth_candidates_psfs.png and docs/depth_e2e_mae_vs_time.png.
+Reads what ``bash scripts/depth_candidates.sh`` wrote under out/depthcand/ (each candidate's proposed depth
+network trained the same way, evaluated on 12 validation scenes under honest captures) and writes
+benchmarks/results/depth_candidates.md, docs/depth_candidates_psfs.png and docs/depth_winner_psfs_all_planes.png.
 
     .venv/bin/python benchmarks/depth_candidates_report.py
 """
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
@@ -17,10 +17,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 D = ROOT / "out" / "depthcand"
 CANDIDATES = [  # name, design folder, weights folder, label
-    ("pixelwise", D / "pixelwise", "pixelwise", "pixel-wise, the earlier default (seed law, window loss)"),
-    ("radial-seed", D / "radial-seed", "radial-seed", "radial, seed law (r = 25 − 5z)"),
-    ("radial-defocus", D / "radial-defocus", "radial-defocus", "radial, defocus law (r ∝ 1/z − 1/5 m)"),
-    ("e2e", D / "e2e" / "design", "e2e-fresh", "end-to-end fine-tuned (from radial defocus)"),
+    ("committed", D / "committed", "committed",
+     "committed until now: radial, defocus law, optimised from the lens start of the wrong sign"),
+    ("radial-seed", D / "radial-seed", "radial-seed", "radial, seed law (r = 25 − 5z), from the refocusing lens"),
+    ("radial-defocus", D / "radial-defocus", "radial-defocus",
+     "radial, defocus law (r ∝ 1/z − 1/5 m), from the refocusing lens"),
 ]
 
 
@@ -47,9 +48,8 @@ def main() -> None:
                      "delta": m.get("delta125", float("nan")), "rmse": m.get("rmse", float("nan")),
                      "steps": t.get("steps", 0), "train_s": t.get("wall_time_s", 0.0),
                      "design_s": d.extra.get("wall_time_s", float("nan")), "pair": pair})
-    joint = D / "e2e" / "eval" / "metrics.json"
     lines = ["| candidate | ring metric mean / worst (16-level) | predicted confusion error (m) | min d′ | "
-             "network MAE (m) | δ<1.25 | RMSE (m) | network steps (6 min) | design wall time (s) |",
+             "validation MAE (m) | δ<1.25 | RMSE (m) | network steps (6 min) | design wall time (s) |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
         lines.append(f"| {r['label']} | {r['metric']:.3f} / {r['worst']:.3f} | {r['score']:.4f} | "
@@ -58,43 +58,14 @@ def main() -> None:
     by_score = [r["name"] for r in sorted(rows, key=lambda r: r["score"])]
     by_mae = [r["name"] for r in sorted(rows, key=lambda r: r["mae"])]
     lines += ["", f"Order by predicted confusion error: {' < '.join(by_score)}.",
-              f"Order by network test MAE: {' < '.join(by_mae)}.",
+              f"Order by the network's validation MAE: {' < '.join(by_mae)}.",
               f"Orders agree: {'yes' if by_score == by_mae else 'no'}."]
-    if joint.is_file():
-        j = json.loads(joint.read_text())["rows"]["proposed"]
-        lines.append(f"The jointly trained network of the end-to-end run itself (not the same budget): MAE "
-                     f"{j['mae']:.3f} m, δ<1.25 {j['delta125']:.3f}.")
-    hist = D / "e2e" / "history.csv"
-    if hist.is_file():
-        h = list(csv.DictReader(hist.open()))
-        t = np.array([float(r["wall_time_s"]) for r in h])
-        mae = np.array([float(r["val_mae_m"]) for r in h])
-        gain = (mae[0] - mae[-1]) / (t[-1] / 60)
-        lines.append(f"End-to-end run: validation MAE {mae[0]:.3f} → {mae[-1]:.3f} m in {t[-1] / 60:.1f} min "
-                     f"({gain * 1000:.1f} mm per minute, {len(h) - 2} steps).")
-        _curve(t, mae)
     out = ROOT / "benchmarks" / "results" / "depth_candidates.md"
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     best = min(rows, key=lambda r: r["mae"])
     _psf_figure(rows, best["name"])
     _all_planes(best)
-
-
-def _curve(t, mae) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 3.2), layout="constrained")
-    ax.plot(t / 60, mae, ".-")
-    ax.set_xlabel("wall time (min)")
-    ax.set_ylabel("validation depth MAE (m)")
-    ax.set_title("end-to-end fine-tuning (DOE + depth network)", fontsize=9)
-    ax.grid(alpha=0.3)
-    fig.savefig(ROOT / "docs" / "depth_e2e_mae_vs_time.png", dpi=110)
-    plt.close(fig)
 
 
 def _psf_figure(rows, best: str) -> None:

@@ -46,7 +46,7 @@ def full_grating(budget) -> tuple[list[str], dict]:
         res[s] = {"nominal": (j.score(j.nominal)["metric"], j.seconds_per_psf)}
         for name in FULL_KINDS:
             t = time.perf_counter()
-            m = j.evaluate(kind(name).budget_part(budget))["metric"]
+            m = j.evaluate(kind(name).budget_part(budget, j.n_masks))["metric"]
             res[s][name] = (m, time.perf_counter() - t)
             print(s, name, res[s][name], flush=True)
         del j

@@ -15,6 +15,7 @@ _EXPORTS = {
     "PRESETS": "doefab.optics.camera",
     "Material": "doefab.optics.materials",
     "FUSED_SILICA": "doefab.optics.materials",
+    "material_by_name": "doefab.optics.materials",
     "blank_height": "doefab.optics.elements",
     "blazed_grating_height": "doefab.optics.elements",
     "split_aperture_psf": "doefab.optics.psf",

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from doefab.errors import DoefabError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
+__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
            "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
@@ -245,3 +245,11 @@ def read_toml(path: str | Path, what: str) -> dict:
         return tomllib.loads(p.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DoefabError(f"{p} is not valid TOML ({exc})") from None
+
+
+def cache_root() -> Path:
+    """Where doefab keeps what it computes once and reuses (``$DOEFAB_CACHE``, else ``$XDG_CACHE_HOME/doefab``,
+    else ``~/.cache/doefab``), read at call time."""
+    if os.environ.get("DOEFAB_CACHE"):
+        return Path(os.environ["DOEFAB_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "doefab"

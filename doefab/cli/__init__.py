@@ -48,13 +48,14 @@ _CLI_NAMES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from doefab.cli import demo, design, doctor, evaluate, finetune, holder, masks, psf, run, tolerance, train
+    from doefab.cli import (demo, design, doctor, evaluate, finetune, holder, masks, psf, run, scene, tolerance,
+                            train)
 
     parser = OneLineParser(prog="doefab", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=OneLineParser)
-    for module in (run, doctor, demo, psf, design, masks, holder, train, evaluate, finetune, tolerance):
+    for module in (run, scene, doctor, demo, psf, design, masks, holder, train, evaluate, finetune, tolerance):
         module.register(sub)
     for name, subparser in sub.choices.items():
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,

@@ -13,7 +13,8 @@ from doefab.errors import DoefabError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("design", help="optimise a streak, grating or half-ring DOE and quantize it to 16 levels",
+    p = sub.add_parser("design", help="optimise a streak, grating or half-ring DOE and quantize it to the fab's "
+                                      "levels (--levels, 16 by default)",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", required=True, choices=["streak", "grating", "half-ring"], help="task")
     p.add_argument("--out", required=True, help="design folder to write")
@@ -27,6 +28,8 @@ def register(sub) -> None:
                    help="design on a DOE grid coarser by this factor (1 = the preset's full grid; must divide it)")
     p.add_argument("--batch", type=number(int, -1, 100_000), default=None,
                    help="(depth, band) pairs per Adam step; 0 = all; -1 = every depth, one random band each")
+    p.add_argument("--levels", type=int, choices=[2, 4, 8, 16, 32], default=16, metavar="L",
+                   help="height levels the fab makes: 2, 4, 8, 16 or 32 (log2 L binary masks)")
     p.add_argument("--qat-fraction", type=number(float, 0, 1, unit="fraction of the steps"), default=0.2,
                    help="last fraction of steps run quantization-aware")
     p.add_argument("--fab-weight", type=number(float, 0, 1000), default=0.0,
@@ -68,7 +71,7 @@ def run(args) -> int:
         check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
-                "checkpoint_every": args.checkpoint_every, "sampling": args.sampling}
+                "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.levels}
     if args.lr is not None:
         settings["lr"] = args.lr
     if args.batch is not None:
@@ -92,7 +95,7 @@ def run(args) -> int:
     m = design.metrics
     stop = design.extra.get("stop_reason")
     print(f"{design.task}: {m['name']}: continuous {m['continuous']:.4f} (worst {m['continuous_worst']:.4f}), "
-          f"16-level {m['quantized']:.4f} (worst {m['quantized_worst']:.4f}); "
+          f"{design.n_levels}-level {m['quantized']:.4f} (worst {m['quantized_worst']:.4f}); "
           f"wall time {design.extra.get('wall_time_s', 0):.0f} s; wrote {out.path}/"
           + (f"; optimiser: {stop}" if stop else ""))
     return 0

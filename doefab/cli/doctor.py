@@ -1,5 +1,7 @@
-"""``doefab doctor SCENE``: the scene's sampling conditions and numerical stiff spots, each with its margin
-and, where it fails, the fix (exit status 3 if any fails)."""
+"""``doefab doctor SCENE``: what the scene's camera and task imply (f-number, diffraction limit in sensor
+pixels, DOE pixels across the aperture, depth of field, the task's geometry in pixels), then its sampling
+conditions and numerical stiff spots, each with its margin and, where it fails, the fix (exit status 3 if any
+fails). Nothing is designed or trained."""
 
 from __future__ import annotations
 
@@ -18,14 +20,23 @@ def run(args) -> int:
     from doefab.pipeline.doctor import diagnose
     from doefab.pipeline.scene import load_scene
 
+    from doefab.pipeline.doctor import explain
+    from doefab.pipeline.system import resolve
+
     scene = load_scene(args.scene)
+    facts = explain(resolve(scene))
+    width = max(len(f["quantity"]) for f in facts)
+    print(f"{args.scene}: the system")
+    for f in facts:
+        print(f"  {f['quantity']:<{width}}  {f['value']:>8.4g} {f['unit']:<10} {f['meaning']}")
+    print("checks")
     rows = diagnose(scene, precision_check=not args.no_precision)
     for r in rows:
         val = f"{r['value']:.4g}" if isinstance(r["value"], float) else str(r["value"])
         print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "
               f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
     if args.out:
-        atomic_write_json(args.out, rows)
+        atomic_write_json(args.out, {"system": facts, "checks": rows})
     bad = [r["check"] for r in rows if not r["ok"]]
     if bad:
         raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")

@@ -1,4 +1,7 @@
-"""``doefab masks``: export a design as 4 binary photomask layers (GDSII [+ OASIS]) and verify them.
+"""``doefab masks``: export an L-level design as log2 L binary photomask layers (GDSII [+ OASIS]) and verify them.
+
+The number of levels is the design's (design.json ``n_levels``): 16 levels make 4 etch layers (1–4), 8 make 3,
+32 make 5 (layers 1–4 and 6; layer 5 is the chrome plate).
 
 Examples:
   doefab masks --design out/designs/streak --out masks/streak --oasis
@@ -16,7 +19,8 @@ from doefab.errors import DoefabError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("masks", help="export a design's 16 levels as 4 verified binary mask layers, or --verify a set",
+    p = sub.add_parser("masks", help="export a design's L levels as log2 L verified binary mask layers, or --verify "
+                                     "a set",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", help="design folder (design.json + levels.npy)")
     p.add_argument("--out", help="mask-set folder to write (must not exist unless --force)")
@@ -32,8 +36,9 @@ def register(sub) -> None:
                    help="max vertices per polygon (GDSII limit 8190)")
     p.add_argument("--align-chain", choices=["chrome", "sequential"], default="chrome",
                    help="every etch mask aligns to the chrome keys, or each to the previous plate")
-    p.add_argument("--etch-order", type=int, nargs=4, default=[4, 3, 2, 1], choices=[1, 2, 3, 4], metavar="LAYER",
-                   help="etch layers in process order (a permutation of 1 2 3 4)")
+    p.add_argument("--etch-order", type=int, nargs="+", default=None, metavar="LAYER",
+                   help="etch layers in process order, each once (default deepest first: 4 3 2 1 for 16 levels, "
+                        "3 2 1 for 8, 6 4 3 2 1 for 32)")
     p.add_argument("--resist", choices=["positive", "negative"], default="positive", help="resist tone")
     p.add_argument("--pattern-faces", choices=["lens", "scene"], default="lens",
                    help="which way the etched face points when mounted (lens: the layout is the design mirrored in x)")
@@ -55,20 +60,25 @@ def run(args) -> int:
         return 0
     if not args.design or not args.out:
         raise DoefabError("give --design DIR and --out DIR (or --verify DIR)")
-    if sorted(args.etch_order) != [1, 2, 3, 4]:
-        raise DoefabError(f"--etch-order {' '.join(map(str, args.etch_order))} must name each etch layer 1..4 once, "
-                          f"e.g. --etch-order 4 3 2 1")
     from doefab.cli._output import claim_output
     from doefab.design.design import Design
+    from doefab.fabrication.layers import etch_layer
+    from doefab.fabrication.process import mask_count
 
     design = Design.load(args.design)
+    layers = [etch_layer(b) for b in range(mask_count(design.n_levels))]
+    if args.etch_order is not None and sorted(args.etch_order) != layers:
+        raise DoefabError(f"--etch-order {' '.join(map(str, args.etch_order))} must name each etch layer of this "
+                          f"{design.n_levels}-level design ({' '.join(map(str, layers))}) once, e.g. --etch-order "
+                          f"{' '.join(map(str, layers[::-1]))}")
     claim_output(args, "masks", replace=args.force)  # validates --out before any work
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
-                       align_chain=args.align_chain, etch_order=tuple(args.etch_order), resist=args.resist,
+                       align_chain=args.align_chain, resist=args.resist,
+                       etch_order=None if args.etch_order is None else tuple(args.etch_order),
                        use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)
     report = export_masks(design.levels, design.camera, Path(args.out), opts, design_dir=args.design,
-                          force=args.force)
+                          force=args.force, n_levels=design.n_levels)
     for lay, st in report["layers"].items():
         print(f"layer {lay}: {st['polygons']} polygons, {st['vertices']} vertices (max {st['max_vertices']}), "
               f"{st['mismatched_pixels_gdstk']} mismatched pixels")

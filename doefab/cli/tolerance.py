@@ -35,7 +35,9 @@ def register(sub) -> None:
                    help="simulation grid: auto (the coarsest each error needs, measured on the design) or a "
                         "refinement per DOE pixel, 1–8")
     p.add_argument("--sweep", action="store_true", help="one-at-a-time sweeps of every error kind")
-    p.add_argument("--levels", action="store_true", help="quantization study: continuous, 16, 8, 4, 2 levels")
+    p.add_argument("--levels", action="store_true",
+                   help="quantization study: continuous, the design's levels and every fab level count below them "
+                        "(16, 8, 4, 2 for a 16-level design)")
     p.add_argument("--networks", action="store_true",
                    help="judge every part through the task's reconstruction network: delivered quality and its "
                         "yield (nominal and measured PSF)")

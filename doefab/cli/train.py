@@ -28,6 +28,9 @@ def register(sub) -> None:
                    help="network variant (the ablations use the same architecture and budget)")
     p.add_argument("--minutes", type=number(float, 0, 1440, lo_open=True, unit="minutes of wall time"), default=10.0,
                    help="training budget in minutes of wall time")
+    p.add_argument("--steps", type=number(int, 1, 10**7, unit="steps"), default=None,
+                   help="stop after this many steps if --minutes has not run out (a budget a loaded machine cannot "
+                        "shrink: for comparisons)")
     p.add_argument("--out", default=None, help="run folder for checkpoint.pt and history.csv "
                                                "(default out/train/<task>_<variant>)")
     p.add_argument("--weights-dir", default=None, help="where to write the weights (default: OUT)")
@@ -76,7 +79,7 @@ def run(args) -> int:
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
                  schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line(),
-                 conditions=cond)
+                 conditions=cond, max_steps=args.steps)
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_path']} and its .json")

@@ -1,7 +1,8 @@
 """A finished design and its folder format (a contract for masks, holder and tolerance work).
 
-Folder: ``design.json`` (task, camera, wavelengths, depths, metrics, seed, versions, ``levels_sha256``),
-``levels.npy`` (uint8 0..15), ``levels.png`` (16-bit, value = level · 4096 so it is visible), ``height.npy``
+Folder: ``design.json`` (task, camera, wavelengths, depths, metrics, seed, versions, ``n_levels`` L — 16 when a
+record predates it — and ``levels_sha256``), ``levels.npy`` (uint8 0..L−1), ``levels.png`` (16-bit, value =
+level · 65536 / L so it is visible), ``height.npy``
 (float64 metres), ``psf_*.png`` (target beside result) and ``history.csv``. Loading validates shape, dtype,
 level range and checksum and refuses a corrupt or mismatched folder with the reason.
 """
@@ -18,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.levels import N_LEVELS, levels_sha256, levels_to_height
+from doefab.fabrication.levels import levels_sha256, levels_to_height
+from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text
 from doefab.optics.camera import Camera
 
@@ -51,9 +53,10 @@ class Design:
     Attributes:
         task: task name.  task_params: the task's parameters.  camera: the camera it was designed for.
         wavelengths: metres.  depths: metres.  height: (N, N) float64 metres (continuous design).
-        levels: (N, N) uint8 0..15 (what the masks make).  metrics: task metric, continuous and quantized.
+        levels: (N, N) uint8 0..n_levels−1 (what the masks make).  metrics: task metric, continuous and quantized.
         seed, optimizer, iterations: how it was made.  history: rows (step, wall_time_s, loss, metric).
         psf_quantized / targets: optional (n_depths, n_wavelengths, K, K) arrays for the figures.
+        n_levels: L, the levels the fab makes (2, 4, 8, 16 or 32: log2 L binary masks).
     """
 
     task: str
@@ -71,11 +74,19 @@ class Design:
     psf_quantized: np.ndarray | None = None
     targets: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+    n_levels: int = DEFAULT_LEVELS
+
+    def __post_init__(self) -> None:
+        check_levels(self.n_levels, "Design.n_levels")
+        top = int(np.asarray(self.levels).max(initial=0))
+        if top >= self.n_levels:
+            raise DoefabError(f"the level map holds level {top} but the design has n_levels = {self.n_levels} "
+                              f"(levels 0..{self.n_levels - 1}): pass the n_levels it was quantized to")
 
     @property
     def quantized_height(self) -> np.ndarray:
-        """(N, N) float64 metres of the 16-level design (level · d)."""
-        return levels_to_height(self.levels, self.camera)
+        """(N, N) float64 metres of the L-level design (level · d)."""
+        return levels_to_height(self.levels, self.camera, self.n_levels)
 
     def to_json(self) -> dict:
         """The ``design.json`` record: task, camera (metres), wavelengths and depths (metres), metrics, level
@@ -91,8 +102,8 @@ class Design:
             "seed": self.seed,
             "optimizer": self.optimizer,
             "iterations": self.iterations,
-            "n_levels": N_LEVELS,
-            "level_step_m": float(levels_to_height(np.array([1], np.uint8), self.camera)[0]),
+            "n_levels": self.n_levels,
+            "level_step_m": float(levels_to_height(np.array([1], np.uint8), self.camera, self.n_levels)[0]),
             "shape": list(self.levels.shape),
             "row0": "top",
             "levels_sha256": levels_sha256(self.levels),
@@ -108,7 +119,7 @@ class Design:
             buf = io.BytesIO()
             np.save(buf, arr)
             atomic_write_bytes(out / name, buf.getvalue())
-        _write_png16(out / "levels.png", self.levels.astype(np.uint16) * 4096)
+        _write_png16(out / "levels.png", self.levels.astype(np.uint16) * (65536 // self.n_levels))
         if self.history:
             lines = ["step,wall_time_s,loss,metric"] + [",".join(f"{v:.6g}" if isinstance(v, float) else str(v)
                                                                 for v in row) for row in self.history]
@@ -131,7 +142,7 @@ class Design:
         for d, w in picks:
             label = f"{self.wavelengths[w] * 1e9:.0f} nm, {depth_label(self.depths[d])}"
             panels.append((f"target {label}", tg[d, w]))
-            panels.append((f"16-level design {label}", psf[d, w]))
+            panels.append((f"{self.n_levels}-level design {label}", psf[d, w]))
         plot_psf_grid(out / "psf_target_vs_design.png", panels, self.camera.sensor_pitch, ncols=2, log=False,
                       suptitle=f"{self.task}: target (left) and quantized design (right), linear scale")
 
@@ -150,32 +161,34 @@ class Design:
             raise DoefabError(f"{meta_path} is not valid JSON ({exc})") from None
         meta = _check_meta(meta, meta_path)
         camera = Camera.from_dict(meta["camera"], where=f"{meta_path}: camera")
-        step = float(levels_to_height(np.array([1], np.uint8), camera)[0])
+        n_levels = meta["n_levels"]
+        step = float(levels_to_height(np.array([1], np.uint8), camera, n_levels)[0])
         if abs(meta["level_step_m"] - step) > 1e-6 * step:
             raise DoefabError(f"{meta_path}: level_step_m {meta['level_step_m']!r} disagrees with the camera's "
-                              f"material and design wavelength ({step:.6g} m = λ / (n − 1) / 16): the record was "
-                              f"edited or made by another process; re-run doefab design")
+                              f"material, design wavelength and n_levels = {n_levels} ({step:.6g} m = λ / (n − 1) / "
+                              f"{n_levels}): the record was edited or made by another process; re-run doefab design")
         n = camera.doe_pixels
         levels = _load_npy(path / "levels.npy")
         if levels.dtype != np.uint8:
-            raise DoefabError(f"{path / 'levels.npy'} has dtype {levels.dtype}; expected uint8 levels 0..15")
+            raise DoefabError(f"{path / 'levels.npy'} has dtype {levels.dtype}; expected uint8 levels 0..{n_levels - 1}")
         if levels.shape != (n, n) or tuple(meta["shape"]) != levels.shape:
             raise DoefabError(f"{path / 'levels.npy'} has shape {levels.shape}, design.json says {meta['shape']} and "
                               f"the camera grid is ({n}, {n}): the folder is inconsistent")
-        if levels.max(initial=0) >= N_LEVELS:
-            raise DoefabError(f"{path / 'levels.npy'} holds level {int(levels.max())}; levels must be 0..15")
+        if levels.max(initial=0) >= n_levels:
+            raise DoefabError(f"{path / 'levels.npy'} holds level {int(levels.max())}; a {n_levels}-level design "
+                              f"(design.json n_levels) has levels 0..{n_levels - 1}")
         if levels_sha256(levels) != meta["levels_sha256"]:
             raise DoefabError(f"{path / 'levels.npy'} does not match levels_sha256 in design.json: the level map "
                               f"was changed or corrupted")
         hp = path / "height.npy"
-        height = _load_npy(hp) if hp.is_file() else levels_to_height(levels, camera)
+        height = _load_npy(hp) if hp.is_file() else levels_to_height(levels, camera, n_levels)
         if height.shape != (n, n) or not np.all(np.isfinite(height)):
             raise DoefabError(f"{hp} must be a finite ({n}, {n}) array of heights in metres")
         depths = tuple(meta["depths_m"])
         return cls(task=meta["task"], task_params=meta.get("task_params", {}), camera=camera,
                    wavelengths=tuple(meta["wavelengths_m"]), depths=depths, height=height, levels=levels,
                    metrics=meta["metrics"], seed=meta["seed"], optimizer=meta.get("optimizer", ""),
-                   iterations=meta.get("iterations", 0), extra=meta.get("extra", {}))
+                   iterations=meta.get("iterations", 0), extra=meta.get("extra", {}), n_levels=n_levels)
 
 
 def _check_meta(meta, where: Path) -> dict:
@@ -185,7 +198,7 @@ def _check_meta(meta, where: Path) -> dict:
     if not isinstance(meta, dict):
         raise DoefabError(f"{where}: must hold a JSON object")
     need = ("format_version", "task", "camera", "wavelengths_m", "depths_m", "metrics", "seed", "levels_sha256",
-            "n_levels", "level_step_m", "shape")
+            "level_step_m", "shape")
     missing = [k for k in need if k not in meta]
     if missing:
         raise DoefabError(f"{where} lacks the fields {missing}: not a doefab design.json (format {FORMAT_VERSION})")
@@ -198,8 +211,11 @@ def _check_meta(meta, where: Path) -> dict:
         bad("format_version", f"is {meta['format_version']!r}; this doefab reads format {FORMAT_VERSION}")
     if meta["task"] not in TASKS:
         bad("task", f"{meta['task']!r} is not one of {sorted(TASKS)}")
-    if meta["n_levels"] != N_LEVELS or isinstance(meta["n_levels"], bool):
-        bad("n_levels", f"is {meta['n_levels']!r}; doefab's process has {N_LEVELS} levels (4 binary masks)")
+    out["n_levels"] = meta.get("n_levels", DEFAULT_LEVELS)  # records written before L was a choice: 16
+    try:
+        check_levels(out["n_levels"], "n_levels")
+    except DoefabError as exc:
+        raise DoefabError(f"{where}: {exc}") from None
     lam = meta["wavelengths_m"]
     if not isinstance(lam, list) or not lam:
         bad("wavelengths_m", "must be a non-empty list of wavelengths in metres")

@@ -23,15 +23,16 @@ from doefab.design.design import Design
 from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
                                             theta_to_height)
 from doefab.errors import DoefabError
-from doefab.fabrication.levels import N_LEVELS, level_step, quantize_levels
+from doefab.fabrication.levels import level_step, quantize_levels
+from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.optics.camera import Camera
 from doefab.optics.psf import PSFPlan
 from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
-__all__ = ["DesignConfig", "optimize", "design_from_theta", "PLAIN_LEVEL", "OPTIMIZERS", "coded_mask"]
+__all__ = ["DesignConfig", "optimize", "design_from_theta", "plain_level", "OPTIMIZERS", "coded_mask",
+           "finalize_levels"]
 
-PLAIN_LEVEL = N_LEVELS - 1  # the plain half and the area outside the clear aperture stay unetched
 OPTIMIZERS = ("adam", "lbfgs", "mma")
 
 
@@ -52,6 +53,8 @@ class DesignConfig:
             profile, ``doefab.design.parameterization.RadialParam``).  knots: radial knot count (0 = N/2).
         start: ``"task"`` (the task's own starting map) or ``"lens"`` (the thin lens that refocuses the coded
             half to the task's farthest depth); ``None`` = task for pixel, lens for radial.
+        n_levels: the levels the fab makes (2, 4, 8, 16 or 32; log2 L masks): the quantization-aware stage and
+            the finished design round to them.
     """
 
     task: str = "streak"
@@ -69,6 +72,7 @@ class DesignConfig:
     parameterization: str = "pixel"
     knots: int = 0
     start: str | None = None
+    n_levels: int = DEFAULT_LEVELS
 
     def check(self) -> None:
         """Every numeric setting within its range (one error naming it), before any work."""
@@ -82,6 +86,7 @@ class DesignConfig:
             number_in(name, getattr(self, name), lo, hi, integer, lo_open=name == "lr")
         if self.knots == 1:
             raise DoefabError("knots must be 0 (one per DOE pixel along the radius) or at least 2")
+        check_levels(self.n_levels, "n_levels")
 
     def key(self) -> dict:
         d = asdict(self)
@@ -106,11 +111,16 @@ def coded_mask(camera: Camera) -> torch.Tensor:
     return torch.from_numpy(m).float()
 
 
-def finalize_levels(height: np.ndarray, camera: Camera) -> np.ndarray:
-    """Levels of a design: nearest level in the coded aperture, PLAIN_LEVEL elsewhere."""
-    lv = quantize_levels(height, camera)
+def plain_level(n_levels: int) -> int:
+    """The level of the plain half and of the area outside the clear aperture: the top one (left unetched)."""
+    return n_levels - 1
+
+
+def finalize_levels(height: np.ndarray, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
+    """Levels of a design: nearest of ``n_levels`` levels in the coded aperture, the plain level elsewhere."""
+    lv = quantize_levels(height, camera, n_levels)
     mask = coded_mask(camera).numpy() > 0
-    lv[~mask] = PLAIN_LEVEL
+    lv[~mask] = plain_level(n_levels)
     return lv
 
 
@@ -185,7 +195,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     def objective(step: int, batch_pairs=None):
         h = theta_to_height(param.waves(theta), dcam)
         if step >= qat_start:
-            h = quantize_ste(h, dcam)
+            h = quantize_ste(h, dcam, cfg.n_levels)
         if batch_pairs is None:
             psf = plan.half_psf("coded", h)
             loss = task_obj.loss(psf, dcam)
@@ -207,7 +217,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         with torch.no_grad():
             h = theta_to_height(param.waves(theta), dcam)
             if quantized:
-                h = quantize_ste(h, dcam)
+                h = quantize_ste(h, dcam, cfg.n_levels)
             return task_obj.metric(plan.half_psf("coded", h), dcam)
 
     def checkpoint(step: int, elapsed: float) -> None:
@@ -393,13 +403,15 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
     h_design = h_design.double().numpy()
     if cfg.sampling > 1 and not radial:
         h_design = np.kron(h_design, np.ones((cfg.sampling, cfg.sampling)))
-    levels = finalize_levels(h_design, cam)
+    n_levels = cfg.n_levels
+    levels = finalize_levels(h_design, cam, n_levels)
     mask = coded_mask(cam).numpy() > 0
-    height = np.where(mask, h_design, PLAIN_LEVEL * level_step(cam))
+    step = level_step(cam, n_levels)
+    height = np.where(mask, h_design, plain_level(n_levels) * step)
     plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",))
     with torch.no_grad():
         psf_c = plan(height).coded
-        psf_q = plan(levels.astype(np.float64) * level_step(cam)).coded
+        psf_q = plan(levels.astype(np.float64) * step).coded
     mc, mq = task_obj.metric(psf_c, cam), task_obj.metric(psf_q, cam)
     metrics = {
         "name": task_obj.metric_name,
@@ -412,21 +424,21 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
     return Design(task=task_obj.name, task_params=task_obj.params(), camera=cam, wavelengths=tuple(lams),
                   depths=tuple(depths), height=height, levels=levels, metrics=metrics, seed=cfg.seed,
                   optimizer=cfg.optimizer, iterations=cfg.iterations, history=history,
-                  psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(),
+                  psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(), n_levels=n_levels,
                   extra={"config": cfg.key(), **({"radial_knots_waves": [round(float(v), 6) for v in theta]}
                                                  if radial else {})})
 
 
 def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str, sampling: int, history=(),
                       extra: dict | None = None) -> Design:
-    """A finished design (full-grid heights, 16 levels, full-grid metrics) of ``design``'s task and camera from
-    parameters θ found on its grid coarsened ``sampling`` times (e.g. by end-to-end fine-tuning)."""
+    """A finished design (full-grid heights, ``design``'s levels, full-grid metrics) of ``design``'s task and camera
+    from parameters θ found on its grid coarsened ``sampling`` times (e.g. by end-to-end fine-tuning)."""
     task_obj = get_task(design.task, **design.task_params)
     task_obj.bind(design.camera)
     radial = parameterization == "radial"
     cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=max(len(history), 1),
                        seed=design.seed, sampling=sampling, parameterization=parameterization,
-                       knots=int(theta.numel()) if radial else 0, start="task")
+                       knots=int(theta.numel()) if radial else 0, start="task", n_levels=design.n_levels)
     dcam = _design_camera(design.camera, sampling)
     param = make_parameterization(parameterization, dcam, cfg.knots)
     out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths)

@@ -1,4 +1,4 @@
-"""How the optimiser sees a height map: unconstrained phase in waves, wrapped into one 16-level process.
+"""How the optimiser sees a height map: unconstrained phase in waves, wrapped into one L-level process.
 
 ``height = h_2π · frac(θ)`` keeps every height in [0, h_2π) at the design wavelength without a constraint
 (gradient 1 almost everywhere). The quantization-aware stage uses a straight-through estimator around
@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import torch
 
-from doefab.fabrication.levels import N_LEVELS, quantize_torch
+from doefab.fabrication.levels import quantize_torch
+from doefab.fabrication.process import DEFAULT_LEVELS
 from doefab.optics.camera import Camera
 
 __all__ = ["theta_to_height", "quantize_ste", "isolated_pixel_penalty", "PixelParam", "RadialParam",
@@ -22,8 +23,9 @@ def theta_to_height(theta: torch.Tensor, camera: Camera) -> torch.Tensor:
     return torch.remainder(theta, 1.0) * h2pi
 
 
-def quantize_ste(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVELS) -> torch.Tensor:
-    """Quantized heights forward, identity gradient backward (straight-through estimator)."""
+def quantize_ste(height: torch.Tensor, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> torch.Tensor:
+    """Quantized heights (nearest of ``n_levels`` levels) forward, identity gradient backward (straight-through
+    estimator)."""
     return height + (quantize_torch(height.detach(), camera, n_levels) - height).detach()
 
 

@@ -1,7 +1,7 @@
-"""Level map → 4 binary etch masks → exact Manhattan rectangles, and back.
+"""Level map → M = log2 L binary etch masks → exact Manhattan rectangles, and back.
 
-Convention (DESIGN-NOTES; kept here and in ``levels``): mask m (m = 0..3) etches depth 2^m·d, and a
-pixel is etched by mask m when bit m of (15 − level) is set, so level = 15 − Σ 2^m·etched_m.
+Convention (DESIGN-NOTES; kept here and in ``levels``): mask m (m = 0..M−1) etches depth 2^m·d, and a pixel is
+etched by mask m when bit m of (L − 1 − level) is set, so level = L − 1 − Σ 2^m·etched_m (L = 16: 4 masks).
 
 Rectangles come from vectorised run-lengths per row, merged down the rows wherever consecutive rows hold
 the same run: exact pixel edges, no per-pixel squares (except truly isolated pixels), no contour tracing.
@@ -12,46 +12,45 @@ from __future__ import annotations
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.levels import N_LEVELS
+from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
 
-__all__ = ["N_MASKS", "validate_levels", "bit_planes", "bit_plane", "levels_from_planes", "plane_rectangles",
+__all__ = ["validate_levels", "bit_planes", "bit_plane", "levels_from_planes", "plane_rectangles",
            "rasterize_rectangles", "rasterize_manhattan"]
 
-N_MASKS = 4
 
-
-def validate_levels(levels) -> np.ndarray:
-    """Return ``levels`` as a uint8 (N, M) array or raise a DoefabError naming the problem."""
+def validate_levels(levels, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
+    """Return ``levels`` as a uint8 (N, M) array of levels 0..n_levels−1, or raise a DoefabError naming the problem."""
+    top = n_levels - 1
     arr = np.asarray(levels)
     if arr.ndim != 2 or min(arr.shape) == 0:
         raise DoefabError(f"level map must be a non-empty 2-D array, got shape {arr.shape}")
     if arr.dtype.kind == "f":
         if not np.all(np.isfinite(arr)):
-            raise DoefabError("level map contains NaN or infinite values: levels must be integers 0..15")
+            raise DoefabError(f"level map contains NaN or infinite values: levels must be integers 0..{top}")
         if not np.all(arr == np.round(arr)):
-            raise DoefabError("level map holds non-integer values: levels must be integers 0..15 (quantize first)")
+            raise DoefabError(f"level map holds non-integer values: levels must be integers 0..{top} (quantize first)")
     elif arr.dtype.kind not in "iub":
         raise DoefabError(f"level map must be an integer array, got dtype {arr.dtype}")
-    if arr.min() < 0 or arr.max() >= N_LEVELS:
-        raise DoefabError(f"level values must lie in 0..{N_LEVELS - 1}, found {arr.min()}..{arr.max()}")
+    if arr.min() < 0 or arr.max() > top:
+        raise DoefabError(f"level values must lie in 0..{top} ({n_levels} levels), found {arr.min()}..{arr.max()}")
     return arr.astype(np.uint8)
 
 
-def bit_planes(levels: np.ndarray) -> np.ndarray:
-    """(4, N, M) bool: plane m marks the pixels mask m etches (bit m of 15 − level)."""
-    lv = validate_levels(levels)
-    return np.stack([bit_plane(lv, m) for m in range(N_MASKS)])
+def bit_planes(levels: np.ndarray, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
+    """(M, N, N') bool, M = log2 n_levels: plane m marks the pixels mask m etches (bit m of L − 1 − level)."""
+    lv = validate_levels(levels, n_levels)
+    return np.stack([bit_plane(lv, m, n_levels) for m in range(mask_count(n_levels))])
 
 
-def bit_plane(levels: np.ndarray, bit: int) -> np.ndarray:
-    """(N, M) bool: the pixels mask ``bit`` etches (bit ``bit`` of 15 − level); levels already validated."""
-    return (((N_LEVELS - 1) - np.asarray(levels, np.uint8)) >> bit & 1).astype(bool)
+def bit_plane(levels: np.ndarray, bit: int, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
+    """(N, N') bool: the pixels mask ``bit`` etches (bit ``bit`` of L − 1 − level); levels already validated."""
+    return (((n_levels - 1) - np.asarray(levels, np.uint8)) >> bit & 1).astype(bool)
 
 
 def levels_from_planes(planes: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`bit_planes`: level = 15 − Σ 2^m·plane_m (uint8)."""
+    """Inverse of :func:`bit_planes` for M planes: level = 2^M − 1 − Σ 2^m·plane_m (uint8)."""
     etch = sum((planes[m].astype(np.int32) << m) for m in range(planes.shape[0]))
-    return ((N_LEVELS - 1) - etch).astype(np.uint8)
+    return (((1 << planes.shape[0]) - 1) - etch).astype(np.uint8)
 
 
 def plane_rectangles(plane: np.ndarray) -> np.ndarray:

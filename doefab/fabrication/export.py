@@ -1,4 +1,4 @@
-"""Export a 16-level design as 4 binary photomask layers with chrome, marks, manifest and previews.
+"""Export an L-level design as M = log2 L binary photomask layers with chrome, marks, manifest and previews.
 
 ``export_masks`` writes into a staging folder, verifies everything by reading the files back, and only
 then moves the folder into place: no half-written mask set survives a failure.
@@ -7,6 +7,7 @@ then moves the folder into place: no half-written mask set survives a failure.
 from __future__ import annotations
 
 import io
+import json
 import math
 import shutil
 import time
@@ -16,13 +17,14 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.fabrication.bitplanes import N_MASKS, bit_plane, plane_rectangles, validate_levels
+from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
-                                       VERNIER_LAYER, etch_layer)
+                                       VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import depth_fields, fab_readme
-from doefab.fabrication.marks import MarkSpec, chrome_polygons, key_site, mark_polygons
+from doefab.fabrication.marks import MarkSpec, check_mark_placement, chrome_polygons, key_site
+from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
 from doefab.optics.camera import Camera
@@ -40,7 +42,8 @@ class MaskOptions:
         vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
         align_chain: ``"chrome"`` (every etch mask aligns to the chrome keys; errors don't accumulate) or
             ``"sequential"`` (mask k aligns to the plate written before it).
-        etch_order: etch layers in process order (default deepest first: 4, 3, 2, 1).
+        etch_order: etch layers in process order (default deepest first: 4, 3, 2, 1 for 16 levels; layer 6 is
+            the fifth mask's, 32 levels).
         resist: ``"positive"`` or ``"negative"``; sets the plate polarity stated in the manifest.
         depth_tolerance: relative etch-depth tolerance stated to the fab.
         use_klayout: verify with KLayout too (where installed).
@@ -56,7 +59,7 @@ class MaskOptions:
     cd_m: float | None = None
     vertex_cap: int = 4000
     align_chain: str = "chrome"
-    etch_order: tuple = (4, 3, 2, 1)
+    etch_order: tuple | None = None
     resist: str = "positive"
     depth_tolerance: float = 0.03
     use_klayout: bool = True
@@ -73,42 +76,30 @@ def _nm(value_m: float, what: str) -> int:
 
 
 def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptions | None = None,
-                 design_dir: str | Path | None = None, force: bool = False, progress: bool = True) -> dict:
+                 design_dir: str | Path | None = None, force: bool = False, progress: bool = True,
+                 n_levels: int | None = None) -> dict:
     """Write and verify a mask set for a (N, N) level map on ``camera``'s DOE grid.
 
     Args:
-        levels: (N, N) integer levels 0..15 (row 0 = top, column 0 = left, x < 0 the coded half).
+        levels: (N, N) integer levels 0..L−1 (row 0 = top, column 0 = left, x < 0 the coded half).
         camera: gives the DOE pitch and grid, the design wavelength and the material.
         out_dir: the mask-set folder (must not exist unless ``force``).
         design_dir: the design folder it came from; its design.json and levels.npy are copied into
             ``out_dir/design`` so the set can be re-verified and traced.
+        n_levels: L (2, 4, 8, 16 or 32; log2 L etch layers); default: the design folder's ``n_levels``, else 16.
     Returns:
         The verification report (also in ``out_dir/report.json``).
     """
     opts = options or MaskOptions()
     t0 = time.perf_counter()
-    lv = validate_levels(levels)
+    n_levels = _levels_of(n_levels, design_dir)
+    n_masks = mask_count(n_levels)
+    lv = validate_levels(levels, n_levels)
     n = camera.doe_pixels
     if lv.shape != (n, n):
         raise DoefabError(f"level map shape {lv.shape} does not match the camera grid ({n}, {n}) at pitch "
                           f"{camera.doe_pitch:g} m: wrong design or camera")
-    if opts.align_chain not in ("chrome", "sequential"):
-        raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
-    if sorted(opts.etch_order) != [etch_layer(b) for b in range(N_MASKS)]:
-        raise DoefabError(f"etch_order must be a permutation of layers 1..4, got {opts.etch_order!r}")
-    if opts.pattern_faces not in ("lens", "scene"):
-        raise DoefabError(f"pattern_faces must be 'lens' or 'scene', got {opts.pattern_faces!r}")
-    if opts.resist not in ("positive", "negative"):
-        raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
-    if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
-        raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
-    plain_name(opts.name, "mask-set name")
-    for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
-                            ("critical dimension cd_m", camera.doe_pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
-            raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
-    if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
-        raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
+    order = _check_options(opts, n_levels, camera.doe_pitch)
     pitch_nm = _nm(camera.doe_pitch, "DOE pitch")
     die_nm = _nm(opts.die_m, "die size")
     cd_nm = _nm(opts.cd_m if opts.cd_m is not None else camera.doe_pitch, "critical dimension")
@@ -121,8 +112,8 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = {}
-    for bit in range(N_MASKS):  # one plane at a time: the 8640² case stays within a few GB
-        r = plane_rectangles(bit_plane(layout, bit))
+    for bit in range(n_masks):  # one plane at a time: the 8640² case stays within a few GB
+        r = plane_rectangles(bit_plane(layout, bit, n_levels))
         x0 = origin_nm[0] + r[:, 0] * pitch_nm
         x1 = origin_nm[0] + r[:, 2] * pitch_nm
         y1 = origin_nm[1] - r[:, 1] * pitch_nm
@@ -131,13 +122,11 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         layer_stats[etch_layer(bit)] = len(r)
     spec = MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
                     cd_nm=cd_nm)
-    order = list(opts.etch_order)
     align_to = {}
     for k, lay in enumerate(order):
-        plate = lay - etch_layer(0) + 1
-        prev = 0 if (opts.align_chain == "chrome" or k == 0) else order[k - 1] - etch_layer(0) + 1
-        align_to[plate] = prev
-    for big in chrome_polygons(spec, CHROME_LAYER) + mark_polygons(spec, align_to):
+        prev = 0 if (opts.align_chain == "chrome" or k == 0) else etch_bit(order[k - 1]) + 1
+        align_to[etch_bit(lay) + 1] = prev
+    for big in chrome_polygons(spec, CHROME_LAYER) + check_mark_placement(spec, align_to):
         pieces = [big] if len(big.points) <= opts.vertex_cap else big.fracture(max_points=opts.vertex_cap,
                                                                              precision=1e-3)
         for poly in pieces:
@@ -161,22 +150,68 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         if design_dir is not None and (Path(design_dir) / "design.json").is_file():
             shutil.copyfile(Path(design_dir) / "design.json", design_sub / "design.json")
         mark_folder(stage, "masks")
-        manifest = _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
+        manifest = _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
         report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout, complete=False)  # mirrors per the manifest
         cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
-        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(layout, b), cd_px, camera.doe_pitch,
+        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(layout, b, n_levels), cd_px,
+                                                                        camera.doe_pitch,
                                                                         (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
-                                 for b in range(N_MASKS)}
+                                 for b in range(n_masks)}
         for lay, nrect in layer_stats.items():
             report["layers"][str(lay)]["rectangles_written"] = nrect
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
-        _previews(stage, layout, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
+        _previews(stage, layout, n_levels, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
         atomic_write_text(stage / "README.txt", fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
+
+
+def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
+    """Every mask option in its range (one error naming it); returns the etch layers in process order."""
+    etch_layers = [etch_layer(b) for b in range(mask_count(n_levels))]
+    order = list(opts.etch_order) if opts.etch_order is not None else etch_layers[::-1]
+    if opts.align_chain not in ("chrome", "sequential"):
+        raise DoefabError(f"align_chain must be 'chrome' or 'sequential', got {opts.align_chain!r}")
+    if sorted(order) != etch_layers:
+        raise DoefabError(f"etch_order must name each of the {len(etch_layers)} etch layers {etch_layers} once (a "
+                          f"{n_levels}-level set), got {opts.etch_order!r}")
+    if opts.pattern_faces not in ("lens", "scene"):
+        raise DoefabError(f"pattern_faces must be 'lens' or 'scene', got {opts.pattern_faces!r}")
+    if opts.resist not in ("positive", "negative"):
+        raise DoefabError(f"resist must be 'positive' or 'negative', got {opts.resist!r}")
+    if not isinstance(opts.vertex_cap, int) or not 5 <= opts.vertex_cap <= 8190:
+        raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
+    plain_name(opts.name, "mask-set name")
+    for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
+                            ("critical dimension cd_m", pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+            raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
+    if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
+        raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
+    return order
+
+
+def _levels_of(n_levels, design_dir) -> int:
+    """L of the export: the argument, else the design folder's design.json ``n_levels`` (16 when absent)."""
+    recorded = None
+    meta = Path(design_dir) / "design.json" if design_dir is not None else None
+    if meta is not None and meta.is_file():
+        try:
+            recorded = json.loads(meta.read_text()).get("n_levels", DEFAULT_LEVELS)
+        except (OSError, ValueError, AttributeError):
+            raise DoefabError(f"{meta} is not a readable design record: load the design with doefab.Design.load "
+                              f"to see why") from None
+        recorded = check_levels(recorded, f"{meta}: n_levels")
+    if n_levels is None:
+        return recorded or DEFAULT_LEVELS
+    n_levels = check_levels(n_levels, "n_levels")
+    if recorded is not None and recorded != n_levels:
+        raise DoefabError(f"n_levels = {n_levels} but the design in {design_dir} has {recorded} levels: export it with "
+                          f"its own")
+    return n_levels
 
 
 def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
@@ -184,11 +219,12 @@ def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
     return np.ascontiguousarray(levels[:, ::-1]) if pattern_faces == "lens" else levels
 
 
-def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
-    depths = depth_fields(camera.material, camera.design_wavelength)
+def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
+    depths = depth_fields(camera.material, camera.design_wavelength, n_levels)
     positive = opts.resist == "positive"
+    n_masks = mask_count(n_levels)
     layers = []
-    for bit in range(N_MASKS):
+    for bit in range(n_masks):
         lay = etch_layer(bit)
         depth_nm = depths["etch_depth_nm"][bit]
         plate = bit + 1
@@ -197,7 +233,7 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
             "etch_depth_nm": depth_nm,
             "etch_depth_tolerance_nm": round(max(opts.depth_tolerance * depth_nm, 2.0), 3),
             "critical_dimension_nm": cd_nm,
-            "polygons_mean": "pixels this mask etches (material removed): level = 15 − Σ 2^bit·etched",
+            "polygons_mean": f"pixels this mask etches (material removed): level = {n_levels - 1} − Σ 2^bit·etched",
             "resist_tone": opts.resist,
             "mask_polarity": ("dark field: the plate is clear (chrome removed) inside the polygons"
                               if positive else "clear field: the plate carries chrome inside the polygons"),
@@ -223,12 +259,12 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
         "other_layers": [{"layer": k, "purpose": v} for k, v in LAYER_PURPOSES.items() if k != CHROME_LAYER]
                         + [{"layer": OUTLINE_LAYER, "datatype": 0, "purpose": "die outline"}],
         "plates": {str(p): ([CHROME_LAYER] if p == 0 else [etch_layer(p - 1)]) + [f"{KEY_LAYER}/{p}", f"{VERNIER_LAYER}/{p}"]
-                   for p in range(N_MASKS + 1)},
+                   for p in range(n_masks + 1)},
         "process_order": [CHROME_LAYER] + list(order),
         "alignment_chain": {str(k): v for k, v in align_to.items()},
         "alignment_scheme": opts.align_chain,
         "key_sites_m": {str(p): [[x * 1e-9, y * 1e-9] for x, y in key_site(MarkSpec(die_nm, 0, cd_nm), p)]
-                        for p in range(N_MASKS + 1)},
+                        for p in range(n_masks + 1)},
         "pitch_m": pitch_nm * 1e-9,
         "origin_m": [origin_nm[0] * 1e-9, origin_nm[1] * 1e-9],
         "origin_means": "layout position of the top-left corner of level-map pixel [0, 0]; x right, y up",
@@ -245,16 +281,18 @@ def _manifest(camera, opts, lv, pitch_nm, origin_nm, files, align_to, order, cd_
         "design_wavelength_m": camera.design_wavelength,
         "material": camera.material.to_dict(),
         "refractive_index_at_design_wavelength": depths["refractive_index_at_design_wavelength"],
+        "n_levels": n_levels, "n_masks": n_masks,
         "level_step_nm": depths["level_step_nm"],
         "level_to_height_nm": depths["level_to_height_nm"],
-        "height_means": "material above the deepest etch; level 15 = unetched surface",
+        "height_means": f"material above the deepest etch; level {n_levels - 1} = unetched surface",
         "levels_sha256": levels_sha256(lv),
         "levels_sha256_means": "SHA-256 of the design's level map (design.json), before any mirroring",
         "vertex_cap": opts.vertex_cap,
     }
 
 
-def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000, mirrored: bool = False) -> None:
+def _previews(stage: Path, lv: np.ndarray, n_levels: int, pitch: float, size: int = 1000,
+              mirrored: bool = False) -> None:
     """PNG previews (Pillow; at most ``size`` px wide) of each etch layer and the composite, with a scale bar."""
     from matplotlib import colormaps
     from PIL import Image, ImageDraw
@@ -282,9 +320,9 @@ def _previews(stage: Path, lv: np.ndarray, pitch: float, size: int = 1000, mirro
         (stage / name).write_bytes(buf.getvalue())
 
     small = lv[::step, ::step]
-    for bit in range(N_MASKS):
-        g = (bit_plane(small, bit) * 255).astype(np.uint8)
+    for bit in range(mask_count(n_levels)):
+        g = (bit_plane(small, bit, n_levels) * 255).astype(np.uint8)
         save(f"preview_layer{etch_layer(bit)}.png", np.repeat(g[..., None], 3, axis=2),
              f"layer {etch_layer(bit)}: white = etched {1 << bit}*d deep ({pitch * 1e6:g} um pixels, 1:{step})")
-    rgb = (colormaps["viridis"](lv[::step, ::step] / 15.0)[..., :3] * 255).astype(np.uint8)
-    save("preview_composite.png", rgb, "composite: level 0 (deepest, dark) ... 15 (unetched, yellow)")
+    rgb = (colormaps["viridis"](lv[::step, ::step] / (n_levels - 1))[..., :3] * 255).astype(np.uint8)
+    save("preview_composite.png", rgb, f"composite: level 0 (deepest, dark) ... {n_levels - 1} (unetched, yellow)")

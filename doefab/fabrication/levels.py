@@ -1,9 +1,10 @@
 """The level ↔ height convention of a multi-level DOE, kept in one place (DESIGN-NOTES, Conventions).
 
-Heights are heights of material above the deepest etch; level k of L (L = 16 for 4 binary masks) means
-height k·d with d = h_2π / L and h_2π = λ_design / (n(λ_design) − 1). Quantization rounds to the nearest
-level (not flooring) after wrapping the height into one 2π period; the mask export and the simulation
-use these same functions.
+Heights are heights of material above the deepest etch; level k of L (L = 2, 4, 8, 16 or 32 for M = log2 L
+binary masks; 16 and 4 masks by default) means height k·d with d = h_2π / L and h_2π = λ_design / (n(λ_design) − 1).
+Quantization rounds to the nearest level (not flooring) after wrapping the height into one 2π period; the mask
+export and the simulation use these same functions. The simulation accepts any L from 2 to 256 (the quantization
+study); what a fab makes is ``doefab.fabrication.process``.
 """
 
 from __future__ import annotations
@@ -15,20 +16,19 @@ import torch
 
 from doefab._validate import heights, number_in
 from doefab.errors import DoefabError
+from doefab.fabrication.process import DEFAULT_LEVELS
 from doefab.optics.camera import Camera
 
-__all__ = ["N_LEVELS", "level_step", "material_level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
+__all__ = ["level_step", "material_level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
            "levels_sha256"]
 
-N_LEVELS = 16
 
-
-def level_step(camera: Camera, n_levels: int = N_LEVELS) -> float:
+def level_step(camera: Camera, n_levels: int = DEFAULT_LEVELS) -> float:
     """Height of one level d (metres) = h_2π(design wavelength) / n_levels."""
     return material_level_step(camera.material, camera.design_wavelength, n_levels)
 
 
-def material_level_step(material, design_wavelength: float, n_levels: int = N_LEVELS) -> float:
+def material_level_step(material, design_wavelength: float, n_levels: int = DEFAULT_LEVELS) -> float:
     """Height of one level d (metres) of ``material`` (a ``doefab.Material``) at ``design_wavelength`` (m)."""
     number_in("n_levels", n_levels, 2, 256, integer=True)  # level maps are uint8
     return material.height_2pi(design_wavelength) / n_levels
@@ -42,7 +42,7 @@ def wrap_height(height, camera: Camera):
     return np.mod(np.asarray(height, dtype=np.float64), h2pi)
 
 
-def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+def quantize_levels(height, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
     """Nearest level index (uint8, 0..n_levels-1) of each height (metres), after wrapping into one 2π period.
 
     A height within half a step below h_2π rounds to level n_levels ≡ 0 (it is the same phase).
@@ -54,7 +54,7 @@ def quantize_levels(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndar
     return k.astype(np.uint8)
 
 
-def quantize_torch(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVELS) -> torch.Tensor:
+def quantize_torch(height: torch.Tensor, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> torch.Tensor:
     """The rule of :func:`quantize_levels` on a torch tensor (for the quantization-aware design stage).
 
     Returns heights (metres) ``d · (round(wrap(h) / d) mod n_levels)``; a test checks that it equals
@@ -65,7 +65,7 @@ def quantize_torch(height: torch.Tensor, camera: Camera, n_levels: int = N_LEVEL
     return k * d
 
 
-def levels_to_height(levels, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+def levels_to_height(levels, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
     """Height map (float64 metres) of a level map: level k → k·d."""
     lv = np.asarray(levels)
     if lv.dtype.kind not in "iu":
@@ -75,7 +75,7 @@ def levels_to_height(levels, camera: Camera, n_levels: int = N_LEVELS) -> np.nda
     return lv.astype(np.float64) * level_step(camera, n_levels)
 
 
-def quantize_height(height, camera: Camera, n_levels: int = N_LEVELS) -> np.ndarray:
+def quantize_height(height, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
     """Height map rounded to the nearest of ``n_levels`` levels (float64 metres)."""
     return levels_to_height(quantize_levels(height, camera, n_levels), camera, n_levels)
 

@@ -2,9 +2,10 @@
 
 The fab reads the etch depths from ``manifest.json`` (and its human copy ``README.txt``): every depth, the
 level step and the level → height table follow from the substrate and the design wavelength alone
-(d = λ / (n(λ) − 1) / 16, mask m etches 2^m·d, level k stands k·d above the deepest etch).
-``depth_fields`` writes them; ``depth_problems`` recomputes them from the manifest's own material (looked up
-by name among the built-in substrates) and design wavelength and names every field that disagrees.
+and the number of levels L (d = λ / (n(λ) − 1) / L, mask m of M = log2 L etches 2^m·d, level k stands k·d above
+the deepest etch). ``depth_fields`` writes them; ``depth_problems`` recomputes them from the manifest's own
+material (looked up by name among the built-in substrates), design wavelength and ``n_levels`` (a set written
+before it was recorded has 16 levels) and names every field that disagrees.
 """
 
 from __future__ import annotations
@@ -14,24 +15,30 @@ import math
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.fabrication.bitplanes import N_MASKS
-from doefab.fabrication.levels import N_LEVELS, material_level_step
+from doefab.fabrication.levels import material_level_step
+from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.optics.materials import Material, material_by_name
 
-__all__ = ["depth_fields", "depth_problems", "fab_readme", "DEPTH_TOLERANCE_NM"]
+__all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM"]
 
 # the manifest rounds depths to 0.001 nm; a field further than this from its re-derived value was edited
 DEPTH_TOLERANCE_NM = 0.002
 
 
-def depth_fields(material: Material, design_wavelength: float) -> dict:
-    """The manifest's depth fields (nm) for ``material`` at ``design_wavelength`` (m): index, level step, level
-    → height table, and the etch depth of each mask (``etch_depth_nm[bit]``)."""
-    d_nm = material_level_step(material, design_wavelength) * 1e9
+def depth_fields(material: Material, design_wavelength: float, n_levels: int = DEFAULT_LEVELS) -> dict:
+    """The manifest's depth fields (nm) for ``material`` at ``design_wavelength`` (m) and ``n_levels`` levels:
+    index, level step, level → height table, and the etch depth of each mask (``etch_depth_nm[bit]``)."""
+    d_nm = material_level_step(material, design_wavelength, n_levels) * 1e9
     return {"refractive_index_at_design_wavelength": float(material.index(design_wavelength)),
             "level_step_nm": round(d_nm, 4),
-            "level_to_height_nm": [round(k * d_nm, 3) for k in range(N_LEVELS)],
-            "etch_depth_nm": [round((1 << bit) * d_nm, 3) for bit in range(N_MASKS)]}
+            "level_to_height_nm": [round(k * d_nm, 3) for k in range(n_levels)],
+            "etch_depth_nm": [round((1 << bit) * d_nm, 3) for bit in range(mask_count(n_levels))]}
+
+
+def manifest_levels(man: dict) -> int:
+    """The manifest's number of levels (``n_levels``; 16 for sets written before it was recorded); a DoefabError
+    when it is not one a mask process makes."""
+    return check_levels(man.get("n_levels", DEFAULT_LEVELS), "n_levels")
 
 
 def _off(got, want: float, tol: float) -> bool:
@@ -55,6 +62,12 @@ def depth_problems(man: dict, design_json: Path | None = None) -> list[str]:
     """Every depth field of the manifest ``man`` that disagrees with its material and design wavelength (and,
     given the set's ``design/design.json``, every disagreement with the design's camera); [] when consistent."""
     material, problems = _material(man)
+    try:
+        n_levels = manifest_levels(man)
+    except DoefabError as exc:
+        return problems + [str(exc)]
+    if man.get("n_masks", mask_count(n_levels)) != mask_count(n_levels):
+        problems.append(f"n_masks = {man['n_masks']!r} (expected {mask_count(n_levels)} for {n_levels} levels)")
     lam = man.get("design_wavelength_m")
     if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not 200e-9 <= lam <= 2e-6:
         problems.append(f"design_wavelength_m = {lam!r} is not a wavelength in metres within 200 nm – 2 µm")
@@ -63,15 +76,15 @@ def depth_problems(man: dict, design_json: Path | None = None) -> list[str]:
         problems += _against_design(man, design_json)
     if material is None or lam is None:
         return problems
-    want = depth_fields(material, lam)
+    want = depth_fields(material, lam, n_levels)
     if _off(man.get("refractive_index_at_design_wavelength"), want["refractive_index_at_design_wavelength"], 1e-9):
         problems.append(f"refractive_index_at_design_wavelength = {man.get('refractive_index_at_design_wavelength')!r}"
                         f" (expected {want['refractive_index_at_design_wavelength']:.10g})")
     if _off(man.get("level_step_nm"), want["level_step_nm"], DEPTH_TOLERANCE_NM):
         problems.append(f"level_step_nm = {man.get('level_step_nm')!r} (expected {want['level_step_nm']})")
     table = man.get("level_to_height_nm")
-    if not isinstance(table, list) or len(table) != N_LEVELS:
-        problems.append(f"level_to_height_nm must list {N_LEVELS} heights, got {table!r}")
+    if not isinstance(table, list) or len(table) != n_levels:
+        problems.append(f"level_to_height_nm must list {n_levels} heights (n_levels), got {table!r}")
     else:
         problems += [f"level_to_height_nm[{k}] = {h!r} (expected {w})" for k, (h, w) in
                      enumerate(zip(table, want["level_to_height_nm"])) if _off(h, w, DEPTH_TOLERANCE_NM)]
@@ -83,8 +96,9 @@ def _etch_problems(layers, depths_nm: list[float]) -> list[str]:
         return ["layers must be a list of layer records"]
     etch = [(i, L) for i, L in enumerate(layers) if L.get("purpose") == "etch"]
     bits = sorted(L.get("bit") for _, L in etch if isinstance(L.get("bit"), int))
-    if bits != list(range(N_MASKS)):
-        return [f"layers: the etch layers must carry bits 0..{N_MASKS - 1} once each, got {bits}"]
+    if bits != list(range(len(depths_nm))):
+        return [f"layers: the etch layers of {1 << len(depths_nm)} levels must carry bits 0..{len(depths_nm) - 1} "
+                f"once each, got {bits}"]
     problems = []
     for i, L in etch:
         want, got, tol = depths_nm[L["bit"]], L.get("etch_depth_nm"), L.get("etch_depth_tolerance_nm")
@@ -98,11 +112,16 @@ def _etch_problems(layers, depths_nm: list[float]) -> list[str]:
 
 def _against_design(man: dict, design_json: Path) -> list[str]:
     try:
-        cam = json.loads(design_json.read_text())["camera"]
+        meta = json.loads(design_json.read_text())
+        cam = meta["camera"]
         lam, name = float(cam["design_wavelength_m"]), cam["material"]["name"]
+        levels = meta.get("n_levels", DEFAULT_LEVELS)
     except (OSError, ValueError, KeyError, TypeError):
         return [f"{design_json} is not a readable design record (camera.design_wavelength_m, camera.material)"]
     problems = []
+    if man.get("n_levels", DEFAULT_LEVELS) != levels:
+        problems.append(f"n_levels = {man.get('n_levels', DEFAULT_LEVELS)!r} differs from the design's {levels!r} "
+                        f"({design_json})")
     if isinstance(man.get("design_wavelength_m"), (int, float)) and not math.isclose(
             man["design_wavelength_m"], lam, rel_tol=1e-9):
         problems.append(f"design_wavelength_m = {man['design_wavelength_m']!r} differs from the design's {lam!r} "
@@ -114,13 +133,14 @@ def _against_design(man: dict, design_json: Path) -> list[str]:
 
 def fab_readme(man: dict) -> str:
     """``README.txt`` of a mask set: the manifest in words, for the fab (verification compares the two)."""
+    n_levels = manifest_levels(man)
     lines = [
         "doefab mask set — instructions for the fab",
         "",
         f"Files: {', '.join(man['files'].values())} (GDSII, 1 nm database unit, 1 µm user unit), manifest.json "
         "(machine-readable), preview_*.png, report.json (verification).",
         f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
-        f"16 levels, step d = {man['level_step_nm']} nm.",
+        f"{n_levels} levels, step d = {man['level_step_nm']} nm.",
         f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
         f"{man['die_m'] * 1e3:g} mm; clear aperture {man['clear_aperture_diameter_m'] * 1e3:g} mm.",
         "",
@@ -137,7 +157,7 @@ def fab_readme(man: dict) -> str:
         f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
         "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
         "keys of the plate it aligns to and carries its own cross).",
-        "Level k = 15 − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
+        f"Level k = {n_levels - 1} − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
         "The layout is drawn as seen from the patterned face. " + man["mirror_means"] + ".",
         "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
     ]

@@ -4,11 +4,15 @@ Scheme (all marks outside the clear aperture, in the four die corners):
 - The chrome plate (layer 5, process step 1) is written first. It leaves chrome everywhere outside the
   clear aperture (the baffle), with clear slits on the y axis above and below the aperture marking the
   split line (x = 0), and chrome alignment crosses ("keys") at the four key sites.
-- Every etch plate m carries (layer 10, datatype m+1) a clear window over the key sites of the layer it
+- Every etch plate m (m = 0..M−1, one per binary mask) carries (layer 10, datatype m+1) a clear window over the key sites of the layer it
   aligns to, plus its own cross at its own key site (so a later mask could align to it); on layer 11,
   datatype m+1, a vernier (pitch p·(1 + 1/10) against the reference layer's pitch p scale) and a CD ladder
   of lines at 1, 1.5, 2 and 3 × the critical dimension. The chrome plate's reference vernier scale and
   ladder are on layer 11, datatype 0; its keys on layer 10, datatype 0.
+
+Each further plate's key sites sit one step further in and its CD ladder one step further along, so a set of
+more masks needs a larger die: :func:`check_mark_placement` refuses marks that fall off the die or into the clear
+aperture.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from dataclasses import dataclass
 
 import gdstk
 
-__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site"]
+__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
@@ -39,7 +43,7 @@ def _rect(x0, y0, x1, y1, layer, datatype):
 
 
 def key_site(spec: MarkSpec, plate: int) -> list[tuple[int, int]]:
-    """Centres (nm) of plate ``plate``'s four key sites (plate 0 = chrome, 1..4 = etch masks).
+    """Centres (nm) of plate ``plate``'s four key sites (plate 0 = chrome, 1..M = etch masks).
 
     Sites sit on the diagonal in each die corner, one SITE_STEP further in per plate.
     """
@@ -71,14 +75,14 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
 
 
 def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
-    """Keys, windows, verniers and CD ladders for the chrome plate (0) and etch plates 1..4.
+    """Keys, windows, verniers and CD ladders for the chrome plate (0) and etch plates 1..M.
 
     Args:
-        align_to: plate → the plate it aligns to (e.g. {1: 0, 2: 0, 3: 0, 4: 0}).
+        align_to: etch plate → the plate it aligns to, one entry per etch plate (e.g. {1: 0, 2: 0, 3: 0, 4: 0}).
     """
     polys = []
     h = spec.die_nm // 2
-    for plate in range(5):
+    for plate in range(len(align_to) + 1):
         for cx, cy in key_site(spec, plate):
             polys += _cross(cx, cy, 10, plate)
         if plate > 0:
@@ -102,3 +106,35 @@ def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
             x += 40_000
     polys.append(_rect(-h, -h, h, h, 100, 0))
     return polys
+
+
+def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
+    """(marks off the die, marks inside the clear aperture) among ``polys`` (the die outline aside)."""
+    h, r = spec.die_nm // 2, spec.aperture_radius_nm
+    off_die = into_aperture = 0
+    for poly in polys:
+        if poly.layer == 100:
+            continue
+        (x0, y0), (x1, y1) = poly.bounding_box()
+        off_die += bool(x0 < -h or y0 < -h or x1 > h or y1 > h)
+        dx, dy = max(x0, -x1, 0.0), max(y0, -y1, 0.0)  # the box's nearest point to the aperture's centre
+        into_aperture += bool(dx * dx + dy * dy < r * r)
+    return off_die, into_aperture
+
+
+def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
+    """The marks of :func:`mark_polygons`, every one (keys, windows, verniers, CD ladders) inside the die and clear
+    of the aperture; else one error naming the smallest die (0.1 mm steps) that holds them."""
+    from doefab.errors import DoefabError
+
+    polys = mark_polygons(spec, align_to)
+    off_die, into_aperture = _misplaced(polys, spec)
+    if not off_die and not into_aperture:
+        return polys
+    need = next((die for die in range(spec.die_nm, 300_000_001, 100_000)
+                 if not any(_misplaced(mark_polygons(MarkSpec(die, spec.aperture_radius_nm, spec.cd_nm), align_to),
+                                       MarkSpec(die, spec.aperture_radius_nm, spec.cd_nm)))), None)
+    fix = f"enlarge die_m to at least {need / 1e6:g} mm" if need else "use a smaller critical dimension"
+    raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
+                      f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
+                      f"{into_aperture} inside the aperture): {fix}")

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import CheckFailed, DoefabError
-from doefab.fabrication.bitplanes import N_MASKS, bit_plane, rasterize_manhattan
-from doefab.fabrication.levels import N_LEVELS
+from doefab.fabrication.bitplanes import bit_plane, rasterize_manhattan
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import CHROME_LAYER, KEY_LAYER, OUTLINE_LAYER, VERNIER_LAYER, etch_layer
-from doefab.fabrication.manifest import depth_problems, fab_readme
+from doefab.fabrication.manifest import depth_problems, fab_readme, manifest_levels
+from doefab.fabrication.process import mask_count
 
-__all__ = ["verify_mask_set", "read_gds_layers", "width_space_report"]
+__all__ = ["verify_mask_set", "read_gds_layers", "width_space_report", "preview_names"]
 
 
 class LayerPolygons:
@@ -108,7 +108,9 @@ def width_space_report(plane: np.ndarray, cd_px: int, pitch_m: float, origin_m: 
     return out
 
 
-PREVIEWS = tuple(f"preview_layer{etch_layer(b)}.png" for b in range(N_MASKS)) + ("preview_composite.png",)
+def preview_names(n_masks: int) -> tuple[str, ...]:
+    """The preview images a finished set of ``n_masks`` etch layers holds."""
+    return tuple(f"preview_layer{etch_layer(b)}.png" for b in range(n_masks)) + ("preview_composite.png",)
 
 
 def _check_manifest(man, mpath: Path) -> None:
@@ -181,8 +183,11 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         raise CheckFailed(f"{mpath} is not valid JSON ({exc}): the set is corrupt; export it again") from None
     _check_manifest(man, mpath)
     _check_depths(man, mpath, folder / "design" / "design.json")
+    n_levels = manifest_levels(man)  # checked by _check_depths
+    n_masks = mask_count(n_levels)
     if complete:
-        wanted = list(man["files"].values()) + ["README.txt", "report.json", "design/levels.npy", *PREVIEWS]
+        wanted = list(man["files"].values()) + ["README.txt", "report.json", "design/levels.npy",
+                                                *preview_names(n_masks)]
         missing = [f for f in wanted if not (folder / f).is_file()]
         if missing:
             raise CheckFailed(f"{folder} is incomplete: {', '.join(missing)} missing (an interrupted export or a "
@@ -201,6 +206,9 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
                           f"shape {man['shape']}")
     if levels_sha256(levels) != man["levels_sha256"]:
         raise CheckFailed("the level map's SHA-256 differs from manifest.json's levels_sha256: wrong or changed design")
+    if np.asarray(levels).max(initial=0) >= n_levels:
+        raise CheckFailed(f"the level map holds level {int(np.asarray(levels).max())} but manifest.json says n_levels = "
+                          f"{n_levels}: the set is inconsistent; export it again from its design")
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
     shape = tuple(man["shape"])
@@ -210,12 +218,12 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         levels = np.ascontiguousarray(levels[:, ::-1])
     gds = folder / man["files"]["gds"]
     mark_keys = {(CHROME_LAYER, 0), (OUTLINE_LAYER, 0)} | {(k, p) for k in (KEY_LAYER, VERNIER_LAYER)
-                                                           for p in range(N_MASKS + 1)}
+                                                           for p in range(n_masks + 1)}
     layers = _read(gds, mark_keys)  # chrome, marks and outline: small
     report: dict = {"gds": gds.name, "layers": {}, "ok": True}
     cap = int(man["vertex_cap"])
     etch_sum = np.zeros(shape, np.uint8)
-    for bit in range(N_MASKS):
+    for bit in range(n_masks):
         lay = etch_layer(bit)
         # one etch layer at a time keeps the peak memory to one layer's polygons
         polys = _read(gds, {(lay, 0)}).get(
@@ -229,7 +237,7 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
             raise CheckFailed(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()})")
         got = wind.astype(bool)
         del wind
-        mism = int(np.count_nonzero(got != bit_plane(levels, bit)))
+        mism = int(np.count_nonzero(got != bit_plane(levels, bit, n_levels)))
         maxv = polys.max_vertices
         report["layers"][str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
                                       "max_vertices": maxv, "mismatched_pixels_gdstk": mism}
@@ -239,24 +247,30 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
             raise CheckFailed(f"layer {lay}: a polygon has {maxv} vertices, over the cap {cap}")
         etch_sum += got.astype(np.uint8) << bit
         del got, polys
-    if not np.array_equal((N_LEVELS - 1) - etch_sum, levels):
+    if not np.array_equal((n_levels - 1) - etch_sum.astype(np.int64), levels):
         raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map")
     report["levels_reproduced"] = True
-    for key, need, what in (((CHROME_LAYER, 0), 1, "chrome aperture"), ((OUTLINE_LAYER, 0), 1, "die outline")):
-        if key not in layers or len(layers[key]) < need:
-            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds.name}")
-    for plate in range(N_MASKS + 1):
+    _check_marks(layers, n_masks, gds.name, cap)
+    report["marks_present"] = True
+    if use_klayout:
+        report["klayout"] = _klayout_check(folder, man, levels, n_levels, pitch_nm)
+    return report
+
+
+def _check_marks(layers: dict, n_masks: int, gds_name: str, cap: int) -> None:
+    """Chrome aperture, die outline, and keys, verniers and CD ladder on the chrome plate and each of the
+    ``n_masks`` etch plates, every polygon within the vertex cap."""
+    for key, what in (((CHROME_LAYER, 0), "chrome aperture"), ((OUTLINE_LAYER, 0), "die outline")):
+        if key not in layers or len(layers[key]) < 1:
+            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds_name}")
+    for plate in range(n_masks + 1):
         keys = len(layers[(KEY_LAYER, plate)]) if (KEY_LAYER, plate) in layers else 0
         vern = len(layers[(VERNIER_LAYER, plate)]) if (VERNIER_LAYER, plate) in layers else 0
         if keys < 8 or vern < 31:
             raise CheckFailed(f"plate {plate}: alignment keys ({keys}) or verniers/CD ladder ({vern}) are missing")
-    report["marks_present"] = True
     for key, p in layers.items():
         if p.max_vertices > cap:
             raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
-    if use_klayout:
-        report["klayout"] = _klayout_check(folder, man, levels, pitch_nm)
-    return report
 
 
 def _read(gds: Path, only: set) -> dict:
@@ -269,7 +283,7 @@ def _read(gds: Path, only: set) -> dict:
                           f"truncated; export the set again") from None
 
 
-def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -> dict:
+def _klayout_check(folder: Path, man: dict, levels: np.ndarray, n_levels: int, pitch_nm: int) -> dict:
     """Second reader: KLayout's areas per etch layer, and OASIS ≡ GDS by XOR (skipped if not installed)."""
     try:
         import klayout.db as kdb
@@ -290,12 +304,12 @@ def _klayout_check(folder: Path, man: dict, levels: np.ndarray, pitch_nm: int) -
     top = gds.top_cell()
     out = {"checked": True, "layers": {}}
     oas = load(man["files"]["oasis"]) if man["files"].get("oasis") else None
-    for bit in range(N_MASKS):
+    for bit in range(mask_count(n_levels)):
         lay = etch_layer(bit)
         li = gds.find_layer(lay, 0)
         region = kdb.Region(top.begin_shapes_rec(li)) if li is not None else kdb.Region()
         area_px = region.area() * (gds.dbu * 1000) ** 2 / pitch_nm**2
-        expected = int(bit_plane(levels, bit).sum())
+        expected = int(bit_plane(levels, bit, n_levels).sum())
         if abs(area_px - expected) > 1e-6:
             raise CheckFailed(f"KLayout: layer {lay} covers {area_px:.1f} pixels, the bit plane {expected}")
         entry = {"area_px": int(round(area_px))}

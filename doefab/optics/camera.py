@@ -29,8 +29,8 @@ class Camera:
         sensor_pitch: sensor pixel pitch, metres (5.4e-6).
         sensor_distance: lens (aperture plane) to sensor distance s, metres (50e-3).
         focus_distance: object distance imaged sharply on the sensor, metres; ``inf`` means s = f (5.0).
-        material: DOE substrate (fused silica).
-        design_wavelength: wavelength whose 2π height sets the 16-level etch depths, metres (550e-9).
+        material: DOE substrate (fused silica; others: ``doefab.material_by_name``).
+        design_wavelength: wavelength whose 2π height sets the etch depths (one level = h_2π / L), metres (550e-9).
         lens_f_number: the lens's own f-number wide open (1.8, the EF 50 mm f/1.8 STM); its entrance pupil is
             focal_length / lens_f_number across. It decides which element is the aperture stop
             (:attr:`doe_is_stop`).

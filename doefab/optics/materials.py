@@ -1,8 +1,26 @@
-"""Refractive index of DOE substrates (Sellmeier dispersion).
+"""Refractive index of DOE substrates (Sellmeier dispersion) and the built-in table of published ones.
 
-The default substrate is fused silica (Malitson 1965, see ../shared/DESIGN-NOTES.md):
-``n² − 1 = Σ B_i λ² / (λ² − C_i²)`` with λ in micrometres inside the formula; the public functions take
-and return SI units (metres).
+Every substrate is a three-term Sellmeier formula ``n² − 1 = Σ B_i λ² / (λ² − C_i²)`` with λ and the resonance
+wavelengths C_i in micrometres inside the formula (sources that publish C_i² in µm², like SCHOTT's catalogue, are
+converted by a square root here, once); the public functions take and return SI units (metres). The indices are
+relative to air, as the sources give them.
+
+Built-in substrates (``material_by_name``, case-insensitive; ``SUBSTRATES`` holds each source and the wavelength
+range its fit covers):
+
+- ``"fused silica"``: I. H. Malitson, "Interspecimen comparison of the refractive index of fused silica",
+  J. Opt. Soc. Am. 55, 1205–1209 (1965); 0.21–3.71 µm, 20 °C.
+- ``"N-BK7"``: SCHOTT AG, optical glass data sheet N-BK7 (Sellmeier B1–B3, C1–C3 in µm²; Zemax catalogue
+  2017-01-20); 0.3–2.5 µm, 20 °C.
+- ``"CaF2"``: I. H. Malitson, "A redetermination of some optical properties of calcium fluoride", Appl. Opt. 2,
+  1103–1107 (1963); 0.23–9.7 µm, 24 °C.
+- ``"sapphire"`` (ordinary ray, i.e. light along the c axis of a c-cut window): I. H. Malitson and M. J. Dodge,
+  "Refractive index and birefringence of synthetic sapphire", J. Opt. Soc. Am. 62, 1405 (1972), with the
+  Sellmeier coefficients of M. J. Dodge, "Refractive index", Handbook of Laser Science and Technology Vol. IV,
+  Optical Materials Part 2, CRC Press (1986), p. 30; 0.2–5.0 µm, 20 °C.
+- ``"PMMA"``: N. Sultanova, S. Kasarova, I. Nikolov, "Dispersion properties of optical polymers", Acta Physica
+  Polonica A 116, 585–587 (2009), as the one-term Sellmeier fit of their data by M. N. Polyanskiy
+  (refractiveindex.info): n² − 1 = 1.1819 λ² / (λ² − 0.011313 µm²); 0.4368–1.052 µm, 20 °C.
 """
 
 from __future__ import annotations
@@ -14,12 +32,13 @@ import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["Material", "FUSED_SILICA", "material_by_name"]
+__all__ = ["Material", "Substrate", "FUSED_SILICA", "N_BK7", "CAF2", "SAPPHIRE", "PMMA", "SUBSTRATES",
+           "material_by_name", "fit_range_warning"]
 
 
 @dataclass(frozen=True)
 class Material:
-    """A dispersive substrate described by a three-term Sellmeier formula.
+    """A dispersive substrate described by a three-term Sellmeier formula (a one- or two-term source has zeros).
 
     Attributes:
         name: human-readable name, stored in design and mask manifests.
@@ -85,21 +104,59 @@ class Material:
         return made
 
 
-#: Fused silica by Malitson's Sellmeier formula (C coefficients in micrometres): the default DOE substrate.
-FUSED_SILICA = Material(
-    name="fused silica",
-    b=(0.6961663, 0.4079426, 0.8974794),
-    c_um=(0.0684043, 0.1162414, 9.896161),
-)
+def _roots(*c2_um2: float) -> tuple[float, ...]:
+    """Resonance wavelengths C_i (µm) from coefficients published as C_i² (µm²)."""
+    return tuple(math.sqrt(c) for c in c2_um2)
 
-_MATERIALS = {"fused silica": FUSED_SILICA, "fused_silica": FUSED_SILICA}
+
+@dataclass(frozen=True)
+class Substrate:
+    """A built-in substrate: its dispersion, where it was published, and the wavelengths (µm) the fit covers."""
+
+    material: Material
+    source: str
+    range_um: tuple[float, float]
+
+
+FUSED_SILICA = Material(name="fused silica", b=(0.6961663, 0.4079426, 0.8974794),
+                        c_um=(0.0684043, 0.1162414, 9.896161))
+N_BK7 = Material(name="N-BK7", b=(1.03961212, 0.231792344, 1.01046945),
+                 c_um=_roots(0.00600069867, 0.0200179144, 103.560653))
+CAF2 = Material(name="CaF2", b=(0.5675888, 0.4710914, 3.8484723), c_um=(0.050263605, 0.1003909, 34.649040))
+SAPPHIRE = Material(name="sapphire", b=(1.4313493, 0.65054713, 5.3414021), c_um=(0.0726631, 0.1193242, 18.028251))
+PMMA = Material(name="PMMA", b=(1.1819, 0.0, 0.0), c_um=_roots(0.011313, 0.0, 0.0))
+
+SUBSTRATES = {s.material.name: s for s in (
+    Substrate(FUSED_SILICA, "Malitson, J. Opt. Soc. Am. 55, 1205 (1965)", (0.21, 3.71)),
+    Substrate(N_BK7, "SCHOTT optical glass data sheet N-BK7", (0.3, 2.5)),
+    Substrate(CAF2, "Malitson, Appl. Opt. 2, 1103 (1963)", (0.23, 9.7)),
+    Substrate(SAPPHIRE, "Malitson & Dodge, J. Opt. Soc. Am. 62, 1405 (1972), ordinary ray", (0.2, 5.0)),
+    Substrate(PMMA, "Sultanova, Kasarova & Nikolov, Acta Phys. Pol. A 116, 585 (2009)", (0.4368, 1.052)),
+)}
+
+_MATERIALS = {**{name.lower(): s.material for name, s in SUBSTRATES.items()}, "fused_silica": FUSED_SILICA}
 
 
 def material_by_name(name: str) -> Material:
-    """Look up a built-in material by name (``"fused silica"``)."""
-    try:
-        return _MATERIALS[name.lower()]
-    except KeyError:
-        raise DoefabError(
-            f"unknown material {name!r}: built-in ones are {sorted(set(_MATERIALS))}; "
-            f"pass a doefab.Material for others") from None
+    """A built-in substrate by name, case-insensitively (``"fused silica"``, ``"N-BK7"``, ``"CaF2"``,
+    ``"sapphire"``, ``"PMMA"``)."""
+    found = _MATERIALS.get(name.strip().lower()) if isinstance(name, str) else None
+    if found is None:
+        table = "; ".join(f"{n!r} ({s.source})" for n, s in SUBSTRATES.items())
+        raise DoefabError(f"unknown material {name!r}: the built-in substrates are {table}; for another, pass a "
+                          f"doefab.Material with its Sellmeier coefficients")
+    return found
+
+
+def fit_range_warning(material: Material, wavelengths_m) -> str | None:
+    """A sentence naming the wavelengths (metres) outside the range the built-in substrate's published fit
+    covers (its index there is an extrapolation), or None (all inside, or not a built-in substrate)."""
+    sub = SUBSTRATES.get(material.name)
+    if sub is None or sub.material != material:
+        return None
+    lo, hi = sub.range_um
+    out = [w for w in np.atleast_1d(np.asarray(wavelengths_m, np.float64)) if not lo <= w * 1e6 <= hi]
+    if not out:
+        return None
+    return (f"{material.name}: {', '.join(f'{w * 1e9:g} nm' for w in out)} outside {lo * 1e3:g}–{hi * 1e3:g} nm, "
+            f"the range of its published dispersion ({sub.source}); the index there is extrapolated")

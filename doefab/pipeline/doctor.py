@@ -1,4 +1,7 @@
-"""``doctor``: a scene's numerical stiff spots, before hours are spent on them.
+"""``doctor``: what a scene's numbers imply, and its numerical stiff spots, before hours are spent on them.
+
+``explain``: the optical system in a reader's terms (f-number, diffraction limit and DOE pixels, depth of
+field, the task's geometry in sensor pixels).
 
 Every sampling condition the propagators check, with its margin (limit / value, ≥ 1 passes); the largest
 phase step per pupil sample at the nearest depth; float32 against float64 on the stiffest PSF entry; the
@@ -12,7 +15,7 @@ import math
 
 import numpy as np
 
-__all__ = ["diagnose"]
+__all__ = ["diagnose", "explain"]
 
 
 def _row(check, value, limit, unit, ok, fix="", at_least: bool = False):
@@ -91,8 +94,8 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
         from doefab.reconstruction.loader import load_reconstructor
 
         if scene.task != "depth":
-            rec = load_reconstructor(scene.task)
-            lam_w = float(rec.model.wiener.lam.detach().min())
+            rec = load_reconstructor(scene.task, "proposed")
+            lam_w = float(rec.model.coded.wiener.lam.detach().min())
             gain = 1 / (2 * math.sqrt(lam_w))
             rows.append(_row(f"Wiener deconvolution gain bound 1/(2√λ), λ_min = {lam_w:.3g} (shipped network)", gain,
                              1e3, "×", math.isfinite(gain) and gain <= 1e3, "retrain with a larger initial λ"))
@@ -102,3 +105,65 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
         rows.append(_row(f"Wiener regularisation: the shipped network cannot be checked ({str(exc)[:100]})", 1.0, 1.0,
                          "", False, f"doefab train --task {scene.task}"))
     return rows
+
+
+def explain(res: dict) -> list[dict]:
+    """What a resolved scene's numbers imply: [{quantity, value, unit, meaning}] (thin lens; the DOE at the
+    aperture; λ the middle of the task's bands)."""
+    cam, task = res["camera"], res["task"]
+    lams = sorted(res["settings"]["wavelengths_m"])
+    lam = lams[len(lams) // 2]
+    f, d, s, p = cam.focal_length, cam.aperture_diameter, cam.sensor_distance, cam.sensor_pitch
+    airy = 1.22 * lam * s / d / p
+    coc = 2 * p  # a blur of two sensor pixels: the sharpness a capture keeps
+    inv_f = 0.0 if math.isinf(cam.focus_distance) else 1 / cam.focus_distance
+    near = 1 / (inv_f + coc / (d * s))
+    far_inv = inv_f - coc / (d * s)
+    far = math.inf if far_inv <= 0 else 1 / far_inv
+    rows = [("focal length", f * 1e3, "mm", "thin lens focused at the focus distance"),
+            ("f-number (DOE aperture)", f / d, "", f"{d * 1e3:.2f} mm clear aperture; each half passes half the light"),
+            ("lens f-number", cam.lens_f_number, "", "the DOE's baffle is the aperture stop" if cam.doe_is_stop
+             else "the lens is the aperture stop: the DOE's diffraction over the gap is propagated"),
+            ("diffraction limit (Airy radius)", airy, "sensor px", f"1.22 λ s / D at {lam * 1e9:.0f} nm; below 1 px "
+             "the sensor, not diffraction, limits detail"),
+            ("DOE pixels across the aperture", cam.doe_pixels, "px", f"at {cam.doe_pitch * 1e6:g} µm, "
+             f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
+            ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
+             f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
+    rows += _task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"])
+    return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
+
+
+def _fab_rows(cam, n_levels: int) -> list[tuple]:
+    from doefab.fabrication.levels import level_step
+    from doefab.fabrication.process import mask_count
+
+    lam = cam.design_wavelength
+    step = level_step(cam, n_levels)
+    return [("substrate index", cam.material.index(lam), "", f"{cam.material.name} at the design wavelength "
+             f"{lam * 1e9:.0f} nm"),
+            ("etch depth of 2π", step * n_levels * 1e9, "nm", f"λ / (n − 1): {n_levels} levels of {step * 1e9:.1f} nm on "
+             f"{mask_count(n_levels)} binary masks")]
+
+
+def _task_rows(cam, task, lams) -> list[tuple]:
+    from doefab.tasks.grating import GratingTask, grating_spot_px
+    from doefab.tasks.halfring import HalfRingTask
+    from doefab.tasks.streak import StreakTask
+
+    if isinstance(task, GratingTask):
+        spots = [grating_spot_px(cam, w, task.period(cam)) for w in (lams[0], lams[-1])]
+        return [("grating dispersion across the band", abs(spots[1] - spots[0]), "sensor px",
+                 f"first order from {abs(spots[0]):.1f} px ({lams[0] * 1e9:.0f} nm) to {abs(spots[1]):.1f} px "
+                 f"({lams[-1] * 1e9:.0f} nm) off axis (s·λ/Λ, Λ = {task.period(cam) * 1e6:.3g} µm)"),
+                ("spectral sampling", (lams[-1] - lams[0]) * 1e9 / max(abs(spots[1] - spots[0]), 1e-9), "nm/px",
+                 "bands closer than this land on the same pixel")]
+    if isinstance(task, StreakTask):
+        return [("streak arms", task.arm_px, "sensor px", f"each arm {task.arm_px} px long, "
+                 f"{2 * task.band_px + 1} px wide: a highlight's light spread over them")]
+    if isinstance(task, HalfRingTask):
+        zs = task.depths(cam)
+        r = [task.radius_px(z) for z in (min(zs), max(zs))]
+        return [("half-ring radius", r[0], "sensor px", f"at the nearest plane ({min(zs):g} m), {r[1]:.1f} px at the "
+                 f"farthest ({max(zs):g} m): {len(zs)} planes, ring law {task.ring_law}")]
+    return []

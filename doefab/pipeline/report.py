@@ -14,7 +14,7 @@ from pathlib import Path
 
 from doefab.io import atomic_write_text
 
-__all__ = ["write_report", "SECTIONS", "html_text"]
+__all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview"]
 
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
@@ -108,7 +108,7 @@ def _knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
                             textcoords="offset points", xytext=(-6 if far else 6, 4), ha="right" if far else "left",
                             fontsize=7, color="red" if chosen else "black")
             ax.set_xlabel("design wall time (s, 2-core CPU)")
-            ax.set_ylabel("16-level task metric (full grid)")
+            ax.set_ylabel("quantized task metric (full grid)")
             ax.set_title(f"optimiser and grid against run time ({BENCHMARK})", fontsize=9)
             fig.savefig(rdir / "knob_design.png", dpi=100)
             plt.close(fig)
@@ -169,17 +169,17 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     d = done.get("design")
     if d:
         m = d.get("metric", {})
-        blocks.append(("Design", [("p", f"Task metric ({m.get('name', '')}): 16-level {m.get('quantized', float('nan')):.4f}, "
+        blocks.append(("Design", [("p", f"Task metric ({m.get('name', '')}): quantized {m.get('quantized', float('nan')):.4f}, "
                                         f"worst entry {m.get('quantized_worst', float('nan')):.4f}."),
                                   ("img", "design/psf_target_vs_design.png",
                                    "PSFs against their targets, log scale (log10 of the light per pixel, 6 decades "
                                    "below each panel's peak)"),
-                                  ("img", "design/levels.png", "16-level height map")]))
+                                  ("img", "design/levels.png", "quantized height map")]))
     mk = done.get("masks")
     if mk and mk.get("status") != "skipped":
         blocks.append(("Masks", [("p", f"Mask set: `{mk.get('mask_set')}`. {mk.get('why', '')}"),
-                                 ("img", "masks/preview_composite.png", "composite of the 4 etch layers (layout view)"),
-                                 ("img", "masks/preview_layer4.png", "layer 4 (deepest etch)")]))
+                                 ("img", "masks/preview_composite.png", "composite of the etch layers (layout view)"),
+                                 ("img", f"masks/{deepest_preview(out / 'masks')}", "the deepest etch layer")]))
     ho = done.get("holder")
     if ho:
         blocks.append(("Holder", [("p", f"DOE {ho.get('doe_to_lens_mm')} mm from the lens glass; files: "
@@ -250,13 +250,20 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     return {"images": images, "sections": [b[0] for b in blocks]}
 
 
+def deepest_preview(masks: Path) -> str:
+    """The file name of a mask set's deepest etch layer preview (``preview_layer<M>.png``)."""
+    layers = sorted(masks.glob("preview_layer*.png"), key=lambda p: int(p.stem.removeprefix("preview_layer") or 0))
+    return layers[-1].name if layers else "preview_layer4.png"
+
+
 def _committed_run(design_name: str) -> tuple[str | None, str]:
     """Which row of the pixel-wise optimiser/grid benchmark the committed design is (None when it is not one of
     them, e.g. the radial half-ring, whose metric follows another ring law), and a caption note saying so."""
+    from doefab.design.committed import committed_dir
     from doefab.design.design import Design
 
     try:
-        cfg = Design.load(REPO / "masks" / design_name / "design").extra.get("config", {})
+        cfg = Design.load(committed_dir(design_name)).extra.get("config", {})
     except Exception:  # noqa: BLE001 - the figure is a courtesy; a missing design only drops the star
         return None, ""
     if cfg.get("parameterization", "pixel") != "pixel":

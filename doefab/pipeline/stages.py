@@ -18,6 +18,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
+from doefab.pipeline.system import resolve
 
 __all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress"]
 
@@ -28,67 +29,6 @@ REPO = Path(__file__).resolve().parents[2]
 
 def _h(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-def resolve(scene: Scene) -> dict:
-    """The design settings the scene asks for, and whether they equal the committed design's."""
-    from doefab.design.design import Design
-    from doefab.optics.camera import Camera
-    from doefab.tasks import get_task
-
-    dname = TASK_DESIGN[scene.task]
-    committed_dir = REPO / "masks" / dname / "design"
-    committed = Design.load(committed_dir)
-    cfg = committed.extra.get("config", {})
-    task = get_task(dname, **{k: v for k, v in committed.task_params.items() if k != "period_m"})
-    preset = scene.camera.get("preset", {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}[scene.task])
-    overrides = {k[:-2]: v for k, v in scene.camera.items() if k.endswith("_m")}
-    try:
-        cam = Camera.preset(preset, **overrides)
-    except DoefabError as exc:
-        raise DoefabError(f"{scene.path}: camera: {exc}") from None
-    task.bind(cam)
-    lams = tuple(task.wavelengths(cam))
-    depths = tuple(task.depths(cam))
-    kernel = int(scene.optics.get("kernel_px", task.kernel_size))
-    want_l = scene.optics.get("wavelengths_nm")
-    if want_l is not None and [round(w, 6) for w in want_l] != [round(x * 1e9, 6) for x in lams]:
-        raise DoefabError(f"{scene.path}: optics.wavelengths_nm: the {dname} task evaluates its own bands "
-                          f"({', '.join(f'{x * 1e9:g}' for x in lams)} nm); other bands are not supported yet")
-    want_z = scene.optics.get("depths_m")
-    if want_z is not None and [math.inf if z == "inf" else float(z) for z in want_z] != list(depths):
-        raise DoefabError(f"{scene.path}: optics.depths_m: the {dname} task evaluates depths {list(depths)} m for "
-                          f"this camera; other depth sets are not supported yet")
-    settings = {"design_task": dname, "camera": cam.to_dict(), "wavelengths_m": list(lams),
-                "depths_m": [z if math.isfinite(z) else "inf" for z in depths], "kernel_px": kernel,
-                "optimizer": scene.design.get("optimizer", cfg.get("optimizer", "adam")),
-                "iterations": scene.design.get("iterations", cfg.get("iterations")),
-                "sampling": scene.design.get("sampling", cfg.get("sampling", 1)),
-                "seed": scene.design.get("seed", cfg.get("seed", 0)),
-                "parameterization": scene.design.get("parameterization", cfg.get("parameterization", "pixel")),
-                "knots": scene.design.get("knots", cfg.get("knots", 0))}
-    from doefab.design.parameterization import PARAMETERIZATIONS
-    from doefab.tasks.halfring import HalfRingTask
-
-    if settings["parameterization"] not in PARAMETERIZATIONS:
-        raise DoefabError(f"{scene.path}: design.parameterization must be one of {PARAMETERIZATIONS}, got "
-                          f"{settings['parameterization']!r}")
-    if dname == "half-ring":
-        if scene.design.get("ring_law", "seed") not in HalfRingTask.RING_LAWS:
-            raise DoefabError(f"{scene.path}: design.ring_law must be one of {HalfRingTask.RING_LAWS}")
-        settings["ring_law"] = scene.design.get("ring_law", committed.task_params.get("ring_law", "seed"))
-    elif "ring_law" in scene.design:
-        raise DoefabError(f"{scene.path}: design.ring_law applies to depth scenes only")
-    committed_settings = {"design_task": dname, "camera": committed.camera.to_dict(),
-                          "wavelengths_m": list(committed.wavelengths),
-                          "depths_m": [z if math.isfinite(z) else "inf" for z in committed.depths],
-                          "kernel_px": committed.task_params.get("kernel_size"), "optimizer": cfg.get("optimizer"),
-                          "iterations": cfg.get("iterations"), "sampling": cfg.get("sampling", 1),
-                          "seed": cfg.get("seed", 0), "parameterization": cfg.get("parameterization", "pixel"),
-                          "knots": cfg.get("knots", 0), "ring_law": committed.task_params.get("ring_law", "seed")}
-    differ = sorted(k for k in settings if settings[k] != committed_settings[k])
-    return {"settings": settings, "camera": cam, "task": task, "committed_dir": committed_dir,
-            "reuse": not differ, "differ": differ, "committed": committed, "committed_settings": committed_settings}
 
 
 def _design_run(settings: dict, quick: bool) -> tuple[int, int]:
@@ -109,7 +49,7 @@ def redesign_note(res: dict, quick: bool) -> str:
     ckpt = ""
     if s["parameterization"] == "pixel":  # the phase map and Adam's two moments, float32
         ckpt = f", checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
-    return (f"the committed design {res['committed_dir'].relative_to(REPO)} is not reused: the scene sets {why}; "
+    return (f"the committed {res['settings']['design_task']} design is not reused: the scene sets {why}; "
             f"a new design is optimised ({iters} {s['optimizer']} iterations on a {grid}² grid: roughly "
             f"{max(minutes, 0.1):.1f} min at the pace of the committed design's run ({took:.0f} s), longer on a "
             f"loaded machine{ckpt})")
@@ -132,16 +72,16 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     if res["reuse"]:
         _copy_design(res["committed_dir"], out)
         info = {"status": "reused", "why": f"the scene's design settings equal the committed design "
-                                          f"{res['committed_dir'].relative_to(REPO)}"}
+                                          f"{res['settings']['design_task']} (shipped with doefab)"}
     else:
         s = res["settings"]
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
         iters, sampling = _design_run(s, quick)
-        params = {"kernel_size": s["kernel_px"], **({"ring_law": s["ring_law"]} if "ring_law" in s else {})}
+        params = res["task"].params()  # the scene's bands, planes and geometry, bound to its camera
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
-                            progress=True)
+                            n_levels=int(s["levels"]), progress=True)
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
                 + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}
@@ -149,10 +89,10 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     task = res["task"]
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
-        psf = plan(doefab.levels_to_height(d.levels, d.camera)).coded.numpy()
+        psf = plan(doefab.levels_to_height(d.levels, d.camera, d.n_levels)).coded.numpy()
     design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())
-    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera), d.camera.doe_pitch,
-                "16-level height map")
+    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera, d.n_levels), d.camera.doe_pitch,
+                f"{d.n_levels}-level height map")
     info["metric"] = d.metrics
     return info
 
@@ -169,9 +109,9 @@ def design_psf_figure(path: Path, d, psf, targets) -> Path:
     panels = []
     for z, w in picks:
         lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {'∞' if math.isinf(d.depths[z]) else f'{d.depths[z]:g} m'}"
-        panels += [(f"target, {lab}", targets[z, w]), (f"16-level design, {lab}", psf[z, w])]
+        panels += [(f"target, {lab}", targets[z, w]), (f"{d.n_levels}-level design, {lab}", psf[z, w])]
     return plot_psf_grid(path, panels, d.camera.sensor_pitch, ncols=2, log=True,
-                         suptitle=f"{d.task}: target (left) and fabricated 16-level design (right), log scale")
+                         suptitle=f"{d.task}: target (left) and fabricated {d.n_levels}-level design (right), log scale")
 
 
 def stage_masks(scene, res, out: Path, quick: bool) -> dict:
@@ -181,8 +121,8 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
 
     design_dir = out.parent / "design"
     fab = scene.fabrication
-    committed_set = res["committed_dir"].parent
-    if res["reuse"] and fab.get("pattern_faces", "lens") == "lens":
+    committed_set = repo_mask_set(res)
+    if committed_set is not None and fab.get("pattern_faces", "lens") == "lens":
         t = time.perf_counter()
         rep = verify_mask_set(committed_set, use_klayout=not quick)
         out.mkdir(parents=True, exist_ok=True)
@@ -191,15 +131,32 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
         for f in ("manifest.json", "README.txt"):
             shutil.copyfile(committed_set / f, out / f)
         atomic_write_json(out / "verification.json", rep)
-        return {"status": "reused", "why": f"committed mask set {committed_set.relative_to(REPO)} (same design), "
+        return {"status": "reused", "why": f"committed mask set {committed_set} (same design), "
                                            f"re-verified in {time.perf_counter() - t:.1f} s",
-                "mask_set": str(committed_set.relative_to(REPO))}
+                "mask_set": str(committed_set)}
     d = Design.load(design_dir)
     (out / MARKER).unlink()  # the export takes the (otherwise empty) folder as its own; run_stage marks it again
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
-    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True)
-    return {"status": "ran", "why": "the design is new (or its pattern side differs)", "mask_set": str(out)}
+    export_masks(d.levels, d.camera, out, opts, design_dir=design_dir, force=True, n_levels=d.n_levels)
+    why = ("the design is new (or its pattern side differs)" if not res["reuse"] else
+           "the committed mask set is not in this installation (it lives in the repository): exported afresh")
+    return {"status": "ran", "why": why, "mask_set": str(out)}
+
+
+def repo_mask_set(res: dict) -> Path | None:
+    """The repository's committed mask set of a reused design (``masks/<design>``), when this is a checkout that
+    has it and its level map is the design's; None otherwise (an installed package exports the masks itself)."""
+    if not res["reuse"]:
+        return None
+    folder = REPO / "masks" / res["settings"]["design_task"]
+    from doefab.design.design import Design, levels_sha256
+
+    try:
+        same = levels_sha256(Design.load(folder / "design").levels) == levels_sha256(res["committed"].levels)
+    except DoefabError:  # no mask set here (an installed package), or a damaged one
+        return None
+    return folder if same else None
 
 
 def stage_holder(scene, res, out: Path, quick: bool) -> dict:
@@ -212,32 +169,67 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
 
 
 def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
+    """The three networks of the scene's design evaluated on held-out test scenes captured through fabricated
+    parts: the shipped ones for a committed design, networks trained here for a new one (``weights = "train"``,
+    warm-started from the shipped ones where shapes match), or the shipped ones on a new design's captures
+    (``"shipped-anyway"``: told its PSFs, flagged in the report)."""
     from doefab.reconstruction.evaluate import evaluate
+    from doefab.tolerance.conditions import for_splits
 
-    rec = scene.reconstruction
-    if not res["reuse"] and rec.get("weights", "shipped") == "shipped":
-        return {"status": "skipped", "why": "the shipped networks are trained for the committed design; set "
-                                            "reconstruction.weights = \"train\" for a new design"}
-    weights_dir = None
-    if rec.get("weights", "shipped") == "train":
+    rec, task = scene.reconstruction, scene.task
+    mode = rec.get("weights", "shipped")
+    design = None if res["reuse"] else out.parent / "design"
+    if design is not None and mode == "shipped":
+        return {"status": "skipped", "why": f"the shipped networks are trained for the committed "
+                                            f"{res['settings']['design_task']} design, not this scene's: set "
+                                            f"reconstruction.weights = \"train\" to train networks for it, or "
+                                            f"\"shipped-anyway\" to evaluate the shipped ones on its captures"}
+    budget = _scene_budget(scene)
+    parts = 2
+    weights_dir, warm = None, {}
+    if mode == "train":
         from doefab.reconstruction.train import train
+        from doefab.reconstruction.weights import WEIGHTS_DIR
 
         weights_dir = out / "weights"
         minutes = 0.2 if quick else float(rec.get("minutes", 6))
+        cond = for_splits(task, design, "honest", ("train", "val"), parts if quick else 6, budget=budget)
         for v in ("proposed", "coded_only", "uncoded_only"):
-            train(scene.task, v, minutes, out / f"run_{v}", weights_dir=weights_dir)
-    from doefab.tolerance.conditions import for_splits
-
+            r = train(task, v, minutes, out / f"run_{v}", weights_dir=weights_dir, design=design, conditions=cond,
+                      warm_start=WEIGHTS_DIR, progress=True, val_images=2 if quick else 8)
+            warm[v] = r["training"]["warm_start"]
     images = 2 if quick else int(rec.get("images", 4))
     size = 128 if quick else int(rec.get("size_px", 256))
-    parts = 2
-    cond = for_splits(scene.task, None, "honest", ("test",), parts)["test"]
-    r = evaluate(scene.task, out, images=images, size=size, weights_dir=weights_dir, conditions=cond)
+    cond = for_splits(task, design, "honest", ("test",), parts, budget=budget)["test"]
+    r = evaluate(task, out, images=images, size=size, weights_dir=weights_dir, design=design, conditions=cond,
+                 other_design=mode == "shipped-anyway")
+    why = {"shipped": "shipped networks of the committed design",
+           "train": "trained here for this design (" + ", ".join(
+               f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" for v, w in warm.items())
+           + ")",
+           "shipped-anyway": "WARNING: the shipped networks, trained for the committed design, evaluated on this "
+                             "design's captures (told its PSFs); train networks for it for fair numbers"}[mode]
     return {"status": "ran" if weights_dir else "reused",
-            "why": ("trained here" if weights_dir else "shipped networks of the committed design") +
-                   f"; evaluated on {images} held-out test scenes of {size}² px, captured through {parts} fabricated "
-                   f"parts with crosstalk unmixed by a noisy calibration (the network told the nominal PSF)",
-            "rows": r["rows"], "by_light": r.get("by_light")}
+            "why": why + f"; evaluated on {images} held-out test scenes of {size}² px, captured through {parts} "
+                         f"fabricated parts with crosstalk unmixed by a noisy calibration (the network told the "
+                         f"nominal PSF)",
+            "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode,
+            "design_levels_sha256": _design_sha(out.parent / "design")}
+
+
+def _scene_budget(scene) -> dict | None:
+    """The scene's tolerance budget (None without a [tolerance] section: the shipped one)."""
+    if scene.tolerance is None:
+        return None
+    from doefab.tolerance.errors import load_budget
+
+    return load_budget(scene.budget_path())
+
+
+def _design_sha(folder: Path) -> str:
+    from doefab.design.design import Design, levels_sha256
+
+    return levels_sha256(Design.load(folder).levels)
 
 
 def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:

@@ -25,7 +25,7 @@ import functools
 import numpy as np
 
 __all__ = ["SPLIT_SEEDS", "sample_rng", "texture", "hdr_sample", "spectral_sample",
-           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images"]
+           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands"]
 
 SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017}
 HS_WAVELENGTHS_M = tuple(float(x) * 1e-9 for x in range(400, 701, 10))
@@ -191,6 +191,25 @@ def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str 
     scene = picks[regions].transpose(2, 0, 1) * shading[None] * e[:, None, None]
     # exposure: the brightest pixel's band-mean radiance is 0.6–1.2 (a flat spectrum of 1 fills an RGB channel)
     return (scene * rng.uniform(0.6, 1.2) / max(scene.mean(axis=0).max(), 1e-6)).astype(np.float32)
+
+
+def resample_bands(values: np.ndarray, wavelengths_m, axis: int = 0) -> np.ndarray:
+    """``values`` known on the 31 bands 400–700 nm (``HS_WAVELENGTHS_M``, along ``axis``) at ``wavelengths_m``
+    (linear in wavelength; the bands must lie within 400–700 nm). The same array when they are those bands."""
+    want = np.asarray(wavelengths_m, np.float64)
+    grid = np.asarray(HS_WAVELENGTHS_M)
+    if want.shape == grid.shape and np.allclose(want, grid, rtol=0, atol=1e-12):
+        return values
+    if want.min() < grid[0] - 1e-12 or want.max() > grid[-1] + 1e-12:
+        from doefab.errors import DoefabError
+
+        raise DoefabError(f"bands {want.min() * 1e9:.0f}–{want.max() * 1e9:.0f} nm reach outside 400–700 nm, where "
+                          f"the scenes' reflectances and lights are known: keep the bands within it")
+    v = np.moveaxis(np.asarray(values), axis, -1)
+    idx = np.clip(np.searchsorted(grid, want) - 1, 0, len(grid) - 2)
+    t = ((want - grid[idx]) / (grid[idx + 1] - grid[idx])).astype(v.dtype if v.dtype.kind == "f" else np.float64)
+    out = v[..., idx] * (1 - t) + v[..., idx + 1] * t
+    return np.moveaxis(out, -1, axis)
 
 
 def _shape_mask(rng, size):

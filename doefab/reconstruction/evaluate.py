@@ -28,15 +28,18 @@ __all__ = ["evaluate"]
 
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
-             progress: bool = True, design=None, variants=VARIANTS, conditions=None, split: str = "test") -> dict:
-    """``conditions``: the split's capture conditions (``doefab.tolerance.conditions``; None: clean)."""
+             progress: bool = True, design=None, variants=VARIANTS, conditions=None, split: str = "test",
+             other_design: bool = False) -> dict:
+    """``conditions``: the split's capture conditions (``doefab.tolerance.conditions``; None: clean).
+    ``other_design``: evaluate networks trained for another design on ``design``'s captures (they are told its
+    PSFs); the result says so."""
     from doefab.reconstruction.spectra import light_kind
     from doefab.reconstruction.train import sensor_response_for
 
     if split not in ("val", "test"):
         raise DoefabError(f"split must be val or test, got {split!r}")
     out = Path(out_dir)
-    recs = {v: load_reconstructor(task, v, weights_dir, design) for v in variants}  # refuse bad weights first
+    recs = {v: load_reconstructor(task, v, weights_dir, design, other_design) for v in variants}  # refuse first
     pair, _ = psf_pair(task, design)
     response = sensor_response_for(task, pair)
     cond = conditions
@@ -64,7 +67,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
                               "lr_schedule": r.meta["training"].get("schedule", "constant"),
-                              "trained_under": _trained_under(r.meta)}
+                              "trained_under": _trained_under(r.meta),
+                              "for_this_design": not r.meta.get("other_design", False)}
                           for v, r in recs.items()}}
     if task == "hyperspectral":
         result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}

@@ -22,7 +22,7 @@ from doefab.reconstruction.specs import get_spec, psf_pair
 from doefab.reconstruction.train import model_inputs
 from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, weights_paths
 
-__all__ = ["load_reconstructor", "Reconstructor"]
+__all__ = ["load_reconstructor", "Reconstructor", "renamed_state"]
 
 
 class Reconstructor:
@@ -118,7 +118,7 @@ def _float_tensor(x) -> torch.Tensor:
     return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
 
 
-def _renamed(state: dict) -> dict:
+def renamed_state(state: dict) -> dict:
     """Weights saved before the coded branch had its own module (``coded.``) load under today's names."""
     old = ("feat_coded.", "wiener.")
     return {("coded." + k if k.startswith(old) else k): v for k, v in state.items()}
@@ -140,9 +140,11 @@ def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, des
 
 
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
-                       design: str | Path | None = None) -> Reconstructor:
+                       design: str | Path | None = None, other_design: bool = False) -> Reconstructor:
     """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth"), trained for the
-    committed design (or for the design folder ``design``: candidates under comparison)."""
+    committed design (or for the design folder ``design``: candidates under comparison). ``other_design``: use
+    weights trained for another design anyway (they take ``design``'s PSFs at call time; ``meta`` then says
+    ``"other_design": true``) when their shapes fit it."""
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
@@ -165,13 +167,29 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
         _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)
     pair, sha = psf_pair(task, design)
-    if meta["design_levels_sha256"] != sha:
+    foreign = meta["design_levels_sha256"] != sha
+    if foreign and not other_design:
         _refuse(pt, "the weights were trained for another design than " +
                 ("the committed one" if design is None else str(design)), *who)
+    if foreign:
+        from doefab.reconstruction.train import arch_for_design
+
+        need = arch_for_design(task, pair)
+        if not meta["arch"].get("cost_volume"):  # only the cost volume has one channel per plane
+            need.pop("planes", None)
+        clash = {k: v for k, v in need.items() if k != "max_depth_m" and meta["arch"].get(k, _DEFAULT_ARCH.get(k)) != v}
+        if clash:
+            raise DoefabError(f"{pt}: trained for another design whose {', '.join(clash)} differ from {design}'s "
+                              f"({'; '.join(f'{k}: {v}' for k, v in clash.items())}): they cannot take its PSFs; "
+                              f"{_retrain(task, variant, weights_dir, design)}")
+        meta = {**meta, "other_design": True}
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])
-        model.load_state_dict(_renamed(state))
+        model.load_state_dict(renamed_state(state))
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta)
+
+
+_DEFAULT_ARCH = {"planes": 17, "wavelengths_m": None}  # what records without these entries were built with

@@ -86,7 +86,8 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     last = history[-1][3] if history else float("nan")
     try:
         while time.perf_counter() - t0 < budget and (max_steps is None or step < max_steps):
-            f = lr_factor(schedule, (time.perf_counter() - t0) / budget)
+            done = (time.perf_counter() - t0) / budget  # the schedule follows whichever budget binds first
+            f = lr_factor(schedule, max(done, step / max_steps) if max_steps else done)
             for opt, base in optimizers:
                 for group in opt.param_groups:
                     group["lr"] = base * f

@@ -31,7 +31,8 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     arch = arch or default_arch(task, variant)
     if task == "depth":  # records without "cost_volume" predate it (networks without one)
         return DepthNet(variant, width=int(arch["width"]), cost_volume=bool(arch.get("cost_volume", False)),
-                        planes=int(arch.get("planes", 17)))  # 17: the seed's planes, 1–5 m in 0.25 m steps
+                        planes=int(arch.get("planes", 17)),  # 17: the seed's planes, 1–5 m in 0.25 m steps
+                        max_depth_m=float(arch.get("max_depth_m", 6.0)))
     if task == "hdr":
         from doefab.reconstruction.hdrnet import HDRNet
 
@@ -40,32 +41,36 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
                       bound_rounds=int(arch.get("bound_rounds", 8)))
     from doefab.reconstruction.spectralnet import SpectralNet
 
-    return SpectralNet(spec.out_channels, variant, features=int(arch["features"]), width=int(arch["width"]),
-                       baseline=spectral_baseline(),
-                       illuminant=_illuminant_search() if arch.get("illuminant_search") else None)
-
-
-def _illuminant_search():
-    """(response [3, 31], inverses [J, 31, 3]) for the proposed hyperspectral network's illuminant search."""
-    from doefab.imaging.sensor import sensor_response
     from doefab.reconstruction.data import HS_WAVELENGTHS_M
+
+    bands = tuple(arch.get("wavelengths_m") or HS_WAVELENGTHS_M)  # the design's bands (31 at 400–700 nm)
+    return SpectralNet(len(bands), variant, features=int(arch["features"]), width=int(arch["width"]),
+                       baseline=spectral_baseline(bands),
+                       illuminant=_illuminant_search(bands) if arch.get("illuminant_search") else None)
+
+
+def _illuminant_search(bands):
+    """(response [3, C], inverses [J, C, 3]) on ``bands`` for the proposed hyperspectral network's illuminant
+    search (the shipped library resampled to them)."""
+    from doefab.imaging.sensor import sensor_response
+    from doefab.reconstruction.data import resample_bands
     from doefab.reconstruction.illuminant import illuminant_inverses, illuminant_library
 
-    t = sensor_response(HS_WAVELENGTHS_M)
-    return t, illuminant_inverses(t, illuminant_library())
+    t = sensor_response(bands)
+    return t, illuminant_inverses(t, resample_bands(illuminant_library(), bands, axis=1))
 
 
-def spectral_baseline(smooth: float = 1e-3, eps: float = 1e-6):
-    """[31, 3] smooth least-squares inverse of a half-exposure capture: s = argmin ‖½ T s − c‖² + μ‖D² s‖²
-    (T: the sensor response on 400–700 nm; D²: second differences along wavelength) — the illuminant
-    search's inverse under a flat illuminant."""
+def spectral_baseline(bands=None, smooth: float = 1e-3, eps: float = 1e-6):
+    """[C, 3] smooth least-squares inverse of a half-exposure capture: s = argmin ‖½ T s − c‖² + μ‖D² s‖²
+    (T: the sensor response on ``bands``, default the 31 bands 400–700 nm; D²: second differences along
+    wavelength) — the illuminant search's inverse under a flat illuminant."""
     import numpy as np
 
     from doefab.imaging.sensor import sensor_response
     from doefab.reconstruction.data import HS_WAVELENGTHS_M
     from doefab.reconstruction.illuminant import illuminant_inverses
 
-    t = sensor_response(HS_WAVELENGTHS_M)
+    t = sensor_response(HS_WAVELENGTHS_M if bands is None else bands)
     return illuminant_inverses(t, np.ones((1, t.shape[1])), smooth, eps)[0]
 
 

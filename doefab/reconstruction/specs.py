@@ -1,7 +1,7 @@
 """What each reconstruction task is trained on: the committed design, its PSF pair, scenes and captures.
 
 The networks see the PSFs of what gets fabricated: the committed 16-level level maps
-(``masks/<task>/design/levels.npy``), not the continuous heights.
+(``doefab/designs/<design>.npz``), not the continuous heights.
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ from doefab.errors import DoefabError
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
            "check_design_task"]
 
-REPO = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)
@@ -56,8 +55,10 @@ def check_design_task(task: str, design_task: str, where, flag: str = "task") ->
 
 
 def design_dir(task: str) -> Path:
-    """The committed design a task's networks are trained for (``masks/<design>/design``)."""
-    return REPO / "masks" / get_spec(task).design / "design"
+    """The committed design a task's networks are trained for (shipped in the package, ``design.committed``)."""
+    from doefab.design.committed import committed_dir
+
+    return committed_dir(get_spec(task).design)
 
 
 @functools.lru_cache(maxsize=None)
@@ -131,16 +132,18 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
 def render_scene(task: str, split: str, index: int, rng, big: int, pair, response):
     """(scene, target, (coded, uncoded) clean views before noise) of one generated scene of side ``big``."""
     from doefab.imaging.captures import plane_masks, render_layers
-    from doefab.reconstruction.data import depth_sample, hdr_sample, spectral_sample
+    from doefab.reconstruction.data import depth_sample, hdr_sample, resample_bands, spectral_sample
     from doefab.reconstruction.spectra import light_kind
 
     masks, target = None, None
     if task == "hdr":
         scene = hdr_sample(rng, big, split)
-    elif task == "hyperspectral":
-        scene = spectral_sample(rng, big, split, light_kind(split, index))
-    else:
-        scene, target = depth_sample(rng, big, split)
+    elif task == "hyperspectral":  # on the design's bands
+        scene = np.ascontiguousarray(resample_bands(spectral_sample(rng, big, split, light_kind(split, index)),
+                                                    pair.wavelengths))
+    else:  # between the design's nearest and farthest planes
+        finite = [z for z in pair.depths if np.isfinite(z)]
+        scene, target = depth_sample(rng, big, split, near=min(finite), far=max(finite))
         masks = plane_masks(torch.from_numpy(target), pair.depths)
     s = torch.from_numpy(scene)
     views = []

@@ -24,7 +24,7 @@ from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
 from doefab.reconstruction.weights import weights_target, write_weights
 
-__all__ = ["train", "model_inputs", "evaluate_batch", "sensor_response_for"]
+__all__ = ["train", "model_inputs", "evaluate_batch", "sensor_response_for", "arch_for_design", "copy_matching"]
 
 
 def model_inputs(task: str, pair) -> torch.Tensor | None:
@@ -47,6 +47,39 @@ def sensor_response_for(task: str, pair):
     return sensor_response(pair.wavelengths)
 
 
+def copy_matching(model: torch.nn.Module, task: str, variant: str, folder) -> dict:
+    """Copy into ``model`` every tensor of ``folder``'s ``task``/``variant`` weights whose name and shape match
+    (a warm start); returns {"from", "tensors", "of"}."""
+    from doefab.reconstruction.loader import renamed_state
+    from doefab.reconstruction.weights import weights_paths
+
+    pt, _ = weights_paths(task, variant, folder)
+    if not pt.is_file():
+        return {"from": str(pt), "tensors": 0, "of": len(model.state_dict()), "why": "no such weights"}
+    try:
+        src = renamed_state(torch.load(pt, weights_only=True, map_location="cpu"))
+    except Exception as exc:  # noqa: BLE001 - a damaged file only loses the warm start
+        return {"from": str(pt), "tensors": 0, "of": len(model.state_dict()), "why": exc.__class__.__name__}
+    own = model.state_dict()
+    take = {k: v for k, v in src.items() if k in own and own[k].shape == v.shape}
+    model.load_state_dict(take, strict=False)
+    return {"from": str(pt), "tensors": len(take), "of": len(own)}
+
+
+def arch_for_design(task: str, pair) -> dict:
+    """The architecture entries a design fixes: the depth planes (one cost-volume channel each) and the depth
+    range (outputs up to 1.2× the farthest plane); a spectral design's bands (one output each)."""
+    if task == "depth":
+        far = max(z for z in pair.depths if np.isfinite(z))
+        return {"planes": len(pair.depths), "max_depth_m": round(1.2 * far, 6)}
+    if task == "hyperspectral":
+        from doefab.reconstruction.data import HS_WAVELENGTHS_M
+
+        lams = [float(w) for w in pair.wavelengths]
+        return {} if np.allclose(lams, HS_WAVELENGTHS_M, rtol=0, atol=1e-12) else {"wavelengths_m": lams}
+    return {}
+
+
 def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4) -> dict:
     """Mean of the task's metrics over a batch (model in eval mode, no gradients)."""
     model.eval()
@@ -64,12 +97,14 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
           progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
-          schedule: str = "cosine", replace_shipped: bool = False, conditions: dict | None = None) -> dict:
+          schedule: str = "cosine", replace_shipped: bool = False, conditions: dict | None = None,
+          warm_start: str | Path | None = None) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
     returns the metadata record written (``weights_path``: where the weights went). ``design``: a design folder
     other than the committed one. Weights go to ``weights_dir`` or else ``out_dir``; the shipped ones are
     replaced only with ``replace_shipped=True``. ``conditions``: {"train": ..., "val": ...} capture conditions
-    (None: the nominal model's own captures)."""
+    (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
+    network of this task and variant starts the training wherever a tensor's name and shape match."""
     spec = get_spec(task)
     weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design)
     if not (0 < minutes <= 24 * 60):
@@ -83,13 +118,13 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
               "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design),
               "conditions": {k: c.describe() for k, c in (conditions or {}).items()}}
     pair, sha = psf_pair(task, design)
-    if arch.get("cost_volume"):  # the cost volume has one channel per depth plane of the design
-        arch = {**arch, "planes": len(pair.depths)}
+    arch = {**arch, **arch_for_design(task, pair)}
     psf = model_inputs(task, pair)
     response = sensor_response_for(task, pair)
     cond = conditions or {"train": None, "val": None}
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
+    warm = copy_matching(model, task, variant, warm_start) if warm_start is not None and not resume else None
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     val = make_batch(task, "val", range(val_images), crop, pair, response, conditions=cond["val"])
 
@@ -115,6 +150,6 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                       "from": "the design's 16-level level map (levels.npy)"},
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
-                           "conditions": config["conditions"] or "clean"},
+                           "conditions": config["conditions"] or "clean", "warm_start": warm},
               "validation": {"images": val_images, "crop_px": crop, **final}}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())

@@ -49,6 +49,7 @@ class Task:
 
     kernel_size: int = 63
     loss_kind: str = "band"
+    wavelengths_m: tuple | None = None  # the bands to design for (metres); None: the task's own
     name: str = field(default="task", init=False)
     preset: str = field(default="default", init=False)
     metric_name: str = field(default="fraction", init=False)
@@ -66,13 +67,17 @@ class Task:
         for name, (lo, hi, integer, unit) in self.RANGES.items():
             if getattr(self, name) is not None:
                 number_in(name, getattr(self, name), lo, hi, integer, unit)
+        if self.wavelengths_m is not None:
+            from doefab._validate import wavelengths
+
+            self.wavelengths_m = wavelengths(self.wavelengths_m)
 
     def bind(self, camera: Camera) -> None:
         """Fix physical (metre) parameters from the camera the design is for, before any resampling."""
 
     # --- what to compute ------------------------------------------------------------------------
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
-        return RGB_WAVELENGTHS
+        return tuple(self.wavelengths_m) if self.wavelengths_m else RGB_WAVELENGTHS
 
     def depths(self, camera: Camera) -> tuple[float, ...]:
         return (camera.focus_distance,)

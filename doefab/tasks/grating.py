@@ -38,6 +38,7 @@ class GratingTask(Task):
     period_pixels: float = 16.0
     period_m: float | None = None  # set by bind(): period_pixels × the preset's DOE pitch
     n_bands: int = 31
+    box_px: int = 1  # the metric box of each band: (2·box_px + 1)² pixels around its first order
     loss_kind: str = "window"
     name: str = field(default="grating", init=False)
     preset: str = field(default="hyperspectral", init=False)
@@ -46,9 +47,11 @@ class GratingTask(Task):
     default_lr: float = field(default=0.01, init=False)
     default_batch: int = field(default=8, init=False)
     RANGES = {**Task.RANGES, "period_pixels": (2, 1e6, False, "DOE pixels"), "period_m": (1e-7, 1e-2, False, "m"),
-              "n_bands": (1, 1000, True, "bands")}
+              "n_bands": (1, 1000, True, "bands"), "box_px": (0, 64, True, "sensor pixels")}
 
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
+        if self.wavelengths_m:
+            return tuple(self.wavelengths_m)
         return tuple(float(v) for v in np.linspace(400e-9, 700e-9, self.n_bands))
 
     def spot_pixels(self, camera: Camera) -> list[int]:
@@ -65,7 +68,7 @@ class GratingTask(Task):
 
     def _masks(self, camera: Camera, width: int) -> torch.Tensor:
         k, c = self.kernel_size, self.kernel_size // 2
-        out = torch.zeros(1, self.n_bands, k, k, dtype=torch.float64)
+        out = torch.zeros(1, len(self.wavelengths(camera)), k, k, dtype=torch.float64)
         for w, off in enumerate(self.spot_pixels(camera)):
             col = c + off
             out[0, w, c - width:c + width + 1, col - width:col + width + 1] = 1.0
@@ -75,7 +78,7 @@ class GratingTask(Task):
         return self._masks(camera, 0) * HALF_LIGHT
 
     def band_masks(self, camera: Camera) -> torch.Tensor:
-        return self._masks(camera, 1)
+        return self._masks(camera, self.box_px)
 
     def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
         """The 16-pixel blazed grating (seed 4.4), blazed at the design wavelength."""

@@ -45,6 +45,8 @@ class HalfRingTask(Task):
     z_step: float = 0.25
     loss_kind: str = "window"
     ring_law: str = "seed"
+    planes_m: tuple | None = None  # explicit depth planes (metres); None: z_min to z_max every z_step
+    ring_max_px: float | None = None  # ring radius at the nearest plane; None: the seed's 25 − 5·z_min px
     name: str = field(default="half-ring", init=False)
     preset: str = field(default="depth", init=False)
     metric_name: str = field(default="fraction of coded light within 1 px of the half-ring", init=False)
@@ -52,9 +54,12 @@ class HalfRingTask(Task):
     default_lr: float = field(default=0.03, init=False)
     default_batch: int = field(default=8, init=False)
     RANGES = {**Task.RANGES, "delta_px": (0.01, 100, False, "sensor pixels"), "z_min": (0.01, 1e4, False, "m"),
-              "z_max": (0.01, 1e4, False, "m"), "z_step": (1e-4, 1e4, False, "m")}
+              "z_max": (0.01, 1e4, False, "m"), "z_step": (1e-4, 1e4, False, "m"),
+              "ring_max_px": (0.0, 2047, False, "sensor pixels")}
 
     def depths(self, camera: Camera) -> tuple[float, ...]:
+        if self.planes_m:
+            return tuple(self.planes_m)
         n = int(round((self.z_max - self.z_min) / self.z_step)) + 1
         return tuple(float(self.z_min + i * self.z_step) for i in range(n))
 
@@ -64,6 +69,14 @@ class HalfRingTask(Task):
         from doefab.errors import DoefabError
 
         super().__post_init__()
+        if self.planes_m is not None:
+            from doefab._validate import depths
+
+            planes = depths(self.planes_m)
+            if len(planes) < 2 or not all(0 < z < float("inf") for z in planes):
+                raise DoefabError(f"planes_m must hold at least two finite depths in metres, got {self.planes_m!r}")
+            self.planes_m = tuple(sorted(planes))
+            self.z_min, self.z_max = self.planes_m[0], self.planes_m[-1]
         if not self.z_min < self.z_max:
             raise DoefabError(f"z_min {self.z_min} m must be below z_max {self.z_max} m")
         if self.side not in (-1, 1):
@@ -73,10 +86,14 @@ class HalfRingTask(Task):
 
     def radius_px(self, z: float) -> float:
         """Target ring radius in pixels at depth z (metres), by the task's ring law."""
-        r_near = max(25.0 - 5.0 * self.z_min, 0.0)
+        r_near = self.ring_max_px if self.ring_max_px is not None else max(25.0 - 5.0 * self.z_min, 0.0)
         if self.ring_law == "defocus":
             return r_near * (1.0 / z - 1.0 / self.z_max) / (1.0 / self.z_min - 1.0 / self.z_max)
-        return max(25.0 - 5.0 * z, 0.0)
+        if self.ring_max_px is None:
+            return max(25.0 - 5.0 * z, 0.0)
+        return r_near * (self.z_max - z) / (self.z_max - self.z_min)
+
+
 
     def distance_to_arc(self, r: float) -> np.ndarray:
         """(K, K) distance in pixels from each pixel centre to the semicircle of radius r."""
@@ -113,7 +130,7 @@ class HalfRingTask(Task):
         c = (np.arange(n) - (n - 1) / 2) * a
         xx, yy = np.meshgrid(c, -c)
         lam = camera.design_wavelength
-        z_point = 25.0 / 5.0
+        z_point = self.z_max
         power = (0.0 if math.isinf(camera.focus_distance) else 1.0 / camera.focus_distance) - 1.0 / z_point
         waves = (xx**2 + yy**2) * power / (2 * lam)
         waves = waves + rng.uniform(0, 0.02, size=(n, n))

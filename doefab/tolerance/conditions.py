@@ -23,7 +23,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,9 +35,6 @@ CONDITIONS = ("honest", "clean")
 
 PART_SEEDS = {"train": 11, "val": 22, "test": 33}  # parts of one split are never another's
 DEPTH_REFINE = 4
-# fabricated parts' PSFs take minutes: kept between runs under $DOEFAB_CACHE (default ~/.cache/doefab)
-CACHE = Path(os.environ.get("DOEFAB_CACHE", Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "doefab"))
-CACHE = CACHE / "conditions"
 
 
 @dataclass
@@ -111,7 +107,8 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from dataclasses import replace
 
     from doefab.design.design import Design
-    from doefab.io import atomic_write_bytes
+    from doefab.fabrication.process import mask_count
+    from doefab.io import atomic_write_bytes, cache_root
     from doefab.optics.psf import PSFPair
     from doefab.reconstruction.specs import get_spec
     from doefab.tolerance.errors import sample_errors
@@ -119,7 +116,8 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
 
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if task == "depth" else design.depths
-    path = CACHE / f"{task}-{_key(task, design, split, n, budget)}.pt"
+    # fabricated parts' PSFs take minutes: kept between runs in the cache (``doefab.io.cache_root``)
+    path = cache_root() / "conditions" / f"{task}-{_key(task, design, split, n, budget)}.pt"
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
@@ -127,7 +125,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
                     for c, u in zip(data["coded"], data["uncoded"])]
         except Exception:  # noqa: BLE001 - a damaged cache is recomputed
             path.unlink(missing_ok=True)
-    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir))
+    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir, mask_count(design.n_levels)))
     children = np.random.SeedSequence(PART_SEEDS[split]).spawn(n)
     coded, uncoded = [], []
     it = range(n)
@@ -136,7 +134,8 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
 
         it = tqdm(it, desc=f"fabricated parts ({split})", unit="part")
     for i in it:
-        err = sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]))
+        err = sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]),
+                            n_masks=judge.n_masks)
         err = replace(err, crosstalk=(0.0, 0.0))  # crosstalk acts on the captures, not on the PSF
         with torch.no_grad():
             got = judge.psfs(err, halves=("coded", "uncoded"), kernel=get_spec(task).kernel)
@@ -148,8 +147,10 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     return [PSFPair(c, u, tuple(design.wavelengths), depths, design.camera.sensor_pitch) for c, u in zip(coded, uncoded)]
 
 
-def for_splits(task: str, design, kind: str, splits=("train", "val"), parts: int = 6, progress: bool = False) -> dict:
-    """{split: Conditions} of a kind ("honest" or "clean") for a task's design (None: the committed one)."""
+def for_splits(task: str, design, kind: str, splits=("train", "val"), parts: int = 6, progress: bool = False,
+               budget: dict | None = None) -> dict:
+    """{split: Conditions} of a kind ("honest" or "clean") for a task's design (None: the committed one), its
+    parts drawn from ``budget`` (default: the shipped one)."""
     from doefab.errors import DoefabError
     from doefab.reconstruction.specs import design_dir
 
@@ -157,4 +158,4 @@ def for_splits(task: str, design, kind: str, splits=("train", "val"), parts: int
         raise DoefabError(f"conditions must be one of {CONDITIONS}, got {kind!r}")
     if kind == "clean":
         return {s: clean() for s in splits}
-    return {s: honest(task, design or design_dir(task), s, parts, progress=progress) for s in splits}
+    return {s: honest(task, design or design_dir(task), s, parts, budget, progress=progress) for s in splits}

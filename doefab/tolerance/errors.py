@@ -7,7 +7,7 @@ same seed gives the same parts, bit for bit, whatever the number of workers or t
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -38,11 +38,14 @@ BUDGET_KEYS = {
 
 @dataclass
 class PartErrors:
-    """The errors of one fabricated and mounted part (SI units)."""
+    """The errors of one fabricated and mounted part (SI units).
 
-    depth_scale: tuple = (1.0, 1.0, 1.0, 1.0)
-    overlay: tuple = ((0.0, 0.0),) * 4
-    rotation: tuple = (0.0,) * 4
+    ``depth_scale``, ``overlay`` and ``rotation`` hold one entry per mask of the design (M = log2 L), or nothing
+    for a part whose masks are all nominal (:meth:`for_masks` fills them in for a design's M)."""
+
+    depth_scale: tuple = ()
+    overlay: tuple = ()
+    rotation: tuple = ()
     edge_bias: float = 0.0
     corner_rounding: float = 0.0
     roughness: float = 0.0
@@ -61,6 +64,14 @@ class PartErrors:
 
     def to_json(self) -> dict:
         return asdict(self)
+
+    def for_masks(self, n_masks: int) -> "PartErrors":
+        """This part with one per-mask entry for each of ``n_masks`` masks (a DoefabError naming the mask count when
+        an entry list has another length)."""
+        from doefab.tolerance.fabricate import per_mask
+
+        return replace(self, **{k: per_mask(k, getattr(self, k), n_masks) for k in ("depth_scale", "overlay",
+                                                                                     "rotation")})
 
 
 def load_budget(path: str | Path | None = None) -> dict:
@@ -119,14 +130,16 @@ def budget_value(budget: dict, sec: str, key: str, default: float = 0.0) -> floa
     return float(budget.get(sec, {}).get(key, default))
 
 
-def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0) -> PartErrors:
-    """One part's errors drawn from ``budget`` with ``rng``."""
+def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0, *, n_masks: int) -> PartErrors:
+    """One part's errors drawn from ``budget`` with ``rng``, for a design of ``n_masks`` masks (log2 of its levels;
+    with 4 masks the draws are those of every 16-level study)."""
+    m = n_masks
     sys_ = rng.normal(0, budget_value(budget, "etch", "systematic_sigma_percent") / 100)
-    rnd = rng.normal(0, budget_value(budget, "etch", "random_sigma_percent") / 100, 4)
+    rnd = rng.normal(0, budget_value(budget, "etch", "random_sigma_percent") / 100, m)
     depth = tuple(float(np.clip(1 + sys_ + r, 0.5, 1.5)) for r in rnd)
     sig = budget_value(budget, "overlay", "shift_sigma_um") * 1e-6
-    overlay = tuple((float(a), float(b)) for a, b in rng.normal(0, sig, (4, 2))) if sig > 0 else ((0.0, 0.0),) * 4
-    rot = tuple(float(v) for v in rng.normal(0, budget_value(budget, "overlay", "rotation_sigma_urad") * 1e-6, 4))
+    overlay = tuple((float(a), float(b)) for a, b in rng.normal(0, sig, (m, 2))) if sig > 0 else ((0.0, 0.0),) * m
+    rot = tuple(float(v) for v in rng.normal(0, budget_value(budget, "overlay", "rotation_sigma_urad") * 1e-6, m))
     bias = float(rng.normal(0, budget_value(budget, "lithography", "edge_bias_sigma_um") * 1e-6))
     dmax = budget_value(budget, "mounting", "decenter_max_mm") * 1e-3
     shift = tuple(float(v) for v in rng.uniform(-dmax, dmax, 2))

@@ -4,6 +4,9 @@ Mask m (m = 0..M−1) etches ``2^m`` level steps where bit m of ``L − 1 − le
 export writes), so an overlay error moves exactly the pixels that mask moves and an etch error scales exactly
 that mask's steps. Errors, in physical units:
 
+The per-mask errors hold one entry per mask of the design (M = log2 L: 4 for 16 levels), or none for "nominal on
+every mask" (:func:`per_mask`).
+
 - ``depth_scale[m]``: etch depth of mask m relative to nominal (1.03 = 3 % too deep).
 - ``overlay[m] = (dx, dy)`` metres and ``rotation[m]`` radians (about the DOE centre): where mask m lands
   relative to the design grid (the alignment chain is the caller's business: the judge composes it).
@@ -27,15 +30,20 @@ import numpy as np
 from doefab._validate import length_m, wavelength_m
 from doefab._validate import seed as seed_value
 from doefab.errors import DoefabError
-from doefab.fabrication.bitplanes import N_MASKS, bit_planes
-from doefab.fabrication.levels import N_LEVELS
+from doefab.fabrication.bitplanes import bit_planes
+from doefab.fabrication.levels import material_level_step
+from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 
-__all__ = ["fabricated_height", "refined_camera", "level_step_for", "roughness_field", "check_errors"]
+__all__ = ["fabricated_height", "refined_camera", "level_step_for", "roughness_field", "check_errors", "per_mask",
+           "MASK_NOMINAL"]
+
+# each per-mask error's value on a mask made without that error
+MASK_NOMINAL = {"depth_scale": 1.0, "overlay": (0.0, 0.0), "rotation": 0.0}
 
 
-def level_step_for(camera, design_wavelength: float) -> float:
-    """d = λ / (n(λ) − 1) / 16 (metres)."""
-    return float(design_wavelength / (camera.material.index(design_wavelength) - 1.0) / N_LEVELS)
+def level_step_for(camera, design_wavelength: float, n_levels: int = DEFAULT_LEVELS) -> float:
+    """d = λ / (n(λ) − 1) / L (metres) of ``camera``'s material at ``design_wavelength``."""
+    return material_level_step(camera.material, design_wavelength, n_levels)
 
 
 def refined_camera(camera, supersample: int):
@@ -43,24 +51,33 @@ def refined_camera(camera, supersample: int):
     return camera.replace(doe_pixels=camera.doe_pixels * supersample, doe_pitch=camera.doe_pitch / supersample)
 
 
-def _tuple(name, value, n):
+def per_mask(name: str, value, n_masks: int) -> tuple:
+    """Per-mask error ``name`` (a key of MASK_NOMINAL) with one entry per mask: empty (or None) means nominal on every
+    mask; otherwise it must hold exactly ``n_masks`` entries (one error naming the design's mask count)."""
+    if value is None:
+        value = ()
     try:
         v = tuple(value)
     except TypeError:
-        raise DoefabError(f"{name} needs one entry per mask ({n}), got {value!r}") from None
-    if len(v) != n:
-        raise DoefabError(f"{name} needs one entry per mask ({n}), got {len(v)}")
+        raise DoefabError(f"{name} needs one entry per mask ({n_masks}), got {value!r}") from None
+    if not v:
+        return (MASK_NOMINAL[name],) * n_masks
+    if len(v) != n_masks:
+        raise DoefabError(f"{name} needs one entry per mask: this design has {n_masks} masks "
+                          f"({1 << n_masks} levels), got {len(v)}")
     return v
 
 
 def check_errors(depth_scale, overlay, rotation, edge_bias, roughness, corner_rounding, roughness_corr,
-                 n_masks: int = N_MASKS) -> tuple:
+                 n_masks: int) -> tuple:
     """The fabrication errors as floats, each checked for type, finiteness and a plausible range in its unit
     (a value far outside is almost always a unit slip: metres and radians here)."""
+    depth_scale, overlay, rotation = (per_mask(k, v, n_masks) for k, v in (("depth_scale", depth_scale),
+                                                                           ("overlay", overlay), ("rotation", rotation)))
     try:
-        scales = [float(v) for v in _tuple("depth_scale", depth_scale, n_masks)]
-        shifts = [tuple(float(a) for a in v) for v in _tuple("overlay", overlay, n_masks)]
-        rots = [float(v) for v in _tuple("rotation", rotation, n_masks)]
+        scales = [float(v) for v in depth_scale]
+        shifts = [tuple(float(a) for a in v) for v in overlay]
+        rots = [float(v) for v in rotation]
         bias, rough, corner, corr = float(edge_bias), float(roughness), float(corner_rounding), float(roughness_corr)
     except (TypeError, ValueError):
         raise DoefabError("fabrication errors must be numbers (metres, radians, relative depths)") from None
@@ -97,19 +114,20 @@ def roughness_field(shape: tuple, cell: float, rms: float, corr: float, seed: in
     return field, rms * math.sqrt(max(1 - g * g, 0.0))
 
 
-def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_scale=(1.0,) * N_MASKS,
-                      overlay=((0.0, 0.0),) * N_MASKS, rotation=(0.0,) * N_MASKS, edge_bias: float = 0.0,
-                      roughness: float = 0.0, supersample: int = 4, seed: int = 0, corner_rounding: float = 0.0,
-                      roughness_corr: float = 2e-6) -> np.ndarray:
+def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_scale=(), overlay=(), rotation=(),
+                      edge_bias: float = 0.0, roughness: float = 0.0, supersample: int = 4, seed: int = 0,
+                      corner_rounding: float = 0.0, roughness_corr: float = 2e-6,
+                      n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
     """Mean height (metres) of each cell of the fabricated DOE on the design grid refined ``supersample`` times.
 
     Args:
-        levels: (N, N) integer levels 0..15 (the design's level map, row 0 at the top, x < 0 coded).
+        levels: (N, N) integer levels 0..L−1 (the design's level map, row 0 at the top, x < 0 coded).
         camera: the design camera (its pitch and material).
-        design_wavelength: metres; sets the level step d = λ / (n(λ) − 1) / 16.
-        depth_scale, overlay (metres), rotation (radians), edge_bias, roughness, corner_rounding,
-        roughness_corr (metres): see the module docstring.
+        design_wavelength: metres; sets the level step d = λ / (n(λ) − 1) / L.
+        depth_scale, overlay (metres), rotation (radians): one entry per mask (M = log2 L), or empty for none;
+        edge_bias, roughness, corner_rounding, roughness_corr (metres): see the module docstring.
         supersample: cells per DOE pixel and axis (1–16).  seed: seeds the roughness.
+        n_levels: L, the design's levels (2, 4, 8, 16 or 32; ``Design.n_levels``).
     Returns:
         (N·s, N·s) float64 heights; with no error, each DOE pixel's height repeated s × s times.
     """
@@ -121,19 +139,21 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     if lv.ndim != 2 or lv.shape[0] != lv.shape[1] or lv.shape[0] != camera.doe_pixels:
         raise DoefabError(f"levels must be ({camera.doe_pixels}, {camera.doe_pixels}) on the camera's grid, got "
                           f"{lv.shape}")
-    if lv.dtype.kind not in "iu" or lv.min() < 0 or lv.max() >= N_LEVELS:
-        raise DoefabError("levels must be integers 0..15")
+    n_levels = check_levels(n_levels, "n_levels")
+    if lv.dtype.kind not in "iu" or lv.min() < 0 or lv.max() >= n_levels:
+        raise DoefabError(f"levels must be integers 0..{n_levels - 1} (n_levels = {n_levels})")
     if not isinstance(supersample, int) or not 1 <= supersample <= 16:
         raise DoefabError(f"supersample must be an integer 1..16, got {supersample!r}")
+    n_masks = mask_count(n_levels)
     scales, shifts, rots, bias, rough, corner, corr = check_errors(depth_scale, overlay, rotation, edge_bias,
-                                                                   roughness, corner_rounding, roughness_corr)
-    planes = bit_planes(lv)
+                                                                   roughness, corner_rounding, roughness_corr, n_masks)
+    planes = bit_planes(lv, n_levels)
     model = ReliefModel(planes, camera.doe_pitch, supersample)
     pitch = camera.doe_pitch
     biases = tuple(bias + corner_bias(p, corner / pitch) * pitch for p in planes)
     hist = model.histogram(MaskErrors(tuple(shifts), tuple(rots), biases))
-    d = level_step_for(camera, design_wavelength)
-    h = mean_height(hist, pattern_heights(N_MASKS, d, scales)).numpy().reshape(model.n, model.n)
+    d = level_step_for(camera, design_wavelength, n_levels)
+    h = mean_height(hist, pattern_heights(n_masks, d, scales)).numpy().reshape(model.n, model.n)
     if rough > 0:
         h = h + roughness_field(h.shape, model.cell, rough, corr, seed)[0]
     return h

@@ -41,7 +41,7 @@ def block_design(design, block: int):
     return Design(task=design.task, task_params=design.task_params, camera=cam,
                   wavelengths=tuple(w[i] for i in pick), depths=(design.depths[z],),
                   height=design.height[r0:r0 + b, c0:c0 + b], levels=levels, metrics=design.metrics,
-                  extra={"bands": pick, "depth": z})
+                  extra={"bands": pick, "depth": z}, n_levels=design.n_levels)
 
 
 def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERANCE, progress: bool = False) -> dict:
@@ -65,7 +65,7 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
     def bound_of(diff):
         return float(2 * (diff.abs() * masks).sum(dim=(-1, -2)).max())
     for k in kinds:
-        part = k.budget_part(budget)
+        part = k.budget_part(budget, judge.n_masks)
         psf = {}
         secs = {}
         for s, j in judges.items():
@@ -83,20 +83,22 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
     return out
 
 
-def judge_grid(study: dict, part) -> int:
-    """The grid a part needs: the finest any of its (nonzero) grid-dependent errors was given."""
+def judge_grid(study: dict, part, n_masks: int) -> int:
+    """The grid a part (of a design of ``n_masks`` masks) needs: the finest any of its (nonzero) grid-dependent
+    errors was given."""
     from doefab.tolerance.errors import PartErrors
 
     need = 1
+    part, nominal = part.for_masks(n_masks), PartErrors().for_masks(n_masks)
     for k in KINDS:
-        if k.grid and k.name in study.get("kinds", {}) and _has(part, k, PartErrors()):
+        if k.grid and k.name in study.get("kinds", {}) and _has(part, k, nominal, n_masks):
             need = max(need, study["kinds"][k.name]["grid"])
     return need
 
 
-def _has(part, k, nominal) -> bool:
+def _has(part, k, nominal, n_masks: int) -> bool:
     """Whether ``part`` carries error kind ``k`` (it differs from the nominal part where ``k`` would)."""
-    probe = k.build(k.sweep[-1] * k.si)
+    probe = k.build(k.sweep[-1] * k.si, n_masks).for_masks(n_masks)
     fields = [f for f in probe.__dataclass_fields__ if getattr(probe, f) != getattr(nominal, f)]
     return any(getattr(part, f) != getattr(nominal, f) for f in fields)
 

@@ -33,21 +33,28 @@ __all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "DEFAULT_MARGIN"]
 DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
 
-def alignment_chain(design_dir: Path) -> dict:
-    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (chrome = 0)."""
-    man = Path(design_dir).parent / "manifest.json"
-    if man.is_file():
+def alignment_chain(design_dir: Path | None, n_masks: int) -> dict:
+    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (a mask set's
+    ``design/``) or in a run's ``masks/`` beside it (chrome = 0); without one, every one of the ``n_masks`` etch
+    plates aligns to the chrome plate."""
+    man = None
+    if design_dir is not None:
+        man = Path(design_dir).parent / "manifest.json"
+        if not man.is_file():
+            man = Path(design_dir).parent / "masks" / "manifest.json"
+    if man is not None and man.is_file():
         try:
             return {int(k): int(v) for k, v in json.loads(man.read_text())["alignment_chain"].items()}
         except (KeyError, ValueError, TypeError):
             pass
-    return {1: 0, 2: 0, 3: 0, 4: 0}
+    return {m + 1: 0 for m in range(n_masks)}
 
 
-def compose_overlay(err: PartErrors, chain: dict, n_masks: int = 4) -> tuple[list, list]:
-    """Where each mask landed on the die: its own error relative to the plate it aligns to, accumulated along
-    the alignment chain (the chrome layer, plate 0, is the die's frame). Mounting errors are not here: they
-    move the die, not the masks on it."""
+def compose_overlay(err: PartErrors, chain: dict, n_masks: int) -> tuple[list, list]:
+    """Where each of the ``n_masks`` masks landed on the die: its own error relative to the plate it aligns to,
+    accumulated along the alignment chain (the chrome layer, plate 0, is the die's frame). Mounting errors are not
+    here: they move the die, not the masks on it."""
+    err = err.for_masks(n_masks)
     shifts, rots = [], []
     for m in range(n_masks):
         plate, dx, dy, th = m + 1, 0.0, 0.0, 0.0
@@ -86,13 +93,13 @@ class PSFJudge:
         self.task = get_task(d.task, **d.task_params)
         self.task.bind(d.camera)
         self.fine = refined_camera(d.camera, supersample)
-        planes = bit_planes(d.levels)
+        planes = bit_planes(d.levels, d.n_levels)
         self.n_masks = planes.shape[0]
         self.relief = ReliefModel(planes, d.camera.doe_pitch, supersample)
         self.corner_px2 = [corner_bias(p, 1.0) for p in planes]  # bias (px) per px² of corner radius
         self.plain_from = plain_columns(planes) * supersample  # grid column from which the design is plain
-        self.step = level_step(d.camera)
-        self.chain = chain or (alignment_chain(self.design_dir) if self.design_dir else {1: 0, 2: 0, 3: 0, 4: 0})
+        self.step = level_step(d.camera, d.n_levels)
+        self.chain = chain or alignment_chain(self.design_dir, self.n_masks)
         self._plans: dict = {}
         self._uncoded = None
         self._relief_cache: tuple = (None, None)
@@ -154,7 +161,7 @@ class PSFJudge:
         th = float(err.mount_rotation)
         cells = self.relief.n
         full = (1 << self.n_masks) - 1
-        heights = pattern_heights(self.n_masks, self.step, err.depth_scale) - full * self.step
+        heights = pattern_heights(self.n_masks, self.step, err.for_masks(self.n_masks).depth_scale) - full * self.step
         phases = [plan.phase_per_metre(i) for i in range(len(self.design.wavelengths))]
         if th == 0.0:
             fields = transmittance(self.relief.die_histogram(me, (r0, r1), (c0, c_end)), heights, phases)

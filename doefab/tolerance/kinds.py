@@ -18,30 +18,38 @@ from doefab.tolerance.errors import PartErrors, budget_value, nominal_gap, senso
 __all__ = ["Kind", "KINDS", "kind", "budget_part"]
 
 
-def _overlay(v: float) -> PartErrors:
-    """Every plate off by v relative to the one it aligns to, in four diagonal directions."""
+def _overlay(v: float, n_masks: int) -> PartErrors:
+    """Every plate off by v relative to the one it aligns to, in the four diagonal directions in turn."""
     s = v / math.sqrt(2)
-    return replace(PartErrors(), overlay=((s, s), (-s, s), (-s, -s), (s, -s)))
+    turns = ((s, s), (-s, s), (-s, -s), (s, -s))
+    return replace(PartErrors(), overlay=tuple(turns[m % 4] for m in range(n_masks)))
+
+
+def _mask_rotation(v: float, n_masks: int) -> PartErrors:
+    """Every plate turned by v relative to the one it aligns to, alternately one way and the other."""
+    return replace(PartErrors(), rotation=tuple(v if m % 2 == 0 else -v for m in range(n_masks)))
 
 
 @dataclass(frozen=True)
 class Kind:
-    """One error kind. ``build(v)``: the part with only this error, of magnitude v (SI); ``from_budget``: the
-    budget's magnitude (1 σ, or the bound of a uniform error; SI), 0 when the budget has none of it."""
+    """One error kind. ``build(v, n_masks)``: the part with only this error, of magnitude v (SI), for a design of
+    ``n_masks`` masks; ``from_budget``: the budget's magnitude (1 σ, or the bound of a uniform error; SI), 0 when the
+    budget has none of it."""
 
     name: str
     unit: str
     si: float  # SI units per ``unit``
     sweep: tuple
-    build: Callable[[float], PartErrors]
+    build: Callable[[float, int], PartErrors]
     from_budget: Callable[[dict], float]
     grid: bool
     part_from_budget: Callable[[dict], PartErrors] | None = None
 
-    def budget_part(self, budget: dict) -> PartErrors:
+    def budget_part(self, budget: dict, n_masks: int) -> PartErrors:
+        """The part with the budget's value of this error alone, for a design of ``n_masks`` masks."""
         if self.part_from_budget is not None:
             return self.part_from_budget(budget)
-        return self.build(self.from_budget(budget))
+        return self.build(self.from_budget(budget), n_masks)
 
 
 def _g(budget, sec, key, default=0.0):
@@ -49,7 +57,7 @@ def _g(budget, sec, key, default=0.0):
 
 
 def _crosstalk(calibrated: bool):
-    def build(v):
+    def build(v, n_masks):
         return replace(PartErrors(), crosstalk=(v, v), calibrated=calibrated)
     return build
 
@@ -67,31 +75,30 @@ def _crosstalk_value(b) -> float:
 
 KINDS = (
     Kind("etch depth (systematic)", "%", 0.01, (-10, -5, -2, 2, 5, 10),
-         lambda v: replace(PartErrors(), depth_scale=(1 + v,) * 4),
+         lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
          lambda b: (_g(b, "etch", "systematic_sigma_percent") + _g(b, "etch", "random_sigma_percent")) / 100, False),
     Kind("mask overlay", "µm", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
          lambda b: _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
-    Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300),
-         lambda v: replace(PartErrors(), rotation=(v, -v, v, -v)),
+    Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
          lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True),
     Kind("edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
-         lambda v: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
+         lambda v, n: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
          True),
-    Kind("corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0), lambda v: replace(PartErrors(), corner_rounding=v),
+    Kind("corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0), lambda v, n: replace(PartErrors(), corner_rounding=v),
          lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True),
     Kind("surface roughness", "nm rms", 1e-9, (5, 10, 20),
-         lambda v: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
+         lambda v, n: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
          lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True),
     Kind("decenter across split", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v: replace(PartErrors(), mount_shift=(v, 0.0)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
+         lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
          False),
     Kind("decenter along split", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v: replace(PartErrors(), mount_shift=(0.0, v)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
+         lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
          False),
     Kind("mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
-         lambda v: replace(PartErrors(), mount_rotation=v),
+         lambda v, n: replace(PartErrors(), mount_rotation=v),
          lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
-    Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v: replace(PartErrors(), axial_gap=v),
+    Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
          lambda b: nominal_gap(b) + _g(b, "mounting", "axial_gap_sigma_mm") * 1e-3, False),
     Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value, False,
          _crosstalk_part(False)),
@@ -107,6 +114,6 @@ def kind(name: str) -> Kind:
     raise KeyError(name)
 
 
-def budget_part(budget: dict, name: str) -> PartErrors:
-    """The part with the budget's value of error ``name`` alone."""
-    return kind(name).budget_part(budget)
+def budget_part(budget: dict, name: str, n_masks: int) -> PartErrors:
+    """The part with the budget's value of error ``name`` alone, for a design of ``n_masks`` masks."""
+    return kind(name).budget_part(budget, n_masks)

@@ -73,14 +73,15 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "samples.jsonl"
-    identity = run_identity(judge_for(design_dir, supersample).design, budget, seed, supersample, networks)
+    judge = judge_for(design_dir, supersample)
+    identity = run_identity(judge.design, budget, seed, supersample, networks)
     done = _read_log(log, identity)
     if not log.is_file():
         log.write_text(json.dumps({"run": identity}) + "\n")
     children = np.random.SeedSequence(seed).spawn(n)
     todo = [i for i in range(n) if i not in done]
-    errs = {i: sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]))
-            for i in todo}
+    errs = {i: sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]),
+                             n_masks=judge.n_masks) for i in todo}
     bar = _bar(n, "Monte Carlo" + (" (networks)" if networks else ""), progress)
     if bar is not None:
         bar.update(len(done))

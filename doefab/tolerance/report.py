@@ -50,6 +50,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     task = TASK_OF_DESIGN.get(judge.design.task, judge.design.task)
     spec = budget.get("spec", {})
     res: dict = {"design": str(design_dir), "task": task, "seed": seed, "stop": stop_case(judge.fine),
+                 "n_levels": judge.design.n_levels,
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
                  "level": "network" if networks else "psf"}
     res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
@@ -142,15 +143,16 @@ def _surrogate(res, design_dir, budget, grid, spec, task, progress) -> None:
     from doefab.tolerance.surrogate import fit_surrogate, surrogate_yield
 
     judge = study.judge_for(str(design_dir), grid)
-    model = fit_surrogate(lambda p: judge.evaluate(p)["metric"], budget, judge.chain, progress)
+    model = fit_surrogate(lambda p: judge.evaluate(p)["metric"], budget, judge.chain, progress, n_masks=judge.n_masks)
     held = [(PartErrors(**{k: _tup(v) for k, v in r["errors"].items()}), r["metric"]) for r in res.get("samples", [])]
     if len(held) < 8:  # no direct run to check against: draw held-out parts of its own
         children = np.random.SeedSequence(HOLDOUT_SEED).spawn(16)
         held = [(p, judge.evaluate(p)["metric"]) for p in
-                (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0])) for c in children)]
+                (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=judge.n_masks)
+                 for c in children)]
     t = time.perf_counter()
     y = surrogate_yield(model, budget, judge.chain, held,
-                        lambda m: meets({"psf_metric": m}, spec, task, "psf", res["nominal"]["psf"]))
+                        lambda m: meets({"psf_metric": m}, spec, task, "psf", res["nominal"]["psf"]), n_masks=judge.n_masks)
     model["seconds_total"] = round(model["seconds"] + time.perf_counter() - t, 1)
     res["surrogate"] = {"model": model, "yield": y}
     direct = res.get("summary", {}).get("yield")

@@ -85,7 +85,8 @@ def _surrogate(res: dict) -> list[str]:
 
 
 def _quantization(res: dict) -> list[str]:
-    lines = ["## Quantization", "", "| levels | quantized from | PSF metric | worst | L1 to the 16-level PSF |",
+    lines = ["## Quantization", "",
+             f"| levels | quantized from | PSF metric | worst | L1 to the {res.get('n_levels', 16)}-level PSF |",
              "| --- | --- | --- | --- | --- |"]
     lines += [f"| {r['levels']} | {r.get('source', '')} | {r['metric']:.4f} | {r['worst']:.4f} | "
               f"{r['l1_to_nominal']:.4f} |" for r in res["quantization"]]

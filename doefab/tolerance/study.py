@@ -73,7 +73,7 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
         nominal.setdefault(s, judge.score(judge.nominal))
         rows = []
         for m in k.sweep:
-            r = judge.evaluate(k.build(m * k.si))
+            r = judge.evaluate(k.build(m * k.si, judge.n_masks))
             rows.append({"magnitude": m, **r})
             if bar is not None:
                 bar.update(1)
@@ -110,11 +110,11 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
     rows = []
     for k in present:
         s = int(grids.get(k.name, 1))
+        j = judge_for(design_dir, s)
         if s not in base:
-            j = judge_for(design_dir, s)
             base[s] = evaluate_part(str(design_dir), s, PartErrors().to_json(), networks, weights_dir)
             base[s]["metric"] = j.score(j.nominal)["metric"]
-        r = evaluate_part(str(design_dir), s, k.budget_part(budget).to_json(), networks, weights_dir)
+        r = evaluate_part(str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks, weights_dir)
         row = {"error": k.name, "value": k.from_budget(budget) / k.si, "unit": k.unit, "grid": s,
                "metric": r["metric"], "delta": r["metric"] - base[s]["metric"]}
         if networks:
@@ -138,23 +138,28 @@ def _bar(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="part")
 
 
-def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int = 1,
+def quantization_study(design_dir, levels=None, supersample: int = 1,
                        networks: bool = False, weights_dir=None) -> list[dict]:
     """The same design at continuous (None) and N-level quantization, on the PSF metric (and, with
-    ``networks``, through the network given the nominal and the quantized design's PSF). Each row says what it
-    was quantized from: the continuous design when the folder keeps it (``height.npy`` or radial knots), else
-    the committed 16-level map re-quantized (fewer levels from 16 are not what a coarser design would be)."""
+    ``networks``, through the network given the nominal and the quantized design's PSF). ``levels``: default
+    continuous, the design's L and every fab level count below it. Each row says what it was quantized from: the
+    continuous design when the folder keeps it (``height.npy`` or radial knots), else the design's L-level map
+    re-quantized (fewer levels from L are not what a coarser design would be)."""
     from doefab.fabrication.levels import quantize_levels
+    from doefab.fabrication.process import LEVEL_CHOICES
 
     judge = judge_for(design_dir, supersample)
     d = judge.design
+    if levels is None:
+        levels = (None, *sorted((n for n in LEVEL_CHOICES if n <= d.n_levels), reverse=True))
     rows = []
     height = continuous_height(d)
-    source = "the continuous design" if height is not None else "the 16-level map, re-quantized"
+    mapped = f"the {d.n_levels}-level map"
+    source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
     for n in levels:
         if n is None and height is None:
             rows.append({"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
-                         "l1_to_nominal": float("nan"), "source": "n/a: the folder keeps only the 16-level map"})
+                         "l1_to_nominal": float("nan"), "source": f"n/a: the folder keeps only {mapped}"})
             continue
         h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
         if n is None:
@@ -165,7 +170,7 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
         if supersample > 1:
             h = np.kron(h, np.ones((supersample, supersample)))
         row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
-               else (source if n != 16 or height is not None else "the committed 16-level map"),
+               else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
                **judge.score(judge.psf_from_height(h))}
         if networks:
             row["network"] = network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
@@ -174,16 +179,16 @@ def quantization_study(design_dir, levels=(None, 16, 8, 4, 2), supersample: int 
 
 
 def continuous_height(design):
-    """The design's continuous (unquantized) heights in metres, or None when the folder keeps only its 16-level map:
+    """The design's continuous (unquantized) heights in metres, or None when the folder keeps only its level map:
     from ``height.npy``, or rebuilt from a radial design's knots (``extra.radial_knots_waves``)."""
     import torch
 
-    from doefab.design.optimize import PLAIN_LEVEL, coded_mask
+    from doefab.design.optimize import coded_mask, plain_level
     from doefab.design.parameterization import RadialParam, theta_to_height
     from doefab.fabrication.levels import level_step, levels_to_height
 
     d = design
-    if not np.allclose(d.height, levels_to_height(d.levels, d.camera), rtol=0, atol=1e-12):
+    if not np.allclose(d.height, levels_to_height(d.levels, d.camera, d.n_levels), rtol=0, atol=1e-12):
         return d.height
     knots = d.extra.get("radial_knots_waves")
     if not knots:
@@ -192,5 +197,5 @@ def continuous_height(design):
         h = theta_to_height(RadialParam(d.camera, len(knots)).waves(torch.tensor(knots, dtype=torch.float64)),
                             d.camera).numpy()
     mask = coded_mask(d.camera).numpy() > 0
-    return np.where(mask, h, PLAIN_LEVEL * level_step(d.camera))
+    return np.where(mask, h, plain_level(d.n_levels) * level_step(d.camera, d.n_levels))
 

@@ -38,7 +38,7 @@ def _chain_depth(chain: dict, m: int) -> int:
     return max(depth, 1)
 
 
-def parameters(budget: dict, chain: dict, n_masks: int = 4) -> list[tuple[str, float, object]]:
+def parameters(budget: dict, chain: dict, n_masks: int) -> list[tuple[str, float, object]]:
     """[(name, step h, setter(part, x) → part)] of the budget's random errors (zero-σ ones left out); overlay
     steps are 2 σ of the composed shift of each mask (√(plates on its alignment path) · σ)."""
     g = lambda s, k: budget_value(budget, s, k)  # noqa: E731
@@ -102,13 +102,13 @@ def base_part(budget: dict) -> PartErrors:
                    **sensor_errors(budget))
 
 
-def features(part: PartErrors, budget: dict, chain: dict, n_masks: int = 4) -> np.ndarray:
+def features(part: PartErrors, budget: dict, chain: dict, n_masks: int) -> np.ndarray:
     """The surrogate's parameters x_j of a sampled part (overlay and mask rotation composed along the chain, as
     the judge applies them)."""
     from doefab.tolerance.judge import compose_overlay
 
     shifts, rots = compose_overlay(part, chain, n_masks)
-    composed = replace(part, overlay=tuple(shifts), rotation=tuple(rots))
+    composed = replace(part.for_masks(n_masks), overlay=tuple(shifts), rotation=tuple(rots))
     vals = []
     for name, _, _ in parameters(budget, chain, n_masks):
         if name.startswith("etch depth"):
@@ -126,11 +126,12 @@ def features(part: PartErrors, budget: dict, chain: dict, n_masks: int = 4) -> n
     return np.array(vals)
 
 
-def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True) -> dict:
-    """{"base", "names", "h", "a", "b", "parts", "seconds"}: the surrogate from 2J + 1 simulated parts;
-    ``evaluate(part) → metric`` judges a part (parameters are set on the base part, each alone)."""
-    params = parameters(budget, chain)
-    base = base_part(budget)
+def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *, n_masks: int) -> dict:
+    """{"base", "names", "h", "a", "b", "parts", "seconds"}: the surrogate from 2J + 1 simulated parts of a design
+    of ``n_masks`` masks; ``evaluate(part) → metric`` judges a part (parameters are set on the base part, each
+    alone)."""
+    params = parameters(budget, chain, n_masks)
+    base = base_part(budget).for_masks(n_masks)
     t = time.perf_counter()
     bar = None
     if progress:
@@ -160,15 +161,16 @@ def predict(model: dict, x: np.ndarray) -> np.ndarray:
 
 
 def surrogate_yield(model: dict, budget: dict, chain: dict, held_out: list[tuple[PartErrors, float]], meets,
-                    draws: int = 20000, seed: int = 12345) -> dict:
-    """Yield on ``draws`` surrogate parts with held-out residuals resampled; ``meets(metric) → bool``. The
-    interval: the Wilson interval of the draws, widened by shifting every prediction by ±1.96 standard errors of
-    the held-out residuals' mean."""
-    xs = np.array([features(p, budget, chain) for p, _ in held_out])
+                    draws: int = 20000, seed: int = 12345, *, n_masks: int) -> dict:
+    """Yield on ``draws`` surrogate parts (of a design of ``n_masks`` masks) with held-out residuals resampled;
+    ``meets(metric) → bool``. The interval: the Wilson interval of the draws, widened by shifting every
+    prediction by ±1.96 standard errors of the held-out residuals' mean."""
+    xs = np.array([features(p, budget, chain, n_masks) for p, _ in held_out])
     resid = np.array([m for _, m in held_out]) - predict(model, xs)
     rng = np.random.default_rng(seed)
     children = np.random.SeedSequence(seed).spawn(draws)
-    x = np.array([features(sample_errors(budget, np.random.default_rng(c)), budget, chain) for c in children])
+    x = np.array([features(sample_errors(budget, np.random.default_rng(c), n_masks=n_masks), budget, chain, n_masks)
+                  for c in children])
     pred = predict(model, x) + rng.choice(resid, size=draws)
     se = resid.std(ddof=1) / math.sqrt(len(resid)) if len(resid) > 1 else float("nan")
     k = int(sum(meets(v) for v in pred))

@@ -193,8 +193,8 @@ def test_row03_train_writes_to_out_and_prints_the_path(tmp_path, capsys, monkeyp
     shipped = WEIGHTS_DIR
     before = _digest(shipped, "hdr_uncoded_only*")
     real = train_mod.train
-    monkeypatch.setattr(train_mod, "train", lambda *a, **k: real(*a, max_steps=1, val_images=1,
-                                                                 **{**k, "conditions": None}))
+    monkeypatch.setattr(train_mod, "train", lambda *a, **k: real(*a, val_images=1,
+                                                                 **{**k, "max_steps": 1, "conditions": None}))
     rc, out, _ = _run(["train", "--task", "hdr", "--variant", "uncoded_only", "--minutes", "0.1", "--crop", "64",
                        "--clean", "--out", tmp_path / "tr"], capsys)
     assert rc == 0

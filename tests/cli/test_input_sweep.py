@@ -451,6 +451,7 @@ API = [
     ("optimize", "checkpoint_every", lambda v: _opt(checkpoint_every=v),
      {NAN: nan, NEG: -1, ZERO: 0, UNIT: NA, BIG: VALID}),
     ("optimize", "batch", lambda v: _opt(batch=v), {NAN: nan, NEG: -2, ZERO: VALID, UNIT: NA, BIG: 10**12}),
+    ("optimize", "n_levels", lambda v: _opt(n_levels=v), {NAN: nan, NEG: -16, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "kernel_size", lambda v: doefab.get_task("streak", kernel_size=v),
      {NAN: nan, NEG: -95, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "period_m", lambda v: doefab.get_task("grating", period_m=v),
@@ -547,6 +548,7 @@ NOTHING_TO_SWEEP = {
     "DoefabError": "exception type", "SamplingError": "exception type", "PRESETS": "constant", "TASKS": "constant",
     "FUSED_SILICA": "constant", "PSFPair": "result type (made by PSFPlan)", "__version__": "constant",
     "blank_height": "a camera only", "calibrate_crosstalk": "two captured image pairs (checked by the unmix cases)",
+    "material_by_name": "a name (unknown names: tests/optics/test_materials.py)",
 }
 
 

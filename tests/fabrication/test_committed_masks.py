@@ -25,3 +25,13 @@ def test_committed_set_verifies(folder):
     assert rep["levels_reproduced"] and rep["marks_present"]
     assert all(v["mismatched_pixels_gdstk"] == 0 for v in rep["layers"].values())
     assert man["pitch_m"] == pytest.approx(design.camera.doe_pitch)
+
+
+@pytest.mark.parametrize("folder", SETS, ids=[p.name for p in SETS])
+def test_committed_sets_are_sixteen_levels_on_four_masks(folder):
+    """Written before the level count was recorded in the manifest: such a set means 16 levels, 4 etch layers."""
+    design = doefab.Design.load(folder / "design")
+    man = json.loads((folder / "manifest.json").read_text())
+    assert design.n_levels == man.get("n_levels", 16) == 16
+    assert sorted(L["layer"] for L in man["layers"] if L["purpose"] == "etch") == [1, 2, 3, 4]
+    assert len(man["level_to_height_nm"]) == 16

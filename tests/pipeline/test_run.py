@@ -5,7 +5,6 @@ import json
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -50,14 +49,12 @@ def test_holder_stage_needs_no_torch(tmp_path):
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "hdr"
-    t = time.perf_counter()
     assert main(["run", str(REPO / "scenes" / "hdr.toml"), "--quick", "--out", str(out)]) == 0
-    return out, time.perf_counter() - t
+    return out
 
 
 def test_quick_run_end_to_end(quick_run):
-    out, seconds = quick_run
-    assert seconds < 180
+    out = quick_run
     run = json.loads((out / "run.json").read_text())
     st = run["stages"]
     assert st["design"]["status"] == "reused" and st["masks"]["status"] == "reused"
@@ -73,7 +70,7 @@ def test_quick_run_end_to_end(quick_run):
 
 
 def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
-    out, _ = quick_run
+    out = quick_run
     assert main(["run", str(REPO / "scenes" / "hdr.toml"), "--quick", "--out", str(out), "--force", "holder"]) == 0
     st = json.loads((out / "run.json").read_text())["stages"]
     assert all(st[s]["reused_from_previous_run"] for s in ("design", "masks", "reconstruction", "tolerance"))
@@ -84,7 +81,7 @@ def test_report_in_headless_chromium(quick_run):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("Debian's chromium is not installed (scripts/setup.sh installs it as root)")
-    out, _ = quick_run
+    out = quick_run
     profile = out / "chromium-profile"
     flags = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
              "--disable-background-networking", f"--user-data-dir={profile}", "--virtual-time-budget=10000"]

@@ -45,3 +45,17 @@ def test_hdr_highlights_carry_structure_not_only_flat_discs():
         step = np.abs(hl[:, 1:] - hl[:, :-1]) / np.minimum(hl[:, 1:], hl[:, :-1])
         varied.append(float(np.mean(step[pairs] > 0.05)))
     assert np.mean(varied) > 0.2, varied
+
+
+def test_resample_bands_is_exact_for_a_linear_spectrum_and_refuses_outside_400_700():
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.data import HS_WAVELENGTHS_M, resample_bands
+
+    grid = np.asarray(HS_WAVELENGTHS_M)
+    spec = np.stack([2.0 + grid * 1e6, 1.0 - grid * 1e6])  # (2, 31): linear in wavelength
+    want = np.linspace(450e-9, 650e-9, 9)
+    out = resample_bands(spec, want, axis=1)
+    np.testing.assert_allclose(out, np.stack([2.0 + want * 1e6, 1.0 - want * 1e6]), rtol=1e-12)
+    assert resample_bands(spec, grid, axis=1) is spec
+    with pytest.raises(DoefabError, match="400–700"):
+        resample_bands(spec, [380e-9, 500e-9], axis=1)

@@ -26,8 +26,15 @@ def depth_design(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def honest(depth_design, tmp_path_factory):
-    C.CACHE = tmp_path_factory.mktemp("cache")
+def cache(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DOEFAB_CACHE", str(root))
+        yield root
+
+
+@pytest.fixture(scope="module")
+def honest(depth_design, cache):
     return {s: C.honest("depth", depth_design, s, parts=2) for s in ("train", "val", "test")}
 
 
@@ -60,7 +67,7 @@ def test_honest_captures_differ_from_clean_ones_of_the_same_scene(honest, depth_
     assert not np.allclose(xt.estimate[0], xt.alpha_lr)  # with a calibration error of its own
 
 
-def test_parts_come_back_from_the_cache(honest, depth_design):
+def test_parts_come_back_from_the_cache(honest, depth_design, cache):
     again = C.honest("depth", depth_design, "val", parts=2)
     assert all(torch.equal(a.coded, b.coded) for a, b in zip(again.parts, honest["val"].parts))
-    assert len(list(C.CACHE.glob("depth-*.pt"))) == 3
+    assert len(list((cache / "conditions").glob("depth-*.pt"))) == 3

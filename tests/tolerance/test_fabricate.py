@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import doefab
+from doefab.errors import DoefabError
 from doefab.tolerance.fabricate import fabricated_height, level_step_for
 
 PITCH = 5.4e-6
@@ -48,6 +49,24 @@ def test_depth_scale_follows_the_grating_formula(cam, n_levels, alpha):
     row = h[32, 16:48]  # whole periods
     assert first_order_from_samples(row, PITCH, n_levels * PITCH, n) == pytest.approx(eta_formula(n_levels, alpha),
                                                                                    abs=1e-10)
+
+
+@pytest.mark.parametrize("n_levels", [2, 8, 32])
+@pytest.mark.parametrize("alpha", [0.9, 1.0, 1.05])
+def test_depth_scale_on_an_n_level_process_follows_the_grating_formula(cam, n_levels, alpha):
+    """A design made for N levels (log2 N masks, levels 0..N−1, step λ / (n − 1) / N): every mask etched α times too
+    deep gives the N-level staircase's first-order efficiency η(N, α)."""
+    masks = int(math.log2(n_levels))
+    lv = np.tile(np.arange(64) % n_levels, (64, 1)).astype(np.uint8)
+    h = fabricated_height(lv, cam, LAM, depth_scale=(alpha,) * masks, supersample=1, n_levels=n_levels)
+    assert level_step_for(cam, LAM, n_levels) == pytest.approx(LAM / (float(cam.material.index(LAM)) - 1) / n_levels,
+                                                              rel=1e-12)
+    n = float(cam.material.index(LAM))
+    row = h[32, 16:16 + 32]  # whole periods of N pixels (32 pixels)
+    assert first_order_from_samples(row, PITCH, n_levels * PITCH, n) == pytest.approx(eta_formula(n_levels, alpha),
+                                                                                    abs=1e-10)
+    with pytest.raises(DoefabError, match=f"this design has {masks} masks"):
+        fabricated_height(lv, cam, LAM, depth_scale=(alpha,) * (masks + 1), n_levels=n_levels)
 
 
 def test_zero_perturbation_reproduces_the_level_map(cam):

@@ -1,0 +1,59 @@
+"""The committed designs, shipped inside the package (so a wheel installed anywhere has them).
+
+Each is ``doefab/designs/<name>.npz``: its ``design.json`` and its level map, compressed. The repository's mask
+sets (``masks/<name>/``, the fab deliverables) carry the same design in their ``design/`` folder; a test keeps
+the two equal, and ``scripts/rebuild_masks.sh`` re-packs a design it rebuilds. ``committed_dir(name)`` unpacks
+a design once into the cache (``$DOEFAB_CACHE``, default ``~/.cache/doefab``) and returns that folder, a design
+folder like any other.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["COMMITTED", "committed_dir", "pack_design", "PACKAGE_DESIGNS"]
+
+COMMITTED = ("streak", "grating", "half-ring")
+PACKAGE_DESIGNS = Path(__file__).resolve().parents[1] / "designs"
+
+
+def pack_design(folder: str | Path, name: str, target: str | Path | None = None) -> Path:
+    """Write design folder ``folder`` (design.json + levels.npy) as the packaged design ``name``."""
+    from doefab.design.design import Design
+    from doefab.io import atomic_write_bytes
+
+    folder = Path(folder)
+    Design.load(folder)  # only a sound design is shipped
+    text = (folder / "design.json").read_bytes()
+    levels = np.load(folder / "levels.npy", allow_pickle=False)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, design_json=np.frombuffer(text, np.uint8), levels=levels)
+    out = Path(target) if target is not None else PACKAGE_DESIGNS / f"{name}.npz"
+    return atomic_write_bytes(out, buf.getvalue())
+
+
+def committed_dir(name: str) -> Path:
+    """The folder of committed design ``name`` (streak, grating, half-ring), unpacked from the package."""
+    from doefab.io import atomic_write_bytes, cache_root
+
+    if name not in COMMITTED:
+        raise DoefabError(f"no committed design {name!r}: the package ships {', '.join(COMMITTED)}")
+    src = PACKAGE_DESIGNS / f"{name}.npz"
+    if not src.is_file():
+        raise DoefabError(f"the package lacks its committed design {src}: reinstall doefab")
+    data = src.read_bytes()
+    folder = cache_root() / "designs" / f"{name}-{hashlib.sha256(data).hexdigest()[:16]}"
+    if not (folder / "design.json").is_file():
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            levels, text = z["levels"], z["design_json"].tobytes()
+        buf = io.BytesIO()
+        np.save(buf, levels)
+        atomic_write_bytes(folder / "levels.npy", buf.getvalue())
+        atomic_write_bytes(folder / "design.json", text)  # written last: its presence means complete
+    return folder

@@ -1,0 +1,171 @@
+"""Every key a scene file takes, in one table: its type, unit, range, default and meaning.
+
+The same table validates scene files (``scene.load_scene``), writes the commented template of ``doefab scene
+new`` and is the scene-key reference of the documentation. Units are in the key names (``_mm``, ``_um``,
+``_nm``, ``_m``, ``_px``); a value far outside a key's range is almost always another unit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Key", "KEYS", "keys_of", "template", "key_table_markdown", "MATERIAL_NAMES"]
+
+# materials the fabrication section accepts (doefab.optics.materials has their dispersion and sources)
+MATERIAL_NAMES = ("fused silica", "N-BK7", "CaF2", "sapphire", "PMMA")
+
+
+@dataclass(frozen=True)
+class Key:
+    section: str  # "" for top-level keys
+    name: str
+    kind: str  # float, int, str, bool, list, choice
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple = ()
+    default: str = ""
+    help: str = ""
+
+
+KEYS = (
+    Key("", "task", "choice", choices=("hdr", "hyperspectral", "depth"), default="required",
+        help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
+    Key("", "stages", "list", default="all",
+        help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
+    Key("camera", "preset", "choice", choices=("default", "hdr", "hyperspectral", "depth"), default="the task's",
+        help="the seed's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
+             "below replace its values"),
+    Key("camera", "focal_length_mm", "float", "mm", 1.0, 2000.0, default="49.5 (prototype)",
+        help="the lens's focal length; the sensor distance follows from it and the focus distance"),
+    Key("camera", "sensor_distance_mm", "float", "mm", 1.0, 2000.0, default="from focal_length_mm",
+        help="lens to sensor, instead of focal_length_mm"),
+    Key("camera", "aperture_diameter_mm", "float", "mm", 0.1, 200.0, default="8.64 (prototype)",
+        help="the DOE's clear aperture (its chrome baffle)"),
+    Key("camera", "f_number", "float", "", 0.5, 64.0, default="from aperture_diameter_mm",
+        help="focal length / DOE aperture, instead of aperture_diameter_mm"),
+    Key("camera", "lens_f_number", "float", "", 0.5, 64.0, default="1.8 (prototype)",
+        help="the lens's own f-number wide open: decides whether the DOE's baffle is the aperture stop"),
+    Key("camera", "focus_distance_m", "float", "m", 1e-3, 1e6, default="5 (3.5 for depth)",
+        help="object distance imaged sharply"),
+    Key("camera", "sensor_pitch_um", "float", "µm", 0.3, 100.0, default="5.4 (prototype)",
+        help="sensor pixel pitch"),
+    Key("camera", "doe_pitch_um", "float", "µm", 0.1, 1000.0, default="5.4 (2.7 for HDR)",
+        help="the fab's DOE pixel; the DOE grid is the aperture divided by it"),
+    Key("camera", "split", "choice", choices=("vertical", "horizontal"), default="vertical",
+        help="the dual-pixel split line on the sensor; horizontal: the holder turns the die by 90°"),
+    Key("camera", "sensor_distance_m", "float", "m", 1e-3, 2.0, default="from the preset",
+        help="lens to sensor in metres (the same as sensor_distance_mm)"),
+    Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, default="the task's",
+        help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10)"),
+    Key("optics", "depths_m", "list", "m", 1e-3, 1e6, default="the task's",
+        help="depth planes (depth: 1–5 m every 0.25; others: the focus distance); \"inf\" for a plane wave"),
+    Key("optics", "kernel_px", "int", "px", 15, 1023, default="95, 191, 63",
+        help="PSF window in sensor pixels"),
+    Key("design", "optimizer", "choice", choices=("adam", "lbfgs", "mma"), default="the committed design's",
+        help="optimiser"),
+    Key("design", "iterations", "int", "steps", 1, 100000, default="the committed design's", help="optimiser steps"),
+    Key("design", "sampling", "int", "DOE px", 1, 16, default="the committed design's",
+        help="DOE pixels per design pixel (2: a half grid, 4× faster)"),
+    Key("design", "seed", "int", "", 0, 2**32 - 1, default="0", help="random seed"),
+    Key("design", "parameterization", "choice", choices=("pixel", "radial"), default="the committed design's",
+        help="free pixels, or a rotationally symmetric profile"),
+    Key("design", "knots", "int", "", 0, 100000, default="0", help="radial knots (0: one per DOE pixel)"),
+    Key("design", "ring_law", "choice", choices=("seed", "defocus"), default="the committed design's",
+        help="depth: ring radius linear in depth (seed) or in inverse depth (defocus)"),
+    Key("design", "ring_max_px", "float", "px", 0.0, 2047.0, default="the camera's defocus blur",
+        help="depth: ring radius at the nearest plane"),
+    Key("design", "streak_arm_px", "int", "px", 1, 2047, default="40", help="HDR: length of the streak's arms"),
+    Key("design", "streak_band_px", "int", "px", 0, 64, default="1",
+        help="HDR: half-width of the band around the arms the metric counts"),
+    Key("design", "grating_period_um", "float", "µm", 0.5, 1e4, default="16 DOE pixels",
+        help="spectra: grating period"),
+    Key("design", "grating_box_px", "int", "px", 0, 64, default="1",
+        help="spectra: half-width of each band's metric box at its first order"),
+    Key("fabrication", "levels", "choice", choices=(2, 4, 8, 16, 32), default="16",
+        help="etch levels: log2(levels) binary masks"),
+    Key("fabrication", "material", "choice", choices=MATERIAL_NAMES, default="fused silica", help="DOE substrate"),
+    Key("fabrication", "design_wavelength_nm", "float", "nm", 200.0, 2000.0, default="550",
+        help="the wavelength whose 2π height sets the etch depths"),
+    Key("fabrication", "min_feature_um", "float", "µm", 0.01, 1000.0, default="none",
+        help="the fab's smallest feature; the DOE pitch must not be smaller"),
+    Key("fabrication", "pattern_faces", "choice", choices=("lens", "scene"), default="lens",
+        help="which way the patterned face is mounted (the layout is mirrored for lens)"),
+    Key("fabrication", "oasis", "bool", default="false", help="also write OASIS"),
+    Key("reconstruction", "weights", "choice", choices=("shipped", "train", "shipped-anyway"), default="shipped",
+        help="shipped networks (the committed designs'), networks trained for this design, or the shipped ones "
+             "given this design's PSF (with a warning)"),
+    Key("reconstruction", "minutes", "float", "min", 0.0, 600.0, default="6",
+        help="training time per network (weights = train)"),
+    Key("reconstruction", "images", "int", "scenes", 1, 10000, default="4", help="held-out test scenes"),
+    Key("reconstruction", "size_px", "int", "px", 64, 2048, default="256", help="test image side (a multiple of 32)"),
+    Key("tolerance", "budget", "str", default="default", help="\"default\" or a budget TOML path"),
+    Key("tolerance", "samples", "int", "parts", 0, 100000, default="20", help="Monte Carlo parts"),
+    Key("tolerance", "supersample", "int", "", 1, 8, default="the grid study's choice",
+        help="fix the simulation grid (cells per DOE pixel)"),
+)
+
+
+def keys_of(section: str) -> dict:
+    return {k.name: k for k in KEYS if k.section == section}
+
+
+def key_table_markdown() -> str:
+    """The scene-key reference (one row per key)."""
+    rows = ["| key | unit / values | default | meaning |", "| --- | --- | --- | --- |"]
+    for k in KEYS:
+        name = f"{k.section}.{k.name}" if k.section else k.name
+        vals = ", ".join(map(str, k.choices)) if k.choices else (
+            f"{k.unit}, {k.lo:g}–{k.hi:g}" if k.lo is not None else k.unit or k.kind)
+        rows.append(f"| `{name}` | {vals} | {k.default} | {k.help} |")
+    rows.append("| `holder.*` | any `doefab holder --set` parameter (mm) | the holder's defaults | the lens's thread "
+                "or barrel and the part |")
+    return "\n".join(rows)
+
+
+_EXAMPLES = {
+    "hdr": {"optics": {"wavelengths_nm": [656, 589, 486]}, "design": {"iterations": 60, "sampling": 2}},
+    "hyperspectral": {"optics": {"wavelengths_nm": list(range(400, 701, 10))},
+                      "design": {"iterations": 300, "grating_period_um": 96.0}},  # first order ≤ 68 px at 700 nm
+    "depth": {"optics": {"depths_m": [1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0]},
+              "design": {"iterations": 600, "sampling": 2, "parameterization": "radial", "ring_law": "defocus"}},
+}
+
+
+def template(task: str) -> str:
+    """A commented scene file for ``task`` with every key, its unit and range (values: a 35 mm f/4 camera)."""
+    ex = _EXAMPLES[task]
+    values = {("camera", "focal_length_mm"): 35.0, ("camera", "f_number"): 4.0, ("camera", "lens_f_number"): 2.0,
+              ("camera", "focus_distance_m"): 3.5 if task == "depth" else 5.0, ("camera", "sensor_pitch_um"): 3.76,
+              ("camera", "doe_pitch_um"): 4.0, ("fabrication", "levels"): 16,
+              ("fabrication", "material"): "fused silica", ("fabrication", "min_feature_um"): 2.0,
+              ("reconstruction", "weights"): "train", ("reconstruction", "minutes"): 6.0,
+              ("tolerance", "samples"): 12, ("tolerance", "budget"): "default"}
+    for sec, d in ex.items():
+        values.update({(sec, k): v for k, v in d.items()})
+    lines = ["# doefab scene (doefab scene new). Every key with its unit; commented keys keep their default.",
+             f'task = "{task}"', 'stages = ["design", "masks", "holder", "reconstruction", "tolerance", "report"]']
+    section = None
+    for k in KEYS:
+        if not k.section or k.name in ("preset", "sensor_distance_m"):
+            continue
+        if k.section != section:
+            section = k.section
+            lines += ["", f"[{section}]"]
+        rng = f"{k.lo:g}–{k.hi:g} {k.unit}".strip() if k.lo is not None else ", ".join(map(str, k.choices))
+        note = f"# {k.help} ({rng}; default {k.default})"
+        if (k.section, k.name) in values:
+            lines += [note, f"{k.name} = {_toml(values[(k.section, k.name)])}"]
+        else:
+            lines += [note, f"# {k.name} = "]
+    lines += ["", "[holder]", "# the lens's filter thread (mm); any `doefab holder --set` parameter",
+              "thread_diameter_mm = 49.0"]
+    return "\n".join(lines) + "\n"
+
+
+def _toml(v) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v) if not isinstance(v, list) else "[" + ", ".join(map(str, v)) + "]"

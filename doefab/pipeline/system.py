@@ -1,0 +1,204 @@
+"""The optical system a scene describes: its camera, its task (bands, planes, geometry), its fabrication, and
+whether that system is the one a committed design was made for (then that design, its masks and its networks
+are reused).
+
+A scene starts from a preset camera (the seed's prototype by default) and replaces whatever it sets: focal
+length or sensor distance, DOE aperture or f-number, the lens's own f-number, focus, sensor and DOE pitch
+(the DOE grid is the aperture divided by the DOE pitch, rounded up to an even number of pixels so the split
+falls on a pixel edge), material and design wavelength. ``resolve`` then checks the physics before any work:
+the fab must resolve the DOE pixel, the grid must stay within memory, the window must hold the task's light
+(a grating's longest first order, a streak's arms, a half-ring's largest ring), the PSF window must sit inside
+the pupil sampling's alias-free field. Every problem is listed with its key and its fix.
+"""
+
+from __future__ import annotations
+
+import math
+
+from doefab.errors import DoefabError
+from doefab.pipeline.scene import TASK_DESIGN, Scene
+
+__all__ = ["resolve", "scene_camera", "scene_task", "is_custom_camera", "MAX_DOE_PIXELS"]
+
+MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
+_PRESET = {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}
+
+
+def is_custom_camera(scene: Scene) -> bool:
+    """Whether the scene's camera differs from its preset (a key equal to the preset's value changes nothing)."""
+    from doefab.optics.camera import Camera
+
+    base = Camera.preset(scene.camera.get("preset", _PRESET[scene.task]))
+    return scene_camera(scene).to_dict() != base.to_dict()
+
+
+def scene_camera(scene: Scene):
+    """The scene's Camera (SI units) and the problems found building it."""
+    from doefab.optics.camera import Camera
+    from doefab.optics.materials import material_by_name
+
+    c, fab = scene.camera, scene.fabrication
+    base = Camera.preset(c.get("preset", _PRESET[scene.task]))
+    focus = float(c.get("focus_distance_m", base.focus_distance))
+    inv_focus = 0.0 if math.isinf(focus) else 1.0 / focus
+    if "sensor_distance_mm" in c or "sensor_distance_m" in c:
+        s = c["sensor_distance_mm"] * 1e-3 if "sensor_distance_mm" in c else float(c["sensor_distance_m"])
+    elif "focal_length_mm" in c:
+        f = c["focal_length_mm"] * 1e-3
+        if f * inv_focus >= 1:
+            raise DoefabError(f"camera.focal_length_mm {c['focal_length_mm']} cannot focus at {focus} m: the focus "
+                              f"distance must exceed the focal length")
+        s = 1.0 / (1.0 / f - inv_focus)
+    else:
+        s = base.sensor_distance
+    focal = 1.0 / (1.0 / s + inv_focus)
+    aperture = (c["aperture_diameter_mm"] * 1e-3 if "aperture_diameter_mm" in c
+                else focal / c["f_number"] if "f_number" in c else base.aperture_diameter)
+    pitch = c["doe_pitch_um"] * 1e-6 if "doe_pitch_um" in c else base.doe_pitch
+    changed = any(k in c for k in ("aperture_diameter_mm", "f_number", "doe_pitch_um"))
+    pixels = 2 * math.ceil(aperture / pitch / 2 - 1e-9) if changed else base.doe_pixels
+    if pixels > MAX_DOE_PIXELS:
+        raise DoefabError(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): "
+                          f"above {MAX_DOE_PIXELS}²; raise camera.doe_pitch_um or lower the aperture")
+    return base.replace(sensor_distance=s, focus_distance=focus, aperture_diameter=aperture, doe_pitch=pitch,
+                        doe_pixels=int(pixels),
+                        sensor_pitch=c["sensor_pitch_um"] * 1e-6 if "sensor_pitch_um" in c else base.sensor_pitch,
+                        lens_f_number=float(c.get("lens_f_number", base.lens_f_number)),
+                        material=material_by_name(fab["material"]) if "material" in fab else base.material,
+                        design_wavelength=fab["design_wavelength_nm"] * 1e-9 if "design_wavelength_nm" in fab
+                        else base.design_wavelength)
+
+
+def scene_task(scene: Scene, committed, cam):
+    """The scene's task: the committed design's parameters, replaced by the scene's bands, planes and geometry."""
+    from doefab.tasks import get_task
+
+    dname = TASK_DESIGN[scene.task]
+    params = {k: v for k, v in committed.task_params.items() if k != "period_m"}
+    own = get_task(dname, **params)
+    o, d = scene.optics, scene.design
+    if "kernel_px" in o:
+        params["kernel_size"] = int(o["kernel_px"])
+    if "wavelengths_nm" in o and [round(w, 6) for w in o["wavelengths_nm"]] != [
+            round(w * 1e9, 6) for w in own.wavelengths(cam)]:
+        params["wavelengths_m"] = tuple(w * 1e-9 for w in o["wavelengths_nm"])
+        if dname == "grating":
+            params["n_bands"] = len(o["wavelengths_nm"])
+    planes = [math.inf if z == "inf" else float(z) for z in o.get("depths_m", [])]
+    if planes and dname == "half-ring" and [round(z, 9) for z in planes] != [round(z, 9) for z in own.depths(cam)]:
+        params["planes_m"] = tuple(planes)
+    for key, name, scale in (("streak_arm_px", "arm_px", 1), ("streak_band_px", "band_px", 1),
+                             ("grating_box_px", "box_px", 1), ("ring_max_px", "ring_max_px", 1),
+                             ("ring_law", "ring_law", None)):
+        if key in d:
+            params[name] = d[key] if scale is None else d[key] * scale
+    if "grating_period_um" in d:
+        params["period_m"] = d["grating_period_um"] * 1e-6
+    if dname == "half-ring" and is_custom_camera(scene) and "ring_max_px" not in d:
+        params["ring_max_px"] = defocus_ring_px(cam, params)
+    task = get_task(dname, **params)
+    task.bind(cam)
+    return task
+
+
+def defocus_ring_px(cam, params: dict) -> float:
+    """The half aperture's geometric blur radius (sensor px) at the nearest plane when it is sharp at the
+    farthest: the radius a defocus-law ring needs there (D·s·|1/z_near − 1/z_far| / 2)."""
+    planes = params.get("planes_m") or (params.get("z_min", 1.0), params.get("z_max", 5.0))
+    near, far = min(planes), max(planes)
+    r = cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
+    return float(min(r, params.get("kernel_size", 63) // 2 - 3))
+
+
+def _checks(scene: Scene, cam, task) -> list[str]:
+    """Physics guards: each problem with its key and fix."""
+    from doefab.fabrication.process import check_min_feature
+    from doefab.tasks.grating import GratingTask, grating_spot_px
+    from doefab.tasks.halfring import HalfRingTask
+    from doefab.tasks.streak import StreakTask
+
+    out = []
+    k = task.kernel_size
+    if "min_feature_um" in scene.fabrication:
+        try:
+            check_min_feature(cam.doe_pitch, scene.fabrication["min_feature_um"] * 1e-6)
+        except DoefabError as exc:
+            out.append(f"camera.doe_pitch_um / fabrication.min_feature_um: {exc}")
+    lam_min = min(task.wavelengths(cam))
+    alias = lam_min * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
+    if k / 2 + 0.5 > alias:
+        out.append(f"optics.kernel_px {k} reaches beyond the DOE sampling's alias-free field ({2 * alias - 1:.0f} px "
+                   f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
+    if isinstance(task, GratingTask):
+        far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in task.wavelengths(cam))
+        if far + task.box_px + 2 > k // 2:
+            out.append(f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis; the window "
+                       f"needs kernel_px ≥ {2 * math.ceil(far + task.box_px + 3) + 1}")
+    if isinstance(task, StreakTask) and task.arm_px + task.band_px + 1 > k // 2:
+        out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
+                   f"{2 * (task.arm_px + task.band_px + 2) + 1}")
+    if isinstance(task, HalfRingTask):
+        r = max(task.radius_px(z) for z in task.depths(cam))
+        if r + task.delta_px + 1 > k // 2:
+            out.append(f"the half-ring's largest ring ({r:.0f} px) does not fit optics.kernel_px {k}: raise kernel_px "
+                       f"or lower design.ring_max_px")
+    planes = [math.inf if z == "inf" else float(z) for z in scene.optics.get("depths_m", [])]
+    if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
+            round(z, 9) for z in task.depths(cam)]:
+        out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
+                   f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
+    if scene.task == "hyperspectral" and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
+        out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
+                   " keep the bands within it")
+    return out
+
+
+def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
+    lams, depths = tuple(task.wavelengths(cam)), tuple(task.depths(cam))
+    s = {"design_task": dname, "camera": cam.to_dict(), "wavelengths_m": list(lams),
+         "depths_m": [z if math.isfinite(z) else "inf" for z in depths], "kernel_px": task.kernel_size,
+         "task_params": {k: v for k, v in task.params().items() if k not in ("period_m", "wavelengths_m", "planes_m")},
+         "optimizer": design.get("optimizer", cfg.get("optimizer", "adam")),
+         "iterations": design.get("iterations", cfg.get("iterations", task.default_iterations)),
+         "sampling": design.get("sampling", cfg.get("sampling", 1)), "seed": design.get("seed", cfg.get("seed", 0)),
+         "parameterization": design.get("parameterization", cfg.get("parameterization", "pixel")),
+         "knots": design.get("knots", cfg.get("knots", 0)),
+         "levels": int(fab.get("levels", committed.n_levels))}
+    if dname == "half-ring":
+        s["ring_law"] = task.ring_law
+    return s
+
+
+def resolve(scene: Scene) -> dict:
+    """The design settings the scene asks for, whether they equal the committed design's, and every physics
+    problem of the system (one DoefabError listing them all, before any work)."""
+    from doefab.design.committed import committed_dir
+    from doefab.design.design import Design
+    from doefab.optics.camera import Camera
+
+    dname = TASK_DESIGN[scene.task]
+    cdir = committed_dir(dname)
+    committed = Design.load(cdir)
+    cfg = committed.extra.get("config", {})
+    try:
+        cam = scene_camera(scene)
+        task = scene_task(scene, committed, cam)
+    except DoefabError as exc:
+        raise DoefabError(f"{scene.path}: {exc}") from None
+    problems = _checks(scene, cam, task)
+    if problems:
+        raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
+    settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
+    ctask = scene_task(Scene(path=scene.path, task=scene.task, stages=()), committed, committed.camera)
+    committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})
+    differ = sorted(k for k in settings if settings[k] != committed_settings.get(k))
+    return {"settings": settings, "camera": cam, "task": task, "committed_dir": cdir, "reuse": not differ,
+            "differ": differ, "committed": committed, "committed_settings": committed_settings,
+            "custom_camera": is_custom_camera(scene), "split": scene.camera.get("split", "vertical"),
+            "stop": _stop(cam)}
+
+
+def _stop(cam) -> str:
+    from doefab.tolerance.mounted import stop_case
+
+    return stop_case(cam)

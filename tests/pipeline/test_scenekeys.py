@@ -1,0 +1,49 @@
+"""The scene-key table: its template loads and resolves for every task, the CLI writes it without replacing a
+file, and the reference table lists every key."""
+
+import tomllib
+
+import pytest
+
+from doefab.cli import main
+from doefab.pipeline.scene import load_scene
+from doefab.pipeline.scenekeys import KEYS, key_table_markdown, template
+
+
+@pytest.mark.parametrize("task", ["hdr", "hyperspectral", "depth"])
+def test_template_is_a_valid_scene_for_another_camera(task, tmp_path):
+    from doefab.pipeline.system import resolve
+
+    p = tmp_path / f"{task}.toml"
+    p.write_text(template(task))
+    res = resolve(load_scene(p))
+    cam = res["camera"]
+    # the template's camera: 35 mm f/4, 3.76 µm pixels, a 4 µm DOE pitch
+    assert cam.sensor_pitch == pytest.approx(3.76e-6)
+    assert cam.doe_pitch == pytest.approx(4e-6)
+    assert cam.aperture_diameter == pytest.approx(35e-3 / 4, rel=1e-9)
+    assert res["custom_camera"] and not res["reuse"]
+
+
+def test_template_names_every_key_with_its_unit():
+    text = template("hdr")
+    raw = tomllib.loads(text)
+    for k in KEYS:
+        if not k.section or k.name in ("preset", "sensor_distance_m"):
+            continue
+        assert f"{k.name} = " in text, k.name
+    assert raw["camera"]["focal_length_mm"] == 35.0
+    table = key_table_markdown()
+    assert all(f"`{k.section}.{k.name}`" in table for k in KEYS if k.section)
+
+
+def test_scene_new_writes_once_and_refuses_to_replace(tmp_path, capsys):
+    out = tmp_path / "mine.toml"
+    assert main(["scene", "new", "--task", "depth", "--out", str(out)]) == 0
+    assert load_scene(out).task == "depth"
+    before = out.read_text()
+    assert main(["scene", "new", "--task", "hdr", "--out", str(out)]) == 2
+    assert out.read_text() == before
+    assert "exists" in capsys.readouterr().err
+    assert main(["scene", "new", "--task", "hdr", "--out", str(tmp_path / "mine.txt")]) == 2
+    assert main(["scene", "new", "--task", "hdr", "--out", str(tmp_path / "no" / "x.toml")]) == 2
