@@ -3,9 +3,11 @@
 - The API reference lists ``doefab.__all__`` and ``holder_cad.__all__`` (written to ``api/reference.rst`` when
   the build starts); every public name without a docstring, and every public callable that takes a length
   without stating its unit, is a warning (an error under ``-W``).
-- Directives: ``docstring-table`` and ``docstring`` (a module's docstring, e.g. the scene keys of
-  ``doefab.pipeline.scene``), ``doefab-help`` (a subcommand's ``--help``), ``doefab-command`` (runs a command
-  and shows what it printed), ``holder-params`` (the holder's parameters, defaults and ranges).
+- Directives: ``scene-keys`` (every scene key, from ``doefab.pipeline.scenekeys.key_table_markdown()``, the
+  table that also validates scenes and writes ``doefab scene new``'s template), ``docstring`` (a module's
+  docstring), ``doefab-help`` (a subcommand's ``--help``), ``doefab-command`` (runs commands and shows what
+  they printed), ``holder-params`` (the holder's parameters, defaults and ranges), ``substrates`` (the built-in
+  substrates with their sources).
 - Results pages (``doefab_results``) and the mask-set page (``doefab_fab``) have their own modules.
 """
 
@@ -159,18 +161,14 @@ class MarkdownDirective(SphinxDirective):
         return container.children
 
 
-class DocstringTable(MarkdownDirective):
-    """The Markdown table inside a module's docstring (its lines starting with ``|``)."""
-
-    required_arguments = 1
+class SceneKeys(MarkdownDirective):
+    """Every scene key with its unit, range, default and meaning: ``doefab.pipeline.scenekeys``' own table."""
 
     def run(self):
-        doc = _module_doc(self.arguments[0])
-        rows = [line.strip() for line in doc.splitlines() if line.strip().startswith("|")]
-        if len(rows) < 3:
-            raise self.error(f"the docstring of {self.arguments[0]} holds no Markdown table")
-        self.env.note_dependency(inspect.getsourcefile(importlib.import_module(self.arguments[0])))
-        return self.parse_markdown(rows)
+        from doefab.pipeline import scenekeys
+
+        self.env.note_dependency(inspect.getsourcefile(scenekeys))
+        return self.parse_markdown(scenekeys.key_table_markdown().splitlines())
 
 
 class Docstring(MarkdownDirective):
@@ -194,9 +192,9 @@ def _parser_help(sub: str | None) -> str:
     os.environ["COLUMNS"] = "100"
     try:
         parser = build_parser()
-        if sub:
-            action = next(a for a in parser._actions if getattr(a, "choices", None) and sub in a.choices)
-            parser = action.choices[sub]
+        for name in (sub or "").split():  # "scene new": a subcommand's own subcommand
+            action = next(a for a in parser._actions if getattr(a, "choices", None) and name in a.choices)
+            parser = action.choices[name]
         return parser.format_help()
     finally:
         if old is None:
@@ -206,9 +204,10 @@ def _parser_help(sub: str | None) -> str:
 
 
 class DoefabHelp(SphinxDirective):
-    """``doefab [SUBCOMMAND] --help``, as the installed parser prints it."""
+    """``doefab [SUBCOMMAND [ACTION]] --help``, as the installed parser prints it."""
 
     optional_arguments = 1
+    final_argument_whitespace = True
 
     def run(self):
         sub = self.arguments[0] if self.arguments else None
@@ -224,12 +223,13 @@ class DoefabHelp(SphinxDirective):
 
 
 class DoefabCommand(SphinxDirective):
-    """Run a ``doefab`` command during the build and show it with what it printed and its exit status.
+    """Run ``doefab`` commands during the build and show each with what it printed and its exit status.
 
-    The command runs in a fresh folder that links the repository's ``masks/`` and ``scenes/``; ``:tail: N``
-    keeps the last N lines of a long output, ``:status: N`` is the exit status it must end with (default 0),
-    ``:files:`` lists what it wrote, ``:write: NAME`` first writes the directive's content to the file NAME
-    (shown above the command).
+    The commands (one, or several joined by `` && ``) run one after another in one fresh folder that links the
+    repository's ``masks/`` and ``scenes/``, so a later command reads what an earlier one wrote; ``:tail: N``
+    keeps the last N lines of each long output, ``:status: N`` is the exit status the last command must end with
+    (default 0; every earlier one must end with 0), ``:files:`` lists what they wrote, ``:write: NAME`` first
+    writes the directive's content to the file NAME (shown above the commands).
     """
 
     required_arguments = 1
@@ -239,10 +239,9 @@ class DoefabCommand(SphinxDirective):
                    "write": directives.unchanged_required}
 
     def run(self):
-        from doefab.cli import main
-
-        argv = shlex.split(self.arguments[0])
-        if argv[0] != "doefab":
+        commands = [c.strip() for c in self.arguments[0].split(" && ")]
+        argvs = [shlex.split(c) for c in commands]
+        if any(not argv or argv[0] != "doefab" for argv in argvs):
             raise self.error("doefab-command runs doefab commands only")
         want = self.options.get("status", 0)
         work = Path(tempfile.mkdtemp(prefix="doefab-docs-"))
@@ -250,30 +249,28 @@ class DoefabCommand(SphinxDirective):
             (work / name).symlink_to(ROOT / name, target_is_directory=True)
         if "write" in self.options:  # the directive's content is a file the command reads
             (work / self.options["write"]).write_text("\n".join(self.content) + "\n")
-        out, cwd = io.StringIO(), os.getcwd()
+        shown = [f"$ cat {self.options['write']}", *self.content] if "write" in self.options else []
+        cwd = os.getcwd()
         t0 = time.perf_counter()
         try:
             os.chdir(work)
-            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
-                try:
-                    status = main(argv[1:])
-                except SystemExit as exc:  # argparse's own exits
-                    status = exc.code
+            for i, (command, argv) in enumerate(zip(commands, argvs)):
+                status, lines = self._run_one(argv)
+                expected = want if i == len(commands) - 1 else 0
+                if status != expected:
+                    raise self.error(f"{command} exited with status {status} (expected {expected}):\n"
+                                     + "\n".join(lines))
+                tail = self.options.get("tail")
+                if tail is not None and len(lines) > tail:
+                    lines = [f"[… {len(lines) - tail} lines before these …]"] + lines[-tail:]
+                shown += [f"$ {command}", *lines, f"[exit status {status}]"]
             files = sorted(str(p.relative_to(work)) for p in work.rglob("*")
                            if p.is_file() and not str(p.relative_to(work)).startswith(("masks", "scenes")))
         finally:
             os.chdir(cwd)
             shutil.rmtree(work, ignore_errors=True)
         seconds = time.perf_counter() - t0
-        if status != want:
-            raise self.error(f"{self.arguments[0]} exited with status {status} (expected {want}):\n{out.getvalue()}")
-        lines = out.getvalue().rstrip("\n").splitlines()
-        tail = self.options.get("tail")
-        if tail is not None and len(lines) > tail:
-            lines = [f"[… {len(lines) - tail} lines before these …]"] + lines[-tail:]
-        text = "\n".join([f"$ {self.arguments[0]}"] + lines + [f"[exit status {status}]"])
-        if "write" in self.options:
-            text = "\n".join([f"$ cat {self.options['write']}", *self.content, text])
+        text = "\n".join(shown)
         if "files" in self.options:
             given = self.options.get("write")
             text += "\n\nwritten:\n" + "\n".join(f"  {f}" for f in files if ".doefab-output" not in f and f != given)
@@ -283,6 +280,38 @@ class DoefabCommand(SphinxDirective):
         caption = nodes.paragraph(text=f"Run while this page was built ({seconds:.1f} s).")
         caption["classes"].append("doefab-command-caption")
         return [block, caption]
+
+    @staticmethod
+    def _run_one(argv: list[str]) -> tuple[int, list[str]]:
+        """Exit status and printed lines (stdout and stderr) of ``doefab ARGV`` run in this process."""
+        from doefab.cli import main
+
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+            try:
+                status = main(argv[1:])
+            except SystemExit as exc:  # argparse's own exits
+                status = exc.code
+        return status, out.getvalue().rstrip("\n").splitlines()
+
+
+class SubstratesTable(MarkdownDirective):
+    """The built-in substrates (``doefab.optics.materials.SUBSTRATES``): name, published source, fitted range, and
+    the index, 2π height and 16-level step they give at 550 nm."""
+
+    def run(self):
+        from doefab.optics import materials
+
+        lam = 550e-9
+        rows = ["| `material` | source of the dispersion | fitted range (µm) | n at 550 nm | 2π height at 550 nm (nm) "
+                "| level step, 16 levels (nm) |", "| --- | --- | --- | --- | --- | --- |"]
+        for name, sub in materials.SUBSTRATES.items():
+            n = float(sub.material.index(lam))
+            h2pi = lam / (n - 1) * 1e9
+            rows.append(f"| `{name}` | {sub.source} | {sub.range_um[0]:g}–{sub.range_um[1]:g} | {n:.4f} | "
+                        f"{h2pi:.1f} | {h2pi / 16:.2f} |")
+        self.env.note_dependency(inspect.getsourcefile(materials))
+        return self.parse_markdown(rows)
 
 
 class HolderParamsTable(MarkdownDirective):
@@ -335,10 +364,11 @@ def setup(app):
     app.connect("config-inited", _on_config_inited)
     app.connect("builder-inited", _on_builder_inited, priority=400)
     app.connect("autodoc-process-docstring", _constant_doc)
-    app.add_directive("docstring-table", DocstringTable)
+    app.add_directive("scene-keys", SceneKeys)
     app.add_directive("docstring", Docstring)
     app.add_directive("doefab-help", DoefabHelp)
     app.add_directive("doefab-command", DoefabCommand)
     app.add_directive("holder-params", HolderParamsTable)
+    app.add_directive("substrates", SubstratesTable)
     doefab_fab.setup(app)
     return {"version": "1", "parallel_read_safe": False, "parallel_write_safe": True}

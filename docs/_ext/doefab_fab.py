@@ -4,7 +4,8 @@
   levels) as a Markdown table.
 - ``manifest-fields`` holds the page's own table of the manifest's fields and checks it against the file: a
   field the manifest has and the table does not explain, or one the table explains and the manifest lacks, is a
-  warning (an error under ``-W``).
+  warning (an error under ``-W``). ``:newer:`` names fields the exporter writes that the committed set predates
+  (each must be absent from the file and written by ``doefab.fabrication.export``).
 - ``write_figures`` draws the die's chrome, keys, verniers and CD ladder from the set's GDS file into
   ``docs/_generated/fab/marks.png``.
 """
@@ -133,11 +134,21 @@ def manifest_field_names(m: dict) -> set[str]:
     return names
 
 
+def exporter_field_names() -> set[str]:
+    """The top-level fields the mask export writes into a manifest (the keys of its ``_manifest`` record)."""
+    import inspect
+
+    from doefab.fabrication import export
+
+    return set(re.findall(r'"(\w+)":', inspect.getsource(export._manifest)))
+
+
 class ManifestFields(_Markdown):
     """The page's explanation of every manifest field, checked against the real manifest."""
 
     required_arguments = 1
     has_content = True
+    option_spec = {"newer": directives.unchanged}
 
     def run(self):
         m = _manifest(self.arguments[0])
@@ -146,7 +157,13 @@ class ManifestFields(_Markdown):
         for line in self.content:
             cell = line.split("|")[1].strip() if line.strip().startswith("|") else ""
             explained |= set(re.findall(r"`([^`]+)`", cell))
-        have = manifest_field_names(m)
+        newer = set(self.options.get("newer", "").split())
+        for name in sorted(newer - exporter_field_names()):
+            log.warning(f":newer: names {name!r}, which the mask export does not write", location=self.get_location())
+        for name in sorted(newer & manifest_field_names(m)):
+            log.warning(f":newer: names {name!r}, which {self.arguments[0]} has already: remove it from :newer:",
+                        location=self.get_location())
+        have = manifest_field_names(m) | newer
         for name in sorted(have - explained):
             log.warning(f"{self.arguments[0]} has the field {name!r}, which the page's table does not explain",
                         location=self.get_location())

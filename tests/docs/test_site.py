@@ -65,14 +65,16 @@ def test_results_pages_show_every_results_file_and_report_one_that_is_not(tmp_pa
 
 
 def test_the_fab_page_explains_every_manifest_field():
-    from doefab_fab import manifest_field_names
+    from doefab_fab import exporter_field_names, manifest_field_names
 
     page = (REPO / "docs" / "fab" / "mask-set.md").read_text()
     table = page.split("```{manifest-fields}")[1].split("```")[0]
     explained = {name for line in table.splitlines() if line.startswith("| `")
                  for name in re.findall(r"`([^`]+)`", line.split("|")[1])}
+    newer = set(re.search(r"^:newer:(.*)$", table, re.M).group(1).split())  # written by the exporter since
     manifest = json.loads((REPO / "masks" / "grating" / "manifest.json").read_text())
-    assert explained == manifest_field_names(manifest)
+    assert explained == manifest_field_names(manifest) | newer
+    assert newer <= exporter_field_names() and not newer & manifest_field_names(manifest)
 
 
 # --- the strict build ------------------------------------------------------------------------------------
