@@ -171,10 +171,12 @@ class HolderParams:
     # ---- derived dimensions (mm) --------------------------------------------------------------
     @property
     def thread_major_radius_mm(self) -> float:
+        """Outer radius of the printed male thread (mm), half the nominal diameter less ``clearance_mm``."""
         return self.thread_diameter_mm / 2 - self.clearance_mm
 
     @property
     def thread_root_radius_mm(self) -> float:
+        """Root radius of the printed thread (mm), the major radius less ``thread_depth_mm``."""
         return self.thread_major_radius_mm - self.thread_depth_mm
 
     @property
@@ -186,18 +188,22 @@ class HolderParams:
 
     @property
     def cartridge_radius_mm(self) -> float:
+        """Outer radius of the cartridge body (mm), the bore radius less ``clearance_mm``."""
         return self.bore_radius_mm - self.clearance_mm
 
     @property
     def die_diagonal_mm(self) -> float:
+        """Diagonal of the die (mm), which the cartridge's die pocket must hold."""
         return math.hypot(self.die_width_mm, self.die_height_mm)
 
     @property
     def chamfer_height_mm(self) -> float:
+        """Height of the flange's 45° chamfer (mm), from the thread to the flange's outer radius."""
         return self.flange_diameter_mm / 2 - self.thread_major_radius_mm
 
     @property
     def base_height_mm(self) -> float:
+        """Height of the base ring (mm), thread (or sleeve) length plus flange height."""
         if self.mount == "thread":
             return self.thread_length_mm + self.flange_height_mm
         return self.sleeve_length_mm + self.flange_height_mm
@@ -214,24 +220,27 @@ class HolderParams:
 
     @property
     def screw_offset_mm(self) -> float:
-        """x of the two die-retention screws: wall_mm of plastic between pocket and pilot hole."""
+        """x of the two die-retention screws (mm), with wall_mm of plastic between pocket and pilot hole."""
         return self.die_width_mm / 2 + self.clearance_mm + self.wall_mm + self.pilot_hole_mm / 2
 
     @property
     def sleeve_outer_radius_mm(self) -> float:
+        """Outer radius of the slip-fit sleeve (mm), barrel radius plus clearance and wall."""
         return self.barrel_diameter_mm / 2 + self.clearance_mm + self.wall_mm
 
     @property
     def pilot_radius_mm(self) -> float:
-        """Radius of the lock-screw circle: mid-flange (thread), outside the sleeve (slip: clear of the barrel)."""
+        """Radius of the lock-screw circle (mm), mid-flange (thread) or outside the sleeve, clear of the barrel (slip)."""
         if self.mount == "thread":
             return 0.5 * (self.bore_radius_mm + self.flange_diameter_mm / 2)
         return self.sleeve_outer_radius_mm + self.wall_mm + self.pilot_hole_mm / 2
 
     def replace(self, **changes) -> "HolderParams":
+        """A copy with some parameters changed (millimetres), checked again."""
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
+        """Every parameter by name (lengths in millimetres), as ``holder.json`` stores them."""
         return dataclasses.asdict(self)
 
 

@@ -21,5 +21,5 @@ if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet "torch==2.13.0"
-.venv/bin/python -m pip install --quiet -e ".[test,klayout,cad,cluster]"
+.venv/bin/python -m pip install --quiet -e ".[test,klayout,cad,cluster,docs]"
 echo "$want" > "$stamp"

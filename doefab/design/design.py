@@ -89,6 +89,8 @@ class Design:
         return levels_to_height(self.levels, self.camera, self.n_levels)
 
     def to_json(self) -> dict:
+        """The ``design.json`` record: task, camera (metres), wavelengths and depths (metres), metrics, level
+        step (metres), shape, ``levels_sha256`` and the versions that made it."""
         return {
             "format_version": FORMAT_VERSION,
             "task": self.task,

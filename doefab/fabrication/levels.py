@@ -43,7 +43,7 @@ def wrap_height(height, camera: Camera):
 
 
 def quantize_levels(height, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
-    """Nearest level index (uint8, 0..n_levels-1) of each height, after wrapping into one 2π period.
+    """Nearest level index (uint8, 0..n_levels-1) of each height (metres), after wrapping into one 2π period.
 
     A height within half a step below h_2π rounds to level n_levels ≡ 0 (it is the same phase).
     """

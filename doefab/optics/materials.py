@@ -79,6 +79,7 @@ class Material:
         return float(wavelength_m / (self.index(wavelength_m) - 1.0))
 
     def to_dict(self) -> dict:
+        """JSON-ready record: ``name``, ``sellmeier_b`` and ``sellmeier_c_um`` (micrometres)."""
         return {"name": self.name, "sellmeier_b": list(self.b), "sellmeier_c_um": list(self.c_um)}
 
     @classmethod
@@ -117,14 +118,20 @@ class Substrate:
     range_um: tuple[float, float]
 
 
+#: Fused silica (Malitson 1965; Sellmeier C coefficients in µm, fit 0.21–3.71 µm): the default DOE substrate.
 FUSED_SILICA = Material(name="fused silica", b=(0.6961663, 0.4079426, 0.8974794),
                         c_um=(0.0684043, 0.1162414, 9.896161))
+#: SCHOTT N-BK7 (data sheet; C_i² in µm² converted to C_i in µm, fit 0.3–2.5 µm).
 N_BK7 = Material(name="N-BK7", b=(1.03961212, 0.231792344, 1.01046945),
                  c_um=_roots(0.00600069867, 0.0200179144, 103.560653))
+#: Calcium fluoride (Malitson 1963; C in µm, fit 0.23–9.7 µm).
 CAF2 = Material(name="CaF2", b=(0.5675888, 0.4710914, 3.8484723), c_um=(0.050263605, 0.1003909, 34.649040))
+#: Sapphire, ordinary ray (Malitson & Dodge 1972; C in µm, fit 0.2–5.0 µm).
 SAPPHIRE = Material(name="sapphire", b=(1.4313493, 0.65054713, 5.3414021), c_um=(0.0726631, 0.1193242, 18.028251))
+#: PMMA (Sultanova et al. 2009, one-term fit; C in µm, fit 0.4368–1.052 µm).
 PMMA = Material(name="PMMA", b=(1.1819, 0.0, 0.0), c_um=_roots(0.011313, 0.0, 0.0))
 
+#: The built-in substrates by name: each one's Material, published source and fitted range (µm).
 SUBSTRATES = {s.material.name: s for s in (
     Substrate(FUSED_SILICA, "Malitson, J. Opt. Soc. Am. 55, 1205 (1965)", (0.21, 3.71)),
     Substrate(N_BK7, "SCHOTT optical glass data sheet N-BK7", (0.3, 2.5)),

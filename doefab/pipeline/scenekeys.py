@@ -17,6 +17,9 @@ MATERIAL_NAMES = ("fused silica", "N-BK7", "CaF2", "sapphire", "PMMA")
 
 @dataclass(frozen=True)
 class Key:
+    """One scene key: its section ("" for top-level keys), name, kind (float, int, str, bool, list, choice),
+    unit (as in its name: mm, µm, nm, m, px), allowed range [lo, hi] in that unit, choices, default and meaning."""
+
     section: str  # "" for top-level keys
     name: str
     kind: str  # float, int, str, bool, list, choice
@@ -107,6 +110,7 @@ KEYS = (
 
 
 def keys_of(section: str) -> dict:
+    """The keys of one section (``"camera"``, ``"fabrication"``…; ``""`` for the top level), by name."""
     return {k.name: k for k in KEYS if k.section == section}
 
 

@@ -10,6 +10,8 @@ from doefab.tasks.streak import StreakTask
 
 __all__ = ["Task", "StreakTask", "GratingTask", "HalfRingTask", "TASKS", "get_task"]
 
+#: The design tasks by name: ``"streak"`` (HDR), ``"grating"`` (hyperspectral) and ``"half-ring"`` (depth),
+#: each a :class:`doefab.tasks.Task` subclass (:func:`get_task` makes one with its parameters).
 TASKS = {"streak": StreakTask, "grating": GratingTask, "half-ring": HalfRingTask}
 
 

@@ -1,0 +1,194 @@
+"""Results pages from ``benchmarks/results/``: the tables and figures the benchmark scripts write, never copied.
+
+For each measurement below, ``write_pages`` writes ``docs/_generated/results/<name>.md``: the command that
+measured it (taken from the script's docstring), the files it wrote and their content — Markdown tables as they
+are, figures as images, JSON records as tables. A results page includes those files under its own headings and
+says in its own words what was measured. Problems are returned as warnings (errors under ``-W``): a script
+whose docstring names no command, an output that is missing or that its script does not write, and a file in
+``benchmarks/results/`` (``.md`` or ``.png``) that no page shows.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "benchmarks" / "results"
+OUT = ROOT / "docs" / "_generated" / "results"
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """name: the generated file.  script: the benchmark script (None: a doefab command wrote it).
+    outputs: files relative to the repository root.  before: commands that make the script's inputs.
+    command: the command when no script's docstring holds it.  note: one line on where the file comes from."""
+
+    name: str
+    script: str | None
+    outputs: tuple[str, ...]
+    before: tuple[str, ...] = ()
+    command: str | None = None
+    note: str = ""
+    json_table: str | None = None  # a renderer below for JSON outputs
+
+
+R = "benchmarks/results/"
+MEASUREMENTS = (
+    Measurement("psf_error_vs_time", "benchmarks/psf_error_vs_time.py",
+                (R + "psf_error_vs_time.md", R + "psf_error_vs_time.png")),
+    Measurement("start_metrics", "benchmarks/start_metrics.py", (R + "start_metrics.md",)),
+    Measurement("design_metric_vs_time", "benchmarks/design_metric_vs_time.py",
+                (R + "design_metric_vs_time.md", R + "design_metric_vs_time.png"),
+                before=tuple(f"doefab design --task {t} --out out/designs/{t}" for t in ("streak", "grating", "half-ring"))),
+    Measurement("nlopt_optimizers", "benchmarks/nlopt_optimizers.py", (R + "nlopt_optimizers.md",)),
+    Measurement("fab_regularizer", "benchmarks/fab_regularizer.py", (R + "fab_regularizer.md",)),
+    Measurement("depth_candidates", "benchmarks/depth_candidates_report.py",
+                (R + "depth_candidates.md", "docs/depth_candidates_psfs.png", "docs/depth_winner_psfs_all_planes.png"),
+                before=("bash scripts/depth_candidates.sh",)),
+    Measurement("mask_export", "benchmarks/mask_export.py", (R + "mask_export.md",)),
+    Measurement("holder_timing", "benchmarks/holder_timing.py", (R + "holder_timing.md",)),
+    Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
+                before=tuple(f"doefab evaluate --task {t} --images 12 --size 256 --clean --out out/eval/{t}"
+                             for t in ("hdr", "hyperspectral", "depth"))),
+    Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),
+    Measurement("training_curves", "benchmarks/training_curves.py", (R + "training_curves.png",)),
+    Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
+    Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
+                json_table="hdr_real_images"),
+    Measurement("tolerance_grating_report", None, (R + "tolerance_grating_report.md",),
+                command="doefab tolerance --design masks/grating --samples 24 --sweep --levels --grid 1 --out out/tol/grating",
+                note="the report.md that command writes, kept as benchmarks/results/tolerance_grating_report.md"),
+    Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
+)
+
+COMMAND = re.compile(r"\.venv/bin/python benchmarks/\w+\.py(?:[ \t]+(?![(])[^\s(;]+)*")
+
+
+def script_command(script: Path) -> str | None:
+    """The run command a benchmark script's docstring names (``.venv/bin/python benchmarks/NAME.py ...``)."""
+    doc = ast.get_docstring(ast.parse(script.read_text())) or ""
+    own = [m.group(0).rstrip(" .,") for m in COMMAND.finditer(doc) if f"benchmarks/{script.name}" in m.group(0)]
+    return own[0] if own else None
+
+
+def demote_headings(text: str, top: int = 3) -> str:
+    """Shift Markdown headings so the file's highest one becomes level ``top`` (it sits under a page's own)."""
+    levels = [len(m.group(1)) for m in re.finditer(r"^(#+) ", text, flags=re.M)]
+    if not levels:
+        return text
+    shift = top - min(levels)
+    return re.sub(r"^(#+) ", lambda m: "#" * (len(m.group(1)) + shift) + " ", text, flags=re.M)
+
+
+# paragraphs of prose in a results file that tell how a number came about rather than what it is
+HISTORY = re.compile(r"\b(replaced|re-measure\w*|swallowed|session|issue)\b", re.I)
+
+
+def markdown_body(path: Path, problems: list[str]) -> str:
+    """A results Markdown file for inclusion: headings demoted, figures that are not kept beside it dropped,
+    prose about earlier versions left out."""
+    out = []
+    for para in path.read_text().strip().split("\n\n"):
+        if not para.lstrip().startswith("|") and HISTORY.search(para):
+            continue
+        images = re.findall(r"!\[([^\]]*)\]\(([^)]+)\)", para)
+        if images and all(not (path.parent / src).is_file() for _, src in images):
+            names = ", ".join(f"`{src}`" for _, src in images)
+            out.append(f"*(The command also writes {names} beside the report; those figures are not kept in "
+                       f"`benchmarks/results/`.)*")
+            continue
+        for alt, src in images:
+            para = para.replace(f"]({src})", f"](/../{(path.parent / src).relative_to(ROOT).as_posix()})")
+        if not para.lstrip().startswith(("|", "#", "![")):
+            para = "\n\n".join(para.splitlines())  # the scripts write one statement per line
+        out.append(para)
+    return demote_headings("\n\n".join(out))
+
+
+def _fmt(v, digits: int = 4) -> str:
+    return f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+
+
+def table_hdr_solve(data: dict) -> str:
+    head = (f"Mean over {data['images']} held-out {data['split']} scenes of {data['size_px']}² px; PSNR with peak "
+            f"{data['psnr_peak']}; highlight columns over the pixels the plain capture clips.\n\n")
+    rows = ["| captures | CGLS iterations | bounded iterations × restarts | RMSE | PSNR (dB) | highlight RMSE | "
+            "highlight PSNR (dB) | seconds per image |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in data["rows"]:
+        bound = f"{r['bound_iters']} × {r['bound_rounds']}" if r["bound_iters"] else "—"
+        rows.append(f"| {r['views']} | {r['iters']} | {bound} | {_fmt(r['rmse'])} | {_fmt(r['psnr'])} | "
+                    f"{_fmt(r['rmse_highlight'])} | {_fmt(r['psnr_highlight'])} | {_fmt(r['seconds_per_image'], 2)} |")
+    return head + "\n".join(rows)
+
+
+def table_hdr_real_images(data: dict) -> str:
+    variants = [k for k in next(iter(data["rows"].values())) if k != "clipped_percent"]
+    head = (f"Each photograph at {data['size_px']}² px through the committed streak design; PSNR with peak "
+            f"{data['psnr_peak']}; each cell: RMSE / highlight PSNR (dB); weights: {data['weights_dir']}.\n\n")
+    rows = ["| image | plain capture clipped (%) | " + " | ".join(v.replace("_", "-") for v in variants) + " |",
+            "| --- | --- | " + " | ".join("---" for _ in variants) + " |"]
+    for image, rec in data["rows"].items():
+        cells = [f"{_fmt(rec[v]['rmse'], 3)} / {_fmt(rec[v]['psnr_highlight'], 4)}" for v in variants]
+        rows.append(f"| {image} | {_fmt(rec['clipped_percent'], 2)} | " + " | ".join(cells) + " |")
+    return head + "\n".join(rows)
+
+
+JSON_TABLES = {"hdr_solve": table_hdr_solve, "hdr_real_images": table_hdr_real_images}
+
+
+def render(m: Measurement, problems: list[str]) -> str:
+    """The generated Markdown of one measurement."""
+    lines = [f"<!-- generated by docs/_ext/doefab_results.py from {', '.join(m.outputs)}: do not edit -->", ""]
+    command = m.command
+    if m.script is not None:
+        script = ROOT / m.script
+        if not script.is_file():
+            problems.append(f"results: {m.script} does not exist")
+            return ""
+        command = script_command(script)
+        if command is None:
+            problems.append(f"results: the docstring of {m.script} names no '.venv/bin/python {m.script} ...' command")
+            return ""
+        source = script.read_text()
+        for o in m.outputs:
+            if Path(o).name not in source:
+                problems.append(f"results: {o} is shown as written by {m.script}, which never names it")
+    lines += ["Measured with:", "", "```bash", *m.before, command, "```", ""]
+    wrote = ", ".join(f"`{o}`" for o in m.outputs)
+    lines += [f"*{m.note or ('which writes ' + wrote)}.*", ""]
+    for o in m.outputs:
+        path = ROOT / o
+        if not path.is_file():
+            problems.append(f"results: {o} is missing (run: {command})")
+            continue
+        if path.suffix == ".md":
+            lines += [markdown_body(path, problems), ""]
+        elif path.suffix == ".png":
+            lines += [f"![{path.stem.replace('_', ' ')}](/../{o})", ""]
+        elif path.suffix == ".json" and m.json_table:
+            lines += [JSON_TABLES[m.json_table](json.loads(path.read_text())), ""]
+        else:
+            problems.append(f"results: no way to show {o}")
+    return "\n".join(lines)
+
+
+def write_pages() -> list[str]:
+    """Write every measurement's Markdown; returns the problems found."""
+    problems: list[str] = []
+    OUT.mkdir(parents=True, exist_ok=True)
+    for m in MEASUREMENTS:
+        text = render(m, problems)
+        path = OUT / f"{m.name}.md"
+        if not path.is_file() or path.read_text() != text:
+            path.write_text(text)
+    shown = {o for m in MEASUREMENTS for o in m.outputs}
+    for f in sorted(RESULTS.iterdir()):
+        rel = R + f.name
+        if f.suffix in (".md", ".png") and rel not in shown:
+            problems.append(f"results: {rel} is on no results page: add it to MEASUREMENTS in "
+                            f"docs/_ext/doefab_results.py and include it in a page of docs/results/")
+    return problems
