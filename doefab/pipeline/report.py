@@ -14,7 +14,7 @@ from pathlib import Path
 
 from doefab.io import atomic_write_text
 
-__all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview"]
+__all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview", "system_table"]
 
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
@@ -165,7 +165,8 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     blocks.append(("Stages", [("p", f"Scene `{scene.path}` — task {scene.task}; design {s['design_task']}; "
                                     f"{len(s['wavelengths_m'])} wavelength(s), {len(s['depths_m'])} depth plane(s), "
                                     f"PSF window {s['kernel_px']} px. Only these samples were computed."),
-                              ("table", stages)]))
+                              ("table", stages), ("p", "The system this run designed for (`doefab doctor` explains "
+                                                       "the same):"), ("table", system_table(res))]))
     d = done.get("design")
     if d:
         m = d.get("metric", {})
@@ -248,6 +249,22 @@ def write_report(out: Path, scene, done: dict, res: dict) -> dict:
     atomic_write_text(out / "report.html", page)
     atomic_write_text(out / "report_files" / "images.json", json.dumps(images))
     return {"images": images, "sections": [b[0] for b in blocks]}
+
+
+def system_table(res: dict) -> list[list[str]]:
+    """The resolved scene's camera, bands and fab as rows (quantity, value, what it means)."""
+    from doefab.pipeline.doctor import explain
+
+    cam = res["camera"]
+    rows = [["quantity", "value", "what it means"],
+            ["camera", f"f = {cam.focal_length * 1e3:.4g} mm, DOE aperture {cam.aperture_diameter * 1e3:.4g} mm, "
+                       f"sensor pitch {cam.sensor_pitch * 1e6:.4g} µm, DOE pitch {cam.doe_pitch * 1e6:.4g} µm",
+             "custom camera" if res.get("custom_camera") else "the preset prototype"],
+            ["fabrication", f"{res['settings']['levels']} levels on {cam.material.name}",
+             f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
+    for r in explain(res):
+        rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
+    return rows
 
 
 def deepest_preview(masks: Path) -> str:
