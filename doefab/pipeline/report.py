@@ -255,6 +255,8 @@ def system_table(res: dict) -> list[list[str]]:
     """The resolved scene's camera, bands and fab as rows (quantity, value, what it means)."""
     from doefab.pipeline.doctor import explain
 
+    if "camera" not in res:  # a report of stages without a resolved scene
+        return [["quantity", "value", "what it means"], ["scene", "not resolved", "run doefab doctor on it"]]
     cam = res["camera"]
     rows = [["quantity", "value", "what it means"],
             ["camera", f"f = {cam.focal_length * 1e3:.4g} mm, DOE aperture {cam.aperture_diameter * 1e3:.4g} mm, "

@@ -376,7 +376,7 @@ def test_row20_design_psf_panels_are_drawn_on_a_log_scale(tmp_path, monkeypatch)
     seen = {}
     monkeypatch.setattr(doefab.plotting, "plot_psf_grid", lambda path, panels, pitch, **kw: seen.update(kw))
     d = SimpleNamespace(wavelengths=[5e-7, 6e-7], depths=[5.0], camera=SimpleNamespace(sensor_pitch=5.4e-6),
-                        task="grating")
+                        task="grating", n_levels=16)
     psf = np.zeros((1, 2, 15, 15))
     psf[0, :, 7, 7] = 1.0
     design_psf_figure(tmp_path / "f.png", d, psf, psf)

@@ -39,8 +39,13 @@ def trained(tmp_path_factory):
     mp.undo()
 
 
+def _stages(out) -> dict:
+    run = json.loads((out / "run.json").read_text())["stages"]
+    return {name: {**run[name], **json.loads((out / name / "stage.json").read_text())} for name in run}
+
+
 def test_networks_are_trained_for_the_scenes_design(trained):
-    st = json.loads((trained / "out" / "run.json").read_text())["stages"]
+    st = _stages(trained / "out")
     assert st["design"]["status"] == "ran" and st["reconstruction"]["weights"] == "train"
     d = Design.load(trained / "out" / "design")
     assert d.n_levels == 4 and d.camera.doe_pixels == 100
@@ -57,10 +62,10 @@ def test_shipped_networks_are_refused_for_a_new_design_unless_asked_for(trained,
     scene = trained / "tiny.toml"
     scene.write_text(TINY.format(weights="shipped"))
     assert main(["run", str(scene), "--quick", "--out", str(trained / "out")]) == 0
-    st = json.loads((trained / "out" / "run.json").read_text())["stages"]
+    st = _stages(trained / "out")
     assert st["reconstruction"]["status"] == "skipped" and "shipped-anyway" in st["reconstruction"]["why"]
     scene.write_text(TINY.format(weights="shipped-anyway"))
     assert main(["run", str(scene), "--quick", "--out", str(trained / "out")]) == 0
-    st = json.loads((trained / "out" / "run.json").read_text())["stages"]
+    st = _stages(trained / "out")
     assert st["design"].get("reused_from_previous_run")
     assert st["reconstruction"]["why"].startswith("WARNING") and st["reconstruction"]["weights"] == "shipped-anyway"

@@ -1,12 +1,15 @@
 """Network-level judge: a perfect part scores as the nominal design, and the depth network reads the measured
 PSF pair it is given (its cross-blur cost volume) — a mounting error then changes what the judge reports."""
 
+from pathlib import Path
+
 import pytest
 
-from doefab.reconstruction.specs import REPO
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.judge import PSFJudge
 from doefab.tolerance.netjudge import NetworkJudge
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
