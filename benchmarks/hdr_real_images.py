@@ -1,4 +1,5 @@
-"""The shipped HDR networks on real photographs they never saw: scikit-image's colour test images, made HDR by
+"""The shipped HDR networks on real photographs they never saw: scikit-image's colour photographs of the test split
+(``doefab.reconstruction.data.IMAGES["test"]``; split used: test), made HDR by
 brightening their brightest 3 % of pixels 60× (so 4–6 % of the plain capture clips, as in the test set), sent
 through the committed streak design's captures (default noise, seed 1) and reconstructed by each variant.
 
@@ -18,7 +19,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-IMAGES = ("astronaut", "coffee", "chelsea", "rocket")
+from doefab.reconstruction.data import IMAGES as SPLIT_IMAGES  # noqa: E402
+
+IMAGES = SPLIT_IMAGES["test"]  # the test split's photographs only: none was seen in training or validation
 VARIANTS = ("proposed", "coded_only", "uncoded_only")
 
 

@@ -1,4 +1,4 @@
-"""Each error kind's fabricated-PSF error against the simulation grid, and its run time (issue: tolerance).
+"""Each error kind's fabricated-PSF error against the simulation grid, and its run time.
 
 1. Per design and error kind (the grid study every tolerance run makes, ``doefab.tolerance.grid``): the part
    with that error alone at the default budget's value, on a 128² block of the design, on grids 1×, 2×, 4×

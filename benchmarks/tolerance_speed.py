@@ -1,4 +1,4 @@
-"""How fast a tolerance study decides, and whether its surrogate agrees with the direct Monte Carlo (issue 22).
+"""How fast a tolerance study decides, and whether its surrogate agrees with the direct Monte Carlo.
 
 ``psf``: ``doefab tolerance --design masks/grating --samples 300`` (PSF level, default budget, grid chosen by the
 study), in process and with 2 worker processes; then ``--samples 0 --surrogate`` (the sensitivity surrogate,

@@ -56,7 +56,8 @@ KEYS = (
     Key("camera", "doe_pitch_um", "float", "µm", 0.1, 1000.0, default="5.4 (2.7 for HDR)",
         help="the fab's DOE pixel; the DOE grid is the aperture divided by it"),
     Key("camera", "split", "choice", choices=("vertical", "horizontal"), default="vertical",
-        help="the dual-pixel split line on the sensor; horizontal: the holder turns the die by 90°"),
+        help="the dual-pixel split line on the sensor; the optics are computed in the DOE's frame, and for "
+             "horizontal the holder stage says to mount the die turned by 90°"),
     Key("camera", "sensor_distance_m", "float", "m", 1e-3, 2.0, default="from the preset",
         help="lens to sensor in metres (the same as sensor_distance_mm)"),
     Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, default="the task's",

@@ -170,8 +170,11 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.params import HolderParams
 
     rep = write_holder(HolderParams(**scene.holder), out, step=False if quick else None, renders=True)
-    return {"status": "ran", "why": "parametric part (0.5 s mesh path)" + ("; STEP skipped (quick)" if quick else ""),
-            "doe_to_lens_mm": rep["doe_to_lens_mm"], "files": rep["files"]}
+    horizontal = (res or {}).get("split") == "horizontal"
+    turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
+            "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
+    return {"status": "ran", "why": "parametric part (0.5 s mesh path)" + ("; STEP skipped (quick)" if quick else "")
+            + turn, "doe_to_lens_mm": rep["doe_to_lens_mm"], "files": rep["files"]}
 
 
 def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
