@@ -1,7 +1,7 @@
 """How fast a tolerance study decides, and whether its surrogate agrees with the direct Monte Carlo.
 
 ``psf``: ``doefab tolerance --design masks/grating --samples 300`` (PSF level, default budget, grid chosen by the
-study), in process and with 2 worker processes; then ``--samples 0 --surrogate`` (the sensitivity surrogate,
+study, default workers: one process per core); then ``--samples 0 --surrogate`` (the sensitivity surrogate,
 checked on held-out parts of its own) — its yield interval against the direct run's.
 ``network``: parts per minute through each task's network (``--networks``, 6 parts each).
 Writes benchmarks/results/tolerance_speed.{md,json}. Run with nothing else on the machine:
@@ -30,8 +30,11 @@ def run(args: list[str], out: Path) -> tuple[dict, float]:
 def psf_rows(tmp: Path) -> tuple[list[str], dict]:
     rows = ["| command | parts | wall time (s) | Monte Carlo (s) | parts / minute | yield (95 % interval) |",
             "| --- | --- | --- | --- | --- | --- |"]
+    import os
+
+    cores = len(os.sched_getaffinity(0))
     data = {}
-    for label, extra in (("in process", []), ("--workers 2", ["--workers", "2"])):
+    for label, extra in (("default", []),):
         res, wall = run(["--design", "masks/grating", "--samples", "300", *extra], tmp / label.replace(" ", "_"))
         y = res["summary"]["yield"]
         data[label] = {"wall_s": wall, "mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"],
@@ -42,7 +45,7 @@ def psf_rows(tmp: Path) -> tuple[list[str], dict]:
         print(rows[-1], flush=True)
     res, wall = run(["--design", "masks/grating", "--samples", "0", "--surrogate"], tmp / "surrogate")
     s = res["surrogate"]
-    d = data["in process"]["yield"]["ci95"]
+    d = data["default"]["yield"]["ci95"]
     agree = s["yield"]["ci95"][0] <= d[1] and d[0] <= s["yield"]["ci95"][1]
     data["surrogate"] = {"wall_s": wall, **s, "agrees_with_direct": agree}
     h = s["yield"]["held_out"]
@@ -51,6 +54,7 @@ def psf_rows(tmp: Path) -> tuple[list[str], dict]:
                 f"{s['yield']['ci95'][1]:.3f}) |")
     rows += ["", f"Surrogate: held-out RMSE {h['rmse']:.4f}, mean residual {h['bias']:+.4f} ± {h['bias_se']:.4f}; its "
                  f"yield interval {'overlaps' if agree else 'does NOT overlap'} the direct run's ({d[0]:.3f}–{d[1]:.3f})."]
+    data["cores"] = cores
     return rows, data
 
 
@@ -74,11 +78,14 @@ def main(parts: list[str]):
         for part, fn in (("psf", psf_rows), ("network", network_rows)):
             if part in parts:
                 rows, data[part] = fn(Path(tmp))
+                if "cores" in data[part]:
+                    data["cores"] = data[part]["cores"]
                 data[part + "_rows"] = rows
     for part in ("psf", "network"):
         text[part] = data.get(part + "_rows", [])
     old.write_text(json.dumps(data, indent=1) + "\n")
-    md = ["PSF level, committed grating design, default budget (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
+    md = ["PSF level, committed grating design, default budget, on a machine with "
+          f"{data.get('cores', '?')} cores (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
           "", *text["psf"], "", "Through the networks (`... tolerance_speed.py network`):", "", *text["network"]]
     (OUT / "tolerance_speed.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))

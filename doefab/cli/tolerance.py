@@ -45,7 +45,9 @@ def register(sub) -> None:
     p.add_argument("--surrogate", action="store_true",
                    help="also a sensitivity surrogate: fitted on simulated parts, Monte Carlo on it, checked on "
                         "held-out parts, compared with the direct Monte Carlo")
-    p.add_argument("--workers", type=number(int, 1, 64), default=1, help="local worker processes")
+    p.add_argument("--workers", type=_workers, default=None,
+                   help="local worker processes, 1–64, or auto (default: one per core when there are at least 4 "
+                        "parts per core, else in process)")
     p.add_argument("--scheduler", type=scheduler_arg, default=None,
                    help="Dask: local:N (a LocalCluster of N = 1..64 workers) or tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder")
@@ -58,6 +60,12 @@ def _grid(text: str):
     if text == "auto":
         return text
     return number(int, 1, 8, unit="cells per DOE pixel", hint=" (or auto)")(text)
+
+
+def _workers(text: str):
+    if text == "auto":
+        return None
+    return number(int, 1, 64, unit="processes", hint=" (or auto)")(text)
 
 
 def scheduler_arg(text: str) -> str:

@@ -21,7 +21,12 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import sample_errors
 
-__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci"]
+__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers"]
+
+# glibc: serve every allocation from the heap and never trim it (a part allocates and frees tens of MB per
+# wavelength; fresh mmap pages for each cost a third of a part in page faults)
+_MALLOC_ENV = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(2**31 - 1)}
+_MALLOC_SET = False
 
 
 def run_identity(design, budget: dict, seed: int, grid: int, networks: bool) -> dict:
@@ -61,12 +66,12 @@ def _read_log(log: Path, identity: dict) -> dict:
 
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
-                scheduler: str | None = None, workers: int = 1, progress: bool = True,
+                scheduler: str | None = None, workers: int | None = None, progress: bool = True,
                 networks: bool = False, weights_dir=None) -> list[dict]:
     """``n`` sampled parts; returns every sample's errors and metrics (ordered by index). ``networks``: judge
     each part through its task's proposed network too (from ``weights_dir``; None: the shipped one).
 
-    scheduler: None (in process, or a local process pool of ``workers``), ``"local:N"`` (a Dask
+    scheduler: None (in process, or a local process pool of ``workers``; None: ``auto_workers``), ``"local:N"`` (a Dask
     ``LocalCluster`` of N workers) or ``"tcp://HOST:PORT"`` (an existing Dask scheduler).
     """
     from doefab.tolerance.study import evaluate_part, judge_for
@@ -100,6 +105,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
 
     ddir = str(design_dir)
     wdir = None if weights_dir is None else str(weights_dir)
+    workers = workers or auto_workers(len(todo))
     try:
         if scheduler:
             _run_dask(scheduler, ddir, supersample, todo, errs, record, networks, weights_dir)
@@ -111,6 +117,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
                 for f in as_completed(futs):
                     record(futs[f], f.result())
         else:
+            keep_freed_memory()
             for i in todo:
                 record(i, evaluate_part(ddir, supersample, errs[i].to_json(), networks, wdir))
     finally:
@@ -127,8 +134,40 @@ def _bar(total, desc, progress):
     return tqdm(total=total, desc=desc, unit="part")
 
 
+def keep_freed_memory() -> bool:
+    """Let this process reuse the memory it frees instead of returning it to the system and faulting it back in
+    (glibc's ``mallopt``: no mmap'd blocks, no heap trimming). A Monte Carlo part allocates and frees several
+    blocks of tens of MB per wavelength; with the default settings each is a fresh mmap whose page faults cost
+    about a third of the part's time (measured: 5.7 → 4.0 s per grating part on one thread). The process keeps
+    its peak memory until it exits: called only in processes that judge parts. Returns whether it applied
+    (False off glibc)."""
+    global _MALLOC_SET
+    if _MALLOC_SET:
+        return True
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        ok = libc.mallopt(-4, 0) == 1 and libc.mallopt(-1, 2**31 - 1) == 1  # M_MMAP_MAX, M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        return False
+    _MALLOC_SET = bool(ok)
+    return _MALLOC_SET
+
+
+def auto_workers(samples: int) -> int:
+    """Worker processes for ``samples`` parts: one per usable core, or in process (1) when there are too few
+    parts to repay each worker's start-up (it builds its own judge, ~5 s for a grating design)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    return cores if cores > 1 and samples >= 4 * cores else 1
+
+
 def _worker_init():
     os.environ["DOEFAB_WORKER"] = "1"
+    keep_freed_memory()
     import torch
 
     torch.set_num_threads(1)
@@ -160,7 +199,7 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
     cluster = None
     if nw is not None:
         cluster = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None,
-                               env={"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1"})
+                               env={"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1", **_MALLOC_ENV})
         client = Client(cluster)
     else:
         client = Client(scheduler)

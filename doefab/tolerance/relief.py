@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 import torch
 
 from doefab.errors import DoefabError
@@ -309,10 +310,15 @@ def rotate_fields(die: torch.Tensor, theta: float, rows, cols, big, bigc, n: int
     y = c - torch.arange(big[0], big[1], dtype=torch.float64)  # cells from the die centre, y up
     x = torch.arange(bigc[0], bigc[1], dtype=torch.float64) - c
     pad = int(math.ceil(max(abs(a) * float(y.abs().max()), abs(b) * float(x.abs().max())))) + 4
+    # each axis is padded on its far side up to a length the FFT factors well (a length with a large prime
+    # factor costs several times more; a longer period moves nothing into the window)
+    real = not f.is_complex()
+    er = scipy.fft.next_fast_len(wr + 2 * pad, real=real) - wr - pad
+    ec = scipy.fft.next_fast_len(wc + 2 * pad, real=real) - wc - pad
     out = torch.as_tensor(outside).to(f.dtype).reshape(-1, 1, 1)
-    f = torch.nn.functional.pad(f - out, (pad, pad, pad, pad)) + out
-    yp = torch.cat([y[0] + torch.arange(pad, 0, -1.0), y, y[-1] - torch.arange(1.0, pad + 1)])
-    xp = torch.cat([x[0] - torch.arange(pad, 0, -1.0), x, x[-1] + torch.arange(1.0, pad + 1)])
+    f = torch.nn.functional.pad(f - out, (pad, ec, pad, er)) + out
+    yp = torch.cat([y[0] + torch.arange(pad, 0, -1.0), y, y[-1] - torch.arange(1.0, er + 1)])
+    xp = torch.cat([x[0] - torch.arange(pad, 0, -1.0), x, x[-1] + torch.arange(1.0, ec + 1)])
     f = _shear(f, a * yp, dim=2)  # each row moves a·y along x
     f = _shear(f, -b * xp, dim=1)  # each column moves b·x up, i.e. −b·x in rows
     f = _shear(f, a * yp, dim=2)

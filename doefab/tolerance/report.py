@@ -37,12 +37,17 @@ REMEDY = {
 
 
 def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, grid="auto",
-              do_sweep: bool = False, do_levels: bool = False, workers: int = 1, scheduler=None, budget_path=None,
+              do_sweep: bool = False, do_levels: bool = False, workers: int | None = None, scheduler=None,
+              budget_path=None,
               networks: bool = False, surrogate: bool = False, weights_dir=None, progress: bool = True,
               network_top: int | None = None) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
-    the tornado's largest errors (at PSF level) through the network."""
+    the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
+    Monte Carlo (None: one per core when there are enough parts)."""
+    from doefab.tolerance.montecarlo import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
+
+    keep_freed_memory()
     from doefab.tolerance.spec import TASK_OF_DESIGN, limits_text, nominal_failures
 
     out = Path(out)

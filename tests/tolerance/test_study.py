@@ -206,3 +206,30 @@ def test_quantization_rows_say_what_they_were_quantized_from(design_dir):
     rows = study.quantization_study(design_dir, levels=(None, 16, 8))
     assert rows[0]["levels"] == "continuous" and "n/a" in rows[0]["source"]  # this folder has no continuous design
     assert rows[1]["source"] == "the committed 16-level map" and "re-quantized" in rows[2]["source"]
+
+
+def test_auto_workers_one_per_core_only_when_parts_repay_the_start_up(monkeypatch):
+    monkeypatch.setattr(montecarlo.os, "sched_getaffinity", lambda pid: {0, 1, 2}, raising=False)
+    assert montecarlo.auto_workers(12) == 3  # 4 parts per core
+    assert montecarlo.auto_workers(11) == 1  # too few to repay three workers' start-up
+    monkeypatch.setattr(montecarlo.os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert montecarlo.auto_workers(300) == 1
+
+
+def test_freed_memory_is_kept_in_a_judging_process():
+    import ctypes.util
+
+    applied = montecarlo.keep_freed_memory()
+    assert applied == (ctypes.util.find_library("c") is not None and __import__("platform").libc_ver()[0] == "glibc")
+
+
+def test_workers_flag_takes_auto_or_a_count():
+    from doefab.cli import build_parser
+
+    p = build_parser()
+    base = ["tolerance", "--design", "masks/grating", "--out", "x"]
+    assert p.parse_args(base).workers is None  # auto by default
+    assert p.parse_args(base + ["--workers", "auto"]).workers is None
+    assert p.parse_args(base + ["--workers", "3"]).workers == 3
+    with pytest.raises(SystemExit):
+        p.parse_args(base + ["--workers", "many"])
