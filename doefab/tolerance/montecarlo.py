@@ -112,10 +112,13 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
         elif workers > 1:
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            with ProcessPoolExecutor(workers, initializer=_worker_init) as ex:
+            ex = ProcessPoolExecutor(workers, initializer=_worker_init)
+            try:
                 futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks, wdir): i for i in todo}
                 for f in as_completed(futs):
                     record(futs[f], f.result())
+            finally:  # an interruption drops the queued parts (the saved ones resume) instead of waiting for all
+                ex.shutdown(wait=True, cancel_futures=True)
         else:
             keep_freed_memory()
             for i in todo:
@@ -166,7 +169,13 @@ def auto_workers(samples: int) -> int:
 
 
 def _worker_init():
+    import signal
+
     os.environ["DOEFAB_WORKER"] = "1"
+    # the parent handles Ctrl-C and SIGTERM (it keeps the finished parts and drops the queue); a worker just
+    # finishes its part, or dies with the pool
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     keep_freed_memory()
     import torch
 
