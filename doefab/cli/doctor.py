@@ -24,11 +24,14 @@ def run(args) -> int:
     from doefab.pipeline.system import resolve
 
     scene = load_scene(args.scene)
-    facts = explain(resolve(scene))
+    res = resolve(scene)
+    facts = explain(res)
     width = max(len(f["quantity"]) for f in facts)
     print(f"{args.scene}: the system")
     for f in facts:
         print(f"  {f['quantity']:<{width}}  {f['value']:>8.4g} {f['unit']:<10} {f['meaning']}")
+    for note in res["warnings"]:
+        print(f"warning: {note}")
     print("checks")
     rows = diagnose(scene, precision_check=not args.no_precision)
     for r in rows:
@@ -36,7 +39,7 @@ def run(args) -> int:
         print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "
               f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
     if args.out:
-        atomic_write_json(args.out, {"system": facts, "checks": rows})
+        atomic_write_json(args.out, {"system": facts, "warnings": res["warnings"], "checks": rows})
     bad = [r["check"] for r in rows if not r["ok"]]
     if bad:
         raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")

@@ -161,8 +161,9 @@ def fit_range_warning(material: Material, wavelengths_m) -> str | None:
     if sub is None or sub.material != material:
         return None
     lo, hi = sub.range_um
-    out = [w for w in np.atleast_1d(np.asarray(wavelengths_m, np.float64)) if not lo <= w * 1e6 <= hi]
+    nm = sorted({round(float(w) * 1e9, 6) for w in np.atleast_1d(np.asarray(wavelengths_m, np.float64))})
+    out = [w for w in nm if not lo * 1e3 - 1e-6 <= w <= hi * 1e3 + 1e-6]  # compared in nm: 436.8 is inside 436.8
     if not out:
         return None
-    return (f"{material.name}: {', '.join(f'{w * 1e9:g} nm' for w in out)} outside {lo * 1e3:g}–{hi * 1e3:g} nm, "
+    return (f"{material.name}: {', '.join(f'{w:g} nm' for w in out)} outside {lo * 1e3:g}–{hi * 1e3:g} nm, "
             f"the range of its published dispersion ({sub.source}); the index there is extrapolated")

@@ -266,6 +266,7 @@ def system_table(res: dict) -> list[list[str]]:
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
     for r in explain(res):
         rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
+    rows += [["warning", "", note] for note in res.get("warnings", [])]
     return rows
 
 

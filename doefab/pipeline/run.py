@@ -44,6 +44,9 @@ def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = Fa
     t0 = time.perf_counter()
     res = res if res is not None else prepare_scene(scene, out, force)
     out.mkdir(parents=True, exist_ok=True)
+    if progress:
+        for note in res.get("warnings", []):
+            print(f"[doefab run] warning: {note}", flush=True)
     done: dict = {}
     for name in STAGES[:-1]:
         if name not in scene.stages:
@@ -64,6 +67,6 @@ def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = Fa
     summary = {"scene": str(scene.path), "task": scene.task, "quick": quick,
                "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash",
                                                         "reused_from_previous_run")} for k, v in done.items()},
-               "seconds": round(time.perf_counter() - t0, 1), "report": report}
+               "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.get("warnings", [])}
     atomic_write_json(out / "run.json", summary)
     return summary

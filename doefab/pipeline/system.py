@@ -18,7 +18,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 
-__all__ = ["resolve", "scene_camera", "scene_task", "is_custom_camera", "MAX_DOE_PIXELS"]
+__all__ = ["resolve", "scene_camera", "scene_task", "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 _PRESET = {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}
@@ -195,7 +195,18 @@ def resolve(scene: Scene) -> dict:
     return {"settings": settings, "camera": cam, "task": task, "committed_dir": cdir, "reuse": not differ,
             "differ": differ, "committed": committed, "committed_settings": committed_settings,
             "custom_camera": is_custom_camera(scene), "split": scene.camera.get("split", "vertical"),
-            "stop": _stop(cam)}
+            "stop": _stop(cam), "warnings": system_warnings(cam, task)}
+
+
+def system_warnings(cam, task) -> list[str]:
+    """What works but deserves the user's eye: bands or the design wavelength outside the range the
+    substrate's published dispersion was fitted on (the index there is an extrapolation)."""
+    from doefab.optics.materials import fit_range_warning
+
+    notes = [fit_range_warning(cam.material, task.wavelengths(cam))]
+    design = fit_range_warning(cam.material, [cam.design_wavelength])
+    notes.append(f"design wavelength {design}" if design else None)
+    return [n for n in notes if n]
 
 
 def _stop(cam) -> str:

@@ -35,3 +35,33 @@ def test_my_camera_scene_is_explained_by_hand_computed_optics():
     assert rows["substrate index"] == pytest.approx(n, abs=2e-5)
     assert rows["etch depth of 2π"] == pytest.approx(550 / (n - 1), rel=1e-4)
     assert res["settings"]["levels"] == 8 and len(res["settings"]["wavelengths_m"]) == 21
+
+
+def test_bands_outside_the_substrates_published_dispersion_are_named(tmp_path):
+    """PMMA's dispersion (Sultanova et al. 2009) was fitted on 436.8–1052 nm: the scene's 450–650 nm bands lie
+    inside, but a 420 nm band does not and must be named; N-BK7 (fitted 0.3–2.5 µm) covers both."""
+    text = (REPO / "scenes" / "my_camera.toml").read_text()
+    assert 'material = "N-BK7"' in text
+    inside = resolve(load_scene(REPO / "scenes" / "my_camera.toml"))
+    assert inside["warnings"] == []
+    pmma = tmp_path / "pmma.toml"
+    pmma.write_text(text.replace('material = "N-BK7"', 'material = "PMMA"'))
+    assert resolve(load_scene(pmma))["warnings"] == []
+    import re
+
+    low = tmp_path / "pmma_low.toml"
+    low.write_text(re.sub(r"wavelengths_nm = \[[^\]]*\]", "wavelengths_nm = [420, 500, 600]",
+                          text.replace('material = "N-BK7"', 'material = "PMMA"')))
+    notes = resolve(load_scene(low))["warnings"]
+    assert len(notes) == 1 and "420 nm" in notes[0] and "500 nm" not in notes[0] and "PMMA" in notes[0]
+
+
+def test_a_band_on_the_edge_of_the_published_range_is_inside_and_each_wavelength_named_once():
+    """436.8 nm is PMMA's published lower limit (0.4368 µm): inside, although 436.8e-9 * 1e6 < 0.4368 in floats;
+    a band listed twice is named once."""
+    from doefab.optics.materials import PMMA, fit_range_warning
+
+    assert 436.8e-9 * 1e6 < 0.4368  # the float trap the check must not fall into
+    assert fit_range_warning(PMMA, [436.8e-9, 1052e-9]) is None
+    note = fit_range_warning(PMMA, [420e-9, 420e-9, 500e-9])
+    assert note.count("420 nm") == 1 and "500 nm" not in note
