@@ -50,6 +50,22 @@ def metres_hint(value: float, lo: float, hi: float) -> str:
     return ""
 
 
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "µm": 1e-6, "nm": 1e-9}  # metres per unit
+
+
+def unit_hint(value: float, lo: float, hi: float, unit: str) -> str:
+    """`` (5.5e-07 m is 550 nm: write 550)`` when ``value`` read in another length unit lies within [lo, hi]
+    ``unit`` (the likely unit slip in a key or flag that names its unit), else ''."""
+    per = LENGTH_UNITS.get(unit)
+    if per is None or not value:
+        return ""
+    for other, factor in LENGTH_UNITS.items():
+        v = value * factor / per
+        if other != unit and lo <= v <= hi:
+            return f" ({value:g} {other} is {v:.4g} {unit}: write {v:.4g})"
+    return ""
+
+
 def length_m(name: str, value: float, lo: float, hi: float, what: str = "lengths") -> float:
     """``value`` as a float within [lo, hi] metres, or one error with the unit hint."""
     v = positive_finite(name, value, "metres")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_psf_grid", "plot_height", "psf_pair_figure", "depth_label", "core_window"]
+__all__ = ["plot_psf_grid", "plot_height", "psf_pair_figure", "depth_label", "core_window", "design_psf_figure"]
 
 
 def _plt():
@@ -134,3 +134,17 @@ def psf_pair_figure(path: str | Path, coded: np.ndarray, uncoded: np.ndarray, de
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def design_psf_figure(path: str | Path, d, psf, targets, panels_max: int = 4) -> Path:
+    """Up to ``panels_max`` (depth, band) entries of a design's coded PSFs (``psf``: [D, W, K, K]) beside their
+    targets, on a log scale: a grating's orders and a streak's arms are a few bright pixels in a large window,
+    invisible on a linear one."""
+    picks = [(z, w) for z in range(psf.shape[0]) for w in range(psf.shape[1])]
+    picks = [picks[i] for i in np.linspace(0, len(picks) - 1, min(panels_max, len(picks))).round().astype(int)]
+    panels = []
+    for z, w in picks:
+        lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {depth_label(d.depths[z])}"
+        panels += [(f"target, {lab}", targets[z, w]), (f"{d.n_levels}-level design, {lab}", psf[z, w])]
+    return plot_psf_grid(path, panels, d.camera.sensor_pitch, ncols=2, log=True,
+                         suptitle=f"{d.task}: target (left) and fabricated {d.n_levels}-level design (right), log scale")

@@ -64,10 +64,18 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
     A failed check raises HolderCheckError naming the failing quantities, after writing the full report as
     ``holder.FAILED.json`` (and no STL/3MF/STEP, so nothing printable looks finished).
     """
-    from doefab.io import atomic_write_json
+    from doefab.errors import DoefabError
+    from doefab.io import MARKER, atomic_write_json, mark_folder, read_marker
 
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise DoefabError(f"{out} is a file: give a folder for the holder's files")
+    if out.is_dir() and any(out.iterdir()) and read_marker(out) is None:
+        raise DoefabError(f"{out} holds files and no doefab ownership marker ({MARKER}): the holder's files are "
+                          f"written only into a new, empty or doefab-made folder; choose another")
     out.mkdir(parents=True, exist_ok=True)
+    if read_marker(out) is None:
+        mark_folder(out, "holder")
     t0 = time.perf_counter()
     parts = build_parts(p)
     asm = assembly(parts, p)

@@ -23,6 +23,8 @@ def run(args) -> int:
     from doefab.pipeline.doctor import explain
     from doefab.pipeline.system import resolve
 
+    if args.out is not None:
+        check_report_file(args.out)  # before any work
     scene = load_scene(args.scene)
     res = resolve(scene)
     facts = explain(res)
@@ -39,9 +41,38 @@ def run(args) -> int:
         print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "
               f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
     if args.out:
-        atomic_write_json(args.out, {"system": facts, "warnings": res["warnings"], "checks": rows})
+        atomic_write_json(args.out, {"written_by": WRITTEN_BY, "scene": str(args.scene), "system": facts,
+                                     "warnings": res["warnings"], "checks": rows})
     bad = [r["check"] for r in rows if not r["ok"]]
     if bad:
         raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")
     print(f"{args.scene}: every check passes")
     return 0
+
+
+WRITTEN_BY = "doefab doctor"
+
+
+def check_report_file(out: str) -> None:
+    """``--out`` names a JSON file doctor may write: not empty, not a folder, not a file of the user's (an
+    existing file is replaced only when it is an earlier doctor report)."""
+    import json
+    from pathlib import Path
+
+    from doefab.errors import DoefabError
+
+    if not str(out).strip():
+        raise DoefabError("--out is empty: give a file path (e.g. --out doctor.json)")
+    p = Path(out)
+    if p.is_dir():
+        raise DoefabError(f"--out {p} is a folder: give a file path (e.g. {p / 'doctor.json'})")
+    if p.exists():
+        try:
+            ours = json.loads(p.read_text()).get("written_by") == WRITTEN_BY
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise DoefabError(f"--out {p} exists and is not an earlier doefab doctor report: doefab never replaces "
+                              f"a file of yours; choose another name")
+    if not p.parent.is_dir():
+        raise DoefabError(f"--out {p}: its folder {p.parent} does not exist; create it first")

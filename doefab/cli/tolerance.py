@@ -82,12 +82,30 @@ def scheduler_arg(text: str) -> str:
                                      f"tcp://127.0.0.1:8786)")
 
 
+def check_scheduler_reachable(text: str | None, timeout_s: float = 5.0) -> None:
+    """A ``tcp://HOST:PORT`` scheduler must accept a connection before any work (not after the grid study)."""
+    import socket
+
+    from doefab.errors import DoefabError
+
+    if not text or not text.startswith("tcp://"):
+        return
+    host, _, port = text.removeprefix("tcp://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise DoefabError(f"--scheduler {text}: no Dask scheduler answers there ({exc.strerror or exc}): start one "
+                          f"(dask scheduler --port {port}, then dask worker {text}) or use local:N") from None
+
+
 def run(args) -> int:
+    import shutil
+
     from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
-    from doefab.tolerance.report import run_study
+    from doefab.tolerance.report import STEPS, run_study
 
     ddir, _ = design_folder(args.design)  # validated before any output exists
     budget = load_budget(args.budget)
@@ -95,12 +113,14 @@ def run(args) -> int:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
+    check_scheduler_reachable(args.scheduler)
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
-                       keep_on_failure=lambda: (args.outdir.path / "samples.jsonl").is_file())
+                       keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in ("samples.jsonl", STEPS)))
     args.resume_hint = f"finished samples are kept in {out.path}: rerun the same command with --resume"
     out.create()
-    if args.force and (out.path / "samples.jsonl").is_file():
-        (out.path / "samples.jsonl").unlink()
+    if args.force:  # a fresh study: no saved parts, no finished steps
+        (out.path / "samples.jsonl").unlink(missing_ok=True)
+        shutil.rmtree(out.path / STEPS, ignore_errors=True)
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
                     budget_path=(args.budget or "doefab/tolerance/budget.toml (default)")

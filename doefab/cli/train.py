@@ -71,7 +71,7 @@ def run(args) -> int:
         check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     design = task_design_arg(args, need_weights_dir=False)
-    weights_target(args.weights_dir, out.path, args.replace_shipped, design)  # refused before any work
+    weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)  # before any work
     out.create()
     from doefab.tolerance.conditions import for_splits
 

@@ -130,21 +130,9 @@ class Design:
         return out
 
     def _figures(self, out: Path) -> None:
-        from doefab.plotting import depth_label, plot_psf_grid
+        from doefab.plotting import design_psf_figure
 
-        psf, tg = self.psf_quantized, self.targets
-        nd, nw = psf.shape[:2]
-        picks = [(d, w) for d in range(nd) for w in range(nw)]
-        if len(picks) > 6:
-            idx = np.linspace(0, len(picks) - 1, 6).round().astype(int)
-            picks = [picks[i] for i in idx]
-        panels = []
-        for d, w in picks:
-            label = f"{self.wavelengths[w] * 1e9:.0f} nm, {depth_label(self.depths[d])}"
-            panels.append((f"target {label}", tg[d, w]))
-            panels.append((f"{self.n_levels}-level design {label}", psf[d, w]))
-        plot_psf_grid(out / "psf_target_vs_design.png", panels, self.camera.sensor_pitch, ncols=2, log=False,
-                      suptitle=f"{self.task}: target (left) and quantized design (right), linear scale")
+        design_psf_figure(out / "psf_target_vs_design.png", self, self.psf_quantized, self.targets, panels_max=6)
 
     @classmethod
     def load(cls, path: str | Path) -> "Design":

@@ -54,6 +54,9 @@ def unmix_crosstalk(left_star, right_star, alpha_lr, alpha_rl, min_determinant: 
     Raises DoefabError where ``1 − α_l→r − α_r→l < min_determinant`` (the inverse would amplify noise by more
     than ``1 / min_determinant``).
     """
+    if not isinstance(min_determinant, (int, float)) or not 0 < min_determinant <= 1:
+        raise DoefabError(f"min_determinant must be a number in (0, 1] (the smallest 1 − α_l→r − α_r→l accepted; "
+                          f"default {MIN_DETERMINANT}), got {min_determinant!r}")
     a, b = _ratio("alpha_lr", alpha_lr, left_star), _ratio("alpha_rl", alpha_rl, left_star)
     det = 1 - a - b
     worst = float(det.min()) if hasattr(det, "min") else float(det)

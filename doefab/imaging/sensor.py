@@ -101,6 +101,6 @@ def noise_model(noise):
     presets = {"default": PoissonGaussian(), "authors": UniformNoise(0.01), "none": NoNoise()}
     if noise is None:
         return presets["none"]
-    if noise not in presets:
+    if not isinstance(noise, str) or noise not in presets:
         raise DoefabError(f"noise must be one of {sorted(presets)} or a noise model, got {noise!r}")
     return presets[noise]

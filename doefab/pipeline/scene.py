@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from doefab._validate import metres_hint
+from doefab._validate import metres_hint, unit_hint
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 
@@ -62,7 +62,8 @@ def _value_problem(where: str, v, key) -> str | None:
         return f"{where} must be {'a number' if key.kind == 'float' else key.kind}, got {v!r}"
     if key.kind in ("float", "int") and key.lo is not None:
         if not math.isfinite(v) or not key.lo <= v <= key.hi:
-            hint = metres_hint(v, key.lo, key.hi) if key.unit == "m" and math.isfinite(v) else ""
+            hint = "" if not math.isfinite(v) else (metres_hint(v, key.lo, key.hi) if key.unit == "m" else
+                                                     unit_hint(v, key.lo, key.hi, key.unit))
             return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{hint}".rstrip()
     return None
 

@@ -67,7 +67,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
 
     import doefab
     from doefab.design.design import Design
-    from doefab.plotting import plot_height
+    from doefab.plotting import design_psf_figure, plot_height
 
     if res["reuse"]:
         _copy_design(res["committed_dir"], out)
@@ -81,7 +81,8 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
-                            n_levels=int(s["levels"]), progress=True)
+                            n_levels=int(s["levels"]), progress=True,
+                            resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
                 + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}
@@ -90,28 +91,11 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
         psf = plan(doefab.levels_to_height(d.levels, d.camera, d.n_levels)).coded.numpy()
-    design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())
+    design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())  # log scale
     plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera, d.n_levels), d.camera.doe_pitch,
                 f"{d.n_levels}-level height map")
     info["metric"] = d.metrics
     return info
-
-
-def design_psf_figure(path: Path, d, psf, targets) -> Path:
-    """Up to 4 (depth, band) entries of a design's coded PSFs beside their targets, on a log scale: a grating's
-    orders and a streak's arms are a few bright pixels in a large window, invisible on a linear one."""
-    import numpy as np
-
-    from doefab.plotting import plot_psf_grid
-
-    picks = [(z, w) for z in range(psf.shape[0]) for w in range(psf.shape[1])]
-    picks = [picks[i] for i in np.linspace(0, len(picks) - 1, min(4, len(picks))).round().astype(int)]
-    panels = []
-    for z, w in picks:
-        lab = f"{d.wavelengths[w] * 1e9:.0f} nm, {'∞' if math.isinf(d.depths[z]) else f'{d.depths[z]:g} m'}"
-        panels += [(f"target, {lab}", targets[z, w]), (f"{d.n_levels}-level design, {lab}", psf[z, w])]
-    return plot_psf_grid(path, panels, d.camera.sensor_pitch, ncols=2, log=True,
-                         suptitle=f"{d.task}: target (left) and fabricated {d.n_levels}-level design (right), log scale")
 
 
 def stage_masks(scene, res, out: Path, quick: bool) -> dict:
@@ -204,8 +188,10 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
         minutes = 0.2 if quick else float(rec.get("minutes", 6))
         cond = for_splits(task, design, "honest", ("train", "val"), parts if quick else 6, budget=budget)
         for v in ("proposed", "coded_only", "uncoded_only"):
-            r = train(task, v, minutes, out / f"run_{v}", weights_dir=weights_dir, design=design, conditions=cond,
-                      warm_start=WEIGHTS_DIR, progress=True, val_images=2 if quick else 8)
+            run_dir = out / f"run_{v}"
+            r = train(task, v, minutes, run_dir, weights_dir=weights_dir, design=design, conditions=cond,
+                      warm_start=WEIGHTS_DIR, progress=True, val_images=2 if quick else 8,
+                      resume=(run_dir / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
             warm[v] = r["training"]["warm_start"]
     images = 2 if quick else int(rec.get("images", 4))
     size = 128 if quick else int(rec.get("size_px", 256))
@@ -214,8 +200,8 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
                  other_design=mode == "shipped-anyway")
     why = {"shipped": "shipped networks of the committed design",
            "train": "trained here for this design (" + ", ".join(
-               f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" for v, w in warm.items())
-           + ")",
+               f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" if w else
+               f"{v}: continued from its checkpoint" for v, w in warm.items()) + ")",
            "shipped-anyway": "WARNING: the shipped networks, trained for the committed design, evaluated on this "
                              "design's captures (told its PSFs); train networks for it for fair numbers"}[mode]
     return {"status": "ran" if weights_dir else "reused",
@@ -271,26 +257,32 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
             "summary": r.get("summary"), "level": r["level"]}
 
 
-RESUMABLE = "samples.jsonl"  # what a stage keeps from an interrupted run of the same inputs
+#: what a stage keeps from an interrupted run of the same inputs: the design's optimiser checkpoint, the networks'
+#: training checkpoints, the tolerance study's finished Monte Carlo parts (each checks that it belongs to its run)
+RESUMABLE = {"design": ("checkpoint.pt", "history.csv"),
+             "reconstruction": ("run_proposed", "run_coded_only", "run_uncoded_only", "weights"),
+             "tolerance": ("samples.jsonl", "steps")}
 
 
 def has_progress(folder: Path, stages) -> bool:
-    """Whether a run folder holds work worth keeping after a failure: a finished stage, or a stage's saved
-    Monte Carlo parts."""
+    """Whether a run folder holds work worth keeping after a failure: a finished stage, or what a stage keeps
+    from an interrupted run (``RESUMABLE``)."""
     for s in stages:
         try:
             if json.loads((Path(folder) / s / "stage.json").read_text()).get("complete"):
                 return True
         except (OSError, ValueError):
             pass
-        if (Path(folder) / s / RESUMABLE).is_file():
+        if any((Path(folder) / s / f).exists() for f in RESUMABLE.get(s, ())):
             return True
     return False
+
+
 STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
-            "tolerance": ("design", "holder"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
-SECTION = {"design": ("camera", "optics", "design"), "masks": ("fabrication",), "holder": ("holder",),
+            "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
+SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("fabrication",), "holder": ("holder",),
            "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 
 
@@ -318,21 +310,30 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
         return old
     if not owned_by_doefab(out, STAGE_KIND, stage=name):  # prepare_scene refuses this before any work
         raise DoefabError(f"{out} is not a doefab {name} stage folder (no ownership marker): move it away")
-    # an interrupted run of the same inputs keeps its finished Monte Carlo parts (samples.jsonl checks its run)
-    keep = out / RESUMABLE if not force and old.get("hash") == h and (out / RESUMABLE).is_file() else None
-    saved = None
-    if keep is not None:
-        saved = out_root / f".{name}.{RESUMABLE}"
-        os.replace(keep, saved)
+    # an interrupted run of the same inputs keeps what it had saved (RESUMABLE): moved aside, then back
+    same = not force and old.get("hash") == h
+    keep = [f for f in RESUMABLE.get(name, ()) if same and (out / f).exists()]
+    aside = out_root / f".{name}.resume"
+    if aside.exists():
+        shutil.rmtree(aside)
+    if keep:
+        aside.mkdir()
+        for f in keep:
+            os.replace(out / f, aside / f)
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
     mark_folder(out, STAGE_KIND, stage=name)
-    if saved is not None:
-        os.replace(saved, out / RESUMABLE)
+    for f in keep:
+        os.replace(aside / f, out / f)
+    if aside.exists():
+        aside.rmdir()
+    info_resumed = bool(keep)
     atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False})
     t = time.perf_counter()
     info = STAGE_FUNCS[name](scene, res, out, quick)
+    if info_resumed:
+        info["why"] = info.get("why", "") + f"; continued from the interrupted run's {', '.join(keep)}"
     mark_folder(out, STAGE_KIND, stage=name)
     info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True)
     atomic_write_json(rec_path, info)

@@ -87,7 +87,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.loop import run_loop
     from doefab.reconstruction.models import build_model, default_arch, loss_fn
-    from doefab.reconstruction.specs import crop_margin, get_spec, psf_pair
+    from doefab.reconstruction.specs import crop_margin, psf_pair
 
     if not 0 < minutes <= 24 * 60:
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
@@ -99,7 +99,6 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     if design.camera.doe_pixels % sampling:
         raise DoefabError(f"sampling {sampling} must divide the DOE grid ({design.camera.doe_pixels} px)")
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
-    spec = get_spec("depth")
     cfg0 = design.extra.get("config", {})
     pname = parameterization or ("radial" if cfg0.get("parameterization") == "radial" else "pixel")
     dcam = design.camera.replace(doe_pixels=design.camera.doe_pixels // sampling,
@@ -108,7 +107,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     theta.requires_grad_(True)
     nominal, _ = psf_pair("depth", design_dir)
     psf_u = nominal.uncoded.to(torch.float32)
-    plan = PSFPlan(dcam, design.wavelengths, design.depths, spec.kernel, halves=("coded",))
+    plan = PSFPlan(dcam, design.wavelengths, design.depths, nominal.coded.shape[-1], halves=("coded",))
     torch.manual_seed(seed)
     arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
     start_from = "a fresh network"
@@ -126,12 +125,12 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
-    margin = crop_margin("depth")
+    margin = crop_margin("depth", nominal)
     current = {}
 
     def coded_psf(grad: bool) -> torch.Tensor:
         with torch.set_grad_enabled(grad):
-            h = quantize_ste(theta_to_height(param.waves(theta), dcam), dcam)
+            h = quantize_ste(theta_to_height(param.waves(theta), dcam), dcam, design.n_levels)
             return plan.half_psf("coded", h)
 
     def validate() -> float:

@@ -52,7 +52,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
 
         it = tqdm(it, desc=f"evaluate {task} ({cond.name if cond else 'clean'}, {split})", unit="image")
     for i in it:
-        coded, uncoded, target = make_batch(task, split, [i], size, pair, response, conditions=cond)
+        coded, uncoded, target = make_batch(task, split, [i], size, pair, response, conditions=cond,
+                                            images=images)  # scene i's crop at its own place across the sensor
         kinds.append(light_kind(split, i))
         preds = {}
         for v, rec in recs.items():

@@ -1,7 +1,8 @@
 """What each reconstruction task is trained on: the committed design, its PSF pair, scenes and captures.
 
-The networks see the PSFs of what gets fabricated: the committed 16-level level maps
-(``doefab/designs/<design>.npz``), not the continuous heights.
+The networks see the PSFs of what gets fabricated: a design's L-level level map (the committed ones:
+``doefab/designs/<design>.npz``, 16 levels), not the continuous heights, in a window at least as large as the
+one the design was optimised in (``network_kernel``).
 """
 
 from __future__ import annotations
@@ -16,14 +17,14 @@ import torch
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
-           "check_design_task"]
-
+           "check_design_task", "network_kernel"]
 
 
 @dataclass(frozen=True)
 class TaskSpec:
     """name: hdr / hyperspectral / depth.  design: the design task (streak / grating / half-ring).
-    kernel: PSF window (sensor pixels) used to simulate captures.  out_channels: network outputs."""
+    kernel: the smallest PSF window (sensor pixels) used to simulate captures (``network_kernel``: a design
+    optimised in a larger window keeps it).  out_channels: network outputs."""
 
     name: str
     design: str
@@ -61,59 +62,67 @@ def design_dir(task: str) -> Path:
     return committed_dir(get_spec(task).design)
 
 
+def network_kernel(task: str, design_kernel: int | None) -> int:
+    """The PSF window (sensor pixels, odd) the networks of ``task`` see for a design optimised in a window of
+    ``design_kernel`` pixels: the task's own window, or the design's when it is larger (long streak arms, far
+    grating orders of another camera are never cut off)."""
+    k = max(get_spec(task).kernel, int(design_kernel or 0))
+    return k if k % 2 else k + 1
+
+
 @functools.lru_cache(maxsize=None)
-def _pair_cached(folder: str, design_task: str, kernel: int):
-    """(pair, levels_sha256) of the design in ``folder``, or (None, its task) when it is not a ``design_task``."""
+def _pair_cached(folder: str, task: str):
+    """(pair, levels_sha256) of the design in ``folder``, or (None, its task) when it is not ``task``'s."""
     from doefab.design.design import Design
-    from doefab.fabrication.levels import levels_to_height
+    from doefab.fabrication.levels import levels_sha256
     from doefab.optics.psf import PSFPlan
 
     d = Design.load(folder)
-    if d.task != design_task:
+    if d.task != get_spec(task).design:
         return None, d.task
-    plan = PSFPlan(d.camera, d.wavelengths, d.depths, kernel)
+    plan = PSFPlan(d.camera, d.wavelengths, d.depths, network_kernel(task, d.task_params.get("kernel_size")))
     with torch.no_grad():
-        pair = plan(levels_to_height(d.levels, d.camera))
-    from doefab.fabrication.levels import levels_sha256
-
+        pair = plan(d.quantized_height)  # the design's own L levels
     return pair, levels_sha256(d.levels)
 
 
 def psf_pair(task: str, folder: str | Path | None = None):
-    """(PSFPair of the 16-level design, its levels_sha256) for ``task`` (cached); a design folder of another
-    task is refused."""
-    spec = get_spec(task)
-    pair, sha = _pair_cached(str(folder or design_dir(task)), spec.design, spec.kernel)
+    """(PSFPair of the design's L-level map at ``network_kernel``, its levels_sha256) for ``task`` (cached); a
+    design folder of another task is refused."""
+    pair, sha = _pair_cached(str(folder or design_dir(task)), task)
     if pair is None:
         check_design_task(task, sha, folder)
     return pair, sha
 
 
-def crop_margin(task: str) -> int:
-    return get_spec(task).kernel // 2
+def crop_margin(task: str, pair=None) -> int:
+    """Half the PSF window (pixels) a scene is generated beyond its crop: ``pair``'s window, or the task's."""
+    return (pair.coded.shape[-1] if pair is not None else get_spec(task).kernel) // 2
 
 
 def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", crosstalk=None,
-               conditions=None):
+               conditions=None, images: int | None = None):
     """Scenes, targets and simulated captures for sample ``indices`` of ``split``.
 
     Each scene is generated with a margin of half a PSF window on every side, blurred, and cropped back to
     ``size``, so the captures hold the light that enters the crop from outside it. ``conditions``
     (``reconstruction.conditions``): what the camera adds — scene i rendered through ``conditions.pair_for(i)``
     (a fabricated part's PSFs, for depth at finer planes), its views mixed by crosstalk and unmixed by a
-    calibrated pipeline; default: ``pair`` and clean views. ``crosstalk(i)`` overrides the views' camera
-    (``DualPixelCrosstalk``). Hyperspectral scenes are lit per ``spectra.light_kind(split, i)``.
+    calibrated pipeline; default: ``pair`` and clean views; ``images``: how many scenes the crops are spread
+    across on the sensor (each sees the crosstalk of its place; default ``len(indices)``). ``crosstalk(i)``
+    overrides the views' camera (``DualPixelCrosstalk``). Hyperspectral scenes are lit per
+    ``spectra.light_kind(split, i)``.
     Returns (coded [B, 3, S, S], uncoded [B, 3, S, S], target [B, C, S, S] or depth [B, S, S]) tensors.
     """
     from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.imaging.sensor import noise_model
     from doefab.reconstruction.data import sample_rng
 
-    m = crop_margin(task)
+    m = crop_margin(task, pair)
     nm = noise_model(noise)
     coded, uncoded, targets = [], [], []
     t = None if response is None else torch.as_tensor(response, dtype=torch.float32)
-    n = len(indices) if hasattr(indices, "__len__") else 8
+    n = images if images is not None else (len(indices) if hasattr(indices, "__len__") else 8)
     for i in indices:
         rng = sample_rng(split, i)
         p = conditions.pair_for(i, pair) if conditions is not None else pair

@@ -107,7 +107,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
     network of this task and variant starts the training wherever a tensor's name and shape match."""
     spec = get_spec(task)
-    weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design)
+    weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design, task, variant)
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     if crop % 32 or crop < 64:
@@ -146,11 +146,19 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                                     resume, progress, f"train {task} ({variant})", max_steps)
     final = evaluate_batch(task, model, *val, psf)
     record = {"design": spec.design if design is None else str(design), "design_levels_sha256": sha, "arch": arch,
-              "psf": {"kernel_px": spec.kernel, "wavelengths_m": list(pair.wavelengths),
+              "psf": {"kernel_px": int(pair.coded.shape[-1]), "wavelengths_m": list(pair.wavelengths),
                       "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",
-                      "from": "the design's 16-level level map (levels.npy)"},
+                      "from": f"the design's {_design_levels(task, design)}-level level map (levels.npy)"},
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
               "validation": {"images": val_images, "crop_px": crop, **final}}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
+
+
+def _design_levels(task: str, design) -> int:
+    """The number of levels L of the design the networks are trained for (the committed one: 16)."""
+    from doefab.design.design import Design
+    from doefab.reconstruction.specs import design_dir
+
+    return Design.load(design or design_dir(task)).n_levels

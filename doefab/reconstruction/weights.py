@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
 from pathlib import Path
 
 import torch
@@ -14,7 +15,7 @@ from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes, atomic_write_json
 
 __all__ = ["WEIGHTS_DIR", "weights_paths", "history_path", "is_shipped", "weights_target", "write_weights",
-           "WEIGHTS_FORMAT"]
+           "WEIGHTS_FORMAT", "foreign_weights_files"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 WEIGHTS_FORMAT = "doefab weights 1"
@@ -36,9 +37,10 @@ def is_shipped(folder: str | Path | None) -> bool:
 
 
 def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_shipped: bool = False,
-                   design=None) -> Path:
+                   design=None, task: str | None = None, variant: str | None = None) -> Path:
     """Where training writes its weights: ``weights_dir``, else the run folder ``out_dir``; the shipped folder
-    only with ``replace_shipped`` (and only for the committed design). Checked before any work."""
+    only with ``replace_shipped`` (and only for the committed design). A file of the same name that doefab did
+    not write (no weights record of ``task``/``variant`` beside it) is never replaced. Checked before any work."""
     if replace_shipped:
         if design is not None:
             raise DoefabError("--replace-shipped: the shipped weights belong to the committed design; a network "
@@ -53,7 +55,28 @@ def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_
                           f"the shipped networks (or give another folder)")
     if target.exists() and not target.is_dir():
         raise DoefabError(f"--weights-dir {target} is a file: give a folder")
+    if task is not None and variant is not None:
+        foreign = foreign_weights_files(target, task, variant)
+        if foreign:
+            raise DoefabError(f"{', '.join(map(str, foreign))}: not written by doefab (no doefab weights record "
+                              f"beside it), so never replaced: move it away or give another --weights-dir")
     return target
+
+
+def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[Path]:
+    """The files training ``task``/``variant`` into ``folder`` would replace that doefab did not write: all of
+    them unless ``{task}_{variant}.json`` is a doefab weights record of that task and variant."""
+    pt, meta = weights_paths(task, variant, folder)
+    paths = [p for p in (pt, meta, history_path(task, variant, folder)) if p.exists()]
+    if not paths:
+        return []
+    try:
+        rec = json.loads(meta.read_text())
+        ours = (isinstance(rec, dict) and rec.get("format") == WEIGHTS_FORMAT and rec.get("task") == task
+                and rec.get("variant") == variant)
+    except (OSError, ValueError):
+        ours = False
+    return [] if ours else paths
 
 
 def write_weights(folder: str | Path, task: str, variant: str, model: torch.nn.Module, record: dict,

@@ -93,12 +93,13 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
     return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split)
 
 
-def _key(task, design, split, n, budget) -> str:
+def _key(task, design, split, n, budget, kernel) -> str:
     from doefab.fabrication.levels import levels_sha256
 
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
-    text = json.dumps([task, levels_sha256(design.levels), split, n, b, DEPTH_REFINE, PART_SEEDS[split],
-                       list(design.depths), list(design.wavelengths)], sort_keys=True, default=str)
+    text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, DEPTH_REFINE,
+                       PART_SEEDS[split], list(design.depths), list(design.wavelengths), kernel,
+                       design.camera.to_dict()], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -110,14 +111,15 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from doefab.fabrication.process import mask_count
     from doefab.io import atomic_write_bytes, cache_root
     from doefab.optics.psf import PSFPair
-    from doefab.reconstruction.specs import get_spec
+    from doefab.reconstruction.specs import network_kernel
     from doefab.tolerance.errors import sample_errors
     from doefab.tolerance.judge import PSFJudge, alignment_chain
 
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if task == "depth" else design.depths
+    kernel = network_kernel(task, design.task_params.get("kernel_size"))
     # fabricated parts' PSFs take minutes: kept between runs in the cache (``doefab.io.cache_root``)
-    path = cache_root() / "conditions" / f"{task}-{_key(task, design, split, n, budget)}.pt"
+    path = cache_root() / "conditions" / f"{task}-{_key(task, design, split, n, budget, kernel)}.pt"
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
@@ -138,7 +140,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
                             n_masks=judge.n_masks)
         err = replace(err, crosstalk=(0.0, 0.0))  # crosstalk acts on the captures, not on the PSF
         with torch.no_grad():
-            got = judge.psfs(err, halves=("coded", "uncoded"), kernel=get_spec(task).kernel)
+            got = judge.psfs(err, halves=("coded", "uncoded"), kernel=kernel)
         coded.append(got["coded"].float())
         uncoded.append(got["uncoded"].float())
     buf = io.BytesIO()

@@ -21,7 +21,8 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import sample_errors
 
-__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers"]
+__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
+           "interval_text"]
 
 # glibc: serve every allocation from the heap and never trim it (a part allocates and frees tens of MB per
 # wavelength; fresh mmap pages for each cost a third of a part in page faults)
@@ -232,6 +233,14 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     w = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return (max(0.0, centre - w), min(1.0, centre + w))
+
+
+def interval_text(ci, fmt: str = ".3f") -> str:
+    """``lo–hi`` of an interval, or a plain statement when it is undefined (fewer than two parts)."""
+    lo, hi = (float(x) for x in ci)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return "n/a: fewer than two parts"
+    return f"{lo:{fmt}}–{hi:{fmt}}"
 
 
 def mean_ci(values) -> dict:

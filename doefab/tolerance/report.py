@@ -15,6 +15,7 @@ import numpy as np
 from doefab.io import atomic_write_json, atomic_write_text
 from doefab.tolerance import plots, study
 from doefab.tolerance.errors import PartErrors
+from doefab.tolerance.kinds import KINDS
 
 __all__ = ["run_study", "REMEDY", "summary_lines"]
 
@@ -59,9 +60,10 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
                  "level": "network" if networks else "psf"}
     res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
+    key = _step_key(judge.design, budget, grid, networks, weights_dir, network_top)
     if networks:
-        res["nominal"]["network"] = study.evaluate_part(str(design_dir), 1, PartErrors().to_json(), True,
-                                                         weights_dir)["network"]
+        res["nominal"]["network"] = cached_step(out, "nominal_network", key, lambda: study.evaluate_part(
+            str(design_dir), 1, PartErrors().to_json(), True, weights_dir)["network"])
     res["warnings"] = [f"the nominal part already fails the spec ({w}): no part can meet it"
                        for lvl in ("psf", "network") if lvl in res["nominal"] or lvl == "psf"
                        for w in nominal_failures(spec, task, lvl, _flat_nominal(res["nominal"], lvl))]
@@ -69,10 +71,13 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     # limits relative to the error-free part differ per label: each label's parts are judged against its own
     res["spec_by_label"] = {label: _limits(spec, task, "network", {"network": {"nominal_psf": nom}}, limits_text)
                             for label, nom in res["nominal"].get("network", {}).items()}
-    grids = _grids(judge, budget, grid, res, progress)
+    res["grid"] = cached_step(out, "grid", key, lambda: _grid_record(judge, budget, grid, progress))
+    grids = ({k: v["grid"] for k, v in res["grid"]["kinds"].items()} if grid == "auto" else
+             {k.name: int(grid) for k in KINDS})
     mc_grid = res["grid"]["monte_carlo_grid"]
     t = time.perf_counter()
-    res["tornado"] = study.tornado(design_dir, budget, grids, networks, weights_dir, progress, network_top)
+    res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
+                                                                            weights_dir, progress, network_top))
     res["tornado_seconds"] = round(time.perf_counter() - t, 1)
     if do_sweep:
         t = time.perf_counter()
@@ -108,19 +113,43 @@ def _limits(spec, task, level, nominal, limits_text) -> str | None:
         return None
 
 
-def _grids(judge, budget, grid, res, progress) -> dict:
+def _grid_record(judge, budget, grid, progress) -> dict:
     """Per-kind grids: measured on the design (``grid="auto"``) or one grid for all."""
     from doefab.tolerance.grid import grid_study
 
     if grid == "auto":
         t = time.perf_counter()
-        res["grid"] = grid_study(judge, budget, progress=progress)
-        res["grid"]["seconds"] = round(time.perf_counter() - t, 1)
-        return {k: v["grid"] for k, v in res["grid"]["kinds"].items()}
-    res["grid"] = {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
-    from doefab.tolerance.kinds import KINDS
+        rec = grid_study(judge, budget, progress=progress)
+        rec["seconds"] = round(time.perf_counter() - t, 1)
+        return rec
+    return {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
 
-    return {k.name: int(grid) for k in KINDS}
+
+STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
+
+
+def _step_key(design, budget, grid, networks, weights_dir, network_top) -> dict:
+    from doefab.tolerance.montecarlo import run_identity
+
+    return {**run_identity(design, budget, 0, 1, networks), "grid_arg": str(grid), "network_top": network_top,
+            "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve())}
+
+
+def cached_step(out: Path, name: str, key: dict, compute):
+    """``compute()``'s result, kept in ``out/steps/<name>.json`` with the ``key`` of the study it belongs to: a
+    resumed study of the same design, budget, grid and networks reuses it instead of computing it again."""
+    import json
+
+    path = Path(out) / STEPS / f"{name}.json"
+    try:
+        rec = json.loads(path.read_text())
+        if rec.get("key") == json.loads(json.dumps(key, default=str)):
+            return rec["value"]
+    except (OSError, ValueError, AttributeError):
+        pass
+    value = compute()
+    atomic_write_json(path, {"key": key, "value": value})
+    return value
 
 
 def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, workers, networks, spec, task,
@@ -194,22 +223,23 @@ def _figures(out: Path, res: dict) -> None:
 
 def summary_lines(res: dict) -> list[str]:
     """The report's opening: what the part delivers, its yield, what limits it and what would buy the most."""
+    from doefab.tolerance.montecarlo import interval_text
+
     lines = []
     s = res.get("summary")
     if s:
         m = s["metric"]
-        lines.append(f"- **PSF metric** {m['mean']:.3f} (95 % interval of the mean {m['ci95'][0]:.3f}–"
-                     f"{m['ci95'][1]:.3f}; nominal {res['nominal']['psf']['psf_metric']:.3f}), {s['yield']['n']} parts.")
+        lines.append(f"- **PSF metric** {m['mean']:.3f} (95 % interval of the mean {interval_text(m['ci95'])}; "
+                     f"nominal {res['nominal']['psf']['psf_metric']:.3f}), {s['yield']['n']} parts.")
         y = s["yield"]
         lines.append(f"- **Yield at PSF level** ({res['spec']['psf'] or 'no limit'}): {y['value']:.2f}, 95 % Wilson "
-                     f"interval {y['ci95'][0]:.2f}–{y['ci95'][1]:.2f}.")
+                     f"interval {interval_text(y['ci95'], '.2f')}.")
         for label, v in s.get("network", {}).items():
-            ms = ", ".join(f"{k} {d['mean']:.4g} ({d['ci95'][0]:.4g}–{d['ci95'][1]:.4g})"
+            ms = ", ".join(f"{k} {d['mean']:.4g} ({interval_text(d['ci95'], '.4g')})"
                            for k, d in v["metrics"].items())
             lines.append(f"- **Delivered, network given the {label.replace('_', ' ')}**: {ms}; yield "
                          f"({res.get('spec_by_label', {}).get(label) or res['spec']['network'] or 'no limit'}) "
-                         f"{v['yield']['value']:.2f} "
-                         f"({v['yield']['ci95'][0]:.2f}–{v['yield']['ci95'][1]:.2f}).")
+                         f"{v['yield']['value']:.2f} ({interval_text(v['yield']['ci95'], '.2f')}).")
     top = [r for r in res["tornado"] if r["delta"] < 0][:3]
     if top:
         lines.append("- **Limited by** " + "; ".join(
@@ -217,6 +247,10 @@ def summary_lines(res: dict) -> list[str]:
         lines.append(f"- **Would buy the most:** {REMEDY.get(top[0]['error'], top[0]['error'])} "
                      f"(recovers up to {-top[0]['delta']:.3f} of the PSF metric).")
     lines += [f"- **Warning:** {w}" for w in res.get("warnings", [])]
+    used = res.get("budget", {}).get("defaults_used")
+    if used:
+        lines.append(f"- Budget keys missing from {res.get('budget_file', 'the budget')}, taken from the default "
+                     f"budget: {', '.join(used)}.")
     lines.append(f"- Aperture stop: {res['stop']}.")
     return lines
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from doefab.tolerance.montecarlo import interval_text
+
 __all__ = ["body_lines"]
 
 
@@ -58,13 +60,12 @@ def _monte_carlo(res: dict) -> list[str]:
     lines = ["## Monte Carlo", "",
              f"{len(res['samples'])} parts (seed {res['seed']}) on the {res['grid']['monte_carlo_grid']}× grid, "
              f"{res['monte_carlo_seconds']} s ({res['parts_per_minute']} parts per minute). PSF metric mean "
-             f"{s['metric']['mean']:.4f} (95 % interval of the mean {s['metric']['ci95'][0]:.4f}–"
-             f"{s['metric']['ci95'][1]:.4f}); yield at PSF level {s['yield']['value']:.3f} (Wilson "
-             f"{s['yield']['ci95'][0]:.3f}–{s['yield']['ci95'][1]:.3f}).", ""]
+             f"{s['metric']['mean']:.4f} (95 % interval of the mean {interval_text(s['metric']['ci95'], '.4f')}); "
+             f"yield at PSF level {s['yield']['value']:.3f} (Wilson {interval_text(s['yield']['ci95'])}).", ""]
     for label, v in s.get("network", {}).items():
         lines.append(f"- network given the {label.replace('_', ' ')}: " + ", ".join(
-            f"{k} {d['mean']:.4g} ({d['ci95'][0]:.4g}–{d['ci95'][1]:.4g})" for k, d in v["metrics"].items())
-            + f"; yield {v['yield']['value']:.3f} ({v['yield']['ci95'][0]:.3f}–{v['yield']['ci95'][1]:.3f})")
+            f"{k} {d['mean']:.4g} ({interval_text(d['ci95'], '.4g')})" for k, d in v["metrics"].items())
+            + f"; yield {v['yield']['value']:.3f} ({interval_text(v['yield']['ci95'])})")
     lines += ["", "| parts | yield | 95 % Wilson interval | width | wall time (s) |", "| --- | --- | --- | --- | --- |"]
     lines += [f"| {c['n']} | {c['yield']:.3f} | {c['yield_ci95'][0]:.3f}–{c['yield_ci95'][1]:.3f} | "
               f"{c['yield_ci95_width']:.3f} | {c['seconds']:.0f} |" for c in res["convergence"]]

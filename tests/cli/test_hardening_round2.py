@@ -238,10 +238,23 @@ def test_row08_reconstructor_refuses_captures_outside_0_1():
 # ---- row 9: the scheduler is checked when the flags are parsed
 
 @pytest.mark.parametrize("scheduler", ["local:0", "local:abc", "tcp://nohost"])
-def test_row09_scheduler_checked_at_parse_time(tmp_path, capsys, scheduler):
+def test_row09_scheduler_checked_at_parse_time(tmp_path, scheduler):
+    """Run as its own process with a time limit: the case used to hang until killed."""
+    p = subprocess.run([sys.executable, "-m", "doefab", "tolerance", "--design", str(REPO / "masks" / "grating"),
+                        "--samples", "1", "--scheduler", scheduler, "--out", str(tmp_path / "t0")],
+                       capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert p.returncode == 2 and "--scheduler" in p.stderr and not (tmp_path / "t0").exists()
+
+
+def test_row09_an_unreachable_scheduler_is_refused_before_any_work(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
     rc, _, err = _run(["tolerance", "--design", REPO / "masks" / "grating", "--samples", "1", "--scheduler",
-                       scheduler, "--out", tmp_path / "t0"], capsys)
-    assert rc == 2 and "--scheduler" in err and not (tmp_path / "t0").exists()
+                       f"tcp://127.0.0.1:{port}", "--out", tmp_path / "t0"], capsys)
+    assert rc == 2 and "no Dask scheduler answers" in err and not (tmp_path / "t0").exists()
 
 
 # ---- rows 11 and 12: a design of another task is named as such, at once
@@ -371,7 +384,7 @@ def test_row20_design_psf_panels_are_drawn_on_a_log_scale(tmp_path, monkeypatch)
     from types import SimpleNamespace
 
     import doefab.plotting
-    from doefab.pipeline.stages import design_psf_figure
+    from doefab.plotting import design_psf_figure
 
     seen = {}
     monkeypatch.setattr(doefab.plotting, "plot_psf_grid", lambda path, panels, pitch, **kw: seen.update(kw))
@@ -381,3 +394,39 @@ def test_row20_design_psf_panels_are_drawn_on_a_log_scale(tmp_path, monkeypatch)
     psf[0, :, 7, 7] = 1.0
     design_psf_figure(tmp_path / "f.png", d, psf, psf)
     assert seen["log"] is True and "log scale" in seen["suptitle"]
+
+
+def test_doctor_out_replaces_only_its_own_report(tmp_path, capsys):
+    """``doctor --out F`` writes F; a rerun replaces its own report; a file of the user's is never replaced."""
+    f = tmp_path / "d.json"
+    for _ in range(2):
+        rc, _, _ = _run(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", f], capsys)
+        assert rc == 0 and json.loads(f.read_text())["written_by"] == "doefab doctor"
+    mine = tmp_path / "notes.txt"
+    mine.write_text("my notes")
+    rc, _, err = _run(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", mine], capsys)
+    assert rc == 2 and "never replaces" in err and mine.read_text() == "my notes"
+
+
+def test_train_never_replaces_a_users_file_in_weights_dir(tmp_path):
+    from doefab.reconstruction.weights import weights_target
+
+    w = tmp_path / "w"
+    w.mkdir()
+    (w / "hdr_proposed.json").write_text('{"mine": 1}')
+    with pytest.raises(DoefabError, match="not written by doefab"):
+        weights_target(w, tmp_path, task="hdr", variant="proposed")
+    assert weights_target(w, tmp_path, task="hdr", variant="coded_only") == w  # other names are free
+    (w / "hdr_proposed.json").write_text(json.dumps({"format": "doefab weights 1", "task": "hdr",
+                                                     "variant": "proposed"}))
+    assert weights_target(w, tmp_path, task="hdr", variant="proposed") == w  # doefab's own: replaced
+
+
+def test_write_holder_never_writes_into_a_users_folder(tmp_path):
+    from holder_cad.build import write_holder
+    from holder_cad.params import HolderParams
+
+    (tmp_path / "holder.stl").write_text("the user's own part")
+    with pytest.raises(DoefabError, match="no doefab ownership marker"):
+        write_holder(HolderParams(), tmp_path, step=False, renders=False)
+    assert (tmp_path / "holder.stl").read_text() == "the user's own part"

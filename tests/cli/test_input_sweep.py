@@ -75,6 +75,9 @@ FLAGS = [
     (["tolerance", "--design", "{design}"], "--seed", SEED),
     (["tolerance", "--design", "{design}"], "--supersample", _int()),
     (["tolerance", "--design", "{design}"], "--workers", _int()),
+    (["tolerance", "--design", "{design}"], "--grid", _int()),
+    (["train", "--task", "hdr"], "--steps", _int()),
+    (["masks", "--design", "{design}"], "--etch-order", {NAN: "nan", NEG: "-1", ZERO: "0", UNIT: NA, BIG: "1000"}),
     (["tolerance", "--design", "{design}"], "--scheduler",
      {NAN: "local:nan", NEG: "local:-1", ZERO: "local:0", UNIT: NA, BIG: f"local:{10**12}"}),
 ]
@@ -137,6 +140,39 @@ SCENE_KEYS = [
     ("tolerance", "supersample", {NAN: "nan", NEG: "-1", ZERO: "0", UNIT: NA, BIG: str(10**12)}),
     ("holder", "clearance_mm", {NAN: "nan", NEG: "-1.0", ZERO: "0.0", UNIT: "0.00025", BIG: "1e9"}),
 ]
+
+
+def _wrong_unit(key) -> str:
+    """A valid value of a length key written in another unit that leaves the range (else NA)."""
+    from doefab._validate import LENGTH_UNITS
+
+    if key.unit not in LENGTH_UNITS or not key.lo or key.lo <= 0:
+        return NA
+    mid = (key.lo * key.hi) ** 0.5  # valid in the key's unit
+    for other, per in LENGTH_UNITS.items():
+        v = mid * LENGTH_UNITS[key.unit] / per
+        if other != key.unit and not key.lo <= v <= key.hi:
+            return f"{v:.6g}"
+    return NA
+
+
+def _table_rows():
+    """Every numeric key of the scene key table (``doefab.pipeline.scenekeys.KEYS``) not listed above."""
+    from doefab.pipeline.scenekeys import KEYS
+
+    listed = {(sec, name) for sec, name, _ in SCENE_KEYS}
+    rows = []
+    for k in KEYS:
+        if k.kind not in ("float", "int") or k.lo is None or (k.section, k.name) in listed:
+            continue
+        f = k.kind == "float"
+        rows.append((k.section, k.name, {NAN: "nan", NEG: "-1.0" if f else "-1",
+                                         ZERO: VALID if k.lo <= 0 else ("0.0" if f else "0"),
+                                         UNIT: _wrong_unit(k), BIG: "1e12" if f else str(10**12)}))
+    return rows
+
+
+SCENE_KEYS += _table_rows()
 SCENE_CASES = _expand(SCENE_KEYS, lambda row, value: (f"scene {row[0]}.{row[1]}", row[0], row[1], value))
 
 
@@ -217,6 +253,14 @@ def _corrupt_set(f, t):
     return m
 
 
+def _users_weights(t):
+    """A folder of the user's holding a file named as training would name its weights."""
+    w = t / "mine"
+    w.mkdir()
+    (w / "hdr_proposed.pt").write_bytes(b"the user's own network")
+    return w
+
+
 def _resume_folder(t, kind, content: bytes | None):
     """An earlier (marked) output of ``kind`` whose checkpoint is missing (None), empty or corrupt."""
     from doefab.io import mark_folder
@@ -284,6 +328,16 @@ def _file_cases():
         cases.append(pytest.param(lambda f, t, make=make: ["tolerance", "--design", f / "design", "--holder",
                                                            make(t), "--out", t / "o"], 2, needle,
                                   id=f"tolerance --holder-{kind}"))
+    doctor_out = {"empty": (lambda t: "", "--out is empty"), "folder": (_a_folder, "is a folder"),
+                  "a file of the user's": (_corrupt_file, "not an earlier doefab doctor report")}
+    for kind, (make, needle) in doctor_out.items():
+        cases.append(pytest.param(lambda f, t, make=make: ["doctor", REPO / "scenes" / "hdr.toml", "--out", make(t)],
+                                  2, needle, id=f"doctor --out-{kind}"))
+    for kind, make in (("file", _corrupt_file), ("a file of the user's inside", _users_weights)):
+        cases.append(pytest.param(lambda f, t, make=make: ["train", "--task", "hdr", "--weights-dir", make(t),
+                                                           "--out", t / "o"], 2,
+                                  "is a file" if kind == "file" else "not written by doefab",
+                                  id=f"train --weights-dir-{kind}"))
     resume = {"design": STREAK, "train": ["train", "--task", "hdr"]}
     for kind, content, needle in (("missing", None, "does not exist"), ("empty", b"", "corrupt"),
                                   ("corrupt", b"\x00garbage", "corrupt")):
@@ -460,6 +514,10 @@ API = [
      {NAN: nan, NEG: -0.05, ZERO: VALID, UNIT: 5.0, BIG: 1e12}),
     ("unmix_crosstalk", "alpha_rl", lambda v: _xtalk(doefab.unmix_crosstalk, alpha_rl=v),
      {NAN: nan, NEG: -0.05, ZERO: VALID, UNIT: 5.0, BIG: 1e12}),
+    ("unmix_crosstalk", "min_determinant", lambda v: _xtalk(doefab.unmix_crosstalk, min_determinant=v),
+     {NAN: nan, NEG: -0.05, ZERO: 0.0, UNIT: 5.0, BIG: 1e12}),
+    ("simulate_captures", "noise", lambda v: _captures(noise={"read": v}),
+     {NAN: nan, NEG: -1.0, ZERO: 0.0, UNIT: NA, BIG: 1e12}),
     ("sensor_response", "wavelengths", lambda v: doefab.sensor_response([v]),
      {NAN: nan, NEG: -550e-9, ZERO: 0.0, UNIT: 550.0, BIG: 1e12}),
     ("simulate_captures", "scene", lambda v: _captures(scene=np.full((3, 32, 32), v)),

@@ -121,3 +121,26 @@ def test_n_level_blazed_grating_sends_sinc2_of_one_over_n_into_the_first_order(n
     assert eff == pytest.approx(np.sinc(1 / n_levels) ** 2, abs=5e-4)
     c = np.arange(k) - k // 2
     assert abs(float((spot.numpy().sum(0) * c).sum() / spot.numpy().sum())) < 0.1
+
+
+def test_the_networks_see_the_psf_of_the_designs_own_levels_in_its_own_window(eight, tiny_camera, tmp_path):
+    """A non-16-level design's networks are told the PSF of its 8-level relief (level · λ/(n−1)/8, computed
+    here from the substrate's index), in a window no smaller than the one it was optimised in."""
+    from doefab.reconstruction.specs import get_spec, network_kernel, psf_pair
+
+    d = tmp_path / "d8"
+    task = doefab.get_task("streak", **eight.task_params)
+    task.bind(tiny_camera)
+    big = dict(eight.task_params, kernel_size=get_spec("hdr").kernel + 20)  # optimised in a larger window
+    Design(**{**eight.__dict__, "task_params": big}).save(d)
+    pair, sha = psf_pair("hdr", d)
+    assert sha == levels_sha256(eight.levels)
+    k = pair.coded.shape[-1]
+    assert k == network_kernel("hdr", big["kernel_size"]) == get_spec("hdr").kernel + 20  # not cut off
+    h2pi = 550e-9 / (float(tiny_camera.material.index(550e-9)) - 1)
+    plan = PSFPlan(tiny_camera, eight.wavelengths, eight.depths, k)
+    with torch.no_grad():
+        want8 = plan(eight.levels * h2pi / 8)
+        as16 = plan(eight.levels * h2pi / 16)  # the level map read as if it had 16 levels
+    assert torch.allclose(pair.coded, want8.coded, atol=1e-7, rtol=1e-5)
+    assert not torch.allclose(pair.coded, as16.coded, atol=1e-5, rtol=1e-3)

@@ -71,3 +71,41 @@ def test_parts_come_back_from_the_cache(honest, depth_design, cache):
     again = C.honest("depth", depth_design, "val", parts=2)
     assert all(torch.equal(a.coded, b.coded) for a, b in zip(again.parts, honest["val"].parts))
     assert len(list((cache / "conditions").glob("depth-*.pt"))) == 3
+
+
+def test_make_batch_records_the_views_through_the_crosstalk_of_each_scenes_place(depth_design):
+    """Eq. 29's mix reaches the captures (uncalibrated: the views stay mixed), and scenes spread across the
+    sensor see different ratios (the per-column profile), not all the centre's."""
+    from dataclasses import replace
+
+    from doefab.reconstruction.specs import psf_pair
+    from doefab.tolerance.errors import load_budget, sensor_errors
+    from doefab.tolerance.surrogate import base_part
+
+    budget = load_budget()
+    sensor = replace(base_part(budget), **sensor_errors(budget))
+    raw = C.Conditions(name="x", crosstalk=replace(sensor, calibrated=False), split="test")
+    pair, _ = psf_pair("depth", depth_design)
+    clean = make_batch("depth", "test", [1], 64, pair, noise="none")
+    mixed = make_batch("depth", "test", [1], 64, pair, noise="none", conditions=raw)
+    # the coded view gains α_r→l of the plain one and loses α_l→r of its own (Eq. 29), column by column
+    assert float((mixed[0] - clean[0]).abs().max()) > 1e-3
+    ends = [raw.crosstalk_for(i, 12, 64) for i in (0, 11)]
+    assert abs(float(np.mean(ends[0].alpha_lr)) - float(np.mean(ends[1].alpha_lr))) > 1e-3
+
+
+def test_evaluate_spreads_its_scenes_across_the_sensor(monkeypatch, tmp_path):
+    """``evaluate`` renders scene i of N at its own place (``images=N``), so the test tables see the crosstalk
+    profile across the sensor and not only the centre column's."""
+    import doefab.reconstruction.evaluate as ev
+
+    seen = []
+    real = ev.make_batch
+
+    def spy(*a, **kw):
+        seen.append(kw.get("images"))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(ev, "make_batch", spy)
+    ev.evaluate("hdr", tmp_path, images=3, size=64, progress=False, variants=("uncoded_only",))
+    assert seen == [3, 3, 3]

@@ -202,6 +202,32 @@ def test_the_yield_band_is_wilsons_everywhere(design_dir, tmp_path):
     assert (tmp_path / "w" / "yield_vs_n.png").stat().st_size > 1000
 
 
+def test_the_yield_figure_draws_wilsons_band_for_every_n(tmp_path, monkeypatch):
+    """Issue 21, row 6: the band drawn in yield_vs_n.png is the Wilson interval of each running count (the
+    figure's own fill, read back from matplotlib), never Wald's zero-width band at 0 or 1."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.axes import Axes
+
+    from doefab.tolerance import plots
+
+    drawn = {}
+    real = Axes.fill_between
+
+    def spy(self, x, y1, y2=0, **kw):
+        drawn.update(x=np.asarray(x), lo=np.asarray(y1), hi=np.asarray(y2))
+        return real(self, x, y1, y2, **kw)
+
+    monkeypatch.setattr(Axes, "fill_between", spy)
+    ok = [True, True, True, False, True, True]
+    plots.yield_plot(tmp_path / "y.png", ok, "spec")
+    k = np.cumsum(ok)
+    want = np.array([montecarlo.wilson(int(a), n + 1) for n, a in enumerate(k)])
+    assert np.allclose(drawn["lo"], want[:, 0]) and np.allclose(drawn["hi"], want[:, 1])
+    assert drawn["hi"][0] - drawn["lo"][0] > 0.5  # one passing part: Wilson is wide, Wald would be 0
+
+
 def test_quantization_rows_say_what_they_were_quantized_from(design_dir):
     rows = study.quantization_study(design_dir, levels=(None, 16, 8))
     assert rows[0]["levels"] == "continuous" and "n/a" in rows[0]["source"]  # this folder has no continuous design
@@ -233,3 +259,49 @@ def test_workers_flag_takes_auto_or_a_count():
     assert p.parse_args(base + ["--workers", "3"]).workers == 3
     with pytest.raises(SystemExit):
         p.parse_args(base + ["--workers", "many"])
+
+
+@pytest.mark.parametrize("design", ["streak", "grating", "half-ring"])
+def test_each_committed_design_meets_its_tasks_default_spec(design):
+    """Issue 21, row 5: the shipped budget's per-task PSF limit lies below what each committed design's
+    fabricated relief reaches (its quantized metric in design.json), so the main job's yield is not zero by
+    construction."""
+    from doefab.design.committed import committed_dir
+    from doefab.tolerance.spec import TASK_OF_DESIGN, nominal_failures
+
+    d = Design.load(committed_dir(design))
+    task = TASK_OF_DESIGN[d.task]
+    spec = load_budget()["spec"]
+    assert nominal_failures(spec, task, "psf", {"psf_metric": d.metrics["quantized"]}) == []
+    assert nominal_failures(spec, task, "psf", {"psf_metric": spec[task]["psf_metric_min"] - 1e-3}) != []
+
+
+def test_an_empty_budget_file_at_the_command_line_reports_the_defaults_it_took(design_dir, tmp_path, capsys):
+    """Issue 21, row 4, replayed: ``: > e.toml; doefab tolerance --budget e.toml --samples 1``: the default budget's
+    values (not zeros), every key taken from it listed in the output and the report, no "nan–nan" interval."""
+    e = tmp_path / "e.toml"
+    e.write_text("")
+    rc = main(["tolerance", "--design", str(design_dir), "--budget", str(e), "--samples", "1", "--grid", "1",
+               "--out", str(tmp_path / "te")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    res = json.loads((tmp_path / "te" / "tolerance.json").read_text())
+    assert res["budget"]["overlay"] == load_budget()["overlay"]  # not zeros
+    report = (tmp_path / "te" / "report.md").read_text()
+    for text in (out, report):
+        assert "taken from the default budget" in text and "mounting.decenter_max_mm" in text
+        assert "nan" not in text.lower().replace("nanometre", "") and "fewer than two parts" in text
+
+
+def test_a_resumed_study_reuses_its_finished_steps_and_a_changed_one_does_not(tmp_path):
+    """Issue 21, row 10: a study's finished steps (grid study, tornado) are kept with the key of their run; a
+    resumed run of the same key reuses them, a run of another key computes afresh."""
+    from doefab.tolerance.report import cached_step
+
+    calls = []
+    key = {"design_levels_sha256": "a", "budget_sha256": "b"}
+    assert cached_step(tmp_path, "tornado", key, lambda: calls.append(1) or [{"error": "x"}]) == [{"error": "x"}]
+    assert cached_step(tmp_path, "tornado", dict(key), lambda: calls.append(2) or []) == [{"error": "x"}]
+    assert calls == [1]
+    assert cached_step(tmp_path, "tornado", {**key, "budget_sha256": "c"}, lambda: calls.append(3) or []) == []
+    assert calls == [1, 3]
