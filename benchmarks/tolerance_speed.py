@@ -3,7 +3,8 @@
 ``psf``: ``doefab tolerance --design masks/grating --samples 300`` (PSF level, default budget, grid chosen by the
 study, default workers: one process per core); then ``--samples 0 --surrogate`` (the sensitivity surrogate,
 checked on held-out parts of its own) — its yield interval against the direct run's.
-``network``: parts per minute through each task's network (``--networks``, 6 parts each).
+``network``: parts per minute through each task's network (``--networks``, 6 parts each; the network judge
+renders validation scenes — split used: val).
 Writes benchmarks/results/tolerance_speed.{md,json}. Run with nothing else on the machine:
     .venv/bin/python benchmarks/tolerance_speed.py psf network
 """

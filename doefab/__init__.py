@@ -34,6 +34,8 @@ _EXPORTS = {
     "mix_crosstalk": "doefab.imaging.crosstalk",
     "unmix_crosstalk": "doefab.imaging.crosstalk",
     "calibrate_crosstalk": "doefab.imaging.crosstalk",
+    "DualPixelCrosstalk": "doefab.imaging.crosstalk",
+    "simulate_calibration": "doefab.imaging.crosstalk",
     "sensor_response": "doefab.imaging.sensor",
     "simulate_captures": "doefab.imaging.captures",
     "load_reconstructor": "doefab.reconstruction.loader",

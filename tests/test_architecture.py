@@ -3,7 +3,6 @@
 import ast
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "doefab"
@@ -32,14 +31,12 @@ def _imports(path: Path):
 
 
 def test_import_doefab_is_light():
-    code = "import sys, time; t = time.perf_counter(); import doefab; dt = time.perf_counter() - t; " \
-           "print(dt); print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in " \
-           "{'torch', 'matplotlib', 'cadquery', 'klayout', 'dask', 'gdstk', 'trimesh', 'manifold3d'})))"
-    t = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
-    assert time.perf_counter() - t < 2.0
-    assert float(out[0]) < 0.5
-    assert out[1].strip() == "", f"import doefab loaded {out[1]}"
+    """``import doefab`` loads none of the heavy packages (its speed is a benchmark's business, not a test's)."""
+    code = "import sys; import doefab; print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in " \
+           "{'torch', 'matplotlib', 'cadquery', 'klayout', 'dask', 'gdstk', 'trimesh', 'manifold3d', 'scipy', " \
+           "'skimage', 'colour', 'nlopt'})))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "", f"import doefab loaded {out}"
 
 
 def test_heavy_packages_only_inside_functions():

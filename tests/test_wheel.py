@@ -28,23 +28,31 @@ def installed(tmp_path_factory):
     subprocess.run(pip + ["wheel", str(src), "--no-deps", "--no-build-isolation", "-w", str(root / "dist")],
                    check=True, cwd=root)
     wheel = next((root / "dist").glob("doefab-*.whl"))
-    # the dependencies are this environment's; doefab itself only from the wheel
-    subprocess.run(pip + ["install", "--no-deps", "--target", str(root / "site"), str(wheel)], check=True, cwd=root)
+    # a fresh virtual environment: doefab only from the wheel (pip install, not editable), its dependencies from
+    # this environment's site-packages by a path entry (whose own .pth files, the checkout's editable hook among
+    # them, are not processed)
+    venv = root / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, cwd=root)
+    site = next(venv.glob("lib/python3*/site-packages"))
+    host = [p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir()]
+    (site / "zz_dependencies.pth").write_text("\n".join(host) + "\n")
+    subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "--disable-pip-version-check", "-q", "install",
+                    "--no-deps", "--no-index", str(wheel)], check=True, cwd=root)
     work = root / "elsewhere"
     work.mkdir()
-    env = {**os.environ, "PYTHONPATH": str(root / "site"), "DOEFAB_CACHE": str(root / "cache"),
-           "MPLBACKEND": "Agg"}
-    return root, work, env, wheel
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env.update(DOEFAB_CACHE=str(root / "cache"), MPLBACKEND="Agg", PATH=f"{venv / 'bin'}:{env.get('PATH', '')}")
+    return root, work, env, wheel, venv
 
 
-def _py(code: str, work: Path, env: dict) -> str:
-    r = subprocess.run([sys.executable, "-c", code], cwd=work, env=env, capture_output=True, text=True)
+def _py(code: str, work: Path, env: dict, venv: Path) -> str:
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", code], cwd=work, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-3000:]
     return r.stdout
 
 
 def test_the_wheel_carries_the_designs_weights_and_data(installed):
-    root, work, env, wheel = installed
+    root, work, env, wheel, venv = installed
     import zipfile
 
     names = zipfile.ZipFile(wheel).namelist()
@@ -57,20 +65,52 @@ def test_the_wheel_carries_the_designs_weights_and_data(installed):
               "rec = doefab.load_reconstructor('hdr')\n"
               "coded = np.full((3, 64, 64), 0.25, np.float32)\n"
               "y = rec(coded, coded)\n"
-              "print(tuple(y.shape), bool(np.isfinite(np.asarray(y)).all()))\n", work, env)
+              "print(tuple(y.shape), bool(np.isfinite(np.asarray(y)).all()))\n", work, env, venv)
     lines = out.strip().splitlines()
-    assert lines[0].startswith(str(root / "site")), lines[0]  # not the checkout's doefab
+    assert lines[0].startswith(str(venv)), lines[0]  # the installed wheel, not the checkout's doefab
     assert lines[-1] == "(3, 64, 64) True"
 
 
-def test_the_wheel_runs_a_scene_from_any_folder(installed):
-    root, work, env, _ = installed
-    scene = work / "my_camera.toml"
+TINY_CAMERA = """task = "hdr"
+stages = ["design", "masks", "holder", "report"]
+[camera]
+focal_length_mm = 20.0
+aperture_diameter_mm = 1.0
+sensor_pitch_um = 5.0
+doe_pitch_um = 10.0
+focus_distance_m = 5.0
+[optics]
+kernel_px = 31
+[design]
+streak_arm_px = 8
+[fabrication]
+levels = 4
+material = "N-BK7"
+"""
+
+
+def test_the_installed_command_runs_a_scene_from_any_folder(installed):
+    """The wheel's ``doefab`` console script, in a folder outside the repository: the preset scene reuses the
+    committed design shipped in the package; a scene of another camera is designed, exported and reported."""
+    root, work, env, _, venv = installed
+    doefab = str(venv / "bin" / "doefab")
+    scene = work / "preset.toml"
     scene.write_text('task = "hdr"\nstages = ["design", "masks", "report"]\n[camera]\npreset = "hdr"\n')
-    r = subprocess.run([sys.executable, "-m", "doefab", "run", str(scene), "--quick", "--out", str(work / "run")],
+    r = subprocess.run([doefab, "run", str(scene), "--quick", "--out", str(work / "run")],
                        cwd=work, env=env, capture_output=True, text=True)
     assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-3000:])
     assert "reused" in r.stdout  # the committed design, from the package
     layers = sorted((work / "run" / "masks").glob("*.gds"))
     assert len(layers) >= 1 and (work / "run" / "masks" / "manifest.json").is_file()
     assert (work / "run" / "report.html").is_file()
+    mine = work / "my_camera.toml"
+    mine.write_text(TINY_CAMERA)
+    r = subprocess.run([doefab, "run", str(mine), "--quick", "--out", str(work / "mine")],
+                       cwd=work, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-3000:])
+    import json
+
+    manifest = json.loads((work / "mine" / "masks" / "manifest.json").read_text())
+    etch = [lay for lay in manifest["layers"] if lay["purpose"] == "etch"]
+    assert manifest["n_levels"] == 4 and len(etch) == 2 and "N-BK7" in json.dumps(manifest)  # log2 4 masks
+    assert (work / "mine" / "holder" / "holder.stl").is_file() and (work / "mine" / "report.html").is_file()

@@ -142,6 +142,25 @@ class DualPixelCrosstalk:
         self.alpha_lr, self.alpha_rl = alpha_lr, alpha_rl
         self.estimate = estimate  # (α̂_l→r, α̂_r→l), or None: the pipeline leaves the mix in
 
+    @classmethod
+    def calibrated(cls, alpha_lr, alpha_rl, rows: int = 3072, noise="default", seed: int = 0,
+                   level: float = 0.5) -> "DualPixelCrosstalk":
+        """A camera with true ratios ``(alpha_lr, alpha_rl)`` (scalars or per-column profiles) whose pipeline
+        unmixes with the ratios a simulated calibration estimated: two noisy white-wall captures of ``rows`` rows,
+        each with one aperture half blocked (Eq. 30–31; ``noise``: a ``doefab.imaging.sensor`` preset or model).
+        The estimate's own error stays in the captures, as it does in a user's pipeline."""
+        from doefab import _validate
+        from doefab.imaging.sensor import noise_model
+
+        if isinstance(rows, bool) or not isinstance(rows, int) or not 1 <= rows <= 100_000:
+            raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r}")
+        rng = np.random.default_rng(_validate.seed("seed", seed))
+        profile = np.atleast_1d(np.asarray(alpha_lr, np.float64))
+        b = np.broadcast_to(np.asarray(alpha_rl, np.float64), profile.shape)
+        estimate = simulate_calibration(profile, b, rows, noise_model(noise), rng, level)
+        return cls(alpha_lr, alpha_rl, estimate if profile.size > 1 else (float(estimate[0][0]),
+                                                                            float(estimate[1][0])))
+
     def record(self, coded, uncoded, noise, rng):
         """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first)."""
         left, right = mix_crosstalk(uncoded, coded, self.alpha_lr, self.alpha_rl)

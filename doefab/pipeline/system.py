@@ -29,13 +29,19 @@ def is_custom_camera(scene: Scene) -> bool:
     from doefab.optics.camera import Camera
 
     base = Camera.preset(scene.camera.get("preset", _PRESET[scene.task]))
-    return scene_camera(scene).to_dict() != base.to_dict()
+    return scene_camera(scene, []).to_dict() != base.to_dict()  # its problems are resolve's to report
 
 
-def scene_camera(scene: Scene):
-    """The scene's Camera (SI units) and the problems found building it."""
+def scene_camera(scene: Scene, problems: list | None = None):
+    """The scene's Camera (SI units). A problem found building it is appended to ``problems`` (and a stand-in
+    value used, so the other checks still run), or raised when no list is given."""
     from doefab.optics.camera import Camera
     from doefab.optics.materials import material_by_name
+
+    def problem(text: str) -> None:
+        if problems is None:
+            raise DoefabError(text)
+        problems.append(text)
 
     c, fab = scene.camera, scene.fabrication
     base = Camera.preset(c.get("preset", _PRESET[scene.task]))
@@ -46,8 +52,9 @@ def scene_camera(scene: Scene):
     elif "focal_length_mm" in c:
         f = c["focal_length_mm"] * 1e-3
         if f * inv_focus >= 1:
-            raise DoefabError(f"camera.focal_length_mm {c['focal_length_mm']} cannot focus at {focus} m: the focus "
-                              f"distance must exceed the focal length")
+            problem(f"camera.focal_length_mm {c['focal_length_mm']} cannot focus at {focus} m: the focus distance "
+                    f"must exceed the focal length")
+            inv_focus, focus = 0.0, math.inf  # stand-in: focused at infinity, so the other checks still run
         s = 1.0 / (1.0 / f - inv_focus)
     else:
         s = base.sensor_distance
@@ -58,15 +65,24 @@ def scene_camera(scene: Scene):
     changed = any(k in c for k in ("aperture_diameter_mm", "f_number", "doe_pitch_um"))
     pixels = 2 * math.ceil(aperture / pitch / 2 - 1e-9) if changed else base.doe_pixels
     if pixels > MAX_DOE_PIXELS:
-        raise DoefabError(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): "
-                          f"above {MAX_DOE_PIXELS}²; raise camera.doe_pitch_um or lower the aperture")
-    return base.replace(sensor_distance=s, focus_distance=focus, aperture_diameter=aperture, doe_pitch=pitch,
-                        doe_pixels=int(pixels),
-                        sensor_pitch=c["sensor_pitch_um"] * 1e-6 if "sensor_pitch_um" in c else base.sensor_pitch,
-                        lens_f_number=float(c.get("lens_f_number", base.lens_f_number)),
-                        material=material_by_name(fab["material"]) if "material" in fab else base.material,
-                        design_wavelength=fab["design_wavelength_nm"] * 1e-9 if "design_wavelength_nm" in fab
-                        else base.design_wavelength)
+        problem(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): above "
+                f"{MAX_DOE_PIXELS}²; raise camera.doe_pitch_um or lower camera.aperture_diameter_mm")
+        pixels, pitch = MAX_DOE_PIXELS, aperture / MAX_DOE_PIXELS  # stand-in grid for the other checks
+    try:
+        material = material_by_name(fab["material"]) if "material" in fab else base.material
+    except DoefabError as exc:
+        problem(f"fabrication.material: {exc}")
+        material = base.material
+    try:
+        return base.replace(sensor_distance=s, focus_distance=focus, aperture_diameter=aperture, doe_pitch=pitch,
+                            doe_pixels=int(pixels),
+                            sensor_pitch=c["sensor_pitch_um"] * 1e-6 if "sensor_pitch_um" in c else base.sensor_pitch,
+                            lens_f_number=float(c.get("lens_f_number", base.lens_f_number)), material=material,
+                            design_wavelength=fab["design_wavelength_nm"] * 1e-9 if "design_wavelength_nm" in fab
+                            else base.design_wavelength)
+    except DoefabError as exc:  # the camera's own checks (e.g. a sensor distance it cannot image at)
+        problem(f"camera: {exc}")
+        return base
 
 
 def scene_task(scene: Scene, committed, cam):
@@ -85,6 +101,9 @@ def scene_task(scene: Scene, committed, cam):
         if dname == "grating":
             params["n_bands"] = len(o["wavelengths_nm"])
     planes = [math.inf if z == "inf" else float(z) for z in o.get("depths_m", [])]
+    if dname == "half-ring" and any(math.isinf(z) for z in planes):
+        raise DoefabError(f"optics.depths_m {o['depths_m']}: a depth design's planes are finite distances (its ring "
+                          f"law needs 1/z at every plane): drop \"inf\"")
     if planes and dname == "half-ring" and [round(z, 9) for z in planes] != [round(z, 9) for z in own.depths(cam)]:
         params["planes_m"] = tuple(planes)
     for key, name, scale in (("streak_arm_px", "arm_px", 1), ("streak_band_px", "band_px", 1),
@@ -96,8 +115,12 @@ def scene_task(scene: Scene, committed, cam):
         params["period_m"] = d["grating_period_um"] * 1e-6
     if dname == "half-ring" and is_custom_camera(scene) and "ring_max_px" not in d:
         params["ring_max_px"] = defocus_ring_px(cam, params)
-    task = get_task(dname, **params)
-    task.bind(cam)
+    try:
+        task = get_task(dname, **params)
+        task.bind(cam)
+    except DoefabError as exc:
+        raise DoefabError(f"the task's keys (optics.wavelengths_nm, optics.depths_m, optics.kernel_px, [design] "
+                          f"geometry): {exc}") from None
     return task
 
 
@@ -121,7 +144,8 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     k = task.kernel_size
     if "min_feature_um" in scene.fabrication:
         try:
-            check_min_feature(cam.doe_pitch, scene.fabrication["min_feature_um"] * 1e-6)
+            pitch = scene.camera["doe_pitch_um"] * 1e-6 if "doe_pitch_um" in scene.camera else cam.doe_pitch
+            check_min_feature(pitch, scene.fabrication["min_feature_um"] * 1e-6)
         except DoefabError as exc:
             out.append(f"camera.doe_pitch_um / fabrication.min_feature_um: {exc}")
     lam_min = min(task.wavelengths(cam))
@@ -180,12 +204,14 @@ def resolve(scene: Scene) -> dict:
     cdir = committed_dir(dname)
     committed = Design.load(cdir)
     cfg = committed.extra.get("config", {})
+    problems: list[str] = []
+    cam = scene_camera(scene, problems)
     try:
-        cam = scene_camera(scene)
         task = scene_task(scene, committed, cam)
     except DoefabError as exc:
-        raise DoefabError(f"{scene.path}: {exc}") from None
-    problems = _checks(scene, cam, task)
+        problems.append(str(exc))
+    else:
+        problems += _checks(scene, cam, task)
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)

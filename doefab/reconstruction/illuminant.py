@@ -30,7 +30,7 @@ from doefab.errors import DoefabError
 from doefab.imaging.captures import convolve
 
 __all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "write_illuminant_library",
-           "LIBRARY_PATH"]
+           "LIBRARY_PATH", "candidate_predictions", "mix_illuminants"]
 
 LIBRARY_PATH = Path(__file__).resolve().parents[1] / "weights" / "illuminants.csv"
 
@@ -96,11 +96,12 @@ def illuminant_inverses(response: np.ndarray, library: np.ndarray, smooth: float
     return np.stack(out)
 
 
-def search_illuminant(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch.Tensor, response: torch.Tensor,
-                      inverses: torch.Tensor, clipped: float = 0.98,
-                      max_side: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
-    """(index [B], cost [B, J]) of the illuminant whose spectra, estimated from ``uncoded``, best predict
-    ``coded``.
+def candidate_predictions(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch.Tensor,
+                          response: torch.Tensor, inverses: torch.Tensor, clipped: float = 0.98,
+                          max_side: int = 256) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(pred [B, J, 3, P], target [B, 3, P], valid [B, 3, P]): the coded capture each candidate illuminant
+    predicts from ``uncoded`` (P pixels of the central ``max_side``² at most), the measured one and its unclipped
+    pixels.
 
     Args:
         coded, uncoded: [B, 3, H, W] captures.  psf_coded: [C, K, K] coded PSF per band.
@@ -128,7 +129,37 @@ def search_illuminant(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: tor
         # candidate j predicts coded channel r as Σ_{λ,k} T[r,λ] N_j[λ,k] Y_{λk}
         wts = torch.einsum("rl,jlk->jrlk", response.float(), inverses.float()).reshape(-1, c_bands * 3)
         pred = torch.einsum("mq,bqp->bmp", wts, y).reshape(b, -1, 3, h * w)  # [B, J, 3, HW]
-        target = coded.float().reshape(b, 1, 3, h * w)
+        target = coded.float().reshape(b, 3, h * w)
         valid = (target < clipped).float()
-        cost = (((pred - target) ** 2) * valid).sum(dim=(-2, -1)) / valid.sum(dim=(-2, -1)).clamp_min(1.0)
+    return pred, target, valid
+
+
+def search_illuminant(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch.Tensor, response: torch.Tensor,
+                      inverses: torch.Tensor, clipped: float = 0.98,
+                      max_side: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
+    """(index [B], cost [B, J]) of the illuminant whose spectra, estimated from ``uncoded``, best predict
+    ``coded`` (arguments as :func:`candidate_predictions`)."""
+    pred, target, valid = candidate_predictions(coded, uncoded, psf_coded, response, inverses, clipped, max_side)
+    v = valid[:, None]
+    cost = (((pred - target[:, None]) ** 2) * v).sum(dim=(-2, -1)) / v.sum(dim=(-2, -1)).clamp_min(1.0)
     return cost.argmin(dim=1), cost
+
+
+def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch.Tensor, response: torch.Tensor,
+                    inverses: torch.Tensor, clipped: float = 0.98, max_side: int = 256) -> torch.Tensor:
+    """[B, J] non-negative weights of the candidates' estimates whose mixture best predicts ``coded``
+    (least squares on the unclipped pixels): light that is no single candidate is met by a blend of them, and
+    light that is one of them gets (nearly) all the weight. The mixed inverse is ``Σ_j w_j N_j``."""
+    from scipy.optimize import nnls
+
+    pred, target, valid = candidate_predictions(coded, uncoded, psf_coded, response, inverses, clipped, max_side)
+    out = []
+    for p, t, v in zip(pred.double(), target.double(), valid.double()):
+        a = (p * v).reshape(p.shape[0], -1)  # [J, 3P]
+        g = a @ a.T
+        g += 1e-9 * torch.trace(g) / len(g) * torch.eye(len(g), dtype=g.dtype)
+        chol = torch.linalg.cholesky(g)
+        rhs = torch.linalg.solve_triangular(chol, (a @ (t * v).reshape(-1))[:, None], upper=False)[:, 0]
+        w, _ = nnls(chol.T.numpy(), rhs.numpy())  # min ‖Lᵀw − L⁻¹Ab‖ = min ‖Aᵀw − b‖ up to a constant
+        out.append(torch.from_numpy(w))
+    return torch.stack(out).float()

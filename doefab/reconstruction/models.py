@@ -20,7 +20,8 @@ def default_arch(task: str, variant: str = "proposed") -> dict:
     if get_spec(task).name == "depth":
         return {"width": 16, "cost_volume": variant == "proposed", "planes": 17}
     if task == "hyperspectral":
-        return {"features": 2, "width": 16, "illuminant_search": variant == "proposed"}
+        return {"features": 2, "width": 16, "illuminant_search": variant == "proposed",
+                "illuminant_mix": variant == "proposed"}
     return {"hdr": {"features": 4, "width": 16, "highlight_iters": 40, "bound_iters": 40, "bound_rounds": 8}}[task]
 
 
@@ -46,7 +47,8 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     bands = tuple(arch.get("wavelengths_m") or HS_WAVELENGTHS_M)  # the design's bands (31 at 400–700 nm)
     return SpectralNet(len(bands), variant, features=int(arch["features"]), width=int(arch["width"]),
                        baseline=spectral_baseline(bands),
-                       illuminant=_illuminant_search(bands) if arch.get("illuminant_search") else None)
+                       illuminant=_illuminant_search(bands) if arch.get("illuminant_search") else None,
+                       mix=bool(arch.get("illuminant_mix", False)))  # older records: the single best member
 
 
 def _illuminant_search(bands):

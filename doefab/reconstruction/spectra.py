@@ -5,16 +5,20 @@ library the proposed network searches.
 Ohta measurement to 1e-6, CIE 2024 repeats 14 of CIE 1995's samples and NIST CQS 7.4 eight of CQS 9.0's. Each
 split takes whole families: test the ColorChecker (every measurement of it), validation the NIST CQS samples,
 training the CIE test colour samples and the PMC chart — and every spectrum within ``DUPLICATE`` (max absolute
-difference on the 31 bands) of one in an earlier-ranked split (test, then validation) is dropped from the
-later one. Training also draws smooth synthetic reflectances, so the networks do not learn a few dozen spectra.
+difference on the 31 bands; 0.035, the median difference between colour-science's two measurements of one
+ColorChecker patch, N Ohta and BabelColor: closer than that is the same surface) of one in an earlier-ranked
+split (test, then validation) is dropped from the later one, and from its own split when it repeats one there.
+Training also draws smooth synthetic reflectances (never within ``DUPLICATE`` of a held-out one), so the
+networks do not learn a few dozen spectra.
 
 **Illuminants.** The proposed network searches a library (``doefab/weights/illuminants.csv``: colour-science's
-CIE illuminants). Training scenes are lit by library members only. Validation scenes by colour-science's
-Validation and test scenes alternate: even indices are lit by a library member (*in-library*: the search can
-find the light), odd ones by light the library does not hold (*out-of-library*) — in validation colour-science's
+CIE illuminants). Training scenes are lit by library members only. Validation and test scenes alternate: even
+indices are lit by a library member (*in-library*: the search can find the light), odd ones by light the library
+does not hold (*out-of-library*) — in validation colour-science's
 fluorescent and high-intensity-discharge light sources, in test its LED and phosphor light sources, LED spectra
 synthesised with ``colour.sd_multi_leds`` and blackbodies at temperatures away from the library's. Light sources equal to a
-library member within ``DUPLICATE`` (SA, SC, incandescent) count as library members.
+library member within 0.02 (max absolute difference, both at peak 1: SA, SC, incandescent) count as library
+members.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 __all__ = ["reflectances", "synthetic_reflectance", "scene_illuminant", "light_kind", "val_lights", "test_lights",
            "on_bands", "DUPLICATE", "REFLECTANCE_FAMILIES", "SPLIT_RANK"]
 
-DUPLICATE = 0.01
+DUPLICATE = 0.035  # the median difference of two measurements of one ColorChecker patch (N Ohta, BabelColor)
 SPLIT_RANK = ("test", "val", "train")  # a spectrum in an earlier split is removed from the later ones
 REFLECTANCE_FAMILIES = {
     "test": (("colourchecker", "ColorChecker N Ohta"), ("colourchecker", "ISO 17321-1"),
@@ -82,13 +86,27 @@ def reflectances(split: str) -> np.ndarray:
 
 
 def synthetic_reflectance(rng: np.random.Generator) -> np.ndarray:
-    """[31] a smooth random reflectance in [0.02, 0.95]: a level plus two to four logistic steps and bumps."""
+    """[31] a smooth random reflectance in [0.02, 0.95]: a level plus two to four logistic steps and bumps; a
+    draw within ``DUPLICATE`` of a held-out (validation or test) reflectance is drawn again."""
+    held = _held_out()
+    while True:
+        r = _smooth_draw(rng)
+        if np.abs(held - r).max(axis=1).min() > DUPLICATE:
+            return r
+
+
+def _smooth_draw(rng: np.random.Generator) -> np.ndarray:
     lam = np.linspace(400, 700, 31)
     r = np.full(31, rng.uniform(0.05, 0.5))
     for _ in range(int(rng.integers(2, 5))):
         c, w, a = rng.uniform(380, 720), rng.uniform(15, 80), rng.uniform(-0.5, 0.5)
         r += a / (1 + np.exp(-(lam - c) / w)) if rng.random() < 0.5 else a * np.exp(-0.5 * ((lam - c) / w) ** 2)
     return np.clip(r, 0.02, 0.95)
+
+
+@functools.lru_cache(maxsize=None)
+def _held_out() -> np.ndarray:
+    return np.concatenate([_measured()["val"], _measured()["test"]])
 
 
 @functools.lru_cache(maxsize=None)

@@ -2,9 +2,12 @@
 
 The network predicts a residual (zero-initialised head) over a linear spectral estimate from one capture:
 
-- ``proposed``: the smooth inverse of the uncoded capture under the illuminant whose predicted coded capture,
-  through the dispersing PSFs, matches the measured one best (``illuminant.search_illuminant``: RGB cannot tell
-  a spiky lamp from a smooth one of the same colour, the grating's dispersion can);
+- ``proposed``: the smooth inverse of the uncoded capture under the library's illuminants, mixed with the
+  non-negative weights whose predicted coded capture, through the dispersing PSFs, matches the measured one best
+  (``illuminant.mix_illuminants``: RGB cannot tell a spiky lamp from a smooth one of the same colour, the
+  grating's dispersion can; a light the library lacks is met by a blend, not forced onto one wrong member —
+  chosen on validation scenes, ``benchmarks/illuminant_search.py``). Networks recorded without ``illuminant_mix``
+  use the single best member (``illuminant.search_illuminant``);
 - ``uncoded_only``: one smooth inverse of the sensor response applied to the uncoded capture;
 - ``coded_only``: the same inverse applied to the coded capture *where each band's light landed*: the grating
   moves band λ's image to its first order, so band λ's estimate reads the capture shifted back by that offset
@@ -23,7 +26,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.illuminant import search_illuminant
+from doefab.reconstruction.illuminant import mix_illuminants, search_illuminant
 from doefab.reconstruction.networks import VARIANTS, CodedFeatures, UNet, check_input, check_psf
 
 __all__ = ["SpectralNet", "dispersion_offsets", "register_bands"]
@@ -51,13 +54,13 @@ def register_bands(capture: torch.Tensor, weights: torch.Tensor, offsets: torch.
 
 class SpectralNet(nn.Module):
     def __init__(self, n_bands: int, variant: str = "proposed", features: int = 2, width: int = 16, baseline=None,
-                 illuminant=None):
+                 illuminant=None, mix: bool = False):
         super().__init__()
         if variant not in VARIANTS:
             raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
         if baseline is None:
             raise DoefabError("the spectral network needs its linear baseline [C, 3] (a smooth inverse)")
-        self.variant, self.n_bands = variant, int(n_bands)
+        self.variant, self.n_bands, self.mix = variant, int(n_bands), bool(mix)
         self.register_buffer("baseline", torch.as_tensor(baseline, dtype=torch.float32), persistent=False)
         # (response [3, C], inverses [J, C, 3]) of the proposed network's illuminant search
         self.register_buffer("response", None if illuminant is None else torch.as_tensor(illuminant[0]).float(),
@@ -89,6 +92,10 @@ class SpectralNet(nn.Module):
 
     def _baseline(self, coded, uncoded, psf) -> torch.Tensor:
         if self.variant == "proposed" and self.inverses is not None:
+            if self.mix:
+                w = mix_illuminants(coded, uncoded, psf[0], self.response, self.inverses)
+                w = w / w.sum(dim=1, keepdim=True).clamp_min(1e-12)  # a blend of estimates, not a gain
+                return torch.einsum("bj,joc,bchw->bohw", w, self.inverses, uncoded)
             idx, _ = search_illuminant(coded, uncoded, psf[0], self.response, self.inverses)
             return torch.einsum("boc,bchw->bohw", self.inverses[idx], uncoded)
         if self.variant == "coded_only":

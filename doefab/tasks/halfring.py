@@ -74,7 +74,8 @@ class HalfRingTask(Task):
 
             planes = depths(self.planes_m)
             if len(planes) < 2 or not all(0 < z < float("inf") for z in planes):
-                raise DoefabError(f"planes_m must hold at least two finite depths in metres, got {self.planes_m!r}")
+                raise DoefabError(f"planes_m must hold at least two depths in metres, all finite (a depth design's "
+                                  f"planes are at finite distances, no \"inf\"), got {self.planes_m!r}")
             self.planes_m = tuple(sorted(planes))
             self.z_min, self.z_max = self.planes_m[0], self.planes_m[-1]
         if not self.z_min < self.z_max:

@@ -107,3 +107,21 @@ def test_a_radial_design_keeps_its_continuous_heights(tmp_path):
     back = doefab.Design.load(tmp_path / "d")
     h = continuous_height(back)
     assert h is not None and np.array_equal(finalize_levels(h, back.camera), back.levels)
+
+
+def test_the_half_ring_tasks_own_start_focuses_the_coded_half_at_the_farthest_depth():
+    """``HalfRingTask.init_height`` (the pixel parameterisation's start) through the PSF pipeline: the coded PSF
+    is sharpest at 5 m, and the opposite sign (its complement modulo 2π) focuses nearer."""
+    cam = doefab.Camera(aperture_diameter=6e-3, doe_pitch=20e-6, doe_pixels=300, sensor_pitch=4e-6,
+                        sensor_distance=50e-3, focus_distance=3.5)
+    task = get_task("half-ring")
+    h = task.init_height(cam, np.random.default_rng(0))
+    h2pi = cam.material.height_2pi(cam.design_wavelength)
+    wrong = np.mod(h2pi - h, h2pi)
+    depths = [3.0, 3.5, 5.0]
+    peak = {}
+    for name, height in (("start", h), ("wrong sign", wrong)):
+        psf = doefab.split_aperture_psf(height, cam, [550e-9], depths, 31, halves=("coded",)).coded
+        peak[name] = {z: float(psf[i, 0].max()) for i, z in enumerate(depths)}
+    assert peak["start"][5.0] > peak["start"][3.5] > peak["start"][3.0]
+    assert peak["wrong sign"][5.0] < 0.5 * peak["start"][5.0]

@@ -103,7 +103,6 @@ def test_the_site_builds_strictly_with_every_tutorial_run(site):
         assert "Total running time of the script" in page
     for name in ("doefab.Camera", "doefab.split_aperture_psf", "holder_cad.write_holder"):
         assert (html / "api" / "generated" / f"{name}.html").is_file()
-    assert seconds < 1500
 
 
 def test_the_readme_commands_are_the_docs_commands(site):

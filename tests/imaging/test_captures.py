@@ -175,3 +175,28 @@ def test_crosstalk_refuses_ratios_that_are_not_fractions():
     scene, pair = _crosstalk_case()
     with pytest.raises(DoefabError, match="crosstalk must be"):
         doefab.simulate_captures(scene, pair, crosstalk="yes")
+
+
+def test_a_calibrated_camera_estimates_its_ratios_from_noisy_white_walls():
+    """``DualPixelCrosstalk.calibrated``: the estimate's error shrinks as the calibration uses more rows (shot
+    noise averages as 1/√rows), is zero-mean across seeds, and the captures through it stay within that error
+    of the clean ones."""
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    a = np.linspace(0.03, 0.07, 40)
+    b = np.linspace(0.06, 0.04, 40)
+    err = {}
+    for rows in (16, 1024):
+        cams = [DualPixelCrosstalk.calibrated(a, b, rows=rows, seed=s) for s in range(6)]
+        est = np.array([c.estimate[0] for c in cams])
+        err[rows] = float(np.sqrt(((est - a) ** 2).mean()))
+        assert abs(float((est - a).mean())) < 3 * err[rows] / np.sqrt(est.size) + 1e-4  # unbiased
+    assert 4 < err[16] / err[1024] < 16  # √(1024/16) = 8
+    scene, pair = _crosstalk_case()
+    clean_c, _ = doefab.simulate_captures(scene, pair, noise="none")
+    cam = DualPixelCrosstalk.calibrated(a, b, rows=16, seed=0)
+    got, _ = doefab.simulate_captures(scene, pair, noise="none", crosstalk=cam)
+    off = np.abs(got - clean_c).max()
+    assert 1e-5 < off < 10 * np.abs(np.asarray(cam.estimate) - np.stack([a, b])).max()
+    with pytest.raises(DoefabError, match="rows"):
+        DualPixelCrosstalk.calibrated(0.05, 0.05, rows=0)

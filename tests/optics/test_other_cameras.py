@@ -105,3 +105,48 @@ def test_a_cylindrical_phase_draws_a_streak_of_half_length_d_s_over_2f(camera):
     assert a == pytest.approx(half_len_px, rel=0.08)
     x_rms = math.sqrt((psf * xx**2).sum() / psf.sum())
     assert x_rms < 0.25 * a  # a streak, not a blob
+
+
+def test_the_gratings_dispersion_follows_the_wavelength_and_the_tasks_targets_sit_on_it(camera):
+    """At two wavelengths either side of the blaze the first order lands at s·tan(asin(λ/Λ)) (its spacing the
+    dispersion across the band), and the grating task's spot targets (``grating_spot_px``) are where this
+    camera's PSF puts the light."""
+    from doefab.tasks.grating import grating_spot_px
+
+    cam, c = camera
+    period = c["period_px"] * cam.doe_pitch
+    x, _ = _grid(cam)
+    height = torch.from_numpy(_two_pi_height(cam) * np.mod(x / period, 1.0))
+    lams = [450e-9, 650e-9]
+    expect = [cam.sensor_distance * math.tan(math.asin(lam / period)) / cam.sensor_pitch for lam in lams]
+    k = 2 * int(max(expect) + 20) + 1
+    with torch.no_grad():
+        psf = PSFPlan(cam, lams, [cam.focus_distance], k, halves=("coded",))(height).coded[0].double().numpy()
+    found = []
+    for i, lam in enumerate(lams):
+        p = psf[i]
+        row, col = np.unravel_index(np.argmax(p), p.shape)
+        box = p[row - 3:row + 4, col - 3:col + 4]
+        found.append(abs((box.sum(axis=0) * np.arange(col - 3, col + 4)).sum() / box.sum() - k // 2))
+        assert found[-1] == pytest.approx(expect[i], abs=0.4)
+        assert grating_spot_px(cam, lam, period) == pytest.approx(expect[i], rel=1e-9)
+    assert found[1] - found[0] == pytest.approx(expect[1] - expect[0], abs=0.6)  # the dispersion across the band
+
+
+def test_defocus_blur_grows_with_the_dioptre_difference_and_the_ring_law_predicts_it(camera):
+    """Two planes: the measured blur radius scales as |1/z − 1/z_f| for this aperture and sensor distance, and
+    the defocus ring law's radius (``defocus_ring_px``, sharp at the focus distance) is the measured one."""
+    from doefab.pipeline.system import defocus_ring_px
+
+    cam, c = camera
+    zs = [c["near_m"], 2 * c["near_m"] * cam.focus_distance / (c["near_m"] + cam.focus_distance)]  # ½ the dioptres
+    dio = [abs(1 / z - 1 / cam.focus_distance) for z in zs]
+    radius = cam.aperture_diameter * cam.sensor_distance * dio[0] / 2 / cam.sensor_pitch
+    k = 2 * int(radius * 1.6) + 1
+    with torch.no_grad():
+        psf = PSFPlan(cam, [550e-9], zs, k, halves=("uncoded",))(None).uncoded[:, 0].double().numpy()
+    yy, xx = np.mgrid[:k, :k] - k // 2
+    measured = [math.sqrt(2 * (p * (xx**2 + yy**2)).sum() / p.sum()) for p in psf]
+    assert measured[0] / measured[1] == pytest.approx(dio[0] / dio[1], rel=0.1)
+    ring = defocus_ring_px(cam, {"planes_m": (zs[0], cam.focus_distance), "kernel_size": 10 * k})
+    assert ring == pytest.approx(measured[0], rel=0.08)

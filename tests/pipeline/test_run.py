@@ -28,6 +28,26 @@ def test_scene_validation_lists_every_problem(tmp_path):
         assert needle in msg, needle
 
 
+def test_the_systems_physics_problems_are_listed_together(tmp_path):
+    """A camera that cannot focus, a DOE grid too large for memory and a DOE pixel below the fab's minimum
+    feature: all three named with their keys in one error, not the first alone; an "inf" plane of a depth scene
+    names optics.depths_m."""
+    from doefab.pipeline.stages import resolve
+
+    p = tmp_path / "bad.toml"
+    p.write_text('task = "depth"\n[camera]\nfocal_length_mm = 50.0\nfocus_distance_m = 0.01\n'
+                 'aperture_diameter_mm = 60.0\ndoe_pitch_um = 2.0\n[fabrication]\nmin_feature_um = 5.0\n')
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(p))
+    msg = str(exc.value)
+    assert "3 problem(s)" in msg
+    for needle in ("camera.focal_length_mm 50.0 cannot focus", "DOE grid would be 30000²", "min_feature_um"):
+        assert needle in msg, needle
+    p.write_text('task = "depth"\n[optics]\ndepths_m = [0.5, 1.0, 2.0, "inf"]\n')
+    with pytest.raises(DoefabError, match=r"optics.depths_m .*drop \"inf\""):
+        resolve(load_scene(p))
+
+
 @pytest.mark.parametrize("scene", ["hdr", "hyperspectral", "depth"])
 def test_shipped_scenes_validate_and_resolve_to_the_committed_designs(scene):
     from doefab.pipeline.stages import resolve

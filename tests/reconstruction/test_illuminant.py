@@ -124,3 +124,37 @@ def test_large_captures_are_searched_on_their_centre():
     _, cost_big = search_illuminant(coded, uncoded, psf, t, inv, max_side=64)
     _, cost_crop = search_illuminant(coded[..., 16:80, 16:80], uncoded[..., 16:80, 16:80], psf, t, inv)
     assert torch.allclose(cost_big, cost_crop)
+
+
+@pytest.mark.parametrize("true_j", [1, 2])
+def test_the_mixture_puts_a_library_light_on_its_own_member(true_j):
+    from doefab.reconstruction.illuminant import mix_illuminants
+
+    lib = _library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    coded, uncoded, psf = _dispersed_scene(lib[true_j])
+    w = mix_illuminants(coded, uncoded, psf, torch.from_numpy(T), inv)[0].numpy()
+    assert w.argmax() == true_j and w[true_j] > 0.8 * w.sum() and np.all(w >= 0)
+
+
+def test_light_between_two_members_is_met_by_their_blend_not_by_one_of_them():
+    """A lamp that is half the blue and half the red spike (no library member): the fitted mixture weighs both
+    and its spectra are closer to the truth than those of the best single member."""
+    from doefab.reconstruction.illuminant import mix_illuminants
+
+    lib = _library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    light = 0.5 * (lib[1] + lib[2])
+    coded, uncoded, psf = _dispersed_scene(light, seed=3)
+    tt = torch.from_numpy(T)
+    w = mix_illuminants(coded, uncoded, psf, tt, inv)[0].double()
+    assert w[1] > 0.2 * w.sum() and w[2] > 0.2 * w.sum()
+    idx, _ = search_illuminant(coded, uncoded, psf, tt, inv)
+    # the truth: the spectra the scene was made of, recovered from the captures' construction
+    rng = np.random.default_rng(3)
+    regions = (np.add.outer(np.arange(64) // 9, np.arange(64) // 13) % 4)
+    a, b = rng.uniform(0.1, 0.5, 4), rng.uniform(-0.3, 0.3, 4)
+    truth = light[:, None, None] * np.clip(a[regions][None] + b[regions][None] * (LAM[:, None, None] / 30), 0.02, 1)
+    mixed = torch.einsum("j,joc,chw->ohw", w / w.sum(), inv, uncoded[0]).numpy()
+    single = torch.einsum("oc,chw->ohw", inv[int(idx[0])], uncoded[0]).numpy()
+    assert np.abs(mixed - truth).mean() < 0.7 * np.abs(single - truth).mean()

@@ -137,3 +137,24 @@ def test_the_coded_only_spectral_baseline_reads_each_band_where_its_light_landed
         base = net._baseline(coded, None, psf)
     assert float(base[0, 0, 30, 20]) == 1.0 and float(base[0, 1, 30, 20]) == 1.0  # registered back to (30, 20)
     assert float(base[0, 0].sum()) == 1.0
+
+
+def test_the_proposed_spectral_network_starts_at_the_mixture_of_illuminant_estimates():
+    """With ``illuminant_mix`` the untrained proposed network (zero residual head) returns exactly the blend of the
+    library's estimates the mixture fit weighs (normalised weights), computed here from ``mix_illuminants``."""
+    from doefab.reconstruction.illuminant import mix_illuminants
+    from doefab.reconstruction.models import build_model, default_arch
+
+    arch = default_arch("hyperspectral", "proposed")
+    assert arch["illuminant_mix"] is True
+    net = build_model("hyperspectral", "proposed", arch).eval()
+    torch.manual_seed(0)
+    coded, uncoded = 0.5 * torch.rand(1, 3, 64, 64), 0.5 * torch.rand(1, 3, 64, 64)
+    psf = _psf(1, 31)
+    with torch.no_grad():
+        out = net(coded, uncoded, psf)
+        w = mix_illuminants(coded, uncoded, psf[0], net.response, net.inverses)[0]
+        want = torch.einsum("j,joc,chw->ohw", w / w.sum(), net.inverses, uncoded[0]).clamp_min(0)
+    assert torch.allclose(out[0], want, atol=1e-5)
+    old = build_model("hyperspectral", "proposed", {**arch, "illuminant_mix": False}).eval()
+    assert not old.mix  # a record written before the mixture keeps the single best member

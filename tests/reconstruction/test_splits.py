@@ -73,3 +73,20 @@ def test_light_kinds_alternate_in_held_out_splits_and_training_uses_the_library(
     for split in ("val", "test"):
         kinds = [spectra.light_kind(split, i) for i in range(6)]
         assert kinds == ["in-library", "out-of-library"] * 3
+
+
+def test_the_duplicate_tolerance_covers_two_measurements_of_one_surface():
+    """Two measurements of the same ColorChecker patch (colour-science's N Ohta and BabelColor average) differ by
+    a median 0.03 on the 31 bands: the tolerance that decides "same content" must be at least that, or a second
+    measurement of a test patch in another collection (the PMC chart's Cyan, Gray-50, Black …) passes as new."""
+    from colour.characterisation import SDS_COLOURCHECKERS
+
+    ohta, babel = SDS_COLOURCHECKERS["ColorChecker N Ohta"], SDS_COLOURCHECKERS["BabelColor Average"]
+    same = [np.abs(np.clip(spectra.on_bands(ohta[n]), 0, 1) - np.clip(spectra.on_bands(babel[n]), 0, 1)).max()
+            for n in ohta]
+    assert spectra.DUPLICATE >= np.median(same) > 0.01
+    pmc = np.array([np.clip(spectra.on_bands(sd), 0, 1) for sd in SDS_COLOURCHECKERS["PMC"].values()])
+    held = np.concatenate([spectra.reflectances("val"), spectra.reflectances("test")])
+    train = spectra.reflectances("train")
+    near = [p for p in pmc if np.abs(held - p).max(axis=1).min() <= spectra.DUPLICATE]
+    assert near and all(np.abs(train - p).max(axis=1).min() > 0 for p in near)  # PMC's near-copies left training

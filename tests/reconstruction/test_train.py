@@ -23,10 +23,34 @@ def test_cosine_factor_is_half_a_cosine_to_the_floor():
 
 def test_training_anneals_over_its_wall_time_budget(tmp_path):
     meta = train("hdr", "proposed", minutes=0.2, out_dir=tmp_path / "run", weights_dir=tmp_path / "w", crop=64,
-                 val_images=1, val_every=1000, arch={"features": 1, "width": 4}, progress=False,
+                 val_images=1, val_every=1000, progress=False,
+                 arch={"features": 1, "width": 4, "highlight_iters": 1, "bound_iters": 0},  # fast steps
                  lr=1e-3)
     state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     last_lr = state["optimizer"]["param_groups"][0]["lr"]
     assert meta["training"]["schedule"] == "cosine" and meta["training"]["steps"] >= 2
     assert last_lr < 0.5e-3  # the last step ran in the second half of the budget, well below the start rate
     assert last_lr >= LR_FLOOR * 1e-3 * (1 - 1e-9)
+    # a training checkpoint holds the network, its optimiser and the loop's state, nothing of a DOE
+    assert "theta" not in state and {"model", "optimizer", "step", "history"} <= set(state)
+
+
+@pytest.mark.parametrize("flag, want", [([], "honest"), (["--clean"], "clean")])
+def test_evaluate_at_the_command_line_is_honest_unless_asked_for_the_clean_captures(tmp_path, monkeypatch, flag,
+                                                                                     want):
+    """``doefab evaluate`` renders through fabricated parts with crosstalk by default; ``--clean`` is the
+    nominal model's own captures (the conditions handed to ``evaluate`` and recorded in metrics.json)."""
+    import json
+
+    import doefab.reconstruction.evaluate as ev
+    import doefab.tolerance.conditions as cond
+    from doefab.cli import main
+
+    monkeypatch.setattr(cond, "_parts", lambda task, d, split, n, budget, progress: [])  # no PSFs computed here
+    rc = main(["evaluate", "--task", "hdr", "--images", "1", "--size", "64", "--variants", "uncoded_only",
+               "--split", "val", "--out", str(tmp_path / "ev"), *flag])
+    assert rc == 0
+    rec = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert rec["conditions"]["name"] == want and rec["split"] == "val"
+    assert rec["conditions"].get("crosstalk", False) is (want == "honest")
+    assert ev  # the module the command ran
