@@ -60,9 +60,13 @@ MEASUREMENTS = (
     Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
     Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
                 json_table="hdr_real_images"),
-    Measurement("tolerance_grating_report", None, (R + "tolerance_grating_report.md",),
-                command="doefab tolerance --design masks/grating --samples 24 --sweep --levels --out out/tol/grating",
-                note="the report.md that command writes, kept as benchmarks/results/tolerance_grating_report.md"),
+    Measurement("tolerance_studies", "benchmarks/tolerance_studies.py", (R + "tolerance_studies.md",)),
+    *(Measurement(f"tolerance_{d}", "benchmarks/tolerance_studies.py", (R + f"tolerance_{d}/report.md",),
+                  note=f"the report.md of `doefab tolerance --design masks/{d} …` and its figures, kept in "
+                       f"`benchmarks/results/tolerance_{d}/`") for d in ("streak", "grating", "halfring")),
+    Measurement("tolerance_grid", "benchmarks/tolerance_grid.py", (R + "tolerance_grid.md",)),
+    Measurement("run_time", "benchmarks/run_time.py", (R + "run_time.md",)),
+    Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
 )
 
@@ -115,7 +119,7 @@ def _fmt(v, digits: int = 4) -> str:
 
 
 def table_hdr_solve(data: dict) -> str:
-    head = (f"Mean over {data['images']} held-out {data['split']} scenes of {data['size_px']}² px; PSNR with peak "
+    head = (f"Mean over {data['images']} {data['split']} scenes of {data['size_px']}² px; PSNR with peak "
             f"{data['psnr_peak']}; highlight columns over the pixels the plain capture clips.\n\n")
     rows = ["| captures | CGLS iterations | bounded iterations × restarts | RMSE | PSNR (dB) | highlight RMSE | "
             "highlight PSNR (dB) | seconds per image |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]

@@ -45,7 +45,7 @@ def register(sub) -> None:
                    help="starting map: the task's own, or the thin lens that refocuses the coded half to the task's "
                         "farthest depth (default: task for pixel, lens for radial)")
     p.add_argument("--ring-law", default=None, choices=["seed", "defocus"],
-                   help="half-ring only: ring radius linear in depth (seed Eq. 25) or in inverse depth (defocus)")
+                   help="half-ring only: ring radius linear in depth (the paper's Eq. 25) or in inverse depth (defocus)")
     p.add_argument("--loss", default=None, choices=["band", "window", "l1"], help="task loss (default: the task's)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="overwrite an existing design in OUT")

@@ -1,4 +1,4 @@
-"""``doefab evaluate``: a task's networks on held-out scenes (the seed's Tables 1–3).
+"""``doefab evaluate``: a task's networks on held-out scenes (the paper's Tables 1–3).
 
 By default under the conditions a real camera makes: captures through fabricated parts drawn from the default
 tolerance budget, per-column dual-pixel crosstalk unmixed with a noisy calibration, depth between the network's

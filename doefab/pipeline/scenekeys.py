@@ -37,7 +37,7 @@ KEYS = (
     Key("", "stages", "list", default="all",
         help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
     Key("camera", "preset", "choice", choices=("default", "hdr", "hyperspectral", "depth"), default="the task's",
-        help="the seed's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
+        help="the paper's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
              "below replace its values"),
     Key("camera", "focal_length_mm", "float", "mm", 1.0, 2000.0, default="49.5 (prototype)",
         help="the lens's focal length; the sensor distance follows from it and the focus distance"),
@@ -76,7 +76,7 @@ KEYS = (
         help="free pixels, or a rotationally symmetric profile"),
     Key("design", "knots", "int", "", 0, 100000, default="0", help="radial knots (0: one per DOE pixel)"),
     Key("design", "ring_law", "choice", choices=("seed", "defocus"), default="the committed design's",
-        help="depth: ring radius linear in depth (seed) or in inverse depth (defocus)"),
+        help="depth: ring radius linear in depth (the paper's law, \"seed\") or in inverse depth (defocus)"),
     Key("design", "ring_max_px", "float", "px", 0.0, 2047.0, default="the camera's defocus blur",
         help="depth: ring radius at the nearest plane"),
     Key("design", "streak_arm_px", "int", "px", 1, 2047, default="40", help="HDR: length of the streak's arms"),

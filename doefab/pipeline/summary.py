@@ -65,7 +65,8 @@ def tolerance_items(out: Path) -> list[tuple]:
         rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}",
                      ", ".join(f"{k} {v:+.3g}" for k, v in d.items()) if d else "not judged through the network"])
     items.append(("table", rows))
-    for f, cap in (("tolerance/tornado.png", "each error alone at its budget value (PSF metric)"),
+    for f, cap in (("tolerance/delivered.png", "what the parts deliver through the network (histogram over parts)"),
+                   ("tolerance/tornado.png", "each error alone at its budget value (PSF metric)"),
                    ("tolerance/yield_vs_n.png", "yield against the number of parts (95 % Wilson interval)"),
                    ("tolerance/quantization.png", "quantization study")):
         if (out / f).is_file():

@@ -69,8 +69,13 @@ def _crosstalk_part(calibrated: bool):
     return part
 
 
-def _crosstalk_value(b) -> float:
-    return max(sensor_errors(b)["crosstalk"])
+def _crosstalk_value(calibrated: bool):
+    """The budget's crosstalk for the kind of its camera (calibrated or not); 0 for the other kind: a budget
+    judges the pipeline it describes, not the one it does not."""
+    def value(b) -> float:
+        s = sensor_errors(b)
+        return max(s["crosstalk"]) if s["calibrated"] == calibrated else 0.0
+    return value
 
 
 KINDS = (
@@ -100,9 +105,9 @@ KINDS = (
          lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
     Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
          lambda b: nominal_gap(b) + _g(b, "mounting", "axial_gap_sigma_mm") * 1e-3, False),
-    Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value, False,
+    Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value(False), False,
          _crosstalk_part(False)),
-    Kind("crosstalk, calibrated", "%", 0.01, (2, 5, 10), _crosstalk(True), _crosstalk_value, False,
+    Kind("crosstalk, calibrated", "%", 0.01, (2, 5, 10), _crosstalk(True), _crosstalk_value(True), False,
          _crosstalk_part(True)),
 )
 

@@ -244,14 +244,17 @@ def interval_text(ci, fmt: str = ".3f") -> str:
 
 
 def mean_ci(values) -> dict:
-    """Mean and 95 % interval of the mean (normal approximation; nan below two values)."""
+    """Mean and 95 % interval of the mean (normal approximation; nan below two values), and the 5th, 50th and
+    95th percentiles of the values themselves (what one part delivers, not the mean's uncertainty)."""
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     if v.size == 0:
         return {"mean": float("nan"), "ci95": [float("nan")] * 2, "ci95_width": float("nan")}
     half = 1.96 * v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
     m = float(v.mean())
-    return {"mean": m, "ci95": [m - half, m + half], "ci95_width": float(2 * half)}
+    p05, p50, p95 = (float(x) for x in np.percentile(v, [5, 50, 95]))
+    return {"mean": m, "ci95": [m - half, m + half], "ci95_width": float(2 * half),
+            "parts_p05_p50_p95": [p05, p50, p95]}  # the spread of what single parts deliver
 
 
 def summarize(samples: list[dict], spec: dict, task: str, nominal: dict) -> dict:

@@ -18,7 +18,8 @@ import math
 
 from doefab.errors import DoefabError
 
-__all__ = ["DELIVERED", "TASK_OF_DESIGN", "spec_keys", "check_spec", "meets", "nominal_failures", "limits_text"]
+__all__ = ["DELIVERED", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "check_spec", "meets",
+           "nominal_failures", "limits_text"]
 
 # delivered metrics per task: name → (unit, better): "+" higher is better, "-" lower is better
 DELIVERED = {
@@ -27,6 +28,16 @@ DELIVERED = {
     "depth": {"mae": ("m", "-"), "rmse": ("m", "-"), "delta125": ("", "+"), "log10": ("", "-")},
 }
 TASK_OF_DESIGN = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
+#: the delivered metric a task's summary, histogram and "what limits it" are ranked by
+PRIMARY = {"hdr": "psnr_highlight", "hyperspectral": "psnr", "depth": "mae"}
+
+
+def delivered_loss(task: str, delta: dict) -> float:
+    """How much worse a change ``delta`` ({metric: new − old}) leaves the task's primary delivered metric
+    (positive: worse; dB for PSNR, metres for depth MAE)."""
+    m = PRIMARY[task]
+    d = float(delta.get(m, float("nan")))
+    return -d if DELIVERED[task][m][1] == "+" else d
 
 
 def _key_parts(task: str) -> dict:

@@ -3,7 +3,7 @@ checked against held-out simulated parts.
 
 Each random error of the budget is a scalar parameter x_j of a part (each mask's etch depth and, composed
 along the alignment chain, its shift and rotation on the die; the edge bias; the mount's decenter across and
-along the split and its rotation; the gap when the lens is the stop). Errors the budget fixes (roughness,
+along the split and its rotation; the gap's random part where the lens, not the DOE, is the stop). Errors the budget fixes (roughness,
 corner rounding, the sensor's crosstalk) are in the base part B. The surrogate is additive and quadratic:
 
     m̂(x) = m(B) + Σ_j a_j x_j + b_j x_j²,
@@ -38,9 +38,11 @@ def _chain_depth(chain: dict, m: int) -> int:
     return max(depth, 1)
 
 
-def parameters(budget: dict, chain: dict, n_masks: int) -> list[tuple[str, float, object]]:
+def parameters(budget: dict, chain: dict, n_masks: int, gap: bool = False) -> list[tuple[str, float, object]]:
     """[(name, step h, setter(part, x) → part)] of the budget's random errors (zero-σ ones left out); overlay
-    steps are 2 σ of the composed shift of each mask (√(plates on its alignment path) · σ)."""
+    steps are 2 σ of the composed shift of each mask (√(plates on its alignment path) · σ). ``gap``: the axial
+    gap's random part is a parameter too (only where the lens, not the DOE, is the aperture stop: otherwise the
+    gap moves nothing)."""
     g = lambda s, k: budget_value(budget, s, k)  # noqa: E731
     out = []
     depth = math.hypot(g("etch", "systematic_sigma_percent"), g("etch", "random_sigma_percent")) / 100
@@ -63,6 +65,10 @@ def parameters(budget: dict, chain: dict, n_masks: int) -> list[tuple[str, float
         out.append(("decenter along split", dmax, _pair("mount_shift", 1)))
     if g("mounting", "rotation_sigma_deg") > 0:
         out.append(("mount rotation", 2 * math.radians(g("mounting", "rotation_sigma_deg")), _field("mount_rotation")))
+    if gap and g("mounting", "axial_gap_sigma_mm") > 0:
+        g0 = nominal_gap(budget)
+        out.append(("axial gap", 2e-3 * g("mounting", "axial_gap_sigma_mm"),
+                    lambda part, x: replace(part, axial_gap=max(0.0, g0 + x))))
     return out
 
 
@@ -102,7 +108,7 @@ def base_part(budget: dict) -> PartErrors:
                    **sensor_errors(budget))
 
 
-def features(part: PartErrors, budget: dict, chain: dict, n_masks: int) -> np.ndarray:
+def features(part: PartErrors, budget: dict, chain: dict, n_masks: int, gap: bool = False) -> np.ndarray:
     """The surrogate's parameters x_j of a sampled part (overlay and mask rotation composed along the chain, as
     the judge applies them)."""
     from doefab.tolerance.judge import compose_overlay
@@ -110,7 +116,7 @@ def features(part: PartErrors, budget: dict, chain: dict, n_masks: int) -> np.nd
     shifts, rots = compose_overlay(part, chain, n_masks)
     composed = replace(part.for_masks(n_masks), overlay=tuple(shifts), rotation=tuple(rots))
     vals = []
-    for name, _, _ in parameters(budget, chain, n_masks):
+    for name, _, _ in parameters(budget, chain, n_masks, gap):
         if name.startswith("etch depth"):
             vals.append(composed.depth_scale[int(name[-1]) - 1] - 1.0)
         elif name.startswith("overlay"):
@@ -121,16 +127,19 @@ def features(part: PartErrors, budget: dict, chain: dict, n_masks: int) -> np.nd
             vals.append(composed.edge_bias)
         elif name.startswith("decenter"):
             vals.append(composed.mount_shift[0 if "across" in name else 1])
+        elif name == "axial gap":
+            vals.append(composed.axial_gap - nominal_gap(budget))
         else:
             vals.append(composed.mount_rotation)
     return np.array(vals)
 
 
-def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *, n_masks: int) -> dict:
-    """{"base", "names", "h", "a", "b", "parts", "seconds"}: the surrogate from 2J + 1 simulated parts of a design
-    of ``n_masks`` masks; ``evaluate(part) → metric`` judges a part (parameters are set on the base part, each
-    alone)."""
-    params = parameters(budget, chain, n_masks)
+def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *, n_masks: int,
+                  gap: bool = False) -> dict:
+    """{"base", "names", "h", "a", "b", "parts", "seconds", "gap"}: the surrogate from 2J + 1 simulated parts of
+    a design of ``n_masks`` masks; ``evaluate(part) → metric`` judges a part (parameters are set on the base
+    part, each alone); ``gap``: as in :func:`parameters`."""
+    params = parameters(budget, chain, n_masks, gap)
     base = base_part(budget).for_masks(n_masks)
     t = time.perf_counter()
     bar = None
@@ -152,7 +161,7 @@ def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *,
     if bar is not None:
         bar.close()
     return {"base": m0, "names": [p[0] for p in params], "h": [p[1] for p in params], "a": a, "b": b,
-            "parts": 2 * len(params) + 1, "seconds": round(time.perf_counter() - t, 1)}
+            "parts": 2 * len(params) + 1, "seconds": round(time.perf_counter() - t, 1), "gap": bool(gap)}
 
 
 def predict(model: dict, x: np.ndarray) -> np.ndarray:
@@ -165,12 +174,13 @@ def surrogate_yield(model: dict, budget: dict, chain: dict, held_out: list[tuple
     """Yield on ``draws`` surrogate parts (of a design of ``n_masks`` masks) with held-out residuals resampled;
     ``meets(metric) → bool``. The interval: the Wilson interval of the draws, widened by shifting every
     prediction by ±1.96 standard errors of the held-out residuals' mean."""
-    xs = np.array([features(p, budget, chain, n_masks) for p, _ in held_out])
+    gap = bool(model.get("gap", False))
+    xs = np.array([features(p, budget, chain, n_masks, gap) for p, _ in held_out])
     resid = np.array([m for _, m in held_out]) - predict(model, xs)
     rng = np.random.default_rng(seed)
     children = np.random.SeedSequence(seed).spawn(draws)
-    x = np.array([features(sample_errors(budget, np.random.default_rng(c), n_masks=n_masks), budget, chain, n_masks)
-                  for c in children])
+    x = np.array([features(sample_errors(budget, np.random.default_rng(c), n_masks=n_masks), budget, chain, n_masks,
+                           gap) for c in children])
     pred = predict(model, x) + rng.choice(resid, size=draws)
     se = resid.std(ddof=1) / math.sqrt(len(resid)) if len(resid) > 1 else float("nan")
     k = int(sum(meets(v) for v in pred))

@@ -213,8 +213,10 @@ PAGE_REPORT = """(async () => {
 def test_every_page_in_chromium(site):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
-        pytest.skip("Debian's chromium is not installed (scripts/setup.sh installs it as root): the site's pages "
-                    "were built but not opened in a browser")
+        if os.environ.get("DOEFAB_SKIP_BROWSER") == "1":
+            pytest.skip("DOEFAB_SKIP_BROWSER=1: the browser checks were skipped on request")
+        pytest.fail("Debian's chromium is not installed: scripts/setup.sh installs it (as root); the browser checks "
+                    "are part of the suite (set DOEFAB_SKIP_BROWSER=1 to skip them on a machine without it)")
     html, _ = site
     pages = sorted(p for p in html.rglob("*.html") if not p.relative_to(html).parts[0].startswith("_"))
     assert len(pages) > 40
@@ -264,3 +266,34 @@ def test_every_page_in_chromium(site):
     for name in [f"tutorials/{s.stem}.html" for s in (REPO / "docs" / "examples").glob("plot_*.py")]:
         assert images[name] >= 1, name
     assert images["fab/mask-set.html"] >= 2 and images["results/psf.html"] >= 1
+
+
+def _doefab_commands(text: str) -> list[str]:
+    """Every ``doefab …`` command written in backticks or at the start of a code-block line."""
+    found = re.findall(r"`(doefab [^`]+)`", text)
+    blocks = "\n".join(re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S))
+    found += [m.split("  #")[0].strip() for m in re.findall(r"(?m)^(doefab [^\n]+)$", blocks)]
+    # a bare "doefab run" in prose names a command, it is not one to run
+    # placeholders (``--task T``, ``FILE.toml``) stand for a value, they are not one
+    placeholder = re.compile(r"(^|[\s=/])[A-Z][A-Z_]*(\.[a-z]+)?($|\s)")
+    return [c for c in found if "…" not in c and "..." not in c and len(c.split()) > 2 and not placeholder.search(c)]
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/guide/commands.md"])
+def test_every_command_the_readme_and_the_guide_write_parses(page):
+    """The README's command table and the guide's examples are commands the CLI accepts as written (flags that
+    exist, values of the right kind): a renamed flag breaks this test, not a user's first try."""
+    import shlex
+
+    from doefab.cli import build_parser
+
+    cmds = _doefab_commands((REPO / page).read_text())
+    assert len(cmds) >= 5, cmds
+    parser = build_parser()
+    for c in cmds:
+        argv = [a for a in shlex.split(c)[1:]]
+        try:
+            parser.parse_args(argv)
+        except SystemExit as exc:  # --help exits 0
+            if exc.code != 0:
+                raise AssertionError(f"{page}: `{c}` does not parse (exit {exc.code})") from None

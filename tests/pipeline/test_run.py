@@ -2,6 +2,7 @@
 browser (Debian's chromium, headless)."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -87,6 +88,16 @@ def test_quick_run_end_to_end(quick_run):
         assert f"<h2>{sec}</h2>" in html
     for img in run["report"]["images"]:
         assert (out / img).stat().st_size > 1000
+    # issue 22, item 4: the report opens with what the part delivers through the network, its yield against the
+    # spec, what limits it, and the files for the fab and the printer
+    first = html.index("<h2>")
+    assert html[first:].startswith("<h2>Summary</h2>")
+    summary = html[first:html.index("<h2>", first + 5)]
+    tol = json.loads((out / "tolerance" / "tolerance.json").read_text())
+    assert tol["level"] == "network"
+    for needle in ("Delivered, network given the nominal PSF", "psnr_highlight", "yield", "Wilson", "Limited by",
+                   "Would buy the most", "to the fab:", "to the printer:"):
+        assert needle in summary, needle
 
 
 def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
@@ -100,7 +111,10 @@ def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
 def test_report_in_headless_chromium(quick_run):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
-        pytest.skip("Debian's chromium is not installed (scripts/setup.sh installs it as root)")
+        if os.environ.get("DOEFAB_SKIP_BROWSER") == "1":
+            pytest.skip("DOEFAB_SKIP_BROWSER=1: the browser checks were skipped on request")
+        pytest.fail("Debian's chromium is not installed: scripts/setup.sh installs it (as root); the browser checks "
+                    "are part of the suite (set DOEFAB_SKIP_BROWSER=1 to skip them on a machine without it)")
     out = quick_run
     profile = out / "chromium-profile"
     flags = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",

@@ -95,8 +95,8 @@ def test_decenter_along_the_split_moves_nothing_in_focus(judges):
 
 def test_mount_sweeps_are_monotone(judges):
     j = judges[1]
-    across = [j.evaluate(PartErrors(mount_shift=(v * PITCH, 0.0)))["metric"] for v in (0, 4, 8, 16, 24)]
-    turned = [j.evaluate(PartErrors(mount_rotation=math.radians(v)))["metric"] for v in (0, 0.5, 1, 2, 4)]
+    across = [j.evaluate(PartErrors(mount_shift=(v * PITCH, 0.0)))["metric"] for v in (0, 4, 6.5, 8, 12.5, 16, 24)]
+    turned = [j.evaluate(PartErrors(mount_rotation=math.radians(v)))["metric"] for v in (0, 0.5, 0.75, 1, 2, 4)]
     assert all(a > b for a, b in zip(across, across[1:])), across
     assert all(a > b for a, b in zip(turned, turned[1:])), turned
 
@@ -105,9 +105,11 @@ def test_mount_sweeps_are_monotone(judges):
                                  PartErrors(mount_rotation=math.radians(0.6)),
                                  PartErrors(mount_rotation=math.radians(2.0), mount_shift=(-3.3 * PITCH, 2e-6))])
 def test_default_grid_agrees_with_a_twice_finer_one(judges, err):
+    """Within 1e-3 of the metric (the issue asks 0.005 of the committed design; a relief resampled bilinearly
+    by a sub-pixel decenter misses by 4e-3 on this one)."""
     one, two = (judges[s].evaluate(err)["metric"] for s in (1, 2))
     nominal_shift = judges[1].score(judges[1].nominal)["metric"] - judges[2].score(judges[2].nominal)["metric"]
-    assert abs(one - two) <= 0.005 and abs(nominal_shift) < 1e-4
+    assert abs(one - two) <= 1e-3 and abs(nominal_shift) < 1e-4
 
 
 def test_a_rotation_turns_the_first_order_spot(judges):

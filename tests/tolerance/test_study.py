@@ -305,3 +305,87 @@ def test_a_resumed_study_reuses_its_finished_steps_and_a_changed_one_does_not(tm
     assert calls == [1]
     assert cached_step(tmp_path, "tornado", {**key, "budget_sha256": "c"}, lambda: calls.append(3) or []) == []
     assert calls == [1, 3]
+
+
+def test_what_limits_a_part_is_ranked_by_what_it_delivers():
+    """Issue 22, item 4: where the tornado judged errors through the network, "limited by" and "would buy the
+    most" follow the delivered primary metric (here highlight PSNR), not the PSF metric's order."""
+    from doefab.tolerance.report import REMEDY, summary_lines
+
+    def row(name, delta, dpsnr):
+        return {"error": name, "value": 1.0, "unit": "µm", "grid": 1, "metric": 0.8 + delta, "delta": delta,
+                "network_delta": {"nominal_psf": {"psnr_highlight": dpsnr, "psnr": 0.0},
+                                  "measured_psf": {"psnr_highlight": dpsnr / 2, "psnr": 0.0}}}
+
+    res = {"task": "hdr", "stop": "the DOE", "warnings": [], "budget": {}, "nominal": {"psf": {"psf_metric": 0.8}},
+           "spec": {"psf": None, "network": None},
+           "tornado": [row("mask overlay", -0.06, -0.2), row("decenter across split", -0.05, -1.5),
+                       row("edge bias", -0.01, 0.1)]}
+    text = "\n".join(summary_lines(res))
+    assert text.index("decenter across split") < text.index("mask overlay")
+    assert "edge bias" not in text.split("Would buy")[0]  # it delivers better: not a limit
+    assert REMEDY["decenter across split"] in text and "1.5 dB" in text
+
+
+def test_a_budget_judges_the_crosstalk_pipeline_it_describes():
+    from doefab.tolerance.kinds import kind
+
+    cal = load_budget()
+    assert cal["sensor"].get("calibrated", True)
+    assert kind("crosstalk, calibrated").from_budget(cal) > 0 and kind("crosstalk, uncalibrated").from_budget(cal) == 0
+    raw = {**cal, "sensor": {**cal["sensor"], "calibrated": False}}
+    assert kind("crosstalk, uncalibrated").from_budget(raw) > 0 and kind("crosstalk, calibrated").from_budget(raw) == 0
+
+
+def test_the_surrogate_has_a_gap_parameter_only_where_the_lens_is_the_stop():
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import nominal_gap
+    from doefab.tolerance.surrogate import base_part, features, parameters
+
+    budget = load_budget()
+    chain = {1: 0, 2: 0, 3: 0, 4: 0}
+    names = [p[0] for p in parameters(budget, chain, 4)]
+    assert "axial gap" not in names
+    with_gap = parameters(budget, chain, 4, gap=True)
+    assert with_gap[-1][0] == "axial gap" and with_gap[-1][1] == pytest.approx(
+        2e-3 * budget["mounting"]["axial_gap_sigma_mm"])
+    part = replace(base_part(budget), axial_gap=nominal_gap(budget) + 0.3e-3)
+    assert features(part, budget, chain, 4, gap=True)[-1] == pytest.approx(0.3e-3)
+    assert with_gap[-1][2](base_part(budget), -0.2e-3).axial_gap == pytest.approx(nominal_gap(budget) - 0.2e-3)
+
+
+def test_quantization_rows_of_a_design_with_its_continuous_heights_come_from_them(design_dir, tmp_path):
+    """Issue 22, item 6: a design written by ``doefab design`` keeps ``height.npy``: its 8/4/2-level rows are
+    quantized from those continuous heights (not from the 16-level map), and equal an independent quantization
+    of them; the continuous row is their own PSF metric."""
+    from doefab.fabrication.levels import quantize_levels
+
+    d = Design.load(design_dir)
+    rng = np.random.default_rng(5)
+    h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
+    height = np.mod(d.height + rng.normal(0, 0.02 * h2pi, d.height.shape), h2pi)  # off the 16 levels
+    cont = Design(**{**d.__dict__, "height": height})
+    cont.save(tmp_path / "cont")
+    rows = {r["levels"]: r for r in study.quantization_study(tmp_path / "cont", levels=(None, 16, 4))}
+    assert rows["continuous"]["source"] == "the continuous design" and np.isfinite(rows["continuous"]["metric"])
+    assert rows[4]["source"] == "the continuous design" and rows[16]["source"] == "the continuous design"
+    judge = study.judge_for(str(tmp_path / "cont"), 1)
+    want = judge.score(judge.psf_from_height(quantize_levels(height, d.camera, 4) * h2pi / 4))["metric"]
+    assert rows[4]["metric"] == pytest.approx(want, abs=1e-9)
+    from_map = judge.score(judge.psf_from_height(quantize_levels(d.height, d.camera, 4) * h2pi / 4))["metric"]
+    assert abs(from_map - want) > 1e-4  # the test can tell the two sources apart
+
+
+def test_resume_refuses_samples_of_another_design_or_grid(design_dir, tmp_path):
+    budget = load_budget()
+    montecarlo.monte_carlo(design_dir, budget, 2, tmp_path / "r", seed=1, progress=False)
+    with pytest.raises(doefab.DoefabError, match="written for another run.*grid"):
+        montecarlo.monte_carlo(design_dir, budget, 3, tmp_path / "r", seed=1, supersample=2, progress=False)
+    d = Design.load(design_dir)
+    lv = d.levels.copy()
+    lv[0, 0] = (int(lv[0, 0]) + 1) % 16
+    other = Design(**{**d.__dict__, "levels": lv, "height": doefab.levels_to_height(lv, d.camera)})
+    other.save(tmp_path / "other")
+    with pytest.raises(doefab.DoefabError, match="written for another run.*design_levels_sha256"):
+        montecarlo.monte_carlo(tmp_path / "other", budget, 3, tmp_path / "r", seed=1, progress=False)

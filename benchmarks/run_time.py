@@ -1,0 +1,56 @@
+"""Wall time of the main job: the three shipped scenes end to end, as on a fresh clone (an empty doefab cache, so
+every fabricated part's PSFs are computed; a fresh output folder), one scene after another:
+
+    doefab run scenes/hdr.toml scenes/hyperspectral.toml scenes/depth.toml
+
+Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [--quick]
+
+Writes benchmarks/results/run_time.md (or run_time_quick.md): seconds per scene and per stage, and the total,
+from each run's run.json.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmarks" / "results"
+SCENES = ("hdr", "hyperspectral", "depth")
+STAGES = ("design", "masks", "holder", "reconstruction", "tolerance")
+
+
+def main() -> None:
+    quick = "--quick" in sys.argv[1:]
+    runs = ROOT / "out" / ("bench_run_quick" if quick else "bench_run")
+    if runs.exists():
+        shutil.rmtree(runs)
+    with tempfile.TemporaryDirectory() as cache:  # one cache for the three scenes, as one command has
+        env = {**os.environ, "DOEFAB_CACHE": cache}
+        t0 = time.perf_counter()
+        for s in SCENES:  # the same stages as one `doefab run` of the three, each into a fresh folder
+            subprocess.run([sys.executable, "-m", "doefab", "run", f"scenes/{s}.toml", "--out", str(runs / s),
+                            *(["--quick"] if quick else [])], check=True, cwd=ROOT, env=env,
+                           stdout=subprocess.DEVNULL)
+        total = time.perf_counter() - t0
+    rows = ["| scene | " + " | ".join(STAGES) + " | scene total (s) |", "| --- " * (len(STAGES) + 2) + "|"]
+    for s in SCENES:
+        rec = json.loads((runs / s / "run.json").read_text())
+        cells = [f"{rec['stages'][st]['seconds']:.0f}" if st in rec["stages"] else "—" for st in STAGES]
+        rows.append(f"| {s} | " + " | ".join(cells) + f" | {rec['seconds']:.0f} |")
+    text = (f"The main job{' with --quick' if quick else ''} from an empty cache (`.venv/bin/python "
+            f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
+            f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
+            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min).\n")
+    (OUT / ("run_time_quick.md" if quick else "run_time.md")).write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
