@@ -102,7 +102,7 @@ def distribution_plot(path: Path, values: dict, unit: str, name: str, limit: flo
     fig, ax = plt.subplots(figsize=(6, 3.6), layout="constrained")
     for label, v in values.items():
         ax.hist(np.asarray(v, float), bins=min(20, max(5, len(v) // 2)), alpha=0.5,
-                label=f"network given the {label.replace('_', ' ')}")
+                label=f"network given the {label.replace('_psf', ' PSF').replace('_', ' ')}")
     ax.axvline(nominal, color="grey", ls=":", label=f"nominal part {nominal:.3g}")
     if limit is not None:
         ax.axvline(limit, color="red", ls="--", label=f"spec {limit:.3g}")

@@ -255,7 +255,7 @@ def summary_lines(res: dict) -> list[str]:
                            + (f"; parts 5–95 %: {d['parts_p05_p50_p95'][0]:.4g}–{d['parts_p05_p50_p95'][2]:.4g}"
                               if "parts_p05_p50_p95" in d and len(res.get("samples", [])) >= 5 else "") + ")"
                            for k, d in v["metrics"].items())
-            lines.append(f"- **Delivered, network given the {label.replace('_', ' ')}**: {ms}; yield "
+            lines.append(f"- **Delivered, network given the {label.replace('_psf', ' PSF').replace('_', ' ')}**: {ms}; yield "
                          f"({res.get('spec_by_label', {}).get(label) or res['spec']['network'] or 'no limit'}) "
                          f"{v['yield']['value']:.2f} ({interval_text(v['yield']['ci95'], '.2f')}).")
     lines += _limits_lines(res)

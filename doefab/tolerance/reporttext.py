@@ -63,7 +63,7 @@ def _monte_carlo(res: dict) -> list[str]:
              f"{s['metric']['mean']:.4f} (95 % interval of the mean {interval_text(s['metric']['ci95'], '.4f')}); "
              f"yield at PSF level {s['yield']['value']:.3f} (Wilson {interval_text(s['yield']['ci95'])}).", ""]
     for label, v in s.get("network", {}).items():
-        lines.append(f"- network given the {label.replace('_', ' ')}: " + ", ".join(
+        lines.append(f"- network given the {label.replace('_psf', ' PSF').replace('_', ' ')}: " + ", ".join(
             f"{k} {d['mean']:.4g} ({interval_text(d['ci95'], '.4g')})" for k, d in v["metrics"].items())
             + f"; yield {v['yield']['value']:.3f} ({interval_text(v['yield']['ci95'])})")
     lines += ["", "| parts | yield | 95 % Wilson interval | width | wall time (s) |", "| --- | --- | --- | --- | --- |"]
