@@ -79,6 +79,8 @@ KEYS = (
         help="depth: ring radius linear in depth (the paper's law, \"seed\") or in inverse depth (defocus)"),
     Key("design", "ring_max_px", "float", "px", 0.0, 2047.0, default="the camera's defocus blur",
         help="depth: ring radius at the nearest plane"),
+    Key("design", "ring_width_px", "float", "px", 0.01, 100.0, default="1",
+        help="depth: half-width of the ring the target and metric count (sensor pixels either side of the arc)"),
     Key("design", "streak_arm_px", "int", "px", 1, 2047, default="40", help="HDR: length of the streak's arms"),
     Key("design", "streak_band_px", "int", "px", 0, 64, default="1",
         help="HDR: half-width of the band around the arms the metric counts"),

@@ -108,6 +108,7 @@ def scene_task(scene: Scene, committed, cam):
         params["planes_m"] = tuple(planes)
     for key, name, scale in (("streak_arm_px", "arm_px", 1), ("streak_band_px", "band_px", 1),
                              ("grating_box_px", "box_px", 1), ("ring_max_px", "ring_max_px", 1),
+                             ("ring_width_px", "delta_px", 1),
                              ("ring_law", "ring_law", None)):
         if key in d:
             params[name] = d[key] if scale is None else d[key] * scale
@@ -190,6 +191,8 @@ def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -
          "levels": int(fab.get("levels", committed.n_levels))}
     if dname == "half-ring":
         s["ring_law"] = task.ring_law
+    if dname == "grating":  # the period in metres (task_params hold it only as the preset's pixel count)
+        s["grating_period_m"] = round(task.period(cam), 12)
     return s
 
 

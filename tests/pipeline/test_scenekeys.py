@@ -47,3 +47,26 @@ def test_scene_new_writes_once_and_refuses_to_replace(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["scene", "new", "--task", "hdr", "--out", str(tmp_path / "mine.txt")]) == 2
     assert main(["scene", "new", "--task", "hdr", "--out", str(tmp_path / "no" / "x.toml")]) == 2
+
+
+@pytest.mark.parametrize("task, key, value, param, want", [
+    ("hdr", "streak_arm_px", 30, "arm_px", 30),
+    ("hdr", "streak_band_px", 2, "band_px", 2),
+    ("hyperspectral", "grating_period_um", 108.0, "period_m", 108e-6),
+    ("hyperspectral", "grating_box_px", 2, "box_px", 2),
+    ("depth", "ring_max_px", 20.0, "ring_max_px", 20.0),
+    ("depth", "ring_width_px", 2.5, "delta_px", 2.5),
+    ("depth", "ring_law", '"seed"', "ring_law", "seed"),
+])
+def test_each_geometry_key_reaches_the_task(tmp_path, task, key, value, param, want):
+    """A [design] geometry key (its unit in its name) sets the task parameter it names, in SI units, and makes the
+    scene's design differ from the committed one."""
+    from doefab.pipeline.scene import load_scene
+    from doefab.pipeline.system import resolve
+
+    p = tmp_path / "s.toml"
+    p.write_text(f'task = "{task}"\n[design]\n{key} = {value}\n')
+    res = resolve(load_scene(p))
+    got = getattr(res["task"], param)
+    assert got == (pytest.approx(want) if isinstance(want, float) else want)
+    assert not res["reuse"]
