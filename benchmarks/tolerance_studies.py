@@ -38,7 +38,8 @@ def study(design: str) -> dict:
 
 def line(design: str, res: dict) -> str:
     s = res["summary"]
-    top = "; ".join(f"{r['error']} {r['value']:.3g} {r['unit']} {r['delta']:+.3f}" for r in res["tornado"][:3])
+    top = "; ".join(f"{r['error']} {r['value']:.3g} {r['unit']} {r['delta']:+.3f}"
+                    for r in [r for r in res["tornado"] if r["delta"] < 0][:3])
     return (f"| {design} | {res['nominal']['psf']['psf_metric']:.3f} | {s['metric']['mean']:.3f} "
             f"({s['metric']['ci95'][0]:.3f}–{s['metric']['ci95'][1]:.3f}) | {res['spec']['psf']} | "
             f"{s['yield']['value']:.2f} ({s['yield']['ci95'][0]:.2f}–{s['yield']['ci95'][1]:.2f}) | {top} |")

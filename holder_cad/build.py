@@ -70,9 +70,14 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise DoefabError(f"{out} is a file: give a folder for the holder's files")
-    if out.is_dir() and any(out.iterdir()) and read_marker(out) is None:
-        raise DoefabError(f"{out} holds files and no doefab ownership marker ({MARKER}): the holder's files are "
-                          f"written only into a new, empty or doefab-made folder; choose another")
+    marker = read_marker(out)
+    holders = marker is not None and (marker.get("kind") == "holder" or
+                                      (marker.get("kind") == "run stage" and marker.get("stage") == "holder"))
+    if out.is_dir() and any(out.iterdir()) and not holders:
+        what = (f"a doefab {marker.get('kind')} output" if marker is not None else
+                f"files and no doefab ownership marker ({MARKER})")
+        raise DoefabError(f"{out} holds {what}: the holder's files are written only into a new, empty or doefab "
+                          f"holder folder; choose another")
     out.mkdir(parents=True, exist_ok=True)
     if read_marker(out) is None:
         mark_folder(out, "holder")

@@ -130,7 +130,8 @@ class DualPixelCrosstalk:
 
     ``record(coded, uncoded, noise, rng)``: the optical mix of Eq. 29 with the true per-column ratios (light
     lands on the wrong photodiode before it is counted), the sensor's noise, clipping to [0, 1], then — when the
-    camera is calibrated — the exact unmix with the *estimated* ratios. Views are [..., H, W] arrays (numpy);
+    camera is calibrated — the exact unmix with the *estimated* ratios, a saturated photodiode's pixel staying
+    saturated (full scale) in its view. Views are [..., H, W] arrays (numpy);
     ratios are scalars or per-column arrays of length W. The coded capture is the right view.
     """
 
@@ -152,14 +153,22 @@ class DualPixelCrosstalk:
         from doefab import _validate
         from doefab.imaging.sensor import noise_model
 
-        if isinstance(rows, bool) or not isinstance(rows, int) or not 1 <= rows <= 100_000:
+        import numbers
+
+        if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
             raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r}")
         rng = np.random.default_rng(_validate.seed("seed", seed))
-        profile = np.atleast_1d(np.asarray(alpha_lr, np.float64))
-        b = np.broadcast_to(np.asarray(alpha_rl, np.float64), profile.shape)
-        estimate = simulate_calibration(profile, b, rows, noise_model(noise), rng, level)
-        return cls(alpha_lr, alpha_rl, estimate if profile.size > 1 else (float(estimate[0][0]),
-                                                                            float(estimate[1][0])))
+        probe = np.zeros(1)
+        a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
+        try:
+            a, b = (np.atleast_1d(x).astype(np.float64) for x in np.broadcast_arrays(a, b))
+        except ValueError:
+            raise DoefabError(f"alpha_lr and alpha_rl must be scalars or per-column profiles of one length, got "
+                              f"shapes {np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
+        estimate = simulate_calibration(a, b, int(rows), noise_model(noise), rng, level)
+        scalar = a.size == 1 and np.ndim(alpha_lr) == 0 and np.ndim(alpha_rl) == 0
+        return cls(a if not scalar else float(a[0]), b if not scalar else float(b[0]),
+                   estimate if not scalar else (float(estimate[0][0]), float(estimate[1][0])))
 
     def record(self, coded, uncoded, noise, rng):
         """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first)."""
@@ -167,6 +176,10 @@ class DualPixelCrosstalk:
         right = np.clip(noise.apply(right, rng), 0.0, 1.0)
         left = np.clip(noise.apply(left, rng), 0.0, 1.0)
         if self.estimate is not None:
+            sat_l, sat_r = left >= 1.0, right >= 1.0
             left, right = unmix_crosstalk(left, right, *self.estimate)
-            left, right = np.clip(left, 0.0, 1.0), np.clip(right, 0.0, 1.0)
+            # a photodiode that saturated stays saturated: the unmix of a clipped value is no measurement (with
+            # unequal ratios two saturated views unmix to values just below full scale that would pass as data)
+            left = np.where(sat_l, 1.0, np.clip(left, 0.0, 1.0))
+            right = np.where(sat_r, 1.0, np.clip(right, 0.0, 1.0))
         return right, left

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_json, mark_folder, owned_by_doefab
+from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 from doefab.pipeline.system import resolve
 
@@ -214,7 +214,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
 
 def _scene_budget(scene) -> dict | None:
     """The scene's tolerance budget (None without a [tolerance] section: the shipped one)."""
-    if scene.tolerance is None:
+    if getattr(scene, "tolerance", None) is None:
         return None
     from doefab.tolerance.errors import load_budget
 
@@ -258,22 +258,25 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
 
 
 #: what a stage keeps from an interrupted run of the same inputs: the design's optimiser checkpoint, the networks'
-#: training checkpoints, the tolerance study's finished Monte Carlo parts (each checks that it belongs to its run)
+#: training runs and finished weights, the tolerance study's finished Monte Carlo parts and steps (each checks
+#: that it belongs to its run); PROGRESS: the files among them that are work worth keeping after a failure
 RESUMABLE = {"design": ("checkpoint.pt", "history.csv"),
              "reconstruction": ("run_proposed", "run_coded_only", "run_uncoded_only", "weights"),
              "tolerance": ("samples.jsonl", "steps")}
+PROGRESS = {"design": ("checkpoint.pt",), "reconstruction": ("run_*/checkpoint.pt", "weights/*.pt"),
+            "tolerance": ("samples.jsonl", "steps/*.json")}
 
 
 def has_progress(folder: Path, stages) -> bool:
-    """Whether a run folder holds work worth keeping after a failure: a finished stage, or what a stage keeps
-    from an interrupted run (``RESUMABLE``)."""
+    """Whether a run folder holds work worth keeping after a failure: a finished stage, or a stage's saved
+    checkpoint, parts or steps (``PROGRESS``)."""
     for s in stages:
         try:
             if json.loads((Path(folder) / s / "stage.json").read_text()).get("complete"):
                 return True
         except (OSError, ValueError):
             pass
-        if any((Path(folder) / s / f).exists() for f in RESUMABLE.get(s, ())):
+        if any(next((Path(folder) / s).glob(g), None) is not None for g in PROGRESS.get(s, ())):
             return True
     return False
 
@@ -287,11 +290,21 @@ SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("f
 
 
 def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
+    """The stage's inputs: its scene sections, the task, --quick, its upstream stages' hashes and, for the stages
+    that draw fabricated parts from it, the tolerance budget's content (not only its file name)."""
     parts = {s: scene.raw.get(s) for s in SECTION[name]}
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
+    if name in ("reconstruction", "tolerance"):
+        parts["budget"] = budget_digest(scene)
     return _h(parts)
+
+
+def budget_digest(scene) -> str | None:
+    """A digest of the scene's tolerance budget as loaded (None without a [tolerance] section)."""
+    b = _scene_budget(scene)
+    return None if b is None else _h({k: v for k, v in b.items() if k != "defaults_used"})
 
 
 def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, force: bool) -> dict:
@@ -310,24 +323,16 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
         return old
     if not owned_by_doefab(out, STAGE_KIND, stage=name):  # prepare_scene refuses this before any work
         raise DoefabError(f"{out} is not a doefab {name} stage folder (no ownership marker): move it away")
-    # an interrupted run of the same inputs keeps what it had saved (RESUMABLE): moved aside, then back
+    # an interrupted run of the same inputs keeps what it had saved (RESUMABLE); everything else is removed in
+    # place (nothing is moved, so an interruption here loses nothing)
     same = not force and old.get("hash") == h
     keep = [f for f in RESUMABLE.get(name, ()) if same and (out / f).exists()]
-    aside = out_root / f".{name}.resume"
-    if aside.exists():
-        shutil.rmtree(aside)
-    if keep:
-        aside.mkdir()
-        for f in keep:
-            os.replace(out / f, aside / f)
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
+    out.mkdir(parents=True, exist_ok=True)
+    for child in out.iterdir():
+        if child.name in keep or child.name == MARKER:
+            continue
+        shutil.rmtree(child) if child.is_dir() and not child.is_symlink() else child.unlink()
     mark_folder(out, STAGE_KIND, stage=name)
-    for f in keep:
-        os.replace(aside / f, out / f)
-    if aside.exists():
-        aside.rmdir()
     info_resumed = bool(keep)
     atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False})
     t = time.perf_counter()

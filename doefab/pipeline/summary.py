@@ -59,11 +59,13 @@ def tolerance_items(out: Path) -> list[tuple]:
                   f"{v['grid']}×"] for k, v in g["kinds"].items()]
         items += [("p", f"Grid each error was judged on (measured on a {g['block_px']}² block of the design; the "
                         f"Monte Carlo ran on {g['monte_carlo_grid']}×):"), ("table", rows)]
-    rows = [["error (alone, at its budget value)", "PSF metric change", "delivered change (network, measured PSF)"]]
+    rows = [["error (alone, at its budget value)", "PSF metric change",
+             "delivered change, network told the nominal PSF", "told the part's measured PSF"]]
     for r in tol.get("tornado", []):
-        d = r.get("network_delta", {}).get("measured_psf")
-        rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}",
-                     ", ".join(f"{k} {v:+.3g}" for k, v in d.items()) if d else "not judged through the network"])
+        d = r.get("network_delta", {})
+        cells = [", ".join(f"{k} {v:+.3g}" for k, v in d[lab].items()) if lab in d else "not judged through the network"
+                 for lab in ("nominal_psf", "measured_psf")]
+        rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}", *cells])
     items.append(("table", rows))
     for f, cap in (("tolerance/delivered.png", "what the parts deliver through the network (histogram over parts)"),
                    ("tolerance/tornado.png", "each error alone at its budget value (PSF metric)"),

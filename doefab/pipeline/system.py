@@ -209,12 +209,13 @@ def resolve(scene: Scene) -> dict:
     cfg = committed.extra.get("config", {})
     problems: list[str] = []
     cam = scene_camera(scene, problems)
-    try:
-        task = scene_task(scene, committed, cam)
-    except DoefabError as exc:
-        problems.append(str(exc))
-    else:
-        problems += _checks(scene, cam, task)
+    if not any(p.startswith("camera: ") for p in problems):  # no camera at all: nothing else can be checked
+        try:
+            task = scene_task(scene, committed, cam)
+        except DoefabError as exc:
+            problems.append(str(exc))
+        else:
+            problems += _checks(scene, cam, task)
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)

@@ -5,8 +5,8 @@ PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None). 
 every choice made along the way.
 
 ``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "conditions", "images", "size_px",
-"rows": {variant: means}, "by_light": {"in-library" | "out-of-library": {variant: means}}}``; the light
-groups for hyperspectral) and ``examples.png`` (inputs, each variant's output, ground truth, error map).
+"rows": {variant: means}, "by_light": {"in-library" | "out-of-library": {variant: means}}, "per_image":
+{"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for hyperspectral) and ``examples.png`` (inputs, each variant's output, ground truth, error map).
 """
 
 from __future__ import annotations
@@ -71,6 +71,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
                               "trained_under": _trained_under(r.meta),
                               "for_this_design": not r.meta.get("other_design", False)}
                           for v, r in recs.items()}}
+    result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
     if task == "hyperspectral":
         result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}
                               for k in ("in-library", "out-of-library") if k in kinds}

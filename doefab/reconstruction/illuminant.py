@@ -156,10 +156,17 @@ def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
     out = []
     for p, t, v in zip(pred.double(), target.double(), valid.double()):
         a = (p * v).reshape(p.shape[0], -1)  # [J, 3P]
-        g = a @ a.T
-        g += 1e-9 * torch.trace(g) / len(g) * torch.eye(len(g), dtype=g.dtype)
-        chol = torch.linalg.cholesky(g)
-        rhs = torch.linalg.solve_triangular(chol, (a @ (t * v).reshape(-1))[:, None], upper=False)[:, 0]
-        w, _ = nnls(chol.T.numpy(), rhs.numpy())  # min ‖Lᵀw − L⁻¹Ab‖ = min ‖Aᵀw − b‖ up to a constant
-        out.append(torch.from_numpy(w))
+        b = (t * v).reshape(-1)
+        w = None
+        scale = float(torch.trace(a @ a.T))
+        if scale > 0 and float(b.abs().sum()) > 0:  # a black or wholly clipped capture says nothing: below
+            # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16)
+            q, r = torch.linalg.qr(a.T)  # Aᵀ = QR: min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant
+            w, _ = nnls(r.numpy(), (q.T @ b).numpy())
+            w = w if np.isfinite(w).all() and w.sum() > 0 else None
+        if w is None:  # the single best member (or the first, when nothing can be told apart)
+            cost = (((p - t[None]) ** 2) * v[None]).sum(dim=(-2, -1))
+            w = np.zeros(p.shape[0])
+            w[int(cost.argmin())] = 1.0
+        out.append(torch.from_numpy(np.asarray(w, np.float64)))
     return torch.stack(out).float()

@@ -71,7 +71,7 @@ def network_kernel(task: str, design_kernel: int | None) -> int:
 
 
 @functools.lru_cache(maxsize=None)
-def _pair_cached(folder: str, task: str):
+def _pair_cached(folder: str, task: str, stamp: tuple):
     """(pair, levels_sha256) of the design in ``folder``, or (None, its task) when it is not ``task``'s."""
     from doefab.design.design import Design
     from doefab.fabrication.levels import levels_sha256
@@ -89,7 +89,11 @@ def _pair_cached(folder: str, task: str):
 def psf_pair(task: str, folder: str | Path | None = None):
     """(PSFPair of the design's L-level map at ``network_kernel``, its levels_sha256) for ``task`` (cached); a
     design folder of another task is refused."""
-    pair, sha = _pair_cached(str(folder or design_dir(task)), task)
+    folder = Path(folder or design_dir(task))
+    # keyed by the folder's files too: a design rewritten in the same folder is a new design
+    stamp = tuple((f, (folder / f).stat().st_mtime_ns, (folder / f).stat().st_size) if (folder / f).is_file()
+                  else (f, None, None) for f in ("design.json", "levels.npy"))
+    pair, sha = _pair_cached(str(folder), task, stamp)
     if pair is None:
         check_design_task(task, sha, folder)
     return pair, sha

@@ -2,14 +2,14 @@
 library the proposed network searches.
 
 **Reflectances.** colour-science ships overlapping collections: the ISO 17321-1 chart is the ColorChecker N
-Ohta measurement to 1e-6, CIE 2024 repeats 14 of CIE 1995's samples and NIST CQS 7.4 eight of CQS 9.0's. Each
-split takes whole families: test the ColorChecker (every measurement of it), validation the NIST CQS samples,
-training the CIE test colour samples and the PMC chart — and every spectrum within ``DUPLICATE`` (max absolute
-difference on the 31 bands; 0.035, the median difference between colour-science's two measurements of one
-ColorChecker patch, N Ohta and BabelColor: closer than that is the same surface) of one in an earlier-ranked
-split (test, then validation) is dropped from the later one, and from its own split when it repeats one there.
-Training also draws smooth synthetic reflectances (never within ``DUPLICATE`` of a held-out one), so the
-networks do not learn a few dozen spectra.
+Ohta measurement to 1e-6, the PMC chart re-measures ColorChecker patches, CIE 2024 repeats 14 of CIE 1995's
+samples and NIST CQS 7.4 eight of CQS 9.0's. Each split takes whole families: test the ColorChecker (every
+measurement of it) and the PMC chart, validation the NIST CQS samples, training the CIE test colour samples —
+and every spectrum within ``DUPLICATE`` (``spectral_distance``: max absolute difference on the 31 bands after a
+least-squares scale, as shading and exposure scale a surface; 0.035, the median gap between colour-science's two
+measurements of one ColorChecker patch) of one in an earlier-ranked split (test, then validation) is dropped
+from the later one, and from its own split when it repeats one there. Training also draws smooth synthetic
+reflectances (never within ``DUPLICATE`` of a held-out one), so the networks do not learn a dozen spectra.
 
 **Illuminants.** The proposed network searches a library (``doefab/weights/illuminants.csv``: colour-science's
 CIE illuminants). Training scenes are lit by library members only. Validation and test scenes alternate: even
@@ -27,18 +27,20 @@ import functools
 
 import numpy as np
 
-__all__ = ["reflectances", "synthetic_reflectance", "scene_illuminant", "light_kind", "val_lights", "test_lights",
-           "on_bands", "DUPLICATE", "REFLECTANCE_FAMILIES", "SPLIT_RANK"]
+__all__ = ["reflectances", "synthetic_reflectance", "spectral_distance", "scene_illuminant", "light_kind",
+           "val_lights", "test_lights", "on_bands", "DUPLICATE", "REFLECTANCE_FAMILIES", "SPLIT_RANK", "MAX_DRAWS"]
 
 DUPLICATE = 0.035  # the median difference of two measurements of one ColorChecker patch (N Ohta, BabelColor)
 SPLIT_RANK = ("test", "val", "train")  # a spectrum in an earlier split is removed from the later ones
 REFLECTANCE_FAMILIES = {
+    # the PMC chart re-measures ColorChecker patches (Bluish Green, Blue Sky, Cyan, the neutrals …): with them
     "test": (("colourchecker", "ColorChecker N Ohta"), ("colourchecker", "ISO 17321-1"),
              ("colourchecker", "BabelColor Average"), ("colourchecker", "babel_average"),
-             ("colourchecker", "cc_ohta")),
+             ("colourchecker", "cc_ohta"), ("colourchecker", "PMC")),
     "val": (("vs", "NIST CQS 9.0"), ("vs", "NIST CQS 7.4")),
-    "train": (("tcs", "CIE 1995"), ("tcs", "CIE 2024"), ("colourchecker", "PMC")),
+    "train": (("tcs", "CIE 1995"), ("tcs", "CIE 2024")),
 }
+MAX_DRAWS = 10_000  # a synthetic reflectance drawn this often next to a held-out one is an error, not a loop
 # colour-science light sources by family (substrings of their names)
 _VAL_LIGHTS = ("FL", "F32T8", "F34", "F40", "T8 ", "TL-84", "Kolor", "HPS", "LPS", "Mercury", "Metal Halide", "H38",
                "MHC100", "SDW-T", "Natural")
@@ -59,11 +61,28 @@ def _collection(kind: str, name: str):
     return {"colourchecker": SDS_COLOURCHECKERS, "tcs": SDS_TCS, "vs": SDS_VS}[kind].get(name, {})
 
 
+def spectral_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Max absolute difference on the bands after the least-squares scale of each onto the other (the larger):
+    a scene multiplies a reflectance by shading and exposure, so a scaled copy is the same surface."""
+    def one(x, y):
+        return float(np.abs(x - (x @ y) / max(float(y @ y), 1e-12) * y).max())
+    return max(one(a, b), one(b, a))
+
+
+def _distances(many: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``spectral_distance`` of ``r`` to every row of ``many`` [N, 31], at once."""
+    dots = many @ r
+    a = np.abs(r[None] - (dots / np.maximum((many * many).sum(axis=1), 1e-12))[:, None] * many).max(axis=1)
+    b = np.abs(many - (dots / max(float(r @ r), 1e-12))[:, None] * r[None]).max(axis=1)
+    return np.maximum(a, b)
+
+
 def _unique_against(rows: list[np.ndarray], taken: list[np.ndarray]) -> list[np.ndarray]:
-    """``rows`` without those within DUPLICATE of one in ``taken`` or of an earlier one of ``rows``."""
+    """``rows`` without those within DUPLICATE (``spectral_distance``) of one in ``taken`` or of an earlier one
+    of ``rows``."""
     out: list[np.ndarray] = []
     for r in rows:
-        if all(np.abs(r - t).max() > DUPLICATE for t in (*taken, *out)):
+        if all(spectral_distance(r, t) > DUPLICATE for t in (*taken, *out)):
             out.append(r)
     return out
 
@@ -89,10 +108,13 @@ def synthetic_reflectance(rng: np.random.Generator) -> np.ndarray:
     """[31] a smooth random reflectance in [0.02, 0.95]: a level plus two to four logistic steps and bumps; a
     draw within ``DUPLICATE`` of a held-out (validation or test) reflectance is drawn again."""
     held = _held_out()
-    while True:
+    for _ in range(MAX_DRAWS):
         r = _smooth_draw(rng)
-        if np.abs(held - r).max(axis=1).min() > DUPLICATE:
+        if _distances(held, r).min() > DUPLICATE:
             return r
+    from doefab.errors import DoefabError
+
+    raise DoefabError(f"no synthetic reflectance away from the held-out ones in {MAX_DRAWS} draws")
 
 
 def _smooth_draw(rng: np.random.Generator) -> np.ndarray:

@@ -126,6 +126,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
     warm = copy_matching(model, task, variant, warm_start) if warm_start is not None and not resume else None
+    warm = _warm_record(Path(out_dir), warm, resume)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     val = make_batch(task, "val", range(val_images), crop, pair, response, conditions=cond["val"])
 
@@ -162,3 +163,21 @@ def _design_levels(task: str, design) -> int:
     from doefab.reconstruction.specs import design_dir
 
     return Design.load(design or design_dir(task)).n_levels
+
+
+def _warm_record(out: Path, warm: dict | None, resume: bool) -> dict | None:
+    """The warm start of a fresh run, kept in ``out/warm_start.json``; a resumed run reads the record of the run
+    it continues (its weights started there, not from scratch)."""
+    import json
+
+    path = out / "warm_start.json"
+    if resume:
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError):
+            return None
+    from doefab.io import atomic_write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(path, warm)
+    return warm

@@ -89,8 +89,8 @@ def write_weights(folder: str | Path, task: str, variant: str, model: torch.nn.M
     pt, meta_path = weights_paths(task, variant, folder)
     meta = {"format": WEIGHTS_FORMAT, "task": task, "variant": variant, **record,
             "weights_sha256": hashlib.sha256(data).hexdigest(), "weights_file": pt.name}
+    atomic_write_json(meta_path, meta)  # the record first: an interruption leaves a file doefab can replace
     atomic_write_bytes(pt, data)
-    atomic_write_json(meta_path, meta)
     if history_csv is not None:
         atomic_write_bytes(history_path(task, variant, folder), history_csv)
     return {**meta, "weights_path": str(pt.resolve())}

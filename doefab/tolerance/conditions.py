@@ -43,6 +43,7 @@ class Conditions:
     parts: list = field(default_factory=list)  # PSFPairs (both halves); empty: the nominal pair
     crosstalk: object = None  # PartErrors carrying the budget's sensor, or None
     split: str = "test"
+    budget_sha256: str | None = None  # the budget the parts and crosstalk were drawn from (None: clean)
 
     def pair_for(self, index: int, nominal):
         return self.parts[index % len(self.parts)] if self.parts else nominal
@@ -65,7 +66,7 @@ class Conditions:
 
     def describe(self) -> dict:
         return {"name": self.name, "parts": len(self.parts), "crosstalk": self.crosstalk is not None,
-                "depth_planes": len(self.parts[0].depths) if self.parts else None}
+                "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
 
 
 def clean() -> Conditions:
@@ -90,16 +91,19 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
     budget = budget or load_budget()
     pairs = _parts(task, Path(design_dir), split, parts, budget, progress)
     sensor = replace(base_part(budget), **sensor_errors(budget))
-    return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split)
+    b = {k: v for k, v in budget.items() if k != "defaults_used"}
+    digest = hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split,
+                      budget_sha256=digest)
 
 
-def _key(task, design, split, n, budget, kernel) -> str:
+def _key(task, design, split, n, budget, kernel, chain) -> str:
     from doefab.fabrication.levels import levels_sha256
 
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
     text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, DEPTH_REFINE,
                        PART_SEEDS[split], list(design.depths), list(design.wavelengths), kernel,
-                       design.camera.to_dict()], sort_keys=True, default=str)
+                       design.camera.to_dict(), sorted(chain.items())], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -118,8 +122,9 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if task == "depth" else design.depths
     kernel = network_kernel(task, design.task_params.get("kernel_size"))
+    chain = alignment_chain(design_dir, mask_count(design.n_levels))
     # fabricated parts' PSFs take minutes: kept between runs in the cache (``doefab.io.cache_root``)
-    path = cache_root() / "conditions" / f"{task}-{_key(task, design, split, n, budget, kernel)}.pt"
+    path = cache_root() / "conditions" / f"{task}-{_key(task, design, split, n, budget, kernel, chain)}.pt"
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
@@ -127,7 +132,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
                     for c, u in zip(data["coded"], data["uncoded"])]
         except Exception:  # noqa: BLE001 - a damaged cache is recomputed
             path.unlink(missing_ok=True)
-    judge = PSFJudge(replace(design, depths=depths), 1, chain=alignment_chain(design_dir, mask_count(design.n_levels)))
+    judge = PSFJudge(replace(design, depths=depths), 1, chain=chain)
     children = np.random.SeedSequence(PART_SEEDS[split]).spawn(n)
     coded, uncoded = [], []
     it = range(n)

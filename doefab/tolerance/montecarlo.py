@@ -30,12 +30,39 @@ _MALLOC_ENV = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(2**31 - 1)
 _MALLOC_SET = False
 
 
-def run_identity(design, budget: dict, seed: int, grid: int, networks: bool) -> dict:
-    """What a samples.jsonl must have been written for to be resumed."""
+def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, weights_dir=None,
+                 chain: dict | None = None) -> dict:
+    """What a samples.jsonl must have been written for to be resumed: the design (level map, camera, bands,
+    planes, levels), the budget, seed, grid, the mask set's alignment chain and, through networks, the network's
+    weights (their SHA-256)."""
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
-    return {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),
-            "budget_sha256": hashlib.sha256(json.dumps(b, sort_keys=True).encode()).hexdigest()[:16],
-            "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf"}
+    system = {"camera": design.camera.to_dict(), "wavelengths_m": list(design.wavelengths), "n_levels": design.n_levels,
+              "depths_m": [z if math.isfinite(z) else "inf" for z in design.depths]}
+    out = {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),
+           "design_system_sha256": _digest(system),
+           "budget_sha256": _digest(b), "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf",
+           "alignment_chain": {str(k): int(v) for k, v in sorted((chain or {}).items())}}
+    if networks:
+        out["network_sha256"] = network_weights_sha(design.task, weights_dir)
+    return out
+
+
+def _digest(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def network_weights_sha(design_task: str, weights_dir=None) -> str | None:
+    """The SHA-256 its record gives of the proposed network a design of ``design_task`` is judged through."""
+    from doefab.reconstruction.weights import weights_paths
+    from doefab.tolerance.netjudge import RECON_TASK
+
+    task = RECON_TASK.get(design_task)
+    if task is None:
+        return None
+    try:
+        return json.loads(weights_paths(task, "proposed", weights_dir)[1].read_text()).get("weights_sha256")
+    except (OSError, ValueError):
+        return None
 
 
 def _levels_sha(levels) -> str:
@@ -81,7 +108,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     out.mkdir(parents=True, exist_ok=True)
     log = out / "samples.jsonl"
     judge = judge_for(design_dir, supersample)
-    identity = run_identity(judge.design, budget, seed, supersample, networks)
+    identity = run_identity(judge.design, budget, seed, supersample, networks, weights_dir, judge.chain)
     done = _read_log(log, identity)
     if not log.is_file():
         log.write_text(json.dumps({"run": identity}) + "\n")

@@ -7,6 +7,7 @@ judged on, the tornado, the Monte Carlo, the surrogate and the quantization stud
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -61,10 +62,11 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
                  "level": "network" if networks else "psf"}
     res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
-    key = _step_key(judge.design, budget, grid, networks, weights_dir, network_top)
+    key = _step_key(judge, budget, grid, networks, weights_dir, network_top)
+    res["steps_reused"] = reused = []
     if networks:
         res["nominal"]["network"] = cached_step(out, "nominal_network", key, lambda: study.evaluate_part(
-            str(design_dir), 1, PartErrors().to_json(), True, weights_dir)["network"])
+            str(design_dir), 1, PartErrors().to_json(), True, weights_dir)["network"], reused)
     res["warnings"] = [f"the nominal part already fails the spec ({w}): no part can meet it"
                        for lvl in ("psf", "network") if lvl in res["nominal"] or lvl == "psf"
                        for w in nominal_failures(spec, task, lvl, _flat_nominal(res["nominal"], lvl))]
@@ -72,14 +74,14 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     # limits relative to the error-free part differ per label: each label's parts are judged against its own
     res["spec_by_label"] = {label: _limits(spec, task, "network", {"network": {"nominal_psf": nom}}, limits_text)
                             for label, nom in res["nominal"].get("network", {}).items()}
-    res["grid"] = cached_step(out, "grid", key, lambda: _grid_record(judge, budget, grid, progress))
+    res["grid"] = cached_step(out, "grid", key, lambda: _grid_record(judge, budget, grid, progress), reused)
     grids = ({k: v["grid"] for k, v in res["grid"]["kinds"].items()} if grid == "auto" else
              {k.name: int(grid) for k in KINDS})
     mc_grid = res["grid"]["monte_carlo_grid"]
     t = time.perf_counter()
     res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
-                                                                            weights_dir, progress, network_top))
-    res["tornado_seconds"] = round(time.perf_counter() - t, 1)
+                                                                            weights_dir, progress, network_top), reused)
+    res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     if do_sweep:
         t = time.perf_counter()
         res["sweeps"] = study.sweep(design_dir, grids, progress=progress)["sweeps"]
@@ -129,27 +131,31 @@ def _grid_record(judge, budget, grid, progress) -> dict:
 STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
 
 
-def _step_key(design, budget, grid, networks, weights_dir, network_top) -> dict:
+def _step_key(judge, budget, grid, networks, weights_dir, network_top) -> dict:
     from doefab.tolerance.montecarlo import run_identity
 
-    return {**run_identity(design, budget, 0, 1, networks), "grid_arg": str(grid), "network_top": network_top,
-            "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve())}
+    return {**run_identity(judge.design, budget, 0, 1, networks, weights_dir, judge.chain), "grid_arg": str(grid),
+            "network_top": network_top, "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve())}
 
 
-def cached_step(out: Path, name: str, key: dict, compute):
+def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):
     """``compute()``'s result, kept in ``out/steps/<name>.json`` with the ``key`` of the study it belongs to: a
-    resumed study of the same design, budget, grid and networks reuses it instead of computing it again."""
+    resumed study of the same design, budget, grid and networks reuses it instead of computing it again (and
+    ``name`` is appended to ``reused``)."""
     import json
 
     path = Path(out) / STEPS / f"{name}.json"
     try:
         rec = json.loads(path.read_text())
         if rec.get("key") == json.loads(json.dumps(key, default=str)):
+            if reused is not None:
+                reused.append(name)
             return rec["value"]
     except (OSError, ValueError, AttributeError):
         pass
+    t = time.perf_counter()
     value = compute()
-    atomic_write_json(path, {"key": key, "value": value})
+    atomic_write_json(path, {"key": key, "value": value, "seconds": round(time.perf_counter() - t, 1)})
     return value
 
 
@@ -225,16 +231,23 @@ def _figures(out: Path, res: dict) -> None:
 
 def _delivered_figure(out: Path, res: dict) -> None:
     """delivered.png: the task's primary delivered metric over the parts, per PSF the network was told."""
-    from doefab.tolerance.spec import DELIVERED, PRIMARY
+    from doefab.tolerance.spec import DELIVERED, PRIMARY, spec_limits
 
     task = res["task"]
-    if task not in PRIMARY or "network" not in res["samples"][0]:
+    if task not in PRIMARY or not res["samples"] or "network" not in res["samples"][0]:
         return
     m = PRIMARY[task]
-    values = {lab: [r["network"][lab][m] for r in res["samples"]] for lab in res["samples"][0]["network"]}
-    nominal = res["nominal"].get("network", {}).get("nominal_psf", {}).get(m, float("nan"))
+    values = {lab: [v for v in (r["network"][lab][m] for r in res["samples"]) if math.isfinite(v)]
+              for lab in res["samples"][0]["network"]}
+    values = {lab: v for lab, v in values.items() if v}
+    if not values:
+        return
+    nominal = res["nominal"].get("network", {}).get("nominal_psf", {})
     unit = {"db": "dB"}.get(DELIVERED[task][m][0], DELIVERED[task][m][0])
-    plots.distribution_plot(out / "delivered.png", values, unit, f"delivered {m}", None, nominal)
+    limit = next((lim for _, metric, lim, _ in spec_limits(res["budget"].get("spec", {}), task, "network", nominal)
+                  if metric == m), None)
+    plots.distribution_plot(out / "delivered.png", values, unit, f"delivered {m}", limit,
+                            nominal.get(m, float("nan")))
 
 
 def summary_lines(res: dict) -> list[str]:
@@ -278,13 +291,14 @@ def _limits_lines(res: dict) -> list[str]:
     task = res["task"]
     if judged and task in PRIMARY:
         metric = PRIMARY[task]
-        ranked = sorted(((delivered_loss(task, r["network_delta"]["nominal_psf"]), r) for r in judged),
-                        key=lambda t: -t[0])
-        top = [(loss, r) for loss, r in ranked if loss > 0][:3]
+        losses = [(delivered_loss(task, r["network_delta"]["nominal_psf"]), r) for r in judged]
+        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > 0), key=lambda t: -t[0])[:3]
         unit = {"psnr_highlight": "dB", "psnr": "dB", "mae": "m"}.get(metric, "")
         if not top:
             return []
-        return ["- **Limited by** (delivered " + metric + ", network told the nominal PSF) " + "; ".join(
+        scope = ("" if len(judged) == len(rows) else
+                 f"; the {len(judged)} errors that cost the most PSF metric were judged through the network")
+        return ["- **Limited by** (delivered " + metric + ", network told the nominal PSF" + scope + ") " + "; ".join(
                     f"{r['error']} at {r['value']:.3g} {r['unit']} ({loss:.3g} {unit} worse)" for loss, r in top) + ".",
                 f"- **Would buy the most:** {REMEDY.get(top[0][1]['error'], top[0][1]['error'])} (recovers up to "
                 f"{top[0][0]:.3g} {unit} of {metric}; PSF metric {-top[0][1]['delta']:.3f})."]
@@ -300,5 +314,8 @@ def _limits_lines(res: dict) -> list[str]:
 def _markdown(res: dict) -> list[str]:
     from doefab.tolerance.reporttext import body_lines
 
-    return [f"# Tolerance study of {res['design']}", "", *summary_lines(res), "", *body_lines(res)]
+    reused = res.get("steps_reused") or []
+    note = ([f"Reused from the interrupted run of the same study: {', '.join(reused).replace('_', ' ')} (their run "
+             f"times are that run's).", ""] if reused else [])
+    return [f"# Tolerance study of {res['design']}", "", *summary_lines(res), "", *note, *body_lines(res)]
 

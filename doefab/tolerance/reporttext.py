@@ -41,16 +41,17 @@ def _grid(res: dict) -> list[str]:
 
 
 def _tornado(res: dict) -> list[str]:
+    net = res["level"] == "network"
     lines = ["## Each error alone at its budget value", "", "| error | value | grid | PSF metric | change |"
-             + (" delivered (network, measured PSF) | change |" if res["level"] == "network" else ""),
-             "| --- | --- | --- | --- | --- |" + (" --- | --- |" if res["level"] == "network" else "")]
+             + (" delivered change, network told the nominal PSF | told the part's measured PSF |" if net else ""),
+             "| --- | --- | --- | --- | --- |" + (" --- | --- |" if net else "")]
     for r in res["tornado"]:
         row = f"| {r['error']} | {r['value']:.3g} {r['unit']} | {r['grid']}× | {r['metric']:.4f} | {r['delta']:+.4f} |"
-        if "network" in r:
-            m = r["network"]["measured_psf"]
-            d = r["network_delta"]["measured_psf"]
-            row += " " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()) + " | " + \
-                   ", ".join(f"{k} {v:+.3g}" for k, v in d.items()) + " |"
+        if net:
+            d = r.get("network_delta")
+            row += (" " + " | ".join(", ".join(f"{k} {v:+.3g}" for k, v in d[lab].items())
+                                     for lab in ("nominal_psf", "measured_psf")) + " |" if d
+                    else " not judged through the network | |")
         lines.append(row)
     return lines + ["", "![tornado](tornado.png)", ""]
 

@@ -19,7 +19,7 @@ import math
 from doefab.errors import DoefabError
 
 __all__ = ["DELIVERED", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "check_spec", "meets",
-           "nominal_failures", "limits_text"]
+           "nominal_failures", "limits_text", "spec_limits"]
 
 # delivered metrics per task: name → (unit, better): "+" higher is better, "-" lower is better
 DELIVERED = {
@@ -80,7 +80,7 @@ def check_spec(spec: dict, where: str = "[spec]") -> list[str]:
     return problems
 
 
-def _limits(spec: dict, task: str, level: str, nominal: dict) -> list[tuple[str, str, float, str]]:
+def spec_limits(spec: dict, task: str, level: str, nominal: dict) -> list[tuple[str, str, float, str]]:
     """[(key, metric, limit, "≥"/"≤")] that apply at ``level`` ("psf" or "network"), relative limits turned
     absolute against the nominal part's values."""
     out = []
@@ -101,7 +101,7 @@ def _limits(spec: dict, task: str, level: str, nominal: dict) -> list[tuple[str,
 
 def meets(values: dict, spec: dict, task: str, level: str, nominal: dict) -> bool:
     """Whether a part with metric ``values`` meets every limit of ``spec`` that applies at ``level``."""
-    for _, metric, limit, op in _limits(spec, task, level, nominal):
+    for _, metric, limit, op in spec_limits(spec, task, level, nominal):
         v = values.get(metric, float("nan"))
         if not math.isfinite(v) or (v < limit if op == "≥" else v > limit):
             return False
@@ -111,13 +111,13 @@ def meets(values: dict, spec: dict, task: str, level: str, nominal: dict) -> boo
 def nominal_failures(spec: dict, task: str, level: str, nominal: dict) -> list[str]:
     """The limits the nominal (error-free) part already misses: a spec the design cannot meet."""
     return [f"{k}: nominal {nominal[m]:.4g} {'<' if op == '≥' else '>'} {lim:.4g}"
-            for k, m, lim, op in _limits(spec, task, level, nominal)
+            for k, m, lim, op in spec_limits(spec, task, level, nominal)
             if m in nominal and (nominal[m] < lim if op == "≥" else nominal[m] > lim)]
 
 
 def limits_text(spec: dict, task: str, level: str, nominal: dict) -> str:
     """The limits as people read them, e.g. "psnr_highlight ≥ 30.7 (nominal − 1 dB)"."""
-    lim = _limits(spec, task, level, nominal)
+    lim = spec_limits(spec, task, level, nominal)
     if not lim:
         raise DoefabError(f"the budget's [spec.{task}] sets no limit judged at {level} level")
     return ", ".join(f"{m} {op} {v:.4g}" for _, m, v, op in lim)

@@ -430,3 +430,12 @@ def test_write_holder_never_writes_into_a_users_folder(tmp_path):
     with pytest.raises(DoefabError, match="no doefab ownership marker"):
         write_holder(HolderParams(), tmp_path, step=False, renders=False)
     assert (tmp_path / "holder.stl").read_text() == "the user's own part"
+    from doefab.io import mark_folder
+
+    masks = tmp_path / "maskset"  # doefab's, but a mask set: no holder files go there
+    masks.mkdir()
+    mark_folder(masks, "masks")
+    (masks / "manifest.json").write_text("{}")
+    with pytest.raises(DoefabError, match="a doefab masks output"):
+        write_holder(HolderParams(), masks, step=False, renders=False)
+    assert sorted(p.name for p in masks.iterdir()) == [".doefab-output.json", "manifest.json"]

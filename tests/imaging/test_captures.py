@@ -200,3 +200,24 @@ def test_a_calibrated_camera_estimates_its_ratios_from_noisy_white_walls():
     assert 1e-5 < off < 10 * np.abs(np.asarray(cam.estimate) - np.stack([a, b])).max()
     with pytest.raises(DoefabError, match="rows"):
         DualPixelCrosstalk.calibrated(0.05, 0.05, rows=0)
+
+
+@pytest.mark.parametrize("a, b", [(0.05, 0.05), (0.037, 0.063), (0.063, 0.037)])
+def test_a_pixel_saturated_in_the_raw_capture_stays_saturated_after_the_unmix(a, b):
+    """Where both photodiodes saturate, the unmix of two clipped values is ((1−b) − b)/(1−a−b) for the left
+    view: 0.971 for a = 0.037, b = 0.063 — below full scale, so it would pass as a measurement of a highlight
+    thousands of times brighter. The pipeline keeps it saturated (exactly 1), whatever the ratios."""
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+    from doefab.imaging.sensor import noise_model
+
+    coded = np.full((3, 4, 6), 0.3)
+    uncoded = np.full((3, 4, 6), 0.3)
+    coded[:, 1, 2], uncoded[:, 1, 2] = 40.0, 60.0  # a highlight both views clip
+    uncoded[:, 2, 4] = 5.0  # one only the plain view clips
+    cam = DualPixelCrosstalk(a, b, (a, b))
+    c, u = cam.record(coded, uncoded, noise_model("none"), np.random.default_rng(0))
+    assert np.all(c[:, 1, 2] == 1.0) and np.all(u[:, 1, 2] == 1.0)
+    assert np.all(u[:, 2, 4] == 1.0)
+    np.testing.assert_allclose(c[:, 0, 0], 0.3, atol=1e-12)  # unclipped pixels unmix exactly
+    naive = ((1 - b) - b) / (1 - a - b)  # what the unmix alone gives for two clipped values
+    assert (naive < 0.98) == (b > a)  # the case the check guards against does arise

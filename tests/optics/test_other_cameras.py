@@ -109,9 +109,9 @@ def test_a_cylindrical_phase_draws_a_streak_of_half_length_d_s_over_2f(camera):
 
 def test_the_gratings_dispersion_follows_the_wavelength_and_the_tasks_targets_sit_on_it(camera):
     """At two wavelengths either side of the blaze the first order lands at s·tan(asin(λ/Λ)) (its spacing the
-    dispersion across the band), and the grating task's spot targets (``grating_spot_px``) are where this
-    camera's PSF puts the light."""
-    from doefab.tasks.grating import grating_spot_px
+    dispersion across the band), and the grating task's target for each band (``GratingTask.targets`` bound to
+    this camera) is the pixel where this camera's PSF puts the most light."""
+    from doefab.tasks.grating import GratingTask
 
     cam, c = camera
     period = c["period_px"] * cam.doe_pitch
@@ -122,6 +122,9 @@ def test_the_gratings_dispersion_follows_the_wavelength_and_the_tasks_targets_si
     k = 2 * int(max(expect) + 20) + 1
     with torch.no_grad():
         psf = PSFPlan(cam, lams, [cam.focus_distance], k, halves=("coded",))(height).coded[0].double().numpy()
+    task = GratingTask(kernel_size=k, period_m=period, wavelengths_m=tuple(lams))
+    task.bind(cam)
+    targets = task.targets(cam).double().numpy()[0]  # [bands, K, K]: one pixel per band
     found = []
     for i, lam in enumerate(lams):
         p = psf[i]
@@ -129,7 +132,8 @@ def test_the_gratings_dispersion_follows_the_wavelength_and_the_tasks_targets_si
         box = p[row - 3:row + 4, col - 3:col + 4]
         found.append(abs((box.sum(axis=0) * np.arange(col - 3, col + 4)).sum() / box.sum() - k // 2))
         assert found[-1] == pytest.approx(expect[i], abs=0.4)
-        assert grating_spot_px(cam, lam, period) == pytest.approx(expect[i], rel=1e-9)
+        t_row, t_col = np.unravel_index(np.argmax(targets[i]), targets[i].shape)
+        assert (t_row, t_col) == (row, col), (lam, (t_row, t_col), (row, col))
     assert found[1] - found[0] == pytest.approx(expect[1] - expect[0], abs=0.6)  # the dispersion across the band
 
 

@@ -10,6 +10,11 @@ from doefab.io import mark_folder
 from doefab.pipeline import stages
 
 
+SAVED = {"design": ("checkpoint.pt", "history.csv"),
+         "reconstruction": ("run_proposed/checkpoint.pt", "run_coded_only/history.csv", "weights/hdr_proposed.pt"),
+         "tolerance": ("samples.jsonl", "steps/grid.json", "steps/tornado.json")}
+
+
 def _interrupted(root, name, scene, files):
     """A stage folder as an interrupted run leaves it: marked, its record incomplete, its saved work present."""
     out = root / name
@@ -18,6 +23,7 @@ def _interrupted(root, name, scene, files):
     h = stages.stage_hash(scene, name, {}, False)
     (out / "stage.json").write_text(f'{{"stage": "{name}", "hash": "{h}", "complete": false}}')
     for f in files:
+        (out / f).parent.mkdir(parents=True, exist_ok=True)
         (out / f).write_bytes(f"saved {f}".encode())
     (out / "partial_figure.png").write_bytes(b"not kept")
     return out
@@ -26,7 +32,7 @@ def _interrupted(root, name, scene, files):
 @pytest.mark.parametrize("name", sorted(stages.RESUMABLE))
 def test_a_rerun_with_the_same_inputs_continues_from_the_saved_work(tmp_path, monkeypatch, name):
     scene = SimpleNamespace(raw={"design": {"iterations": 60}}, task="hdr")
-    files = stages.RESUMABLE[name]
+    files = SAVED[name]
     _interrupted(tmp_path, name, scene, files)
     assert stages.has_progress(tmp_path, [name])
     seen = {}
@@ -43,10 +49,20 @@ def test_a_rerun_with_the_same_inputs_continues_from_the_saved_work(tmp_path, mo
     assert "continued from the interrupted run" in info["why"] and info["complete"]
 
 
+def test_a_failed_run_with_nothing_resumable_is_not_kept(tmp_path):
+    """A copied history.csv or an empty training folder is not progress; a checkpoint is."""
+    (tmp_path / "design").mkdir()
+    (tmp_path / "design" / "history.csv").write_text("copied from the committed design")
+    (tmp_path / "reconstruction" / "run_proposed").mkdir(parents=True)
+    assert not stages.has_progress(tmp_path, ["design", "reconstruction"])
+    (tmp_path / "reconstruction" / "run_proposed" / "checkpoint.pt").write_bytes(b"x")
+    assert stages.has_progress(tmp_path, ["design", "reconstruction"])
+
+
 @pytest.mark.parametrize("name", sorted(stages.RESUMABLE))
 def test_changed_inputs_or_force_start_afresh(tmp_path, monkeypatch, name):
     scene = SimpleNamespace(raw={"design": {"iterations": 60}}, task="hdr")
-    files = stages.RESUMABLE[name]
+    files = SAVED[name]
     seen = {}
     monkeypatch.setitem(stages.STAGE_FUNCS, name, lambda scene, res, out, quick: seen.update(
         kept=[f for f in files if (out / f).exists()]) or {"status": "ran", "why": "fake"})
@@ -94,3 +110,46 @@ def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_netw
     assert stages.stage_hash(a, "design", {}, False) != stages.stage_hash(b, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
     assert stages.stage_hash(a, "tolerance", one, False) != stages.stage_hash(a, "tolerance", two, False)
+
+
+def test_editing_the_budget_file_changes_the_stages_that_draw_parts_from_it(tmp_path):
+    """The reconstruction stage draws its fabricated parts, the tolerance stage its Monte Carlo, from the budget:
+    a new budget under the same file name must not reuse their finished results."""
+    from doefab.pipeline.scene import load_scene
+
+    scene = tmp_path / "s.toml"
+    scene.write_text('task = "hdr"\n[tolerance]\nbudget = "b.toml"\n')
+    (tmp_path / "b.toml").write_text("[overlay]\nshift_sigma_um = 0.5\n")
+    first = {n: stages.stage_hash(load_scene(scene), n, {}, False) for n in ("reconstruction", "tolerance", "holder")}
+    (tmp_path / "b.toml").write_text("[overlay]\nshift_sigma_um = 1.5\n")
+    second = {n: stages.stage_hash(load_scene(scene), n, {}, False) for n in first}
+    assert first["reconstruction"] != second["reconstruction"] and first["tolerance"] != second["tolerance"]
+    assert first["holder"] == second["holder"]
+
+
+def test_the_reconstruction_stage_resumes_each_networks_training(tmp_path, monkeypatch):
+    """An interrupted training run of the scene's networks continues from its checkpoint (the others start)."""
+    import doefab.reconstruction.train as train_mod
+    import doefab.tolerance.conditions as cond_mod
+
+    got = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_train(task, variant, minutes, out_dir, **kw):
+        got.append((variant, kw["resume"]))
+        if len(got) == 3:
+            raise Stop
+        return {"training": {"warm_start": None}}
+
+    monkeypatch.setattr(train_mod, "train", fake_train)
+    monkeypatch.setattr(cond_mod, "for_splits", lambda *a, **k: {})
+    (tmp_path / "design").mkdir()
+    out = tmp_path / "reconstruction"
+    (out / "run_coded_only").mkdir(parents=True)
+    (out / "run_coded_only" / "checkpoint.pt").write_bytes(b"x")
+    scene = SimpleNamespace(reconstruction={"weights": "train", "minutes": 1}, task="hdr", tolerance=None)
+    with pytest.raises(Stop):
+        stages.stage_reconstruction(scene, {"reuse": False, "settings": {"design_task": "streak"}}, out, False)
+    assert got == [("proposed", False), ("coded_only", True), ("uncoded_only", False)]

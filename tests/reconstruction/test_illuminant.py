@@ -158,3 +158,35 @@ def test_light_between_two_members_is_met_by_their_blend_not_by_one_of_them():
     mixed = torch.einsum("j,joc,chw->ohw", w / w.sum(), inv, uncoded[0]).numpy()
     single = torch.einsum("oc,chw->ohw", inv[int(idx[0])], uncoded[0]).numpy()
     assert np.abs(mixed - truth).mean() < 0.7 * np.abs(single - truth).mean()
+
+
+@pytest.mark.parametrize("kind", ["black", "clipped"])
+def test_a_capture_that_says_nothing_falls_back_to_one_member(kind):
+    """A black or wholly clipped coded capture has no unclipped pixel to fit: the mixture falls back to a single
+    member (weights sum to one), never to an error or to all-zero weights."""
+    from doefab.reconstruction.illuminant import mix_illuminants
+
+    lib = _library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    coded, uncoded, psf = _dispersed_scene(lib[1])
+    coded = torch.zeros_like(coded) if kind == "black" else torch.ones_like(coded)
+    w = mix_illuminants(coded, uncoded, psf, torch.from_numpy(T), inv)[0]
+    assert float(w.sum()) == pytest.approx(1.0) and int((w > 0).sum()) == 1
+
+
+def test_the_mixture_is_well_posed_for_the_shipped_library():
+    """The shipped library's 50-odd members are nearly collinear as predictors; the weights must still be the
+    non-negative least-squares solution (checked with scipy's nnls on the full system)."""
+    from scipy.optimize import nnls
+
+    from doefab.reconstruction.illuminant import candidate_predictions, mix_illuminants
+
+    lib = illuminant_library()
+    inv = torch.from_numpy(illuminant_inverses(T, lib))
+    coded, uncoded, psf = _dispersed_scene(0.5 * (lib[3] + lib[20]), size=32, seed=2)
+    w = mix_illuminants(coded, uncoded, psf, torch.from_numpy(T), inv)[0].double().numpy()
+    pred, target, valid = candidate_predictions(coded, uncoded, psf, torch.from_numpy(T), inv)
+    a = (pred[0] * valid[0][None]).reshape(len(lib), -1).double().numpy()
+    b = (target[0] * valid[0]).reshape(-1).double().numpy()
+    ref, _ = nnls(a.T, b)
+    assert np.linalg.norm(a.T @ w - b) <= np.linalg.norm(a.T @ ref - b) * (1 + 1e-4) + 1e-9

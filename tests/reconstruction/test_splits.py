@@ -39,8 +39,10 @@ def test_photographs_belong_to_one_split(a, b):
 @pytest.mark.parametrize("a, b", list(combinations(SPLITS, 2)))
 def test_measured_reflectances_belong_to_one_split(a, b):
     ra, rb = spectra.reflectances(a), spectra.reflectances(b)
-    gap = np.abs(ra[:, None] - rb[None]).max(axis=-1).min()
+    gap = min(spectra.spectral_distance(x, y) for x in ra for y in rb)
     assert gap > spectra.DUPLICATE, f"{a} and {b} share a reflectance (closest pair differs by {gap:.2g})"
+    raw = np.abs(ra[:, None] - rb[None]).max(axis=-1).min()
+    assert raw > spectra.DUPLICATE  # unscaled too
 
 
 def test_the_colourchecker_collections_collapse_to_one_family_in_test():
@@ -54,7 +56,18 @@ def test_synthetic_training_reflectances_are_not_held_out_ones():
     rng = np.random.default_rng(123)
     syn = np.array([spectra.synthetic_reflectance(rng) for _ in range(2000)])
     for split in ("val", "test"):
-        assert np.abs(syn[:, None] - spectra.reflectances(split)[None]).max(axis=-1).min() > spectra.DUPLICATE
+        held = spectra.reflectances(split)
+        assert min(spectra.spectral_distance(x, h) for x in syn[:300] for h in held) > spectra.DUPLICATE
+        assert np.abs(syn[:, None] - held[None]).max(axis=-1).min() > spectra.DUPLICATE
+
+
+def test_the_spectral_distance_ignores_scale_and_is_symmetric():
+    a = 0.2 + 0.6 * np.linspace(0, 1, 31)
+    assert spectra.spectral_distance(a, 0.6 * a) < 1e-12  # shading and exposure scale a surface
+    b = a.copy()
+    b[10] += 0.1
+    assert spectra.spectral_distance(a, b) == pytest.approx(spectra.spectral_distance(b, a))
+    assert spectra.spectral_distance(a, b) > 0.05
 
 
 def test_out_of_library_light_is_not_in_the_library_and_test_light_not_in_validation():
@@ -85,8 +98,11 @@ def test_the_duplicate_tolerance_covers_two_measurements_of_one_surface():
     same = [np.abs(np.clip(spectra.on_bands(ohta[n]), 0, 1) - np.clip(spectra.on_bands(babel[n]), 0, 1)).max()
             for n in ohta]
     assert spectra.DUPLICATE >= np.median(same) > 0.01
-    pmc = np.array([np.clip(spectra.on_bands(sd), 0, 1) for sd in SDS_COLOURCHECKERS["PMC"].values()])
-    held = np.concatenate([spectra.reflectances("val"), spectra.reflectances("test")])
+    # the PMC chart re-measures ColorChecker patches: no PMC spectrum may train a network the test split scores
     train = spectra.reflectances("train")
-    near = [p for p in pmc if np.abs(held - p).max(axis=1).min() <= spectra.DUPLICATE]
-    assert near and all(np.abs(train - p).max(axis=1).min() > 0 for p in near)  # PMC's near-copies left training
+    for name, sd in SDS_COLOURCHECKERS["PMC"].items():
+        p = np.clip(spectra.on_bands(sd), 0, 1)
+        assert min(spectra.spectral_distance(p, t) for t in train) > spectra.DUPLICATE, name
+    # and no training spectrum lies as close to a test one as two measurements of one patch typically do
+    test = spectra.reflectances("test")
+    assert min(np.abs(t - x).max() for t in train for x in test) > np.median(same)

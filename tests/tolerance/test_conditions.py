@@ -92,6 +92,10 @@ def test_make_batch_records_the_views_through_the_crosstalk_of_each_scenes_place
     assert float((mixed[0] - clean[0]).abs().max()) > 1e-3
     ends = [raw.crosstalk_for(i, 12, 64) for i in (0, 11)]
     assert abs(float(np.mean(ends[0].alpha_lr)) - float(np.mean(ends[1].alpha_lr))) > 1e-3
+    # the place a scene is rendered at follows ``images``: the same scene at the sensor's edge records otherwise
+    centre = make_batch("depth", "test", [0], 64, pair, noise="none", conditions=raw, images=1)
+    edge = make_batch("depth", "test", [0], 64, pair, noise="none", conditions=raw, images=12)
+    assert float((centre[0] - edge[0]).abs().max()) > 1e-4
 
 
 def test_evaluate_spreads_its_scenes_across_the_sensor(monkeypatch, tmp_path):

@@ -293,6 +293,28 @@ def test_an_empty_budget_file_at_the_command_line_reports_the_defaults_it_took(d
         assert "nan" not in text.lower().replace("nanometre", "") and "fewer than two parts" in text
 
 
+def test_run_study_reuses_its_steps_only_for_the_same_study(design_dir, tmp_path, monkeypatch):
+    """Issue 21, row 10, through ``run_study``: an interrupted study rerun with the same design and budget reuses
+    its grid study and tornado (the tornado is not computed again, the report says so); a changed budget, a
+    changed grid or another design computes them afresh."""
+    from doefab.tolerance.report import run_study
+
+    calls = []
+    real = study.tornado
+    monkeypatch.setattr(study, "tornado", lambda *a, **k: calls.append(1) or real(*a, **k))
+    out = tmp_path / "o"
+    run_study(design_dir, load_budget(), out, samples=0, grid=1, progress=False)
+    res = run_study(design_dir, load_budget(), out, samples=0, grid=1, progress=False)
+    assert len(calls) == 1 and "tornado" in res["steps_reused"]
+    assert "Reused from the interrupted run" in (out / "report.md").read_text()
+    other = tmp_path / "b.toml"
+    other.write_text("[overlay]\nshift_sigma_um = 1.5\n")
+    run_study(design_dir, load_budget(other), out, samples=0, grid=1, progress=False)
+    assert len(calls) == 2
+    run_study(design_dir, load_budget(other), out, samples=0, grid=2, progress=False)
+    assert len(calls) == 3
+
+
 def test_a_resumed_study_reuses_its_finished_steps_and_a_changed_one_does_not(tmp_path):
     """Issue 21, row 10: a study's finished steps (grid study, tornado) are kept with the key of their run; a
     resumed run of the same key reuses them, a run of another key computes afresh."""
@@ -389,3 +411,44 @@ def test_resume_refuses_samples_of_another_design_or_grid(design_dir, tmp_path):
     other.save(tmp_path / "other")
     with pytest.raises(doefab.DoefabError, match="written for another run.*design_levels_sha256"):
         montecarlo.monte_carlo(tmp_path / "other", budget, 3, tmp_path / "r", seed=1, progress=False)
+
+
+def test_for_depth_a_larger_mae_is_the_loss_and_a_nan_is_left_out():
+    from doefab.tolerance.report import summary_lines
+
+    def row(name, delta, dmae):
+        return {"error": name, "value": 1.0, "unit": "mm", "grid": 1, "metric": 0.4 + delta, "delta": delta,
+                "network_delta": {"nominal_psf": {"mae": dmae, "delta125": 0.0},
+                                  "measured_psf": {"mae": dmae, "delta125": 0.0}}}
+
+    res = {"task": "depth", "stop": "the DOE", "warnings": [], "budget": {}, "nominal": {"psf": {"psf_metric": 0.4}},
+           "spec": {"psf": None, "network": None},
+           "tornado": [row("mask overlay", -0.05, 0.01), row("mount rotation", -0.01, float("nan")),
+                       row("decenter across split", -0.02, 0.12), row("edge bias", -0.01, -0.02)]}
+    text = "\n".join(summary_lines(res))
+    limited = text.split("Limited by")[1].split("\n")[0]
+    assert limited.index("decenter across split") < limited.index("mask overlay")
+    assert "mount rotation" not in limited and "edge bias" not in limited  # NaN and a better MAE: no limit
+    assert "0.12 m worse" in limited
+
+
+def test_a_run_identity_names_the_networks_and_the_alignment_chain(design_dir, tmp_path):
+    """Resuming a study's parts with other networks, or on a mask set aligned another way, is another run."""
+    import shutil
+
+    from doefab.reconstruction.weights import WEIGHTS_DIR
+
+    d = Design.load(design_dir)
+    budget = load_budget()
+    a = montecarlo.run_identity(d, budget, 0, 1, False, chain={1: 0, 2: 0})
+    assert a != montecarlo.run_identity(d, budget, 0, 1, False, chain={1: 0, 2: 1})
+    w = tmp_path / "w"
+    w.mkdir()
+    for f in ("hdr_proposed.json", "hdr_proposed.pt"):
+        shutil.copy(WEIGHTS_DIR / f, w / f)
+    shipped = montecarlo.run_identity(d, budget, 0, 1, True)
+    assert shipped["network_sha256"] and shipped == montecarlo.run_identity(d, budget, 0, 1, True, w)
+    rec = json.loads((w / "hdr_proposed.json").read_text())
+    rec["weights_sha256"] = "0" * 64  # retrained weights in the same folder
+    (w / "hdr_proposed.json").write_text(json.dumps(rec))
+    assert montecarlo.run_identity(d, budget, 0, 1, True, w)["network_sha256"] != shipped["network_sha256"]
