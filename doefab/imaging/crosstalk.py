@@ -107,15 +107,32 @@ def crosstalk_profile(columns, centre: float, slope: float, half_width: float):
     return np.clip(centre + slope * x / float(half_width), 0.0, 0.499)
 
 
-def simulate_calibration(alpha_lr, alpha_rl, rows: int, noise, rng: np.random.Generator, level: float = 0.5):
+def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", rng=0, level: float = 0.5):
     """(α̂_l→r, α̂_r→l) per column from two simulated white-wall captures of ``rows`` rows, each with one aperture
     half blocked (Eq. 30), exposed so the open half's view reaches ``level`` of full scale, with ``noise`` (a
-    ``doefab.imaging.sensor`` model) on each recorded view, estimated by :func:`calibrate_crosstalk`."""
-    a = np.asarray(alpha_lr, np.float64).reshape(1, -1)
-    b = np.asarray(alpha_rl, np.float64).reshape(1, -1)
-    if a.shape != b.shape or rows < 1 or not 0 < level <= 1:
-        raise DoefabError("simulate_calibration needs ratio profiles of one shape, rows ≥ 1 and 0 < level ≤ 1")
-    white = np.full((rows, a.shape[1]), float(level))
+    ``doefab.imaging.sensor`` preset name or model) on each recorded view, estimated by
+    :func:`calibrate_crosstalk`. ``rng``: a seed or a ``numpy.random.Generator``."""
+    import numbers
+
+    from doefab import _validate
+    from doefab.imaging.sensor import noise_model
+
+    if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
+        raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r}")
+    if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level <= 1:
+        raise DoefabError(f"level must be the white wall's exposure as a fraction of full scale in (0, 1], got "
+                          f"{level!r}")
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(_validate.seed("seed", rng))
+    noise = noise_model(noise)
+    probe = np.zeros(1)
+    a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
+    try:
+        a, b = (np.atleast_1d(x).astype(np.float64).reshape(1, -1) for x in np.broadcast_arrays(a, b))
+    except ValueError:
+        raise DoefabError(f"alpha_lr and alpha_rl must be scalars or per-column profiles of one length, got "
+                          f"shapes {np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
+    white = np.full((int(rows), a.shape[1]), float(level))
     dark = np.zeros_like(white)
     pairs = []
     for left, right in ((white, dark), (dark, white)):  # left aperture half blocked → only the left view lit
@@ -150,22 +167,8 @@ class DualPixelCrosstalk:
         unmixes with the ratios a simulated calibration estimated: two noisy white-wall captures of ``rows`` rows,
         each with one aperture half blocked (Eq. 30–31; ``noise``: a ``doefab.imaging.sensor`` preset or model).
         The estimate's own error stays in the captures, as it does in a user's pipeline."""
-        from doefab import _validate
-        from doefab.imaging.sensor import noise_model
-
-        import numbers
-
-        if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
-            raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r}")
-        rng = np.random.default_rng(_validate.seed("seed", seed))
-        probe = np.zeros(1)
-        a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
-        try:
-            a, b = (np.atleast_1d(x).astype(np.float64) for x in np.broadcast_arrays(a, b))
-        except ValueError:
-            raise DoefabError(f"alpha_lr and alpha_rl must be scalars or per-column profiles of one length, got "
-                              f"shapes {np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
-        estimate = simulate_calibration(a, b, int(rows), noise_model(noise), rng, level)
+        estimate = simulate_calibration(alpha_lr, alpha_rl, rows, noise, seed, level)
+        a, b = (np.atleast_1d(x).astype(np.float64) for x in np.broadcast_arrays(alpha_lr, alpha_rl))
         scalar = a.size == 1 and np.ndim(alpha_lr) == 0 and np.ndim(alpha_rl) == 0
         return cls(a if not scalar else float(a[0]), b if not scalar else float(b[0]),
                    estimate if not scalar else (float(estimate[0][0]), float(estimate[1][0])))
