@@ -19,6 +19,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from doefab.io import atomic_write_text  # noqa: E402
 import doefab.reconstruction.models as models  # noqa: E402
 import doefab.reconstruction.train as train_mod  # noqa: E402
 from doefab.reconstruction.evaluate import evaluate  # noqa: E402
@@ -59,7 +60,7 @@ def main() -> None:
              "| loss | PSNR (dB) | highlight PSNR (dB) | RMSE | highlight RMSE |", "| --- | --- | --- | --- | --- |"]
     lines += [f"| {n} | {m['psnr']:.2f} | {m['psnr_highlight']:.2f} | {m['rmse']:.3f} | {m['rmse_highlight']:.2f} |"
               for n, m in rows.items()]
-    (OUT / "hdr_loss_pilot.md").write_text("\n".join(lines) + "\n")
+    atomic_write_text(OUT / "hdr_loss_pilot.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

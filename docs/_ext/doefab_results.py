@@ -57,7 +57,6 @@ MEASUREMENTS = (
     Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),
     Measurement("training_curves", "benchmarks/training_curves.py", (R + "training_curves.png",)),
     Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
-    Measurement("hdr_loss_pilot", "benchmarks/hdr_loss_pilot.py", (R + "hdr_loss_pilot.md",)),
     Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
                 json_table="hdr_real_images"),
     Measurement("tolerance_studies", "benchmarks/tolerance_studies.py", (R + "tolerance_studies.md",)),

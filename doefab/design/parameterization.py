@@ -129,7 +129,7 @@ def _extra_power(camera: Camera, task) -> float:
 
 def lens_difference_waves(camera: Camera, task, r2=None):
     """Unwrapped phase (waves) of the thin lens that refocuses the coded half to the task's farthest depth (the
-    seed's half-ring starts sharp at 5 m, ring radius 0, and blurs towards the near planes), at squared radii
+    paper's half-ring starts sharp at 5 m, ring radius 0, and blurs towards the near planes), at squared radii
     ``r2`` (m²; default the (N, N) DOE pixel centres)."""
     import numpy as np
 

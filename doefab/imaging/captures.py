@@ -1,4 +1,4 @@
-"""Coded and uncoded captures of a scene through a PSF pair (seed Eq. 11, 14, 23, 27).
+"""Coded and uncoded captures of a scene through a PSF pair (the paper's Eq. 11, 14, 23, 27).
 
 Each half's PSF carries half of the aperture's light (the PSFs are fractions of the whole aperture), so each
 capture is a half-exposure image: a uniform scene of radiance 1 gives about 0.5 in each capture.

@@ -1,14 +1,14 @@
-"""Dual-pixel crosstalk (seed Eq. 29–31) and its exact inverse.
+"""Dual-pixel crosstalk (the paper's Eq. 29–31) and its exact inverse.
 
 Eq. 29 mixes the left and right views: ``L* = (1 − a) L + b R``, ``R* = a L + (1 − b) R`` with
 ``a = α_l→r`` and ``b = α_r→l``; each ratio is a scalar or an array broadcastable to the images (per column
 is what real dual-pixel sensors show). The inverse solves this 2 × 2 system exactly — its determinant is
-``1 − a − b`` — instead of the seed's Eq. 32, whose printed denominator is not that of Eq. 29 (see
+``1 − a − b`` — instead of the paper's Eq. 32, whose printed denominator is not that of Eq. 29 (see
 ../shared/DESIGN-NOTES.md). A determinant near zero would amplify noise without bound, so it is refused.
 Calibration (Eq. 30–31): with one aperture half blocked, a white wall's light reaches only one view, and the
 fraction that lands on the other one is the ratio.
 
-Crosstalk depends on the angle at which light reaches the sensor (seed Fig. 5), so the ratios change across
+Crosstalk depends on the angle at which light reaches the sensor (the paper's Fig. 5), so the ratios change across
 the sensor's columns: :func:`crosstalk_profile` models them as linear in the column's position, rising toward
 one edge for l→r and toward the other for r→l. :func:`simulate_calibration` makes the two blocked-aperture
 white-wall captures with sensor noise and estimates the ratios from them (Eq. 31, averaged over rows), so a
@@ -73,7 +73,7 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
     """Eq. 30–31: crosstalk ratios from two white-wall captures, each with one aperture half blocked.
 
     Args:
-        blocked_left_pair: ``(L*, R*)`` recorded with the LEFT aperture half (the DOE) blocked, as in the seed's
+        blocked_left_pair: ``(L*, R*)`` recorded with the LEFT aperture half (the DOE) blocked, as in the paper's
             Eq. 30: the right view then gets no light of its own (I_R = 0), so α_l→r = R* / (L* + R*) (Eq. 31).
             (The left aperture half images onto the right sub-pixels: coded = right view, uncoded = left.)
         blocked_right_pair: ``(L*, R*)`` with the RIGHT aperture half blocked (I_L = 0): α_r→l = L* / (L* + R*).
@@ -102,7 +102,7 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
 def crosstalk_profile(columns, centre: float, slope: float, half_width: float):
     """Ratios at sensor ``columns`` (pixels from the sensor's centre column): ``centre + slope · x / half_width``
     clipped to [0, 0.499]; ``slope`` is the change from the centre to ``half_width`` columns away (the edge of
-    the calibrated region; seed 5.1: 3072 px wide)."""
+    the calibrated region; the paper's § 5.1: 3072 px wide)."""
     x = np.asarray(columns, np.float64)
     return np.clip(centre + slope * x / float(half_width), 0.0, 0.499)
 
@@ -143,7 +143,7 @@ def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", 
 
 
 class DualPixelCrosstalk:
-    """What a dual-pixel camera does to a pair of clean views, and what its pipeline undoes (seed 5.1).
+    """What a dual-pixel camera does to a pair of clean views, and what its pipeline undoes (the paper's § 5.1).
 
     ``record(coded, uncoded, noise, rng)``: the optical mix of Eq. 29 with the true per-column ratios (light
     lands on the wrong photodiode before it is counted), the sensor's noise, clipping to [0, 1], then — when the

@@ -1,9 +1,9 @@
-"""The sensor's RGB response to spectral bands (seed Eq. 23's T_s) and its noise models.
+"""The sensor's RGB response to spectral bands (the paper's Eq. 23's T_s) and its noise models.
 
 Response source: the Canon EOS 5D Mark II RGB spectral sensitivities measured for the Academy's rawtoaces
 project, as shipped by the ``colour-science`` package
 (``colour/characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv``, 380–780 nm at
-5 nm). The seed's camera is a 5D Mark IV, whose curves are not published in any package; the Mark II is the
+5 nm). The paper's camera is a 5D Mark IV, whose curves are not published in any package; the Mark II is the
 nearest Canon full-frame sensor with public curves.
 
 Noise (``PoissonGaussian``): shot noise of the photo-electrons plus Gaussian read noise, in units of the

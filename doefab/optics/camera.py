@@ -94,7 +94,7 @@ class Camera:
     def doe_is_stop(self) -> bool:
         """True when the DOE's chrome baffle is narrower than the lens's entrance pupil; the baffle is then the
         aperture stop, the exit pupil is the lens's image of the DOE and the dual-pixel split is conjugate to
-        the DOE itself, so an axial gap between DOE and lens moves nothing (seed prototype: 8.64 mm against
+        the DOE itself, so an axial gap between DOE and lens moves nothing (the paper's prototype: 8.64 mm against
         27.5 mm)."""
         return self.aperture_diameter <= self.lens_pupil_diameter
 

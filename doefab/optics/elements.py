@@ -21,7 +21,7 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
     """Blazed grating along x over the whole grid, heights in [0, h_2π) at ``wavelength``.
 
     Args:
-        period_pixels: grating period Λ in DOE pixels (16 in the seed).
+        period_pixels: grating period Λ in DOE pixels (16 in the paper).
         n_levels: None for the continuous (pixel-sampled) blaze; else a staircase of ``n_levels`` steps
             per period, step heights (N_steps − 1)/N · h_2π (the ideal multi-level blaze).
         wavelength: blaze wavelength, metres (default: the camera's design wavelength).

@@ -1,6 +1,6 @@
-"""A DOE mounted a distance in front of the aperture plane (the prototype's add-on holder, seed Fig. 4).
+"""A DOE mounted a distance in front of the aperture plane (the prototype's add-on holder, the paper's Fig. 4).
 
-The seed designs the DOE for the aperture plane, but the prototype's holder puts it against the lens's front
+The paper designs the DOE for the aperture plane, but the prototype's holder puts it against the lens's front
 glass, some millimetres in front of the plane where the dual-pixel sensor splits the pupil. Over that gap the
 DOE's diffraction spreads: coded light crosses the split line into the uncoded half and the coded half's
 pattern blurs at its edges. ``gap_transmittance`` gives the DOE's effective complex transmittance *at the

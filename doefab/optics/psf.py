@@ -1,4 +1,4 @@
-"""Split-aperture PSFs (seed Eq. 1–10 and 14): the coded (x < 0, DOE) and uncoded (x > 0) halves.
+"""Split-aperture PSFs (the paper's Eq. 1–10 and 14): the coded (x < 0, DOE) and uncoded (x > 0) halves.
 
 ``PSFPlan`` precomputes everything that does not depend on the height map (pupil sampling, source
 wavefronts, transform matrices) so that an optimiser calls it cheaply; ``split_aperture_psf`` is the
@@ -221,7 +221,7 @@ class PSFPlan:
 
 def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size: int = 255,
                        halves=HALVES, h_right=None, **options) -> PSFPair:
-    """Coded and uncoded PSFs of a split aperture (seed Eq. 10/14), one call.
+    """Coded and uncoded PSFs of a split aperture (the paper's Eq. 10/14), one call.
 
     Args:
         height: (N, N) DOE height map over the full aperture grid, metres (numpy or torch; torch keeps

@@ -3,7 +3,7 @@ smooth optical path of a point source relative to the plane in focus.
 
 Array convention used everywhere in doefab: a 2-D map over the DOE grid is indexed ``[row, column]``;
 row 0 is the top (largest y), column 0 the left (most negative x), looking from the scene into the
-camera (x right, y up). The coded half is x < 0 (seed Eq. 3), i.e. the left columns.
+camera (x right, y up). The coded half is x < 0 (the paper's Eq. 3), i.e. the left columns.
 """
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ def _disk_area(camera: Camera, oversample: int) -> float:
 def source_path_difference(r2: np.ndarray, depth: float, focus_distance: float) -> np.ndarray:
     """Optical path (metres) of an on-axis point at ``depth`` across the pupil, relative to the plane in focus.
 
-    The exact spherical wavefront of seed Eq. 1, ``sqrt(r² + z²) − z``, minus the one the lens images
+    The exact spherical wavefront of the paper's Eq. 1, ``sqrt(r² + z²) − z``, minus the one the lens images
     perfectly onto the sensor (from ``focus_distance``); ``inf`` is a plane wave. Written as
     ``r² / (sqrt(r² + z²) + z)`` so that it keeps full precision for distant points.
 

@@ -2,7 +2,7 @@
 whether that system is the one a committed design was made for (then that design, its masks and its networks
 are reused).
 
-A scene starts from a preset camera (the seed's prototype by default) and replaces whatever it sets: focal
+A scene starts from a preset camera (the paper's prototype by default) and replaces whatever it sets: focal
 length or sensor distance, DOE aperture or f-number, the lens's own f-number, focus, sensor and DOE pitch
 (the DOE grid is the aperture divided by the DOE pitch, rounded up to an even number of pixels so the split
 falls on a pixel edge), material and design wavelength. ``resolve`` then checks the physics before any work:

@@ -7,14 +7,14 @@ but the illuminant library the proposed network searches (``spectra``; ``tests/r
 checks every pair of splits). A third of the textures are procedural (smooth noise, stripes, checkers), so the
 networks see natural image statistics and sharp synthetic edges.
 
-Why these are fair stand-ins for the seed's datasets:
-- HDR (seed 4.3 uses HDR photographs): textured scenes at ordinary exposure plus highlights — light sources,
+Why these are fair stand-ins for the paper's datasets:
+- HDR (the paper's § 4.3 uses HDR photographs): textured scenes at ordinary exposure plus highlights — light sources,
   specular blobs and small bright points — scaled so 1–5 % of the pixels saturate the plain (uncoded)
-  half-exposure capture, with values up to 2^8, the seed's peak.
-- Hyperspectral (seed 4.4 uses measured hyperspectral images): 31 bands 400–700 nm built from measured
+  half-exposure capture, with values up to 2^8, the paper's peak.
+- Hyperspectral (the paper's § 4.4 uses measured hyperspectral images): 31 bands 400–700 nm built from measured
   reflectance spectra shipped by colour-science (and smooth synthetic ones in training) under measured and
   synthesised light (``spectra``), laid out in regions following the edges of real photographs, with shading.
-- Depth (seed 4.5 uses rendered scenes, 1–5 m): layered scenes — a far background, often a receding ground
+- Depth (the paper's § 4.5 uses rendered scenes, 1–5 m): layered scenes — a far background, often a receding ground
   plane, and 2–6 occluding textured objects at random depths — with a metric depth map.
 """
 

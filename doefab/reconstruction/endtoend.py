@@ -6,7 +6,7 @@ Starting point: a task-loss design (its radial knots when it is a radial design,
 phases) and, optionally, a network already trained for it. Each step renders a batch of layered depth scenes
 with the current coded PSF (occlusion-aware layer compositing, ``doefab.imaging.captures.render_layers``, which
 is differentiable), adds sensor noise as a Gaussian with the Poisson–Gaussian variance (the reparameterised
-form, so gradients pass), and trains the network on L1 + gradient depth loss (seed Eq. 28). Every
+form, so gradients pass), and trains the network on L1 + gradient depth loss (the paper's Eq. 28). Every
 ``doe_every``-th step the PSF is recomputed *with* gradients and the DOE takes an Adam step too (quantization-
 aware: straight-through rounding to the 16 levels the masks will have); the other steps reuse the last PSF, since
 one PSF with gradients costs as much as many network steps on this CPU. The PSFs are computed on the design grid

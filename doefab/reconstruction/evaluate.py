@@ -1,4 +1,4 @@
-"""The seed's Tables 1–3: every variant's network on the same held-out scenes, under the conditions a real camera
+"""The paper's Tables 1–3: every variant's network on the same held-out scenes, under the conditions a real camera
 makes (``conditions``: ``doefab.tolerance.conditions.honest`` — a fabricated part's PSF, per-column crosstalk
 unmixed with a noisy calibration, depth between the network's planes — while the network is told the nominal
 PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None). The test split is for the final tables; ``split="val"`` is for

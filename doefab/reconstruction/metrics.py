@@ -1,4 +1,4 @@
-"""The seed's metrics (Tables 1–3): HDR RMSE/PSNR (peak 2^8) overall and in highlights, hyperspectral PSNR/SSIM/
+"""The paper's metrics (Tables 1–3): HDR RMSE/PSNR (peak 2^8) overall and in highlights, hyperspectral PSNR/SSIM/
 SAM (radians), depth MAE/RMSE/log10/δ<1.25."""
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     arch = arch or default_arch(task, variant)
     if task == "depth":  # records without "cost_volume" predate it (networks without one)
         return DepthNet(variant, width=int(arch["width"]), cost_volume=bool(arch.get("cost_volume", False)),
-                        planes=int(arch.get("planes", 17)),  # 17: the seed's planes, 1–5 m in 0.25 m steps
+                        planes=int(arch.get("planes", 17)),  # 17: the paper's planes, 1–5 m in 0.25 m steps
                         max_depth_m=float(arch.get("max_depth_m", 6.0)))
     if task == "hdr":
         from doefab.reconstruction.hdrnet import HDRNet
@@ -80,7 +80,7 @@ def loss_fn(task: str, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor
     """HDR: L1 of log(1 + radiance) over the image (highlights up to 2^8 would otherwise swamp the rest), plus
     the L1 of the radiance itself over the highlight pixels (radiance > 2 in any channel) relative to their
     total radiance: they are 1–5 % of the pixels, and the log term alone pulls an uncertain highlight towards
-    its geometric median, below the mean that Table 1's linear PSNR rewards (the seed's Eq. 20 also adds a
+    its geometric median, below the mean that Table 1's linear PSNR rewards (the paper's Eq. 20 also adds a
     highlight term); hyperspectral: L1; depth: L1 + gradient (Eq. 28)."""
     if task == "hdr":
         err = (torch.log1p(pred) - torch.log1p(target)).abs()

@@ -1,5 +1,5 @@
-"""The building blocks of the reconstruction networks (seed sections 4.2–4.5), scaled to train on a CPU, and the
-depth network.
+"""The building blocks of the reconstruction networks (the paper's sections 4.2–4.5), scaled to train on a CPU,
+and the depth network.
 
 One network per task: ``hdrnet.HDRNet`` (G_HDR), ``spectralnet.SpectralNet`` (G_HS) and ``DepthNet`` here
 (G_depth). Each comes in three variants with the same architecture and budget: ``proposed`` (both captures),

@@ -42,7 +42,7 @@ class Task:
         kernel_size: K, sensor pixels of the simulated window.
         loss_kind: which loss drives the design: ``"band"`` (1 − mean in-band fraction: Eq. 26 made
             window-independent), ``"window"`` (band plus 1 − soft-min over bands/depths, which also lifts the
-            worst entry) or ``"l1"`` (the seed's L1 to the target scaled to sum 0.5).
+            worst entry) or ``"l1"`` (the paper's L1 to the target scaled to sum 0.5).
         focus_depth: design the PSF for a point at the camera's focus distance (True, default) or at
             the depths the task lists explicitly.
     """

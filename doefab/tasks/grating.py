@@ -1,4 +1,4 @@
-"""Grating (hyperspectral) task, seed Eq. 21–22: one first-order spot per band."""
+"""Grating (hyperspectral) task, the paper's Eq. 21–22: one first-order spot per band."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ class GratingTask(Task):
     The metric box for band λ is the 3 × 3 pixels around the pixel that holds the spot centre. Kernel:
     the 700 nm spot lies 75 px off axis, so K = 191 keeps every box inside with margin. ``loss_kind``:
     ``"window"`` (default: 1 − mean box fraction + (1 − soft-min over bands), which raises the worst band
-    too), ``"band"`` (1 − mean box fraction) or ``"l1"`` (seed Eq. 22, L1 to a Dirac per band — it can
+    too), ``"band"`` (1 − mean box fraction) or ``"l1"`` (the paper's Eq. 22, L1 to a Dirac per band — it can
     lower the metric, see the README).
     """
 
@@ -81,5 +81,5 @@ class GratingTask(Task):
         return self._masks(camera, self.box_px)
 
     def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:
-        """The 16-pixel blazed grating (seed 4.4), blazed at the design wavelength."""
+        """The 16-pixel blazed grating (the paper's § 4.4), blazed at the design wavelength."""
         return blazed_grating_height(camera, self.period(camera) / camera.doe_pitch)

@@ -1,4 +1,4 @@
-"""Half-ring (depth) task, seed Eq. 25–26: a semicircle whose radius encodes depth."""
+"""Half-ring (depth) task, the paper's Eq. 25–26: a semicircle whose radius encodes depth."""
 
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ class HalfRingTask(Task):
 
     Ring laws (``ring_law``):
 
-    - ``"seed"`` (default, for comparison with the paper): r = 25 − 5z pixels, linear in depth (seed Eq. 25):
+    - ``"seed"`` (default, for comparison with the paper): r = 25 − 5z pixels, linear in depth (the paper's Eq. 25):
       20, 15, 10, 5, 0 px at 1–5 m.
     - ``"defocus"``: r linear in *inverse* depth between the nearest and the farthest plane,
-      r = r_near · (1/z − 1/z_far) / (1/z_near − 1/z_far) with r_near = the seed's radius at z_near (20 px).
+      r = r_near · (1/z − 1/z_far) / (1/z_near − 1/z_far) with r_near = the paper's radius at z_near (20 px).
       A defocused (half-)aperture blurs to a radius ∝ |1/z − 1/z_sharp|, so a phase plate that makes the coded
-      half sharp at z_far follows this law at every depth at once; the seed's linear law asks for a
+      half sharp at z_far follows this law at every depth at once; the paper's linear law asks for a
       non-physical radius–depth relation that no single plate meets at all depths (the optimiser then
       trades depths against each other).
 
@@ -46,7 +46,7 @@ class HalfRingTask(Task):
     loss_kind: str = "window"
     ring_law: str = "seed"
     planes_m: tuple | None = None  # explicit depth planes (metres); None: z_min to z_max every z_step
-    ring_max_px: float | None = None  # ring radius at the nearest plane; None: the seed's 25 − 5·z_min px
+    ring_max_px: float | None = None  # ring radius at the nearest plane; None: the paper's 25 − 5·z_min px
     name: str = field(default="half-ring", init=False)
     preset: str = field(default="depth", init=False)
     metric_name: str = field(default="fraction of coded light within 1 px of the half-ring", init=False)

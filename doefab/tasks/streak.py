@@ -1,4 +1,4 @@
-"""Streak (HDR) task, seed Eq. 16–18: a cross-shaped coded PSF through the kernel centre."""
+"""Streak (HDR) task, the paper's Eq. 16–18: a cross-shaped coded PSF through the kernel centre."""
 
 from __future__ import annotations
 
@@ -17,12 +17,12 @@ __all__ = ["StreakTask"]
 class StreakTask(Task):
     """Cross of two streaks (row K//2 and column K//2) of half-length ``arm_px`` pixels.
 
-    Choices the seed leaves open: the streak length. The seed draws the cross across the whole kernel
+    Choices the paper leaves open: the streak length. The paper draws the cross across the whole kernel
     (x = R/2, y = R/2); we keep arms of ``arm_px`` = 40 px by default (a 81-px cross, 0.44 mm), long enough to
     spread a saturated highlight over many unsaturated pixels while the kernel stays small enough to design
     at full resolution quickly. The metric band is the cross widened by 1 px each side (DESIGN: "within
     1 px of the target cross"). ``loss_kind``: ``"band"`` (energy outside the band, default: it is the
-    metric) or ``"l1"`` (seed Eq. 18, L1 to the cross scaled to sum 0.5).
+    metric) or ``"l1"`` (the paper's Eq. 18, L1 to the cross scaled to sum 0.5).
     """
 
     kernel_size: int = 95

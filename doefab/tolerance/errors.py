@@ -56,7 +56,7 @@ class PartErrors:
     crosstalk: tuple = (0.0, 0.0)  # (α_l→r, α_r→l) at the sensor's centre column
     crosstalk_slope: float = 0.0  # change of α_l→r (up) and α_r→l (down) from the centre to the calibrated edge
     calibrated: bool = True  # unmixed with ratios estimated from simulated noisy white-wall captures
-    calibration_rows: int = 3072  # rows averaged per column by that calibration (seed 5.1: 3072 × 3072)
+    calibration_rows: int = 3072  # rows averaged per column by that calibration (the paper's § 5.1: 3072 × 3072)
     calibration_level: float = 0.5  # the white wall's exposure, fraction of full scale
     calibrated_width_px: int = 3072
     seed: int = 0

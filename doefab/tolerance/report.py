@@ -34,7 +34,7 @@ REMEDY = {
     "decenter along split": "a tighter die pocket in the holder (clearance_mm)",
     "mount rotation": "index pins or a tighter pocket (holder clearance_mm), or turning the die to the split",
     "axial gap": "mounting the DOE at the lens's stop",
-    "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, seed Eq. 30–31)",
+    "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, the paper's Eq. 30–31)",
     "crosstalk, calibrated": "more rows or frames in the crosstalk calibration",
 }
 

@@ -2,7 +2,7 @@
 
 ``angular_spectrum`` propagates a sampled field over a distance z (the DOE-to-aperture gap, or any short
 distance); ``ASMRoute`` uses it for the whole lens-to-sensor distance after applying the lens's converging
-sphere, which is the seed's literal route (Eq. 4–7) and is valid only where the pupil sampling resolves
+sphere, which is the paper's literal route (Eq. 4–7) and is valid only where the pupil sampling resolves
 that sphere: it refuses the default camera and says why.
 """
 
@@ -68,7 +68,7 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
 
 
 class ASMRoute:
-    """Lens sphere + band-limited angular spectrum over s, then pixel integration (seed Eq. 4–7 made exact).
+    """Lens sphere + band-limited angular spectrum over s, then pixel integration (the paper's Eq. 4–7 made exact).
 
     Args:
         pad: zero-padding factor of the angular spectrum grid (the output window must fit inside it).

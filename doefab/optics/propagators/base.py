@@ -2,7 +2,7 @@
 
 A propagator ("route") turns the pupil function of one aperture half into pixel-integrated intensity on
 a K × K window of sensor pixels. The pupil function excludes the converging spherical wave of the lens
-(the lens images the focus plane perfectly; seed Eq. 4 is its paraxial form), so for the Fraunhofer
+(the lens images the focus plane perfectly; the paper's Eq. 4 is its paraxial form), so for the Fraunhofer
 routes the sensor field is a scaled Fourier transform of it (DESIGN-NOTES erratum on Eq. 4 + 7).
 
 Routes: ``mft`` (matrix Fourier transform straight onto Gauss–Legendre nodes inside each sensor pixel),
