@@ -1,5 +1,5 @@
 """The committed designs' tolerance studies at PSF level under the default budget: every error kind swept alone,
-the tornado at the budget's values, a Monte Carlo of 24 parts with the yield and its Wilson interval, and the
+the tornado at one standard deviation of the budget, a Monte Carlo of 24 parts with the yield and its Wilson interval, and the
 quantization study, for the streak, the grating and the half-ring design:
 
     doefab tolerance --design masks/DESIGN --samples 24 --sweep --levels --out out/tol/DESIGN
@@ -48,7 +48,7 @@ def line(design: str, res: dict) -> str:
 def main() -> None:
     designs = sys.argv[1:] or ["streak", "grating", "half-ring"]
     rows = ["| design | nominal PSF metric | mean of 24 parts (95 % interval) | spec | yield (Wilson 95 %) | "
-            "largest single losses at the budget's values |", "| --- | --- | --- | --- | --- | --- |"]
+            "largest single losses at the budget's 1σ |", "| --- | --- | --- | --- | --- | --- |"]
     for d in designs:
         rows.append(line(d, study(d)))
         print(rows[-1], flush=True)

@@ -54,12 +54,12 @@ def tolerance_items(out: Path) -> list[tuple]:
     items = []
     g = tol.get("grid", {})
     if g.get("kinds"):
-        rows = [["error", "budget value", "bound on the PSF metric at 1×", "grid used"]]
+        rows = [["error", "budget 1σ", "bound on the PSF metric at 1×", "grid used"]]
         rows += [[k, f"{v['value']:.3g} {v['unit']}", f"{v['bound'].get('1', v['bound'].get(1, float('nan'))):.2g}",
                   f"{v['grid']}×"] for k, v in g["kinds"].items()]
         items += [("p", f"Grid each error was judged on (measured on a {g['block_px']}² block of the design; the "
                         f"Monte Carlo ran on {g['monte_carlo_grid']}×):"), ("table", rows)]
-    rows = [["error (alone, at its budget value)", "PSF metric change",
+    rows = [["error (alone, at the budget's 1σ)", "PSF metric change",
              "delivered change, network told the nominal PSF", "told the part's measured PSF"]]
     for r in tol.get("tornado", []):
         d = r.get("network_delta", {})
@@ -68,7 +68,7 @@ def tolerance_items(out: Path) -> list[tuple]:
         rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}", *cells])
     items.append(("table", rows))
     for f, cap in (("tolerance/delivered.png", "what the parts deliver through the network (histogram over parts)"),
-                   ("tolerance/tornado.png", "each error alone at its budget value (PSF metric)"),
+                   ("tolerance/tornado.png", "each error alone at one standard deviation of the budget (PSF metric)"),
                    ("tolerance/yield_vs_n.png", "yield against the number of parts (95 % Wilson interval)"),
                    ("tolerance/quantization.png", "quantization study")):
         if (out / f).is_file():

@@ -1,5 +1,5 @@
 """The kinds of error a tolerance study knows, in one table: unit, sweep, the part with that error alone, the
-budget's value of it, and whether its simulation depends on the grid (and so enters the grid study).
+budget's standard deviation of it, and whether its simulation depends on the grid (and so enters the grid study).
 
 ``grid = False`` for errors that are exact on any grid: an etch depth scales the heights, a decenter moves the
 split line and the lens (``mounted``), a gap is propagated analytically or not at all, crosstalk mixes views.
@@ -33,8 +33,10 @@ def _mask_rotation(v: float, n_masks: int) -> PartErrors:
 @dataclass(frozen=True)
 class Kind:
     """One error kind. ``build(v, n_masks)``: the part with only this error, of magnitude v (SI), for a design of
-    ``n_masks`` masks; ``from_budget``: the budget's magnitude (1 σ, or the bound of a uniform error; SI), 0 when the
-    budget has none of it."""
+    ``n_masks`` masks; ``from_budget``: one standard deviation of the budget's distribution of it (SI; a uniform
+    decenter ±d: d/√3; the etch depth: the systematic and random parts added in quadrature), so every kind is
+    judged at the same probability point and the ranking compares like with like; 0 when the budget has none of
+    it."""
 
     name: str
     unit: str
@@ -46,7 +48,7 @@ class Kind:
     part_from_budget: Callable[[dict], PartErrors] | None = None
 
     def budget_part(self, budget: dict, n_masks: int) -> PartErrors:
-        """The part with the budget's value of this error alone, for a design of ``n_masks`` masks."""
+        """The part with one standard deviation of this error alone, for a design of ``n_masks`` masks."""
         if self.part_from_budget is not None:
             return self.part_from_budget(budget)
         return self.build(self.from_budget(budget), n_masks)
@@ -60,6 +62,11 @@ def _crosstalk(calibrated: bool):
     def build(v, n_masks):
         return replace(PartErrors(), crosstalk=(v, v), calibrated=calibrated)
     return build
+
+
+def _decenter_sigma(budget) -> float:
+    """One standard deviation (m) of the decenter, uniform in ±decenter_max_mm on each axis."""
+    return _g(budget, "mounting", "decenter_max_mm") * 1e-3 / math.sqrt(3)
 
 
 def _crosstalk_part(calibrated: bool):
@@ -81,7 +88,8 @@ def _crosstalk_value(calibrated: bool):
 KINDS = (
     Kind("etch depth (systematic)", "%", 0.01, (-10, -5, -2, 2, 5, 10),
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
-         lambda b: (_g(b, "etch", "systematic_sigma_percent") + _g(b, "etch", "random_sigma_percent")) / 100, False),
+         lambda b: math.hypot(_g(b, "etch", "systematic_sigma_percent"), _g(b, "etch", "random_sigma_percent")) / 100,
+         False),
     Kind("mask overlay", "µm", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
          lambda b: _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
     Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
@@ -95,11 +103,9 @@ KINDS = (
          lambda v, n: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
          lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True),
     Kind("decenter across split", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
-         False),
+         lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), _decenter_sigma, False),
     Kind("decenter along split", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), lambda b: _g(b, "mounting", "decenter_max_mm") * 1e-3,
-         False),
+         lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), _decenter_sigma, False),
     Kind("mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
          lambda v, n: replace(PartErrors(), mount_rotation=v),
          lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
@@ -120,5 +126,5 @@ def kind(name: str) -> Kind:
 
 
 def budget_part(budget: dict, name: str, n_masks: int) -> PartErrors:
-    """The part with the budget's value of error ``name`` alone, for a design of ``n_masks`` masks."""
+    """The part with one standard deviation of error ``name`` alone, for a design of ``n_masks`` masks."""
     return kind(name).budget_part(budget, n_masks)

@@ -56,7 +56,7 @@ def tornado_plot(path: Path, rows: list, nominal: float, key: str = "delta", lab
     ax.barh(names, vals, color=["#d65f5f" if (v or 0) < 0 else "#4878cf" for v in vals])
     ax.axvline(0, color="black", lw=0.8)
     ax.set_xlabel(label or f"change of the {METRIC_LABEL} from the nominal {nominal:.3f}")
-    ax.set_title("each error alone at its budget value", fontsize=9)
+    ax.set_title("each error alone at one standard deviation of the budget", fontsize=9)
     ax.tick_params(labelsize=8)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -25,12 +25,12 @@ def _grid(res: dict) -> list[str]:
     if g.get("fixed"):
         return ["## Simulation grid", "", f"Every error on the {g['monte_carlo_grid']}× grid (chosen by the user).", ""]
     lines = ["## Simulation grid", "",
-             f"Each grid-dependent error alone at its budget value on a {g['block_px']}² block of the design, on "
+             f"Each grid-dependent error alone at one standard deviation of the budget on a {g['block_px']}² block of the design, on "
              f"grids 1×, 2×, 4× against {g['reference_grid']}× (bound on the PSF metric's error: twice the summed "
              f"absolute PSF difference over the metric's pixels; tolerance {g['tolerance']}). The Monte Carlo runs "
              f"on the {g['monte_carlo_grid']}× grid. Errors not listed are exact on any grid (etch depth, decenter, "
              f"gap, crosstalk).", "",
-             "| error | budget value | bound 1× | bound 2× | bound 4× | its own effect (8×) | grid used |",
+             "| error | budget 1σ | bound 1× | bound 2× | bound 4× | its own effect (8×) | grid used |",
              "| --- | --- | --- | --- | --- | --- | --- |"]
     for name, v in g["kinds"].items():
         b = v["bound"]
@@ -42,7 +42,7 @@ def _grid(res: dict) -> list[str]:
 
 def _tornado(res: dict) -> list[str]:
     net = res["level"] == "network"
-    lines = ["## Each error alone at its budget value", "", "| error | value | grid | PSF metric | change |"
+    lines = ["## Each error alone at one standard deviation of the budget", "", "| error | value | grid | PSF metric | change |"
              + (" delivered change, network told the nominal PSF | told the part's measured PSF |" if net else ""),
              "| --- | --- | --- | --- | --- |" + (" --- | --- |" if net else "")]
     for r in res["tornado"]:

@@ -193,11 +193,20 @@ def test_a_calibrated_camera_estimates_its_ratios_from_noisy_white_walls():
         assert abs(float((est - a).mean())) < 3 * err[rows] / np.sqrt(est.size) + 1e-4  # unbiased
     assert 4 < err[16] / err[1024] < 16  # √(1024/16) = 8
     scene, pair = _crosstalk_case()
-    clean_c, _ = doefab.simulate_captures(scene, pair, noise="none")
-    cam = DualPixelCrosstalk.calibrated(a, b, rows=16, seed=0)
-    got, _ = doefab.simulate_captures(scene, pair, noise="none", crosstalk=cam)
-    off = np.abs(got - clean_c).max()
-    assert 1e-5 < off < 10 * np.abs(np.asarray(cam.estimate) - np.stack([a, b])).max()
+    clean_c, clean_u = doefab.simulate_captures(scene, pair, noise="none")
+    mixed, _ = doefab.simulate_captures(scene, pair, noise="none", crosstalk=DualPixelCrosstalk(a, b))
+    left_in = np.abs(mixed - clean_c).max()  # what an uncalibrated pipeline leaves in
+    assert left_in > 5e-3
+    off = {}
+    for rows in (16, 1024):
+        cam = DualPixelCrosstalk.calibrated(a, b, rows=rows, seed=0)
+        got, _ = doefab.simulate_captures(scene, pair, noise="none", crosstalk=cam)
+        off[rows] = np.abs(got - clean_c).max()
+        # the unmix's first-order error: the ratios' errors times the other view, over the determinant
+        d_a, d_b = np.abs(np.asarray(cam.estimate) - np.stack([a, b]))
+        bound = ((d_a * clean_u.max() + d_b * clean_c.max()) / (1 - a - b)).max()
+        assert 1e-6 < off[rows] < 1.5 * bound
+    assert off[1024] < 0.25 * left_in and off[1024] < off[16] / 3  # the calibration removes the mix; more rows, less
     with pytest.raises(DoefabError, match="rows"):
         DualPixelCrosstalk.calibrated(0.05, 0.05, rows=0)
 
@@ -219,5 +228,5 @@ def test_a_pixel_saturated_in_the_raw_capture_stays_saturated_after_the_unmix(a,
     assert np.all(c[:, 1, 2] == 1.0) and np.all(u[:, 1, 2] == 1.0)
     assert np.all(u[:, 2, 4] == 1.0)
     np.testing.assert_allclose(c[:, 0, 0], 0.3, atol=1e-12)  # unclipped pixels unmix exactly
-    naive = ((1 - b) - b) / (1 - a - b)  # what the unmix alone gives for two clipped values
-    assert (naive < 0.98) == (b > a)  # the case the check guards against does arise
+    naive_l, naive_r = doefab.unmix_crosstalk(np.ones(3), np.ones(3), a, b)  # the unmix alone, both clipped
+    assert (min(naive_l.min(), naive_r.min()) < 0.98) == (a != b)  # the case the check guards against does arise

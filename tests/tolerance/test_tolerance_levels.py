@@ -69,3 +69,24 @@ def test_quantization_study_starts_at_the_design_levels(design_dir):
     rows = study.quantization_study(design_dir)
     assert [r["levels"] for r in rows] == ["continuous", 8, 4, 2]
     assert rows[1]["source"] == "the committed 8-level map" and rows[1]["l1_to_nominal"] < 1e-9
+
+
+def test_each_kind_is_judged_at_one_standard_deviation_of_the_parts_the_budget_draws():
+    """The tornado and "limited by" compare errors at one probability point: each kind's magnitude is the standard
+    deviation of that error over parts drawn from the budget (decenter is uniform, the etch depth has a systematic
+    and a random part), measured here on 4000 drawn parts."""
+    budget = load_budget()
+    rng = np.random.default_rng(11)
+    parts = [sample_errors(budget, rng, n_masks=4) for _ in range(4000)]
+    drawn = {"etch depth (systematic)": [p.depth_scale[0] - 1 for p in parts],
+             "mask overlay": [p.overlay[1][0] for p in parts],
+             "mask rotation": [p.rotation[2] for p in parts],
+             "edge bias": [p.edge_bias for p in parts],
+             "decenter across split": [p.mount_shift[0] for p in parts],
+             "decenter along split": [p.mount_shift[1] for p in parts],
+             "mount rotation": [p.mount_rotation for p in parts]}
+    by_name = {k.name: k for k in KINDS}
+    for name, values in drawn.items():
+        sigma = float(np.std(values))
+        assert sigma > 0, name
+        assert by_name[name].from_budget(budget) == pytest.approx(sigma, rel=0.05), name
