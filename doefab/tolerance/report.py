@@ -132,10 +132,12 @@ STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``
 
 
 def _step_key(judge, budget, grid, networks, weights_dir, network_top) -> dict:
+    from doefab.tolerance.kinds import KINDS
     from doefab.tolerance.montecarlo import run_identity
 
     return {**run_identity(judge.design, budget, 0, 1, networks, weights_dir, judge.chain), "grid_arg": str(grid),
-            "network_top": network_top, "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve())}
+            "network_top": network_top, "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve()),
+            "kind_magnitudes": {k.name: k.from_budget(budget) for k in KINDS}}  # what each error is judged at
 
 
 def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):
