@@ -250,3 +250,21 @@ def depth_sample(rng: np.random.Generator, size: int, split: str, near: float = 
         depth[m] = z
         scene = np.where(m[None], texture(rng, size, split) * gain * rng.uniform(0.5, 1.0), scene)
     return scene.astype(np.float32), depth
+
+
+def split_digest(task: str) -> str:
+    """SHA-256 of what the splits hold for ``task``: the photographs' names and the seeds of every split, and for
+    hyperspectral the measured reflectances of each split and the held-out lights (values to 1e-6). A network's
+    weights record it, so an evaluation can tell when the networks were trained on another split definition (and
+    the test scenes may then hold their training content)."""
+    import hashlib
+    import json
+
+    h = hashlib.sha256(json.dumps({"images": IMAGES, "seeds": SPLIT_SEEDS}, sort_keys=True).encode())
+    if task == "hyperspectral":
+        from doefab.reconstruction import spectra
+
+        for arr in [spectra.reflectances(s) for s in ("train", "val", "test")] + [spectra.val_lights(),
+                                                                                spectra.test_lights()]:
+            h.update(np.round(np.asarray(arr, np.float64), 6).tobytes())
+    return h.hexdigest()

@@ -18,7 +18,7 @@ import torch
 
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_json
-from doefab.reconstruction.data import SPLIT_SEEDS
+from doefab.reconstruction.data import SPLIT_SEEDS, split_digest
 from doefab.reconstruction.loader import load_reconstructor
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.networks import VARIANTS
@@ -62,6 +62,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
             rows[v].append(metrics_for(task, preds[v], target[0].numpy()))
         if example is None:
             example = (coded[0].numpy(), uncoded[0].numpy(), target[0].numpy(), preds)
+    digest = split_digest(task)
     result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
               "conditions": cond.describe() if cond is not None else {"name": "clean"},
               "noise": "default (Poisson–Gaussian)",
@@ -69,7 +70,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
                               "lr_schedule": r.meta["training"].get("schedule", "constant"),
                               "trained_under": _trained_under(r.meta),
-                              "for_this_design": not r.meta.get("other_design", False)}
+                              "for_this_design": not r.meta.get("other_design", False),
+                              "splits": _splits_state(r.meta, digest)}
                           for v, r in recs.items()}}
     result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
     if task == "hyperspectral":
@@ -79,6 +81,14 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     atomic_write_json(out / "metrics.json", result)
     _figure(out / "examples.png", task, *example)
     return result
+
+
+def _splits_state(meta: dict, digest: str) -> str:
+    """Whether a network was trained on the split definition this evaluation draws its scenes from."""
+    got = meta.get("splits_sha256")
+    if got is None:
+        return "not recorded (trained before the weights named their splits)"
+    return "the same splits" if got == digest else "ANOTHER split definition: the test scenes may hold training content"
 
 
 def _trained_under(meta: dict) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from doefab.errors import DoefabError
+from doefab.reconstruction.data import split_digest
 from doefab.reconstruction.loop import run_loop
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
@@ -153,7 +154,8 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
-              "validation": {"images": val_images, "crop_px": crop, **final}}
+              "validation": {"images": val_images, "crop_px": crop, **final},
+              "splits_sha256": split_digest(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 
 

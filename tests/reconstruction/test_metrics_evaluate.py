@@ -44,6 +44,29 @@ def test_evaluate_writes_the_three_rows(tmp_path):
     assert set(saved["rows"]["proposed"]) == {"rmse", "psnr", "rmse_highlight", "psnr_highlight"}
     assert (tmp_path / "eval" / "examples.png").stat().st_size > 10_000
     assert res["rows"] == saved["rows"]
+    # the weights name the splits they were trained on, and the evaluation says whether its scenes come from them
+    assert all(saved["weights"][v]["splits"] == "the same splits" for v in saved["weights"])
+    import doefab.reconstruction.evaluate as ev
+
+    rec = json.loads((tmp_path / "w" / "hdr_proposed.json").read_text())
+    assert len(rec["splits_sha256"]) == 64
+    assert ev._splits_state(rec, "0" * 64).startswith("ANOTHER split definition")
+
+
+def test_the_split_digest_follows_the_content_of_the_splits(monkeypatch):
+    """A network trained on other splits is noticed: moving one photograph between splits, or one reflectance
+    family, changes the digest; the tasks that use no spectra do not depend on the spectra."""
+    from doefab.reconstruction import data, spectra
+
+    hdr, hs = data.split_digest("hdr"), data.split_digest("hyperspectral")
+    assert hdr != hs
+    moved = {**data.IMAGES, "train": data.IMAGES["train"][1:], "test": data.IMAGES["test"] + data.IMAGES["train"][:1]}
+    monkeypatch.setattr(data, "IMAGES", moved)
+    assert data.split_digest("hdr") != hdr
+    monkeypatch.undo()
+    real = spectra.reflectances
+    monkeypatch.setattr(spectra, "reflectances", lambda s: real(s)[1:] if s == "train" else real(s))
+    assert data.split_digest("hyperspectral") != hs and data.split_digest("hdr") == hdr
 
 
 def test_mean_metrics_skips_images_without_the_metric_quietly():
