@@ -3,7 +3,7 @@ under honest captures (fabricated parts, crosstalk unmixed by a noisy calibratio
 planes; the network told the nominal PSF) beside the nominal model's own captures (`--clean`), and hyperspectral
 results for in-library and out-of-library light.
 
-Run: .venv/bin/python benchmarks/reconstruction_tables.py out/ship10/eval
+Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s11/eval
 (expects <root>/<task>/metrics.json and <root>/<task>_clean/metrics.json, as scripts/train_shipped.sh writes);
 writes benchmarks/results/reconstruction_tables.md. Split used: test (once, for these tables).
 """
