@@ -87,9 +87,9 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
 
 def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool = False, weights_dir=None,
             progress: bool = True, network_top: int | None = None) -> list[dict]:
-    """Each error alone at one standard deviation of the budget, largest change first: the PSF metric, and with ``networks`` the
-    delivered metrics (reconstructed with the nominal PSF and with the part's own) — for every error, or for
-    the ``network_top`` largest at PSF level."""
+    """Each error alone at one standard deviation of the budget, largest change first: the PSF metric, and with
+    ``networks`` the delivered metrics (reconstructed with the nominal PSF and with the part's own) — for every
+    error, or for the ``network_top`` largest at PSF level."""
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
