@@ -6,7 +6,8 @@ every choice made along the way.
 
 ``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "conditions", "images", "size_px",
 "rows": {variant: means}, "by_light": {"in-library" | "out-of-library": {variant: means}}, "per_image":
-{"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for hyperspectral) and ``examples.png`` (inputs, each variant's output, ground truth, error map).
+{"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for hyperspectral) and
+``examples.png`` (inputs, each variant's output, ground truth, error map).
 """
 
 from __future__ import annotations

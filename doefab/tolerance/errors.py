@@ -169,7 +169,6 @@ def crosstalk_ratios(err: PartErrors, columns) -> tuple:
     crosstalk profile, and the estimate its calibration gives (simulated noisy white-wall captures, seeded by
     the part; the estimate is the true profile when the camera is not calibrated — it is then not used)."""
     from doefab.imaging.crosstalk import crosstalk_profile, simulate_calibration
-    from doefab.imaging.sensor import noise_model
 
     half = err.calibrated_width_px / 2
     a = crosstalk_profile(columns, err.crosstalk[0], err.crosstalk_slope, half)
@@ -177,7 +176,7 @@ def crosstalk_ratios(err: PartErrors, columns) -> tuple:
     if not err.calibrated:
         return a, b, a, b
     rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
-    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, noise_model("default"), rng, err.calibration_level)
+    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, "default", rng, err.calibration_level)
     return a, b, a_hat, b_hat
 
 
