@@ -26,3 +26,30 @@ def tiny_camera():
 @pytest.fixture(scope="session")
 def tiny_streak():
     return {"kernel_size": 31, "arm_px": 8}
+
+
+@pytest.fixture(scope="session")
+def grating_design(tmp_path_factory):
+    """``make(n, kernel, seed) → design folder``: a quantized blazed grating over the coded half of an n-pixel
+    aperture at 5.4 µm (3 bands, the grating task's metric), plain (level 15) over the other half."""
+    import numpy as np
+
+    import doefab
+    from doefab.design.design import Design
+    from doefab.tasks.grating import GratingTask
+
+    def make(n: int, kernel: int, seed: int = 0):
+        pitch = 5.4e-6
+        cam = doefab.Camera(aperture_diameter=n * pitch, doe_pitch=pitch, doe_pixels=n, sensor_pitch=5.4e-6,
+                            sensor_distance=50e-3, focus_distance=5.0)
+        task = GratingTask(kernel_size=kernel, n_bands=3)
+        task.bind(cam)
+        lv = doefab.quantize_levels(task.init_height(cam, np.random.default_rng(seed)), cam)
+        lv[:, n // 2:] = 15
+        d = Design(task="grating", task_params=task.params(), camera=cam, wavelengths=task.wavelengths(cam),
+                   depths=(5.0,), height=doefab.levels_to_height(lv, cam), levels=lv,
+                   metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
+        root = tmp_path_factory.mktemp("grating")
+        d.save(root / "design")
+        return root / "design"
+    return make

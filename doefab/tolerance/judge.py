@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import time
@@ -103,9 +104,34 @@ class PSFJudge:
         self._plans: dict = {}
         self._uncoded = None
         self._relief_cache: tuple = (None, None)
-        t = time.perf_counter()
-        self.nominal = self.psfs(PartErrors())["coded"].double()
-        self.seconds_per_psf = time.perf_counter() - t
+        self._last: tuple | None = None  # (source, halves, kernel, {half: PSF}) of the latest PSF computed
+        self._nominal = None
+        self.seconds_per_psf = None
+
+    @property
+    def nominal(self) -> torch.Tensor:
+        """The error-free part's coded PSF at the task's kernel (computed on first use; ``seconds_per_psf``: its
+        time)."""
+        if self._nominal is None:
+            t = time.perf_counter()
+            with torch.no_grad():
+                self._nominal = self.psfs(PartErrors())["coded"].double()
+            self.seconds_per_psf = time.perf_counter() - t
+        return self._nominal
+
+    def reuse(self, source: str, halves, kernel: int | None, compute) -> dict:
+        """``compute()``'s {half: PSF} for ``source`` (a part's errors or a height map's digest), or the crop of the
+        latest PSFs of the same source when they hold these halves at a kernel at least as large: pixel centres
+        sit at (k − K//2)·p for every K, so a smaller kernel is the centre crop of a larger one, exactly. A
+        network-level part thereby pays once for the coded PSF its PSF metric and its network both use."""
+        k = int(kernel or self.task.kernel_size)
+        last = self._last
+        if last is not None and last[0] == source and set(halves) <= set(last[1]) and k <= last[2]:
+            c = last[2] // 2 - k // 2
+            return {h: last[3][h][..., c:c + k, c:c + k].clone() for h in halves}
+        out = compute()
+        self._last = (source, tuple(halves), k, {h: v.detach().clone() for h, v in out.items()})
+        return out
 
     def plan(self, halves=("coded",), decenter: float = 0.0, kernel: int | None = None):
         """The mounted-part PSF model for these halves, reaching at least ``decenter`` beyond the centre line."""
@@ -188,8 +214,12 @@ class PSFJudge:
         """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""
         if any(not 0 <= v < 0.5 for v in err.crosstalk):
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
-        plan = self.plan(halves, err.mount_shift[0], kernel)
-        return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
+        source = "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
+
+        def compute():
+            plan = self.plan(halves, err.mount_shift[0], kernel)
+            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
+        return self.reuse(source, halves, kernel, compute)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""
@@ -200,15 +230,19 @@ class PSFJudge:
     def height_psfs(self, height, halves=("coded",), kernel: int | None = None) -> dict:
         """{half: PSF} of an explicit height map (metres, on the judge's grid; the quantization study)."""
         h = torch.as_tensor(np.asarray(height, np.float64))
-        plan = self.plan(halves, 0.0, kernel)
-        (r0, r1), (c0, c1) = plan.window
-        rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
+        source = "height " + hashlib.sha256(h.numpy().tobytes()).hexdigest() + str(tuple(h.shape))
 
-        def at(i: int) -> torch.Tensor:
-            ph = (plan.phase_per_metre(i) * rel).float()
-            return torch.polar(torch.ones_like(ph), ph)
-        with torch.no_grad():
-            return plan.psfs(at, halves=halves)
+        def compute():
+            plan = self.plan(halves, 0.0, kernel)
+            (r0, r1), (c0, c1) = plan.window
+            rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
+
+            def at(i: int) -> torch.Tensor:
+                ph = (plan.phase_per_metre(i) * rel).float()
+                return torch.polar(torch.ones_like(ph), ph)
+            with torch.no_grad():
+                return plan.psfs(at, halves=halves)
+        return self.reuse(source, halves, kernel, compute)
 
     def psf_from_height(self, height) -> torch.Tensor:
         """Coded PSF of an explicit height map (metres) on the judge's grid."""

@@ -48,9 +48,11 @@ def evaluate_part(design_dir: str, supersample: int, errors: dict, networks: boo
                   weights_dir=None) -> dict:
     """PSF metrics of a part given as ``PartErrors`` fields (and, with ``networks``, its delivered quality)."""
     err = PartErrors(**errors)
+    # the network's PSF pair first: the PSF metric's coded PSF is its crop (``PSFJudge.reuse``)
+    net = network_judge_for(design_dir, supersample, weights_dir).evaluate(err) if networks else None
     res = judge_for(design_dir, supersample).evaluate(err)
     if networks:
-        res["network"] = network_judge_for(design_dir, supersample, weights_dir).evaluate(err)
+        res["network"] = net
     return res
 
 
@@ -169,11 +171,13 @@ def quantization_study(design_dir, levels=None, supersample: int = 1,
             h = lv.astype(np.float64) * h2pi / n
         if supersample > 1:
             h = np.kron(h, np.ones((supersample, supersample)))
+        net = (network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
+               if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
         row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
                else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
                **judge.score(judge.psf_from_height(h))}
         if networks:
-            row["network"] = network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
+            row["network"] = net
         rows.append(row)
     return rows
 

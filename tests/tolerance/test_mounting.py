@@ -13,7 +13,6 @@ from doefab.design.design import Design
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup
 from doefab.optics.pupil import cell_coverage
-from doefab.tasks.grating import GratingTask
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.judge import PSFJudge
 
@@ -22,20 +21,9 @@ N = 240  # a 1.3 mm aperture: Airy radius ~2 sensor px at 50 mm, so a 3×3 box h
 
 
 @pytest.fixture(scope="module")
-def grating_dir(tmp_path_factory):
+def grating_dir(grating_design):
     """A quantized blazed grating (Λ = 16 px) over the coded half, 3 bands, the grating task's metric."""
-    cam = doefab.Camera(aperture_diameter=N * PITCH, doe_pitch=PITCH, doe_pixels=N, sensor_pitch=5.4e-6,
-                        sensor_distance=50e-3, focus_distance=5.0)
-    task = GratingTask(kernel_size=161, n_bands=3)
-    task.bind(cam)
-    lv = doefab.quantize_levels(task.init_height(cam, np.random.default_rng(0)), cam)
-    lv[:, N // 2:] = 15
-    d = Design(task="grating", task_params=task.params(), camera=cam, wavelengths=task.wavelengths(cam),
-               depths=(5.0,), height=doefab.levels_to_height(lv, cam), levels=lv,
-               metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
-    root = tmp_path_factory.mktemp("mount")
-    d.save(root / "design")
-    return root / "design"
+    return grating_design(N, 161, seed=0)
 
 
 @pytest.fixture(scope="module")

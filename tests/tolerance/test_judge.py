@@ -1,0 +1,62 @@
+"""PSFJudge's reuse of a part's PSFs: a smaller kernel served as the centre crop of a larger one computed for the
+same part must equal the PSF computed directly at that kernel (an independent judge with nothing cached)."""
+
+import pytest
+import torch
+
+import doefab
+from doefab.tolerance.errors import PartErrors
+from doefab.tolerance.judge import PSFJudge
+
+PITCH = 5.4e-6
+N = 160
+
+
+@pytest.fixture(scope="module")
+def design_dir(grating_design):
+    return grating_design(N, 41, seed=1)
+
+
+PART = PartErrors(overlay=((0.4e-6, -0.2e-6),) * 4, mount_shift=(17.3e-6, -4.1e-6), mount_rotation=2e-3,
+                  depth_scale=(1.03, 0.98, 1.01, 0.99), edge_bias=0.1e-6)
+OTHER = PartErrors(mount_shift=(-31.0e-6, 0.0))
+
+
+@pytest.mark.parametrize("big", [61, 64])  # same and opposite parity to the task's 41 px
+def test_a_smaller_kernel_is_the_centre_crop_of_a_larger_one(design_dir, big):
+    warm = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    with torch.no_grad():
+        pair = warm.psfs(PART, halves=("coded", "uncoded"), kernel=big)
+        served = warm.psfs(PART)["coded"]  # from the pair above
+        direct = cold.psfs(PART)["coded"]
+    assert pair["coded"].shape[-1] == big and served.shape == direct.shape == pair["coded"].shape[:-2] + (41, 41)
+    assert float((served - direct).abs().max()) <= 1e-5 * float(direct.max())
+    # the pair's uncoded half is a different PSF: serving it for the coded one would fail the check above
+    assert float((pair["uncoded"][..., :41, :41] - direct).abs().max()) > 1e-3 * float(direct.max())
+
+
+def test_another_part_is_never_served_from_the_last(design_dir):
+    j = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    with torch.no_grad():
+        j.psfs(PART, halves=("coded", "uncoded"), kernel=61)
+        got = j.psfs(OTHER)["coded"]
+        want = cold.psfs(OTHER)["coded"]
+        first = cold.psfs(PART)["coded"]
+    assert float((got - want).abs().max()) <= 1e-6 * float(want.max())
+    assert float((got - first).abs().max()) > 1e-3 * float(want.max())  # the two parts do differ
+
+
+def test_a_height_map_is_reused_only_for_itself(design_dir):
+    j = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    d = j.design
+    h1 = doefab.levels_to_height(d.levels, d.camera)
+    h2 = h1 * 0.9
+    j.height_psfs(h1, ("coded", "uncoded"), 61)
+    got1, want1 = j.psf_from_height(h1), cold.psf_from_height(h1)  # served from the pair / computed
+    got2, want2 = j.psf_from_height(h2), cold.psf_from_height(h2)
+    assert float((got1 - want1).abs().max()) <= 1e-5 * float(want1.max())
+    assert float((got2 - want2).abs().max()) <= 1e-6 * float(want2.max())
+    assert float((want2 - want1).abs().max()) > 1e-3 * float(want1.max())
