@@ -167,11 +167,13 @@ class PSFJudge:
         me = self.mask_errors(err)
         cells = self.relief.n
         reach = abs(th) * cells + max(abs(v) for s in me.shifts for v in s) / self.relief.cell + 4
-        c_end = min(c1, max(c0 + 1, int(self.plain_from + reach)))
+        # the relief's own extent, not the plan's (which depends on the halves asked for): a part's coded half is
+        # the same whether its plain half is computed too (``reuse`` relies on it)
+        c_end = min(cells, max(c0 + 1, int(self.plain_from + reach)))
         key = (json.dumps(err.to_json(), sort_keys=True, default=str), r0, r1, c0, c_end)
         if self._relief_cache[0] != key:  # one part's relief serves its coded-only and its two-half PSFs
             self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)))
-        fields = self._relief_cache[1].reshape(-1, r1 - r0, c_end - c0)
+        fields = self._relief_cache[1].reshape(-1, r1 - r0, c_end - c0)[:, :, :c1 - c0]
         if c_end < c1:  # plain glass beyond the relief's reach
             fields = torch.cat([fields, torch.ones(fields.shape[0], r1 - r0, c1 - c_end, dtype=fields.dtype)], dim=2)
 

@@ -136,5 +136,5 @@ class MountedPlan:
         n = self.camera.doe_pixels
         (r0, r1), (c0, c1) = self.window
         full = torch.ones((n, n), dtype=torch.complex64)
-        full[r0:r1, c0:c1] = t[0]
+        full[r0:r1, c0:c1] = t
         return gap_field(full, self.camera, self.wavelengths[i], self.depths[j], gap)[r0:r1, c0:c1]

@@ -19,21 +19,38 @@ def design_dir(grating_design):
 
 PART = PartErrors(overlay=((0.4e-6, -0.2e-6),) * 4, mount_shift=(17.3e-6, -4.1e-6), mount_rotation=2e-3,
                   depth_scale=(1.03, 0.98, 1.01, 0.99), edge_bias=0.1e-6)
+ROTATED = PartErrors(mount_rotation=0.05, roughness=4e-9, seed=3)  # reaches past a 3-px margin's window
 OTHER = PartErrors(mount_shift=(-31.0e-6, 0.0))
 
 
-@pytest.mark.parametrize("big", [61, 64])  # same and opposite parity to the task's 41 px
-def test_a_smaller_kernel_is_the_centre_crop_of_a_larger_one(design_dir, big):
-    warm = PSFJudge(design_dir, 1, margin=40 * PITCH)
-    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+@pytest.mark.parametrize("big,part,margin_px", [(61, PART, 40), (64, PART, 40), (61, ROTATED, 3)])
+def test_a_smaller_kernel_is_the_centre_crop_of_a_larger_one(design_dir, big, part, margin_px):
+    """41 px (the task's) from 61 or 64 px (same and opposite parity); a relief rotated beyond the coded half's
+    window, with roughness (whose random field must not depend on the halves asked for)."""
+    warm = PSFJudge(design_dir, 1, margin=margin_px * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=margin_px * PITCH)
     with torch.no_grad():
-        pair = warm.psfs(PART, halves=("coded", "uncoded"), kernel=big)
-        served = warm.psfs(PART)["coded"]  # from the pair above
-        direct = cold.psfs(PART)["coded"]
+        pair = warm.psfs(part, halves=("coded", "uncoded"), kernel=big)
+        served = warm.psfs(part)["coded"]  # from the pair above
+        direct = cold.psfs(part)["coded"]
+    assert all(key[2] == big for key in warm._plans)  # the 41 px PSF was served, not computed
     assert pair["coded"].shape[-1] == big and served.shape == direct.shape == pair["coded"].shape[:-2] + (41, 41)
     assert float((served - direct).abs().max()) <= 1e-5 * float(direct.max())
     # the pair's uncoded half is a different PSF: serving it for the coded one would fail the check above
-    assert float((pair["uncoded"][..., :41, :41] - direct).abs().max()) > 1e-3 * float(direct.max())
+    c = big // 2 - 41 // 2
+    assert float((pair["uncoded"][..., c:c + 41, c:c + 41] - direct).abs().max()) > 1e-3 * float(direct.max())
+
+
+def test_parts_differing_only_in_their_roughness_draw_are_told_apart(design_dir):
+    j = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    a, b = (PartErrors(roughness=8e-9, roughness_corr=5e-6, seed=s) for s in (1, 2))
+    with torch.no_grad():
+        j.psfs(a, halves=("coded", "uncoded"), kernel=61)
+        got = j.psfs(b)["coded"]
+        want, first = cold.psfs(b)["coded"], PSFJudge(design_dir, 1, margin=40 * PITCH).psfs(a)["coded"]
+    assert float((got - want).abs().max()) <= 1e-6 * float(want.max())
+    assert float((want - first).abs().max()) > 1e-4 * float(want.max())
 
 
 def test_another_part_is_never_served_from_the_last(design_dir):

@@ -130,3 +130,20 @@ def test_stop_decides_whether_the_gap_matters(grating_dir):
     k = PSFJudge(other, 1)
     l1 = [k.evaluate(PartErrors(axial_gap=g))["l1_to_nominal"] for g in (0.0, 1e-3, 5e-3)]
     assert not k.fine.doe_is_stop and l1[0] == 0.0 and 0 < l1[1] < l1[2]
+
+
+def test_a_vanishing_gap_changes_nothing_in_front_of_a_lens_stop(grating_dir):
+    """DOE in front of the lens's stop: propagating a relief that varies along both axes over 1 nm must leave
+    its PSF as without the gap (the whole window is carried over the gap, not one of its rows)."""
+    d = Design.load(grating_dir)
+    lv = d.levels.copy()
+    lv[::3, : N // 2] = (lv[::3, : N // 2] + 7) % 16  # rows now differ
+    other = grating_dir.parent / "lens_stop_rows"
+    replace(d, camera=d.camera.replace(lens_f_number=60.0), levels=lv,
+            height=doefab.levels_to_height(lv, d.camera)).save(other)
+    k = PSFJudge(other, 1)
+    assert not k.fine.doe_is_stop
+    with torch.no_grad():
+        none, tiny = (k.psfs(PartErrors(axial_gap=g))["coded"] for g in (0.0, 1e-9))
+    assert float((tiny - none).abs().max()) <= 1e-4 * float(none.max())
+
