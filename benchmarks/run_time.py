@@ -48,7 +48,9 @@ def main() -> None:
             f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
             f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
             + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min).\n")
-    (OUT / ("run_time_quick.md" if quick else "run_time.md")).write_text(text)
+    from doefab.io import atomic_write_text
+
+    atomic_write_text(OUT / ("run_time_quick.md" if quick else "run_time.md"), text)
     print(text)
 
 
