@@ -190,6 +190,9 @@ def write_pages() -> list[str]:
         path = OUT / f"{m.name}.md"
         if not path.is_file() or path.read_text() != text:
             path.write_text(text)
+    pages = "".join(p.read_text() for p in sorted((ROOT / "docs" / "results").glob("*.md")))
+    problems += [f"results: _generated/results/{m.name}.md is included by no page of docs/results/"
+                 for m in MEASUREMENTS if f"_generated/results/{m.name}.md" not in pages]
     shown = {o for m in MEASUREMENTS for o in m.outputs}
     for f in sorted(RESULTS.iterdir()):
         rel = R + f.name

@@ -221,6 +221,8 @@ class PSFJudge:
         def compute():
             plan = self.plan(halves, err.mount_shift[0], kernel)
             return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
+        if err.axial_gap > 0 and not self.fine.doe_is_stop:  # the gap mixes the plan's window: nothing to share
+            return compute()
         return self.reuse(source, halves, kernel, compute)
 
     def uncoded(self) -> torch.Tensor:

@@ -1,10 +1,13 @@
 """PSFJudge's reuse of a part's PSFs: a smaller kernel served as the centre crop of a larger one computed for the
 same part must equal the PSF computed directly at that kernel (an independent judge with nothing cached)."""
 
+from dataclasses import replace
+
 import pytest
 import torch
 
 import doefab
+from doefab.design.design import Design
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.judge import PSFJudge
 
@@ -77,3 +80,20 @@ def test_a_height_map_is_reused_only_for_itself(design_dir):
     assert float((got1 - want1).abs().max()) <= 1e-5 * float(want1.max())
     assert float((got2 - want2).abs().max()) <= 1e-6 * float(want2.max())
     assert float((want2 - want1).abs().max()) > 1e-3 * float(want1.max())
+
+
+def test_nothing_is_shared_across_a_gap_in_front_of_a_lens_stop(design_dir):
+    """In front of a lens stop the gap spreads the relief over the plan's whole window, which depends on the
+    halves asked for: the coded PSF is computed for itself, equal to a cold judge's."""
+    d = Design.load(design_dir)
+    other = design_dir.parent / "lens_stop"
+    replace(d, camera=d.camera.replace(lens_f_number=60.0)).save(other)
+    part = replace(ROTATED, axial_gap=2e-3)
+    warm = PSFJudge(other, 1, margin=3 * PITCH)
+    cold = PSFJudge(other, 1, margin=3 * PITCH)
+    assert not warm.fine.doe_is_stop
+    with torch.no_grad():
+        warm.psfs(part, halves=("coded", "uncoded"), kernel=61)
+        got, want = warm.psfs(part)["coded"], cold.psfs(part)["coded"]
+    assert float((got - want).abs().max()) <= 1e-6 * float(want.max())
+

@@ -27,3 +27,14 @@ def test_perfect_part_reads_the_same_with_either_psf(judge):
 def test_depth_network_uses_the_measured_pair(judge):
     r = judge.evaluate(PartErrors(mount_shift=(400e-6, 0.0)))  # 0.4 mm across the split line
     assert r["nominal_psf"]["mae"] != pytest.approx(r["measured_psf"]["mae"], rel=1e-4)
+
+
+def test_the_error_free_part_is_judged_once_and_handed_out_by_copy(judge):
+    first = judge.evaluate(PartErrors())
+    first["nominal_psf"]["mae"] = -1.0  # a caller's edit must not reach the next call
+    again = judge.evaluate(PartErrors())
+    cold = NetworkJudge(judge.base, images=1, size=64).evaluate(PartErrors())
+    assert again["nominal_psf"]["mae"] > 0
+    for label in ("nominal_psf", "measured_psf"):
+        for k, v in cold[label].items():
+            assert again[label][k] == pytest.approx(v, rel=1e-6, abs=1e-9)
