@@ -1,18 +1,21 @@
 """Wall time of the main job: the three shipped scenes end to end, as on a fresh clone (an empty doefab cache, so
-every fabricated part's PSFs are computed; a fresh output folder), one scene after another:
+every fabricated part's PSFs are computed; a fresh output folder), the one command the README gives:
 
     doefab run scenes/hdr.toml scenes/hyperspectral.toml scenes/depth.toml
+
+(run in a fresh folder, so it writes out/run/<scene>/ there; it runs each scene in a process of its own).
 
 Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [--quick]
 
 Writes benchmarks/results/run_time.md (or run_time_quick.md): seconds per scene and per stage, and the total,
-from each run's run.json.
+from each run's run.json, and the largest resident memory of any of its processes.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -28,17 +31,18 @@ STAGES = ("design", "masks", "holder", "reconstruction", "tolerance")
 
 def main() -> None:
     quick = "--quick" in sys.argv[1:]
-    runs = ROOT / "out" / ("bench_run_quick" if quick else "bench_run")
-    if runs.exists():
-        shutil.rmtree(runs)
+    work = ROOT / "out" / ("bench_run_quick" if quick else "bench_run")
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    runs = work / "out" / "run"
     with tempfile.TemporaryDirectory() as cache:  # one cache for the three scenes, as one command has
         env = {**os.environ, "DOEFAB_CACHE": cache}
         t0 = time.perf_counter()
-        for s in SCENES:  # the same stages as one `doefab run` of the three, each into a fresh folder
-            subprocess.run([sys.executable, "-m", "doefab", "run", f"scenes/{s}.toml", "--out", str(runs / s),
-                            *(["--quick"] if quick else [])], check=True, cwd=ROOT, env=env,
-                           stdout=subprocess.DEVNULL)
+        subprocess.run([sys.executable, "-m", "doefab", "run", *(str(ROOT / "scenes" / f"{s}.toml") for s in SCENES),
+                        *(["--quick"] if quick else [])], check=True, cwd=work, env=env, stdout=subprocess.DEVNULL)
         total = time.perf_counter() - t0
+    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20  # kB on Linux
     rows = ["| scene | " + " | ".join(STAGES) + " | scene total (s) |", "| --- " * (len(STAGES) + 2) + "|"]
     for s in SCENES:
         rec = json.loads((runs / s / "run.json").read_text())
@@ -47,7 +51,8 @@ def main() -> None:
     text = (f"The main job{' with --quick' if quick else ''} from an empty cache (`.venv/bin/python "
             f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
             f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
-            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min).\n")
+            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min); the largest "
+            f"resident memory of any one process: {peak_gb:.1f} GB.\n")
     from doefab.io import atomic_write_text
 
     atomic_write_text(OUT / ("run_time_quick.md" if quick else "run_time.md"), text)

@@ -131,3 +131,26 @@ def test_report_in_headless_chromium(quick_run):
                    timeout=120)
     assert shot.stat().st_size > 10_000
     shutil.rmtree(profile, ignore_errors=True)
+
+
+def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
+    """Memory a scene's run builds (judges, networks, PSF caches) must not carry into the next scene: with several
+    scenes each runs as its own ``doefab run SCENE`` process (an in-process call to run_scene here would fail)."""
+    import doefab.pipeline.run as pipeline_run
+
+    text = (REPO / "scenes" / "hdr.toml").read_text().replace(
+        next(ln for ln in (REPO / "scenes" / "hdr.toml").read_text().splitlines() if ln.startswith("stages = ")),
+        'stages = ["holder"]')
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.toml").write_text(text)
+
+    def in_this_process(*a, **k):
+        raise AssertionError("run_scene called in the parent process")
+
+    monkeypatch.setattr(pipeline_run, "run_scene", in_this_process)
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "a.toml", "b.toml", "--quick"]) == 0
+    for name in ("a", "b"):
+        rec = json.loads((tmp_path / "out" / "run" / name / "run.json").read_text())
+        assert rec["quick"] and list(rec["stages"]) == ["holder"] and rec["scene"] == f"{name}.toml"
+        assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
