@@ -40,6 +40,7 @@ def run(args) -> int:
         od = OutputDir(Path("out/run") / sc.path.stem if args.out is None else args.out, "run", replace=True)
         runs.append((sc, od, prepare_scene(sc, od.path, tuple(args.force))))
     if len(runs) > 1:
+        del runs  # the checks' designs are not held while the scenes run
         return run_each_in_own_process(args)
     sc, od, res = runs[0]
     args.outdir = od  # a failure removes what this scene's run created, unless a stage finished
@@ -54,15 +55,55 @@ def run(args) -> int:
 
 def run_each_in_own_process(args) -> int:
     """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, in order, stopping at the first that
-    fails (its exit code is returned; it printed its own error)."""
+    fails (its exit status is returned; it printed its own error). Ctrl-C reaches the running scene directly;
+    SIGTERM is passed on to it; either way the scene cleans up and reports what it kept, and no later scene
+    starts."""
     import subprocess
     import sys
 
-    flags = [f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
+    flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
+             + (["--debug"] if getattr(args, "debug", False) else []))
     for scene in args.scene:
-        rc = subprocess.run([sys.executable, "-m", "doefab", "run", scene, *flags]).returncode
+        rc = scene_process_status(subprocess.Popen([sys.executable, "-m", "doefab", "run", scene, *flags]))
         if rc != 0:
-            print(f"[doefab run] stopped: {scene} failed (exit {rc}); the scenes after it were not run",
+            print(f"[doefab run] stopped: {scene} {describe_status(rc)}; the scenes after it were not run",
                   file=sys.stderr)
             return rc
     return 0
+
+
+def scene_process_status(child) -> int:
+    """Wait for a scene's process and return its exit status (128 + N for a death by signal N). On Ctrl-C (which
+    the terminal sends to the child as well) or SIGTERM (passed on here), wait for it to clean up and return its
+    status; a second interrupt kills it."""
+    import signal
+
+    from doefab.cli import Terminated
+
+    try:
+        rc = child.wait()
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, Terminated):
+            child.send_signal(signal.SIGTERM)
+        while True:
+            try:
+                rc = child.wait()
+                break
+            except KeyboardInterrupt:
+                child.kill()
+    return 128 - rc if rc < 0 else rc
+
+
+def describe_status(rc: int) -> str:
+    """A scene process's exit status in words."""
+    import signal
+
+    from doefab.cli import EXIT_INTERRUPTED, EXIT_TERMINATED
+
+    if rc in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+        return "was interrupted (Ctrl-C)" if rc == EXIT_INTERRUPTED else "was terminated (SIGTERM)"
+    if rc > 128 and rc - 128 in {s.value for s in signal.Signals}:
+        sig = signal.Signals(rc - 128)
+        why = " (SIGKILL: often the system running out of memory; see dmesg)" if sig == signal.SIGKILL else ""
+        return f"was killed by {sig.name}{why}"
+    return f"failed (exit status {rc})"

@@ -135,22 +135,58 @@ def test_report_in_headless_chromium(quick_run):
 
 def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
     """Memory a scene's run builds (judges, networks, PSF caches) must not carry into the next scene: with several
-    scenes each runs as its own ``doefab run SCENE`` process (an in-process call to run_scene here would fail)."""
+    scenes each runs as its own ``doefab run SCENE`` process (a stage run in the parent process here fails), and
+    the flags reach every scene (--force: the holder is recomputed, not kept from the first run)."""
     import doefab.pipeline.run as pipeline_run
 
-    text = (REPO / "scenes" / "hdr.toml").read_text().replace(
-        next(ln for ln in (REPO / "scenes" / "hdr.toml").read_text().splitlines() if ln.startswith("stages = ")),
-        'stages = ["holder"]')
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
     for name in ("a", "b"):
-        (tmp_path / f"{name}.toml").write_text(text)
+        (tmp_path / f"{name}.toml").write_text(text.replace(stages, 'stages = ["holder"]'))
 
     def in_this_process(*a, **k):
-        raise AssertionError("run_scene called in the parent process")
+        raise AssertionError("a scene run in the parent process")
 
     monkeypatch.setattr(pipeline_run, "run_scene", in_this_process)
+    monkeypatch.setattr(pipeline_run, "run_stage", in_this_process)
     monkeypatch.chdir(tmp_path)
     assert main(["run", "a.toml", "b.toml", "--quick"]) == 0
+    assert main(["run", "a.toml", "b.toml", "--quick", "--force", "holder"]) == 0
     for name in ("a", "b"):
         rec = json.loads((tmp_path / "out" / "run" / name / "run.json").read_text())
         assert rec["quick"] and list(rec["stages"]) == ["holder"] and rec["scene"] == f"{name}.toml"
+        assert not rec["stages"]["holder"]["reused_from_previous_run"]
         assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
+
+
+def test_sigterm_to_several_scenes_reaches_the_running_scene(tmp_path):
+    """SIGTERM to ``doefab run A B`` is passed on to A's process, which cleans up (nothing finished: its folder
+    goes) before the parent reports; B never starts."""
+    import signal
+
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.toml").write_text(text.replace(stages, 'stages = ["holder"]'))
+    proc = subprocess.Popen([sys.executable, "-m", "doefab", "run", "a.toml", "b.toml"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    for line in proc.stdout:
+        if "[doefab run] holder …" in line:
+            break
+    assert (tmp_path / "out" / "run" / "a").is_dir()  # scene a is under way
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 143, err
+    lines = err.strip().splitlines()
+    assert "terminated (SIGTERM); nothing was kept" in lines[-2], err
+    assert "a.toml was terminated (SIGTERM); the scenes after it were not run" in lines[-1], err
+    assert not (tmp_path / "out" / "run" / "a").exists() and not (tmp_path / "out" / "run" / "b").exists()
+
+
+def test_a_scene_process_killed_by_a_signal_is_named():
+    from doefab.cli.run import describe_status, scene_process_status
+
+    child = subprocess.Popen([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
+    rc = scene_process_status(child)
+    assert rc == 137 and "SIGKILL" in describe_status(rc) and "memory" in describe_status(rc)
+    assert describe_status(2) == "failed (exit status 2)"
