@@ -3,9 +3,10 @@ under honest captures (fabricated parts, crosstalk unmixed by a noisy calibratio
 planes; the network told the nominal PSF) beside the nominal model's own captures (`--clean`), and hyperspectral
 results for in-library and out-of-library light.
 
-Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s11/eval
-(expects <root>/<task>/metrics.json and <root>/<task>_clean/metrics.json, as scripts/train_shipped.sh writes);
-writes benchmarks/results/reconstruction_tables.md. Split used: test (once, for these tables).
+Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s14/eval out/s12/eval out/s13/eval
+(each ROOT holds <task>/metrics.json and <task>_clean/metrics.json, as scripts/train_shipped.sh writes; a task is
+taken from the first ROOT that has it); writes benchmarks/results/reconstruction_tables.md. Split used: test
+(once, for these tables).
 """
 
 from __future__ import annotations
@@ -98,16 +99,16 @@ def light_table(honest: dict, clean: dict | None) -> list[str]:
     return lines + [""]
 
 
-def main(root: Path) -> None:
+def main(roots: list[Path]) -> None:
     lines = []
     for task in KEYS:
-        honest = _load(root, task)
-        if honest is not None:
-            lines += task_table(task, honest, _load(root, f"{task}_clean"))
+        root = next((r for r in roots if _load(r, task) is not None), None)
+        if root is not None:
+            lines += task_table(task, _load(root, task), _load(root, f"{task}_clean"))
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "reconstruction_tables.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("out/ship10/eval"))
+    main([Path(a) for a in sys.argv[1:]] or [Path("out/ship10/eval")])

@@ -53,7 +53,7 @@ MEASUREMENTS = (
     Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
                 before=("bash scripts/train_shipped.sh 500 out/s12 hdr",
                         "bash scripts/train_shipped.sh 500 out/s13 depth",
-                        "bash scripts/train_shipped.sh 200 out/s11 hyperspectral")),
+                        "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
     Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),
     Measurement("training_curves", "benchmarks/training_curves.py", (R + "training_curves.png",)),
     Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
