@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.metrics import HIGHLIGHT_ABOVE
 from doefab.reconstruction.networks import VARIANTS, DepthNet, depth_loss
 from doefab.reconstruction.specs import get_spec
 
@@ -77,18 +76,13 @@ def spectral_baseline(bands=None, smooth: float = 1e-3, eps: float = 1e-6):
 
 
 def loss_fn(task: str, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """HDR: L1 of log(1 + radiance) over the image (highlights up to 2^8 would otherwise swamp the rest), plus
-    the L1 of the radiance itself over the highlight pixels (radiance > 2 in any channel) relative to their
-    total radiance: they are 1–5 % of the pixels, and the log term alone pulls an uncertain highlight towards
-    its geometric median, below the mean that Table 1's linear PSNR rewards (the paper's Eq. 20 also adds a
-    highlight term). The validation pilot (``benchmarks/hdr_loss_pilot.py``, three seeds per loss) does not
-    confirm the gain: the log term alone scores 0.22 dB higher on average, less than the spread between seeds;
-    hyperspectral: L1; depth: L1 + gradient (Eq. 28)."""
+    """HDR: L1 of log(1 + radiance) over the image (highlights up to 2^8 would otherwise swamp the rest). The
+    paper's Eq. 20 adds a highlight term; on validation scenes an added L1 of the highlight pixels relative to
+    their radiance did not help (``benchmarks/hdr_loss_pilot.py``: three seeds per loss, highlight PSNR 0.22 dB
+    lower on average, paired 95 % interval −1.18 to +0.74 dB), so the log term stands alone. Hyperspectral: L1;
+    depth: L1 + gradient (Eq. 28)."""
     if task == "hdr":
-        err = (torch.log1p(pred) - torch.log1p(target)).abs()
-        hl = (target > HIGHLIGHT_ABOVE).any(dim=1, keepdim=True).expand_as(err)
-        lin = ((pred - target).abs() * hl).sum() / (target * hl).sum().clamp_min(1e-6)
-        return err.mean() + lin
+        return (torch.log1p(pred) - torch.log1p(target)).abs().mean()
     if task == "depth":
         return depth_loss(pred, target)
     return (pred - target).abs().mean()

@@ -106,19 +106,20 @@ def test_bad_input_sizes_are_refused(shape):
         net(torch.rand(*shape), torch.rand(*shape), _psf(1, 31))
 
 
-def test_hdr_loss_adds_the_relative_highlight_error():
+def test_hdr_loss_is_the_l1_of_log_radiance():
+    """Eq. 20's log term, computed independently in float64; a highlight's error counts through its log only."""
     from doefab.reconstruction.models import loss_fn
 
     target = torch.full((1, 3, 4, 4), 0.5)
-    target[0, :, 1, 1] = torch.tensor([100.0, 50.0, 1.0])  # one highlight pixel (any channel above 2)
+    target[0, :, 1, 1] = torch.tensor([100.0, 50.0, 1.0])  # one highlight pixel
     assert float(loss_fn("hdr", target.clone(), target)) == 0.0
     pred = target.clone()
     pred[0, 0, 1, 1] = 80.0   # −20 in the highlight's red channel
     pred[0, 2, 3, 3] = 0.25   # a dark pixel off by half
     t, p = target.numpy().astype(np.float64), pred.numpy().astype(np.float64)
-    log_l1 = np.abs(np.log1p(p) - np.log1p(t)).mean()
-    want = log_l1 + 20.0 / (100.0 + 50.0 + 1.0)  # linear L1 over the highlight pixel's channels / their radiance
+    want = (abs(np.log(81.0) - np.log(101.0)) + abs(np.log(1.25) - np.log(1.5))) / t.size
     assert abs(float(loss_fn("hdr", pred, target)) - want) < 1e-6
+    assert abs(want - np.abs(np.log1p(p) - np.log1p(t)).mean()) < 1e-12
 
 
 def test_the_coded_only_spectral_baseline_reads_each_band_where_its_light_landed():
