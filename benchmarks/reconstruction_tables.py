@@ -3,7 +3,7 @@ under honest captures (fabricated parts, crosstalk unmixed by a noisy calibratio
 planes; the network told the nominal PSF) beside the nominal model's own captures (`--clean`), and hyperspectral
 results for in-library and out-of-library light.
 
-Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s14/eval out/s12/eval out/s13/eval
+Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s14/eval out/s15/eval out/s13/eval
 (each ROOT holds <task>/metrics.json and <task>_clean/metrics.json, as scripts/train_shipped.sh writes; a task is
 taken from the first ROOT that has it); writes benchmarks/results/reconstruction_tables.md. Split used: test
 (once, for these tables).

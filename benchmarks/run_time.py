@@ -9,8 +9,8 @@ Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [-
 
 Writes benchmarks/results/run_time.md (or run_time_quick.md): seconds per scene and per stage, and the total,
 from each run's run.json; the largest resident memory of any one of its processes, and the job's peak memory:
-the largest sum, sampled every second, of the proportional set size (shared pages split between the processes that
-share them) over the command's whole process tree.
+the machine's memory in use (MemTotal − MemAvailable), sampled every second, above what was in use before it
+started (so run it with nothing else on the machine).
 """
 
 from __future__ import annotations
@@ -32,34 +32,19 @@ SCENES = ("hdr", "hyperspectral", "depth")
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance")
 
 
-def tree_pss_bytes(root: int) -> int:
-    """Proportional set size summed over ``root`` and all its descendants (Linux /proc)."""
-    children: dict = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            pid, ppid = int(stat.parent.name), int(stat.read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, ValueError, IndexError):
-            continue
-        children.setdefault(ppid, []).append(pid)
-    total, todo = 0, [root]
-    while todo:
-        pid = todo.pop()
-        todo += children.get(pid, [])
-        try:
-            rollup = Path(f"/proc/{pid}/smaps_rollup").read_text()
-        except OSError:
-            continue
-        total += sum(int(ln.split()[1]) * 1024 for ln in rollup.splitlines() if ln.startswith("Pss:"))
-    return total
+def memory_in_use_bytes() -> int:
+    """The machine's memory in use and not reclaimable: MemTotal − MemAvailable (Linux /proc/meminfo)."""
+    info = {ln.split(":")[0]: int(ln.split()[1]) * 1024 for ln in Path("/proc/meminfo").read_text().splitlines()}
+    return info["MemTotal"] - info["MemAvailable"]
 
 
-def peak_while(proc: subprocess.Popen, every_s: float = 1.0) -> int:
-    """Wait for ``proc``, sampling its tree's summed PSS; returns the largest sample in bytes."""
+def peak_while(proc: subprocess.Popen, baseline: int, every_s: float = 1.0) -> int:
+    """Wait for ``proc``, sampling the machine's memory in use; returns the largest sample above ``baseline``."""
     peak = [0]
 
     def sample():
         while proc.poll() is None:
-            peak[0] = max(peak[0], tree_pss_bytes(proc.pid))
+            peak[0] = max(peak[0], memory_in_use_bytes() - baseline)
             time.sleep(every_s)
 
     t = threading.Thread(target=sample, daemon=True)
@@ -78,11 +63,12 @@ def main() -> None:
     runs = work / "out" / "run"
     with tempfile.TemporaryDirectory() as cache:  # one cache for the three scenes, as one command has
         env = {**os.environ, "DOEFAB_CACHE": cache}
+        baseline = memory_in_use_bytes()
         t0 = time.perf_counter()
         proc = subprocess.Popen([sys.executable, "-m", "doefab", "run",
                                  *(str(ROOT / "scenes" / f"{s}.toml") for s in SCENES), *(["--quick"] if quick else [])],
                                 cwd=work, env=env, stdout=subprocess.DEVNULL)
-        job_gib = peak_while(proc) / 2**30
+        job_gib = peak_while(proc, baseline) / 2**30
         total = time.perf_counter() - t0
         if proc.returncode != 0:
             raise SystemExit(f"the main job failed (exit status {proc.returncode})")
@@ -96,8 +82,8 @@ def main() -> None:
             f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
             f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
             + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min); the largest "
-            f"resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (summed proportional set "
-            f"size of its processes, sampled every second): {job_gib:.1f} GiB.\n")
+            f"resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (the machine's memory in use "
+            f"above what it was before, sampled every second): {job_gib:.1f} GiB.\n")
     from doefab.io import atomic_write_text
 
     atomic_write_text(OUT / ("run_time_quick.md" if quick else "run_time.md"), text)

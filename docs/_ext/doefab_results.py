@@ -51,7 +51,7 @@ MEASUREMENTS = (
     Measurement("mask_export", "benchmarks/mask_export.py", (R + "mask_export.md",)),
     Measurement("holder_timing", "benchmarks/holder_timing.py", (R + "holder_timing.md",)),
     Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
-                before=("bash scripts/train_shipped.sh 500 out/s12 hdr",
+                before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
                         "bash scripts/train_shipped.sh 500 out/s13 depth",
                         "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
     Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),

@@ -55,43 +55,48 @@ def run(args) -> int:
 
 def run_each_in_own_process(args) -> int:
     """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, in order, stopping at the first that
-    fails (its exit status is returned; it printed its own error). Ctrl-C reaches the running scene directly;
-    SIGTERM is passed on to it; either way the scene cleans up and reports what it kept, and no later scene
-    starts."""
+    fails (its exit status is returned; it printed its own error). Each scene runs in a session of its own:
+    Ctrl-C and SIGTERM reach this process, which passes them on, waits for the scene to clean up and report
+    what it kept, and starts no later scene."""
     import subprocess
     import sys
 
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
              + (["--debug"] if getattr(args, "debug", False) else []))
     for scene in args.scene:
-        rc = scene_process_status(subprocess.Popen([sys.executable, "-m", "doefab", "run", scene, *flags]))
+        child = subprocess.Popen([sys.executable, "-m", "doefab", "run", scene, *flags], start_new_session=True)
+        rc, how = scene_process_status(child)
         if rc != 0:
-            print(f"[doefab run] stopped: {scene} {describe_status(rc)}; the scenes after it were not run",
-                  file=sys.stderr)
+            print(f"[doefab run] stopped: {scene} {how}; the scenes after it were not run", file=sys.stderr)
             return rc
     return 0
 
 
-def scene_process_status(child) -> int:
-    """Wait for a scene's process and return its exit status (128 + N for a death by signal N). On Ctrl-C (which
-    the terminal sends to the child as well) or SIGTERM (passed on here), wait for it to clean up and return its
-    status; a second interrupt kills it."""
+def scene_process_status(child) -> tuple[int, str]:
+    """Wait for a scene's process; returns (exit status, what happened in words). A death by signal N is status
+    128 + N. An interrupt of this process (Ctrl-C, or SIGTERM as ``Terminated``) is passed on to the scene, which
+    is waited for while it cleans up, and gives 130 or 143 whatever the scene returned; a second interrupt kills
+    it."""
     import signal
 
-    from doefab.cli import Terminated
+    from doefab.cli import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
 
     try:
         rc = child.wait()
     except KeyboardInterrupt as exc:
-        if isinstance(exc, Terminated):
-            child.send_signal(signal.SIGTERM)
+        term = isinstance(exc, Terminated)
+        child.send_signal(signal.SIGTERM if term else signal.SIGINT)
+        how = "was terminated (SIGTERM)" if term else "was interrupted (Ctrl-C)"
         while True:
             try:
-                rc = child.wait()
+                child.wait()
                 break
             except KeyboardInterrupt:
                 child.kill()
-    return 128 - rc if rc < 0 else rc
+                how += "; killed at the second interrupt"
+        return (EXIT_TERMINATED if term else EXIT_INTERRUPTED), how
+    rc = 128 - rc if rc < 0 else rc
+    return rc, describe_status(rc)
 
 
 def describe_status(rc: int) -> str:

@@ -133,16 +133,20 @@ def test_report_in_headless_chromium(quick_run):
     shutil.rmtree(profile, ignore_errors=True)
 
 
+def _holder_scenes(tmp_path, names=("a", "b")) -> None:
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
+    for name in names:
+        (tmp_path / f"{name}.toml").write_text(text.replace(stages, 'stages = ["holder"]'))
+
+
 def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
     """Memory a scene's run builds (judges, networks, PSF caches) must not carry into the next scene: with several
     scenes each runs as its own ``doefab run SCENE`` process (a stage run in the parent process here fails), and
-    the flags reach every scene (--force: the holder is recomputed, not kept from the first run)."""
+    the flags reach every scene (a rerun keeps the holder; with --force it is recomputed)."""
     import doefab.pipeline.run as pipeline_run
 
-    text = (REPO / "scenes" / "hdr.toml").read_text()
-    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
-    for name in ("a", "b"):
-        (tmp_path / f"{name}.toml").write_text(text.replace(stages, 'stages = ["holder"]'))
+    _holder_scenes(tmp_path)
 
     def in_this_process(*a, **k):
         raise AssertionError("a scene run in the parent process")
@@ -150,36 +154,53 @@ def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline_run, "run_scene", in_this_process)
     monkeypatch.setattr(pipeline_run, "run_stage", in_this_process)
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "a.toml", "b.toml", "--quick"]) == 0
-    assert main(["run", "a.toml", "b.toml", "--quick", "--force", "holder"]) == 0
-    for name in ("a", "b"):
-        rec = json.loads((tmp_path / "out" / "run" / name / "run.json").read_text())
-        assert rec["quick"] and list(rec["stages"]) == ["holder"] and rec["scene"] == f"{name}.toml"
-        assert not rec["stages"]["holder"]["reused_from_previous_run"]
-        assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
+    rec = lambda name: json.loads((tmp_path / "out" / "run" / name / "run.json").read_text())  # noqa: E731
+    for force, reused in (([], None), ([], True), (["--force", "holder"], None)):
+        assert main(["run", "a.toml", "b.toml", "--quick", *force]) == 0
+        for name in ("a", "b"):
+            r = rec(name)
+            assert r["quick"] and list(r["stages"]) == ["holder"] and r["scene"] == f"{name}.toml"
+            assert r["stages"]["holder"]["reused_from_previous_run"] is reused, (force, name)
+            assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
 
 
-def test_sigterm_to_several_scenes_reaches_the_running_scene(tmp_path):
-    """SIGTERM to ``doefab run A B`` is passed on to A's process, which cleans up (nothing finished: its folder
-    goes) before the parent reports; B never starts."""
+def _line_with(stream, needle: str, timeout_s: float = 300) -> bool:
+    """Read ``stream`` until a line holds ``needle``; False if it does not come within ``timeout_s``."""
+    import queue
+    import threading
+
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(ln) for ln in stream], daemon=True).start()
+    while True:
+        try:
+            if needle in lines.get(timeout=timeout_s):
+                return True
+        except queue.Empty:
+            return False
+
+
+@pytest.mark.parametrize("sig, status, word", [("SIGTERM", 143, "terminated (SIGTERM)"),
+                                               ("SIGINT", 130, "interrupted")])
+def test_an_interrupt_of_several_scenes_reaches_the_running_scene(tmp_path, sig, status, word):
+    """SIGTERM or Ctrl-C to ``doefab run A B`` (the parent alone: each scene has a session of its own) is passed
+    on to A's process, which cleans up (nothing finished: its folder goes) before the parent reports; B never
+    starts."""
     import signal
 
-    text = (REPO / "scenes" / "hdr.toml").read_text()
-    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
-    for name in ("a", "b"):
-        (tmp_path / f"{name}.toml").write_text(text.replace(stages, 'stages = ["holder"]'))
+    _holder_scenes(tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "doefab", "run", "a.toml", "b.toml"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    for line in proc.stdout:
-        if "[doefab run] holder …" in line:
-            break
-    assert (tmp_path / "out" / "run" / "a").is_dir()  # scene a is under way
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=300)
-    assert proc.returncode == 143, err
-    lines = err.strip().splitlines()
-    assert "terminated (SIGTERM); nothing was kept" in lines[-2], err
-    assert "a.toml was terminated (SIGTERM); the scenes after it were not run" in lines[-1], err
+    try:
+        assert _line_with(proc.stdout, "[doefab run] holder …")
+        assert (tmp_path / "out" / "run" / "a").is_dir()  # scene a is under way
+        proc.send_signal(getattr(signal, sig))
+        err = proc.communicate(timeout=300)[1]
+    finally:
+        proc.kill()
+    assert proc.returncode == status, err
+    scene_line = next(i for i, ln in enumerate(err.splitlines()) if f"{word}; nothing was kept" in ln)
+    assert any(f"a.toml was {word}" in ln and "the scenes after it were not run" in ln
+               for ln in err.splitlines()[scene_line + 1:]), err
     assert not (tmp_path / "out" / "run" / "a").exists() and not (tmp_path / "out" / "run" / "b").exists()
 
 
@@ -187,6 +208,6 @@ def test_a_scene_process_killed_by_a_signal_is_named():
     from doefab.cli.run import describe_status, scene_process_status
 
     child = subprocess.Popen([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
-    rc = scene_process_status(child)
-    assert rc == 137 and "SIGKILL" in describe_status(rc) and "memory" in describe_status(rc)
+    rc, how = scene_process_status(child)
+    assert rc == 137 and "SIGKILL" in how and "memory" in how
     assert describe_status(2) == "failed (exit status 2)"
