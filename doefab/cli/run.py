@@ -55,37 +55,41 @@ def run(args) -> int:
 
 def run_each_in_own_process(args) -> int:
     """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, in order, stopping at the first that
-    fails (its exit status is returned; it printed its own error). Each scene runs in a session of its own:
-    Ctrl-C and SIGTERM reach this process, which passes them on, waits for the scene to clean up and report
-    what it kept, and starts no later scene."""
-    import subprocess
+    fails (its exit status is returned; it printed its own error). Ctrl-C reaches the running scene from the
+    terminal; SIGTERM is passed on to it; either way the scene cleans up and reports what it kept, and no later
+    scene starts."""
     import sys
 
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
              + (["--debug"] if getattr(args, "debug", False) else []))
     for scene in args.scene:
-        child = subprocess.Popen([sys.executable, "-m", "doefab", "run", scene, *flags], start_new_session=True)
-        rc, how = scene_process_status(child)
+        rc, how = run_scene_process([sys.executable, "-m", "doefab", "run", scene, *flags])
         if rc != 0:
             print(f"[doefab run] stopped: {scene} {how}; the scenes after it were not run", file=sys.stderr)
             return rc
     return 0
 
 
-def scene_process_status(child) -> tuple[int, str]:
-    """Wait for a scene's process; returns (exit status, what happened in words). A death by signal N is status
-    128 + N. An interrupt of this process (Ctrl-C, or SIGTERM as ``Terminated``) is passed on to the scene, which
-    is waited for while it cleans up, and gives 130 or 143 whatever the scene returned; a second interrupt kills
-    it."""
+def run_scene_process(cmd: list[str]) -> tuple[int, str]:
+    """Start a scene's process and wait for it; returns (exit status, what happened in words). A death by signal
+    N is status 128 + N. On Ctrl-C (which the terminal sends to the scene too) or SIGTERM (``Terminated``, passed
+    on here) the scene is waited for while it cleans up, and the status is 130 or 143 whatever the scene
+    returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short)."""
     import signal
+    import subprocess
 
     from doefab.cli import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
 
+    child = None
     try:
+        child = subprocess.Popen(cmd)
         rc = child.wait()
     except KeyboardInterrupt as exc:
+        if child is None:
+            raise
         term = isinstance(exc, Terminated)
-        child.send_signal(signal.SIGTERM if term else signal.SIGINT)
+        if term:
+            child.send_signal(signal.SIGTERM)
         how = "was terminated (SIGTERM)" if term else "was interrupted (Ctrl-C)"
         while True:
             try:

@@ -164,50 +164,9 @@ def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
             assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
 
 
-def _line_with(stream, needle: str, timeout_s: float = 300) -> bool:
-    """Read ``stream`` until a line holds ``needle``; False if it does not come within ``timeout_s``."""
-    import queue
-    import threading
-
-    lines: queue.Queue = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(ln) for ln in stream], daemon=True).start()
-    while True:
-        try:
-            if needle in lines.get(timeout=timeout_s):
-                return True
-        except queue.Empty:
-            return False
-
-
-@pytest.mark.parametrize("sig, status, word", [("SIGTERM", 143, "terminated (SIGTERM)"),
-                                               ("SIGINT", 130, "interrupted")])
-def test_an_interrupt_of_several_scenes_reaches_the_running_scene(tmp_path, sig, status, word):
-    """SIGTERM or Ctrl-C to ``doefab run A B`` (the parent alone: each scene has a session of its own) is passed
-    on to A's process, which cleans up (nothing finished: its folder goes) before the parent reports; B never
-    starts."""
-    import signal
-
-    _holder_scenes(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-m", "doefab", "run", "a.toml", "b.toml"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    try:
-        assert _line_with(proc.stdout, "[doefab run] holder …")
-        assert (tmp_path / "out" / "run" / "a").is_dir()  # scene a is under way
-        proc.send_signal(getattr(signal, sig))
-        err = proc.communicate(timeout=300)[1]
-    finally:
-        proc.kill()
-    assert proc.returncode == status, err
-    scene_line = next(i for i, ln in enumerate(err.splitlines()) if f"{word}; nothing was kept" in ln)
-    assert any(f"a.toml was {word}" in ln and "the scenes after it were not run" in ln
-               for ln in err.splitlines()[scene_line + 1:]), err
-    assert not (tmp_path / "out" / "run" / "a").exists() and not (tmp_path / "out" / "run" / "b").exists()
-
-
 def test_a_scene_process_killed_by_a_signal_is_named():
-    from doefab.cli.run import describe_status, scene_process_status
+    from doefab.cli.run import describe_status, run_scene_process
 
-    child = subprocess.Popen([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
-    rc, how = scene_process_status(child)
+    rc, how = run_scene_process([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
     assert rc == 137 and "SIGKILL" in how and "memory" in how
     assert describe_status(2) == "failed (exit status 2)"
