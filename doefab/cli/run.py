@@ -56,8 +56,8 @@ def run(args) -> int:
 def run_each_in_own_process(args) -> int:
     """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, in order, stopping at the first that
     fails (its exit status is returned; it printed its own error). Ctrl-C reaches the running scene from the
-    terminal; SIGTERM is passed on to it; either way the scene cleans up and reports what it kept, and no later
-    scene starts."""
+    terminal; SIGTERM is passed on to it; either way this process waits for the scene, and no later scene
+    starts."""
     import sys
 
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
@@ -87,10 +87,10 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
     except KeyboardInterrupt as exc:
         if child is None:
             raise
-        term = isinstance(exc, Terminated)
-        if term:
+        status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+        if status == EXIT_TERMINATED:
             child.send_signal(signal.SIGTERM)
-        how = "was terminated (SIGTERM)" if term else "was interrupted (Ctrl-C)"
+        how = describe_status(status)
         while True:
             try:
                 child.wait()
@@ -98,7 +98,7 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
             except KeyboardInterrupt:
                 child.kill()
                 how += "; killed at the second interrupt"
-        return (EXIT_TERMINATED if term else EXIT_INTERRUPTED), how
+        return status, how
     rc = 128 - rc if rc < 0 else rc
     return rc, describe_status(rc)
 
