@@ -30,7 +30,7 @@ import torch
 
 from doefab.optics.camera import Camera
 from doefab.optics.propagators import make_route
-from doefab.optics.propagators.base import FocalSetup
+from doefab.optics.propagators.base import FocalSetup, plane_batches
 from doefab.optics.pupil import pupil_half, source_path_difference
 
 __all__ = ["MountedPlan", "stop_case"]
@@ -110,11 +110,15 @@ class MountedPlan:
             for half in halves:
                 geo = self.geo[half]
                 sub = t[:, geo.rows.start - r0:geo.rows.stop - r0, geo.cols.start - c0:geo.cols.stop - c0]
-                pupil = self._coverage(half, dx) * sub
-                if opd[half] is not None:
-                    pupil = pupil * torch.polar(torch.ones_like(opd[half]), self._k[i] * opd[half])
                 setup, prepared = self._prepared[half]
-                inten = self.route.intensity(pupil, i, setup, prepared) / geo.full_area
+                planes = d if (opd[half] is not None or propagate) else 1
+                got = []
+                for b in plane_batches(planes, 4 * sub.shape[-1] * sub.shape[-2]):  # pupils of a few planes
+                    pupil = self._coverage(half, dx) * (sub if sub.shape[0] == 1 else sub[b])
+                    if opd[half] is not None:
+                        pupil = pupil * torch.polar(torch.ones_like(opd[half][b]), self._k[i] * opd[half][b])
+                    got.append(self.route.intensity(pupil, i, setup, prepared))
+                inten = (got[0] if len(got) == 1 else torch.cat(got)) / geo.full_area
                 out[half].append(inten.expand(d, self.kernel, self.kernel))
         return {h: torch.stack(v, dim=1) for h, v in out.items()}
 

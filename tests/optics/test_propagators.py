@@ -108,3 +108,32 @@ def test_angular_spectrum_refuses_long_distance():
     field = torch.ones(128, 128, dtype=torch.complex128)
     with pytest.raises(SamplingError, match="transfer-function aliasing"):
         doefab.angular_spectrum(field * torch.exp(1j * torch.linspace(0, 300, 128))[None, :], 1e-6, 500e-9, 0.5)
+
+
+@pytest.mark.parametrize("n, plane, budget", [(65, 5_248_000, 2**25), (5, 10, 2**25), (7, 100, 200), (3, 10**9, 2**25)])
+def test_plane_batches_cover_every_plane_once_within_the_budget(monkeypatch, n, plane, budget):
+    from doefab.optics.propagators import base
+
+    monkeypatch.setattr(base, "BATCH_ELEMENTS", budget)
+    runs = base.plane_batches(n, plane)
+    assert [i for s in runs for i in range(s.start, s.stop)] == list(range(n))
+    assert all(s.stop - s.start >= 1 for s in runs)
+    assert all((s.stop - s.start) * plane <= budget for s in runs if s.stop - s.start > 1)
+
+
+def test_spectral_batches_of_planes_equal_each_plane_alone(small_camera, random_doe, monkeypatch):
+    """Depth planes transformed a few at a time give each plane's PSF as computed alone."""
+    from doefab.optics.propagators import base
+
+    zs = [0.4, 0.7, 1.5, 5.0, math.inf]
+    kw = dict(kernel_size=41, halves=("coded",))
+    alone = np.concatenate([doefab.split_aperture_psf(random_doe, small_camera, [450e-9, 650e-9], [z], **kw)["coded"]
+                            for z in zs])
+    monkeypatch.setattr(base, "BATCH_ELEMENTS", 1)  # one plane per transform
+    one = doefab.split_aperture_psf(random_doe, small_camera, [450e-9, 650e-9], zs, **kw)["coded"]
+    monkeypatch.setattr(base, "BATCH_ELEMENTS", 2**40)  # every plane in one transform
+    every = doefab.split_aperture_psf(random_doe, small_camera, [450e-9, 650e-9], zs, **kw)["coded"]
+    for got in (one, every):
+        assert np.asarray(got).shape == alone.shape
+        assert np.abs(np.asarray(got) - alone).max() <= 1e-6 * alone.max()
+    assert np.abs(alone[0] - alone[-1]).max() > 1e-2 * alone.max()

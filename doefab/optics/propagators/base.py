@@ -22,7 +22,13 @@ import torch
 
 from doefab.errors import SamplingError
 
-__all__ = ["FocalSetup", "Route", "gauss_legendre_pixel", "check_window", "pixel_integration_matrix"]
+__all__ = ["FocalSetup", "Route", "gauss_legendre_pixel", "check_window", "pixel_integration_matrix",
+           "plane_batches", "BATCH_ELEMENTS"]
+
+#: complex samples (padded transform planes × batch) one batched transform holds at most: a batch of dozens of
+#: depth planes on a 1600² grid is GBs, and runs ~1.6× slower than the same planes a few at a time (measured
+#: on the committed half-ring design, 65 planes: 40–51 s and 12 GiB against 26 s and 3.6 GiB per part)
+BATCH_ELEMENTS = 2**25
 
 
 @dataclass(frozen=True)
@@ -142,3 +148,10 @@ def pixel_integration_matrix(samples: np.ndarray, spacing: float, edges_lo: np.n
         return np.where(t < 0, (t + d) ** 2 / (2 * d), d - (d - t) ** 2 / (2 * d))
 
     return antideriv(edges_hi[:, None] - samples[None, :]) - antideriv(edges_lo[:, None] - samples[None, :])
+
+
+def plane_batches(n: int, plane_elements: int) -> list[slice]:
+    """Slices cutting a batch of ``n`` planes into runs of at most ``BATCH_ELEMENTS`` samples (at least one plane
+    each) for planes of ``plane_elements`` samples."""
+    step = max(1, BATCH_ELEMENTS // max(int(plane_elements), 1))
+    return [slice(j, min(j + step, n)) for j in range(0, n, step)]

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from doefab.optics.propagators.base import FocalSetup, check_window
+from doefab.optics.propagators.base import FocalSetup, check_window, plane_batches
 
 __all__ = ["SpectralRoute", "band_limited_pixel_matrix"]
 
@@ -85,8 +85,12 @@ class SpectralRoute:
         wy, wxt, env = mats[index]
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)
-        field = torch.fft.fft2(pupil, s=(ly, lx))
-        re_im = torch.view_as_real(field)
-        inten = torch.addcmul(re_im[..., 0] * re_im[..., 0], re_im[..., 1], re_im[..., 1])
-        out = (wy @ inten @ wxt) * scale**2
+        lead, flat = pupil.shape[:-2], pupil.reshape(-1, *pupil.shape[-2:])
+        parts = []
+        for b in plane_batches(flat.shape[0], ly * lx):  # a few planes at a time (``BATCH_ELEMENTS``)
+            field = torch.fft.fft2(flat[b], s=(ly, lx))
+            re_im = torch.view_as_real(field)
+            inten = torch.addcmul(re_im[..., 0] * re_im[..., 0], re_im[..., 1], re_im[..., 1])
+            parts.append(wy @ inten @ wxt)
+        out = (parts[0] if len(parts) == 1 else torch.cat(parts)).reshape(*lead, *parts[0].shape[-2:]) * scale**2
         return out * env if env is not None else out
