@@ -20,6 +20,8 @@ import hashlib
 import json
 import math
 import time
+from collections import OrderedDict
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +77,8 @@ class PSFJudge:
     refined ``supersample``× (cells per DOE pixel and axis). ``chain``: the mask set's alignment chain (default:
     read from the manifest beside the design folder)."""
 
+    KEEP = 32  # PSFs (source, half) ``reuse`` keeps: a tornado's coded halves and its network pass's pairs
+
     def __init__(self, design_dir, supersample: int = 1, threads: int | None = None, margin: float = DEFAULT_MARGIN,
                  chain: dict | None = None):
         from doefab.design.design import Design
@@ -104,7 +108,8 @@ class PSFJudge:
         self._plans: dict = {}
         self._uncoded = None
         self._relief_cache: tuple = (None, None)
-        self._last: tuple | None = None  # (source, halves, kernel, {half: PSF}) of the latest PSF computed
+        self._kept: OrderedDict = OrderedDict()  # {(source, half): PSF} of the latest PSFs computed (``reuse``)
+        self._min_kernel = 0  # part PSFs are computed at this kernel at least (``computing_at``)
         self._nominal = None
         self.seconds_per_psf = None
 
@@ -119,19 +124,41 @@ class PSFJudge:
             self.seconds_per_psf = time.perf_counter() - t
         return self._nominal
 
-    def reuse(self, source: str, halves, kernel: int | None, compute) -> dict:
-        """``compute()``'s {half: PSF} for ``source`` (a part's errors or a height map's digest), or the crop of the
-        latest PSFs of the same source when they hold these halves at a kernel at least as large: pixel centres
-        sit at (k − K//2)·p for every K, so a smaller kernel is the centre crop of a larger one, exactly. A
-        network-level part thereby pays once for the coded PSF its PSF metric and its network both use."""
+    def reuse(self, source: str, halves, kernel: int | None, compute, compute_kernel: int | None = None) -> dict:
+        """{half: PSF} of ``source`` (a part's errors or a height map's digest): each half served from the PSFs
+        kept for the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p for every K, so
+        a smaller kernel is the centre crop of a larger one, exactly), the rest from ``compute(todo)``, which
+        computes only the halves ``todo``, at ``compute_kernel`` (default ``kernel``). The latest ``KEEP`` PSFs
+        are kept: a network-level part pays once for the coded PSF its PSF metric and its network both use, and
+        the tornado's network pass for the coded halves its PSF-level pass already computed."""
         k = int(kernel or self.task.kernel_size)
-        last = self._last
-        if last is not None and last[0] == source and set(halves) <= set(last[1]) and k <= last[2]:
-            c = last[2] // 2 - k // 2
-            return {h: last[3][h][..., c:c + k, c:c + k].clone() for h in halves}
-        out = compute()
-        self._last = (source, tuple(halves), k, {h: v.detach().clone() for h, v in out.items()})
-        return out
+        got = {}
+        for h in halves:
+            kept = self._kept.get((source, h))
+            if kept is not None and k <= kept.shape[-1]:
+                c = kept.shape[-1] // 2 - k // 2
+                got[h] = kept[..., c:c + k, c:c + k].clone()
+                self._kept.move_to_end((source, h))
+        todo = tuple(h for h in halves if h not in got)
+        if todo:
+            out = compute(todo)
+            for h in todo:
+                self._kept[(source, h)] = out[h].detach().clone()
+                c = out[h].shape[-1] // 2 - k // 2
+                got[h] = out[h][..., c:c + k, c:c + k] if c else out[h]
+            while len(self._kept) > self.KEEP:
+                self._kept.popitem(last=False)
+        return {h: got[h] for h in halves}
+
+    @contextmanager
+    def computing_at(self, kernel: int | None):
+        """Within: part PSFs are computed at ``kernel`` at least (and cropped to what is asked), so that a pass
+        at that larger kernel which follows (the networks') is served from them."""
+        old, self._min_kernel = self._min_kernel, int(kernel or 0)
+        try:
+            yield self
+        finally:
+            self._min_kernel = old
 
     def plan(self, halves=("coded",), decenter: float = 0.0, kernel: int | None = None):
         """The mounted-part PSF model for these halves, reaching at least ``decenter`` beyond the centre line."""
@@ -217,13 +244,16 @@ class PSFJudge:
         if any(not 0 <= v < 0.5 for v in err.crosstalk):
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
         source = "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
-
-        def compute():
-            plan = self.plan(halves, err.mount_shift[0], kernel)
-            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
+        k = int(kernel or self.task.kernel_size)
         if err.axial_gap > 0 and not self.fine.doe_is_stop:  # the gap mixes the plan's window: nothing to share
-            return compute()
-        return self.reuse(source, halves, kernel, compute)
+            plan = self.plan(halves, err.mount_shift[0], k)
+            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
+        big = max(k, self._min_kernel)
+
+        def compute(todo):
+            plan = self.plan(halves, err.mount_shift[0], big)
+            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
+        return self.reuse(source, halves, k, compute, big)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""
@@ -236,7 +266,7 @@ class PSFJudge:
         h = torch.as_tensor(np.asarray(height, np.float64))
         source = "height " + hashlib.sha256(h.numpy().tobytes()).hexdigest() + str(tuple(h.shape))
 
-        def compute():
+        def compute(todo):
             plan = self.plan(halves, 0.0, kernel)
             (r0, r1), (c0, c1) = plan.window
             rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
@@ -245,7 +275,7 @@ class PSFJudge:
                 ph = (plan.phase_per_metre(i) * rel).float()
                 return torch.polar(torch.ones_like(ph), ph)
             with torch.no_grad():
-                return plan.psfs(at, halves=halves)
+                return plan.psfs(at, halves=todo)
         return self.reuse(source, halves, kernel, compute)
 
     def psf_from_height(self, height) -> torch.Tensor:

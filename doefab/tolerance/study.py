@@ -8,6 +8,7 @@ Judges are built once per (design, grid) per process; workers rebuild them from 
 from __future__ import annotations
 
 import os
+from contextlib import ExitStack
 
 import numpy as np
 
@@ -95,7 +96,11 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
-        psf = tornado(design_dir, budget, grids, False, progress=progress)
+        with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up
+            for s in {1, *(int(v) for v in grids.values())}:
+                k = network_judge_for(design_dir, s, weights_dir).rec.pair.coded.shape[-1]
+                stack.enter_context(judge_for(design_dir, s).computing_at(k))
+            psf = tornado(design_dir, budget, grids, False, progress=progress)
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
         present = [k for k in present if k.name in top]

@@ -97,3 +97,27 @@ def test_nothing_is_shared_across_a_gap_in_front_of_a_lens_stop(design_dir):
         got, want = warm.psfs(part)["coded"], cold.psfs(part)["coded"]
     assert float((got - want).abs().max()) <= 1e-6 * float(want.max())
 
+
+
+def test_a_pass_computed_at_a_larger_kernel_serves_the_pair_that_follows(design_dir):
+    """The tornado's PSF pass runs ``computing_at`` the network's kernel: its coded halves are kept there, and the
+    network pass computes only the plain halves; every PSF equals a cold judge's."""
+    j = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    cold = PSFJudge(design_dir, 1, margin=40 * PITCH)
+    computed = []
+    orig = j.plan(("coded", "uncoded"), PART.mount_shift[0], 61).psfs
+
+    def spy(field, *a, halves=None, **kw):
+        computed.append(tuple(halves))
+        return orig(field, *a, halves=halves, **kw)
+    j.plan(("coded", "uncoded"), PART.mount_shift[0], 61).psfs = spy
+    with torch.no_grad():
+        with j.computing_at(61):
+            small = j.psfs(PART)["coded"]  # the task's 41 px
+        pair = j.psfs(PART, halves=("coded", "uncoded"), kernel=61)
+        want_small, want = cold.psfs(PART)["coded"], cold.psfs(PART, halves=("coded", "uncoded"), kernel=61)
+    assert small.shape[-1] == 41 and pair["coded"].shape[-1] == 61
+    assert float((small - want_small).abs().max()) <= 1e-5 * float(want_small.max())
+    for h in ("coded", "uncoded"):
+        assert float((pair[h] - want[h]).abs().max()) <= 1e-5 * float(want[h].max())
+    assert len(computed) == 1 and computed[0] == ("uncoded",)  # the coded half came from the first pass
