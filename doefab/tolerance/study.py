@@ -96,10 +96,10 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
+        kernel = network_judge_for(design_dir, 1, weights_dir).rec.pair.coded.shape[-1]  # the network's
         with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up
-            for s in {1, *(int(v) for v in grids.values())}:
-                k = network_judge_for(design_dir, s, weights_dir).rec.pair.coded.shape[-1]
-                stack.enter_context(judge_for(design_dir, s).computing_at(k))
+            for s in {int(grids.get(k.name, 1)) for k in present}:
+                stack.enter_context(judge_for(design_dir, s).computing_at(kernel))
             psf = tornado(design_dir, budget, grids, False, progress=progress)
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
