@@ -17,8 +17,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 D = ROOT / "out" / "depthcand"
 CANDIDATES = [  # name, design folder, weights folder, label
-    ("committed", D / "committed", "committed",
-     "radial, defocus law, from a lens start of the wrong sign (refocused to ≈ 2.7 m)"),
+    ("previous", D / "committed", "committed",  # out/depthcand/committed: the design committed before
+     "radial, defocus law, from a lens start of the wrong sign (refocused to ≈ 2.7 m): the previous design"),
     ("radial-seed", D / "radial-seed", "radial-seed", "radial, seed law (r = 25 − 5z), from the refocusing lens"),
     ("radial-defocus", D / "radial-defocus", "radial-defocus",
      "radial, defocus law (r ∝ 1/z − 1/5 m), from the refocusing lens: the committed design"),

@@ -43,8 +43,8 @@ def export_once(levels, cam, klayout: bool) -> tuple[float, dict]:
 def child_8640() -> None:
     levels, cam = level_map(8640, 1e-6)
     dt, rep = export_once(levels, cam, klayout=False)
-    rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
-    print(json.dumps({"seconds": dt, "max_rss_gb": rss_gb, "gds_bytes": rep["file_bytes"]["gds"],
+    rss_gib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+    print(json.dumps({"seconds": dt, "max_rss_gib": rss_gib, "gds_bytes": rep["file_bytes"]["gds"],
                       "polygons": sum(v["polygons"] for v in rep["layers"].values())}))
 
 
@@ -99,7 +99,7 @@ def main() -> None:
     child = subprocess.run([sys.executable, __file__, "--child-8640"], capture_output=True, text=True, check=True)
     big = json.loads(child.stdout.strip().splitlines()[-1])
     lines.append(f"| 8640² at 1 µm, gdstk read-back | {big['seconds']:.1f} | {big['polygons']} | "
-                 f"{big['gds_bytes'] / 1e6:.0f} MB | peak memory {big['max_rss_gb']:.2f} GB |")
+                 f"{big['gds_bytes'] / 1e6:.0f} MB | peak memory {big['max_rss_gib']:.2f} GiB |")
     crop = levels[1300:1556, 1300:1556]
     from doefab.fabrication.bitplanes import bit_planes
 

@@ -77,7 +77,7 @@ class PSFJudge:
     refined ``supersample``× (cells per DOE pixel and axis). ``chain``: the mask set's alignment chain (default:
     read from the manifest beside the design folder)."""
 
-    KEEP = 32  # PSFs (source, half) ``reuse`` keeps: a tornado's coded halves and its network pass's pairs
+    KEEP_BYTES = 256 * 2**20  # PSFs ``reuse`` keeps: a tornado's coded halves (12 of 4.5 MB for a 31-band grating)
 
     def __init__(self, design_dir, supersample: int = 1, threads: int | None = None, margin: float = DEFAULT_MARGIN,
                  chain: dict | None = None):
@@ -124,30 +124,32 @@ class PSFJudge:
             self.seconds_per_psf = time.perf_counter() - t
         return self._nominal
 
-    def reuse(self, source: str, halves, kernel: int | None, compute, compute_kernel: int | None = None) -> dict:
-        """{half: PSF} of ``source`` (a part's errors or a height map's digest): each half served from the PSFs
-        kept for the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p for every K, so
-        a smaller kernel is the centre crop of a larger one, exactly), the rest from ``compute(todo)``, which
-        computes only the halves ``todo``, at ``compute_kernel`` (default ``kernel``). The latest ``KEEP`` PSFs
-        are kept: a network-level part pays once for the coded PSF its PSF metric and its network both use, and
-        the tornado's network pass for the coded halves its PSF-level pass already computed."""
+    def reuse(self, source: str, halves, kernel: int | None, compute) -> dict:
+        """{half: PSF} of ``source`` (a part's errors or a height map's digest) at ``kernel``: each half served
+        from the PSF kept for the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p
+        for every K, so a smaller kernel is the centre crop of a larger one, to float rounding), the rest from
+        ``compute(todo)``, which computes only the halves ``todo`` (at ``kernel`` or larger). The latest PSFs are
+        kept, up to ``KEEP_BYTES``: a network-level part pays once for the coded PSF its PSF metric and its
+        network both use, and the tornado's network pass for the coded halves its PSF-level pass computed."""
         k = int(kernel or self.task.kernel_size)
+
+        def crop(v: torch.Tensor) -> torch.Tensor:
+            c = v.shape[-1] // 2 - k // 2
+            return v if v.shape[-1] == k else v[..., c:c + k, c:c + k]
         got = {}
         for h in halves:
             kept = self._kept.get((source, h))
             if kept is not None and k <= kept.shape[-1]:
-                c = kept.shape[-1] // 2 - k // 2
-                got[h] = kept[..., c:c + k, c:c + k].clone()
+                got[h] = crop(kept).clone()
                 self._kept.move_to_end((source, h))
         todo = tuple(h for h in halves if h not in got)
         if todo:
             out = compute(todo)
             for h in todo:
                 self._kept[(source, h)] = out[h].detach().clone()
-                c = out[h].shape[-1] // 2 - k // 2
-                got[h] = out[h][..., c:c + k, c:c + k] if c else out[h]
-            while len(self._kept) > self.KEEP:
-                self._kept.popitem(last=False)
+                got[h] = crop(out[h])
+            while len(self._kept) > len(todo) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
+                self._kept.popitem(last=False)  # the oldest first; this call's PSFs stay
         return {h: got[h] for h in halves}
 
     @contextmanager
@@ -253,7 +255,7 @@ class PSFJudge:
         def compute(todo):
             plan = self.plan(halves, err.mount_shift[0], big)
             return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
-        return self.reuse(source, halves, k, compute, big)
+        return self.reuse(source, halves, k, compute)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""

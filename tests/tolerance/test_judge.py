@@ -98,7 +98,6 @@ def test_nothing_is_shared_across_a_gap_in_front_of_a_lens_stop(design_dir):
     assert float((got - want).abs().max()) <= 1e-6 * float(want.max())
 
 
-
 def test_a_pass_computed_at_a_larger_kernel_serves_the_pair_that_follows(design_dir):
     """The tornado's PSF pass runs ``computing_at`` the network's kernel: its coded halves are kept there, and the
     network pass computes only the plain halves; every PSF equals a cold judge's."""
@@ -121,3 +120,20 @@ def test_a_pass_computed_at_a_larger_kernel_serves_the_pair_that_follows(design_
     for h in ("coded", "uncoded"):
         assert float((pair[h] - want[h]).abs().max()) <= 1e-5 * float(want[h].max())
     assert len(computed) == 1 and computed[0] == ("uncoded",)  # the coded half came from the first pass
+
+
+def test_an_even_kernel_is_cropped_from_one_a_pixel_larger(grating_design):
+    """An even task kernel inside ``computing_at`` the odd network kernel one larger: the PSF comes back at the
+    size asked, equal to a cold judge's, and the part can be scored against the nominal."""
+    even = grating_design(N, 40, seed=1)
+    j, cold = PSFJudge(even, 1, margin=40 * PITCH), PSFJudge(even, 1, margin=40 * PITCH)
+    with torch.no_grad():
+        with j.computing_at(41):
+            got = j.psfs(PART)["coded"]
+            again = j.psfs(PART)["coded"]  # served from the kept 41 px PSF
+            scored = j.evaluate(PART)
+        want = cold.psfs(PART)["coded"]
+    assert got.shape == again.shape == want.shape and want.shape[-1] == 40
+    for v in (got, again):
+        assert float((v - want).abs().max()) <= 1e-5 * float(want.max())
+    assert abs(scored["metric"] - cold.evaluate(PART)["metric"]) <= 1e-5

@@ -148,7 +148,6 @@ def test_a_vanishing_gap_changes_nothing_in_front_of_a_lens_stop(grating_dir):
     assert float((tiny - none).abs().max()) <= 1e-4 * float(none.max())
 
 
-
 def test_planes_in_batches_equal_each_plane_alone(grating_dir, monkeypatch):
     """A part's PSFs at several depths, transformed a few planes at a time (``plane_batches``), equal each depth
     computed by a judge of that depth alone (defocus, a decenter across the split and one along it)."""
