@@ -247,15 +247,13 @@ class PSFJudge:
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
         source = "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
         k = int(kernel or self.task.kernel_size)
-        if err.axial_gap > 0 and not self.fine.doe_is_stop:  # the gap mixes the plan's window: nothing to share
-            plan = self.plan(halves, err.mount_shift[0], k)
-            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=halves)
-        big = max(k, self._min_kernel)
+        shared = err.axial_gap == 0 or self.fine.doe_is_stop  # a gap in front of a lens stop mixes the window
+        big = max(k, self._min_kernel) if shared else k
 
         def compute(todo):
             plan = self.plan(halves, err.mount_shift[0], big)
             return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
-        return self.reuse(source, halves, k, compute)
+        return self.reuse(source, halves, k, compute) if shared else compute(halves)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""
