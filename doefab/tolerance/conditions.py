@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits", "CONDITIONS"]
+__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits", "CONDITIONS",
+           "model_sources_sha256"]
 
 CONDITIONS = ("honest", "clean")
 
@@ -97,13 +98,29 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
                       budget_sha256=digest)
 
 
+PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose code computes a fabricated part's PSF
+
+
+def model_sources_sha256(packages=PART_MODEL) -> str:
+    """SHA-256 of the source of the subpackages that compute a fabricated part's PSFs: part of the cache key, so
+    parts cached by another version of that code (a model fix, an upgrade) are computed afresh, never reused."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for pkg in packages:
+        for f in sorted((root / pkg).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def _key(task, design, split, n, budget, kernel, chain) -> str:
     from doefab.fabrication.levels import levels_sha256
 
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
     text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, DEPTH_REFINE,
                        PART_SEEDS[split], list(design.depths), list(design.wavelengths), kernel,
-                       design.camera.to_dict(), sorted(chain.items())], sort_keys=True, default=str)
+                       design.camera.to_dict(), sorted(chain.items()), model_sources_sha256()], sort_keys=True,
+                      default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 

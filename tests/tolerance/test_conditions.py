@@ -113,3 +113,13 @@ def test_evaluate_spreads_its_scenes_across_the_sensor(monkeypatch, tmp_path):
     monkeypatch.setattr(ev, "make_batch", spy)
     ev.evaluate("hdr", tmp_path, images=3, size=64, progress=False, variants=("uncoded_only",))
     assert seen == [3, 3, 3]
+
+
+def test_parts_cached_by_other_model_code_are_not_reused(depth_design, cache, monkeypatch):
+    before = set((cache / "conditions").glob("depth-*.pt"))
+    real = C.model_sources_sha256()
+    assert real == C.model_sources_sha256() and len(real) == 64
+    assert C.model_sources_sha256(("optics",)) != real  # the part model's sources all count
+    monkeypatch.setattr(C, "model_sources_sha256", lambda: "another version of the optics")
+    C.honest("depth", depth_design, "val", parts=2)
+    assert len(set((cache / "conditions").glob("depth-*.pt")) - before) == 1  # computed afresh, kept apart
