@@ -38,8 +38,8 @@ def register(sub) -> None:
                    help="write the weights over the shipped ones in doefab/weights/ (the committed design only)")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
     p.add_argument("--batch", type=number(int, 1, 64), default=4, help="scenes per step")
-    p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=96,
-                   help="training crop side in pixels")
+    p.add_argument("--crop", type=number(int, 64, 512, unit="pixels; a multiple of 32"), default=None,
+                   help="training crop side in pixels (default: the task's: 96; depth 128)")
     p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate at the start")
     p.add_argument("--schedule", default="cosine", choices=["cosine", "constant"],
                    help="learning rate over the wall-time budget: cosine decay to 5 %% of --lr, or constant")
@@ -60,7 +60,7 @@ def run(args) -> int:
     from doefab.reconstruction.train import train
     from doefab.reconstruction.weights import weights_target
 
-    if args.crop % 32:
+    if args.crop is not None and args.crop % 32:
         raise DoefabError(f"--crop {args.crop} must be a multiple of 32 (e.g. 96)")
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")

@@ -24,19 +24,22 @@ __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batc
 class TaskSpec:
     """name: hdr / hyperspectral / depth.  design: the design task (streak / grating / half-ring).
     kernel: the smallest PSF window (sensor pixels) used to simulate captures (``network_kernel``: a design
-    optimised in a larger window keeps it).  out_channels: network outputs."""
+    optimised in a larger window keeps it).  out_channels: network outputs.  crop: the side (pixels) of the
+    training crops (depth: 128, which validation scenes preferred to 96 and 160 —
+    ``benchmarks/results/depth_training_crop.md``; a cost volume with a 95-pixel PSF needs room)."""
 
     name: str
     design: str
     kernel: int
     out_channels: int
     metric: str  # the validation metric logged while training (higher is better unless it is MAE)
+    crop: int = 96
 
 
 SPECS = {
     "hdr": TaskSpec("hdr", "streak", 95, 3, "psnr"),
     "hyperspectral": TaskSpec("hyperspectral", "grating", 191, 31, "psnr"),
-    "depth": TaskSpec("depth", "half-ring", 95, 1, "mae"),
+    "depth": TaskSpec("depth", "half-ring", 95, 1, "mae", crop=128),
 }
 
 

@@ -96,7 +96,7 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
 
 
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",
-          resume: bool = False, seed: int = 0, batch: int = 4, crop: int = 96, val_images: int = 8,
+          resume: bool = False, seed: int = 0, batch: int = 4, crop: int | None = None, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
           progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
           schedule: str = "cosine", replace_shipped: bool = False, conditions: dict | None = None,
@@ -108,6 +108,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
     network of this task and variant starts the training wherever a tensor's name and shape match."""
     spec = get_spec(task)
+    crop = spec.crop if crop is None else crop
     weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design, task, variant)
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")

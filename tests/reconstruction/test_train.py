@@ -52,3 +52,14 @@ def test_evaluate_at_the_command_line_is_honest_unless_asked_for_the_clean_captu
     rec = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     assert rec["conditions"]["name"] == want and rec["split"] == "val"
     assert rec["conditions"].get("crosstalk", False) is (want == "honest")
+
+
+def test_training_crop_defaults_to_the_tasks(tmp_path):
+    """Depth trains on 128-pixel crops (the cost volume of a 95-pixel PSF needs room), the others on 96."""
+    from doefab.reconstruction.specs import get_spec
+
+    assert get_spec("depth").crop == 128 and get_spec("hdr").crop == 96
+    meta = train("depth", "coded_only", minutes=5, out_dir=tmp_path / "run", weights_dir=tmp_path / "w",
+                 val_images=1, val_every=1000, progress=False, arch={"width": 4, "cost_volume": False},
+                 max_steps=1)
+    assert meta["training"]["crop_px"] == 128 and meta["validation"]["crop_px"] == 128
