@@ -66,7 +66,7 @@ def main() -> None:
 
 def table(rows: dict, args) -> str:
     lines = [f"Proposed depth networks, {args.steps} steps each from scratch under honest captures, on "
-             f"{args.images} validation scenes of 256² px under honest captures (`.venv/bin/python "
+             f"{args.images} validation scenes of 256² px (`.venv/bin/python "
              f"benchmarks/depth_training_pilot.py --steps {args.steps} --images {args.images}`).", "",
              "| training crop (px) | seed | loss | MAE (m) | RMSE (m) | δ<1.25 |", "| --- | --- | --- | --- | --- | --- |"]
     for crop, seed, shipped, m in rows.values():
