@@ -52,7 +52,7 @@ MEASUREMENTS = (
     Measurement("holder_timing", "benchmarks/holder_timing.py", (R + "holder_timing.md",)),
     Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
                 before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
-                        "bash scripts/train_shipped.sh 500 out/s13 depth",
+                        "bash scripts/train_shipped.sh 500 out/s16 depth",
                         "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
     Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),
     Measurement("training_curves", "benchmarks/training_curves.py", (R + "training_curves.png",)),

@@ -70,7 +70,8 @@ def _start_theta(design, param_name: str, dcam, sampling: int) -> tuple[torch.Te
 
 
 def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=None, doe_every: int = 4,
-                        lr_doe: float = 0.01, lr_net: float = 2e-4, batch: int = 4, crop: int = 96, seed: int = 0,
+                        lr_doe: float = 0.01, lr_net: float = 2e-4, batch: int = 4, crop: int | None = None,
+                        seed: int = 0,
                         val_images: int = 8, val_every: int = 20, sampling: int = 2, parameterization: str | None = None,
                         resume: bool = False, progress: bool = True, max_steps: int | None = None) -> dict:
     """Fine-tune the DOE of ``design_dir`` and a depth network together for ``minutes`` of wall time.
@@ -78,7 +79,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     Writes ``out_dir/design/`` (the fine-tuned design, full-grid metrics), ``out_dir/weights/`` (the jointly trained
     network, loadable with ``load_reconstructor("depth", weights_dir=..., design=...)``), ``history.csv`` (step,
     wall time, loss, validation MAE in metres) and ``checkpoint.pt``. Returns a summary with the MAE gained per
-    minute.
+    minute. ``crop``: the training crop side in pixels (default: the depth networks', ``TaskSpec.crop``).
     """
     from doefab.design.design import Design
     from doefab.design.optimize import design_from_theta
@@ -87,8 +88,9 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.loop import run_loop
     from doefab.reconstruction.models import build_model, default_arch, loss_fn
-    from doefab.reconstruction.specs import crop_margin, psf_pair
+    from doefab.reconstruction.specs import crop_margin, get_spec, psf_pair
 
+    crop = get_spec("depth").crop if crop is None else crop
     if not 0 < minutes <= 24 * 60:
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     if crop % 32 or crop < 64:

@@ -25,7 +25,7 @@ class TaskSpec:
     """name: hdr / hyperspectral / depth.  design: the design task (streak / grating / half-ring).
     kernel: the smallest PSF window (sensor pixels) used to simulate captures (``network_kernel``: a design
     optimised in a larger window keeps it).  out_channels: network outputs.  crop: the side (pixels) of the
-    training crops (depth: 128, which validation scenes preferred to 96 and 160 —
+    training crops (depth: 128, better than 96 on validation scenes, 160 no better —
     ``benchmarks/results/depth_training_crop.md``; a cost volume with a 95-pixel PSF needs room)."""
 
     name: str

@@ -63,3 +63,21 @@ def test_training_crop_defaults_to_the_tasks(tmp_path):
                  val_images=1, val_every=1000, progress=False, arch={"width": 4, "cost_volume": False},
                  max_steps=1)
     assert meta["training"]["crop_px"] == 128 and meta["validation"]["crop_px"] == 128
+
+
+@pytest.mark.parametrize("flag, want", [([], None), (["--crop", "160"], 160)])
+def test_train_at_the_command_line_leaves_the_crop_to_the_task_unless_given(tmp_path, monkeypatch, flag, want):
+    import doefab.reconstruction.train as train_mod
+    from doefab.cli import main
+
+    got = {}
+
+    def fake(*a, **k):
+        got.update(k)
+        raise SystemExit(0)  # stop before any training
+
+    monkeypatch.setattr(train_mod, "train", fake)
+    with pytest.raises(SystemExit):
+        main(["train", "--task", "depth", "--variant", "coded_only", "--clean", "--steps", "1",
+              "--out", str(tmp_path / "t"), *flag])
+    assert got["crop"] == want  # None: train() takes the task's crop (128 for depth)

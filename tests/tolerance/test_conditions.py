@@ -115,11 +115,20 @@ def test_evaluate_spreads_its_scenes_across_the_sensor(monkeypatch, tmp_path):
     assert seen == [3, 3, 3]
 
 
-def test_parts_cached_by_other_model_code_are_not_reused(depth_design, cache, monkeypatch):
+def test_parts_cached_by_other_model_code_are_not_reused(honest, depth_design, cache, monkeypatch):
+    """The validation parts are cached (the ``honest`` fixture made them); under another model code the same
+    request misses that file and computes its parts afresh."""
+    from doefab.tolerance import judge
+
     before = set((cache / "conditions").glob("depth-*.pt"))
-    real = C.model_sources_sha256()
-    assert real == C.model_sources_sha256() and len(real) == 64
-    assert C.model_sources_sha256(("optics",)) != real  # the part model's sources all count
+    assert before and C.model_sources_sha256() == C.model_sources_sha256() and len(C.model_sources_sha256()) == 64
+    assert C.model_sources_sha256(("optics",)) != C.model_sources_sha256()  # every part-model package counts
+    computed = []
+    real_psfs = judge.PSFJudge.psfs
+    monkeypatch.setattr(judge.PSFJudge, "psfs", lambda self, *a, **k: computed.append(1) or real_psfs(self, *a, **k))
+    C.honest("depth", depth_design, "val", parts=2)
+    assert computed == []  # the same code: served from the cache
     monkeypatch.setattr(C, "model_sources_sha256", lambda: "another version of the optics")
     C.honest("depth", depth_design, "val", parts=2)
-    assert len(set((cache / "conditions").glob("depth-*.pt")) - before) == 1  # computed afresh, kept apart
+    assert len(computed) == 2  # both parts computed again
+    assert len(set((cache / "conditions").glob("depth-*.pt")) - before) == 1  # and kept apart
