@@ -88,13 +88,11 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.loop import run_loop
     from doefab.reconstruction.models import build_model, default_arch, loss_fn
-    from doefab.reconstruction.specs import crop_margin, get_spec, psf_pair
+    from doefab.reconstruction.specs import crop_margin, psf_pair, training_crop
 
-    crop = get_spec("depth").crop if crop is None else crop
     if not 0 < minutes <= 24 * 60:
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
-    if crop % 32 or crop < 64:
-        raise DoefabError(f"crop must be a multiple of 32 and at least 64, got {crop}")
+    crop = training_crop("depth", crop)
     design = Design.load(design_dir)
     if design.task != "half-ring":
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")

@@ -17,7 +17,7 @@ import torch
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
-           "check_design_task", "network_kernel"]
+           "check_design_task", "network_kernel", "training_crop"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,15 @@ def get_spec(task: str) -> TaskSpec:
     if task not in SPECS:
         raise DoefabError(f"unknown reconstruction task {task!r}: choose one of {sorted(SPECS)}")
     return SPECS[task]
+
+
+def training_crop(task: str, crop: int | None = None) -> int:
+    """The training crop side (pixels) for ``task``: ``crop``, or the task's own (``TaskSpec.crop``) when None;
+    a DoefabError unless it is a multiple of 32 and at least 64 (the networks' input sizes)."""
+    crop = get_spec(task).crop if crop is None else crop
+    if crop % 32 or crop < 64:
+        raise DoefabError(f"crop must be a multiple of 32 and at least 64, got {crop}")
+    return crop
 
 
 def check_design_task(task: str, design_task: str, where, flag: str = "task") -> None:

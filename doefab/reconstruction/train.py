@@ -22,7 +22,7 @@ from doefab.reconstruction.data import split_digest
 from doefab.reconstruction.loop import run_loop
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
-from doefab.reconstruction.specs import get_spec, make_batch, psf_pair
+from doefab.reconstruction.specs import get_spec, make_batch, psf_pair, training_crop
 from doefab.reconstruction.weights import weights_target, write_weights
 
 __all__ = ["train", "model_inputs", "evaluate_batch", "sensor_response_for", "arch_for_design", "copy_matching"]
@@ -108,12 +108,10 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
     network of this task and variant starts the training wherever a tensor's name and shape match."""
     spec = get_spec(task)
-    crop = spec.crop if crop is None else crop
     weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design, task, variant)
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
-    if crop % 32 or crop < 64:
-        raise DoefabError(f"crop must be a multiple of 32 and at least 64, got {crop}")
+    crop = training_crop(task, crop)
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     arch = arch or default_arch(task, variant)
     out = Path(out_dir)
