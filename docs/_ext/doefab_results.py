@@ -59,6 +59,7 @@ MEASUREMENTS = (
     Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
     Measurement("hdr_loss_pilot", "benchmarks/hdr_loss_pilot.py", (R + "hdr_loss_pilot.md",)),
     Measurement("depth_training_crop", "benchmarks/depth_training_pilot.py", (R + "depth_training_crop.md",)),
+    Measurement("depth_error_sources", "benchmarks/depth_error_sources.py", (R + "depth_error_sources.md",)),
     Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
                 json_table="hdr_real_images"),
     Measurement("tolerance_studies", "benchmarks/tolerance_studies.py", (R + "tolerance_studies.md",)),
