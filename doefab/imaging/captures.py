@@ -26,17 +26,26 @@ from doefab import _validate
 from doefab.errors import DoefabError
 from doefab.imaging.sensor import noise_model
 
-__all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks"]
+__all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks", "fft_length"]
+
+
+def fft_length(n: int) -> int:
+    """The smallest even 5-smooth length ≥ ``n`` (2^a·3^b·5^c, a ≥ 1): any length ≥ h + k − 1 gives the same
+    linear convolution, and real transforms of these lengths are the fastest (an odd one such as 625 takes
+    ~1.5× as long as 640 in torch's CPU FFT)."""
+    from scipy.fft import next_fast_len
+
+    m = next_fast_len(int(n), real=True)
+    while m % 2:
+        m = next_fast_len(m + 1, real=True)
+    return m
 
 
 def convolve(images: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
     """Linear 'same' convolution of [..., C, H, W] images with [C, K, K] PSFs (pixel K//2 at the centre)."""
-    from scipy.fft import next_fast_len
-
     h, w = images.shape[-2:]
     k = psf.shape[-1]
-    # any size ≥ h + k − 1 gives the same linear convolution; a 5-smooth one is several times faster
-    fh, fw = next_fast_len(h + k - 1, real=True), next_fast_len(w + k - 1, real=True)
+    fh, fw = fft_length(h + k - 1), fft_length(w + k - 1)
     spec = torch.fft.rfft2(images, s=(fh, fw)) * torch.fft.rfft2(psf.to(images.dtype), s=(fh, fw))
     full = torch.fft.irfft2(spec, s=(fh, fw))
     c = k // 2
@@ -56,11 +65,9 @@ def render_layers(scene: torch.Tensor, psf: torch.Tensor, masks: torch.Tensor | 
         return convolve(scene, psf[0])
     # farthest plane first: ascending inverse depth (plane index order when no depths are given)
     order = sorted(range(psf.shape[0]), key=(lambda d: 1.0 / depths[d]) if depths else (lambda d: d))
-    from scipy.fft import next_fast_len
-
     h, w = scene.shape[-2:]
     k = psf.shape[-1]
-    fh, fw = next_fast_len(h + k - 1, real=True), next_fast_len(w + k - 1, real=True)
+    fh, fw = fft_length(h + k - 1), fft_length(w + k - 1)
     c = k // 2
     acc = torch.zeros_like(scene)
     for d in order:  # farthest first

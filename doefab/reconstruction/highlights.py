@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
+from doefab.imaging.captures import fft_length
 from doefab.reconstruction.wiener import psf_to_otf
 
 __all__ = ["solve_highlights", "highlight_support", "VIEWS"]
@@ -74,13 +75,11 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
     if not views or any(v not in VIEWS for v in views):
         raise DoefabError(f"views must be a non-empty subset of {VIEWS}, got {views!r}")
     with torch.no_grad():
-        from scipy.fft import next_fast_len
-
         h, w = coded.shape[-2:]
         m = psf_coded.shape[-1] // 2
-        # the canvas: frame + margin, grown to a fast FFT length (606 = 2·3·101 for 512 px is 2× slower than
-        # 625); the extra pixels lie more than m from the frame both ways round, so no light crosses
-        big = (next_fast_len(h + 2 * m, real=True), next_fast_len(w + 2 * m, real=True))
+        # the canvas: frame + margin, grown to a fast FFT length (606 for 512 px: 640); the extra pixels lie
+        # more than m from the frame both ways round, so no light crosses
+        big = (fft_length(h + 2 * m), fft_length(w + 2 * m))
         pad = (m, big[1] - w - m, m, big[0] - h - m)
         caps = {"coded": coded.to(dtype), "uncoded": uncoded.to(dtype)}
         psfs = {"coded": psf_coded.to(dtype), "uncoded": psf_uncoded.to(dtype)}

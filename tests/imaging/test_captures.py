@@ -6,7 +6,7 @@ import torch
 
 import doefab
 from doefab.errors import DoefabError
-from doefab.imaging.captures import convolve
+from doefab.imaging.captures import convolve, fft_length
 
 
 def _pair(psf_coded, psf_uncoded, wavelengths, depths):
@@ -35,6 +35,30 @@ def test_convolution_matches_direct_sum():
                     if 0 <= ii < 12 and 0 <= jj < 10:
                         ref[i, j] += psf[0, u, v] * img[0, ii, jj]
     np.testing.assert_allclose(got, ref, atol=1e-10)
+
+
+def test_fft_length_is_the_smallest_even_5_smooth_length_not_below_n():
+    def smooth5(m):
+        for p in (2, 3, 5):
+            while m % p == 0:
+                m //= p
+        return m == 1
+
+    for n in [1, 2, 7, 73, 75, 300, 606, 1118]:
+        want = next(m for m in range(max(n, 2), 4 * n + 4) if m % 2 == 0 and smooth5(m))
+        assert fft_length(n) == want, n
+    assert fft_length(606) == 640  # next_fast_len gives 625, an odd length
+
+
+def test_convolution_on_a_grown_canvas_matches_scipy():
+    from scipy.signal import convolve2d
+
+    rng = np.random.default_rng(1)
+    img = rng.random((2, 71, 69))  # 71 + 5 − 1 = 75: next_fast_len's 75 is odd, the canvas grows to 80
+    psf = rng.random((2, 5, 5))
+    got = convolve(torch.from_numpy(img), torch.from_numpy(psf)).numpy()
+    for c in range(2):
+        np.testing.assert_allclose(got[c], convolve2d(img[c], psf[c], mode="same"), atol=1e-10)
 
 
 def test_energy_is_conserved_before_clipping():
