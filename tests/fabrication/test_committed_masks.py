@@ -29,9 +29,8 @@ def test_committed_set_verifies(folder):
 
 @pytest.mark.parametrize("folder", SETS, ids=[p.name for p in SETS])
 def test_committed_sets_are_sixteen_levels_on_four_masks(folder):
-    """Written before the level count was recorded in the manifest: such a set means 16 levels, 4 etch layers."""
     design = doefab.Design.load(folder / "design")
     man = json.loads((folder / "manifest.json").read_text())
-    assert design.n_levels == man.get("n_levels", 16) == 16
+    assert design.n_levels == man["n_levels"] == 16 and man["n_masks"] == 4
     assert sorted(L["layer"] for L in man["layers"] if L["purpose"] == "etch") == [1, 2, 3, 4]
     assert len(man["level_to_height_nm"]) == 16

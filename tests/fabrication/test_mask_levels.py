@@ -136,6 +136,9 @@ def test_a_corrupted_depth_in_an_eight_level_manifest_fails_verification(cam, tm
     path.write_text(json.dumps(dict(good, n_levels=16)))  # a set that claims another level count
     with pytest.raises(CheckFailed, match="n_levels"):
         verify_mask_set(tmp_path / "m", d.levels, use_klayout=False)
+    path.write_text(json.dumps(dict(good, n_masks=4)))  # 8 levels on 4 masks: the fields disagree
+    with pytest.raises(CheckFailed, match=r"n_masks = 4 \(expected 3 for 8 levels\)"):
+        verify_mask_set(tmp_path / "m", d.levels, use_klayout=False)
 
 
 def test_the_export_follows_the_design_and_refuses_another_level_count(cam, tmp_path):
