@@ -17,7 +17,6 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
-from doefab.imaging.captures import fft_length
 
 __all__ = ["cross_blur_cost", "relative_log_cost"]
 
@@ -41,7 +40,7 @@ def cross_blur_cost(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
     k = psf_coded.shape[-1]
     h, w = coded.shape[-2:]
     pad = k // 2
-    fh, fw = fft_length(h + 2 * pad + k - 1), fft_length(w + 2 * pad + k - 1)  # any ≥ these: the same result
+    fh, fw = h + 2 * pad + k - 1, w + 2 * pad + k - 1
     pc = psf_coded.to(coded.dtype)
     pu = psf_uncoded.to(coded.dtype)
     spec_c = torch.fft.rfft2(F.pad(coded, (pad, pad, pad, pad), mode="replicate"), s=(fh, fw))[:, None]
