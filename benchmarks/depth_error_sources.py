@@ -117,7 +117,7 @@ def binned(px: dict, key: str, edges) -> list:
     """(label, share of pixels, δ<1.25, MAE) per bin of ``px[key]``."""
     rows = []
     for lo, hi in zip(edges[:-1], edges[1:]):
-        sel = (px[key] >= lo) & (px[key] < hi)
+        sel = (px[key] >= lo) & ((px[key] < hi) | np.isinf(hi))  # "≥ lo" holds inf (a scene with no edge)
         label = f"≥ {lo:g}" if np.isinf(hi) else f"{lo:g}–{hi:g}"
         rows.append((label, sel.mean(), px["ok"][sel].mean() if sel.any() else np.nan,
                      px["abs_err"][sel].mean() if sel.any() else np.nan))

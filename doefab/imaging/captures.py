@@ -31,8 +31,8 @@ __all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks", "fft
 
 def fft_length(n: int) -> int:
     """The smallest even 5-smooth length ≥ ``n`` (2^a·3^b·5^c, a ≥ 1): any length ≥ h + k − 1 gives the same
-    linear convolution, and real transforms of these lengths are the fastest (an odd one such as 625 took
-    1.2–1.7× as long as 640 in torch's CPU FFT, 2 threads)."""
+    linear convolution, and real transforms of these lengths are the fastest (an odd one such as 625 is slower
+    than 640 in torch's CPU FFT)."""
     from scipy.fft import next_fast_len
 
     m = next_fast_len(int(n), real=True)

@@ -24,8 +24,9 @@ highlight, so with the coded capture the highlight radiance is the solution of a
   The plain capture's clipped pixels are not used as bounds: next to its compact PSF they bound nothing the
   start does not, and as data they let weakly-seen unknowns overshoot.
 - numerical limit: where both captures clip, the data bound the radiance from below only, and the bounded
-  stage's result there can follow rounding (float32 and float64 solves may differ widely at those pixels, while
-  they agree wherever a capture measures the pixel: ``tests/reconstruction/test_highlights.py``).
+  stage's result there can follow rounding (float32 and float64 solves may differ at those pixels by far more
+  than where a capture measures the pixel; ``tests/reconstruction/test_highlights.py`` checks a synthetic
+  case of the latter).
 
 Measured on 12 held-out HDR test scenes of 256² (``benchmarks/hdr_solve.py``, highlight PSNR with peak 2^8):
 see ``benchmarks/results/hdr_solve.json`` and the README.
