@@ -78,6 +78,7 @@ def split_pixels(split: str, images: int, size: int = 256) -> dict:
     import torch
 
     from doefab.reconstruction.loader import load_reconstructor
+    from doefab.reconstruction.metrics import depth_pixels
     from doefab.reconstruction.specs import crop_margin, make_batch, psf_pair
     from doefab.tolerance.conditions import for_splits
 
@@ -92,12 +93,12 @@ def split_pixels(split: str, images: int, size: int = 256) -> dict:
         if not np.array_equal(depth, target[0].numpy()):
             raise SystemExit(f"scene {i} of {split}: regenerated depth differs from the evaluation's")
         with torch.no_grad():
-            pred = np.maximum(np.asarray(rec(coded[0], uncoded[0])), 1e-3)
+            _p, err, within = depth_pixels(np.asarray(rec(coded[0], uncoded[0])), depth)
         cols["texture"].append(local_contrast(scene).ravel())
         cols["detail"].append(local_contrast(scene, detail_px=DETAIL_PX).ravel())
         cols["edge"].append(edge_distance(depth).ravel())
-        cols["abs_err"].append(np.abs(pred - depth).ravel())
-        cols["ok"].append((np.maximum(pred / depth, depth / pred) < 1.25).ravel())
+        cols["abs_err"].append(err.ravel())
+        cols["ok"].append(within.ravel())
     return {k: np.concatenate(v) for k, v in cols.items()}
 
 
@@ -113,13 +114,16 @@ def detail_shares(split: str, images: int, size: int = 256) -> np.ndarray:
     return np.histogram(d, bins=np.array(TEXTURE_BINS))[0] / d.size
 
 
+def bin_label(lo: float, hi: float) -> str:
+    return f"≥ {lo:g}" if np.isinf(hi) else f"{lo:g}–{hi:g}"
+
+
 def binned(px: dict, key: str, edges) -> list:
     """(label, share of pixels, δ<1.25, MAE) per bin of ``px[key]``."""
     rows = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         sel = (px[key] >= lo) & ((px[key] < hi) | np.isinf(hi))  # "≥ lo" holds inf (a scene with no edge)
-        label = f"≥ {lo:g}" if np.isinf(hi) else f"{lo:g}–{hi:g}"
-        rows.append((label, sel.mean(), px["ok"][sel].mean() if sel.any() else np.nan,
+        rows.append((bin_label(lo, hi), sel.mean(), px["ok"][sel].mean() if sel.any() else np.nan,
                      px["abs_err"][sel].mean() if sel.any() else np.nan))
     return rows
 
@@ -133,18 +137,19 @@ def reweighted(rows: list, like: list) -> float:
 def table(data: dict, images: int) -> str:
     lines = [f"The shipped proposed depth network on {images} scenes of 256² px per split, honest captures "
              "(`.venv/bin/python benchmarks/depth_error_sources.py`).", ""]
+    per_key = {}
     for key, edges, head in (("texture", TEXTURE_BINS, f"local relative contrast ({WINDOW_PX}-px window)"),
                              ("detail", TEXTURE_BINS, f"fine detail: relative contrast above a {DETAIL_PX:g}-px blur"),
                              ("edge", EDGE_BINS, "distance to a depth edge (px)")):
         lines += [f"| {head} | " + " | ".join(f"{s}: share of pixels | {s}: δ<1.25 | {s}: MAE (m)" for s in data)
                   + " |", "| --- |" + " --- | --- | --- |" * len(data)]
-        per = {s: binned(px, key, edges) for s, px in data.items()}
+        per = per_key[key] = {s: binned(px, key, edges) for s, px in data.items()}
         for j, (label, *_r) in enumerate(next(iter(per.values()))):
             cells = [f"{per[s][j][1]:.3f} | {per[s][j][2]:.3f} | {per[s][j][3]:.3f}" for s in data]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
         lines.append("")
     if set(data) == {"val", "test"}:
-        det = {s: binned(px, "detail", TEXTURE_BINS) for s, px in data.items()}
+        det = per_key["detail"]
         lines += ["Reweighted by fine detail: " + "; ".join(
             f"{a}'s δ<1.25 per bin with {b}'s shares of pixels {reweighted(det[a], det[b]):.3f}"
             for a, b in (("test", "val"), ("val", "test"))) + ".", ""]
@@ -153,8 +158,7 @@ def table(data: dict, images: int) -> str:
               f"pixels by fine detail (above a {DETAIL_PX:g}-px blur).", "", "| fine detail | " + " | ".join(shares) + " |",
               "| --- |" + " --- |" * len(shares)]
     for j, (lo, hi) in enumerate(zip(TEXTURE_BINS[:-1], TEXTURE_BINS[1:])):
-        label = f"≥ {lo:g}" if np.isinf(hi) else f"{lo:g}–{hi:g}"
-        lines.append(f"| {label} | " + " | ".join(f"{v[j]:.3f}" for v in shares.values()) + " |")
+        lines.append(f"| {bin_label(lo, hi)} | " + " | ".join(f"{v[j]:.3f}" for v in shares.values()) + " |")
     lines.append("")
     lines.append("All pixels: " + "; ".join(f"{s} δ<1.25 {px['ok'].mean():.3f}, MAE {px['abs_err'].mean():.3f} m"
                                             for s, px in data.items()) + ".")

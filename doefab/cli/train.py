@@ -57,11 +57,11 @@ def run(args) -> int:
     from doefab.cli._args import task_design_arg
     from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
+    from doefab.reconstruction.specs import training_crop
     from doefab.reconstruction.train import train
     from doefab.reconstruction.weights import weights_target
 
-    if args.crop is not None and args.crop % 32:
-        raise DoefabError(f"--crop {args.crop} must be a multiple of 32 (e.g. 96)")
+    training_crop(args.task, args.crop)  # train() resolves it again; checked here before any output is claimed
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out

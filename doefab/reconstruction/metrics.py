@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "metrics_for", "mean_metrics", "HDR_PEAK",
+__all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "metrics_for", "mean_metrics", "HDR_PEAK",
            "HIGHLIGHT_ABOVE"]
 
 HDR_PEAK = 256.0  # Table 1: PSNR with a maximum value of 2^8
@@ -43,12 +43,18 @@ def spectral_metrics(pred: np.ndarray, target: np.ndarray) -> dict:
     return {"psnr": _psnr(mse, 1.0), "ssim": ssim, "sam": sam}
 
 
+def depth_pixels(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pixel of [H, W] depths (metres): (prediction floored at 1 mm, |error| in metres, whether
+    max(p/t, t/p) < 1.25)."""
+    p = np.maximum(pred, 1e-3)
+    return p, np.abs(p - target), np.maximum(p / target, target / p) < 1.25
+
+
 def depth_metrics(pred: np.ndarray, target: np.ndarray) -> dict:
     """[H, W] metres each."""
-    p = np.maximum(pred, 1e-3)
-    ratio = np.maximum(p / target, target / p)
-    return {"mae": float(np.abs(p - target).mean()), "rmse": float(np.sqrt(((p - target) ** 2).mean())),
-            "log10": float(np.abs(np.log10(p) - np.log10(target)).mean()), "delta125": float((ratio < 1.25).mean())}
+    p, err, within = depth_pixels(pred, target)
+    return {"mae": float(err.mean()), "rmse": float(np.sqrt((err**2).mean())),
+            "log10": float(np.abs(np.log10(p) - np.log10(target)).mean()), "delta125": float(within.mean())}
 
 
 def metrics_for(task: str, pred: np.ndarray, target: np.ndarray) -> dict:
