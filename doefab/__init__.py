@@ -37,6 +37,7 @@ _EXPORTS = {
     "DualPixelCrosstalk": "doefab.imaging.crosstalk",
     "simulate_calibration": "doefab.imaging.crosstalk",
     "sensor_response": "doefab.imaging.sensor",
+    "Sensor": "doefab.imaging.sensor",
     "simulate_captures": "doefab.imaging.captures",
     "load_reconstructor": "doefab.reconstruction.loader",
     "depth_encoding_score": "doefab.imaging.depth_score",

@@ -107,3 +107,21 @@ def task_design_arg(args, need_weights_dir: bool):
     if need_weights_dir and getattr(args, "weights_dir", None) is None:
         raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
     return d.resolve()
+
+
+def add_sensor_args(p) -> None:
+    """--sensor-response, --full-well-e, --read-noise-e: the camera whose captures the networks see."""
+    p.add_argument("--sensor-response", default="Canon EOS 5D Mark II",
+                   help="RGB spectral sensitivities forming the hyperspectral captures: \"Canon EOS 5D Mark II\", "
+                        "\"Nikon D5100\", \"Sigma SD Merrill\" or a CSV (header, then wavelength_nm,R,G,B rows)")
+    p.add_argument("--full-well-e", type=number(float, 100, 1e7, unit="electrons"), default=25_000.0,
+                   help="electrons at a capture value of 1 (one photodiode's full well)")
+    p.add_argument("--read-noise-e", type=number(float, 0, 1000, unit="electrons rms"), default=3.0,
+                   help="read noise in electrons rms")
+
+
+def sensor_arg(args):
+    """The ``imaging.sensor.Sensor`` the sensor flags name (a bad CSV refused before any work)."""
+    from doefab.imaging.sensor import Sensor
+
+    return Sensor(response=args.sensor_response, full_well_e=args.full_well_e, read_noise_e=args.read_noise_e)

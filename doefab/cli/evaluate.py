@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from doefab.cli._args import number
+from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -32,12 +32,13 @@ def register(sub) -> None:
     p.add_argument("--clean", action="store_true",
                    help="the nominal model's own captures (no fabricated part, crosstalk or off-plane depth)")
     p.add_argument("--split", default="test", choices=["test", "val"], help="held-out scenes to use")
+    add_sensor_args(p)
     p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from doefab.cli._args import task_design_arg
+    from doefab.cli._args import sensor_arg, task_design_arg
     from doefab.cli._output import claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.evaluate import evaluate
@@ -50,15 +51,16 @@ def run(args) -> int:
     bad = [v for v in variants if v not in ("proposed", "coded_only", "uncoded_only")]
     if bad or not variants:
         raise DoefabError(f"--variants: unknown {bad or 'empty list'}; choose from proposed, coded_only, uncoded_only")
-    for v in variants:
-        load_reconstructor(args.task, v, args.weights_dir, design)  # a bad weights file is refused before any output
+    sensor = sensor_arg(args)
+    for v in variants:  # a bad weights file, or one for another sensor, is refused before any output
+        load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
     out = claim_output(args, "evaluate", replace=args.force)
     out.create()
     from doefab.tolerance.conditions import for_splits
 
     cond = for_splits(args.task, design, "clean" if args.clean else "honest", (args.split,), progress=True)
     res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants,
-                   conditions=None if args.clean else cond[args.split], split=args.split)
+                   conditions=None if args.clean else cond[args.split], split=args.split, sensor=sensor)
     print(json.dumps({"rows": res["rows"], **({"by_light": res["by_light"]} if "by_light" in res else {})}, indent=1))
     print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
     return 0

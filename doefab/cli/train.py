@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from doefab.cli._args import number
+from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -48,13 +48,14 @@ def register(sub) -> None:
     p.add_argument("--clean", action="store_true",
                    help="train on the nominal model's own captures instead of each split's fabricated parts, "
                         "crosstalk and off-plane depth")
+    add_sensor_args(p)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from doefab.cli._args import task_design_arg
+    from doefab.cli._args import sensor_arg, task_design_arg
     from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.specs import training_crop
@@ -62,6 +63,7 @@ def run(args) -> int:
     from doefab.reconstruction.weights import weights_target
 
     training_crop(args.task, args.crop)  # train() resolves it again; checked here before any output is claimed
+    sensor = sensor_arg(args)
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out
@@ -79,7 +81,7 @@ def run(args) -> int:
     meta = train(args.task, args.variant, args.minutes, out.path, resume=args.resume, seed=args.seed,
                  batch=args.batch, crop=args.crop, lr=args.lr, weights_dir=args.weights_dir, design=design,
                  schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line(),
-                 conditions=cond, max_steps=args.steps)
+                 conditions=cond, max_steps=args.steps, sensor=sensor)
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_path']} and its .json")

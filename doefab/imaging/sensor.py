@@ -1,10 +1,8 @@
-"""The sensor's RGB response to spectral bands (the paper's Eq. 23's T_s) and its noise models.
+"""The sensor: its RGB response to spectral bands (the paper's Eq. 23's T_s) and its noise, and ``Sensor``, the
+two together as a scene or a set of weights names them.
 
-Response source: the Canon EOS 5D Mark II RGB spectral sensitivities measured for the Academy's rawtoaces
-project, as shipped by the ``colour-science`` package
-(``colour/characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv``, 380–780 nm at
-5 nm). The paper's camera is a 5D Mark IV, whose curves are not published in any package; the Mark II is the
-nearest Canon full-frame sensor with public curves.
+Responses: ``imaging.responses`` (the Canon EOS 5D Mark II rawtoaces curves by default; the Nikon D5100 and Sigma
+SD Merrill NPL curves, or a user's CSV).
 
 Noise (``PoissonGaussian``): shot noise of the photo-electrons plus Gaussian read noise, in units of the
 full-well signal (a capture value of 1 = a full sub-pixel). Defaults: 25 000 e⁻ full well per dual-pixel
@@ -16,33 +14,23 @@ sensor's. ``"authors"`` is the uniform ±0.01 noise of the authors' released cod
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.imaging.responses import DEFAULT_RESPONSE, response_curves, response_label, response_sha256
 
-__all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE"]
+__all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE", "Sensor",
+           "sensor_from_record"]
 
 RESPONSE_SOURCE = ("Canon EOS 5D Mark II RGB sensitivities (rawtoaces), shipped by colour-science as "
                    "characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
 
 
-def _curves() -> tuple[np.ndarray, np.ndarray]:
-    """(wavelengths in metres, [3, L] R, G, B sensitivities) from colour-science's data file."""
-    try:
-        from colour.characterisation.aces_it import ROOT_RESOURCES_RAWTOACES
-    except ImportError:
-        raise DoefabError("sensor_response needs the colour-science package: pip install colour-science") from None
-    path = os.path.join(ROOT_RESOURCES_RAWTOACES, "CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
-    data = np.genfromtxt(path, delimiter=",", names=True)
-    lam = np.asarray(data["wavelength"], np.float64) * 1e-9
-    return lam, np.stack([np.asarray(data[c], np.float64) for c in ("R", "G", "B")])
-
-
-def sensor_response(wavelengths) -> np.ndarray:
-    """[3, C] float32 RGB response for bands at ``wavelengths`` (metres, 380–780 nm), linearly interpolated.
+def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
+    """[3, C] float32 RGB response for bands at ``wavelengths`` (metres, within the curves' range), linearly
+    interpolated from ``source`` (a camera name of ``imaging.responses.RESPONSES`` or a CSV path).
 
     Normalised so that a flat spectrum of radiance 1 in every band gives 1 in the most sensitive channel
     (summed over the given bands): a white spectral scene and an RGB scene of value 1 expose alike.
@@ -50,12 +38,15 @@ def sensor_response(wavelengths) -> np.ndarray:
     lam = np.asarray(wavelengths, np.float64).ravel()
     if lam.size == 0 or not np.all(np.isfinite(lam)):
         raise DoefabError("wavelengths must be a non-empty list of finite numbers in metres")
-    src_lam, curves = _curves()
+    src_lam, curves = response_curves(source)
     if lam.min() < src_lam[0] - 1e-12 or lam.max() > src_lam[-1] + 1e-12:
         hint = " (they look like nanometres: pass metres, e.g. 550e-9)" if lam.max() > 1 else ""
-        raise DoefabError(f"wavelengths {lam.min():g}–{lam.max():g} m lie outside the sensor data's "
-                          f"{src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}")
+        raise DoefabError(f"wavelengths {lam.min():g}–{lam.max():g} m lie outside the {response_label(source)} "
+                          f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands within "
+                          f"it, or give a response that covers them")
     t = np.stack([np.interp(lam, src_lam, c) for c in curves])
+    if t.sum(axis=1).max() <= 0:
+        raise DoefabError(f"the {response_label(source)} response is zero in every one of the bands")
     return (t / t.sum(axis=1).max()).astype(np.float32)
 
 
@@ -104,3 +95,50 @@ def noise_model(noise):
     if not isinstance(noise, str) or noise not in presets:
         raise DoefabError(f"noise must be one of {sorted(presets)} or a noise model, got {noise!r}")
     return presets[noise]
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A camera's sensor as the captures see it: its RGB response (a camera name or a CSV path) and its noise
+    (``full_well_e`` electrons at capture value 1, ``read_noise_e`` rms electrons). The default is the
+    prototype's (Canon EOS 5D Mark II curves, 25 000 e⁻, 3 e⁻)."""
+
+    response: str = DEFAULT_RESPONSE
+    full_well_e: float = 25_000.0
+    read_noise_e: float = 3.0
+
+    def __post_init__(self):
+        PoissonGaussian(self.full_well_e, self.read_noise_e)  # its checks
+        response_curves(self.response)  # a missing or malformed CSV is refused here, before any work
+
+    def noise(self) -> PoissonGaussian:
+        return PoissonGaussian(float(self.full_well_e), float(self.read_noise_e))
+
+    def rgb(self, wavelengths) -> np.ndarray:
+        """[3, C] response on the bands (``sensor_response``)."""
+        return sensor_response(wavelengths, self.response)
+
+    def has_default_response(self) -> bool:
+        """Whether the response's curves are the default camera's (by content, not by name)."""
+        return response_sha256(self.response) == response_sha256(DEFAULT_RESPONSE)
+
+    def record(self) -> dict:
+        """What weights and results record: the response (its label and the SHA-256 of its curves) and the noise."""
+        return {"response": response_label(self.response), "response_sha256": response_sha256(self.response),
+                "full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e)}
+
+    def differs_from(self, record: dict | None, spectral: bool) -> list[str]:
+        """What of this sensor another's ``record`` (None: the default sensor's) does not share: the noise, and the
+        response where it forms the captures (``spectral``: hyperspectral scenes; RGB scenes are the camera's own)."""
+        other = record or Sensor().record()
+        mine = self.record()
+        out = [f"{k} {other.get(k)} (this camera: {mine[k]})" for k in ("full_well_e", "read_noise_e")
+               if not math.isclose(float(other.get(k, math.nan)), mine[k], rel_tol=1e-9)]
+        if spectral and other.get("response_sha256") != mine["response_sha256"]:
+            out.insert(0, f"response {other.get('response')} (this camera: {mine['response']})")
+        return out
+
+
+def sensor_from_record(record: dict | None) -> dict:
+    """A weights record's ``sensor`` entry, or the default sensor's for records that predate it."""
+    return record if isinstance(record, dict) and "response_sha256" in record else Sensor().record()

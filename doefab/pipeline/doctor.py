@@ -130,8 +130,21 @@ def explain(res: dict) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
-    rows += _task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"])
+    rows += _task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"]) + _sensor_rows(res.get("sensor"))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
+
+
+def _sensor_rows(sensor) -> list[tuple]:
+    """One capture's noise: shot-noise SNR at full scale and the range above the read-noise floor."""
+    if sensor is None:
+        return []
+    fw, rn = sensor.full_well_e, sensor.read_noise_e
+    rows = [("shot-noise SNR at full scale", math.sqrt(fw), "", f"√(full well) at {fw:g} e⁻; a pixel at 1 % of full "
+             f"scale: {fw / 100 / math.sqrt(fw / 100 + rn ** 2):.3g}")]
+    if rn > 0:
+        rows.append(("capture dynamic range", math.log2(fw / rn), "stops", f"full well over read noise ({rn:g} e⁻ "
+                     f"rms): one capture's range; the HDR task recovers highlights beyond its clip"))
+    return rows
 
 
 def _fab_rows(cam, n_levels: int) -> list[tuple]:

@@ -264,6 +264,11 @@ def system_table(res: dict) -> list[list[str]]:
              "custom camera" if res.get("custom_camera") else "the preset prototype"],
             ["fabrication", f"{res['settings']['levels']} levels on {cam.material.name}",
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
+    if res.get("sensor") is not None:
+        r = res["sensor"].record()
+        rows.append(["sensor", f"{r['response']} response, {r['full_well_e']:g} e⁻ full well, "
+                               f"{r['read_noise_e']:g} e⁻ read noise",
+                     "the default (prototype) sensor" if res["sensor"] == type(res["sensor"])() else "this camera's sensor"])
     for r in explain(res):
         rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
     rows += [["warning", "", note] for note in res.get("warnings", [])]

@@ -33,6 +33,7 @@ class Scene:
     holder: dict = field(default_factory=dict)
     reconstruction: dict = field(default_factory=dict)
     tolerance: dict | None = None
+    sensor: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict)
 
     def budget_path(self) -> Path | None:
@@ -41,6 +42,15 @@ class Scene:
         if b == "default":
             return None
         return self.path.parent / b if (self.path.parent / b).is_file() else Path(b)
+
+    def response_path(self) -> str:
+        """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or as given)."""
+        from doefab.imaging.responses import DEFAULT_RESPONSE, RESPONSES
+
+        r = self.sensor.get("response", DEFAULT_RESPONSE)
+        if r in RESPONSES:
+            return r
+        return str(self.path.parent / r) if (self.path.parent / r).is_file() else r
 
     def section(self, name: str) -> dict:
         return self.raw.get(name, {}) if name else {k: v for k, v in self.raw.items() if not isinstance(v, dict)}
@@ -73,7 +83,7 @@ def _schema_problems(raw: dict) -> list[str]:
     from doefab.pipeline.scenekeys import keys_of
 
     problems = []
-    sections = {"camera", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance"}
+    sections = {"camera", "sensor", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance"}
     for key, val in raw.items():
         if isinstance(val, dict):
             if key not in sections:
@@ -154,4 +164,4 @@ def load_scene(path: str | Path) -> Scene:
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
-                 reconstruction=rec, tolerance=tol, raw=raw)
+                 reconstruction=rec, tolerance=tol, sensor=raw.get("sensor", {}), raw=raw)

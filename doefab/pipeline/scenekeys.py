@@ -60,6 +60,14 @@ KEYS = (
              "horizontal the holder stage says to mount the die turned by 90°"),
     Key("camera", "sensor_distance_m", "float", "m", 1e-3, 2.0, default="from the preset",
         help="lens to sensor in metres (the same as sensor_distance_mm)"),
+    Key("sensor", "response", "str", default="Canon EOS 5D Mark II",
+        help="the sensor's RGB spectral sensitivities (they form the hyperspectral task's captures): "
+             "\"Canon EOS 5D Mark II\", \"Nikon D5100\", \"Sigma SD Merrill\" (400–680 nm), or a CSV path (relative "
+             "to the scene) with a header line and rows wavelength_nm, R, G, B"),
+    Key("sensor", "full_well_e", "float", "e⁻", 100.0, 1e7, default="25000",
+        help="electrons at a capture value of 1 (one dual-pixel photodiode's full well at the ISO used)"),
+    Key("sensor", "read_noise_e", "float", "e⁻", 0.0, 1000.0, default="3",
+        help="read noise, rms electrons (at the ISO used)"),
     Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, default="the task's",
         help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10)"),
     Key("optics", "depths_m", "list", "m", 1e-3, 1e6, default="the task's",

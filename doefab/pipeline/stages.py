@@ -18,7 +18,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
-from doefab.pipeline.system import resolve
+from doefab.pipeline.system import resolve, scene_sensor
 
 __all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress"]
 
@@ -172,11 +172,18 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     rec, task = scene.reconstruction, scene.task
     mode = rec.get("weights", "shipped")
     design = None if res["reuse"] else out.parent / "design"
+    sensor = res.get("sensor")  # None: the default sensor
     if design is not None and mode == "shipped":
         return {"status": "skipped", "why": f"the shipped networks are trained for the committed "
                                             f"{res['settings']['design_task']} design, not this scene's: set "
                                             f"reconstruction.weights = \"train\" to train networks for it, or "
                                             f"\"shipped-anyway\" to evaluate the shipped ones on its captures"}
+    other_sensor = shipped_sensor_differs(task, sensor)
+    if other_sensor and mode == "shipped":
+        return {"status": "skipped", "why": f"the shipped networks are trained for another sensor ("
+                                            f"{'; '.join(other_sensor)}): set reconstruction.weights = \"train\" "
+                                            f"to train networks for this camera, or \"shipped-anyway\" to evaluate "
+                                            f"the shipped ones on its captures"}
     budget = _scene_budget(scene)
     parts = 2
     weights_dir, warm = None, {}
@@ -189,7 +196,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
         cond = for_splits(task, design, "honest", ("train", "val"), parts if quick else 6, budget=budget)
         for v in ("proposed", "coded_only", "uncoded_only"):
             run_dir = out / f"run_{v}"
-            r = train(task, v, minutes, run_dir, weights_dir=weights_dir, design=design, conditions=cond,
+            r = train(task, v, minutes, run_dir, weights_dir=weights_dir, design=design, conditions=cond, sensor=sensor,
                       warm_start=WEIGHTS_DIR, progress=True, val_images=2 if quick else 8,
                       resume=(run_dir / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
             warm[v] = r["training"]["warm_start"]
@@ -197,19 +204,41 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     size = 128 if quick else int(rec.get("size_px", 256))
     cond = for_splits(task, design, "honest", ("test",), parts, budget=budget)["test"]
     r = evaluate(task, out, images=images, size=size, weights_dir=weights_dir, design=design, conditions=cond,
-                 other_design=mode == "shipped-anyway")
+                 other_design=mode == "shipped-anyway", sensor=sensor)
     why = {"shipped": "shipped networks of the committed design",
            "train": "trained here for this design (" + ", ".join(
                f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" if w else
                f"{v}: continued from its checkpoint" for v, w in warm.items()) + ")",
-           "shipped-anyway": "WARNING: the shipped networks, trained for the committed design, evaluated on this "
-                             "design's captures (told its PSFs); train networks for it for fair numbers"}[mode]
+           "shipped-anyway": "WARNING: the shipped networks, trained for the committed design and the default "
+                             "sensor, evaluated on this system's captures (told its PSFs); train networks for it "
+                             "for fair numbers"}[mode]
     return {"status": "ran" if weights_dir else "reused",
             "why": why + f"; evaluated on {images} held-out test scenes of {size}² px, captured through {parts} "
                          f"fabricated parts with crosstalk unmixed by a noisy calibration (the network told the "
-                         f"nominal PSF)",
+                         f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor)})",
             "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode,
             "design_levels_sha256": _design_sha(out.parent / "design")}
+
+
+def shipped_sensor_differs(task: str, sensor) -> list[str]:
+    """What of ``sensor`` (None: the default) the shipped ``task`` networks were not trained for (empty: nothing)."""
+    if sensor is None:
+        return []
+    from doefab.reconstruction.weights import weights_paths
+
+    try:
+        meta = json.loads(weights_paths(task, "proposed")[1].read_text())
+    except (OSError, ValueError):
+        meta = {}
+    return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
+                               spectral=task == "hyperspectral")
+
+
+def _sensor_text(sensor) -> str:
+    from doefab.imaging.sensor import Sensor
+
+    r = (sensor or Sensor()).record()
+    return f"{r['response']} response, {r['full_well_e']:g} e⁻ full well, {r['read_noise_e']:g} e⁻ read noise"
 
 
 def _scene_budget(scene) -> dict | None:
@@ -244,16 +273,19 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
         budget.setdefault("mounting", {}).update(holder_mounting(holder))
     samples = 3 if quick else int(tol.get("samples", 20))
     weights = out.parent / "reconstruction" / "weights"
-    networks = res["reuse"] or weights.is_dir()
+    shipped_fits = res["reuse"] and not shipped_sensor_differs(scene.task, res.get("sensor"))
+    networks = shipped_fits or weights.is_dir()
     out.mkdir(parents=True, exist_ok=True)
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
                   grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
-                  budget_path=path, networks=networks, weights_dir=None if res["reuse"] else weights,
+                  budget_path=path, networks=networks, weights_dir=None if shipped_fits else weights,
                   network_top=2 if quick else 5)
     return {"status": "ran", "why": f"{samples} Monte Carlo parts " + ("through the network" if networks else
-                                                                      "at PSF level (no network for this design)")
+                                                                      "at PSF level (no network for this system)")
             + ("" if quick else " and the quantization study")
-            + ("; mounting errors from this scene's holder" if holder.is_file() else ""),
+            + ("; mounting errors from this scene's holder" if holder.is_file() else "")
+            + ("" if networks or not res["reuse"] else "; the shipped networks are for another sensor")
+            + ("" if not networks else "; captures by the sensor its network was trained for"),
             "summary": r.get("summary"), "level": r["level"]}
 
 
@@ -286,7 +318,7 @@ STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_hol
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
             "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
 SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("fabrication",), "holder": ("holder",),
-           "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
+           "reconstruction": ("reconstruction", "sensor"), "tolerance": ("tolerance", "sensor"), "report": ()}
 
 
 def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
@@ -298,6 +330,8 @@ def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)
+        if "response" in (scene.raw.get("sensor") or {}):
+            parts["sensor"] = scene_sensor(scene).record()  # a CSV response by its content
     return _h(parts)
 
 

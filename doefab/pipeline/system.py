@@ -18,7 +18,8 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 
-__all__ = ["resolve", "scene_camera", "scene_task", "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS"]
+__all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "is_custom_camera", "system_warnings",
+           "MAX_DOE_PIXELS"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 _PRESET = {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}
@@ -83,6 +84,34 @@ def scene_camera(scene: Scene, problems: list | None = None):
     except DoefabError as exc:  # the camera's own checks (e.g. a sensor distance it cannot image at)
         problem(f"camera: {exc}")
         return base
+
+
+def scene_sensor(scene: Scene, problems: list | None = None):
+    """The scene's ``imaging.sensor.Sensor`` (its ``[sensor]`` section over the default camera's). A problem (an
+    unreadable CSV) is appended to ``problems`` and the default sensor returned, or raised without a list."""
+    from doefab.imaging.sensor import Sensor
+
+    sec = scene.sensor
+    try:
+        return Sensor(response=scene.response_path(), full_well_e=float(sec.get("full_well_e", 25_000.0)),
+                      read_noise_e=float(sec.get("read_noise_e", 3.0)))
+    except DoefabError as exc:
+        if problems is None:
+            raise
+        problems.append(f"sensor: {exc}")
+        return Sensor()
+
+
+def _sensor_checks(scene: Scene, sensor, task, cam) -> list[str]:
+    """The response must cover a spectral task's bands."""
+    if scene.task != "hyperspectral":
+        return []
+    try:
+        sensor.rgb(task.wavelengths(cam))
+    except DoefabError as exc:
+        return [f"sensor.response / optics.wavelengths_nm: {exc}: choose bands within the response, or another "
+                f"response"]
+    return []
 
 
 def scene_task(scene: Scene, committed, cam):
@@ -209,13 +238,14 @@ def resolve(scene: Scene) -> dict:
     cfg = committed.extra.get("config", {})
     problems: list[str] = []
     cam = scene_camera(scene, problems)
+    sensor = scene_sensor(scene, problems)
     if not any(p.startswith("camera: ") for p in problems):  # no camera at all: nothing else can be checked
         try:
             task = scene_task(scene, committed, cam)
         except DoefabError as exc:
             problems.append(str(exc))
         else:
-            problems += _checks(scene, cam, task)
+            problems += _checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
@@ -225,7 +255,15 @@ def resolve(scene: Scene) -> dict:
     return {"settings": settings, "camera": cam, "task": task, "committed_dir": cdir, "reuse": not differ,
             "differ": differ, "committed": committed, "committed_settings": committed_settings,
             "custom_camera": is_custom_camera(scene), "split": scene.camera.get("split", "vertical"),
-            "stop": _stop(cam), "warnings": system_warnings(cam, task)}
+            "stop": _stop(cam), "sensor": sensor,
+            "warnings": system_warnings(cam, task) + _sensor_warnings(scene, sensor)}
+
+
+def _sensor_warnings(scene: Scene, sensor) -> list[str]:
+    if scene.task != "hyperspectral" and "response" in scene.sensor and not sensor.has_default_response():
+        return [f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes are "
+                f"the camera's own RGB (only the noise applies)"]
+    return []
 
 
 def system_warnings(cam, task) -> list[str]:

@@ -30,19 +30,23 @@ __all__ = ["evaluate"]
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
              progress: bool = True, design=None, variants=VARIANTS, conditions=None, split: str = "test",
-             other_design: bool = False) -> dict:
+             other_design: bool = False, sensor=None) -> dict:
     """``conditions``: the split's capture conditions (``doefab.tolerance.conditions``; None: clean).
-    ``other_design``: evaluate networks trained for another design on ``design``'s captures (they are told its
-    PSFs); the result says so."""
+    ``sensor``: the camera's ``imaging.sensor.Sensor`` that makes the captures (response, noise; None: the
+    default camera's). ``other_design``: evaluate networks trained for another design or sensor on these
+    captures (they are told ``design``'s PSFs); the result says so."""
+    from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.spectra import light_kind
     from doefab.reconstruction.train import sensor_response_for
 
     if split not in ("val", "test"):
         raise DoefabError(f"split must be val or test, got {split!r}")
     out = Path(out_dir)
-    recs = {v: load_reconstructor(task, v, weights_dir, design, other_design) for v in variants}  # refuse first
+    sensor = sensor or Sensor()
+    recs = {v: load_reconstructor(task, v, weights_dir, design, other_design, sensor)
+            for v in variants}  # refuse first
     pair, _ = psf_pair(task, design)
-    response = sensor_response_for(task, pair)
+    response = sensor_response_for(task, pair, sensor)
     cond = conditions
     rows = {v: [] for v in variants}
     kinds = []
@@ -53,7 +57,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
 
         it = tqdm(it, desc=f"evaluate {task} ({cond.name if cond else 'clean'}, {split})", unit="image")
     for i in it:
-        coded, uncoded, target = make_batch(task, split, [i], size, pair, response, conditions=cond,
+        coded, uncoded, target = make_batch(task, split, [i], size, pair, response, sensor.noise(), conditions=cond,
                                             images=images)  # scene i's crop at its own place across the sensor
         kinds.append(light_kind(split, i))
         preds = {}
@@ -66,12 +70,14 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     digest = split_digest(task)
     result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
               "conditions": cond.describe() if cond is not None else {"name": "clean"},
-              "noise": "default (Poisson–Gaussian)",
+              "noise": f"Poisson–Gaussian, {sensor.full_well_e:g} e⁻ full well, {sensor.read_noise_e:g} e⁻ read noise",
+              "sensor": sensor.record(),
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
                               "lr_schedule": r.meta["training"].get("schedule", "constant"),
                               "trained_under": _trained_under(r.meta),
                               "for_this_design": not r.meta.get("other_design", False),
+                              "for_this_sensor": not r.meta.get("other_sensor", False),
                               "splits": _splits_state(r.meta, digest)}
                           for v, r in recs.items()}}
     result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals

@@ -140,11 +140,13 @@ def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, des
 
 
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
-                       design: str | Path | None = None, other_design: bool = False) -> Reconstructor:
+                       design: str | Path | None = None, other_design: bool = False, sensor=None) -> Reconstructor:
     """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth"), trained for the
     committed design (or for the design folder ``design``: candidates under comparison). ``other_design``: use
     weights trained for another design anyway (they take ``design``'s PSFs at call time; ``meta`` then says
-    ``"other_design": true``) when their shapes fit it."""
+    ``"other_design": true``) when their shapes fit it. ``sensor``: the ``imaging.sensor.Sensor`` whose captures the
+    network will see; weights trained for another sensor's noise (or, hyperspectral, response) are refused unless
+    ``other_design`` (``meta`` then says ``"other_sensor": true``)."""
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
@@ -183,6 +185,7 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
                               f"({'; '.join(f'{k}: {v}' for k, v in clash.items())}): they cannot take its PSFs; "
                               f"{_retrain(task, variant, weights_dir, design)}")
         meta = {**meta, "other_design": True}
+    meta = _check_sensor(meta, sensor, other_design, pt, who)
     try:
         state = torch.load(io.BytesIO(data), weights_only=True, map_location="cpu")
         model = build_model(task, variant, meta["arch"])
@@ -190,6 +193,22 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta)
+
+
+def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dict:
+    """``meta``, marked ``other_sensor`` when the weights were trained for another sensor and ``anyway``; refused
+    when they were and not ``anyway``."""
+    if sensor is None:
+        return meta
+    diff = sensor.differs_from(meta.get("sensor"), spectral=meta["task"] == "hyperspectral")
+    if not diff:
+        return meta
+    if not anyway:
+        task, variant, weights_dir, design = who
+        raise DoefabError(f"{pt}: trained for another sensor ({'; '.join(diff)}): train networks for this camera "
+                          f"(doefab train --task {task} --variant {variant} with its --sensor-response, --full-well-e "
+                          f"and --read-noise-e, and a --weights-dir), or use them anyway (other_design=True; in a scene, reconstruction.weights = \"shipped-anyway\")")
+    return {**meta, "other_sensor": True}
 
 
 _DEFAULT_ARCH = {"planes": 17, "wavelengths_m": None}  # what records without these entries were built with

@@ -8,7 +8,7 @@ from doefab.errors import DoefabError
 from doefab.reconstruction.networks import VARIANTS, DepthNet, depth_loss
 from doefab.reconstruction.specs import get_spec
 
-__all__ = ["default_arch", "build_model", "loss_fn"]
+__all__ = ["default_arch", "build_model", "loss_fn", "arch_response", "spectral_baseline"]
 
 
 def default_arch(task: str, variant: str = "proposed") -> dict:
@@ -44,34 +44,49 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     from doefab.reconstruction.data import HS_WAVELENGTHS_M
 
     bands = tuple(arch.get("wavelengths_m") or HS_WAVELENGTHS_M)  # the design's bands (31 at 400–700 nm)
+    t = arch_response(arch, bands)
     return SpectralNet(len(bands), variant, features=int(arch["features"]), width=int(arch["width"]),
-                       baseline=spectral_baseline(bands),
-                       illuminant=_illuminant_search(bands) if arch.get("illuminant_search") else None,
+                       baseline=spectral_baseline(bands, response=t),
+                       illuminant=_illuminant_search(bands, t) if arch.get("illuminant_search") else None,
                        mix=bool(arch.get("illuminant_mix", False)))  # older records: the single best member
 
 
-def _illuminant_search(bands):
-    """(response [3, C], inverses [J, C, 3]) on ``bands`` for the proposed hyperspectral network's illuminant
-    search (the shipped library resampled to them)."""
+def arch_response(arch: dict, bands):
+    """The [3, C] sensor response a spectral network was built for: the record's own (``"response"``, written
+    for a camera other than the default) or the default camera's on ``bands``."""
+    import numpy as np
+
     from doefab.imaging.sensor import sensor_response
+
+    if arch.get("response") is None:
+        return sensor_response(bands)
+    t = np.asarray(arch["response"], np.float32)
+    if t.shape != (3, len(bands)) or not np.all(np.isfinite(t)) or np.any(t < 0):
+        raise DoefabError(f"the architecture record's response must be a finite [3, {len(bands)}] array ≥ 0, got "
+                          f"{t.shape}")
+    return t
+
+
+def _illuminant_search(bands, t):
+    """(response [3, C], inverses [J, C, 3]) on ``bands`` for the proposed hyperspectral network's illuminant
+    search (the shipped library resampled to them; ``t``: the response on the bands)."""
     from doefab.reconstruction.data import resample_bands
     from doefab.reconstruction.illuminant import illuminant_inverses, illuminant_library
 
-    t = sensor_response(bands)
     return t, illuminant_inverses(t, resample_bands(illuminant_library(), bands, axis=1))
 
 
-def spectral_baseline(bands=None, smooth: float = 1e-3, eps: float = 1e-6):
+def spectral_baseline(bands=None, smooth: float = 1e-3, eps: float = 1e-6, response=None):
     """[C, 3] smooth least-squares inverse of a half-exposure capture: s = argmin ‖½ T s − c‖² + μ‖D² s‖²
-    (T: the sensor response on ``bands``, default the 31 bands 400–700 nm; D²: second differences along
-    wavelength) — the illuminant search's inverse under a flat illuminant."""
+    (T: ``response`` [3, C], default the default camera's on ``bands``, default the 31 bands 400–700 nm; D²:
+    second differences along wavelength) — the illuminant search's inverse under a flat illuminant."""
     import numpy as np
 
     from doefab.imaging.sensor import sensor_response
     from doefab.reconstruction.data import HS_WAVELENGTHS_M
     from doefab.reconstruction.illuminant import illuminant_inverses
 
-    t = sensor_response(HS_WAVELENGTHS_M if bands is None else bands)
+    t = sensor_response(HS_WAVELENGTHS_M if bands is None else bands) if response is None else response
     return illuminant_inverses(t, np.ones((1, t.shape[1])), smooth, eps)[0]
 
 

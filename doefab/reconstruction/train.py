@@ -39,13 +39,14 @@ def model_inputs(task: str, pair) -> torch.Tensor | None:
     return pair.coded[0][None].to(torch.float32)
 
 
-def sensor_response_for(task: str, pair):
-    """The [3, C] RGB response that forms a task's captures from its bands (hyperspectral), or None (RGB)."""
+def sensor_response_for(task: str, pair, sensor=None):
+    """The [3, C] RGB response that forms a task's captures from its bands (hyperspectral), or None (RGB).
+    ``sensor``: an ``imaging.sensor.Sensor`` (None: the default camera's)."""
     if task != "hyperspectral":
         return None
-    from doefab.imaging.sensor import sensor_response
+    from doefab.imaging.sensor import Sensor
 
-    return sensor_response(pair.wavelengths)
+    return (sensor or Sensor()).rgb(pair.wavelengths)
 
 
 def copy_matching(model: torch.nn.Module, task: str, variant: str, folder) -> dict:
@@ -67,9 +68,11 @@ def copy_matching(model: torch.nn.Module, task: str, variant: str, folder) -> di
     return {"from": str(pt), "tensors": len(take), "of": len(own)}
 
 
-def arch_for_design(task: str, pair) -> dict:
+def arch_for_design(task: str, pair, sensor=None) -> dict:
     """The architecture entries a design fixes: the depth planes (one cost-volume channel each) and the depth
-    range (outputs up to 1.2× the farthest plane); a spectral design's bands (one output each)."""
+    range (outputs up to 1.2× the farthest plane); a spectral design's bands (one output each) and, for a
+    ``sensor`` whose response is not the default camera's, that response on the bands (its inverses are built
+    from it)."""
     if task == "depth":
         far = max(z for z in pair.depths if np.isfinite(z))
         return {"planes": len(pair.depths), "max_depth_m": round(1.2 * far, 6)}
@@ -78,7 +81,10 @@ def arch_for_design(task: str, pair) -> dict:
 
         lams = [float(w) for w in pair.wavelengths]
         same = len(lams) == len(HS_WAVELENGTHS_M) and np.allclose(lams, HS_WAVELENGTHS_M, rtol=0, atol=1e-12)
-        return {} if same else {"wavelengths_m": lams}
+        out = {} if same else {"wavelengths_m": lams}
+        if sensor is not None and not sensor.has_default_response():
+            out["response"] = sensor.rgb(lams).astype(float).tolist()
+        return out
     return {}
 
 
@@ -100,39 +106,44 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
           progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
           schedule: str = "cosine", replace_shipped: bool = False, conditions: dict | None = None,
-          warm_start: str | Path | None = None) -> dict:
+          warm_start: str | Path | None = None, sensor=None) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
     returns the metadata record written (``weights_path``: where the weights went). ``design``: a design folder
     other than the committed one. Weights go to ``weights_dir`` or else ``out_dir``; the shipped ones are
     replaced only with ``replace_shipped=True``. ``conditions``: {"train": ..., "val": ...} capture conditions
     (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
-    network of this task and variant starts the training wherever a tensor's name and shape match."""
+    network of this task and variant starts the training wherever a tensor's name and shape match. ``sensor``:
+    the camera's ``imaging.sensor.Sensor`` (response and noise; None: the default camera's), recorded with the
+    weights."""
+    from doefab.imaging.sensor import Sensor
+
     spec = get_spec(task)
     weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design, task, variant)
     if not (0 < minutes <= 24 * 60):
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop(task, crop)
+    sensor = sensor or Sensor()
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     arch = arch or default_arch(task, variant)
     out = Path(out_dir)
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
               "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design),
-              "conditions": {k: c.describe() for k, c in (conditions or {}).items()}}
+              "conditions": {k: c.describe() for k, c in (conditions or {}).items()}, "sensor": sensor.record()}
     pair, sha = psf_pair(task, design)
-    arch = {**arch, **arch_for_design(task, pair)}
+    arch = {**arch, **arch_for_design(task, pair, sensor)}
     psf = model_inputs(task, pair)
-    response = sensor_response_for(task, pair)
+    response, noise = sensor_response_for(task, pair, sensor), sensor.noise()
     cond = conditions or {"train": None, "val": None}
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
     warm = copy_matching(model, task, variant, warm_start) if warm_start is not None and not resume else None
     warm = _warm_record(Path(out_dir), warm, resume)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
-    val = make_batch(task, "val", range(val_images), crop, pair, response, conditions=cond["val"])
+    val = make_batch(task, "val", range(val_images), crop, pair, response, noise, conditions=cond["val"])
 
     def step_fn(step: int) -> float:
         coded, uncoded, target = make_batch(task, "train", range(step * batch, (step + 1) * batch), crop, pair,
-                                            response, conditions=cond["train"])
+                                            response, noise, conditions=cond["train"])
         opt.zero_grad()
         loss = loss_fn(task, model(coded, uncoded, psf), target)
         if torch.isfinite(loss):
@@ -153,7 +164,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
-              "validation": {"images": val_images, "crop_px": crop, **final},
+              "validation": {"images": val_images, "crop_px": crop, **final}, "sensor": config["sensor"],
               "splits_sha256": split_digest(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 

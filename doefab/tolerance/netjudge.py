@@ -3,7 +3,8 @@
 For each part the judge computes both halves of the part's PSF (``PSFJudge``: relief as made, mount, stop),
 renders a fixed set of validation scenes through them, and records them as the part's camera does
 (``DualPixelCrosstalk``: Eq. 29's mix with per-column ratios at the crop's place on the sensor, shot and read
-noise, then the unmix with the ratios its simulated white-wall calibration estimated). The proposed network
+noise of the sensor the network was trained for (its weights record), then the unmix with the ratios its
+simulated white-wall calibration estimated). The proposed network
 reconstructs each capture twice — told the nominal PSF it was trained with, and told the part's own PSF pair
 (as a user gets after measuring the part) — and the task's delivered metrics are averaged over the scenes.
 Validation scenes, not test ones: the test split belongs to the final tables.
@@ -72,19 +73,30 @@ class NetworkJudge:
             return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
         return at
 
+    def sensor(self):
+        """(response [3, C] or None, noise model) of the sensor the network was trained for: its record's noise
+        and, hyperspectral, the response its architecture record holds (the default camera's when none)."""
+        from doefab.imaging.sensor import PoissonGaussian, sensor_from_record
+        from doefab.reconstruction.models import arch_response
+
+        rec = sensor_from_record(self.rec.meta.get("sensor"))
+        response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if self.task == "hyperspectral" \
+            else None
+        return response, PoissonGaussian(rec["full_well_e"], rec["read_noise_e"])
+
     def evaluate(self, err: PartErrors, height=None) -> dict:
         """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes); ``height``: an
         explicit height map instead of the part's relief (the quantization study)."""
         from doefab.reconstruction.metrics import mean_metrics, metrics_for
         from doefab.reconstruction.specs import make_batch
-        from doefab.reconstruction.train import sensor_response_for
 
         nominal = height is None and err == PartErrors()
         if nominal and self._nominal is not None:  # the error-free part: judged once (the tornado's base)
             return copy.deepcopy(self._nominal)
         pair = self.pair(err, height)
-        coded, uncoded, target = make_batch(self.task, "val", range(self.images), self.size, pair,
-                                            sensor_response_for(self.task, pair), crosstalk=self.crosstalk(err))
+        response, noise = self.sensor()
+        coded, uncoded, target = make_batch(self.task, "val", range(self.images), self.size, pair, response, noise,
+                                            crosstalk=self.crosstalk(err))
         out = {}
         for label, psf in (("nominal_psf", None), ("measured_psf", pair)):
             rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf)), t.numpy())

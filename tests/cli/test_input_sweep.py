@@ -65,6 +65,10 @@ FLAGS = [
     (["train", "--task", "hdr"], "--lr", _float()),
     (["evaluate", "--task", "hdr"], "--images", _int()),
     (["evaluate", "--task", "hdr"], "--size", _int()),
+    (["train", "--task", "hdr"], "--full-well-e", _float()),
+    (["train", "--task", "hdr"], "--read-noise-e", _float(zero_ok=True)),
+    (["evaluate", "--task", "hdr"], "--full-well-e", _float()),
+    (["evaluate", "--task", "hdr"], "--read-noise-e", _float(zero_ok=True)),
     (["finetune", "--design", "{design}"], "--minutes", _float(unit="36000")),
     (["finetune", "--design", "{design}"], "--doe-every", _int()),
     (["finetune", "--design", "{design}"], "--lr-doe", _float()),
@@ -316,6 +320,13 @@ def _file_cases():
         cases.append(pytest.param(lambda f, t, make=make: ["finetune", "--design", f / "design", "--weights-dir",
                                                            make(t), "--out", t / "o"], 2, "half-ring",
                                   id=f"finetune --weights-dir-{kind}"))
+    response = {"missing": (_missing, "neither a known camera"), "folder": (_a_folder, "neither a known camera"),
+                "empty": (_empty_file, "row(s)"), "corrupt": (_corrupt_file, "not a readable CSV")}
+    for kind, (make, needle) in response.items():
+        for cmd in (["train", "--task", "hyperspectral"], ["evaluate", "--task", "hyperspectral"]):
+            cases.append(pytest.param(lambda f, t, make=make, cmd=cmd: [*cmd, "--sensor-response", make(t), "--out",
+                                                                        t / "o"], 2, needle,
+                                      id=f"{cmd[0]} --sensor-response-{kind}"))
     budget = {"missing": (_missing, "not found"), "folder": (_a_folder, "is a folder"),
               "corrupt": (_corrupt_file, "not valid TOML")}  # an empty budget: rows 4–6 of issue 21 (defaults)
     for kind, (make, needle) in budget.items():
@@ -532,6 +543,10 @@ API = [
      {NAN: nan, NEG: -1.0, ZERO: 0.0, UNIT: NA, BIG: 1e12}),
     ("sensor_response", "wavelengths", lambda v: doefab.sensor_response([v]),
      {NAN: nan, NEG: -550e-9, ZERO: 0.0, UNIT: 550.0, BIG: 1e12}),
+    ("Sensor", "full_well_e", lambda v: doefab.Sensor(full_well_e=v), {NAN: nan, NEG: -25000.0, ZERO: 0.0, UNIT: NA,
+                                                                       BIG: VALID}),
+    ("Sensor", "read_noise_e", lambda v: doefab.Sensor(read_noise_e=v), {NAN: nan, NEG: -3.0, ZERO: VALID, UNIT: NA,
+                                                                         BIG: VALID}),
     ("simulate_captures", "scene", lambda v: _captures(scene=np.full((3, 32, 32), v)),
      {NAN: nan, NEG: -0.5, ZERO: VALID, UNIT: NA, BIG: VALID}),
     ("simulate_captures", "seed", lambda v: _captures(seed=v), {NAN: nan, NEG: -1, ZERO: VALID, UNIT: NA, BIG: 2**80}),
@@ -587,6 +602,7 @@ def test_api_argument(name, arg, call, value):
 API_FILES = [
     ("Design.load", lambda p: doefab.Design.load(p)),
     ("load_reconstructor weights_dir", lambda p: doefab.load_reconstructor("hdr", weights_dir=p)),
+    ("Sensor response", lambda p: doefab.Sensor(response=str(p))),
     ("load_reconstructor design", lambda p: doefab.load_reconstructor("hdr", design=p)),
     ("finetune_end_to_end design_dir", lambda p: doefab.finetune_end_to_end(p, p.parent / "out", minutes=0.1)),
 ]

@@ -101,3 +101,31 @@ def test_depth_network_takes_its_cost_volume_psfs_and_a_swapped_pair(tmp_path):
             rec(c, u, psf=other)
     with pytest.raises(DoefabError, match="both halves"):
         rec(c, u, psf=p.coded)
+
+
+def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_for_the_default(tmp_path):
+    """A hyperspectral network trained for the Nikon D5100 builds its inverses on that camera's curves (read here
+    from colour-science's NPL data, not through doefab), records its sensor, and is refused for the default
+    camera's captures unless asked for."""
+    import colour
+
+    from doefab.imaging.sensor import Sensor
+    from doefab.reconstruction.loader import load_reconstructor
+
+    nikon = Sensor("Nikon D5100", full_well_e=8000.0, read_noise_e=2.0)
+    meta = train("hyperspectral", "proposed", minutes=5, out_dir=tmp_path / "run", weights_dir=tmp_path / "w",
+                 crop=64, val_images=1, val_every=1000, progress=False, max_steps=1, sensor=nikon,
+                 arch={"features": 1, "width": 4, "illuminant_search": True, "illuminant_mix": True})
+    assert meta["sensor"]["response"] == "Nikon D5100" and meta["sensor"]["full_well_e"] == 8000.0
+    rec = load_reconstructor("hyperspectral", "proposed", tmp_path / "w", sensor=nikon)
+    msds = colour.MSDS_CAMERA_SENSITIVITIES["Nikon 5100 (NPL)"]
+    bands_nm = np.asarray(rec.pair.wavelengths) * 1e9
+    t = np.stack([np.interp(bands_nm, msds.wavelengths, msds.values[:, k]) for k in range(3)])
+    assert np.allclose(rec.model.response.numpy(), t / t.sum(axis=1).max(), atol=1e-6)
+    with pytest.raises(DoefabError, match="another sensor.*response Nikon D5100"):
+        load_reconstructor("hyperspectral", "proposed", tmp_path / "w", sensor=Sensor())
+    with pytest.raises(DoefabError, match="full_well_e 8000"):
+        load_reconstructor("hyperspectral", "proposed", tmp_path / "w", sensor=Sensor("Nikon D5100"))
+    anyway = load_reconstructor("hyperspectral", "proposed", tmp_path / "w", other_design=True, sensor=Sensor())
+    assert anyway.meta["other_sensor"] and not np.allclose(anyway.model.response.numpy(),
+                                                           Sensor().rgb(rec.pair.wavelengths))

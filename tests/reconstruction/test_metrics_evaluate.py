@@ -53,6 +53,26 @@ def test_evaluate_writes_the_three_rows(tmp_path):
     assert ev._splits_state(rec, "0" * 64).startswith("ANOTHER split definition")
 
 
+def test_the_evaluation_records_the_cameras_sensor_and_its_noise_reaches_the_captures(tmp_path):
+    """The shipped HDR network on one validation scene: the default sensor's captures, then a sensor with 200 e⁻
+    full well and 20 e⁻ read noise (refused unless asked for: the network was trained for 25 000 e⁻ / 3 e⁻);
+    its noise costs image PSNR."""
+    from doefab.errors import DoefabError
+    from doefab.imaging.sensor import Sensor
+    from doefab.reconstruction.evaluate import evaluate
+
+    kw = dict(images=1, size=64, progress=False, variants=("uncoded_only",), split="val")
+    quiet = evaluate("hdr", tmp_path / "a", **kw)
+    noisy_sensor = Sensor(full_well_e=200.0, read_noise_e=20.0)
+    with pytest.raises(DoefabError, match="another sensor"):
+        evaluate("hdr", tmp_path / "b", sensor=noisy_sensor, **kw)
+    noisy = evaluate("hdr", tmp_path / "b", sensor=noisy_sensor, other_design=True, **kw)
+    assert quiet["sensor"]["full_well_e"] == 25000.0 and noisy["sensor"]["full_well_e"] == 200.0
+    assert quiet["weights"]["uncoded_only"]["for_this_sensor"] and not noisy["weights"]["uncoded_only"][
+        "for_this_sensor"]
+    assert noisy["rows"]["uncoded_only"]["psnr"] < quiet["rows"]["uncoded_only"]["psnr"] - 3
+
+
 def test_the_split_digest_follows_the_content_of_the_splits(monkeypatch):
     """A network trained on other splits is noticed: moving one photograph between splits, or one reflectance
     family, changes the digest; the tasks that use no spectra do not depend on the spectra."""

@@ -3,6 +3,8 @@ PSF pair it is given (its cross-blur cost volume) — a mounting error then chan
 
 from pathlib import Path
 
+import numpy as np
+
 import pytest
 
 from doefab.tolerance.errors import PartErrors
@@ -38,3 +40,24 @@ def test_the_error_free_part_is_judged_once_and_handed_out_by_copy(judge):
     for label in ("nominal_psf", "measured_psf"):
         for k, v in cold[label].items():
             assert again[label][k] == pytest.approx(v, rel=1e-6, abs=1e-9)
+
+
+def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for():
+    """The network's weights record names its sensor: the judge's captures use that noise and (hyperspectral) the
+    response its architecture record holds; records without one are the default camera's."""
+    from types import SimpleNamespace
+
+    from doefab.imaging.sensor import Sensor
+    from doefab.tolerance.netjudge import NetworkJudge
+
+    bands = np.arange(400, 701, 10) * 1e-9
+    nikon = Sensor("Nikon D5100", full_well_e=5000.0, read_noise_e=4.0)
+    judge = NetworkJudge.__new__(NetworkJudge)
+    judge.task = "hyperspectral"
+    judge.rec = SimpleNamespace(meta={"arch": {"response": nikon.rgb(bands).tolist()}, "sensor": nikon.record()},
+                                pair=SimpleNamespace(wavelengths=bands))
+    t, noise = judge.sensor()
+    assert np.allclose(t, nikon.rgb(bands)) and (noise.full_well_e, noise.read_noise_e) == (5000.0, 4.0)
+    judge.rec.meta = {"arch": {}}  # shipped weights recorded before sensors were
+    t, noise = judge.sensor()
+    assert np.allclose(t, Sensor().rgb(bands)) and (noise.full_well_e, noise.read_noise_e) == (25000.0, 3.0)

@@ -1,0 +1,102 @@
+"""Camera RGB spectral sensitivities: the published curves doefab knows by name, or a user's own CSV file.
+
+Named curves (all shipped by the ``colour-science`` package):
+
+- ``"Canon EOS 5D Mark II"`` (the default): measured for the Academy's rawtoaces project,
+  ``colour/characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv``, 380–780 nm at 5 nm.
+  The paper's camera is a 5D Mark IV, whose curves are not published in any package; the Mark II is the nearest
+  Canon full-frame sensor with public curves.
+- ``"Nikon D5100"``: measured at the UK's National Physical Laboratory, ``colour.MSDS_CAMERA_SENSITIVITIES
+  ["Nikon 5100 (NPL)"]``, 380–780 nm at 5 nm.
+- ``"Sigma SD Merrill"``: NPL, ``colour.MSDS_CAMERA_SENSITIVITIES["Sigma SDMerill (NPL)"]`` (a Foveon sensor),
+  400–680 nm at 10 nm: bands beyond 680 nm are refused.
+
+A CSV file (anything else is read as a path): a header line, then rows ``wavelength_nm, R, G, B`` in
+increasing wavelength, relative sensitivities ≥ 0 (any scale: ``imaging.sensor.sensor_response`` normalises).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["DEFAULT_RESPONSE", "RESPONSES", "response_curves", "response_sha256", "response_label"]
+
+DEFAULT_RESPONSE = "Canon EOS 5D Mark II"
+RESPONSES = {  # name → where colour-science keeps the curves
+    "Canon EOS 5D Mark II": "rawtoaces CANON_EOS_5DMark_II_RGB_Sensitivities.csv",
+    "Nikon D5100": "MSDS_CAMERA_SENSITIVITIES['Nikon 5100 (NPL)']",
+    "Sigma SD Merrill": "MSDS_CAMERA_SENSITIVITIES['Sigma SDMerill (NPL)']",
+}
+_MSDS = {"Nikon D5100": "Nikon 5100 (NPL)", "Sigma SD Merrill": "Sigma SDMerill (NPL)"}
+
+
+def _colour_curves(name: str) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        import colour
+        from colour.characterisation.aces_it import ROOT_RESOURCES_RAWTOACES
+    except ImportError:
+        raise DoefabError("camera responses need the colour-science package: pip install colour-science") from None
+    if name == DEFAULT_RESPONSE:
+        path = os.path.join(ROOT_RESOURCES_RAWTOACES, "CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
+        data = np.genfromtxt(path, delimiter=",", names=True)
+        return (np.asarray(data["wavelength"], np.float64) * 1e-9,
+                np.stack([np.asarray(data[c], np.float64) for c in ("R", "G", "B")]))
+    msds = colour.MSDS_CAMERA_SENSITIVITIES[_MSDS[name]]
+    return np.asarray(msds.wavelengths, np.float64) * 1e-9, np.asarray(msds.values, np.float64).T.copy()
+
+
+def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths in metres, [3, L]) of a ``wavelength_nm, R, G, B`` CSV, or one error naming the fix."""
+    fix = "give a CSV with a header line, then rows wavelength_nm, R, G, B (relative sensitivities ≥ 0)"
+    if not path.is_file():
+        names = ", ".join(f'"{n}"' for n in RESPONSES)
+        raise DoefabError(f"camera response {str(path)!r} is neither a known camera ({names}) nor an existing CSV "
+                          f"file: {fix}")
+    try:
+        with warnings.catch_warnings():  # an empty file: refused below, not warned about
+            warnings.simplefilter("ignore")
+            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise DoefabError(f"{path}: not a readable CSV of numbers ({str(exc).splitlines()[0]}): {fix}") from None
+    if data.shape[1] != 4 or data.shape[0] < 2:
+        raise DoefabError(f"{path}: {data.shape[0]} row(s) of {data.shape[1]} column(s); need ≥ 2 rows of 4: {fix}")
+    lam_nm, curves = data[:, 0], data[:, 1:].T
+    if not np.all(np.isfinite(data)):
+        raise DoefabError(f"{path}: holds NaN or infinite values: {fix}")
+    if lam_nm.max() < 1e-3:
+        raise DoefabError(f"{path}: wavelengths {lam_nm.min():g}–{lam_nm.max():g} look like metres: write "
+                          f"nanometres (e.g. 550)")
+    if lam_nm.min() < 200 or lam_nm.max() > 2000 or np.any(np.diff(lam_nm) <= 0):
+        raise DoefabError(f"{path}: wavelengths must increase row by row within 200–2000 nm, got "
+                          f"{lam_nm.min():g}–{lam_nm.max():g} nm")
+    if np.any(curves < 0) or np.any(curves.max(axis=1) <= 0):
+        raise DoefabError(f"{path}: sensitivities must be ≥ 0 with some light in each of R, G and B")
+    return lam_nm * 1e-9, curves
+
+
+def response_curves(source: str | os.PathLike = DEFAULT_RESPONSE) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths in metres [L], R, G, B sensitivities [3, L]) of a named camera or a CSV file."""
+    if not isinstance(source, (str, os.PathLike)) or not str(source):
+        raise DoefabError(f"a camera response is a camera name ({', '.join(RESPONSES)}) or a CSV path, got {source!r}")
+    if str(source) in RESPONSES:
+        return _colour_curves(str(source))
+    return _csv_curves(Path(source))
+
+
+def response_sha256(source: str | os.PathLike = DEFAULT_RESPONSE) -> str:
+    """SHA-256 of the curves' values (wavelengths and sensitivities as float64): a response's identity, so a
+    copied or renamed CSV is the same camera and an edited one is not."""
+    lam, curves = response_curves(source)
+    return hashlib.sha256(lam.astype(np.float64).tobytes() + curves.astype(np.float64).tobytes()).hexdigest()
+
+
+def response_label(source: str | os.PathLike) -> str:
+    """How a report names a response: the camera, or the CSV's file name."""
+    return str(source) if str(source) in RESPONSES else f"{Path(source).name} (CSV)"

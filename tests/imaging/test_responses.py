@@ -1,0 +1,89 @@
+"""Camera responses: the named published curves and a user's CSV."""
+
+import numpy as np
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.imaging.responses import RESPONSES, response_curves, response_label, response_sha256
+from doefab.imaging.sensor import sensor_response
+
+BANDS = np.arange(400, 701, 10) * 1e-9
+
+
+@pytest.mark.parametrize("name", sorted(RESPONSES))
+def test_each_named_camera_peaks_red_above_green_above_blue(name):
+    """Every Bayer/Foveon camera's blue channel peaks below its green, green below red (physics of the colour
+    filters / silicon depth), all three within the visible (a Foveon's middle layer peaks as late as ~590 nm)."""
+    lam, curves = response_curves(name)
+    peaks = lam[np.argmax(curves, axis=1)] * 1e9
+    assert 560 <= peaks[0] <= 680 and 490 <= peaks[1] <= 600 and 420 <= peaks[2] <= 490, peaks
+    assert peaks[0] > peaks[1] > peaks[2]
+
+
+def test_the_nikon_curves_are_colour_sciences_npl_measurement():
+    import colour
+
+    lam, curves = response_curves("Nikon D5100")
+    msds = colour.MSDS_CAMERA_SENSITIVITIES["Nikon 5100 (NPL)"]
+    i = list(msds.wavelengths).index(550.0)
+    assert lam[i] == pytest.approx(550e-9)
+    assert np.allclose(curves[:, i], msds[550.0])
+
+
+def _gauss(lam_nm, mu, sigma):
+    return np.exp(-0.5 * ((lam_nm - mu) / sigma) ** 2)
+
+
+def test_a_csv_response_is_read_interpolated_and_normalised(tmp_path):
+    """Gaussian channels written every 2 nm, read back on 10 nm bands: the response equals the Gaussians there,
+    scaled so the largest channel sum over the bands is 1."""
+    lam = np.arange(380, 781, 2.0)
+    rows = np.column_stack([lam] + [_gauss(lam, mu, 30) for mu in (600, 540, 460)])
+    path = tmp_path / "cam.csv"
+    np.savetxt(path, rows, delimiter=",", header="wavelength_nm,R,G,B", comments="")
+    got = sensor_response(BANDS, str(path))
+    want = np.stack([_gauss(BANDS * 1e9, mu, 30) for mu in (600, 540, 460)])
+    want /= want.sum(axis=1).max()
+    assert np.allclose(got, want, atol=2e-4)
+    assert response_label(str(path)) == "cam.csv (CSV)"
+
+
+def test_a_responses_identity_is_its_content(tmp_path):
+    lam = np.arange(400, 701, 5.0)
+    rows = np.column_stack([lam] + [_gauss(lam, mu, 25) for mu in (610, 530, 450)])
+    a, b, c = tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    for p in (a, b):
+        np.savetxt(p, rows, delimiter=",", header="wavelength_nm,R,G,B", comments="")
+    rows[10, 2] *= 1.01
+    np.savetxt(c, rows, delimiter=",", header="wavelength_nm,R,G,B", comments="")
+    assert response_sha256(str(a)) == response_sha256(str(b)) != response_sha256(str(c))
+    assert response_sha256("Nikon D5100") != response_sha256("Canon EOS 5D Mark II")
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("wavelength_nm,R,G,B\n400,1,1\n500,1,1\n", "4"),  # three columns
+    ("wavelength_nm,R,G,B\n400,1,1,1\n", "≥ 2 rows"),
+    ("wavelength_nm,R,G,B\n400,1,nan,1\n500,1,1,1\n", "NaN"),
+    ("wavelength_nm,R,G,B\n4e-7,1,1,1\n5e-7,1,1,1\n", "look like metres"),
+    ("wavelength_nm,R,G,B\n500,1,1,1\n400,1,1,1\n", "increase"),
+    ("wavelength_nm,R,G,B\n400,1,-1,1\n500,1,1,1\n", "≥ 0"),
+    ("wavelength_nm,R,G,B\n400,1,0,1\n500,1,0,1\n", "each of R, G and B"),
+    ("wavelength_nm,R,G,B\n400,a,1,1\n500,1,1,1\n", "not a readable CSV"),
+])
+def test_a_malformed_csv_gets_one_error_naming_the_fix(tmp_path, text, needle):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(DoefabError, match=needle.replace("(", r"\(")) as exc:
+        response_curves(str(p))
+    assert str(p) in str(exc.value)
+
+
+def test_an_unknown_name_lists_the_known_cameras():
+    with pytest.raises(DoefabError, match="Nikon D5100"):
+        response_curves("Canon EOS R5")
+
+
+def test_bands_outside_a_response_are_refused_with_its_range():
+    with pytest.raises(DoefabError, match="400–680 nm"):
+        sensor_response(BANDS, "Sigma SD Merrill")
+    assert sensor_response(BANDS[:-2], "Sigma SD Merrill").shape == (3, 29)

@@ -1,0 +1,42 @@
+"""The sensor as a scene or a weights record names it: response and noise."""
+
+import math
+
+import numpy as np
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.imaging.sensor import Sensor, sensor_from_record
+
+
+def test_the_noise_has_the_poisson_gaussian_variance():
+    """A flat capture at 25 % of full scale: variance x / N_fw + (σ_read / N_fw)² (shot + read, in units of the
+    full well), measured on 400 000 pixels."""
+    s = Sensor(full_well_e=1000.0, read_noise_e=10.0)
+    x = np.full((400, 1000), 0.25)
+    got = s.noise().apply(x, np.random.default_rng(1))
+    want = 0.25 / 1000 + (10 / 1000) ** 2
+    assert got.mean() == pytest.approx(0.25, abs=1e-4)
+    assert got.var() == pytest.approx(want, rel=0.02)
+
+
+def test_what_differs_between_sensors():
+    default = Sensor().record()
+    assert Sensor().differs_from(None, spectral=True) == []
+    assert sensor_from_record(None) == default and sensor_from_record({"x": 1}) == default
+    noisy = Sensor(read_noise_e=12.0)
+    assert len(noisy.differs_from(default, spectral=False)) == 1 and "read_noise_e 3.0" in noisy.differs_from(
+        default, spectral=False)[0]
+    nikon = Sensor("Nikon D5100")
+    assert nikon.differs_from(default, spectral=False) == []  # RGB scenes: the response forms nothing
+    assert nikon.differs_from(default, spectral=True)[0].startswith("response Canon EOS 5D Mark II")
+    assert not nikon.has_default_response() and Sensor().has_default_response()
+
+
+def test_a_sensor_is_refused_whole_before_any_work(tmp_path):
+    with pytest.raises(DoefabError, match="full_well_e"):
+        Sensor(full_well_e=math.nan)
+    with pytest.raises(DoefabError, match="read_noise_e"):
+        Sensor(read_noise_e=-1.0)
+    with pytest.raises(DoefabError, match="neither a known camera"):
+        Sensor(response=str(tmp_path / "missing.csv"))
