@@ -109,19 +109,40 @@ def task_design_arg(args, need_weights_dir: bool):
     return d.resolve()
 
 
-def add_sensor_args(p) -> None:
-    """--sensor-response, --full-well-e, --read-noise-e: the camera whose captures the networks see."""
-    p.add_argument("--sensor-response", default="Canon EOS 5D Mark II",
-                   help="RGB spectral sensitivities forming the hyperspectral captures: \"Canon EOS 5D Mark II\", "
-                        "\"Nikon D5100\", \"Sigma SD Merrill\" or a CSV (header, then wavelength_nm,R,G,B rows)")
-    p.add_argument("--full-well-e", type=number(float, 100, 1e7, unit="electrons"), default=25_000.0,
-                   help="electrons at a capture value of 1 (one photodiode's full well)")
-    p.add_argument("--read-noise-e", type=number(float, 0, 1000, unit="electrons rms"), default=3.0,
-                   help="read noise in electrons rms")
+def add_sensor_args(p, spectral_flag: bool = True) -> None:
+    """--sensor-response (``spectral_flag``), --full-well-e, --read-noise-e: the camera whose captures the
+    networks see."""
+    from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
+
+    if spectral_flag:
+        p.add_argument("--sensor-response", default=None,
+                       help="hyperspectral: the RGB spectral sensitivities that form the captures: \"Canon EOS 5D "
+                            "Mark II\" (default), \"Nikon D5100\", \"Sigma SD Merrill\" or a CSV (a header, then "
+                            "wavelength_nm,R,G,B rows)")
+    p.add_argument("--full-well-e", type=number(float, *FULL_WELL_RANGE_E, unit="electrons"),
+                   default=DEFAULT_FULL_WELL_E, help="electrons at a capture value of 1 (one photodiode's full well)")
+    p.add_argument("--read-noise-e", type=number(float, *READ_NOISE_RANGE_E, unit="electrons rms"),
+                   default=DEFAULT_READ_NOISE_E, help="read noise in electrons rms")
 
 
-def sensor_arg(args):
-    """The ``imaging.sensor.Sensor`` the sensor flags name (a bad CSV refused before any work)."""
+def sensor_arg(args, design=None):
+    """The ``imaging.sensor.Sensor`` the sensor flags name, checked before any work: a bad CSV, a response given
+    to an RGB task (it forms nothing there), a response that does not cover the design's bands."""
+    from doefab.errors import DoefabError
     from doefab.imaging.sensor import Sensor
 
-    return Sensor(response=args.sensor_response, full_well_e=args.full_well_e, read_noise_e=args.read_noise_e)
+    response = getattr(args, "sensor_response", None)
+    task = getattr(args, "task", "depth")
+    if response is not None and task != "hyperspectral":
+        raise DoefabError(f"--sensor-response forms the hyperspectral task's captures only; the {task} task's "
+                          f"scenes are the camera's own RGB: drop it (the noise flags apply)")
+    sensor = Sensor(**({"response": response} if response is not None else {}), full_well_e=args.full_well_e,
+                    read_noise_e=args.read_noise_e)
+    if response is not None:
+        from doefab.reconstruction.specs import psf_pair
+
+        try:
+            sensor.rgb(psf_pair(task, design)[0].wavelengths)
+        except DoefabError as exc:
+            raise DoefabError(f"--sensor-response: {exc}") from None
+    return sensor

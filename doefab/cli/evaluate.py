@@ -51,7 +51,7 @@ def run(args) -> int:
     bad = [v for v in variants if v not in ("proposed", "coded_only", "uncoded_only")]
     if bad or not variants:
         raise DoefabError(f"--variants: unknown {bad or 'empty list'}; choose from proposed, coded_only, uncoded_only")
-    sensor = sensor_arg(args)
+    sensor = sensor_arg(args, design)
     for v in variants:  # a bad weights file, or one for another sensor, is refused before any output
         load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
     out = claim_output(args, "evaluate", replace=args.force)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from doefab.cli._args import number
+from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -33,13 +33,14 @@ def register(sub) -> None:
     p.add_argument("--sampling", type=number(int, 1, 16), default=2, help="PSF grid coarsening while training")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
     p.add_argument("--out", required=True, help="output folder")
+    add_sensor_args(p, spectral_flag=False)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier run in OUT")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from doefab.cli._args import design_folder
+    from doefab.cli._args import design_folder, sensor_arg
     from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
@@ -47,6 +48,7 @@ def run(args) -> int:
     d, design = design_folder(args.design)
     if design.task != "half-ring":
         raise DoefabError(f"{d}: end-to-end fine-tuning is for depth (half-ring) designs")
+    sensor = sensor_arg(args)
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     out = claim_output(args, "finetune", replace=args.force or args.resume, replace_flag="--force (or --resume)",
@@ -57,7 +59,7 @@ def run(args) -> int:
     out.create()
     res = finetune_end_to_end(d, out.path, minutes=args.minutes, weights_dir=args.weights_dir,
                               doe_every=args.doe_every, lr_doe=args.lr_doe, lr_net=args.lr_net,
-                              sampling=args.sampling, seed=args.seed, resume=args.resume)
+                              sampling=args.sampling, seed=args.seed, resume=args.resume, sensor=sensor)
     print(f"end-to-end: {res['steps']} steps in {res['wall_time_s']:.0f} s; validation MAE "
           f"{res['val_mae_start_m']:.3f} → {res['val_mae_end_m']:.3f} m "
           f"({res['mae_gain_per_minute_m'] * 1000:.1f} mm per minute); wrote {res['design']}")

@@ -63,7 +63,6 @@ def run(args) -> int:
     from doefab.reconstruction.weights import weights_target
 
     training_crop(args.task, args.crop)  # train() resolves it again; checked here before any output is claimed
-    sensor = sensor_arg(args)
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out
@@ -73,6 +72,7 @@ def run(args) -> int:
         check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     design = task_design_arg(args, need_weights_dir=False)
+    sensor = sensor_arg(args, design)
     weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)  # before any work
     out.create()
     from doefab.tolerance.conditions import for_splits

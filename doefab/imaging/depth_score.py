@@ -32,6 +32,7 @@ import torch
 from doefab._validate import depths as _validate_depths
 from doefab._validate import number_in
 from doefab.errors import DoefabError
+from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
 
 __all__ = ["depth_encoding_score", "texture_spectrum"]
 
@@ -51,7 +52,8 @@ def texture_spectrum(n: int, patch: int = 32, kind: str = "natural") -> np.ndarr
 
 
 def depth_encoding_score(psf, depths, signal: float = 0.25, contrast: float = 0.05, patch: int = 8,
-                         full_well: float = 25_000.0, read_noise: float = 3.0, spectrum: str = "natural") -> dict:
+                         full_well: float = DEFAULT_FULL_WELL_E, read_noise: float = DEFAULT_READ_NOISE_E,
+                         spectrum: str = "natural") -> dict:
     """Depth discriminability of a PSF stack.
 
     Args:

@@ -11,12 +11,21 @@ Named curves (all shipped by the ``colour-science`` package):
 - ``"Sigma SD Merrill"``: NPL, ``colour.MSDS_CAMERA_SENSITIVITIES["Sigma SDMerill (NPL)"]`` (a Foveon sensor),
   400–680 nm at 10 nm: bands beyond 680 nm are refused.
 
+Neither the D5100 nor the SD Merrill has dual-pixel photodiodes: like the Mark II for the prototype's Mark IV,
+they stand in for a dual-pixel sensor of similar colour filters. The NPL curves are published normalised to a
+peak of 1 per channel, so their channels' relative gains (which channel clips first under white light) are the
+dataset's, not the camera's; the rawtoaces curves keep them. A user's own measured curves (a CSV) keep whatever
+gains they were measured with.
+
 A CSV file (anything else is read as a path): a header line, then rows ``wavelength_nm, R, G, B`` in
 increasing wavelength, relative sensitivities ≥ 0 (any scale: ``imaging.sensor.sensor_response`` normalises).
+Measured curves often dip slightly below zero in their tails: values down to −1 % of a channel's peak are read
+as 0; below that the file is refused.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import warnings
@@ -26,7 +35,7 @@ import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["DEFAULT_RESPONSE", "RESPONSES", "response_curves", "response_sha256", "response_label"]
+__all__ = ["DEFAULT_RESPONSE", "RESPONSES", "response_curves", "response_sha256", "response_label", "is_named"]
 
 DEFAULT_RESPONSE = "Canon EOS 5D Mark II"
 RESPONSES = {  # name → where colour-science keeps the curves
@@ -49,7 +58,8 @@ def _colour_curves(name: str) -> tuple[np.ndarray, np.ndarray]:
         return (np.asarray(data["wavelength"], np.float64) * 1e-9,
                 np.stack([np.asarray(data[c], np.float64) for c in ("R", "G", "B")]))
     msds = colour.MSDS_CAMERA_SENSITIVITIES[_MSDS[name]]
-    return np.asarray(msds.wavelengths, np.float64) * 1e-9, np.asarray(msds.values, np.float64).T.copy()
+    cols = [list(msds.labels).index(c) for c in ("red", "green", "blue")]
+    return np.asarray(msds.wavelengths, np.float64) * 1e-9, np.asarray(msds.values, np.float64)[:, cols].T.copy()
 
 
 def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -59,6 +69,13 @@ def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
         names = ", ".join(f'"{n}"' for n in RESPONSES)
         raise DoefabError(f"camera response {str(path)!r} is neither a known camera ({names}) nor an existing CSV "
                           f"file: {fix}")
+    try:
+        first = path.read_text(encoding="utf-8").splitlines()[:1]
+    except UnicodeDecodeError as exc:
+        raise DoefabError(f"{path}: not a readable CSV of numbers ({exc.reason}): {fix}") from None
+    if first and _numbers(first[0]):
+        raise DoefabError(f"{path}: its first line ({first[0][:40]!r}) is data, not a header: add a header line "
+                          f"such as wavelength_nm,R,G,B")
     try:
         with warnings.catch_warnings():  # an empty file: refused below, not warned about
             warnings.simplefilter("ignore")
@@ -70,29 +87,52 @@ def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
     lam_nm, curves = data[:, 0], data[:, 1:].T
     if not np.all(np.isfinite(data)):
         raise DoefabError(f"{path}: holds NaN or infinite values: {fix}")
-    if lam_nm.max() < 1e-3:
-        raise DoefabError(f"{path}: wavelengths {lam_nm.min():g}–{lam_nm.max():g} look like metres: write "
-                          f"nanometres (e.g. 550)")
+    for unit, top, factor in (("metres", 1e-3, 1e9), ("micrometres", 3.0, 1e3)):
+        if lam_nm.max() < top:
+            raise DoefabError(f"{path}: wavelengths {lam_nm.min():g}–{lam_nm.max():g} look like {unit}: write "
+                              f"nanometres (e.g. {lam_nm.max() * factor:.4g})")
     if lam_nm.min() < 200 or lam_nm.max() > 2000 or np.any(np.diff(lam_nm) <= 0):
         raise DoefabError(f"{path}: wavelengths must increase row by row within 200–2000 nm, got "
                           f"{lam_nm.min():g}–{lam_nm.max():g} nm")
-    if np.any(curves < 0) or np.any(curves.max(axis=1) <= 0):
-        raise DoefabError(f"{path}: sensitivities must be ≥ 0 with some light in each of R, G and B")
-    return lam_nm * 1e-9, curves
+    peak = curves.max(axis=1, keepdims=True)
+    if np.any(peak <= 0) or np.any(curves < -0.01 * peak):
+        raise DoefabError(f"{path}: sensitivities must be ≥ 0 (tails down to −1 % of a channel's peak are read as "
+                          f"0) with some light in each of R, G and B")
+    return lam_nm * 1e-9, np.clip(curves, 0.0, None)
+
+
+def _numbers(line: str) -> bool:
+    try:
+        [float(v) for v in line.split(",")]
+    except ValueError:
+        return False
+    return True
 
 
 def response_curves(source: str | os.PathLike = DEFAULT_RESPONSE) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths in metres [L], R, G, B sensitivities [3, L]) of a named camera or a CSV file."""
     if not isinstance(source, (str, os.PathLike)) or not str(source):
         raise DoefabError(f"a camera response is a camera name ({', '.join(RESPONSES)}) or a CSV path, got {source!r}")
-    if str(source) in RESPONSES:
+    if is_named(source):
         return _colour_curves(str(source))
     return _csv_curves(Path(source))
+
+
+def is_named(source) -> bool:
+    """Whether ``source`` names one of the cameras of ``RESPONSES`` (else it is a CSV path)."""
+    return isinstance(source, str) and source in RESPONSES
 
 
 def response_sha256(source: str | os.PathLike = DEFAULT_RESPONSE) -> str:
     """SHA-256 of the curves' values (wavelengths and sensitivities as float64): a response's identity, so a
     copied or renamed CSV is the same camera and an edited one is not."""
+    p = Path(source) if not is_named(source) and isinstance(source, (str, os.PathLike)) else None
+    stamp = (p.stat().st_mtime_ns, p.stat().st_size) if p is not None and p.is_file() else None
+    return _sha_cached(str(source), stamp)
+
+
+@functools.lru_cache(maxsize=32)
+def _sha_cached(source: str, stamp) -> str:  # keyed by a file's time and size: an edited file is read again
     lam, curves = response_curves(source)
     return hashlib.sha256(lam.astype(np.float64).tobytes() + curves.astype(np.float64).tobytes()).hexdigest()
 

@@ -19,10 +19,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.imaging.responses import DEFAULT_RESPONSE, response_curves, response_label, response_sha256
+from doefab.imaging.responses import DEFAULT_RESPONSE, is_named, response_curves, response_label, response_sha256
 
 __all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE", "Sensor",
-           "sensor_from_record"]
+           "sensor_from_record", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
+           "READ_NOISE_RANGE_E"]
+
+DEFAULT_FULL_WELL_E = 25_000.0  # electrons per dual-pixel photodiode at capture value 1 (module docstring)
+DEFAULT_READ_NOISE_E = 3.0  # electrons rms at base ISO
+FULL_WELL_RANGE_E = (100.0, 1e7)  # what a scene, a flag and ``Sensor`` accept
+READ_NOISE_RANGE_E = (0.0, 1000.0)
 
 RESPONSE_SOURCE = ("Canon EOS 5D Mark II RGB sensitivities (rawtoaces), shipped by colour-science as "
                    "characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
@@ -42,8 +48,8 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
     if lam.min() < src_lam[0] - 1e-12 or lam.max() > src_lam[-1] + 1e-12:
         hint = " (they look like nanometres: pass metres, e.g. 550e-9)" if lam.max() > 1 else ""
         raise DoefabError(f"wavelengths {lam.min():g}–{lam.max():g} m lie outside the {response_label(source)} "
-                          f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands within "
-                          f"it, or give a response that covers them")
+                          f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands "
+                          f"within it, or give a response that covers them")
     t = np.stack([np.interp(lam, src_lam, c) for c in curves])
     if t.sum(axis=1).max() <= 0:
         raise DoefabError(f"the {response_label(source)} response is zero in every one of the bands")
@@ -54,8 +60,8 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
 class PoissonGaussian:
     """Shot + read noise. ``full_well_e``: electrons at capture value 1; ``read_noise_e``: rms electrons."""
 
-    full_well_e: float = 25_000.0
-    read_noise_e: float = 3.0
+    full_well_e: float = DEFAULT_FULL_WELL_E
+    read_noise_e: float = DEFAULT_READ_NOISE_E
 
     def __post_init__(self):
         if not (math.isfinite(self.full_well_e) and self.full_well_e > 0):
@@ -99,46 +105,70 @@ def noise_model(noise):
 
 @dataclass(frozen=True)
 class Sensor:
-    """A camera's sensor as the captures see it: its RGB response (a camera name or a CSV path) and its noise
-    (``full_well_e`` electrons at capture value 1, ``read_noise_e`` rms electrons). The default is the
-    prototype's (Canon EOS 5D Mark II curves, 25 000 e⁻, 3 e⁻)."""
+    """A camera's sensor as the captures see it: its RGB response (a camera name of
+    ``imaging.responses.RESPONSES`` or a CSV path) and its noise (``full_well_e``: electrons at a capture value of
+    1, within ``FULL_WELL_RANGE_E``; ``read_noise_e``: rms electrons, within ``READ_NOISE_RANGE_E``). The default
+    is the prototype's (Canon EOS 5D Mark II curves, 25 000 e⁻, 3 e⁻). A CSV response is read and checked when
+    the sensor is made; a named one when first used."""
 
     response: str = DEFAULT_RESPONSE
-    full_well_e: float = 25_000.0
-    read_noise_e: float = 3.0
+    full_well_e: float = DEFAULT_FULL_WELL_E
+    read_noise_e: float = DEFAULT_READ_NOISE_E
 
     def __post_init__(self):
-        PoissonGaussian(self.full_well_e, self.read_noise_e)  # its checks
-        response_curves(self.response)  # a missing or malformed CSV is refused here, before any work
+        from doefab._validate import number_in
+
+        number_in("full_well_e", self.full_well_e, *FULL_WELL_RANGE_E, unit="electrons")
+        number_in("read_noise_e", self.read_noise_e, *READ_NOISE_RANGE_E, unit="electrons rms")
+        if not is_named(self.response):
+            response_curves(self.response)  # a missing or malformed CSV is refused here, before any work
 
     def noise(self) -> PoissonGaussian:
+        """The shot and read noise of this sensor (``PoissonGaussian``)."""
         return PoissonGaussian(float(self.full_well_e), float(self.read_noise_e))
 
     def rgb(self, wavelengths) -> np.ndarray:
-        """[3, C] response on the bands (``sensor_response``)."""
+        """[3, C] response on the bands at ``wavelengths`` (metres; ``sensor_response``)."""
         return sensor_response(wavelengths, self.response)
 
     def has_default_response(self) -> bool:
         """Whether the response's curves are the default camera's (by content, not by name)."""
-        return response_sha256(self.response) == response_sha256(DEFAULT_RESPONSE)
+        return self.response == DEFAULT_RESPONSE or response_sha256(self.response) == response_sha256(DEFAULT_RESPONSE)
 
-    def record(self) -> dict:
-        """What weights and results record: the response (its label and the SHA-256 of its curves) and the noise."""
-        return {"response": response_label(self.response), "response_sha256": response_sha256(self.response),
-                "full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e)}
+    def record(self, with_response: bool = True) -> dict:
+        """What weights and results record: the noise (e⁻) and, ``with_response`` (the spectral task, whose
+        captures it forms), the response's label and the SHA-256 of its curves."""
+        out = {"full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e)}
+        if with_response:
+            out = {"response": response_label(self.response), "response_sha256": response_sha256(self.response),
+                   **out}
+        return out
+
+    def describe(self, with_response: bool = True) -> str:
+        """One line for reports: response (``with_response``), full well and read noise with their units."""
+        noise = f"{self.full_well_e:g} e⁻ full well, {self.read_noise_e:g} e⁻ read noise"
+        return f"{response_label(self.response)} response, {noise}" if with_response else noise
 
     def differs_from(self, record: dict | None, spectral: bool) -> list[str]:
-        """What of this sensor another's ``record`` (None: the default sensor's) does not share: the noise, and the
-        response where it forms the captures (``spectral``: hyperspectral scenes; RGB scenes are the camera's own)."""
-        other = record or Sensor().record()
-        mine = self.record()
-        out = [f"{k} {other.get(k)} (this camera: {mine[k]})" for k in ("full_well_e", "read_noise_e")
-               if not math.isclose(float(other.get(k, math.nan)), mine[k], rel_tol=1e-9)]
-        if spectral and other.get("response_sha256") != mine["response_sha256"]:
-            out.insert(0, f"response {other.get('response')} (this camera: {mine['response']})")
+        """What of this sensor another's ``record`` does not share (its missing entries, or a None record: the
+        default sensor's): the noise, and the response where it forms the captures (``spectral``: hyperspectral
+        scenes; RGB scenes are the camera's own)."""
+        other = record or {}
+        out = [f"{k} {other.get(k, d):g} (this camera: {getattr(self, k):g})"
+               for k, d in (("full_well_e", DEFAULT_FULL_WELL_E), ("read_noise_e", DEFAULT_READ_NOISE_E))
+               if not math.isclose(float(other.get(k, d)), float(getattr(self, k)), rel_tol=1e-9)]
+        if spectral:
+            theirs = other.get("response_sha256") or response_sha256(DEFAULT_RESPONSE)
+            if theirs != response_sha256(self.response):
+                out.insert(0, f"response {other.get('response', DEFAULT_RESPONSE)} (this camera: "
+                              f"{response_label(self.response)})")
         return out
 
 
-def sensor_from_record(record: dict | None) -> dict:
-    """A weights record's ``sensor`` entry, or the default sensor's for records that predate it."""
-    return record if isinstance(record, dict) and "response_sha256" in record else Sensor().record()
+def sensor_from_record(record: dict | None) -> Sensor:
+    """The noise of a weights record's ``sensor`` entry (its response stays the default's: a record names a
+    response, it does not carry its curves — a spectral network's architecture record does); the default sensor
+    for records that predate it."""
+    r = record if isinstance(record, dict) else {}
+    return Sensor(full_well_e=float(r.get("full_well_e", DEFAULT_FULL_WELL_E)),
+                  read_noise_e=float(r.get("read_noise_e", DEFAULT_READ_NOISE_E)))

@@ -139,8 +139,8 @@ def _sensor_rows(sensor) -> list[tuple]:
     if sensor is None:
         return []
     fw, rn = sensor.full_well_e, sensor.read_noise_e
-    rows = [("shot-noise SNR at full scale", math.sqrt(fw), "", f"√(full well) at {fw:g} e⁻; a pixel at 1 % of full "
-             f"scale: {fw / 100 / math.sqrt(fw / 100 + rn ** 2):.3g}")]
+    rows = [("shot-noise SNR at full scale", math.sqrt(fw), "", f"√(full well) at {fw:g} e⁻; a pixel at 1 % of "
+             f"full scale: {fw / 100 / math.sqrt(fw / 100 + rn ** 2):.3g}")]
     if rn > 0:
         rows.append(("capture dynamic range", math.log2(fw / rn), "stops", f"full well over read noise ({rn:g} e⁻ "
                      f"rms): one capture's range; the HDR task recovers highlights beyond its clip"))

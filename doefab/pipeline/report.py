@@ -265,10 +265,10 @@ def system_table(res: dict) -> list[list[str]]:
             ["fabrication", f"{res['settings']['levels']} levels on {cam.material.name}",
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
     if res.get("sensor") is not None:
-        r = res["sensor"].record()
-        rows.append(["sensor", f"{r['response']} response, {r['full_well_e']:g} e⁻ full well, "
-                               f"{r['read_noise_e']:g} e⁻ read noise",
-                     "the default (prototype) sensor" if res["sensor"] == type(res["sensor"])() else "this camera's sensor"])
+        spectral = res["settings"].get("design_task") == "grating"
+        own = res["sensor"].differs_from(None, spectral)
+        rows.append(["sensor", res["sensor"].describe(with_response=spectral),
+                     "this camera's sensor" if own else "the default (prototype) sensor"])
     for r in explain(res):
         rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
     rows += [["warning", "", note] for note in res.get("warnings", [])]

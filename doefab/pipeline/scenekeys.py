@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
+
 __all__ = ["Key", "KEYS", "keys_of", "template", "key_table_markdown", "MATERIAL_NAMES"]
 
 # materials the fabrication section accepts (doefab.optics.materials has their dispersion and sources)
@@ -64,9 +66,9 @@ KEYS = (
         help="the sensor's RGB spectral sensitivities (they form the hyperspectral task's captures): "
              "\"Canon EOS 5D Mark II\", \"Nikon D5100\", \"Sigma SD Merrill\" (400–680 nm), or a CSV path (relative "
              "to the scene) with a header line and rows wavelength_nm, R, G, B"),
-    Key("sensor", "full_well_e", "float", "e⁻", 100.0, 1e7, default="25000",
+    Key("sensor", "full_well_e", "float", "e⁻", *FULL_WELL_RANGE_E, default=f"{DEFAULT_FULL_WELL_E:g}",
         help="electrons at a capture value of 1 (one dual-pixel photodiode's full well at the ISO used)"),
-    Key("sensor", "read_noise_e", "float", "e⁻", 0.0, 1000.0, default="3",
+    Key("sensor", "read_noise_e", "float", "e⁻", *READ_NOISE_RANGE_E, default=f"{DEFAULT_READ_NOISE_E:g}",
         help="read noise, rms electrons (at the ISO used)"),
     Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, default="the task's",
         help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10)"),

@@ -215,7 +215,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     return {"status": "ran" if weights_dir else "reused",
             "why": why + f"; evaluated on {images} held-out test scenes of {size}² px, captured through {parts} "
                          f"fabricated parts with crosstalk unmixed by a noisy calibration (the network told the "
-                         f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor)})",
+                         f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor, task)})",
             "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode,
             "design_levels_sha256": _design_sha(out.parent / "design")}
 
@@ -234,11 +234,10 @@ def shipped_sensor_differs(task: str, sensor) -> list[str]:
                                spectral=task == "hyperspectral")
 
 
-def _sensor_text(sensor) -> str:
+def _sensor_text(sensor, task: str) -> str:
     from doefab.imaging.sensor import Sensor
 
-    r = (sensor or Sensor()).record()
-    return f"{r['response']} response, {r['full_well_e']:g} e⁻ full well, {r['read_noise_e']:g} e⁻ read noise"
+    return (sensor or Sensor()).describe(with_response=task == "hyperspectral")
 
 
 def _scene_budget(scene) -> dict | None:
@@ -318,7 +317,7 @@ STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_hol
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
             "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
 SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("fabrication",), "holder": ("holder",),
-           "reconstruction": ("reconstruction", "sensor"), "tolerance": ("tolerance", "sensor"), "report": ()}
+           "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 
 
 def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
@@ -330,8 +329,10 @@ def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)
-        if "response" in (scene.raw.get("sensor") or {}):
-            parts["sensor"] = scene_sensor(scene).record()  # a CSV response by its content
+        if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
+            sensor = scene_sensor(scene)
+            if sensor.differs_from(None, spectral=scene.task == "hyperspectral"):
+                parts["sensor"] = sensor.record(with_response=scene.task == "hyperspectral")
     return _h(parts)
 
 

@@ -93,8 +93,8 @@ def scene_sensor(scene: Scene, problems: list | None = None):
 
     sec = scene.sensor
     try:
-        return Sensor(response=scene.response_path(), full_well_e=float(sec.get("full_well_e", 25_000.0)),
-                      read_noise_e=float(sec.get("read_noise_e", 3.0)))
+        return Sensor(response=scene.response_path(), **{k: float(sec[k]) for k in ("full_well_e", "read_noise_e")
+                                                          if k in sec})
     except DoefabError as exc:
         if problems is None:
             raise

@@ -28,11 +28,16 @@ __all__ = ["finetune_end_to_end", "render_depth_batch"]
 
 
 def render_depth_batch(indices, split: str, size: int, psf_coded: torch.Tensor, psf_uncoded: torch.Tensor,
-                       depths, margin: int, noise_seed: int, full_well: float = 25_000.0, read_noise: float = 3.0):
-    """(coded, uncoded, depth) for depth scenes ``indices`` of ``split``, differentiable in ``psf_coded``."""
+                       depths, margin: int, noise_seed: int, full_well: float | None = None,
+                       read_noise: float | None = None):
+    """(coded, uncoded, depth) for depth scenes ``indices`` of ``split``, differentiable in ``psf_coded``;
+    ``full_well``, ``read_noise``: electrons (default: the default sensor's)."""
+    from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
     from doefab.imaging.captures import plane_masks, render_layers
     from doefab.reconstruction.data import depth_sample, sample_rng
 
+    full_well = DEFAULT_FULL_WELL_E if full_well is None else full_well
+    read_noise = DEFAULT_READ_NOISE_E if read_noise is None else read_noise
     big = size + 2 * margin
     gen = torch.Generator().manual_seed(int(noise_seed))
     out_c, out_u, out_d = [], [], []
@@ -73,14 +78,19 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
                         lr_doe: float = 0.01, lr_net: float = 2e-4, batch: int = 4, crop: int | None = None,
                         seed: int = 0,
                         val_images: int = 8, val_every: int = 20, sampling: int = 2, parameterization: str | None = None,
-                        resume: bool = False, progress: bool = True, max_steps: int | None = None) -> dict:
+                        resume: bool = False, progress: bool = True, max_steps: int | None = None,
+                        sensor=None) -> dict:
     """Fine-tune the DOE of ``design_dir`` and a depth network together for ``minutes`` of wall time.
 
     Writes ``out_dir/design/`` (the fine-tuned design, full-grid metrics), ``out_dir/weights/`` (the jointly trained
     network, loadable with ``load_reconstructor("depth", weights_dir=..., design=...)``), ``history.csv`` (step,
     wall time, loss, validation MAE in metres) and ``checkpoint.pt``. Returns a summary with the MAE gained per
     minute. ``crop``: the training crop side in pixels (default: the depth networks', ``TaskSpec.crop``).
+    ``sensor``: the ``imaging.sensor.Sensor`` whose noise the captures carry (None: the default sensor's); a
+    starting network trained for another sensor's noise is refused.
     """
+    from doefab.imaging.sensor import Sensor
+
     from doefab.design.design import Design
     from doefab.design.optimize import design_from_theta
     from doefab.design.parameterization import quantize_ste, theta_to_height
@@ -93,6 +103,8 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     if not 0 < minutes <= 24 * 60:
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop("depth", crop)
+    sensor = sensor or Sensor()
+    noise = {"full_well": sensor.full_well_e, "read_noise": sensor.read_noise_e}
     design = Design.load(design_dir)
     if design.task != "half-ring":
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")
@@ -112,7 +124,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
     start_from = "a fresh network"
     if weights_dir is not None:
-        rec = load_reconstructor("depth", "proposed", weights_dir, design_dir)
+        rec = load_reconstructor("depth", "proposed", weights_dir, design_dir, sensor=sensor)
         arch = rec.meta["arch"]
         net = build_model("depth", "proposed", arch)
         net.load_state_dict(rec.model.state_dict())
@@ -125,6 +137,8 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
+    if sensor != Sensor():  # the record of a run for the default sensor stays as it was (resume)
+        config["sensor"] = sensor.record(with_response=False)
     margin = crop_margin("depth", nominal)
     current = {}
 
@@ -137,7 +151,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
         psf_c = coded_psf(False)
         current["psf"] = psf_c
         c, u, d = render_depth_batch(range(val_images), "val", crop, psf_c, psf_u, design.depths, margin,
-                                     noise_seed=seed + 1)
+                                     noise_seed=seed + 1, **noise)
         net.eval()
         with torch.no_grad():
             mae = float((net(c, u, torch.stack([psf_c.float(), psf_u])) - d).abs().mean())
@@ -153,7 +167,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
                 current["psf"] = coded_psf(False)
             psf_c = current["psf"]
         c, u, d = render_depth_batch(range(step * batch, (step + 1) * batch), "train", crop, psf_c, psf_u,
-                                     design.depths, margin, noise_seed=seed * 1_000_003 + step)
+                                     design.depths, margin, noise_seed=seed * 1_000_003 + step, **noise)
         opt_net.zero_grad()
         opt_doe.zero_grad()
         # the cost volume sees the coded PSF too (differentiable in it on joint steps)
@@ -182,7 +196,8 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
 
     write_weights(out / "weights", "depth", "proposed", net,
                   {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": arch,
-                   "training": {"end_to_end": config, "steps": steps, "wall_time_s": round(wall, 1)}},
+                   "training": {"end_to_end": config, "steps": steps, "wall_time_s": round(wall, 1)},
+                   "sensor": sensor.record(with_response=False)},
                   (out / "history.csv").read_bytes())
     return {"steps": steps, "wall_time_s": round(wall, 1), "val_mae_start_m": start_mae, "val_mae_end_m": final,
             "mae_gain_per_minute_m": (start_mae - final) / (wall / 60.0), "design": str(out / "design"),

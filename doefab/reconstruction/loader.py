@@ -145,8 +145,8 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     committed design (or for the design folder ``design``: candidates under comparison). ``other_design``: use
     weights trained for another design anyway (they take ``design``'s PSFs at call time; ``meta`` then says
     ``"other_design": true``) when their shapes fit it. ``sensor``: the ``imaging.sensor.Sensor`` whose captures the
-    network will see; weights trained for another sensor's noise (or, hyperspectral, response) are refused unless
-    ``other_design`` (``meta`` then says ``"other_sensor": true``)."""
+    network will see (None: no check); weights trained for another sensor's noise (or, hyperspectral, response)
+    are refused unless ``other_design`` (``meta`` then says ``"other_sensor": true``)."""
     get_spec(task)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
@@ -200,14 +200,16 @@ def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dic
     when they were and not ``anyway``."""
     if sensor is None:
         return meta
-    diff = sensor.differs_from(meta.get("sensor"), spectral=meta["task"] == "hyperspectral")
+    task, variant, weights_dir, design = who
+    if task == "hyperspectral":  # a response that misses the bands: no network can be trained for it either
+        sensor.rgb(psf_pair(task, design)[0].wavelengths)
+    diff = sensor.differs_from(meta.get("sensor"), spectral=task == "hyperspectral")
     if not diff:
         return meta
     if not anyway:
-        task, variant, weights_dir, design = who
+        flags = ("--sensor-response, " if task == "hyperspectral" else "") + "--full-well-e and --read-noise-e"
         raise DoefabError(f"{pt}: trained for another sensor ({'; '.join(diff)}): train networks for this camera "
-                          f"(doefab train --task {task} --variant {variant} with its --sensor-response, --full-well-e "
-                          f"and --read-noise-e, and a --weights-dir), or use them anyway (other_design=True; in a scene, reconstruction.weights = \"shipped-anyway\")")
+                          f"with doefab train --task {task} --variant {variant} and its {flags} into a --weights-dir")
     return {**meta, "other_sensor": True}
 
 

@@ -143,7 +143,7 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
         rng = sample_rng(split, i)
         p = conditions.pair_for(i, pair) if conditions is not None else pair
         scene, target, views = render_scene(task, split, i, rng, size + 2 * m, p, t)
-        xt = crosstalk(i) if crosstalk is not None else (conditions.crosstalk_for(i, n, size)
+        xt = crosstalk(i) if crosstalk is not None else (conditions.crosstalk_for(i, n, size, nm)
                                                          if conditions is not None else None)
         c_view, u_view = (xt or DualPixelCrosstalk(0.0, 0.0)).record(
             *(v[:, m:m + size, m:m + size].double().numpy() for v in views), nm, rng)

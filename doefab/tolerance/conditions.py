@@ -49,8 +49,9 @@ class Conditions:
     def pair_for(self, index: int, nominal):
         return self.parts[index % len(self.parts)] if self.parts else nominal
 
-    def crosstalk_for(self, index: int, images: int, size: int):
-        """The DualPixelCrosstalk of scene ``index`` (its crop spread across the calibrated width), or None."""
+    def crosstalk_for(self, index: int, images: int, size: int, noise="default"):
+        """The DualPixelCrosstalk of scene ``index`` (its crop spread across the calibrated width; calibrated with
+        the sensor's ``noise``, the captures' own), or None."""
         if self.crosstalk is None:
             return None
         from dataclasses import replace
@@ -62,7 +63,7 @@ class Conditions:
         err = replace(self.crosstalk, seed=int(np.random.SeedSequence([PART_SEEDS[self.split], index])
                                                .generate_state(1)[0]))
         a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(index % max(images, 1), images, size,
-                                                                err.calibrated_width_px))
+                                                                err.calibrated_width_px), noise)
         return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
 
     def describe(self) -> dict:

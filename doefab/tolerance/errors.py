@@ -164,10 +164,11 @@ def sensor_errors(budget: dict) -> dict:
             "calibrated_width_px": int(g("calibrated_width_px", 3072))}
 
 
-def crosstalk_ratios(err: PartErrors, columns) -> tuple:
+def crosstalk_ratios(err: PartErrors, columns, noise="default") -> tuple:
     """(α_l→r, α_r→l, α̂_l→r, α̂_r→l) at sensor ``columns`` (pixels from the centre column): the part's camera's
-    crosstalk profile, and the estimate its calibration gives (simulated noisy white-wall captures, seeded by
-    the part; the estimate is the true profile when the camera is not calibrated — it is then not used)."""
+    crosstalk profile, and the estimate its calibration gives (simulated white-wall captures with the sensor's
+    ``noise``, seeded by the part; the estimate is the true profile when the camera is not calibrated — it is
+    then not used)."""
     from doefab.imaging.crosstalk import crosstalk_profile, simulate_calibration
 
     half = err.calibrated_width_px / 2
@@ -176,7 +177,7 @@ def crosstalk_ratios(err: PartErrors, columns) -> tuple:
     if not err.calibrated:
         return a, b, a, b
     rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
-    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, "default", rng, err.calibration_level)
+    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, noise, rng, err.calibration_level)
     return a, b, a_hat, b_hat
 
 

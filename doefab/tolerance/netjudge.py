@@ -65,24 +65,25 @@ class NetworkJudge:
         """``index → DualPixelCrosstalk`` of the part's camera for each scene's crop."""
         from doefab.imaging.crosstalk import DualPixelCrosstalk
 
+        noise = self.sensor()[1]
+
         def at(i: int):
             if not any(err.crosstalk):
                 return None
             a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(i, self.images, self.size,
-                                                                    err.calibrated_width_px))
+                                                                    err.calibrated_width_px), noise)
             return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
         return at
 
     def sensor(self):
         """(response [3, C] or None, noise model) of the sensor the network was trained for: its record's noise
         and, hyperspectral, the response its architecture record holds (the default camera's when none)."""
-        from doefab.imaging.sensor import PoissonGaussian, sensor_from_record
+        from doefab.imaging.sensor import sensor_from_record
         from doefab.reconstruction.models import arch_response
 
-        rec = sensor_from_record(self.rec.meta.get("sensor"))
-        response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if self.task == "hyperspectral" \
-            else None
-        return response, PoissonGaussian(rec["full_well_e"], rec["read_noise_e"])
+        spectral = self.task == "hyperspectral"
+        response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if spectral else None
+        return response, sensor_from_record(self.rec.meta.get("sensor")).noise()
 
     def evaluate(self, err: PartErrors, height=None) -> dict:
         """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes); ``height``: an

@@ -1,5 +1,7 @@
 """Camera responses: the named published curves and a user's CSV."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -69,11 +71,13 @@ def test_a_responses_identity_is_its_content(tmp_path):
     ("wavelength_nm,R,G,B\n400,1,-1,1\n500,1,1,1\n", "≥ 0"),
     ("wavelength_nm,R,G,B\n400,1,0,1\n500,1,0,1\n", "each of R, G and B"),
     ("wavelength_nm,R,G,B\n400,a,1,1\n500,1,1,1\n", "not a readable CSV"),
+    ("400,1,1,1\n500,1,1,1\n600,1,1,1\n", "is data, not a header"),
+    ("wavelength_nm,R,G,B\n0.4,1,1,1\n0.7,1,1,1\n", "look like micrometres: write nanometres (e.g. 700)"),
 ])
 def test_a_malformed_csv_gets_one_error_naming_the_fix(tmp_path, text, needle):
     p = tmp_path / "bad.csv"
     p.write_text(text)
-    with pytest.raises(DoefabError, match=needle.replace("(", r"\(")) as exc:
+    with pytest.raises(DoefabError, match=re.escape(needle)) as exc:
         response_curves(str(p))
     assert str(p) in str(exc.value)
 
@@ -87,3 +91,10 @@ def test_bands_outside_a_response_are_refused_with_its_range():
     with pytest.raises(DoefabError, match="400–680 nm"):
         sensor_response(BANDS, "Sigma SD Merrill")
     assert sensor_response(BANDS[:-2], "Sigma SD Merrill").shape == (3, 29)
+
+
+def test_small_negative_tails_of_a_measured_curve_read_as_zero(tmp_path):
+    p = tmp_path / "tails.csv"
+    p.write_text("wavelength_nm,R,G,B\n400,-0.005,0.5,1\n500,0.2,1,0.4\n600,1,0.3,-0.009\n")
+    lam, curves = response_curves(str(p))
+    assert curves.min() == 0.0 and curves[0, 0] == 0.0 and curves[1, 1] == 1.0

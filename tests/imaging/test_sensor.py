@@ -22,11 +22,17 @@ def test_the_noise_has_the_poisson_gaussian_variance():
 
 def test_what_differs_between_sensors():
     default = Sensor().record()
-    assert Sensor().differs_from(None, spectral=True) == []
-    assert sensor_from_record(None) == default and sensor_from_record({"x": 1}) == default
+    assert Sensor().differs_from(None, spectral=True) == [] and Sensor().differs_from({}, spectral=True) == []
+    assert sensor_from_record(None) == Sensor() and sensor_from_record({"x": 1}) == Sensor()
+    assert sensor_from_record({"full_well_e": 9000.0, "read_noise_e": 2.0}) == Sensor(full_well_e=9000.0,
+                                                                                       read_noise_e=2.0)
+    # a record of an RGB task's sensor holds its noise only; its response is nobody's business
+    assert Sensor(read_noise_e=12.0).record(with_response=False) == {"full_well_e": 25000.0, "read_noise_e": 12.0}
+    assert Sensor("Nikon D5100").differs_from(Sensor().record(with_response=False), spectral=True)[0].startswith(
+        "response Canon EOS 5D Mark II")
     noisy = Sensor(read_noise_e=12.0)
-    assert len(noisy.differs_from(default, spectral=False)) == 1 and "read_noise_e 3.0" in noisy.differs_from(
-        default, spectral=False)[0]
+    diff = noisy.differs_from(default, spectral=False)
+    assert len(diff) == 1 and "read_noise_e 3 (this camera: 12)" in diff[0]
     nikon = Sensor("Nikon D5100")
     assert nikon.differs_from(default, spectral=False) == []  # RGB scenes: the response forms nothing
     assert nikon.differs_from(default, spectral=True)[0].startswith("response Canon EOS 5D Mark II")
@@ -38,5 +44,7 @@ def test_a_sensor_is_refused_whole_before_any_work(tmp_path):
         Sensor(full_well_e=math.nan)
     with pytest.raises(DoefabError, match="read_noise_e"):
         Sensor(read_noise_e=-1.0)
+    with pytest.raises(DoefabError, match="full_well_e must be ≥ 100"):
+        Sensor(full_well_e=1e12)
     with pytest.raises(DoefabError, match="neither a known camera"):
         Sensor(response=str(tmp_path / "missing.csv"))

@@ -42,10 +42,12 @@ def test_a_csv_response_is_found_beside_the_scene_and_named_by_its_file(tmp_path
 
 
 def test_the_doctor_states_the_noise_the_sensor_implies(tmp_path):
+    """The SNR at full scale against the sensor's own noise drawn at a capture value of 1 (200 000 pixels)."""
     res = resolve(load_scene(_scene(tmp_path, "hdr", "full_well_e = 12000.0\nread_noise_e = 1.5")))
     rows = {r["quantity"]: r["value"] for r in explain(res)}
+    full = res["sensor"].noise().apply(np.ones(200_000), np.random.default_rng(0))
+    assert rows["shot-noise SNR at full scale"] == pytest.approx(full.mean() / full.std(), rel=0.01)
     assert rows["capture dynamic range"] == pytest.approx(math.log2(12000 / 1.5))
-    assert rows["shot-noise SNR at full scale"] == pytest.approx(math.sqrt(12000))
 
 
 def test_an_rgb_task_warns_that_the_response_is_not_used(tmp_path):
@@ -67,9 +69,26 @@ def test_the_reconstruction_stage_hash_follows_the_csv_content(tmp_path):
     assert hashes[0][0] != hashes[1][0] and hashes[0][1] == hashes[1][1]
 
 
+def test_the_default_sensor_written_out_changes_no_stage(tmp_path):
+    """A [sensor] section that states the default values leaves every stage's hash as without it (earlier runs
+    are kept); another noise changes the reconstruction and tolerance stages only."""
+    from doefab.pipeline.stages import stage_hash
+
+    plain = load_scene(REPO / "scenes" / "hdr.toml")
+    stated = load_scene(_scene(tmp_path, "hdr", "full_well_e = 25000.0\nread_noise_e = 3.0"))
+    (tmp_path / "other").mkdir()
+    other = load_scene(_scene(tmp_path / "other", "hdr", "full_well_e = 20000.0"))
+    for name in ("design", "reconstruction", "tolerance"):
+        assert stage_hash(stated, name, {}, False) == stage_hash(plain, name, {}, False), name
+    assert stage_hash(other, "design", {}, False) == stage_hash(plain, "design", {}, False)
+    assert stage_hash(other, "reconstruction", {}, False) != stage_hash(plain, "reconstruction", {}, False)
+    assert stage_hash(other, "tolerance", {}, False) != stage_hash(plain, "tolerance", {}, False)
+
+
 def test_shipped_networks_are_not_used_for_another_sensors_noise(tmp_path, monkeypatch):
     monkeypatch.setenv("DOEFAB_CACHE", str(tmp_path / "cache"))
     scene = _scene(tmp_path, "hdr", "read_noise_e = 20.0", stages='["design", "reconstruction"]')
     assert main(["run", str(scene), "--quick", "--out", str(tmp_path / "out")]) == 0
     st = json.loads((tmp_path / "out" / "reconstruction" / "stage.json").read_text())
-    assert st["status"] == "skipped" and "another sensor" in st["why"] and "read_noise_e 3.0" in st["why"]
+    assert st["status"] == "skipped" and "another sensor" in st["why"] and "read_noise_e 3 (this camera: 20)" in st[
+        "why"]

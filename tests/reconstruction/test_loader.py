@@ -103,15 +103,28 @@ def test_depth_network_takes_its_cost_volume_psfs_and_a_swapped_pair(tmp_path):
         rec(c, u, psf=p.coded)
 
 
-def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_for_the_default(tmp_path):
-    """A hyperspectral network trained for the Nikon D5100 builds its inverses on that camera's curves (read here
-    from colour-science's NPL data, not through doefab), records its sensor, and is refused for the default
-    camera's captures unless asked for."""
+def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_for_the_default(tmp_path,
+                                                                                                 monkeypatch):
+    """A hyperspectral network trained for the Nikon D5100: its training and evaluation captures are formed with
+    that camera's curves (read here from colour-science's NPL data, not through doefab) and noise, it builds its
+    inverses on them, records its sensor, and is refused for the default camera's captures unless asked for."""
     import colour
 
+    import doefab.reconstruction.evaluate as evaluate_mod
+    import doefab.reconstruction.train as train_mod
     from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.loader import load_reconstructor
 
+    seen = []
+
+    def spy(real):
+        def call(task, split, indices, size, pair, response=None, noise="default", **kw):
+            seen.append((split, response, noise))
+            return real(task, split, indices, size, pair, response, noise, **kw)
+        return call
+
+    monkeypatch.setattr(train_mod, "make_batch", spy(train_mod.make_batch))
+    monkeypatch.setattr(evaluate_mod, "make_batch", spy(evaluate_mod.make_batch))
     nikon = Sensor("Nikon D5100", full_well_e=8000.0, read_noise_e=2.0)
     meta = train("hyperspectral", "proposed", minutes=5, out_dir=tmp_path / "run", weights_dir=tmp_path / "w",
                  crop=64, val_images=1, val_every=1000, progress=False, max_steps=1, sensor=nikon,
@@ -122,6 +135,12 @@ def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_
     bands_nm = np.asarray(rec.pair.wavelengths) * 1e9
     t = np.stack([np.interp(bands_nm, msds.wavelengths, msds.values[:, k]) for k in range(3)])
     assert np.allclose(rec.model.response.numpy(), t / t.sum(axis=1).max(), atol=1e-6)
+    evaluate_mod.evaluate("hyperspectral", tmp_path / "ev", images=1, size=64, weights_dir=tmp_path / "w",
+                          progress=False, variants=("proposed",), split="val", sensor=nikon)
+    assert {split for split, _, _ in seen} == {"train", "val"} and len(seen) >= 3  # val, a step, the evaluation
+    for _, response, noise in seen:
+        assert np.allclose(response, t / t.sum(axis=1).max(), atol=1e-6)
+        assert (noise.full_well_e, noise.read_noise_e) == (8000.0, 2.0)
     with pytest.raises(DoefabError, match="another sensor.*response Nikon D5100"):
         load_reconstructor("hyperspectral", "proposed", tmp_path / "w", sensor=Sensor())
     with pytest.raises(DoefabError, match="full_well_e 8000"):

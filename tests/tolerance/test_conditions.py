@@ -132,3 +132,19 @@ def test_parts_cached_by_other_model_code_are_not_reused(honest, depth_design, c
     C.honest("depth", depth_design, "val", parts=2)
     assert len(computed) == 2  # both parts computed again
     assert len(set((cache / "conditions").glob("depth-*.pt")) - before) == 1  # and kept apart
+
+
+def test_the_crosstalk_calibration_scatters_with_the_sensors_shot_noise():
+    """The white-wall calibration's estimate of a per-column ratio is shot-noise limited: its scatter across
+    columns grows as 1/√(full well) — √125 ≈ 11.2× from 25 000 e⁻ to 200 e⁻ (no read noise) — so a scene's own
+    sensor reaches the calibration, not the default's."""
+    from doefab.imaging.sensor import Sensor
+    from doefab.tolerance.errors import PartErrors, crosstalk_ratios
+
+    err = PartErrors(crosstalk=(0.03, 0.03), calibration_rows=256)
+    cols = np.arange(512) - 255.5
+    scatter = []
+    for full_well in (25_000.0, 200.0):
+        a, _, a_hat, _ = crosstalk_ratios(err, cols, Sensor(full_well_e=full_well, read_noise_e=0.0).noise())
+        scatter.append(np.std(a_hat - a))
+    assert scatter[1] / scatter[0] == pytest.approx(np.sqrt(25_000 / 200), rel=0.15)

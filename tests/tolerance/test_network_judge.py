@@ -42,22 +42,49 @@ def test_the_error_free_part_is_judged_once_and_handed_out_by_copy(judge):
             assert again[label][k] == pytest.approx(v, rel=1e-6, abs=1e-9)
 
 
-def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for():
-    """The network's weights record names its sensor: the judge's captures use that noise and (hyperspectral) the
-    response its architecture record holds; records without one are the default camera's."""
+def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for(monkeypatch):
+    """The network's weights record names its sensor: the judge's captures (and the crosstalk calibration behind
+    them) use that noise and, hyperspectral, the response its architecture record holds; records without one
+    are the default camera's (its rawtoaces curves, read here from colour-science's file)."""
+    import os
     from types import SimpleNamespace
 
+    import doefab.reconstruction.specs as specs
+    from colour.characterisation.aces_it import ROOT_RESOURCES_RAWTOACES
     from doefab.imaging.sensor import Sensor
-    from doefab.tolerance.netjudge import NetworkJudge
 
     bands = np.arange(400, 701, 10) * 1e-9
     nikon = Sensor("Nikon D5100", full_well_e=5000.0, read_noise_e=4.0)
     judge = NetworkJudge.__new__(NetworkJudge)
-    judge.task = "hyperspectral"
+    judge.task, judge.images, judge.size, judge._nominal = "hyperspectral", 2, 64, None
     judge.rec = SimpleNamespace(meta={"arch": {"response": nikon.rgb(bands).tolist()}, "sensor": nikon.record()},
                                 pair=SimpleNamespace(wavelengths=bands))
-    t, noise = judge.sensor()
-    assert np.allclose(t, nikon.rgb(bands)) and (noise.full_well_e, noise.read_noise_e) == (5000.0, 4.0)
+    judge.pair = lambda err, height=None: judge.rec.pair
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(task, split, indices, size, pair, response=None, noise="default", crosstalk=None, **kw):
+        seen.update(response=response, noise=noise, crosstalk=crosstalk)
+        raise Stop
+
+    monkeypatch.setattr(specs, "make_batch", spy)
+    with pytest.raises(Stop):
+        judge.evaluate(PartErrors(crosstalk=(0.05, 0.05)))
+    assert np.allclose(seen["response"], nikon.rgb(bands))
+    assert (seen["noise"].full_well_e, seen["noise"].read_noise_e) == (5000.0, 4.0)
+    calls = []
+    import doefab.tolerance.netjudge as nj
+
+    monkeypatch.setattr(nj, "crosstalk_ratios", lambda err, cols, noise: calls.append(noise) or (0, 0, 0, 0))
+    seen["crosstalk"](0)
+    assert (calls[0].full_well_e, calls[0].read_noise_e) == (5000.0, 4.0)
+
     judge.rec.meta = {"arch": {}}  # shipped weights recorded before sensors were
     t, noise = judge.sensor()
-    assert np.allclose(t, Sensor().rgb(bands)) and (noise.full_well_e, noise.read_noise_e) == (25000.0, 3.0)
+    data = np.genfromtxt(os.path.join(ROOT_RESOURCES_RAWTOACES, "CANON_EOS_5DMark_II_RGB_Sensitivities.csv"),
+                         delimiter=",", names=True)
+    canon = np.stack([np.interp(bands * 1e9, data["wavelength"], data[c]) for c in ("R", "G", "B")])
+    assert np.allclose(t, canon / canon.sum(axis=1).max(), atol=1e-6)
+    assert (noise.full_well_e, noise.read_noise_e) == (25000.0, 3.0)
