@@ -133,12 +133,12 @@ def sensor_arg(args, design=None):
 
     response = getattr(args, "sensor_response", None)
     task = getattr(args, "task", "depth")
-    if response is not None and task != "hyperspectral":
-        raise DoefabError(f"--sensor-response forms the hyperspectral task's captures only; the {task} task's "
-                          f"scenes are the camera's own RGB: drop it (the noise flags apply)")
     sensor = Sensor(**({"response": response} if response is not None else {}), full_well_e=args.full_well_e,
                     read_noise_e=args.read_noise_e)
-    if response is not None:
+    if response is not None and task != "hyperspectral" and not sensor.has_default_response():
+        raise DoefabError(f"--sensor-response forms the hyperspectral task's captures only; the {task} task's "
+                          f"scenes are the camera's own RGB: drop it (the noise flags apply)")
+    if task == "hyperspectral":  # the design's bands within the response (the default's too)
         from doefab.reconstruction.specs import psf_pair
 
         try:

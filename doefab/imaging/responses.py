@@ -70,7 +70,7 @@ def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise DoefabError(f"camera response {str(path)!r} is neither a known camera ({names}) nor an existing CSV "
                           f"file: {fix}")
     try:
-        first = path.read_text(encoding="utf-8").splitlines()[:1]
+        first = path.read_text(encoding="utf-8-sig").splitlines()[:1]  # a spreadsheet's byte-order mark: not data
     except UnicodeDecodeError as exc:
         raise DoefabError(f"{path}: not a readable CSV of numbers ({exc.reason}): {fix}") from None
     if first and _numbers(first[0]):
@@ -79,7 +79,7 @@ def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         with warnings.catch_warnings():  # an empty file: refused below, not warned about
             warnings.simplefilter("ignore")
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8-sig")
     except (ValueError, UnicodeDecodeError) as exc:
         raise DoefabError(f"{path}: not a readable CSV of numbers ({str(exc).splitlines()[0]}): {fix}") from None
     if data.shape[1] != 4 or data.shape[0] < 2:

@@ -137,7 +137,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
-    if sensor != Sensor():  # the record of a run for the default sensor stays as it was (resume)
+    if sensor.differs_from(None, spectral=False):  # a run for the default noise keeps its old record (resume)
         config["sensor"] = sensor.record(with_response=False)
     margin = crop_margin("depth", nominal)
     current = {}

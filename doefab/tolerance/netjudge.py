@@ -65,7 +65,7 @@ class NetworkJudge:
         """``index → DualPixelCrosstalk`` of the part's camera for each scene's crop."""
         from doefab.imaging.crosstalk import DualPixelCrosstalk
 
-        noise = self.sensor()[1]
+        noise = self.noise()
 
         def at(i: int):
             if not any(err.crosstalk):
@@ -78,12 +78,17 @@ class NetworkJudge:
     def sensor(self):
         """(response [3, C] or None, noise model) of the sensor the network was trained for: its record's noise
         and, hyperspectral, the response its architecture record holds (the default camera's when none)."""
-        from doefab.imaging.sensor import sensor_from_record
         from doefab.reconstruction.models import arch_response
 
         spectral = self.task == "hyperspectral"
         response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if spectral else None
-        return response, sensor_from_record(self.rec.meta.get("sensor")).noise()
+        return response, self.noise()
+
+    def noise(self):
+        """The noise model of the sensor the network was trained for (its weights record's)."""
+        from doefab.imaging.sensor import sensor_from_record
+
+        return sensor_from_record(self.rec.meta.get("sensor")).noise()
 
     def evaluate(self, err: PartErrors, height=None) -> dict:
         """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes); ``height``: an

@@ -72,6 +72,7 @@ def test_a_responses_identity_is_its_content(tmp_path):
     ("wavelength_nm,R,G,B\n400,1,0,1\n500,1,0,1\n", "each of R, G and B"),
     ("wavelength_nm,R,G,B\n400,a,1,1\n500,1,1,1\n", "not a readable CSV"),
     ("400,1,1,1\n500,1,1,1\n600,1,1,1\n", "is data, not a header"),
+    ("\ufeff400,1,1,1\n500,1,1,1\n600,1,1,1\n", "is data, not a header"),  # a spreadsheet's byte-order mark
     ("wavelength_nm,R,G,B\n0.4,1,1,1\n0.7,1,1,1\n", "look like micrometres: write nanometres (e.g. 700)"),
 ])
 def test_a_malformed_csv_gets_one_error_naming_the_fix(tmp_path, text, needle):

@@ -69,10 +69,16 @@ def test_the_reconstruction_stage_hash_follows_the_csv_content(tmp_path):
     assert hashes[0][0] != hashes[1][0] and hashes[0][1] == hashes[1][1]
 
 
-def test_the_default_sensor_written_out_changes_no_stage(tmp_path):
-    """A [sensor] section that states the default values leaves every stage's hash as without it (earlier runs
-    are kept); another noise changes the reconstruction and tolerance stages only."""
+def test_the_default_sensor_written_out_changes_no_stage(tmp_path, monkeypatch):
+    """A [sensor] section that states the default values leaves every stage's hash as without it, and no stage
+    hashes a sensor then (runs made before sensors existed are kept); another noise changes the reconstruction
+    and tolerance stages only."""
+    import doefab.pipeline.stages as stages
     from doefab.pipeline.stages import stage_hash
+
+    hashed = []
+    real = stages._h
+    monkeypatch.setattr(stages, "_h", lambda obj: hashed.append(obj) or real(obj))
 
     plain = load_scene(REPO / "scenes" / "hdr.toml")
     stated = load_scene(_scene(tmp_path, "hdr", "full_well_e = 25000.0\nread_noise_e = 3.0"))
@@ -80,6 +86,8 @@ def test_the_default_sensor_written_out_changes_no_stage(tmp_path):
     other = load_scene(_scene(tmp_path / "other", "hdr", "full_well_e = 20000.0"))
     for name in ("design", "reconstruction", "tolerance"):
         assert stage_hash(stated, name, {}, False) == stage_hash(plain, name, {}, False), name
+    stage_parts = [p for p in hashed if "upstream" in p]  # not the budget's digest (its own [sensor] table)
+    assert len(stage_parts) == 6 and not any("sensor" in parts for parts in stage_parts)
     assert stage_hash(other, "design", {}, False) == stage_hash(plain, "design", {}, False)
     assert stage_hash(other, "reconstruction", {}, False) != stage_hash(plain, "reconstruction", {}, False)
     assert stage_hash(other, "tolerance", {}, False) != stage_hash(plain, "tolerance", {}, False)

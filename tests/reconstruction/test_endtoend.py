@@ -41,3 +41,39 @@ def test_finetune_moves_the_doe_resumes_and_writes_loadable_outputs(radial_desig
     rec = doefab.load_reconstructor("depth", weights_dir=out / "weights", design=out / "design")
     pred = rec(np.zeros((3, 64, 64), np.float32), np.zeros((3, 64, 64), np.float32))
     assert np.asarray(pred).shape == (64, 64)
+
+
+def test_finetune_renders_with_the_sensors_noise(radial_design, tmp_path, monkeypatch):
+    """``sensor``'s full well and read noise reach the rendered captures (the first, validation batch)."""
+    import doefab.reconstruction.endtoend as e2e
+    from doefab.imaging.sensor import Sensor
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr(e2e, "render_depth_batch", spy)
+    with pytest.raises(Stop):
+        finetune_end_to_end(radial_design, tmp_path / "run", minutes=10, sampling=4, crop=64, val_images=1, batch=1,
+                            progress=False, max_steps=1, sensor=Sensor(full_well_e=900.0, read_noise_e=7.0))
+    assert (seen["full_well"], seen["read_noise"]) == (900.0, 7.0)
+
+
+def test_rendered_depth_captures_carry_the_poisson_gaussian_variance():
+    """A flat grey scene through a delta PSF: the capture's variance is x / N_fw + (σ_read / N_fw)²."""
+    k = 9
+    psf = torch.zeros((2, 3, k, k))
+    psf[:, :, k // 2, k // 2] = 1.0
+    c, _, _ = render_depth_batch([0], "train", 64, psf, psf, (2.0, 4.0), margin=k // 2, noise_seed=0,
+                                 full_well=400.0, read_noise=8.0)
+    clean, _, _ = render_depth_batch([0], "train", 64, psf, psf, (2.0, 4.0), margin=k // 2, noise_seed=0,
+                                     full_well=1e12, read_noise=0.0)
+    resid = (c - clean).numpy()
+    want = clean.numpy() / 400.0 + (8.0 / 400.0) ** 2
+    inside = (clean.numpy() > 0.05) & (clean.numpy() < 0.9)  # not clipped at 0 or 1
+    assert np.mean(resid[inside] ** 2) == pytest.approx(np.mean(want[inside]), rel=0.05)

@@ -81,3 +81,28 @@ def test_train_at_the_command_line_leaves_the_crop_to_the_task_unless_given(tmp_
         main(["train", "--task", "depth", "--variant", "coded_only", "--clean", "--steps", "1",
               "--out", str(tmp_path / "t"), *flag])
     assert got["crop"] == want  # None: train() takes the task's crop (128 for depth)
+
+
+@pytest.mark.parametrize("task", ["hdr", "hyperspectral"])
+def test_a_run_for_the_default_sensor_keeps_its_old_record(task, tmp_path, monkeypatch):
+    """The run's config (what a resumed run must match) names a sensor only when it is not the default one, so
+    checkpoints made before sensors existed resume; another noise is named."""
+    import doefab.reconstruction.train as train_mod
+    from doefab.imaging.sensor import Sensor
+
+    configs = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(out, config, *args, **kw):
+        configs.append(config)
+        raise Stop
+
+    monkeypatch.setattr(train_mod, "run_loop", spy)
+    for sensor in (None, Sensor(), Sensor(read_noise_e=5.0)):
+        with pytest.raises(Stop):
+            train(task, "uncoded_only", minutes=1, out_dir=tmp_path / "run", weights_dir=tmp_path / "w", crop=64,
+                  val_images=1, progress=False, arch={"features": 1, "width": 4}, sensor=sensor)
+    assert "sensor" not in configs[0] and configs[0] == configs[1]
+    assert configs[2]["sensor"]["read_noise_e"] == 5.0

@@ -148,3 +148,29 @@ def test_the_crosstalk_calibration_scatters_with_the_sensors_shot_noise():
         a, _, a_hat, _ = crosstalk_ratios(err, cols, Sensor(full_well_e=full_well, read_noise_e=0.0).noise())
         scatter.append(np.std(a_hat - a))
     assert scatter[1] / scatter[0] == pytest.approx(np.sqrt(25_000 / 200), rel=0.15)
+
+
+def test_make_batch_calibrates_the_crosstalk_with_the_captures_own_noise(depth_design, monkeypatch):
+    """The calibration behind a calibrated camera's unmix draws the same sensor noise as the captures."""
+    from dataclasses import replace
+
+    import doefab.tolerance.errors as errors
+    from doefab.imaging.sensor import Sensor
+    from doefab.reconstruction.specs import psf_pair
+    from doefab.tolerance.errors import load_budget, sensor_errors
+    from doefab.tolerance.surrogate import base_part
+
+    real, seen = errors.crosstalk_ratios, []
+
+    def spy(err, columns, noise="default"):
+        seen.append(noise)
+        return real(err, columns, noise)
+
+    monkeypatch.setattr(errors, "crosstalk_ratios", spy)
+    budget = load_budget()
+    cond = C.Conditions(name="x", crosstalk=replace(base_part(budget), **sensor_errors(budget)), split="test")
+    assert cond.crosstalk.calibrated
+    pair, _ = psf_pair("depth", depth_design)
+    make_batch("depth", "test", [1], 64, pair, noise=Sensor(full_well_e=900.0, read_noise_e=7.0).noise(),
+               conditions=cond)
+    assert len(seen) == 1 and (seen[0].full_well_e, seen[0].read_noise_e) == (900.0, 7.0)
