@@ -104,7 +104,8 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             None for a pair of one depth.
         response: [3, C] RGB response for spectral scenes (``doefab.sensor_response(pair.wavelengths)``);
             None for RGB scenes (C = 3).
-        noise: ``"default"`` (Poisson–Gaussian), ``"authors"`` (uniform ±0.01), ``"none"`` or a model.
+        noise: ``"default"`` (Poisson–Gaussian), ``"authors"`` (uniform ±0.01), ``"none"``, a model, or a
+            ``doefab.Sensor`` (its full well and read noise; its ``rgb(pair.wavelengths)`` is the response).
         seed: seeds the noise (coded first, then uncoded).
         crosstalk: None (each view records only its own half), or a ``doefab.imaging.crosstalk.DualPixelCrosstalk``
             — the camera's per-column ratios mix the two views (Eq. 29) before the noise, and, when it carries a

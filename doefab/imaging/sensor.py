@@ -93,9 +93,12 @@ class NoNoise:
 
 
 def noise_model(noise):
-    """``"default"`` (PoissonGaussian()), ``"authors"`` (uniform ±0.01), ``"none"``, or a model object."""
+    """``"default"`` (PoissonGaussian()), ``"authors"`` (uniform ±0.01), ``"none"``, a model object, or a
+    ``Sensor`` (its shot and read noise)."""
     if hasattr(noise, "apply"):
         return noise
+    if isinstance(noise, Sensor):
+        return noise.noise()
     presets = {"default": PoissonGaussian(), "authors": UniformNoise(0.01), "none": NoNoise()}
     if noise is None:
         return presets["none"]

@@ -112,6 +112,16 @@ def test_spectral_scene_uses_the_sensor_response():
     np.testing.assert_allclose(coded[:, 8, 8], 0.5 * t @ spectrum, rtol=1e-5)
 
 
+def test_a_sensor_gives_the_captures_its_noise():
+    """A 500 e⁻, 10 e⁻ sensor: a capture at 0.4 scatters by √(0.4 · 500 + 10²) / 500."""
+    psf = np.zeros((1, 3, 3, 3))
+    psf[0, :, 1, 1] = 0.5
+    pair = _pair(psf, psf, (656e-9, 589e-9, 486e-9), (5.0,))
+    scene = np.full((3, 128, 128), 0.8, np.float32)  # capture 0.4
+    coded, _ = doefab.simulate_captures(scene, pair, noise=doefab.Sensor(full_well_e=500.0, read_noise_e=10.0))
+    assert coded.std() == pytest.approx(math.sqrt(0.4 * 500 + 100) / 500, rel=0.05)
+
+
 def test_noise_is_seeded_and_has_the_stated_size():
     psf = np.zeros((1, 3, 3, 3))
     psf[0, :, 1, 1] = 0.5
