@@ -89,116 +89,141 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     ``sensor``: the ``imaging.sensor.Sensor`` whose noise the captures carry (None: the default sensor's); a
     starting network trained for another sensor's noise is refused.
     """
-    from doefab.imaging.sensor import Sensor
-
     from doefab.design.design import Design
-    from doefab.design.optimize import design_from_theta
-    from doefab.design.parameterization import quantize_ste, theta_to_height
-    from doefab.optics.psf import PSFPlan
-    from doefab.reconstruction.loader import load_reconstructor
+    from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.loop import run_loop
-    from doefab.reconstruction.models import build_model, default_arch, loss_fn
-    from doefab.reconstruction.specs import crop_margin, psf_pair, training_crop
+    from doefab.reconstruction.specs import training_crop
 
     if not 0 < minutes <= 24 * 60:
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop("depth", crop)
     sensor = sensor or Sensor()
-    noise = {"full_well": sensor.full_well_e, "read_noise": sensor.read_noise_e}
     design = Design.load(design_dir)
     if design.task != "half-ring":
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")
     if design.camera.doe_pixels % sampling:
         raise DoefabError(f"sampling {sampling} must divide the DOE grid ({design.camera.doe_pixels} px)")
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
-    cfg0 = design.extra.get("config", {})
-    pname = parameterization or ("radial" if cfg0.get("parameterization") == "radial" else "pixel")
-    dcam = design.camera.replace(doe_pixels=design.camera.doe_pixels // sampling,
-                                 doe_pitch=design.camera.doe_pitch * sampling)
-    theta, param = _start_theta(design, pname, dcam, sampling)
-    theta.requires_grad_(True)
-    nominal, _ = psf_pair("depth", design_dir)
-    psf_u = nominal.uncoded.to(torch.float32)
-    plan = PSFPlan(dcam, design.wavelengths, design.depths, nominal.coded.shape[-1], halves=("coded",))
-    torch.manual_seed(seed)
-    arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
-    start_from = "a fresh network"
-    if weights_dir is not None:
-        rec = load_reconstructor("depth", "proposed", weights_dir, design_dir, sensor=sensor)
-        arch = rec.meta["arch"]
-        net = build_model("depth", "proposed", arch)
-        net.load_state_dict(rec.model.state_dict())
-        start_from = f"the network in {weights_dir}"
-    else:
-        net = build_model("depth", "proposed", arch)
-    opt_net = torch.optim.Adam(net.parameters(), lr=lr_net)
-    opt_doe = torch.optim.Adam([theta], lr=lr_doe)
-    out = Path(out_dir)
+    pname = parameterization or ("radial" if design.extra.get("config", {}).get("parameterization") == "radial"
+                                 else "pixel")
+    run = _JointRun(design, design_dir, pname, sampling, weights_dir, sensor, seed, lr_doe, lr_net)
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
     if sensor.differs_from(None, spectral=False):  # a run for the default noise keeps its old record (resume)
         config["sensor"] = sensor.record(with_response=False)
-    margin = crop_margin("depth", nominal)
-    current = {}
-
-    def coded_psf(grad: bool) -> torch.Tensor:
-        with torch.set_grad_enabled(grad):
-            h = quantize_ste(theta_to_height(param.waves(theta), dcam), dcam, design.n_levels)
-            return plan.half_psf("coded", h)
-
-    def validate() -> float:
-        psf_c = coded_psf(False)
-        current["psf"] = psf_c
-        c, u, d = render_depth_batch(range(val_images), "val", crop, psf_c, psf_u, design.depths, margin,
-                                     noise_seed=seed + 1, **noise)
-        net.eval()
-        with torch.no_grad():
-            mae = float((net(c, u, torch.stack([psf_c.float(), psf_u])) - d).abs().mean())
-        net.train()
-        return mae
-
-    def step_fn(step: int) -> float:
-        joint = step % doe_every == 0
-        if joint:
-            psf_c = coded_psf(True)
-        else:
-            if "psf" not in current:
-                current["psf"] = coded_psf(False)
-            psf_c = current["psf"]
-        c, u, d = render_depth_batch(range(step * batch, (step + 1) * batch), "train", crop, psf_c, psf_u,
-                                     design.depths, margin, noise_seed=seed * 1_000_003 + step, **noise)
-        opt_net.zero_grad()
-        opt_doe.zero_grad()
-        # the cost volume sees the coded PSF too (differentiable in it on joint steps)
-        loss = loss_fn("depth", net(c, u, torch.stack([psf_c.float(), psf_u])), d)
-        if torch.isfinite(loss):
-            loss.backward()
-            opt_net.step()
-            if joint:
-                opt_doe.step()
-                current["psf"] = coded_psf(False)
-        return float(loss.detach())
-
-    steps, history, wall = run_loop(out, config, minutes, step_fn, validate,
-                                    {"model": net, "optimizer": opt_net, "optimizer_doe": opt_doe},
-                                    [(opt_net, lr_net), (opt_doe, lr_doe)], "constant", "mae_m", val_every, resume,
-                                    progress, "end-to-end depth", max_steps, tensors={"theta": theta},
-                                    validate_first=True)
+    out = Path(out_dir)
+    steps, history, wall = run_loop(
+        out, config, minutes, lambda step: run.step(step, doe_every, batch, crop),
+        lambda: run.validate(val_images, crop), {"model": run.net, "optimizer": run.opt_net,
+                                                 "optimizer_doe": run.opt_doe},
+        [(run.opt_net, lr_net), (run.opt_doe, lr_doe)], "constant", "mae_m", val_every, resume, progress,
+        "end-to-end depth", max_steps, tensors={"theta": run.theta}, validate_first=True)
     start_mae, final = history[0][3], history[-1][3]
-    new = design_from_theta(design, theta.detach(), pname, sampling, history=[],
-                            extra={"end_to_end": {"from_design": str(Path(design_dir).resolve()), "minutes": minutes,
-                                                  "steps": steps, "doe_steps": math.ceil(steps / doe_every),
-                                                  "start_network": start_from}})
-    new.save(out / "design")
-    from doefab.fabrication.levels import levels_sha256
-    from doefab.reconstruction.weights import write_weights
-
-    write_weights(out / "weights", "depth", "proposed", net,
-                  {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": arch,
-                   "training": {"end_to_end": config, "steps": steps, "wall_time_s": round(wall, 1)},
-                   "sensor": sensor.record(with_response=False)},
-                  (out / "history.csv").read_bytes())
+    new = run.write(out, config, {"from_design": config["design"], "minutes": minutes, "steps": steps,
+                                  "doe_steps": math.ceil(steps / doe_every), "start_network": run.start_from}, wall)
     return {"steps": steps, "wall_time_s": round(wall, 1), "val_mae_start_m": start_mae, "val_mae_end_m": final,
             "mae_gain_per_minute_m": (start_mae - final) / (wall / 60.0), "design": str(out / "design"),
             "metric": new.metrics}
+
+
+class _JointRun:
+    """The DOE's parameters, the depth network, their optimisers and the PSFs of one end-to-end run: its
+    validation, its training step and its outputs."""
+
+    def __init__(self, design, design_dir, pname: str, sampling: int, weights_dir, sensor, seed: int,
+                 lr_doe: float, lr_net: float):
+        from doefab.optics.psf import PSFPlan
+        from doefab.reconstruction.specs import crop_margin, psf_pair
+
+        self.design, self.pname, self.sampling, self.seed = design, pname, sampling, seed
+        self.noise = {"full_well": sensor.full_well_e, "read_noise": sensor.read_noise_e}
+        self.sensor = sensor
+        self.dcam = design.camera.replace(doe_pixels=design.camera.doe_pixels // sampling,
+                                          doe_pitch=design.camera.doe_pitch * sampling)
+        self.theta, self.param = _start_theta(design, pname, self.dcam, sampling)
+        self.theta.requires_grad_(True)
+        nominal, _ = psf_pair("depth", design_dir)
+        self.psf_u = nominal.uncoded.to(torch.float32)
+        self.plan = PSFPlan(self.dcam, design.wavelengths, design.depths, nominal.coded.shape[-1], halves=("coded",))
+        self.margin = crop_margin("depth", nominal)
+        torch.manual_seed(seed)
+        self.net, self.arch, self.start_from = _start_network(design, design_dir, weights_dir, sensor)
+        self.opt_net = torch.optim.Adam(self.net.parameters(), lr=lr_net)
+        self.opt_doe = torch.optim.Adam([self.theta], lr=lr_doe)
+        self.current = {}
+
+    def coded_psf(self, grad: bool) -> torch.Tensor:
+        from doefab.design.parameterization import quantize_ste, theta_to_height
+
+        with torch.set_grad_enabled(grad):
+            h = quantize_ste(theta_to_height(self.param.waves(self.theta), self.dcam), self.dcam,
+                             self.design.n_levels)
+            return self.plan.half_psf("coded", h)
+
+    def validate(self, images: int, crop: int) -> float:
+        psf_c = self.coded_psf(False)
+        self.current["psf"] = psf_c
+        c, u, d = render_depth_batch(range(images), "val", crop, psf_c, self.psf_u, self.design.depths, self.margin,
+                                     noise_seed=self.seed + 1, **self.noise)
+        self.net.eval()
+        with torch.no_grad():
+            mae = float((self.net(c, u, torch.stack([psf_c.float(), self.psf_u])) - d).abs().mean())
+        self.net.train()
+        return mae
+
+    def step(self, step: int, doe_every: int, batch: int, crop: int) -> float:
+        from doefab.reconstruction.models import loss_fn
+
+        joint = step % doe_every == 0
+        if joint:
+            psf_c = self.coded_psf(True)
+        else:
+            if "psf" not in self.current:
+                self.current["psf"] = self.coded_psf(False)
+            psf_c = self.current["psf"]
+        c, u, d = render_depth_batch(range(step * batch, (step + 1) * batch), "train", crop, psf_c, self.psf_u,
+                                     self.design.depths, self.margin, noise_seed=self.seed * 1_000_003 + step,
+                                     **self.noise)
+        self.opt_net.zero_grad()
+        self.opt_doe.zero_grad()
+        # the cost volume sees the coded PSF too (differentiable in it on joint steps)
+        loss = loss_fn("depth", self.net(c, u, torch.stack([psf_c.float(), self.psf_u])), d)
+        if torch.isfinite(loss):
+            loss.backward()
+            self.opt_net.step()
+            if joint:
+                self.opt_doe.step()
+                self.current["psf"] = self.coded_psf(False)
+        return float(loss.detach())
+
+    def write(self, out: Path, config: dict, record: dict, wall: float):
+        """The fine-tuned design (``out/design``) and network (``out/weights``); returns the design."""
+        from doefab.design.optimize import design_from_theta
+        from doefab.fabrication.levels import levels_sha256
+        from doefab.reconstruction.weights import write_weights
+
+        new = design_from_theta(self.design, self.theta.detach(), self.pname, self.sampling, history=[],
+                                extra={"end_to_end": record})
+        new.save(out / "design")
+        write_weights(out / "weights", "depth", "proposed", self.net,
+                      {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": self.arch,
+                       "training": {"end_to_end": config, "steps": record["steps"], "wall_time_s": round(wall, 1)},
+                       "sensor": self.sensor.record(with_response=False)},
+                      (out / "history.csv").read_bytes())
+        return new
+
+
+def _start_network(design, design_dir, weights_dir, sensor):
+    """(network, its architecture record, where it started): the one trained for the design in ``weights_dir``
+    (refused if trained for another sensor's noise), or a fresh one."""
+    from doefab.reconstruction.loader import load_reconstructor
+    from doefab.reconstruction.models import build_model, default_arch
+
+    if weights_dir is None:
+        arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
+        return build_model("depth", "proposed", arch), arch, "a fresh network"
+    rec = load_reconstructor("depth", "proposed", weights_dir, design_dir, sensor=sensor)
+    net = build_model("depth", "proposed", rec.meta["arch"])
+    net.load_state_dict(rec.model.state_dict())
+    return net, rec.meta["arch"], f"the network in {weights_dir}"
