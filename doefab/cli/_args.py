@@ -144,5 +144,6 @@ def sensor_arg(args, design=None):
         try:
             sensor.rgb(psf_pair(task, design)[0].wavelengths)
         except DoefabError as exc:
-            raise DoefabError(f"--sensor-response: {exc}") from None
+            flag = "--sensor-response" if response is not None else "the design's bands (default response)"
+            raise DoefabError(f"{flag}: {exc}") from None
     return sensor
