@@ -148,6 +148,12 @@ class Sensor:
                    **out}
         return out
 
+    def entry(self, spectral: bool) -> dict:
+        """``{"sensor": record}`` for records (training runs, weights, evaluations, stage hashes) when this is not
+        the default sensor — in what a task uses: the noise, and the response if ``spectral`` — else ``{}``: a
+        record without it is the default sensor's, as every record made before sensors could be named."""
+        return {"sensor": self.record(with_response=spectral)} if self.differs_from(None, spectral) else {}
+
     def describe(self, with_response: bool = True) -> str:
         """One line for reports: response (``with_response``), full well and read noise with their units."""
         noise = f"{self.full_well_e:g} e⁻ full well, {self.read_noise_e:g} e⁻ read noise"

@@ -330,9 +330,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
-            sensor = scene_sensor(scene)
-            if sensor.differs_from(None, spectral=scene.task == "hyperspectral"):
-                parts["sensor"] = sensor.record(with_response=scene.task == "hyperspectral")
+            parts.update(scene_sensor(scene).entry(scene.task == "hyperspectral"))
     return _h(parts)
 
 

@@ -110,8 +110,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
-    if sensor.differs_from(None, spectral=False):  # a run for the default noise keeps its old record (resume)
-        config["sensor"] = sensor.record(with_response=False)
+    config.update(sensor.entry(False))  # none for the default noise: old runs resume
     out = Path(out_dir)
     steps, history, wall = run_loop(
         out, config, minutes, lambda step: run.step(step, doe_every, batch, crop),
@@ -209,7 +208,7 @@ class _JointRun:
         write_weights(out / "weights", "depth", "proposed", self.net,
                       {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": self.arch,
                        "training": {"end_to_end": config, "steps": record["steps"], "wall_time_s": round(wall, 1)},
-                       "sensor": self.sensor.record(with_response=False)},
+                       **self.sensor.entry(False)},
                       (out / "history.csv").read_bytes())
         return new
 

@@ -70,14 +70,14 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     digest = split_digest(task)
     result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
               "conditions": cond.describe() if cond is not None else {"name": "clean"},
-              "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}",
-              "sensor": sensor.record(with_response=task == "hyperspectral"),
+              "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
+              else "default (Poisson–Gaussian)", **sensor.entry(task == "hyperspectral"),
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
                               "lr_schedule": r.meta["training"].get("schedule", "constant"),
                               "trained_under": _trained_under(r.meta),
                               "for_this_design": not r.meta.get("other_design", False),
-                              "for_this_sensor": not r.meta.get("other_sensor", False),
+                              **({"for_this_sensor": False} if r.meta.get("other_sensor") else {}),
                               "splits": _splits_state(r.meta, digest)}
                           for v, r in recs.items()}}
     result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals

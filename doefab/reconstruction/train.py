@@ -129,9 +129,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
               "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design),
               "conditions": {k: c.describe() for k, c in (conditions or {}).items()}}
-    spectral = task == "hyperspectral"
-    if sensor.differs_from(None, spectral):  # a run for the default sensor keeps its old record (resume)
-        config["sensor"] = sensor.record(with_response=spectral)
+    config.update(sensor.entry(task == "hyperspectral"))  # none for the default sensor: old runs resume
     pair, sha = psf_pair(task, design)
     arch = {**arch, **arch_for_design(task, pair, sensor)}
     psf = model_inputs(task, pair)
@@ -168,7 +166,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
               "validation": {"images": val_images, "crop_px": crop, **final},
-              "sensor": sensor.record(with_response=spectral),
+              **sensor.entry(task == "hyperspectral"),
               "splits_sha256": split_digest(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 

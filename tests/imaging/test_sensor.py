@@ -37,6 +37,10 @@ def test_what_differs_between_sensors():
     assert nikon.differs_from(default, spectral=False) == []  # RGB scenes: the response forms nothing
     assert nikon.differs_from(default, spectral=True)[0].startswith("response Canon EOS 5D Mark II")
     assert not nikon.has_default_response() and Sensor().has_default_response()
+    # records name a sensor only when it is not the default one, in what the task uses
+    assert Sensor().entry(True) == {} and nikon.entry(False) == {}
+    assert nikon.entry(True)["sensor"]["response"] == "Nikon D5100"
+    assert noisy.entry(False) == {"sensor": {"full_well_e": 25000.0, "read_noise_e": 12.0}}
 
 
 def test_a_sensor_is_refused_whole_before_any_work(tmp_path):
