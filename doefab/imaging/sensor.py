@@ -22,7 +22,7 @@ from doefab.errors import DoefabError
 from doefab.imaging.responses import DEFAULT_RESPONSE, is_named, response_curves, response_label, response_sha256
 
 __all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE", "Sensor",
-           "sensor_from_record", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
+           "sensor_from_record", "noise_fields", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
            "READ_NOISE_RANGE_E"]
 
 DEFAULT_FULL_WELL_E = 25_000.0  # electrons per dual-pixel photodiode at capture value 1 (module docstring)
@@ -180,5 +180,10 @@ def sensor_from_record(record: dict | None) -> Sensor:
     response, it does not carry its curves — a spectral network's architecture record does); the default sensor
     for records that predate it."""
     r = record if isinstance(record, dict) else {}
-    return Sensor(full_well_e=float(r.get("full_well_e", DEFAULT_FULL_WELL_E)),
-                  read_noise_e=float(r.get("read_noise_e", DEFAULT_READ_NOISE_E)))
+    return Sensor(**noise_fields(r))
+
+
+def noise_fields(mapping: dict) -> dict:
+    """The ``Sensor`` noise fields a record or a scene's ``[sensor]`` table gives (as floats; absent ones keep
+    the defaults)."""
+    return {k: float(mapping[k]) for k in ("full_well_e", "read_noise_e") if k in mapping}

@@ -45,10 +45,10 @@ class Scene:
 
     def response_path(self) -> str:
         """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or as given)."""
-        from doefab.imaging.responses import DEFAULT_RESPONSE, RESPONSES
+        from doefab.imaging.responses import DEFAULT_RESPONSE, is_named
 
         r = self.sensor.get("response", DEFAULT_RESPONSE)
-        if r in RESPONSES:
+        if is_named(r):
             return r
         return str(self.path.parent / r) if (self.path.parent / r).is_file() else r
 

@@ -89,12 +89,10 @@ def scene_camera(scene: Scene, problems: list | None = None):
 def scene_sensor(scene: Scene, problems: list | None = None):
     """The scene's ``imaging.sensor.Sensor`` (its ``[sensor]`` section over the default camera's). A problem (an
     unreadable CSV) is appended to ``problems`` and the default sensor returned, or raised without a list."""
-    from doefab.imaging.sensor import Sensor
+    from doefab.imaging.sensor import Sensor, noise_fields
 
-    sec = scene.sensor
     try:
-        return Sensor(response=scene.response_path(), **{k: float(sec[k]) for k in ("full_well_e", "read_noise_e")
-                                                          if k in sec})
+        return Sensor(response=scene.response_path(), **noise_fields(scene.sensor))
     except DoefabError as exc:
         if problems is None:
             raise
