@@ -24,7 +24,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 
 __all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
-           "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
+           "folder_lock", "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
 
@@ -55,9 +55,11 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno is not None:  # a full disk names no file: name the target
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path.absolute())) from exc
         raise
     return path
 
@@ -147,6 +149,31 @@ def _nearest_existing(path: Path) -> Path:
     while not p.exists():
         p = p.parent
     return p
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | Path, what: str = "doefab run"):
+    """Hold an exclusive lock on ``folder`` (its file ``.doefab-lock``, locked with ``flock``) while the block
+    runs; a second holder is refused at once with one error naming the process that holds it. The lock ends with
+    the process, however it ends (a killed run leaves no stale lock)."""
+    import fcntl
+    import time
+
+    path = Path(folder) / ".doefab-lock"
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "another process"
+            raise DoefabError(f"{folder} is in use by {holder}: two runs must not write one output folder; wait "
+                              f"for that run to finish (it releases the folder when it ends), or choose another "
+                              f"--out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{what} (process {os.getpid()}, since {time.strftime('%Y-%m-%d %H:%M:%S')})".encode(), 0)
+        yield path
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
 
 
 def read_marker(folder: Path) -> dict | None:
@@ -242,7 +269,7 @@ def read_toml(path: str | Path, what: str) -> dict:
     if not p.is_file():
         raise DoefabError(f"{what} {p} not found")
     try:
-        return tomllib.loads(p.read_text())
+        return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark (some editors write one)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DoefabError(f"{p} is not valid TOML ({exc})") from None
 

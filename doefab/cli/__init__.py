@@ -10,6 +10,7 @@ folder the run created is removed on failure (a design's checkpoint is kept).
 from __future__ import annotations
 
 import argparse
+import errno
 import signal
 import sys
 import traceback
@@ -38,6 +39,17 @@ def _handle_sigterm():
     except ValueError:  # not the main thread: leave signals alone
         return None
 
+DESCRIPTION = """\
+doefab designs a split-aperture diffractive optical element (DOE) for your camera and takes it to the fab: it
+optimises the coded half of the aperture for a task (HDR, spectra or depth), quantizes it to the fab's levels,
+writes and verifies the photomasks, builds a 3D-printable holder, reconstructs the two captures with networks
+and judges fabricated parts. Start with `doefab scene new`, check the scene with `doefab doctor`, then
+`doefab run` it; `doefab SUBCOMMAND --help` tells more of each."""
+
+EPILOG = """\
+exit status: 0 done, 2 bad input (the message names the fix), 3 a product that fails its own checks,
+130 / 143 interrupted (rerun the same command to continue), 1 an internal error (--debug shows it)."""
+
 # API names that may appear in a library message, and what a command-line user sets instead
 _CLI_NAMES = (
     ("(pupil_oversample ≥", "(--pupil-oversample ≥"),
@@ -51,7 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
     from doefab.cli import (demo, design, doctor, evaluate, finetune, holder, masks, psf, run, scene, tolerance,
                             train)
 
-    parser = OneLineParser(prog="doefab", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = OneLineParser(prog="doefab", description=DESCRIPTION, epilog=EPILOG,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=OneLineParser)
@@ -98,7 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # disk full, permissions, a path that vanished: the user's environment
         error = exc
         where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
-        status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}"
+        fix = ("; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)"
+               if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "")
+        status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}{fix}"
     except MemoryError:
         status, message = EXIT_USAGE, "error: out of memory: use a smaller kernel, grid or fewer wavelengths"
     except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request

@@ -35,6 +35,7 @@ def run(args) -> int:
     if args.out is not None and len(scenes) > 1:
         raise DoefabError("--out names one folder: give one scene, or leave --out out (out/run/<scene name>)")
     args.resume_hint = "finished stages are kept: rerun the same command to continue"
+    shared_output_folders(scenes)
     runs = []
     for sc in scenes:  # every check of every scene before the first folder is created
         od = OutputDir(Path("out/run") / sc.path.stem if args.out is None else args.out, "run", replace=True)
@@ -51,6 +52,23 @@ def run(args) -> int:
               "no report written (\"report\" is not in the scene's stages)")
     print(f"{sc.path}: {summary['seconds']:.0f} s; {report}")
     return 0
+
+
+def shared_output_folders(scenes) -> None:
+    """Refuse scenes whose default output folders (out/run/<file name>) coincide: the later would replace the
+    earlier's results."""
+    from collections import defaultdict
+
+    from doefab.errors import DoefabError
+
+    by_folder = defaultdict(list)
+    for sc in scenes:
+        by_folder[sc.path.stem].append(str(sc.path))
+    clash = {k: v for k, v in by_folder.items() if len(v) > 1}
+    if clash:
+        which = "; ".join(f"{', '.join(v)} would all write out/run/{k}" for k, v in clash.items())
+        raise DoefabError(f"{which}: each scene needs an output folder of its own; rename a scene file, or run "
+                          f"each alone with its own --out")
 
 
 def run_each_in_own_process(args) -> int:

@@ -49,11 +49,20 @@ def committed_dir(name: str) -> Path:
         raise DoefabError(f"the package lacks its committed design {src}: reinstall doefab")
     data = src.read_bytes()
     folder = cache_root() / "designs" / f"{name}-{hashlib.sha256(data).hexdigest()[:16]}"
-    if not (folder / "design.json").is_file():
-        with np.load(io.BytesIO(data), allow_pickle=False) as z:
-            levels, text = z["levels"], z["design_json"].tobytes()
-        buf = io.BytesIO()
-        np.save(buf, levels)
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        levels, text = z["levels"], z["design_json"].tobytes()
+    buf = io.BytesIO()
+    np.save(buf, levels)
+    # a cached copy that differs from the package's (a damaged disk, an edit) is written afresh, not trusted
+    if not (_same(folder / "levels.npy", buf.getvalue()) and _same(folder / "design.json", text)):
+        (folder / "design.json").unlink(missing_ok=True)  # absent while the folder is incomplete
         atomic_write_bytes(folder / "levels.npy", buf.getvalue())
         atomic_write_bytes(folder / "design.json", text)  # written last: its presence means complete
     return folder
+
+
+def _same(path: Path, data: bytes) -> bool:
+    try:
+        return path.stat().st_size == len(data) and path.read_bytes() == data
+    except OSError:
+        return False

@@ -31,7 +31,7 @@ from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
 __all__ = ["DesignConfig", "optimize", "design_from_theta", "plain_level", "OPTIMIZERS", "coded_mask",
-           "finalize_levels"]
+           "finalize_levels", "sampling_problem"]
 
 OPTIMIZERS = ("adam", "lbfgs", "mma")
 
@@ -95,11 +95,24 @@ class DesignConfig:
         return d
 
 
+def sampling_problem(doe_pixels: int, sampling: int, key: str = "sampling") -> str | None:
+    """Why ``sampling`` cannot coarsen a ``doe_pixels``-wide DOE grid (None: it can), with the factors that can.
+
+    Example: ``sampling_problem(2234, 4)`` names 1 and 2, the factors up to 16 that divide 2234.
+    """
+    if doe_pixels % sampling == 0:
+        return None
+    fits = [d for d in range(1, 17) if doe_pixels % d == 0]
+    return (f"{key} {sampling} must divide the DOE grid ({doe_pixels} px): use "
+            f"{' or '.join(map(str, fits))}, or a DOE pitch or aperture whose grid it divides")
+
+
 def _design_camera(camera: Camera, sampling: int) -> Camera:
     if sampling == 1:
         return camera
-    if camera.doe_pixels % sampling:
-        raise DoefabError(f"sampling {sampling} must divide the DOE grid ({camera.doe_pixels} px)")
+    problem = sampling_problem(camera.doe_pixels, sampling)
+    if problem:
+        raise DoefabError(problem)
     return camera.replace(doe_pixels=camera.doe_pixels // sampling, doe_pitch=camera.doe_pitch * sampling)
 
 

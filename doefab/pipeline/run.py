@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from doefab.errors import DoefabError
-from doefab.io import MARKER, atomic_write_json, owned_by_doefab
+from doefab.io import MARKER, atomic_write_json, folder_lock, owned_by_doefab
 from doefab.pipeline.scene import STAGES, Scene
 from doefab.pipeline.stages import STAGE_FUNCS, STAGE_KIND, resolve, run_stage
 
@@ -44,6 +44,11 @@ def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = Fa
     t0 = time.perf_counter()
     res = res if res is not None else prepare_scene(scene, out, force)
     out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, f"doefab run {scene.path}"):  # a second run on this folder is refused, not interleaved
+        return _run_locked(scene, out, res, force, quick, progress, t0)
+
+
+def _run_locked(scene: Scene, out: Path, res: dict, force: tuple, quick: bool, progress: bool, t0: float) -> dict:
     if progress:
         for note in res.get("warnings", []):
             print(f"[doefab run] warning: {note}", flush=True)

@@ -20,7 +20,8 @@ from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 from doefab.pipeline.system import resolve, scene_sensor
 
-__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress"]
+__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress",
+           "quick_sampling"]
 
 STAGE_KIND = "run stage"  # the ownership marker's kind of a stage folder (its ``stage`` field names the stage)
 
@@ -31,10 +32,20 @@ def _h(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def quick_sampling(doe_pixels: int, sampling: int) -> int:
+    """The design grid's coarsening under ``--quick``: of the factors up to 8 that divide the grid and are
+    multiples of the scene's own ``sampling``, the one nearest 4 (the larger on a tie); the scene's own when none
+    is. Example: ``quick_sampling(3200, 1) == 4``, ``quick_sampling(2234, 1) == 2`` (2234 = 2 · 1117)."""
+    fits = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0]
+    return min(fits, key=lambda d: (abs(d - 4), -d)) if fits else sampling
+
+
 def _design_run(settings: dict, quick: bool) -> tuple[int, int]:
-    """(iterations, sampling) of the design stage's run for these settings (quick: 10 on a 4× coarser grid)."""
+    """(iterations, sampling) of the design stage's run for these settings (quick: at most 10 iterations on a grid
+    about 4× coarser, by a factor that divides it: ``quick_sampling``)."""
     iters = min(int(settings["iterations"]), 10) if quick else int(settings["iterations"])
-    return iters, max(int(settings["sampling"]), 4 if quick else 1)
+    sampling = int(settings["sampling"])
+    return iters, quick_sampling(int(settings["camera"]["doe_pixels"]), sampling) if quick else sampling
 
 
 def redesign_note(res: dict, quick: bool) -> str:
@@ -85,7 +96,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
-                + (" (quick: 10 iterations on a 4× coarser grid)" if quick else "")}
+                + (f" (quick: {iters} iterations on a {sampling}× coarser grid)" if quick else "")}
     d = Design.load(out)
     task = res["task"]
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
@@ -361,18 +372,36 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     same = not force and old.get("hash") == h
     keep = [f for f in RESUMABLE.get(name, ()) if same and (out / f).exists()]
     out.mkdir(parents=True, exist_ok=True)
+    theirs = foreign_entries(out, old)
     for child in out.iterdir():
-        if child.name in keep or child.name == MARKER:
+        if child.name in keep or child.name == MARKER or child.name in theirs:
             continue
         shutil.rmtree(child) if child.is_dir() and not child.is_symlink() else child.unlink()
+    if theirs:
+        print(f"[doefab run] {name}: kept what doefab did not write in {out}: {', '.join(sorted(theirs))}",
+              flush=True)
     mark_folder(out, STAGE_KIND, stage=name)
     info_resumed = bool(keep)
-    atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False})
+    atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False, "foreign": sorted(theirs)})
     t = time.perf_counter()
     info = STAGE_FUNCS[name](scene, res, out, quick)
     if info_resumed:
         info["why"] = info.get("why", "") + f"; continued from the interrupted run's {', '.join(keep)}"
     mark_folder(out, STAGE_KIND, stage=name)
-    info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True)
+    info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True,
+                files=sorted(c.name for c in out.iterdir() if c.name not in theirs and c.name != "stage.json"))
     atomic_write_json(rec_path, info)
     return info
+
+
+def foreign_entries(out: Path, record: dict) -> set[str]:
+    """The names in stage folder ``out`` that doefab did not write: those missing from the last finished run's
+    ``files`` list, and those an interrupted run recorded as not its own (``foreign``). A record without a list (a
+    run made before stages listed their files) names none."""
+    if not out.is_dir():
+        return set()
+    theirs = set(record.get("foreign") or ())
+    if isinstance(record.get("files"), list):
+        ours = set(record["files"]) | {"stage.json", MARKER}
+        theirs |= {c.name for c in out.iterdir() if c.name not in ours}
+    return {n for n in theirs if (out / n).exists()}

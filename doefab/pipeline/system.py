@@ -205,6 +205,16 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     return out
 
 
+def _sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:
+    """The design grid's coarsening (the scene's ``design.sampling``, else the committed design's) must divide
+    the DOE grid: ``doefab run`` would stop at the design stage otherwise (``--quick`` picks a factor that fits)."""
+    from doefab.design.optimize import sampling_problem
+
+    key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
+    problem = sampling_problem(cam.doe_pixels, int(scene.design.get("sampling", cfg.get("sampling", 1))), key)
+    return [problem] if problem else []
+
+
 def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
     lams, depths = tuple(task.wavelengths(cam)), tuple(task.depths(cam))
     s = {"design_task": dname, "camera": cam.to_dict(), "wavelengths_m": list(lams),
@@ -243,7 +253,8 @@ def resolve(scene: Scene) -> dict:
         except DoefabError as exc:
             problems.append(str(exc))
         else:
-            problems += _checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
+            problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
+                         + _sampling_checks(scene, cam, cfg))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)

@@ -36,3 +36,37 @@ def test_pack_and_unknown_name(tmp_path, cache):
         np.testing.assert_array_equal(z["levels"], np.load(REPO / "masks/grating/design/levels.npy"))
     with pytest.raises(DoefabError, match="ships streak"):
         committed_dir("spiral")
+
+
+@pytest.mark.parametrize("damage", ["flip a level", "truncate", "edit design.json"])
+def test_a_damaged_cached_design_is_rebuilt_from_the_package(cache, damage):
+    """A cached copy that no longer equals the package's (a flipped byte, a cut file, an edited record) is written
+    afresh on the next use, so the design loads instead of failing on its checksum."""
+    folder = committed_dir("grating")
+    ref = Design.load(REPO / "masks" / "grating" / "design")
+    lv = folder / "levels.npy"
+    if damage == "flip a level":
+        arr = np.load(lv)
+        arr[0, 0] = (int(arr[0, 0]) + 1) % 16
+        np.save(lv, arr)
+    elif damage == "truncate":
+        lv.write_bytes(lv.read_bytes()[:1000])
+    else:
+        meta = json.loads((folder / "design.json").read_text())
+        meta["seed"] = 12345
+        (folder / "design.json").write_text(json.dumps(meta))
+    with pytest.raises(DoefabError) if damage != "edit design.json" else _no_error():
+        Design.load(folder)  # the damage is real: the folder as left does not load (or loads another record)
+    again = committed_dir("grating")
+    assert again == folder
+    d = Design.load(again)
+    np.testing.assert_array_equal(d.levels, ref.levels)
+    assert d.seed == ref.seed
+
+
+class _no_error:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False

@@ -1,0 +1,25 @@
+"""A full disk names the file that could not be written, by its whole path, and says the fix."""
+
+import errno
+import os
+
+from doefab.cli import main
+
+
+def test_a_full_disk_names_the_whole_path_and_the_fix(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "deep" / "psf"
+    real_fsync = os.fsync
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    try:
+        status = main(["psf", "--wavelengths-nm", "550", "--kernel", "31", "--out", str(out)])
+    finally:
+        monkeypatch.setattr(os, "fsync", real_fsync)
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert f"cannot read or write {out}" in err and "No space left on device" in err, err
+    assert "free space on that disk" in err
+    assert err.count("\n") == 1  # one line
