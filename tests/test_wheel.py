@@ -114,3 +114,33 @@ def test_the_installed_command_runs_a_scene_from_any_folder(installed):
     etch = [lay for lay in manifest["layers"] if lay["purpose"] == "etch"]
     assert manifest["n_levels"] == 4 and len(etch) == 2 and "N-BK7" in json.dumps(manifest)  # log2 4 masks
     assert (work / "mine" / "holder" / "holder.stl").is_file() and (work / "mine" / "report.html").is_file()
+
+
+def test_the_license_ships_and_a_build_leaves_the_tree_clean(installed, tmp_path):
+    """LICENSE (MIT, as pyproject.toml declares) is in the wheel and in the sdist, and building them from a copy
+    of the checkout leaves no build/ or *.egg-info in it."""
+    import tarfile
+    import zipfile
+
+    _, _, _, wheel, _ = installed
+    assert "MIT License" in (REPO / "LICENSE").read_text()
+    names = zipfile.ZipFile(wheel).namelist()
+    lic = [n for n in names if n.endswith("licenses/LICENSE")]
+    assert lic and "MIT License" in zipfile.ZipFile(wheel).read(lic[0]).decode()
+    src = tmp_path / "checkout"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(REPO / name, src / name)
+    for pkg in ("doefab", "holder_cad"):
+        shutil.copytree(REPO / pkg, src / pkg, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    before = sorted(p.name for p in src.iterdir())
+    code = ("from hatchling.build import build_sdist, build_wheel; import sys; "
+            "print(build_sdist(sys.argv[1]), build_wheel(sys.argv[1]))")
+    subprocess.run([sys.executable, "-c", code, str(tmp_path / "dist")], check=True, cwd=src)
+    assert sorted(p.name for p in src.iterdir()) == before  # no build/, no egg-info
+    sdist = next((tmp_path / "dist").glob("doefab-*.tar.gz"))
+    with tarfile.open(sdist) as tar:
+        members = tar.getnames()
+        assert any(m.endswith("/LICENSE") for m in members)
+        assert any(m.endswith("doefab/designs/streak.npz") for m in members)
+        assert not any("/tests/" in m or "/masks/" in m for m in members)

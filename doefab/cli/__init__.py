@@ -40,15 +40,18 @@ def _handle_sigterm():
         return None
 
 DESCRIPTION = """\
-doefab designs a split-aperture diffractive optical element (DOE) for your camera and takes it to the fab: it
-optimises the coded half of the aperture for a task (HDR, spectra or depth), quantizes it to the fab's levels,
-writes and verifies the photomasks, builds a 3D-printable holder, reconstructs the two captures with networks
-and judges fabricated parts. Start with `doefab scene new`, check the scene with `doefab doctor`, then
-`doefab run` it; `doefab SUBCOMMAND --help` tells more of each."""
+doefab designs a split-aperture diffractive optical element (DOE) for your
+camera and takes it to the fab: it optimises the coded half of the aperture
+for a task (HDR, spectra or depth), quantizes it to the fab's levels, writes
+and verifies the photomasks, builds a 3D-printable holder, reconstructs the
+two captures with networks and judges fabricated parts. Start with `doefab
+scene new`, check the scene with `doefab doctor`, then `doefab run` it;
+`doefab SUBCOMMAND --help` tells more of each."""
 
 EPILOG = """\
-exit status: 0 done, 2 bad input (the message names the fix), 3 a product that fails its own checks,
-130 / 143 interrupted (rerun the same command to continue), 1 an internal error (--debug shows it)."""
+exit status: 0 done, 2 bad input (the message names the fix), 3 a product that
+fails its own checks, 130 / 143 interrupted (rerun the same command to
+continue), 1 an internal error (--debug shows it)."""
 
 # API names that may appear in a library message, and what a command-line user sets instead
 _CLI_NAMES = (
@@ -59,12 +62,19 @@ _CLI_NAMES = (
 )
 
 
+class _TopFormatter(argparse.RawDescriptionHelpFormatter):
+    """The top-level help: the paragraphs as written, and each subcommand on one line of 80 columns."""
+
+    def __init__(self, prog):
+        super().__init__(prog, max_help_position=20, width=80)
+        self._action_max_length = 16  # room for the longest subcommand name ("tolerance") beside its help
+
+
 def build_parser() -> argparse.ArgumentParser:
     from doefab.cli import (demo, design, doctor, evaluate, finetune, holder, masks, psf, run, scene, tolerance,
                             train)
 
-    parser = OneLineParser(prog="doefab", description=DESCRIPTION, epilog=EPILOG,
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = OneLineParser(prog="doefab", description=DESCRIPTION, epilog=EPILOG, formatter_class=_TopFormatter)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=OneLineParser)

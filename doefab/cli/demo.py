@@ -14,8 +14,7 @@ RGB_M = (656e-9, 589e-9, 486e-9)
 
 
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="compute and plot the default camera's coded/uncoded PSFs (blank DOE and "
-                                    "a 16-level blazed grating)",
+    p = sub.add_parser("demo", help="plot the default camera's coded and uncoded PSFs",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--out", default="out/demo", help="output folder (an earlier demo output there is replaced; "
                                                      "any other non-empty folder is refused)")

@@ -13,8 +13,7 @@ from doefab.errors import DoefabError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("design", help="optimise a streak, grating or half-ring DOE and quantize it to the fab's "
-                                      "levels (--levels, 16 by default)",
+    p = sub.add_parser("design", help="optimise a DOE for a task and quantize it to L levels",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", required=True, choices=["streak", "grating", "half-ring"], help="task")
     p.add_argument("--out", required=True, help="design folder to write")

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    p = sub.add_parser("doctor", help="check a scene's numerical conditions before running it", description=__doc__)
+    p = sub.add_parser("doctor", help="check a scene's numbers and sampling before running it", description=__doc__)
     p.add_argument("scene", help="scene TOML file")
     p.add_argument("--out", default=None, help="also write the checks as JSON to this file")
     p.add_argument("--no-precision", action="store_true", help="skip the float32 vs float64 PSF computation")

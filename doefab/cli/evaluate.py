@@ -18,7 +18,7 @@ from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
-    p = sub.add_parser("evaluate", help="score the shipped reconstruction networks on the held-out test set",
+    p = sub.add_parser("evaluate", help="score reconstruction networks on held-out test scenes",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
     p.add_argument("--out", required=True, help="output folder")

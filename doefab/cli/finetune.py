@@ -17,7 +17,7 @@ from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
-    p = sub.add_parser("finetune", help="end-to-end fine-tuning of a depth DOE with its depth network",
+    p = sub.add_parser("finetune", help="fine-tune a depth DOE and its network end to end",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", required=True, help="a half-ring design folder (or mask set) to start from")
     p.add_argument("--weights-dir", default=None,

@@ -8,7 +8,7 @@ import argparse
 def register(sub) -> None:
     from holder_cad.cli import add_arguments
 
-    p = sub.add_parser("holder", help="build and check the 3D-printable DOE holder (STL/3MF/STEP, renders, JSON)",
+    p = sub.add_parser("holder", help="build and check the 3D-printable DOE holder",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_arguments(p)
     p.set_defaults(func=run)

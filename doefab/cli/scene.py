@@ -6,7 +6,7 @@ from __future__ import annotations
 
 
 def register(sub) -> None:
-    p = sub.add_parser("scene", help="write a scene template (every key with its unit) or list the keys",
+    p = sub.add_parser("scene", help="write a scene template, or list every key with its unit",
                        description=__doc__)
     actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     new = actions.add_parser("new", help="write a commented scene file for a task", description=__doc__)

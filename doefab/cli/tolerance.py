@@ -21,8 +21,7 @@ from doefab.cli._args import number
 
 
 def register(sub) -> None:
-    p = sub.add_parser("tolerance", help="Monte Carlo, sweeps and quantization study of a design's fabrication "
-                                         "and mounting tolerance", description=__doc__,
+    p = sub.add_parser("tolerance", help="yield of fabricated and mounted parts (Monte Carlo)", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", required=True, help="a design folder, or a mask set (its design/ is used)")
     p.add_argument("--budget", default=None, help="tolerance budget TOML (default: the shipped one for the prototype)")

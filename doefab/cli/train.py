@@ -21,7 +21,7 @@ from doefab.cli._args import add_sensor_args, number
 
 
 def register(sub) -> None:
-    p = sub.add_parser("train", help="train a reconstruction network (hdr, hyperspectral, depth) on this machine",
+    p = sub.add_parser("train", help="train a reconstruction network on this machine",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
     p.add_argument("--variant", default="proposed", choices=["proposed", "coded_only", "uncoded_only"],
