@@ -119,16 +119,12 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
     committed_set = repo_mask_set(res)
     if committed_set is not None and fab.get("pattern_faces", "lens") == "lens":
         t = time.perf_counter()
-        rep = verify_mask_set(committed_set, use_klayout=not quick)
-        out.mkdir(parents=True, exist_ok=True)
-        for f in committed_set.glob("preview_*.png"):
-            shutil.copyfile(f, out / f.name)
-        for f in ("manifest.json", "README.txt"):
-            shutil.copyfile(committed_set / f, out / f)
+        copy_mask_set(committed_set, out)
+        rep = verify_mask_set(out, use_klayout=not quick)  # the copy this run hands over is the one verified
         atomic_write_json(out / "verification.json", rep)
-        return {"status": "reused", "why": f"committed mask set {committed_set} (same design), "
-                                           f"re-verified in {time.perf_counter() - t:.1f} s",
-                "mask_set": str(committed_set)}
+        return {"status": "reused", "why": f"the committed mask set {committed_set} (same design), copied here "
+                                           f"whole and re-verified in {time.perf_counter() - t:.1f} s",
+                "mask_set": str(out)}
     d = Design.load(design_dir)
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
@@ -143,6 +139,20 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
     why = ("the design is new (or its pattern side differs)" if not res["reuse"] else
            "the committed mask set is not in this installation (it lives in the repository): exported afresh")
     return {"status": "ran", "why": why, "mask_set": str(out)}
+
+
+def copy_mask_set(src: Path, out: Path) -> None:
+    """Copy a mask set's files (layouts, manifest, README for the fab, previews, its design) into ``out``, each
+    written under a temporary name and renamed, so the run's masks folder is a whole mask set of its own."""
+    out.mkdir(parents=True, exist_ok=True)
+    for f in sorted(src.rglob("*")):
+        if f.is_dir() or f.name == MARKER:
+            continue
+        dst = out / f.relative_to(src)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dst.with_name(f".{dst.name}.copy")
+        shutil.copyfile(f, tmp)
+        os.replace(tmp, dst)
 
 
 def repo_mask_set(res: dict) -> Path | None:

@@ -24,7 +24,7 @@ def test_scene_validation_lists_every_problem(tmp_path):
     with pytest.raises(DoefabError) as exc:
         load_scene(p)
     msg = str(exc.value)
-    for needle in ("unknown key colour", "optics.wavelengths_nm holds 250, 5.5e-07", "looks like metres",
+    for needle in ("unknown key colour", "optics.wavelengths_nm holds 250, 5.5e-07", "5.5e-07 m is 550 nm",
                    "optics.depths_m holds 0", "design.optimizer", "holder:", "tolerance.budget"):
         assert needle in msg, needle
 
@@ -98,6 +98,12 @@ def test_quick_run_end_to_end(quick_run):
     for needle in ("Delivered, network given the nominal PSF", "psnr_highlight", "yield", "Wilson", "Limited by",
                    "Would buy the most", "to the fab:", "to the printer:"):
         assert needle in summary, needle
+    # the run's masks folder holds the whole mask set it reports (a reused design's copied from the repository)
+    masks = out / "masks"
+    assert (masks / "streak.gds").read_bytes() == (REPO / "masks" / "streak" / "streak.gds").read_bytes()
+    assert (masks / "manifest.json").is_file() and (masks / "design" / "levels.npy").is_file()
+    assert f"to the fab: {masks}/" in summary and str(REPO / "masks") not in summary
+    assert (masks / "verification.json").is_file()
 
 
 def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
