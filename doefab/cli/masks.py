@@ -19,8 +19,7 @@ from doefab.errors import DoefabError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("masks", help="export a design's L levels as log2 L verified binary mask layers, or --verify "
-                                     "a set",
+    p = sub.add_parser("masks", help="export a design as binary mask layers, or --verify a set",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", help="design folder (design.json + levels.npy)")
     p.add_argument("--out", help="mask-set folder to write (must not exist unless --force)")
@@ -56,7 +55,9 @@ def run(args) -> int:
             raise DoefabError("--verify DIR checks an existing set; --design/--out export one: give one or the other")
         report = verify_mask_set(args.verify, use_klayout=not args.no_klayout)
         print(json.dumps({k: v for k, v in report.items()}, indent=1))
-        print(f"{args.verify}: verified (0 mismatched pixels on every etch layer, marks present)")
+        print(f"{args.verify}: verified (0 mismatched pixels on every etch layer, nothing outside the pixel grid; "
+              f"chrome, marks and die outline where manifest.json places them within "
+              f"{report['marks']['tolerance_nm']} nm; no other layer)")
         return 0
     if not args.design or not args.out:
         raise DoefabError("give --design DIR and --out DIR (or --verify DIR)")

@@ -19,11 +19,11 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
-from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER,
+from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import depth_fields, fab_readme
-from doefab.fabrication.marks import MarkSpec, check_mark_placement, chrome_polygons, key_site
+from doefab.fabrication.marks import MarkSpec, key_site, mark_layout
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
@@ -126,11 +126,8 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     for k, lay in enumerate(order):
         prev = 0 if (opts.align_chain == "chrome" or k == 0) else etch_bit(order[k - 1]) + 1
         align_to[etch_bit(lay) + 1] = prev
-    for big in chrome_polygons(spec, CHROME_LAYER) + check_mark_placement(spec, align_to):
-        pieces = [big] if len(big.points) <= opts.vertex_cap else big.fracture(max_points=opts.vertex_cap,
-                                                                             precision=1e-3)
-        for poly in pieces:
-            writer.add_polygon(np.rint(poly.points).astype(np.int64), big.layer, big.datatype)
+    for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
+        writer.add_polygon(points, layer, datatype)
     with staging_dir(out) as stage:
         gds_name = f"{opts.name}.gds"
         writer.write(stage / gds_name)
@@ -256,8 +253,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "files": files,
         "database_unit_m": 1e-9, "user_unit_m": 1e-6,
         "layers": layers,
-        "other_layers": [{"layer": k, "purpose": v} for k, v in LAYER_PURPOSES.items() if k != CHROME_LAYER]
-                        + [{"layer": OUTLINE_LAYER, "datatype": 0, "purpose": "die outline"}],
+        "other_layers": [{"layer": k, "purpose": v} for k, v in LAYER_PURPOSES.items() if k != CHROME_LAYER],
         "plates": {str(p): ([CHROME_LAYER] if p == 0 else [etch_layer(p - 1)]) + [f"{KEY_LAYER}/{p}", f"{VERNIER_LAYER}/{p}"]
                    for p in range(n_masks + 1)},
         "process_order": [CHROME_LAYER] + list(order),

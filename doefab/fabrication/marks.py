@@ -20,8 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import gdstk
+import numpy as np
 
-__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement"]
+__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement", "mark_layout"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
@@ -138,3 +139,16 @@ def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
     raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
                       f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
                       f"{into_aperture} inside the aperture): {fix}")
+
+
+def mark_layout(spec: MarkSpec, align_to: dict[int, int], vertex_cap: int,
+                chrome_layer: int = 5) -> list[tuple[np.ndarray, int, int]]:
+    """Every polygon besides the etch layers as the layout holds it: the chrome plate and the marks of
+    :func:`check_mark_placement`, each as (integer vertices in nm, layer, datatype), a polygon over
+    ``vertex_cap`` vertices fractured into pieces within it (the export writes these; verification redraws
+    them from the manifest and compares)."""
+    out = []
+    for big in chrome_polygons(spec, chrome_layer) + check_mark_placement(spec, align_to):
+        pieces = [big] if len(big.points) <= vertex_cap else big.fracture(max_points=vertex_cap, precision=1e-3)
+        out += [(np.rint(poly.points).astype(np.int64), big.layer, big.datatype) for poly in pieces]
+    return out

@@ -1,12 +1,15 @@
-"""Read a mask set back and prove it: every etch layer, rasterised from the file, equals its bit plane.
+"""Read a mask set back and prove it: every polygon of every layer is where the manifest and the design put it.
 
 Checks (all in the report; any failure fails the export or ``doefab masks --verify``):
 every etch depth, the level step and the level → height table re-derived from the manifest's material and
-design wavelength (``manifest.depth_problems``), README.txt equal to what the manifest says, zero mismatched
-pixels per etch layer (gdstk reader; KLayout's too where installed), Σ 2^m·mask_m
-reproduces the level map, every polygon within the vertex cap and on the design grid, every plate's marks
-present, the level map's checksum equals the manifest's, OASIS geometry identical to GDS (where written).
-A width/space report at the critical dimension lists features below it and isolated single pixels.
+design wavelength (``manifest.depth_problems``), each layer listed once in the manifest, README.txt equal to what
+the manifest says, every etch polygon inside the pixel grid and on it, zero mismatched pixels per etch layer
+(gdstk reader; KLayout's too where installed), Σ 2^m·mask_m reproduces the level map, the chrome aperture, every
+plate's keys, windows, verniers and CD ladder and the die outline equal to what the manifest describes within
+two database units (:mod:`doefab.fabrication.layout_check`), no geometry on a layer the set does not hold, every
+polygon within the vertex cap, the level map's checksum equals the manifest's, OASIS geometry identical to GDS
+(where written, KLayout). A width/space report at the critical dimension lists features below it and isolated
+single pixels.
 """
 
 from __future__ import annotations
@@ -18,8 +21,10 @@ import numpy as np
 
 from doefab.errors import CheckFailed, DoefabError
 from doefab.fabrication.bitplanes import bit_plane, rasterize_manhattan
+from doefab.fabrication.klayout_check import klayout_check
 from doefab.fabrication.levels import levels_sha256
-from doefab.fabrication.layers import CHROME_LAYER, KEY_LAYER, OUTLINE_LAYER, VERNIER_LAYER, etch_layer
+from doefab.fabrication.layers import etch_layer
+from doefab.fabrication.layout_check import check_layout, expected_layout
 from doefab.fabrication.manifest import depth_problems, fab_readme, manifest_levels
 from doefab.fabrication.process import mask_count
 
@@ -38,6 +43,10 @@ class LayerPolygons:
     @property
     def max_vertices(self) -> int:
         return int(self.counts.max(initial=0))
+
+    def polygons(self) -> list[np.ndarray]:
+        """Each polygon's (P, 2) vertices."""
+        return np.split(self.points, np.cumsum(self.counts)[:-1]) if len(self.counts) else []
 
 
 def read_gds_layers(path: Path, only: set | None = None) -> dict[tuple[int, int], LayerPolygons]:
@@ -62,13 +71,24 @@ def read_gds_layers(path: Path, only: set | None = None) -> dict[tuple[int, int]
     return out
 
 
-def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int):
+def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int, shape: tuple[int, int], lay: int):
+    """Vertices in pixels (column, row) and their polygon index; CheckFailed for a vertex outside the pixel grid
+    or between its lines."""
     pts = polys.points
     idx = np.repeat(np.arange(len(polys.counts)), polys.counts)
     col = pts[:, 0] - origin_nm[0]
     row = origin_nm[1] - pts[:, 1]
+    outside = (col < 0) | (row < 0) | (col > shape[1] * pitch_nm) | (row > shape[0] * pitch_nm)
+    if outside.any():
+        x, y = pts[np.argmax(outside)] / 1e3
+        x0, y1 = origin_nm[0] / 1e3, origin_nm[1] / 1e3
+        raise CheckFailed(f"layer {lay}: {len(np.unique(idx[outside]))} polygon(s) reach outside the "
+                          f"{shape[0]} × {shape[1]} pixel grid (x {x0:g} … {x0 + shape[1] * pitch_nm / 1e3:g} µm, "
+                          f"y {y1 - shape[0] * pitch_nm / 1e3:g} … {y1:g} µm), e.g. a vertex at ({x:g}, {y:g}) µm: "
+                          f"an etch layer holds only its bit plane's pixels; export the set again from its design")
     if np.any(col % pitch_nm) or np.any(row % pitch_nm):
-        raise CheckFailed("a polygon vertex lies off the design grid (not an integer number of pixels)")
+        raise CheckFailed(f"layer {lay}: a polygon vertex lies off the design grid (not an integer number of "
+                          f"{pitch_nm} nm pixels); export the set again from its design")
     return np.stack([col // pitch_nm, row // pitch_nm], axis=1), idx
 
 
@@ -138,6 +158,23 @@ def _check_manifest(man, mpath: Path) -> None:
     for v in files.values():
         need(isinstance(v, str) and "/" not in v and "\\" not in v and not v.startswith("."), "files",
              f"holds {v!r}, not a plain file name in the set")
+    for key in ("layers", "other_layers"):
+        need(isinstance(man.get(key), list) and all(isinstance(L, dict) for L in man[key]), key,
+             "must be a list of layer records")
+    _check_listed_once(man, mpath)
+
+
+def _check_listed_once(man: dict, mpath: Path) -> None:
+    """Each layer once across ``layers`` and ``other_layers``: the fab reads one purpose per layer."""
+    seen: dict = {}
+    for key in ("layers", "other_layers"):
+        for i, L in enumerate(man[key]):
+            lay = L.get("layer")
+            if lay in seen:
+                raise CheckFailed(f"{mpath}: {key}[{i}] lists layer {lay!r} ({L.get('purpose')!r}) again, after "
+                                  f"{seen[lay]}: each layer must be listed once; delete the repeated entry or export "
+                                  f"the set again")
+            seen[lay] = f"{key}[{i}]"
 
 
 def _check_depths(man: dict, mpath: Path, design_json: Path) -> None:
@@ -193,6 +230,25 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
             raise CheckFailed(f"{folder} is incomplete: {', '.join(missing)} missing (an interrupted export or a "
                               f"copied-in-part set); export it again with doefab masks --force")
         _check_readme(man, folder / "README.txt")
+    levels = _level_map(folder, man, levels, n_levels)
+    gds = folder / man["files"]["gds"]
+    expected = expected_layout(man, n_masks)  # chrome, marks and outline as the manifest describes them
+    etch_keys = {(etch_layer(b), 0) for b in range(n_masks)}
+    others = _read(gds, _layers_in(gds) - etch_keys)  # chrome, marks, outline and anything stray: small
+    report: dict = {"gds": gds.name, "layers": {}, "ok": True}
+    report["marks"] = check_layout({k: p.polygons() for k, p in others.items()}, expected, set(expected) | etch_keys)
+    _check_cap(others, int(man["vertex_cap"]))
+    report["marks_present"] = True
+    report["layers"] = _check_etch_layers(gds, man, levels, n_levels)
+    report["levels_reproduced"] = True
+    if use_klayout:
+        report["klayout"] = klayout_check(folder, man, levels, n_levels, expected)
+    return report
+
+
+def _level_map(folder: Path, man: dict, levels, n_levels: int) -> np.ndarray:
+    """The set's level map (given, or its design/levels.npy) checked against the manifest, as drawn in the layout
+    (mirrored in x when the pattern faces the lens)."""
     if levels is None:
         lpath = folder / "design" / "levels.npy"
         if not lpath.is_file():
@@ -209,28 +265,35 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     if np.asarray(levels).max(initial=0) >= n_levels:
         raise CheckFailed(f"the level map holds level {int(np.asarray(levels).max())} but manifest.json says n_levels = "
                           f"{n_levels}: the set is inconsistent; export it again from its design")
+    levels = np.asarray(levels, np.uint8)
+    return np.ascontiguousarray(levels[:, ::-1]) if man.get("mirrored_x", False) else levels
+
+
+def _check_cap(layers: dict, cap: int) -> None:
+    for key, p in layers.items():
+        if p.max_vertices > cap:
+            raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
+
+
+def _check_etch_layers(gds: Path, man: dict, levels: np.ndarray, n_levels: int) -> dict:
+    """Each etch layer rasterised from the file equals its bit plane of ``levels`` (as drawn), and Σ 2^m·mask_m
+    reproduces the level map; the per-layer report."""
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
-    shape = tuple(man["shape"])
-    # compare against the level map as drawn (mirrored in x when the pattern faces the lens)
-    levels = np.asarray(levels, np.uint8)
-    if man.get("mirrored_x", False):
-        levels = np.ascontiguousarray(levels[:, ::-1])
-    gds = folder / man["files"]["gds"]
-    mark_keys = {(CHROME_LAYER, 0), (OUTLINE_LAYER, 0)} | {(k, p) for k in (KEY_LAYER, VERNIER_LAYER)
-                                                           for p in range(n_masks + 1)}
-    layers = _read(gds, mark_keys)  # chrome, marks and outline: small
-    report: dict = {"gds": gds.name, "layers": {}, "ok": True}
-    cap = int(man["vertex_cap"])
+    shape = levels.shape
+    out = {}
     etch_sum = np.zeros(shape, np.uint8)
-    for bit in range(n_masks):
+    for bit in range(mask_count(n_levels)):
         lay = etch_layer(bit)
         # one etch layer at a time keeps the peak memory to one layer's polygons
         polys = _read(gds, {(lay, 0)}).get(
             (lay, 0), LayerPolygons(np.zeros((0, 2), np.int64), np.zeros(0, np.int64)))
         if len(polys):
-            pix, idx = _to_pixels(polys, origin_nm, pitch_nm)
-            wind = rasterize_manhattan(pix, idx, shape)
+            pix, idx = _to_pixels(polys, origin_nm, pitch_nm, shape, lay)
+            try:
+                wind = rasterize_manhattan(pix, idx, shape)
+            except DoefabError as exc:
+                raise CheckFailed(f"layer {lay}: {exc}; export the set again from its design") from None
         else:
             wind = np.zeros(shape, np.int32)
         if np.any(wind < 0) or np.any(wind > 1):
@@ -238,39 +301,16 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
         got = wind.astype(bool)
         del wind
         mism = int(np.count_nonzero(got != bit_plane(levels, bit, n_levels)))
-        maxv = polys.max_vertices
-        report["layers"][str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
-                                      "max_vertices": maxv, "mismatched_pixels_gdstk": mism}
+        out[str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
+                         "max_vertices": polys.max_vertices, "mismatched_pixels_gdstk": mism}
         if mism:
             raise CheckFailed(f"layer {lay}: {mism} pixels differ between the GDS and the design's bit plane {bit}")
-        if maxv > cap:
-            raise CheckFailed(f"layer {lay}: a polygon has {maxv} vertices, over the cap {cap}")
+        _check_cap({(lay, 0): polys}, int(man["vertex_cap"]))
         etch_sum += got.astype(np.uint8) << bit
         del got, polys
     if not np.array_equal((n_levels - 1) - etch_sum.astype(np.int64), levels):
         raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map")
-    report["levels_reproduced"] = True
-    _check_marks(layers, n_masks, gds.name, cap)
-    report["marks_present"] = True
-    if use_klayout:
-        report["klayout"] = _klayout_check(folder, man, levels, n_levels, pitch_nm)
-    return report
-
-
-def _check_marks(layers: dict, n_masks: int, gds_name: str, cap: int) -> None:
-    """Chrome aperture, die outline, and keys, verniers and CD ladder on the chrome plate and each of the
-    ``n_masks`` etch plates, every polygon within the vertex cap."""
-    for key, what in (((CHROME_LAYER, 0), "chrome aperture"), ((OUTLINE_LAYER, 0), "die outline")):
-        if key not in layers or len(layers[key]) < 1:
-            raise CheckFailed(f"{what} (layer {key[0]}) is missing from {gds_name}")
-    for plate in range(n_masks + 1):
-        keys = len(layers[(KEY_LAYER, plate)]) if (KEY_LAYER, plate) in layers else 0
-        vern = len(layers[(VERNIER_LAYER, plate)]) if (VERNIER_LAYER, plate) in layers else 0
-        if keys < 8 or vern < 31:
-            raise CheckFailed(f"plate {plate}: alignment keys ({keys}) or verniers/CD ladder ({vern}) are missing")
-    for key, p in layers.items():
-        if p.max_vertices > cap:
-            raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
+    return out
 
 
 def _read(gds: Path, only: set) -> dict:
@@ -279,46 +319,20 @@ def _read(gds: Path, only: set) -> dict:
     except CheckFailed:
         raise
     except Exception as exc:  # noqa: BLE001 - gdstk reports a damaged file as RuntimeError/OSError/...
-        raise CheckFailed(f"{gds} cannot be read as GDSII ({exc.__class__.__name__}: {exc}): the file is corrupt or "
-                          f"truncated; export the set again") from None
+        raise _unreadable(gds, exc) from None
 
 
-def _klayout_check(folder: Path, man: dict, levels: np.ndarray, n_levels: int, pitch_nm: int) -> dict:
-    """Second reader: KLayout's areas per etch layer, and OASIS ≡ GDS by XOR (skipped if not installed)."""
+def _layers_in(gds: Path) -> set[tuple[int, int]]:
+    """Every (layer, datatype) the GDS file holds geometry on (read without loading the geometry)."""
+    import gdstk
+
     try:
-        import klayout.db as kdb
-    except ImportError:
-        return {"checked": False, "reason": "klayout not installed"}
-    def load(name: str):
-        lay = kdb.Layout()
-        try:
-            lay.read(str(folder / name))
-        except RuntimeError as exc:
-            raise CheckFailed(f"KLayout cannot read {folder / name} ({' '.join(str(exc).split())[:200]}): the file "
-                              f"is corrupt or truncated; export the set again") from None
-        if lay.top_cell() is None:
-            raise CheckFailed(f"KLayout finds no top cell in {folder / name}: the file is empty or corrupt")
-        return lay
+        return {(int(a), int(b)) for a, b in gdstk.gds_info(str(gds))["layers_and_datatypes"]}
+    except Exception as exc:  # noqa: BLE001 - as in _read
+        raise _unreadable(gds, exc) from None
 
-    gds = load(man["files"]["gds"])
-    top = gds.top_cell()
-    out = {"checked": True, "layers": {}}
-    oas = load(man["files"]["oasis"]) if man["files"].get("oasis") else None
-    for bit in range(mask_count(n_levels)):
-        lay = etch_layer(bit)
-        li = gds.find_layer(lay, 0)
-        region = kdb.Region(top.begin_shapes_rec(li)) if li is not None else kdb.Region()
-        area_px = region.area() * (gds.dbu * 1000) ** 2 / pitch_nm**2
-        expected = int(bit_plane(levels, bit, n_levels).sum())
-        if abs(area_px - expected) > 1e-6:
-            raise CheckFailed(f"KLayout: layer {lay} covers {area_px:.1f} pixels, the bit plane {expected}")
-        entry = {"area_px": int(round(area_px))}
-        if oas is not None:
-            lo = oas.find_layer(lay, 0)
-            other = kdb.Region(oas.top_cell().begin_shapes_rec(lo)) if lo is not None else kdb.Region()
-            xor = region ^ other
-            if not xor.is_empty():
-                raise CheckFailed(f"KLayout: OASIS layer {lay} differs from GDS (XOR area {xor.area()} dbu²)")
-            entry["oasis_identical"] = True
-        out["layers"][str(lay)] = entry
-    return out
+
+def _unreadable(gds: Path, exc: Exception) -> CheckFailed:
+    return CheckFailed(f"{gds} cannot be read as GDSII ({exc.__class__.__name__}: {exc}): the file is corrupt or "
+                       f"truncated; export the set again")
+
