@@ -1,6 +1,6 @@
 """Command line of the holder: ``doefab holder`` and ``python -m holder_cad`` (millimetres).
 
-Example: doefab holder --out out/holder --set thread_diameter_mm=52 --set flange_diameter_mm=60
+Example: doefab holder --out out/holder --set thread_diameter_mm=52 (the pitch and the flange follow from it)
 """
 
 from __future__ import annotations

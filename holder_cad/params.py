@@ -17,6 +17,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from holder_cad import derive
+
 __all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES"]
 
 
@@ -63,7 +65,8 @@ class HolderParams:
     Attributes:
         mount: ``"thread"`` (male filter thread into the lens) or ``"slip"`` (sleeve over the front barrel).
         thread_diameter_mm: nominal filter thread diameter (49 for the Canon EF 50 mm f/1.8 STM).
-        thread_pitch_mm: thread pitch (0.75).  thread_depth_mm: tooth height (0.3; 45° flanks).
+        thread_pitch_mm: thread pitch (by default the commonest for the diameter: 0.75 for 49 mm).
+        thread_depth_mm: tooth height (by default 0.4 × pitch; 45° flanks).
         thread_length_mm: engaged thread length (2.5).
         barrel_diameter_mm: outer diameter of the lens front barrel (slip fit only).
         sleeve_length_mm: slip-fit sleeve length.
@@ -74,21 +77,25 @@ class HolderParams:
         clear_aperture_mm: DOE clear aperture (8.64).  aperture_margin_mm: extra radius of the hole.
         clearance_mm: fit clearance per side (die in pocket, cartridge in bore, thread).
         wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
-        flange_diameter_mm: outer diameter of both flanges.  flange_height_mm, cartridge_flange_mm: heights.
+        flange_diameter_mm: outer diameter of both flanges (by default the least that holds the lock screws).
+        flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
+        cartridge_flange_mm: the cartridge flange's height.
         screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
         washer_diameter_mm, washer_recess_mm: retention washers (recessed so nothing protrudes to the lens).
         max_doe_to_lens_mm: the farthest the DOE may sit in front of the lens glass (the split-aperture optics
             assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
 
-    Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter set that
-    violates one is refused before anything is built, with the quantity, its value and the limit.
+    The four parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
+    thread (or barrel) and the die by the rules of :mod:`holder_cad.derive`, and :attr:`derived` names them.
+    Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter that violates
+    one is refused before anything is built, with the parameter to change and a value that works.
     """
 
     mount: str = "thread"
     thread_diameter_mm: float = 49.0
-    thread_pitch_mm: float = 0.75
-    thread_depth_mm: float = 0.3
+    thread_pitch_mm: float | None = None
+    thread_depth_mm: float | None = None
     thread_length_mm: float = 2.5
     barrel_diameter_mm: float = 56.0
     sleeve_length_mm: float = 8.0
@@ -102,8 +109,8 @@ class HolderParams:
     clearance_mm: float = 0.25
     wall_mm: float = 1.2
     nozzle_mm: float = 0.4
-    flange_diameter_mm: float = 57.0
-    flange_height_mm: float = 6.0
+    flange_diameter_mm: float | None = None
+    flange_height_mm: float | None = None
     cartridge_flange_mm: float = 2.4
     screw_clearance_mm: float = 2.4
     pilot_hole_mm: float = 1.7
@@ -113,60 +120,125 @@ class HolderParams:
     segments: int = 128
 
     def __post_init__(self) -> None:
-        errs = []
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.name.endswith("_mm") and (not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
-                errs.append(f"{f.name} must be a positive length in mm, got {v!r}")
-        if errs:
-            raise HolderError("; ".join(errs))
-        out = [f"{k} {getattr(self, k):g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in
-               PARAM_RANGES.items() if not lo <= getattr(self, k) <= hi]
-        if out:
-            raise HolderError("; ".join(out))
-        if self.mount not in ("thread", "slip"):
-            raise HolderError(f"mount must be 'thread' or 'slip', got {self.mount!r}")
-        if self.wall_mm < self.nozzle_mm:
-            raise HolderError(f"wall_mm ({self.wall_mm}) is below nozzle_mm ({self.nozzle_mm}): a printer cannot "
-                              f"make walls thinner than one line; raise wall_mm")
-        if self.clear_aperture_mm + 2 * self.aperture_margin_mm >= min(self.die_width_mm, self.die_height_mm) - 2 * self.wall_mm:
-            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm}) + margins does not fit inside the die "
-                              f"({self.die_width_mm} × {self.die_height_mm} mm) with a {self.wall_mm} mm ledge: use "
-                              f"a larger die or a smaller aperture")
-        if self.die_chamfer_mm >= 0.5 * min(self.die_width_mm, self.die_height_mm):
-            raise HolderError("die_chamfer_mm must be less than half the die side")
-        if self.thread_depth_mm * 2 >= self.thread_pitch_mm:
-            raise HolderError(f"thread_depth_mm ({self.thread_depth_mm}) is too deep for thread_pitch_mm "
-                              f"({self.thread_pitch_mm}) with 45° flanks: depth must be < pitch / 2")
-        overlap = self.die_width_mm / 2 - (self.screw_offset_mm - self.washer_diameter_mm / 2)
-        if overlap < 0.5:
-            raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm}) overlap the die "
-                              f"edge by {overlap:.2f} mm (< 0.5 mm): use larger washers")
-        if not isinstance(self.segments, int) or not 32 <= self.segments <= 1024:
-            raise HolderError(f"segments must be an integer in 32..1024 (facets per circle), got {self.segments!r}")
-        # the cartridge body must hold the die pocket with walls around it
-        if self.die_diagonal_mm / 2 + self.clearance_mm + self.wall_mm > self.cartridge_radius_mm:
-            raise HolderError(f"the die ({self.die_width_mm} × {self.die_height_mm} mm) does not fit the cartridge "
-                              f"(radius {self.cartridge_radius_mm:.2f} mm) with clearance_mm and wall_mm: use a "
-                              f"larger thread/barrel or a smaller die")
-        rf = self.flange_diameter_mm / 2
-        if self.pilot_radius_mm + self.screw_clearance_mm / 2 + self.wall_mm > rf + 1e-9 or (
-                self.pilot_radius_mm - self.pilot_hole_mm / 2 - self.wall_mm < self.bore_radius_mm - 1e-9):
-            need = 2 * (self.pilot_radius_mm + self.screw_clearance_mm / 2 + self.wall_mm)
-            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) leaves no room for the lock-screw "
-                              f"holes and slots with wall_mm around them: use at least {need:.1f} mm")
-        if self.mount == "slip" and rf < self.sleeve_outer_radius_mm + self.wall_mm:
-            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm}) must cover the sleeve (outer "
-                              f"diameter {2 * self.sleeve_outer_radius_mm:.2f} mm from barrel_diameter_mm)")
-        if self.mount == "thread" and self.flange_diameter_mm / 2 <= self.thread_major_radius_mm + self.wall_mm:
-            raise HolderError("flange_diameter_mm must exceed the thread diameter by 2 × wall_mm")
-        if self.mount == "thread" and self.chamfer_height_mm + self.wall_mm > self.flange_height_mm:
-            raise HolderError(f"flange_height_mm ({self.flange_height_mm}) is too low for the 45° chamfer "
-                              f"({self.chamfer_height_mm:.2f} mm) plus wall_mm")
+        object.__setattr__(self, "_derived", tuple(n for n in derive.DERIVED if getattr(self, n) is None))
+        self._check_given()
+        self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
+        self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
+        self._check_die_and_thread()
+        self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))
+        self._check_flange_diameter()
+        self._resolve("flange_height_mm", derive.flange_height_mm(self))
+        self._check_flange_height()
         bad = [b for b in fit_bounds(self) if not b["ok"]]
         if bad:
             raise HolderError("; ".join(f"{b['quantity']} = {b['value']:.3g} {b['unit']} is outside "
                                         f"{b['min']:g}–{b['max']:g} {b['unit']} ({b['fix']})" for b in bad))
+
+    @property
+    def derived(self) -> tuple:
+        """Names of the parameters that were not given and follow from the others (:mod:`holder_cad.derive`)."""
+        return self._derived
+
+    def _resolve(self, name: str, value: float) -> None:
+        if name in self._derived:
+            object.__setattr__(self, name, float(value))
+
+    def _check_given(self) -> None:
+        """Each given length positive, finite and in its range; the mount and the facet count known."""
+        given = [f.name for f in dataclasses.fields(self) if f.name not in self._derived]
+        errs = []
+        for name in given:
+            v = getattr(self, name)
+            if name.endswith("_mm") and (isinstance(v, bool) or not isinstance(v, (int, float))
+                                         or not math.isfinite(v) or v <= 0):
+                errs.append(f"{name} must be a positive length in mm, got {v!r}")
+        if errs:
+            raise HolderError("; ".join(errs))
+        out = [f"{k} {getattr(self, k):g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in
+               PARAM_RANGES.items() if k in given and not lo <= getattr(self, k) <= hi]
+        if out:
+            raise HolderError("; ".join(out))
+        if self.mount not in ("thread", "slip"):
+            raise HolderError(f"mount must be 'thread' or 'slip', got {self.mount!r}")
+        if isinstance(self.segments, bool) or not isinstance(self.segments, int) or not 32 <= self.segments <= 1024:
+            raise HolderError(f"segments must be an integer in 32..1024 (facets per circle), got {self.segments!r}")
+
+    def _check_die_and_thread(self) -> None:
+        """The die, its pocket, the washers and the thread's teeth: each conflict names a value that works."""
+        if self.wall_mm < self.nozzle_mm:
+            raise HolderError(f"wall_mm ({self.wall_mm:g}) is below nozzle_mm ({self.nozzle_mm:g}): a printer "
+                              f"cannot make walls thinner than one line: set wall_mm = {self.nozzle_mm:g} or more")
+        side = min(self.die_width_mm, self.die_height_mm)
+        ledge = side - 2 * self.wall_mm - 2 * self.aperture_margin_mm  # the widest aperture the die holds
+        if self.clear_aperture_mm >= ledge:
+            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm:g}) + margins does not fit inside the "
+                              f"die ({self.die_width_mm:g} × {self.die_height_mm:g} mm) with a {self.wall_mm:g} mm "
+                              f"ledge: set clear_aperture_mm = {math.floor(100 * ledge - 1) / 100:g} or less, or "
+                              f"die_width_mm and die_height_mm to "
+                              f"{math.ceil(self.clear_aperture_mm + side - ledge + 0.01):g} or more")
+        if self.die_chamfer_mm >= 0.5 * side:
+            raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) must be less than half the die's shorter "
+                              f"side ({side:g} mm): set die_chamfer_mm = {min(1.5, side / 4):g}")
+        if self.thread_depth_mm * 2 >= self.thread_pitch_mm:
+            raise HolderError(f"thread_depth_mm ({self.thread_depth_mm:g}) is too deep for thread_pitch_mm "
+                              f"({self.thread_pitch_mm:g}) with 45° flanks (depth < pitch / 2): set "
+                              f"thread_depth_mm = {derive.standard_depth_mm(self.thread_pitch_mm):g}")
+        overlap = self.die_width_mm / 2 - (self.screw_offset_mm - self.washer_diameter_mm / 2)
+        if overlap < 0.5:
+            need = math.ceil(2 * (self.washer_diameter_mm / 2 + 0.5 - overlap) * 2 - 1e-9) / 2
+            raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm:g}) overlap the "
+                              f"die edge by {overlap:.2f} mm (< 0.5 mm): set washer_diameter_mm = {need:g} or more")
+        if self.cartridge_need_mm > self.cartridge_radius_mm + 1e-9:
+            raise HolderError(self._die_too_large())
+
+    def _die_too_large(self) -> str:
+        """The refusal of a die the cartridge cannot hold, with a thread (or barrel) and a die that work."""
+        c, wall, rw, need = self.clearance_mm, self.wall_mm, self.washer_recess_half_mm, self.cartridge_need_mm
+        # the largest square die whose pocket and washer recesses fit this cartridge
+        reach = self.screw_offset_mm - self.die_width_mm / 2  # pocket edge to screw axis
+        room = self.cartridge_radius_mm - wall
+        half = min((room - c) / math.sqrt(2), math.sqrt(max(room ** 2 - rw ** 2, 0.0)) - reach - rw)
+        side = math.floor(20 * half) / 10
+        holds = side - 2 * wall - 2 * self.aperture_margin_mm > self.clear_aperture_mm  # it still takes the DOE
+        die = f", or use a die of at most {side:g} × {side:g} mm (die_width_mm, die_height_mm)" if holds else ""
+        what = (f"the die ({self.die_width_mm:g} × {self.die_height_mm:g} mm), its pocket and the washer recesses "
+                f"need a cartridge of radius {need:.2f} mm, this one has {self.cartridge_radius_mm:.2f} mm")
+        if self.mount == "slip":
+            barrel = math.ceil(2 * (need + c + wall + 3.0) * 2 - 1e-9) / 2
+            return f"{what}: set barrel_diameter_mm = {barrel:g} or more{die}"
+        thread = 2 * (need + 2 * c + wall + self.thread_depth_mm)
+        if "thread_depth_mm" in self._derived and "thread_pitch_mm" in self._derived:  # a larger thread's teeth
+            thread = 2 * (need + 2 * c + wall + derive.standard_depth_mm(derive.standard_pitch_mm(thread)))
+        thread = derive.next_filter_thread_mm(thread)
+        return (f"{what}: set thread_diameter_mm = {thread:g} or more (a step-up ring from the lens's "
+                f"{self.thread_diameter_mm:g} mm thread){die}")
+
+    def _check_flange_diameter(self) -> None:
+        least = derive.min_flange_diameter_mm(self)
+        if self.flange_diameter_mm < least - 1e-9:
+            what = (f"the {self.thread_diameter_mm:g} mm thread's bore" if self.mount == "thread" else
+                    f"the sleeve over the {self.barrel_diameter_mm:g} mm barrel")
+            src = "thread" if self.mount == "thread" else "barrel"
+            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm:g}) is below {least:.2f} mm, the least "
+                              f"that holds {what} and the lock-screw holes and slots with wall_mm "
+                              f"({self.wall_mm:g} mm) on both sides: set flange_diameter_mm = "
+                              f"{derive.flange_diameter_mm(self):g}, or leave it out (it follows from the {src})")
+
+    def _check_flange_height(self) -> None:
+        hi = PARAM_RANGES["flange_height_mm"][1]
+        if "flange_height_mm" in self._derived and self.flange_height_mm > hi:
+            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm:g}) needs a "
+                              f"{self.flange_height_mm:g} mm flange height over its 45° chamfer, above the "
+                              f"{hi:g} mm allowed: set flange_diameter_mm = "
+                              f"{derive.max_flange_diameter_mm(self, hi):g} or less, or leave it out")
+        need = derive.min_flange_height_mm(self)
+        if self.flange_height_mm < need - 1e-9:
+            why = (f"the 45° chamfer ({self.chamfer_height_mm:.2f} mm) plus wall_mm and lock-screw pilot holes "
+                   f"{derive.PILOT_DEPTH_MM:g} mm deep above it" if self.mount == "thread" else
+                   f"lock-screw pilot holes {derive.PILOT_DEPTH_MM:g} mm deep")
+            raise HolderError(f"flange_height_mm ({self.flange_height_mm:g}) is too low: {why} need {need:.2f} mm: "
+                              f"set flange_height_mm = {derive.flange_height_mm(self):g}, or leave it out (it "
+                              f"follows from the flange)")
 
     # ---- derived dimensions (mm) --------------------------------------------------------------
     @property
@@ -195,6 +267,18 @@ class HolderParams:
     def die_diagonal_mm(self) -> float:
         """Diagonal of the die (mm), which the cartridge's die pocket must hold."""
         return math.hypot(self.die_width_mm, self.die_height_mm)
+
+    @property
+    def washer_recess_half_mm(self) -> float:
+        """Half-width (mm) of each washer's square-cornered recess: the washer's radius plus ``clearance_mm``."""
+        return self.washer_diameter_mm / 2 + self.clearance_mm
+
+    @property
+    def cartridge_need_mm(self) -> float:
+        """The cartridge radius (mm) that holds the die pocket and the washer recesses with wall_mm around them
+        (a recess runs from the pocket to ``washer_recess_half_mm`` beyond its screw)."""
+        rw = self.washer_recess_half_mm
+        return max(self.die_diagonal_mm / 2 + self.clearance_mm, math.hypot(self.screw_offset_mm + rw, rw)) + self.wall_mm
 
     @property
     def chamfer_height_mm(self) -> float:
@@ -235,9 +319,20 @@ class HolderParams:
             return 0.5 * (self.bore_radius_mm + self.flange_diameter_mm / 2)
         return self.sleeve_outer_radius_mm + self.wall_mm + self.pilot_hole_mm / 2
 
+    @property
+    def pilot_stop_mm(self) -> float:
+        """Height (mm) above the thread's end at which the base's blind pilot holes stop: wall_mm, square to the
+        45° chamfer, short of it (threaded base); the slip-fit plate is drilled through (its bottom)."""
+        if self.mount == "thread":
+            return (self.pilot_radius_mm + self.pilot_hole_mm / 2 + self.wall_mm * math.sqrt(2)
+                    - self.thread_major_radius_mm)
+        return 0.0
+
     def replace(self, **changes) -> "HolderParams":
-        """A copy with some parameters changed (millimetres), checked again."""
-        return dataclasses.replace(self, **changes)
+        """A copy with some parameters changed (millimetres), checked again; parameters that were derived are
+        derived again (a new thread gets its own pitch and flange), ``None`` derives a given one."""
+        given = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in self._derived}
+        return HolderParams(**{**given, **changes})
 
     def to_dict(self) -> dict:
         """Every parameter by name (lengths in millimetres), as ``holder.json`` stores them."""

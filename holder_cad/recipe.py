@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from holder_cad import derive
 from holder_cad.params import HolderParams
 
 __all__ = ["Cyl", "Cone", "Revolve", "Prism", "Twisted", "Body", "base_body", "cartridge_body", "coupon_bodies",
@@ -162,7 +163,7 @@ def base_body(p: HolderParams) -> Body:
     for k in range(4):  # M2 pilot holes for the cartridge's lock screws
         a = math.pi / 4 + k * math.pi / 2
         if p.mount == "thread":  # stop wall_mm (measured square to the 45° chamfer) above the chamfer
-            z_lo = z_a + (p.pilot_radius_mm + r_hole - r0) + p.wall_mm * math.sqrt(2)
+            z_lo = t + p.pilot_stop_mm
         else:
             z_lo = -1.0
         body.subs.append(Cyl(r_hole, z_lo, top + 1.0, p.pilot_radius_mm * math.cos(a),
@@ -192,7 +193,7 @@ def cartridge_body(p: HolderParams) -> Body:
     for sx in (-1, 1):
         cx = sx * p.screw_offset_mm
         body.subs.append(Cyl(p.pilot_hole_mm / 2, top - 5.0, top + 1.0, cx, 0.0))
-        rw = p.washer_diameter_mm / 2 + p.clearance_mm  # recess: a rectangle from the pocket wall (square corners)
+        rw = p.washer_recess_half_mm  # recess: a rectangle from the pocket wall (square corners)
         edge = p.die_width_mm / 2 + p.clearance_mm - 0.01
         x0, x1 = (edge, cx + rw) if sx > 0 else (cx - rw, -edge)
         body.subs.append(Prism(((x0, -rw), (x1, -rw), (x1, rw), (x0, rw)), die_top, top + 1.0))
@@ -209,7 +210,8 @@ def cartridge_body(p: HolderParams) -> Body:
 
 def coupon_bodies(p: HolderParams) -> list[Body]:
     """Fit-test coupon: a short thread (or sleeve) ring and a die pocket, quick to print."""
-    q = p.replace(flange_height_mm=max(p.chamfer_height_mm + p.wall_mm, 2.0) if p.mount == "thread" else 2.0,
+    # the lowest flange the thread's chamfer and the pilot holes allow (derived), a thin plate for a sleeve
+    q = p.replace(flange_height_mm=None if p.mount == "thread" else derive.PILOT_DEPTH_MM,
                   sleeve_length_mm=min(p.sleeve_length_mm, 4.0))
     ring = base_body(q)
     ring.name = "coupon_ring"

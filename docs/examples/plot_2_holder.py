@@ -8,15 +8,15 @@ only and the split line can be turned and locked. Both print flat and support-fr
 holder to a lens, builds it, reads its checks, and shows what happens when a parameter does not fit.
 
 Every holder length is in **millimetres** (the CAD convention). On the command line the same build is
-``doefab holder --out out/holder --set thread_diameter_mm=52 --set flange_diameter_mm=60``.
+``doefab holder --out out/holder --set thread_diameter_mm=52``.
 """
 
 # %%
 # Fit the parameters to your lens
 # -------------------------------
 # The defaults fit the Canon EF 50 mm f/1.8 STM (49 mm filter thread) and a 12 mm × 12 mm die. Here the lens
-# has a 52 mm filter thread; the flange must then be larger too. ``lens_face_to_glass_mm`` (from the filter
-# face to the front glass) sets how far the DOE sits from the lens: measure it on your lens.
+# has a 52 mm filter thread; the thread's pitch and the flange follow from it. ``lens_face_to_glass_mm`` (from
+# the filter face to the front glass) sets how far the DOE sits from the lens: measure it on your lens.
 import json
 import tempfile
 from pathlib import Path
@@ -26,7 +26,9 @@ import numpy as np
 
 from holder_cad import HolderError, HolderParams, build_parts, write_holder
 
-params = HolderParams(thread_diameter_mm=52.0, flange_diameter_mm=60.0, lens_face_to_glass_mm=3.5)
+params = HolderParams(thread_diameter_mm=52.0, lens_face_to_glass_mm=3.5)
+print(f"M{params.thread_diameter_mm:g} × {params.thread_pitch_mm:g} thread, flange {params.flange_diameter_mm:g} mm "
+      f"across and {params.flange_height_mm:g} mm high (derived: {', '.join(params.derived)})")
 print(f"DOE to lens glass (from the parameters): {params.doe_to_lens_mm:.2f} mm")
 print(f"die pocket: {params.die_width_mm:g} × {params.die_height_mm:g} mm with {params.clearance_mm:g} mm "
       f"clearance per side")
@@ -34,7 +36,7 @@ print(f"die pocket: {params.die_width_mm:g} × {params.die_height_mm:g} mm with 
 # %%
 # A parameter set that cannot work is refused before anything is built, with the quantity and the fix:
 try:
-    HolderParams(thread_diameter_mm=52.0, flange_diameter_mm=60.0, clearance_mm=0.02)
+    HolderParams(thread_diameter_mm=52.0, clearance_mm=0.02)
 except HolderError as err:
     print("refused:", err)
 

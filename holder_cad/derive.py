@@ -1,0 +1,102 @@
+"""The holder dimensions that follow from the lens's thread (or barrel) and the die when they are not given (mm).
+
+A parameter left out (``None``) takes the value these rules give; a parameter that is given is kept, and one
+that conflicts is refused by :class:`holder_cad.params.HolderParams` with the value these rules would choose.
+
+- ``thread_pitch_mm``: the commonest pitch of a filter thread of that diameter: 0.5 mm up to 40.5 mm, 0.75 mm
+  up to 82 mm, 1.0 mm above (some lenses differ, e.g. M37 × 0.75: measure yours and set it).
+- ``thread_depth_mm``: 0.4 × the pitch (45° flanks leave 0.1 × pitch flats at crest and root).
+- ``flange_diameter_mm``: the smallest whole millimetre that holds the thread (or sleeve) and the lock-screw
+  holes and slots with ``wall_mm`` on both sides.
+- ``flange_height_mm``: threaded base: the smallest half millimetre above the 45° chamfer plus ``wall_mm``
+  that leaves the lock-screw pilot holes ``PILOT_DEPTH_MM`` deep; slip-fit plate: ``SLIP_PLATE_MM``.
+
+Functions take a parameter set whose other dimensions are already resolved (duck-typed, any object with the
+``HolderParams`` fields and properties).
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM", "standard_pitch_mm", "standard_depth_mm",
+           "min_flange_diameter_mm", "min_flange_height_mm", "flange_diameter_mm", "flange_height_mm",
+           "max_flange_diameter_mm"]
+
+PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
+SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
+_EPS = 1e-9
+# the common photographic filter threads (mm), the sizes step-up rings come in
+COMMON_FILTER_THREADS_MM = (25.0, 27.0, 28.0, 30.5, 34.0, 37.0, 39.0, 40.5, 43.0, 46.0, 49.0, 52.0, 55.0, 58.0,
+                            62.0, 67.0, 72.0, 77.0, 82.0, 86.0, 95.0, 105.0, 112.0, 122.0, 127.0)
+
+# how each derived parameter follows (the key table and the holder page say the same)
+DERIVED = {
+    "thread_pitch_mm": "from thread_diameter_mm: 0.5 up to 40.5, 0.75 up to 82, 1.0 above",
+    "thread_depth_mm": "0.4 × thread_pitch_mm",
+    "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
+    "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
+                        f"pilot holes; slip: {SLIP_PLATE_MM:g}",
+}
+
+
+def next_filter_thread_mm(diameter_mm: float) -> float:
+    """The smallest common filter thread (mm) of at least ``diameter_mm`` (a step-up ring's size), or
+    ``diameter_mm`` rounded up to half a millimetre beyond the list."""
+    return next((d for d in COMMON_FILTER_THREADS_MM if d >= diameter_mm - _EPS), math.ceil(2 * diameter_mm) / 2)
+
+
+def standard_pitch_mm(thread_diameter_mm: float) -> float:
+    """The commonest pitch (mm) of a photographic filter thread of this nominal diameter (mm)."""
+    if thread_diameter_mm <= 40.5:
+        return 0.5
+    return 0.75 if thread_diameter_mm <= 82.0 else 1.0
+
+
+def standard_depth_mm(pitch_mm: float) -> float:
+    """Tooth depth (mm) of a 45°-flank thread of this pitch: 0.4 × pitch, below the pitch / 2 a V would reach."""
+    return round(0.4 * pitch_mm, 6)
+
+
+def min_flange_diameter_mm(p) -> float:
+    """The least flange diameter (mm): the lock-screw ring (pilot holes, cartridge slots) with wall_mm inside and
+    outside it, around the bore (thread) or outside the sleeve (slip); a thread's flange also overhangs its
+    crest by wall_mm."""
+    hole = max(p.screw_clearance_mm, p.pilot_hole_mm)
+    if p.mount == "thread":  # the screws sit mid-flange, between the bore and the rim
+        r = max(p.bore_radius_mm + hole + 2 * p.wall_mm, p.thread_major_radius_mm + p.wall_mm)
+    else:  # the screws sit just outside the sleeve
+        pilot_r = p.sleeve_outer_radius_mm + p.wall_mm + p.pilot_hole_mm / 2
+        r = max(pilot_r + p.screw_clearance_mm / 2 + p.wall_mm, p.sleeve_outer_radius_mm + p.wall_mm)
+    return 2 * r
+
+
+def flange_diameter_mm(p) -> float:
+    """The derived flange diameter (mm): :func:`min_flange_diameter_mm` rounded up to a whole millimetre."""
+    return float(math.ceil(min_flange_diameter_mm(p) - _EPS))
+
+
+def min_flange_height_mm(p) -> float:
+    """The least flange height (mm) for ``p``'s flange diameter: a threaded base's 45° chamfer plus wall_mm, and
+    pilot holes PILOT_DEPTH_MM deep above the chamfer (they stop wall_mm, square to it, short of it); a
+    slip-fit plate is drilled through, so it needs PILOT_DEPTH_MM."""
+    if p.mount != "thread":
+        return PILOT_DEPTH_MM
+    return max(p.chamfer_height_mm + p.wall_mm, PILOT_DEPTH_MM + p.pilot_stop_mm)
+
+
+def flange_height_mm(p) -> float:
+    """The derived flange height (mm): :func:`min_flange_height_mm` rounded up to half a millimetre (threaded
+    base), SLIP_PLATE_MM (slip fit)."""
+    if p.mount != "thread":
+        return SLIP_PLATE_MM
+    return math.ceil(2 * min_flange_height_mm(p) - _EPS) / 2
+
+
+def max_flange_diameter_mm(p, height_mm: float) -> float:
+    """The largest whole-millimetre flange diameter (mm) whose :func:`min_flange_height_mm` is at most
+    ``height_mm`` (a threaded base: its chamfer grows with the flange)."""
+    major, wall = p.thread_major_radius_mm, p.wall_mm
+    by_chamfer = height_mm - wall + major
+    by_pilots = 2 * (height_mm - PILOT_DEPTH_MM - p.pilot_hole_mm / 2 - wall * math.sqrt(2) + major) - p.bore_radius_mm
+    return float(math.floor(2 * min(by_chamfer, by_pilots) + _EPS))

@@ -1,0 +1,126 @@
+"""The holder's dimensions that follow from the thread and the die: every common filter thread builds with no
+other key (every check passes and every layer a slicer would print is supported); a given dimension that
+conflicts is refused with the key to change and a value that builds."""
+
+import functools
+import math
+import re
+
+import numpy as np
+import pytest
+
+from holder_cad.build import assembly, build_parts
+from holder_cad.checks import run_checks
+from holder_cad.params import HolderError, HolderParams
+
+# common photographic filter threads (mm) and the shipped mask sets' 12 mm × 12 mm die (the parameters' default)
+FILTER_THREADS_MM = [25, 27, 28, 30.5, 34, 37, 39, 40.5, 43, 46, 49, 52, 55, 58, 62, 67, 72, 77, 82, 86, 95]
+DERIVED = {"thread_pitch_mm", "thread_depth_mm", "flange_diameter_mm", "flange_height_mm"}
+LAYER_MM = 0.2
+
+
+def _standard_pitch(d: float) -> float:
+    """Filter threads of 40.5 mm and smaller are generally M × 0.5, medium ones M × 0.75, 86 mm and up M × 1.0."""
+    return 0.5 if d <= 40.5 else 0.75 if d < 86 else 1.0
+
+
+def _least_thread_for_the_die(p: HolderParams) -> float:
+    """The smallest thread (mm) whose cartridge holds the die's square-cornered washer recesses with a wall,
+    from the part's stated layout: screw at the pocket edge + clearance + wall + pilot radius, recess reaching
+    the washer radius + clearance past the screw; cartridge = thread radius − clearance − tooth − wall −
+    clearance."""
+    c, wall = p.clearance_mm, p.wall_mm
+    rw = p.washer_diameter_mm / 2 + c
+    screw = p.die_width_mm / 2 + c + wall + p.pilot_hole_mm / 2
+    corner = math.hypot(screw + rw, rw)
+    return 2 * (corner + wall + c + 0.2 + wall + c)  # 0.2 mm: the tooth of a 0.5 mm pitch
+
+
+def _layers_supported(m) -> float:
+    """Slice the body as a printer would (0.2 mm layers from the bed); every layer must lie within the one below
+    grown by one layer height (45°), and the layers' volume must be the body's. Returns the layers' volume."""
+    from manifold3d import JoinType
+
+    b = m.bounding_box()
+    zs = np.arange(b[2] + 0.37 * LAYER_MM, b[5], LAYER_MM)  # off the flat faces (all at multiples of 0.05 mm)
+    below, volume = None, 0.0
+    for z in zs:
+        layer = m.slice(float(z))
+        assert layer.area() > 0, f"empty layer at z = {z:.2f} mm"
+        if below is not None:
+            unsupported = (layer - below.offset(LAYER_MM + 0.02, JoinType.Round)).area()
+            assert unsupported < 1e-3, f"{unsupported:.4f} mm² unsupported at z = {z:.2f} mm"
+        below = layer
+        volume += layer.area() * LAYER_MM
+    return volume
+
+
+@functools.lru_cache(maxsize=None)
+def _build_and_check(**kw) -> dict:
+    p = HolderParams(**kw)
+    parts = build_parts(p)
+    checks = run_checks(parts, assembly(parts, p), p, expected_bodies=2)
+    assert checks["passed"], checks["failing"]
+    for name, m in parts.items():
+        assert _layers_supported(m) == pytest.approx(m.volume(), rel=0.02), name
+    return checks
+
+
+@pytest.mark.parametrize("thread", FILTER_THREADS_MM)
+def test_common_filter_thread_builds_with_no_other_key(thread):
+    least = _least_thread_for_the_die(HolderParams())
+    if thread < least:  # the die and its washers cannot fit this thread's bore: refused with a step-up size
+        with pytest.raises(HolderError, match=r"set thread_diameter_mm = ([\d.]+) or more") as err:
+            HolderParams(thread_diameter_mm=thread)
+        step_up = float(re.search(r"thread_diameter_mm = ([\d.]+)", str(err.value)).group(1))
+        assert step_up == min(d for d in FILTER_THREADS_MM if d >= least)
+        _build_and_check(thread_diameter_mm=step_up)
+        return
+    p = HolderParams(thread_diameter_mm=thread)
+    assert set(p.derived) == DERIVED
+    assert p.thread_pitch_mm == _standard_pitch(thread) and p.thread_depth_mm == pytest.approx(0.4 * p.thread_pitch_mm)
+    checks = _build_and_check(thread_diameter_mm=thread)
+    assert checks["bodies"]["base"]["bounding_box_mm"][3] == pytest.approx(p.flange_diameter_mm / 2, abs=0.01)
+
+
+def test_pitch_follows_the_filter_standard_and_a_given_pitch_is_kept():
+    for d, pitch in [(30.5, 0.5), (40.5, 0.5), (43, 0.75), (49, 0.75), (82, 0.75), (86, 1.0), (95, 1.0)]:
+        p = HolderParams(thread_diameter_mm=d)
+        assert (p.thread_pitch_mm, p.thread_depth_mm) == (pitch, pytest.approx(0.4 * pitch))
+    p = HolderParams(thread_diameter_mm=49, thread_pitch_mm=0.5)
+    assert (p.thread_pitch_mm, p.thread_depth_mm) == (0.5, pytest.approx(0.2))
+    assert "thread_pitch_mm" not in p.derived and "thread_depth_mm" in p.derived
+
+
+def test_the_shipped_holder_keeps_its_thread_and_height():
+    p = HolderParams(thread_diameter_mm=49.0)  # the shipped scenes' only holder key
+    assert (p.thread_pitch_mm, p.thread_depth_mm, p.flange_height_mm) == (0.75, 0.3, 6.0)
+    assert p.flange_diameter_mm == 56.0
+    kept = HolderParams(thread_diameter_mm=52.0, flange_diameter_mm=60.0)  # scenes/my_camera.toml
+    assert (kept.flange_diameter_mm, kept.flange_height_mm) == (60.0, 6.0) and "flange_diameter_mm" not in kept.derived
+
+
+@pytest.mark.parametrize("kw, key", [
+    ({"thread_diameter_mm": 52.0, "flange_diameter_mm": 57.0}, "flange_diameter_mm"),
+    ({"thread_diameter_mm": 40.5, "flange_diameter_mm": 57.0, "flange_height_mm": 6.0}, "flange_height_mm"),
+    ({"thread_diameter_mm": 49.0, "flange_diameter_mm": 200.0}, "flange_diameter_mm"),
+    ({"thread_diameter_mm": 30.5, "thread_depth_mm": 0.3}, "thread_depth_mm"),
+    ({"washer_diameter_mm": 4.0}, "washer_diameter_mm"),
+    ({"clear_aperture_mm": 11.0}, "clear_aperture_mm"),
+    ({"die_width_mm": 40.0, "die_height_mm": 40.0}, "thread_diameter_mm"),
+])
+def test_a_conflicting_key_is_named_with_a_value_that_builds(kw, key):
+    with pytest.raises(HolderError) as err:
+        HolderParams(**kw)
+    msg = str(err.value)
+    found = re.search(rf"set {key} = ([\d.]+)", msg)
+    assert found, msg
+    fixed = {**kw, key: float(found.group(1))}
+    _build_and_check(**fixed)
+
+
+def test_replace_derives_again_what_was_not_given():
+    p = HolderParams()
+    q = p.replace(thread_diameter_mm=40.5)
+    assert (q.thread_pitch_mm, q.flange_diameter_mm) == (0.5, HolderParams(thread_diameter_mm=40.5).flange_diameter_mm)
+    assert HolderParams(flange_diameter_mm=60.0).replace(thread_diameter_mm=52.0).flange_diameter_mm == 60.0
