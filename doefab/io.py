@@ -24,7 +24,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 
 __all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
-           "folder_lock", "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
+           "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
 
@@ -272,6 +272,20 @@ def read_toml(path: str | Path, what: str) -> dict:
         return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark (some editors write one)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DoefabError(f"{p} is not valid TOML ({exc})") from None
+
+
+def sources_sha256(root: str | Path, packages: tuple[str, ...]) -> str:
+    """SHA-256 of the Python sources of ``packages`` (folders under ``root``), by relative path and content: a
+    key that changes with the code that computes something, so a result of another version is not reused."""
+    import hashlib
+
+    root = Path(root)
+    h = hashlib.sha256()
+    for pkg in packages:
+        for f in sorted((root / pkg).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
 
 
 def cache_root() -> Path:

@@ -342,12 +342,19 @@ SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("f
 
 
 def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
-    """The stage's inputs: its scene sections, the task, --quick, its upstream stages' hashes and, for the stages
-    that draw fabricated parts from it, the tolerance budget's content (not only its file name)."""
+    """The stage's inputs: its scene sections, the task, --quick, its upstream stages' hashes, for the holder the
+    source of ``holder_cad`` that builds it and, for the stages that draw fabricated parts from it, the tolerance
+    budget's content (not only its file name)."""
     parts = {s: scene.raw.get(s) for s in SECTION[name]}
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
+    if name == "holder":  # the part is computed by holder_cad: another version of it builds another part
+        import holder_cad
+
+        from doefab.io import sources_sha256
+
+        parts["code"] = sources_sha256(Path(holder_cad.__file__).resolve().parent.parent, ("holder_cad",))
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor

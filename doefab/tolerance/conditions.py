@@ -105,13 +105,9 @@ PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose cod
 def model_sources_sha256(packages=PART_MODEL) -> str:
     """SHA-256 of the source of the subpackages that compute a fabricated part's PSFs: part of the cache key, so
     parts cached by another version of that code (a model fix, an upgrade) are computed afresh, never reused."""
-    root = Path(__file__).resolve().parent.parent
-    h = hashlib.sha256()
-    for pkg in packages:
-        for f in sorted((root / pkg).rglob("*.py")):
-            h.update(f.relative_to(root).as_posix().encode())
-            h.update(f.read_bytes())
-    return h.hexdigest()
+    from doefab.io import sources_sha256
+
+    return sources_sha256(Path(__file__).resolve().parent.parent, tuple(packages))
 
 
 def _key(task, design, split, n, budget, kernel, chain) -> str:

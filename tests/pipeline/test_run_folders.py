@@ -87,3 +87,23 @@ def test_force_keeps_a_file_doefab_did_not_write(tmp_path):
     (out / "holder" / "holder.stl").write_text("stale")
     run_scene(scene, out, force=("holder",), quick=True, progress=False)
     assert (out / "holder" / "holder.stl").read_bytes()[:5] != b"stale" and mine.is_file()
+
+
+def test_the_holder_stage_is_rebuilt_when_the_holder_code_changes(tmp_path, monkeypatch):
+    """A holder built by another version of holder_cad (another flange rule, say) is not reused: the holder
+    stage's hash covers holder_cad's source. The same source elsewhere gives the same hash."""
+    import shutil
+
+    import holder_cad
+    from doefab.pipeline.stages import stage_hash
+
+    scene = load_scene(_holder_scene(tmp_path))
+    before = stage_hash(scene, "holder", {}, True)
+    copy = tmp_path / "src" / "holder_cad"
+    shutil.copytree(Path(holder_cad.__file__).parent, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(holder_cad, "__file__", str(copy / "__init__.py"))
+    assert stage_hash(scene, "holder", {}, True) == before
+    with open(copy / "params.py", "a") as fh:
+        fh.write("\n# another flange rule\n")
+    assert stage_hash(scene, "holder", {}, True) != before
+    assert stage_hash(scene, "design", {}, True) == stage_hash(scene, "design", {}, True)
