@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM", "standard_pitch_mm", "standard_depth_mm",
-           "min_flange_diameter_mm", "min_flange_height_mm", "flange_diameter_mm", "flange_height_mm",
+__all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
+           "standard_pitch_mm", "standard_depth_mm", "widest_aperture_mm", "min_flange_diameter_mm", "min_flange_height_mm", "flange_diameter_mm", "flange_height_mm",
            "max_flange_diameter_mm"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
@@ -38,6 +38,12 @@ DERIVED = {
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
 }
+
+
+def widest_aperture_mm(die_side_mm: float, wall_mm: float, aperture_margin_mm: float) -> float:
+    """The widest clear aperture a die of this (shorter) side holds: its pocket's ledge is ``wall_mm`` wide and
+    the hole ``aperture_margin_mm`` larger than the aperture all round (an aperture must stay below this)."""
+    return die_side_mm - 2 * wall_mm - 2 * aperture_margin_mm
 
 
 def next_filter_thread_mm(diameter_mm: float) -> float:

@@ -169,7 +169,7 @@ class HolderParams:
             raise HolderError(f"wall_mm ({self.wall_mm:g}) is below nozzle_mm ({self.nozzle_mm:g}): a printer "
                               f"cannot make walls thinner than one line: set wall_mm = {self.nozzle_mm:g} or more")
         side = min(self.die_width_mm, self.die_height_mm)
-        ledge = side - 2 * self.wall_mm - 2 * self.aperture_margin_mm  # the widest aperture the die holds
+        ledge = derive.widest_aperture_mm(side, self.wall_mm, self.aperture_margin_mm)
         if self.clear_aperture_mm >= ledge:
             raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm:g}) + margins does not fit inside the "
                               f"die ({self.die_width_mm:g} × {self.die_height_mm:g} mm) with a {self.wall_mm:g} mm "

@@ -17,12 +17,14 @@ aperture.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import gdstk
 import numpy as np
 
-__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement", "mark_layout"]
+__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement", "mark_layout",
+           "smallest_die_m"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
@@ -139,6 +141,22 @@ def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
     raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
                       f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
                       f"{into_aperture} inside the aperture): {fix}")
+
+
+def smallest_die_m(aperture_diameter_m: float, extent_m: float, cd_m: float, n_masks: int,
+                   floor_m: float = 12e-3) -> float:
+    """The smallest square die in whole millimetres, at least ``floor_m`` (12 mm: the prototype's), that holds a
+    pattern ``extent_m`` wide with a 1 mm margin and every mark of ``n_masks`` plates aligned to the chrome keys
+    clear of the aperture (m). Example: ``smallest_die_m(8.64e-3, 8.64e-3, 5.4e-6, 4) == 0.012``."""
+    radius_nm, cd_nm = int(round(aperture_diameter_m / 2 * 1e9)), max(1, int(round(cd_m * 1e9)))
+    align_to = {plate: 0 for plate in range(1, n_masks + 1)}
+    die_mm = max(math.ceil(floor_m * 1e3 - 1e-9), math.ceil(extent_m * 1e3 + 2 - 1e-9))
+    while die_mm < 300:
+        spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm)
+        if not any(_misplaced(mark_polygons(spec, align_to), spec)):
+            return die_mm * 1e-3
+        die_mm += 1
+    return die_mm * 1e-3
 
 
 def mark_layout(spec: MarkSpec, align_to: dict[int, int], vertex_cap: int,

@@ -5,8 +5,9 @@ wavelengths C_i in micrometres inside the formula (sources that publish C_i² in
 converted by a square root here, once); the public functions take and return SI units (metres). The indices are
 relative to air, as the sources give them.
 
-Built-in substrates (``material_by_name``, case-insensitive; ``SUBSTRATES`` holds each source and the wavelength
-range its fit covers):
+Built-in substrates (``substrate_name`` resolves a name in any case, spaces, ``-`` and ``_`` alike, for the API's
+``material_by_name`` and for scene files; ``SUBSTRATES`` holds each source and the wavelength range its fit
+covers):
 
 - ``"fused silica"``: I. H. Malitson, "Interspecimen comparison of the refractive index of fused silica",
   J. Opt. Soc. Am. 55, 1205–1209 (1965); 0.21–3.71 µm, 20 °C.
@@ -33,7 +34,7 @@ import numpy as np
 from doefab.errors import DoefabError
 
 __all__ = ["Material", "Substrate", "FUSED_SILICA", "N_BK7", "CAF2", "SAPPHIRE", "PMMA", "SUBSTRATES",
-           "material_by_name", "fit_range_warning"]
+           "material_by_name", "substrate_name", "fit_range_warning"]
 
 
 @dataclass(frozen=True)
@@ -97,7 +98,8 @@ class Material:
             made = cls(d["name"], coeffs[0], coeffs[1])
         except DoefabError as exc:
             raise DoefabError(f"{where}: {exc}") from None
-        known = _MATERIALS.get(d["name"].lower())
+        builtin = _NAMES.get(_key(d["name"]))
+        known = SUBSTRATES[builtin].material if builtin else None
         if known is not None and (known.b, known.c_um) != (coeffs[0], coeffs[1]):
             raise DoefabError(f"{where}: {d['name']!r} is a built-in material but its Sellmeier coefficients differ "
                               f"from the built-in ones: the record was edited; restore them or rename the material")
@@ -140,18 +142,32 @@ SUBSTRATES = {s.material.name: s for s in (
     Substrate(PMMA, "Sultanova, Kasarova & Nikolov, Acta Phys. Pol. A 116, 585 (2009)", (0.4368, 1.052)),
 )}
 
-_MATERIALS = {**{name.lower(): s.material for name, s in SUBSTRATES.items()}, "fused_silica": FUSED_SILICA}
+def _key(name: str) -> str:
+    """A name as the resolver compares it: lower case, without spaces, ``-`` or ``_``."""
+    return "".join(c for c in name.lower() if c not in " -_\t")
+
+
+_NAMES = {_key(name): name for name in SUBSTRATES}
+
+
+def substrate_name(name) -> str:
+    """The built-in substrate ``name`` means, as ``SUBSTRATES`` spells it: any case, with spaces, ``-`` or ``_``
+    alike (``"Fused Silica"``, ``"fused_silica"``, ``"n-bk7"``, ``"caf2"``). The one resolver of substrate names,
+    for ``material_by_name`` and for scene files; an unknown name is a DoefabError listing the built-in ones."""
+    found = _NAMES.get(_key(name)) if isinstance(name, str) else None
+    if found is None:
+        raise DoefabError(f"unknown material {name!r}: choose a built-in substrate, "
+                          f"{', '.join(map(repr, SUBSTRATES))} (any case)")
+    return found
 
 
 def material_by_name(name: str) -> Material:
-    """A built-in substrate by name, case-insensitively (``"fused silica"``, ``"N-BK7"``, ``"CaF2"``,
-    ``"sapphire"``, ``"PMMA"``)."""
-    found = _MATERIALS.get(name.strip().lower()) if isinstance(name, str) else None
-    if found is None:
-        table = "; ".join(f"{n!r} ({s.source})" for n, s in SUBSTRATES.items())
-        raise DoefabError(f"unknown material {name!r}: the built-in substrates are {table}; for another, pass a "
-                          f"doefab.Material with its Sellmeier coefficients")
-    return found
+    """A built-in substrate by name (``substrate_name``: ``"fused silica"``, ``"N-BK7"``, ``"CaF2"``,
+    ``"sapphire"``, ``"PMMA"``, in any case)."""
+    try:
+        return SUBSTRATES[substrate_name(name)].material
+    except DoefabError as exc:
+        raise DoefabError(f"{exc}; for another, pass a doefab.Material with its Sellmeier coefficients") from None
 
 
 def fit_range_warning(material: Material, wavelengths_m) -> str | None:

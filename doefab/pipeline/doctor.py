@@ -32,8 +32,8 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
     import torch
 
     from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
-    from doefab.optics.pupil import source_path_difference
     from doefab.pipeline.stages import resolve
+    from doefab.pipeline.system import phase_step_fix, pitch_fix, source_phase_step
 
     res = resolve(scene)
     cam = res["camera"]
@@ -46,16 +46,14 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
     alias_half = lam_min * cam.sensor_distance / (2 * cam.doe_pitch)
     half = (k / 2 + 0.5) * cam.sensor_pitch
     rows.append(_row("output window inside the alias-free field (shortest wavelength)", half, alias_half, "m",
-                     half <= alias_half, f"optics.kernel_px ≤ {int(2 * alias_half / cam.sensor_pitch - 1)} or a finer "
-                                         f"pupil sampling"))
+                     half <= alias_half, " or ".join(
+                         [f"optics.kernel_px ≤ {int(2 * alias_half / cam.sensor_pitch - 1)}"]
+                         + pitch_fix(cam, lam_min * cam.sensor_distance / (2 * half)))))
     z_near = min(depths)
-    r = np.linspace(0, cam.aperture_diameter / 2, 20001)
-    opd = source_path_difference(r**2, z_near, cam.focus_distance)
-    step = float(np.max(np.abs(np.diff(opd))) * (cam.doe_pitch / (r[1] - r[0])) * 2 * math.pi / lam_min)
+    step = source_phase_step(cam, lam_min, z_near)
     rows.append(_row(f"source phase step per pupil sample at the nearest depth ({z_near:g} m)", step,
                      SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
-                     f"pupil_oversample ≥ {math.ceil(step / SOURCE_PHASE_LIMIT)} (doefab psf --pupil-oversample) or "
-                     f"a nearest depth farther away"))
+                     phase_step_fix(cam, lam_min, z_near, step)))
     fft_bytes = (2 * cam.doe_pixels) ** 2 * 8 * 3
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
                      8e9, "bytes", fft_bytes <= 8e9, "a coarser design grid (design.sampling) or fewer pixels"))

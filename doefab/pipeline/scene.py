@@ -2,9 +2,10 @@
 
 Every key, its type, unit, range and default are in ``scenekeys.KEYS`` (the documentation's scene-key
 reference and ``doefab scene new``'s template are made from the same table). ``load_scene`` checks every key
-against it and lists every problem with its key; the physics of the system a scene describes (does the DOE grid
-cover the aperture, does the fab resolve the DOE pixel, do the grating's orders fit the window...) is checked by
-``system.resolve`` before any folder is made.
+against it (each item of a list key too) and the tolerance budget the scene names (every range of
+``tolerance.errors.budget_problems``), and lists every problem with its key; the physics of the system a scene
+describes (does the DOE grid cover the aperture, does the fab resolve the DOE pixel, do the grating's orders
+fit the window...) is checked by ``system.resolve`` before any folder is made.
 """
 
 from __future__ import annotations
@@ -16,11 +17,16 @@ from pathlib import Path
 from doefab._validate import metres_hint, unit_hint
 from doefab.errors import DoefabError
 from doefab.io import read_toml
+from doefab.pipeline.scenekeys import STAGES, item_text, keys_of, toml_value, values_text
 
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
 TASK_DESIGN = {"hdr": "streak", "hyperspectral": "grating", "depth": "half-ring"}
-STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
+# keys that set the same quantity: a scene gives at most one of each group
+SAME_QUANTITY = ((("focal_length_mm", "sensor_distance_mm", "sensor_distance_m"), "the lens-to-sensor distance"),
+                 (("aperture_diameter_mm", "f_number"), "the DOE's aperture"))
+
+
 @dataclass
 class Scene:
     path: Path
@@ -39,9 +45,7 @@ class Scene:
     def budget_path(self) -> Path | None:
         """The tolerance budget file: None for the shipped default, else relative to the scene file or as given."""
         b = (self.tolerance or {}).get("budget", "default")
-        if b == "default":
-            return None
-        return self.path.parent / b if (self.path.parent / b).is_file() else Path(b)
+        return None if b == "default" else _budget_file(self.path, b)
 
     def response_path(self) -> str:
         """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or as given)."""
@@ -64,24 +68,66 @@ def _typed(v, kind: str) -> bool:
     return isinstance(v, {"str": str, "bool": bool, "list": list}.get(kind, object))
 
 
+def _hint(v: float, key) -> str:
+    """The unit slip a value outside a key's range suggests (" (550 nm is 5.5e-07 m)"), or ''."""
+    if not math.isfinite(v):
+        return ""
+    return metres_hint(v, key.lo, key.hi) if key.unit == "m" else unit_hint(v, key.lo, key.hi, key.unit)
+
+
 def _value_problem(where: str, v, key) -> str | None:
     """The problem with one value of a known key, or None."""
+    if key.kind == "list":
+        return _list_problem(where, v, key)
     if key.kind == "choice":
+        if key.resolve is not None:
+            try:
+                key.resolve(v)
+            except DoefabError as exc:
+                return f"{where}: {exc}"
+            return None
         return None if v in key.choices else f"{where} {v!r} is not one of {', '.join(map(str, key.choices))}"
     if not _typed(v, key.kind):
         return f"{where} must be {'a number' if key.kind == 'float' else key.kind}, got {v!r}"
     if key.kind in ("float", "int") and key.lo is not None:
         if not math.isfinite(v) or not key.lo <= v <= key.hi:
-            hint = "" if not math.isfinite(v) else (metres_hint(v, key.lo, key.hi) if key.unit == "m" else
-                                                     unit_hint(v, key.lo, key.hi, key.unit))
-            return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{hint}".rstrip()
+            return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{_hint(v, key)}".rstrip()
     return None
 
 
-def _schema_problems(raw: dict) -> list[str]:
-    """Unknown sections and keys, values of the wrong type, choice or range (``scenekeys.KEYS``)."""
-    from doefab.pipeline.scenekeys import keys_of
+def _bad_item(x, key) -> bool:
+    """Whether one item of a list key is outside what the key's items take."""
+    if x in key.choices and isinstance(x, str):
+        return False
+    if key.item == "choice":
+        return True
+    return not _typed(x, key.item) or not math.isfinite(x) or not key.lo <= x <= key.hi
 
+
+def _list_problem(where: str, v, key) -> str | None:
+    """The problems with a list key's value: not a list, empty, items outside what the key's items take, an item
+    given twice."""
+    if not isinstance(v, list):
+        fix = f": write [{toml_value(v)}]" if not _bad_item(v, key) else f" ({values_text(key)})"
+        return f"{where} must be a list{fix}"
+    if not v:
+        return f"{where} is empty: list at least one item ({item_text(key)}), or leave it out for {key.default}"
+    problems = []
+    bad = [x for x in v if _bad_item(x, key)]
+    if bad:
+        hint = next((h for x in bad if _typed(x, "float") for h in [_hint(x, key)] if h), "")
+        problems.append(f"{where} holds {', '.join(map(repr, bad))}: each item must be {item_text(key)}{hint}")
+    twice = [x for i, x in enumerate(v) if x in v[:i]]
+    if twice:
+        once = [x for i, x in enumerate(v) if x not in v[:i]]
+        problems.append(f"{where} holds {', '.join(map(repr, dict.fromkeys(twice)))} more than once: list each "
+                        f"item once, e.g. {toml_value(once)}")
+    return "; ".join(problems) or None
+
+
+def _schema_problems(raw: dict) -> list[str]:
+    """Unknown sections and keys, values of the wrong type, choice or range (``scenekeys.KEYS``), keys that set
+    the same quantity twice."""
     problems = []
     sections = {"camera", "sensor", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance"}
     for key, val in raw.items():
@@ -93,21 +139,23 @@ def _schema_problems(raw: dict) -> list[str]:
                 for k, v in val.items():
                     if k not in known:
                         problems.append(f"unknown key {key}.{k}")
-                    elif known[k].kind != "list":
+                    else:
                         problems.append(_value_problem(f"{key}.{k}", v, known[k]))
         elif key not in keys_of(""):
             problems.append(f"unknown key {key}")
+        elif key != "task":
+            problems.append(_value_problem(key, val, keys_of("")[key]))
     cam = raw.get("camera", {}) if isinstance(raw.get("camera"), dict) else {}
-    for a, b in (("focal_length_mm", "sensor_distance_mm"), ("aperture_diameter_mm", "f_number"),
-                 ("sensor_distance_mm", "sensor_distance_m")):
-        if a in cam and b in cam:
-            problems.append(f"camera.{a} and camera.{b} say the same thing: give one of them")
+    for group, what in SAME_QUANTITY:
+        given = [f"camera.{k} = {cam[k]!r}" for k in group if k in cam]
+        if len(given) > 1:
+            problems.append(f"{' and '.join(given)} both set {what}: keep one of them")
     return [p for p in problems if p]
 
 
 def _stage_problems(stages: tuple) -> list[str]:
-    """Unknown stages, and stages listed without the design stage they need."""
-    problems = [f"stages: unknown stage {s!r} (choose from {list(STAGES)})" for s in stages if s not in STAGES]
+    """Stages listed without the design stage they need."""
+    problems = []
     needy = [s for s in ("masks", "reconstruction", "tolerance") if s in stages and "design" not in stages]
     if needy:
         problems.append(f"stages: {', '.join(needy)} need{'s' if len(needy) == 1 else ''} the design stage: add "
@@ -123,20 +171,11 @@ def load_scene(path: str | Path) -> Scene:
     task = raw.get("task")
     if task not in TASK_DESIGN:
         problems.append(f"task must be one of {sorted(TASK_DESIGN)}, got {task!r}")
-    stages = tuple(raw.get("stages", STAGES))
+    stages = raw.get("stages", STAGES)
+    stages = tuple(stages) if isinstance(stages, list) else STAGES  # not a list: named by the schema check
     problems += _stage_problems(stages)
     cam = raw.get("camera", {})
     opt = raw.get("optics", {})
-    lams = opt.get("wavelengths_nm", []) if isinstance(opt.get("wavelengths_nm", []), list) else []
-    bad = [w for w in lams if not _typed(w, "float") or not 300 <= w <= 1100]
-    if bad:
-        metres = [w for w in bad if _typed(w, "float") and 0 < w < 1]
-        hint = f" ({metres[0]!r} looks like metres: write {metres[0] * 1e9:.4g}, not {metres[0]!r})" if metres else ""
-        problems.append(f"optics.wavelengths_nm holds {', '.join(map(repr, bad))}: wavelengths are nm within "
-                        f"300–1100{hint}")
-    for z in opt.get("depths_m", []) if isinstance(opt.get("depths_m", []), list) else []:
-        if not (z == "inf" or (_typed(z, "float") and z > 0 and math.isfinite(z))):
-            problems.append(f"optics.depths_m holds {z!r}: depths are metres > 0 (or \"inf\")")
     des = raw.get("design", {})
     fab = raw.get("fabrication", {})
     hol = raw.get("holder", {})
@@ -157,11 +196,30 @@ def load_scene(path: str | Path) -> Scene:
     if "size_px" in rec and _typed(rec["size_px"], "int") and rec["size_px"] % 32:
         problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32")
     tol = raw.get("tolerance")
-    if tol is not None:
-        b = tol.get("budget", "default")
-        if b != "default" and not (p.parent / b).is_file() and not Path(b).is_file():
-            problems.append(f"tolerance.budget {b!r}: no such file (give default or a TOML path)")
+    if isinstance(tol, dict):
+        problems += _budget_problems(p, tol.get("budget", "default"))
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
                  reconstruction=rec, tolerance=tol, sensor=raw.get("sensor", {}), raw=raw)
+
+
+def _budget_file(scene_path: Path, budget: str) -> Path:
+    """A budget path relative to the scene file (or as given)."""
+    return scene_path.parent / budget if (scene_path.parent / budget).is_file() else Path(budget)
+
+
+def _budget_problems(scene_path: Path, budget) -> list[str]:
+    """The problems of the tolerance budget a scene names (every key's range, the spec's limits), each named
+    ``tolerance.budget FILE: ...``: a bad budget is refused with the scene, before any stage runs."""
+    from doefab.tolerance.errors import budget_problems
+
+    if budget == "default" or not isinstance(budget, str):
+        return []  # the shipped budget; a value of another type is named by the schema check
+    path = _budget_file(scene_path, budget)
+    if not path.is_file():
+        return [f"tolerance.budget {budget!r}: no such file (give default or a TOML path)"]
+    try:
+        return [f"tolerance.budget {budget}: {q}" for q in budget_problems(path)]
+    except DoefabError as exc:  # not TOML
+        return [f"tolerance.budget: {exc}"]

@@ -8,19 +8,25 @@ new`` and is the scene-key reference of the documentation. Units are in the key 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
+from doefab.optics.materials import SUBSTRATES, substrate_name
 
-__all__ = ["Key", "KEYS", "keys_of", "template", "key_table_markdown", "MATERIAL_NAMES"]
+__all__ = ["Key", "KEYS", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
+           "toml_value"]
 
-# materials the fabrication section accepts (doefab.optics.materials has their dispersion and sources)
-MATERIAL_NAMES = ("fused silica", "N-BK7", "CaF2", "sapphire", "PMMA")
+STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
 
 
 @dataclass(frozen=True)
 class Key:
     """One scene key: its section ("" for top-level keys), name, kind (float, int, str, bool, list, choice),
-    unit (as in its name: mm, µm, nm, m, px), allowed range [lo, hi] in that unit, choices, default and meaning."""
+    unit (as in its name: mm, µm, nm, m, px), allowed range [lo, hi] in that unit, choices, default and meaning.
+
+    A list key's ``item`` is the kind of each of its items ("float": within [lo, hi], or one of the words in
+    ``choices``; "choice": one of ``choices``); each item may appear once. A choice key with a ``resolve``
+    takes whatever that resolver accepts (it returns the choice meant, or raises a DoefabError)."""
 
     section: str  # "" for top-level keys
     name: str
@@ -31,12 +37,14 @@ class Key:
     choices: tuple = ()
     default: str = ""
     help: str = ""
+    item: str = ""
+    resolve: Callable | None = None
 
 
 KEYS = (
     Key("", "task", "choice", choices=("hdr", "hyperspectral", "depth"), default="required",
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
-    Key("", "stages", "list", default="all",
+    Key("", "stages", "list", choices=STAGES, item="choice", default="all",
         help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
     Key("camera", "preset", "choice", choices=("default", "hdr", "hyperspectral", "depth"), default="the task's",
         help="the paper's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
@@ -70,9 +78,9 @@ KEYS = (
         help="electrons at a capture value of 1 (one dual-pixel photodiode's full well at the ISO used)"),
     Key("sensor", "read_noise_e", "float", "e⁻", *READ_NOISE_RANGE_E, default=f"{DEFAULT_READ_NOISE_E:g}",
         help="read noise, rms electrons (at the ISO used)"),
-    Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, default="the task's",
+    Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, item="float", default="the task's",
         help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10)"),
-    Key("optics", "depths_m", "list", "m", 1e-3, 1e6, default="the task's",
+    Key("optics", "depths_m", "list", "m", 1e-3, 1e6, choices=("inf",), item="float", default="the task's",
         help="depth planes (depth: 1–5 m every 0.25; others: the focus distance); \"inf\" for a plane wave"),
     Key("optics", "kernel_px", "int", "px", 15, 1023, default="95, 191, 63",
         help="PSF window in sensor pixels"),
@@ -100,7 +108,8 @@ KEYS = (
         help="spectra: half-width of each band's metric box at its first order"),
     Key("fabrication", "levels", "choice", choices=(2, 4, 8, 16, 32), default="16",
         help="etch levels: log2(levels) binary masks"),
-    Key("fabrication", "material", "choice", choices=MATERIAL_NAMES, default="fused silica", help="DOE substrate"),
+    Key("fabrication", "material", "choice", choices=tuple(SUBSTRATES), resolve=substrate_name,
+        default="fused silica", help="DOE substrate (the name in any case)"),
     Key("fabrication", "design_wavelength_nm", "float", "nm", 200.0, 2000.0, default="550",
         help="the wavelength whose 2π height sets the etch depths"),
     Key("fabrication", "min_feature_um", "float", "µm", 0.01, 1000.0, default="none",
@@ -127,14 +136,37 @@ def keys_of(section: str) -> dict:
     return {k.name: k for k in KEYS if k.section == section}
 
 
+def _range(k: Key) -> str:
+    """``lo–hi`` in the key's unit (or "no unit"), integers written in full."""
+    lo, hi = (f"{int(k.lo)}", f"{int(k.hi)}") if k.kind == "int" else (f"{k.lo:g}", f"{k.hi:g}")
+    return f"{k.unit or 'no unit'}, {lo}–{hi}"
+
+
+def item_text(k: Key) -> str:
+    """What each item of a list key takes: one of its choices, or a number in its range (or one of its words)."""
+    if k.item == "choice":
+        return "one of " + ", ".join(map(str, k.choices))
+    return f"within {k.lo:g}–{k.hi:g} {k.unit}" + "".join(f' or "{w}"' for w in k.choices)
+
+
+def values_text(k: Key) -> str:
+    """What a key takes, as the key table and the template print it: its unit (or "no unit") and range, its
+    choices, or for a list what each item takes."""
+    if k.kind == "list":
+        return f"a list, each item {item_text(k)}, none twice"
+    if k.choices:
+        return ", ".join(map(str, k.choices)) + (" (any case)" if k.resolve else "")
+    if k.lo is not None:
+        return _range(k)
+    return {"bool": "true or false", "str": "text, no unit"}[k.kind]
+
+
 def key_table_markdown() -> str:
     """The scene-key reference (one row per key)."""
-    rows = ["| key | unit / values | default | meaning |", "| --- | --- | --- | --- |"]
+    rows = ["| key | unit and range, or values | default | meaning |", "| --- | --- | --- | --- |"]
     for k in KEYS:
         name = f"{k.section}.{k.name}" if k.section else k.name
-        vals = ", ".join(map(str, k.choices)) if k.choices else (
-            f"{k.unit}, {k.lo:g}–{k.hi:g}" if k.lo is not None else k.unit or k.kind)
-        rows.append(f"| `{name}` | {vals} | {k.default} | {k.help} |")
+        rows.append(f"| `{name}` | {values_text(k)} | {k.default} | {k.help} |")
     rows.append("| `holder.*` | any `doefab holder --set` parameter (mm) | the holder's defaults | the lens's thread "
                 "or barrel and the part |")
     return "\n".join(rows)
@@ -160,19 +192,19 @@ def template(task: str) -> str:
               ("tolerance", "samples"): 12, ("tolerance", "budget"): "default"}
     for sec, d in ex.items():
         values.update({(sec, k): v for k, v in d.items()})
-    lines = ["# doefab scene (doefab scene new). Every key with its unit; commented keys keep their default.",
-             f'task = "{task}"', 'stages = ["design", "masks", "holder", "reconstruction", "tolerance", "report"]']
-    section = None
+    values.update({("", "task"): task, ("", "stages"): list(STAGES)})
+    lines = ["# doefab scene (doefab scene new). Every key with its unit and range; commented keys keep their "
+             "default."]
+    section = ""
     for k in KEYS:
-        if not k.section or k.name in ("preset", "sensor_distance_m"):
+        if k.name in ("preset", "sensor_distance_m"):
             continue
         if k.section != section:
             section = k.section
             lines += ["", f"[{section}]"]
-        rng = f"{k.lo:g}–{k.hi:g} {k.unit}".strip() if k.lo is not None else ", ".join(map(str, k.choices))
-        note = f"# {k.help} ({rng}; default {k.default})"
+        note = f"# {k.help} ({values_text(k)}; default {k.default})"
         if (k.section, k.name) in values:
-            lines += [note, f"{k.name} = {_toml(values[(k.section, k.name)])}"]
+            lines += [note, f"{k.name} = {toml_value(values[(k.section, k.name)])}"]
         else:
             lines += [note, f"# {k.name} = "]
     lines += ["", "[holder]", "# the lens's filter thread (mm); any `doefab holder --set` parameter",
@@ -180,9 +212,10 @@ def template(task: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _toml(v) -> str:
+def toml_value(v) -> str:
+    """A value as a scene file writes it (a string quoted, a list in brackets)."""
     if isinstance(v, str):
         return f'"{v}"'
     if isinstance(v, bool):
         return "true" if v else "false"
-    return repr(v) if not isinstance(v, list) else "[" + ", ".join(map(str, v)) + "]"
+    return repr(v) if not isinstance(v, list) else "[" + ", ".join(map(toml_value, v)) + "]"

@@ -18,7 +18,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
-from doefab.pipeline.system import resolve, scene_sensor
+from doefab.pipeline.system import resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress",
            "quick_sampling"]
@@ -126,7 +126,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                                            f"whole and re-verified in {time.perf_counter() - t:.1f} s",
                 "mask_set": str(out)}
     d = Design.load(design_dir)
-    opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)),
+    opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)), die_m=res["die_m"],
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
     # the export writes a fresh folder of its own beside the stage folder, then moves in (run_stage marks it again)
     tmp = out.parent / f".{out.name}.export"
@@ -174,7 +174,7 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.build import write_holder
     from holder_cad.params import HolderParams
 
-    rep = write_holder(HolderParams(**scene.holder), out, step=False if quick else None, renders=True)
+    rep = write_holder(HolderParams(**scene_holder(scene)), out, step=False if quick else None, renders=True)
     horizontal = (res or {}).get("split") == "horizontal"
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
             "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
@@ -349,11 +349,12 @@ def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
-    if name == "holder":  # the part is computed by holder_cad: another version of it builds another part
+    if name == "holder":  # the DOE's die and aperture, and holder_cad's code: another version builds another part
         import holder_cad
 
         from doefab.io import sources_sha256
 
+        parts["holder"] = scene_holder(scene)
         parts["code"] = sources_sha256(Path(holder_cad.__file__).resolve().parent.parent, ("holder_cad",))
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)

@@ -16,8 +16,8 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 
-__all__ = ["PartErrors", "load_budget", "sample_errors", "budget_value", "DEFAULT_BUDGET", "BUDGET_KEYS",
-           "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios"]
+__all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
+           "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -34,6 +34,8 @@ BUDGET_KEYS = {
                "calibrated_width_px": (16, 100000)},
     "spec": None,  # per-task tables, checked by doefab.tolerance.spec
 }
+# keys that count something: whole numbers only (3072 or 3072.0, not 1.5)
+WHOLE_KEYS = {("sensor", "calibration_rows"), ("sensor", "calibrated_width_px")}
 
 
 @dataclass
@@ -97,6 +99,12 @@ def load_budget(path: str | Path | None = None) -> dict:
     return {**merged, "defaults_used": used}
 
 
+def budget_problems(path: str | Path) -> list[str]:
+    """Every problem of a budget file, each naming its key, the value and the range (a DoefabError when the file
+    is missing or not TOML): what ``load_budget`` refuses, for a scene check to list with its own."""
+    return _problems(read_toml(path, "budget file"))
+
+
 def _problems(data: dict) -> list[str]:
     from doefab.tolerance.spec import check_spec
 
@@ -118,10 +126,15 @@ def _problems(data: dict) -> list[str]:
                 if not isinstance(v, bool):
                     problems.append(f"{sec}.{key} must be true or false")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                problems.append(f"{sec}.{key} must be a number")
+                lo, hi = BUDGET_KEYS[sec][key]
+                problems.append(f"{sec}.{key} must be a number within {lo}–{hi}, got {v!r}")
             elif not BUDGET_KEYS[sec][key][0] <= v <= BUDGET_KEYS[sec][key][1]:
                 lo, hi = BUDGET_KEYS[sec][key]
                 problems.append(f"{sec}.{key} = {v} is outside {lo}–{hi} (check the unit in the key's name)")
+            elif (sec, key) in WHOLE_KEYS and v != int(v):
+                lo, hi = BUDGET_KEYS[sec][key]
+                problems.append(f"{sec}.{key} = {v} counts something: give a whole number, e.g. "
+                                f"{min(max(round(v), lo), hi)}")
     return problems
 
 

@@ -8,6 +8,9 @@ its unit and the limit's kind:
 - limits relative to the nominal (error-free) part, e.g. ``psnr_highlight_db_loss_max = 1.0`` (at most 1 dB
   below what the nominal part delivers), ``mae_m_increase_max = 0.05``.
 
+Every limit must lie within its metric's span (``SPAN``: a fraction 0–1, PSNR 0–100 dB, SAM 0–π rad...), a
+margin within 0 and the span's width; the budget check refuses any other value before any work.
+
 A part meets spec when it meets every limit that applies at the level it was judged on (PSF level: the PSF
 metric; network level: the delivered metrics, reconstructed with the nominal PSF and with the part's own).
 """
@@ -17,15 +20,25 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
+from doefab.reconstruction.metrics import HDR_PEAK
 
-__all__ = ["DELIVERED", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "check_spec", "meets",
-           "nominal_failures", "limits_text", "spec_limits"]
+__all__ = ["DELIVERED", "SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "limit_range",
+           "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
 
 # delivered metrics per task: name → (unit, better): "+" higher is better, "-" lower is better
 DELIVERED = {
     "hdr": {"psnr_highlight": ("db", "+"), "psnr": ("db", "+"), "rmse_highlight": ("", "-"), "rmse": ("", "-")},
     "hyperspectral": {"psnr": ("db", "+"), "sam": ("rad", "-"), "ssim": ("", "+")},
     "depth": {"mae": ("m", "-"), "rmse": ("m", "-"), "delta125": ("", "+"), "log10": ("", "-")},
+}
+# the values each metric can take (in its unit): the range of an absolute limit; a margin lies in 0 – the width.
+# HDR RMSE is in radiance, ≤ the PSNR's peak (2^8) where the PSNR is ≥ 0 dB; SAM is an angle; SSIM −1–1.
+SPAN = {
+    "psf_metric": (0.0, 1.0),
+    "hdr": {"psnr_highlight": (0.0, 100.0), "psnr": (0.0, 100.0), "rmse_highlight": (0.0, HDR_PEAK),
+            "rmse": (0.0, HDR_PEAK)},
+    "hyperspectral": {"psnr": (0.0, 100.0), "sam": (0.0, math.pi), "ssim": (-1.0, 1.0)},
+    "depth": {"mae": (0.0, 1000.0), "rmse": (0.0, 1000.0), "delta125": (0.0, 1.0), "log10": (0.0, 10.0)},
 }
 TASK_OF_DESIGN = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
 #: the delivered metric a task's summary, histogram and "what limits it" are ranked by
@@ -59,8 +72,23 @@ def spec_keys(task: str) -> list[str]:
     return list(_key_parts(task))
 
 
+def limit_range(task: str, key: str) -> tuple[float, float, str]:
+    """(lo, hi, unit) a spec key of ``task`` may take: its metric's span for an absolute limit, 0 to the span's
+    width for a margin (``*_loss_max``, ``*_increase_max``)."""
+    metric, kind = _key_parts(task)[key]
+    lo, hi = SPAN["psf_metric"] if metric == "psf_metric" else SPAN[task][metric]
+    unit = "" if metric == "psf_metric" else {"db": "dB"}.get(DELIVERED[task][metric][0], DELIVERED[task][metric][0])
+    return (0.0, hi - lo, unit) if kind in ("loss", "increase") else (lo, hi, unit)
+
+
+def _range_text(task: str, key: str) -> str:
+    lo, hi, unit = limit_range(task, key)
+    return f"{lo:g}–{hi:.4g}{f' {unit}' if unit else ''}"
+
+
 def check_spec(spec: dict, where: str = "[spec]") -> list[str]:
-    """Problems of a budget's ``[spec]`` section (per-task tables; every key of a known task, a finite number)."""
+    """Problems of a budget's ``[spec]`` section (per-task tables; every key of a known task, a finite number
+    within ``limit_range``)."""
     problems = []
     for task, table in spec.items():
         if task not in DELIVERED:
@@ -74,9 +102,12 @@ def check_spec(spec: dict, where: str = "[spec]") -> list[str]:
             if k not in keys:
                 problems.append(f"unknown key spec.{task}.{k} (keys: {', '.join(keys)})")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                problems.append(f"spec.{task}.{k} must be a number")
-            elif keys[k][1] in ("loss", "increase") and v < 0:
-                problems.append(f"spec.{task}.{k} = {v} must be ≥ 0 (a margin below the nominal part)")
+                problems.append(f"spec.{task}.{k} must be a number within {_range_text(task, k)}, got {v!r}")
+            elif not limit_range(task, k)[0] <= v <= limit_range(task, k)[1]:
+                margin = keys[k][1] in ("loss", "increase")
+                what = "a margin below the nominal part" if margin else f"the values {keys[k][0]} takes"
+                problems.append(f"spec.{task}.{k} = {v} is outside {_range_text(task, k)} ({what}): give a value "
+                                f"within it")
     return problems
 
 

@@ -206,6 +206,67 @@ def test_scene_key(name, section, key, value, one_clear_error):
     one_clear_error(lambda f, t: ["run", _scene_with(t, section, key, value), "--out", t / "o"], 2, key)
 
 
+# ---------------------------------------------------------------- command line: what else a scene check refuses
+# (issue 37) every list key of the key table: not a list, empty, an item twice, an item below its range, a word it
+# does not take; two keys that set one quantity; every key of the budget a scene names and every limit of its spec
+# below and above its range and NaN, a whole-number key given a fraction. `run` and `doctor` both refuse each.
+
+def _list_rows():
+    from doefab.pipeline.scenekeys import KEYS
+
+    rows = []
+    for k in (k for k in KEYS if k.kind == "list"):
+        name = f"{k.section}.{k.name}".lstrip(".")
+        item = f'"{k.choices[0]}"' if k.item == "choice" else f"{(k.lo * k.hi) ** 0.5:.4g}"
+        low = '"nonsense"' if k.item == "choice" else f"{k.lo / 10:g}"
+        for kind, value, needle in (("not a list", item, "must be a list"), ("empty", "[]", "is empty"),
+                                    ("twice", f"[{item}, {item}]", "holds {} more than once"),
+                                    ("below range", f"[{low}]", "holds"), ("a word", '["far"]', "holds")):
+            needle = needle.format(item.replace('"', "'"))
+            rows.append((f"scene {name}-{kind}", k.section, k.name, value, f"{name} {needle}"))
+    return rows
+
+
+def _pair_rows():
+    import itertools
+
+    from doefab.pipeline.scene import SAME_QUANTITY
+
+    return [(f"scene camera.{a}+{b}", "camera", a, f"1.0\n{b} = 1.0", f"camera.{b} = 1.0")
+            for group, _ in SAME_QUANTITY for a, b in itertools.combinations(group, 2)]
+
+
+def _budget_rows():
+    from doefab.tolerance.errors import BUDGET_KEYS, WHOLE_KEYS
+    from doefab.tolerance.spec import DELIVERED, limit_range, spec_keys
+
+    ranges = [(sec, key, lo, hi) for sec, keys in BUDGET_KEYS.items() for key, (lo, hi) in
+              ((k, r) for k, r in (keys or {}).items() if r)]
+    ranges += [(f"spec.{task}", key, *limit_range(task, key)[:2]) for task in DELIVERED for key in spec_keys(task)]
+    rows = [(f"budget {sec}.{key}-{kind}", sec, key, value) for sec, key, lo, hi in ranges
+            for kind, value in (("below", f"{lo - 1:g}"), ("above", f"{hi * 10 + 1:g}"), (NAN, "nan"))]
+    return rows + [(f"budget {sec}.{key}-fraction", sec, key, "16.7") for sec, key in sorted(WHOLE_KEYS)]
+
+
+def _budget_scene(t: Path, table: str, key: str, value: str) -> Path:
+    (t / "budget.toml").write_text(f"[{table}]\n{key} = {value}\n")
+    return _scene_with(t, "tolerance", "budget", '"budget.toml"')
+
+
+def _scene_check_cases():
+    cases = [(name, lambda t, s=section, k=key, v=value: _scene_with(t, s, k, v), needle)
+             for name, section, key, value, needle in _list_rows() + _pair_rows()]
+    cases += [(name, lambda t, s=sec, k=key, v=value: _budget_scene(t, s, k, v),
+               f"tolerance.budget budget.toml: {sec}.{key}") for name, sec, key, value in _budget_rows()]
+    return [pytest.param(cmd, make, needle, id=f"{cmd} {name}") for name, make, needle in cases
+            for cmd in ("run", "doctor")]
+
+
+@pytest.mark.parametrize("cmd, make, needle", _scene_check_cases())
+def test_scene_check(cmd, make, needle, one_clear_error):
+    one_clear_error(lambda f, t: [cmd, make(t)] + (["--out", t / "o"] if cmd == "run" else []), 2, needle)
+
+
 # ---------------------------------------------------------------- command line: file and folder arguments
 
 def _missing(t, name="nothing"):

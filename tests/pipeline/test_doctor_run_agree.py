@@ -60,6 +60,8 @@ def test_quick_sampling_picks_a_factor_that_divides():
     assert quick_sampling(1000, 3) == 3  # nothing in 3..8 that divides 1000 and is a multiple of 3
     for grid in range(100, 3000, 2):
         for s in (1, 2, 4):
+            if grid % s:
+                continue  # a scene sampling that does not divide the grid is refused before any run
             q = quick_sampling(grid, s)
             assert grid % q == 0 and q % s == 0 and q <= max(8, s)
 
@@ -73,3 +75,42 @@ def test_issue_camera_doctor_and_quick_run_agree(tmp_path):
         resolve(_scene(tmp_path, 25.0, 2.8, 4.0, 4))
     res = resolve(_scene(tmp_path, 25.0, 2.8, 4.0))
     assert _design_run(res["settings"], True)[1] == 2
+
+
+def test_the_die_holds_the_pattern_and_marks_and_no_smaller_one_does(tmp_path, tiny_camera):
+    """``smallest_die_m`` against the mask export's own checks: the export accepts the die it names and refuses
+    one a millimetre smaller (the 12 mm floor lifted, so the bound is the pattern's and the marks')."""
+    import numpy as np
+
+    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.marks import smallest_die_m
+
+    cam = tiny_camera
+    die = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, 2, floor_m=0.0)
+    levels = np.full((cam.doe_pixels, cam.doe_pixels), 3, np.uint8)
+    levels[:, : cam.doe_pixels // 2] = np.arange(cam.doe_pixels // 2) % 4
+    export_masks(levels, cam, tmp_path / "ok", MaskOptions(die_m=die, use_klayout=False), n_levels=4)
+    with pytest.raises(DoefabError, match="die"):
+        export_masks(levels, cam, tmp_path / "small", MaskOptions(die_m=die - 1e-3, use_klayout=False), n_levels=4)
+
+
+def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
+    """A 50 mm f/2.8 lens: a 17.86 mm DOE needs a 21 mm die (the prototype's 12 mm cannot hold it; the marks
+    need 17.86 + 2 mm, the holder's pocket 17.86 + 2 · (1.2 mm ledge + 0.3 mm margin) = 20.86 mm); the holder the
+    run builds takes that die and the DOE's clear aperture, and a thread too small for it is named by doctor."""
+    from holder_cad.params import HolderParams
+
+    from doefab.pipeline.system import scene_holder
+
+    p = tmp_path / "big.toml"
+    p.write_text('task = "hdr"\nstages = ["design", "masks", "holder"]\n[camera]\nfocal_length_mm = 50.0\n'
+                 'f_number = 2.8\ndoe_pitch_um = 8.0\n[holder]\nthread_diameter_mm = 62\n')
+    res = resolve(load_scene(p))
+    aperture = res["camera"].aperture_diameter
+    assert 17.5e-3 < aperture < 18e-3 and res["die_m"] == pytest.approx(21e-3)
+    params = scene_holder(load_scene(p))
+    assert params["die_width_mm"] == 21.0 and params["clear_aperture_mm"] == pytest.approx(aperture * 1e3)
+    HolderParams(**params)
+    p.write_text(p.read_text().replace("thread_diameter_mm = 62", "thread_diameter_mm = 30.5"))
+    with pytest.raises(DoefabError, match="holder .with the DOE's die and clear aperture.*thread_diameter_mm"):
+        resolve(load_scene(p))

@@ -95,7 +95,7 @@ def test_quick_run_end_to_end(quick_run):
     summary = html[first:html.index("<h2>", first + 5)]
     tol = json.loads((out / "tolerance" / "tolerance.json").read_text())
     assert tol["level"] == "network"
-    for needle in ("Delivered, network given the nominal PSF", "psnr_highlight", "yield", "Wilson", "Limited by",
+    for needle in ("Delivered, network given the nominal PSF", "highlight PSNR", "yield", "Wilson", "Limited by",
                    "Would buy the most", "to the fab:", "to the printer:"):
         assert needle in summary, needle
     # the run's masks folder holds the whole mask set it reports (a reused design's copied from the repository)

@@ -70,3 +70,28 @@ def test_each_geometry_key_reaches_the_task(tmp_path, task, key, value, param, w
     got = getattr(res["task"], param)
     assert got == (pytest.approx(want) if isinstance(want, float) else want)
     assert not res["reuse"]
+
+
+def _cell(k) -> str:
+    """The "unit and range, or values" cell of a key's row in the key table."""
+    name = f"{k.section}.{k.name}" if k.section else k.name
+    row = next(r for r in key_table_markdown().splitlines() if r.startswith(f"| `{name}` |"))
+    return row.split(" | ")[1]
+
+
+@pytest.mark.parametrize("k", KEYS, ids=[f"{k.section}.{k.name}" for k in KEYS])
+def test_every_key_prints_its_unit_and_range(k):
+    """``doefab scene keys`` and the template of ``scene new`` (issue 37, row 21): a numeric key shows its unit
+    (or "no unit") and its range, a list key what each item takes; no cell or note is left with a bare ", 0.5–64"
+    or "(; default …)"."""
+    cell = _cell(k)
+    assert cell and not cell.startswith(","), cell
+    if k.lo is not None:
+        lo, hi = (int(k.lo), int(k.hi)) if k.kind == "int" else (f"{k.lo:g}", f"{k.hi:g}")
+        assert f"{lo}–{hi}" in cell and (k.unit or "no unit") in cell, cell
+    if k.kind == "list":
+        assert cell.startswith("a list, each item") and "none twice" in cell, cell
+    notes = [line for task in ("hdr", "depth") for line in template(task).splitlines() if line.startswith("# ")]
+    if k.name not in ("preset", "sensor_distance_m"):
+        assert any(line.startswith(f"# {k.help} ({cell}; default {k.default})") for line in notes), k.name
+    assert not any("(;" in line for line in notes)

@@ -1,0 +1,159 @@
+"""What ``load_scene`` checks before any stage runs: keys that set the same quantity, substrate names (one
+resolver with the API), every item of a list key, the tolerance budget the scene names, a byte-order mark; and
+the scene keys ``doctor`` names where a sampling check fails."""
+
+import itertools
+import re
+
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.optics.materials import SUBSTRATES, material_by_name, substrate_name
+from doefab.pipeline.scene import SAME_QUANTITY, load_scene
+from doefab.pipeline.scenekeys import KEYS
+
+CAMERA_VALUES = {"focal_length_mm": 35.0, "sensor_distance_mm": 50.5, "sensor_distance_m": 0.0505,
+                 "aperture_diameter_mm": 8.0, "f_number": 4.0}
+
+
+def _scene(tmp_path, text: str, task: str = "hdr"):
+    p = tmp_path / "scene.toml"
+    p.write_text(f'task = "{task}"\n{text}\n')
+    return p
+
+
+@pytest.mark.parametrize("a, b", [pair for group, _ in SAME_QUANTITY for pair in itertools.combinations(group, 2)])
+def test_two_keys_for_one_quantity_are_refused(tmp_path, a, b):
+    """focal_length_mm with sensor_distance_m (issue 37, row 3) is refused as the sensor_distance_mm pair is,
+    both keys and their values named; either key alone is accepted."""
+    text = f"[camera]\n{a} = {CAMERA_VALUES[a]}\n{b} = {CAMERA_VALUES[b]}\n"
+    with pytest.raises(DoefabError) as exc:
+        load_scene(_scene(tmp_path, text))
+    msg = str(exc.value)
+    assert f"camera.{a} = {CAMERA_VALUES[a]}" in msg and f"camera.{b} = {CAMERA_VALUES[b]}" in msg, msg
+    assert "keep one of them" in msg
+    for key in (a, b):
+        assert load_scene(_scene(tmp_path, f"[camera]\n{key} = {CAMERA_VALUES[key]}\n")).camera == {
+            key: CAMERA_VALUES[key]}
+
+
+@pytest.mark.parametrize("name", ["Fused Silica", "n-bk7", "caf2", "fused_silica", "SAPPHIRE", "pmma", " N_BK7 "])
+def test_a_substrate_name_in_any_case_is_the_one_the_api_resolves(tmp_path, name):
+    """Scene files and ``material_by_name`` take the same names (issue 37, row 10): the scene's camera gets the
+    substrate the API gives."""
+    from doefab.pipeline.system import scene_camera
+
+    scene = load_scene(_scene(tmp_path, f'[fabrication]\nmaterial = "{name}"'))
+    assert scene_camera(scene).material is material_by_name(name) is SUBSTRATES[substrate_name(name)].material
+
+
+def test_an_unknown_substrate_is_refused_with_the_names_a_scene_can_use(tmp_path):
+    with pytest.raises(DoefabError) as exc:
+        load_scene(_scene(tmp_path, '[fabrication]\nmaterial = "quartz"'))
+    msg = str(exc.value)
+    assert "fabrication.material" in msg and "'quartz'" in msg and all(repr(n) in msg for n in SUBSTRATES)
+    assert "doefab.Material" not in msg  # the API's way to another substrate is not a scene's
+
+
+LIST_KEYS = [k for k in KEYS if k.kind == "list"]
+
+
+def _item(key):
+    """A valid item of a list key."""
+    return f'"{key.choices[0]}"' if key.item == "choice" else f"{(key.lo * key.hi) ** 0.5:.4g}"
+
+
+def _bad_items(key):
+    """Items outside what the key's items take: below and above its range, NaN, a word it does not know."""
+    if key.item == "choice":
+        return ['"d"', '"nonsense"', "1"]
+    return [f"{key.lo / 10:g}", f"{key.hi * 10:g}", "nan", '"far"']
+
+
+def _set(key, value: str) -> str:
+    return f"{key.name} = {value}" if not key.section else f"[{key.section}]\n{key.name} = {value}"
+
+
+def _list_cases():
+    out = []
+    for key in LIST_KEYS:
+        name = f"{key.section}.{key.name}".lstrip(".")
+        out.append(pytest.param(key, _item(key), f"{name} must be a list: write [{_item(key)}]",
+                                id=f"{name}-not-a-list"))
+        out.append(pytest.param(key, "[]", f"{name} is empty", id=f"{name}-empty"))
+        out.append(pytest.param(key, f"[{_item(key)}, {_item(key)}]", "more than once", id=f"{name}-twice"))
+        out += [pytest.param(key, f"[{bad}]", f"{name} holds", id=f"{name}-item-{bad}") for bad in _bad_items(key)]
+    return out
+
+
+@pytest.mark.parametrize("key, value, needle", _list_cases())
+def test_every_list_key_checks_its_type_each_item_and_repeats(tmp_path, key, value, needle):
+    """Issue 37, row 11, for every list key of the table: not a list ("stages = "design""), empty, an item twice,
+    an item outside the key's range (each item is checked as the key's unit and range say)."""
+    with pytest.raises(DoefabError) as exc:
+        load_scene(_scene(tmp_path, _set(key, value), task="depth"))
+    msg = str(exc.value)
+    assert needle in msg, msg
+    assert "unknown stage 'd'" not in msg
+
+
+def test_the_user_trials_lists_are_refused_with_their_fix(tmp_path):
+    text = "[optics]\nwavelengths_nm = [550, 550, 600]\ndepths_m = [1e-9, 1, 2, 2]"
+    with pytest.raises(DoefabError) as exc:
+        load_scene(_scene(tmp_path, text, task="depth"))
+    msg = str(exc.value)
+    assert "optics.wavelengths_nm holds 550 more than once: list each item once, e.g. [550, 600]" in msg
+    assert "optics.depths_m holds 1e-09: each item must be within 0.001–1e+06 m" in msg
+    assert "optics.depths_m holds 2 more than once" in msg
+
+
+def test_a_bad_budget_is_refused_with_the_scene(tmp_path):
+    """The budget a scene names is checked with the scene (issue 37, row 4): every problem listed, with the key
+    tolerance.budget, before any stage runs."""
+    (tmp_path / "tight.toml").write_text("[etch]\nsystematic_sigma_percent = -3\n[spec.hdr]\npsf_metric_min = 5.0\n")
+    with pytest.raises(DoefabError) as exc:
+        load_scene(_scene(tmp_path, '[tolerance]\nbudget = "tight.toml"'))
+    msg = str(exc.value)
+    assert "2 problem(s)" in msg
+    assert "tolerance.budget tight.toml: etch.systematic_sigma_percent = -3 is outside 0–50" in msg
+    assert "tolerance.budget tight.toml: spec.hdr.psf_metric_min = 5.0 is outside 0–1" in msg
+    (tmp_path / "tight.toml").write_text("[etch]\nsystematic_sigma_percent = 3\n")
+    assert load_scene(_scene(tmp_path, '[tolerance]\nbudget = "tight.toml"')).budget_path() == tmp_path / "tight.toml"
+
+
+def test_a_scene_and_its_budget_saved_with_a_byte_order_mark_load(tmp_path):
+    """Issue 37, row 12: some editors save UTF-8 with a byte-order mark; it is not part of the TOML."""
+    from doefab.tolerance.errors import load_budget
+
+    (tmp_path / "b.toml").write_bytes("\ufeff[etch]\nsystematic_sigma_percent = 2.0\n".encode())
+    p = tmp_path / "scene.toml"
+    p.write_bytes('\ufefftask = "depth"\n[tolerance]\nbudget = "b.toml"\n'.encode())
+    assert load_scene(p).task == "depth"
+    assert load_budget(tmp_path / "b.toml")["etch"]["systematic_sigma_percent"] == 2.0
+
+
+def _source_step_row(path):
+    from doefab.pipeline.doctor import diagnose
+
+    rows = diagnose(load_scene(path), precision_check=False)
+    return next(r for r in rows if r["check"].startswith("source phase step"))
+
+
+def test_doctor_and_run_name_the_scene_keys_that_fix_the_source_phase_step(tmp_path):
+    """A depth scene whose nearest plane is too near for one pupil sample per DOE pixel: the scene check that
+    doctor and run share refuses it (run would stop in the design stage) with a fix made of scene keys (a farther
+    nearest depth, a finer DOE pitch), not a flag a scene cannot set; each suggested value, put in the scene,
+    passes the check and doctor's sampled-wavefront row."""
+    from doefab.pipeline.system import resolve
+
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(_scene(tmp_path, "[optics]\ndepths_m = [0.15, 1.0, 2.0]", task="depth")))
+    msg = str(exc.value)
+    assert "pupil" not in msg, msg
+    m = re.search(r"set a nearest depth ≥ ([\d.]+) m \(optics.depths_m\) or camera.doe_pitch_um ≤ ([\d.]+)$", msg)
+    assert m, msg
+    depth, pitch = float(m[1]), float(m[2])
+    assert 0.15 < depth < 1.0 and pitch < 5.4
+    assert _source_step_row(_scene(tmp_path, f"[optics]\ndepths_m = [{depth}, 1.0, 2.0]", task="depth"))["ok"]
+    finer = f"[camera]\ndoe_pitch_um = {pitch}\n[optics]\ndepths_m = [0.15, 1.0, 2.0]"
+    assert _source_step_row(_scene(tmp_path, finer, task="depth"))["ok"]
