@@ -11,8 +11,24 @@ import numpy as np
 from doefab.errors import DoefabError
 
 
+def is_half(x) -> bool:
+    """Whether ``x`` (a numpy or torch array or scalar) holds half-precision floats (float16, bfloat16)."""
+    return str(getattr(x, "dtype", "")).removeprefix("torch.") in ("float16", "bfloat16")
+
+
+def full_precision(name: str, values, unit: str = "metres") -> None:
+    """Refuse half-precision floats — an array, a tensor, or a list holding such scalars: float16 keeps 11
+    significant bits and has no normal number below 6.1e-5, so lengths in metres arrive already rounded (a
+    wavelength of 550e-9 m is stored as 5.36e-07 m) and heights of ~1e-7 m become subnormal."""
+    if is_half(values) or (isinstance(values, (list, tuple)) and any(is_half(v) for v in values)):
+        raise DoefabError(f"{name} is half precision ({getattr(values, 'dtype', 'float16')}), which rounds values "
+                          f"in {unit} (550e-9 is stored as {float(np.float16(550e-9)):.3g}): pass float32 or "
+                          f"float64 values")
+
+
 def positive_finite(name: str, value: float, unit: str) -> float:
     """Return ``value`` as float, or raise if it is not a positive finite number."""
+    full_precision(name, value, unit)
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -91,7 +107,9 @@ def seed(name: str, value) -> int:
 
 
 def heights(name: str, values) -> None:
-    """A height map (metres; numpy or torch) must be finite and within ±1 mm (a DOE step is ~1e-7 m)."""
+    """A height map (metres; numpy or torch, not half precision) must be finite and within ±1 mm (a DOE step is
+    ~1e-7 m)."""
+    full_precision(name, values)
     a = np.asarray(values.detach().cpu() if hasattr(values, "detach") else values, dtype=np.float64)
     if not np.all(np.isfinite(a)):
         raise DoefabError(f"{name} contains {int((~np.isfinite(a)).sum())} NaN or infinite values: every height must "
@@ -133,6 +151,7 @@ def depths(values: Iterable[float]) -> tuple[float, ...]:
 
 
 def _as_tuple(name: str, values) -> tuple:
+    full_precision(name, values)
     if isinstance(values, (int, float)):
         values = [values]
     try:

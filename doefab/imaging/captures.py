@@ -11,6 +11,9 @@ capture is a half-exposure image: a uniform scene of radiance 1 gives about 0.5 
   attenuates what lies behind it (``acc ← acc · (1 − p∗M_z) + p∗(I·M_z)``), so a near object hides the far one
   instead of adding to it as Eq. 27's plain sum does.
 - Then clip to [0, 1] after noise (``sensor.noise_model``); the random generator is seeded.
+- The captures are :class:`Capture` arrays: numpy arrays that also name the PSF pair they were recorded
+  through (``capture.pair``; a torch tensor carries the same attribute), so a reconstructor can refuse captures
+  of other bands or another camera than its own (``reconstruction.loader``).
 
 Convolutions are linear (zero-padded FFT, 'same' crop), batched over bands in torch.
 """
@@ -24,9 +27,32 @@ import torch
 
 from doefab import _validate
 from doefab.errors import DoefabError
+from doefab.imaging.crosstalk import DualPixelCrosstalk, check_pair
 from doefab.imaging.sensor import noise_model
 
-__all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks", "fft_length"]
+__all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks", "fft_length", "Capture", "MAX_RADIANCE"]
+
+#: The brightest scene radiance ``simulate_captures`` takes, in units of the clipping level of a full exposure:
+#: a million times it (20 stops above; the HDR scenes here peak at 60×, the sun's disc against a sunlit scene is
+#: about 5e4×). Brighter light saturates every pixel a PSF's 1e-6 tail reaches, and its shot noise overflows the
+#: Poisson sampler.
+MAX_RADIANCE = 1e6
+
+
+class Capture(np.ndarray):
+    """A simulated capture: a numpy array that also names the ``PSFPair`` it was recorded through (``pair``).
+    Views, crops and arithmetic keep it; a reduction to one number is a plain numpy scalar; ``np.asarray``
+    gives the plain array."""
+
+    pair = None
+
+    def __array_finalize__(self, obj):
+        self.pair = getattr(obj, "pair", None)
+
+    def __array_wrap__(self, arr, context=None, return_scalar=False):  # numpy ≥ 2 passes return_scalar
+        if arr.ndim == 0:
+            return arr[()]
+        return super().__array_wrap__(arr, context)
 
 
 def fft_length(n: int) -> int:
@@ -114,10 +140,16 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
     """
     torch_in = isinstance(scene, torch.Tensor)
     seed = _validate.seed("seed", seed)
-    s = _check_array("scene", scene, 3)
+    s = _finite("scene", scene, 3)
     if bool((s < 0).any()):
         raise DoefabError(f"scene holds negative radiance (min {float(s.min()):g}): radiance is ≥ 0 (linear, not "
                           f"log or centred)")
+    top = float(s.max()) if s.numel() else 0.0
+    if top > MAX_RADIANCE:
+        raise DoefabError(f"scene holds radiance up to {top:.3g}: simulate_captures takes radiance up to "
+                          f"{MAX_RADIANCE:g} times the clipping level of a full exposure (1); scale the scene, e.g. "
+                          f"multiply it by {100 / top:.3g} to put its brightest point at 100")
+    s = s.to(torch.float32)
     if pair.coded is None or pair.uncoded is None:
         raise DoefabError("the PSF pair lacks a half: compute it with halves=('coded', 'uncoded')")
     c, h, w = s.shape
@@ -126,13 +158,7 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
         raise DoefabError(f"the scene has {c} bands but the PSF pair {len(lams)} wavelengths "
                           f"({', '.join(f'{x * 1e9:.0f}' for x in lams[:6])}{'…' if len(lams) > 6 else ''} nm): "
                           f"compute the pair for the scene's bands")
-    t = None
-    if response is not None:
-        t = _check_array("response", response, 2)
-        if tuple(t.shape) != (3, c) or bool((t < 0).any()):
-            raise DoefabError(f"response must be a non-negative [3, {c}] array (RGB × bands), got {tuple(t.shape)}")
-    elif c != 3:
-        raise DoefabError(f"a {c}-band scene needs response=sensor_response(pair.wavelengths) to form RGB captures")
+    t = _response(response, c, top)
     masks = None
     if depth_map is not None:
         dm = _check_array("depth_map", depth_map, 2)
@@ -154,14 +180,40 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             rgb = torch.einsum("rc,chw->rhw", t, blurred) if t is not None else blurred
             views.append(rgb.double().numpy())
     out = [v.astype(np.float32) for v in _camera(crosstalk).record(views[0], views[1], noise_obj, rng)]
+    return _labelled(out[0], pair, torch_in), _labelled(out[1], pair, torch_in)
+
+
+def _response(response, c: int, top: float) -> torch.Tensor | None:
+    """The [3, C] response as float32 (None for an RGB scene), checked against a scene peaking at ``top``: the
+    RGB radiance it forms stays within ``MAX_RADIANCE``."""
+    if response is None:
+        if c != 3:
+            raise DoefabError(f"a {c}-band scene needs response=sensor_response(pair.wavelengths) to form RGB "
+                              f"captures")
+        return None
+    t = _check_array("response", response, 2)
+    if tuple(t.shape) != (3, c) or bool((t < 0).any()):
+        raise DoefabError(f"response must be a non-negative [3, {c}] array (RGB × bands), got {tuple(t.shape)}")
+    gain = float(t.double().sum(dim=1).max())
+    if gain * top > MAX_RADIANCE:
+        raise DoefabError(f"response sums to {gain:.3g} over the bands in its largest channel: with the scene's peak "
+                          f"{top:.3g} the RGB radiance would reach {gain * top:.3g}, beyond {MAX_RADIANCE:g}; use a "
+                          f"normalised response (doefab.sensor_response sums to 1 in its most sensitive channel)")
+    return t
+
+
+def _labelled(view: np.ndarray, pair, torch_in: bool):
+    """``view`` as a :class:`Capture` of ``pair`` (a torch tensor with a ``pair`` attribute when ``torch_in``)."""
     if torch_in:
-        return torch.from_numpy(out[0]), torch.from_numpy(out[1])
-    return out[0], out[1]
+        t = torch.from_numpy(view)
+        t.pair = pair
+        return t
+    out = view.view(Capture)
+    out.pair = pair
+    return out
 
 
 def _camera(crosstalk):
-    from doefab.imaging.crosstalk import DualPixelCrosstalk
-
     if crosstalk is None:
         return DualPixelCrosstalk(0.0, 0.0)
     if isinstance(crosstalk, DualPixelCrosstalk):
@@ -170,13 +222,27 @@ def _camera(crosstalk):
         a, b = crosstalk
     except (TypeError, ValueError):
         raise DoefabError("crosstalk must be a DualPixelCrosstalk or an (α_l→r, α_r→l) pair of fractions") from None
+    check_pair(a, b, "crosstalk α_l→r, α_r→l")
     return DualPixelCrosstalk(a, b)
 
 
-def _check_array(name: str, x, ndim: int) -> torch.Tensor:
-    t = torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).to(torch.float32)
+def _finite(name: str, x, ndim: int) -> torch.Tensor:
+    """``x`` as a tensor of its own precision with ``ndim`` dimensions, every value finite."""
+    t = torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x))
     if t.ndim != ndim:
         raise DoefabError(f"{name} must have {ndim} dimensions, got shape {tuple(t.shape)}")
+    if t.is_complex():
+        raise DoefabError(f"{name} must hold real numbers, got dtype {t.dtype}")
     if not bool(torch.isfinite(t).all()):
         raise DoefabError(f"{name} contains NaN or infinite values: every value must be finite")
     return t
+
+
+def _check_array(name: str, x, ndim: int) -> torch.Tensor:
+    """``x`` as float32 (``_finite``), its values within float32's range."""
+    t = _finite(name, x, ndim)
+    big, top = (float(t.abs().max()) if t.numel() else 0.0), torch.finfo(torch.float32).max
+    if big > top:
+        raise DoefabError(f"{name} holds values up to {big:.3g}, beyond float32's {top:.3g}: give it in the "
+                          f"units simulate_captures documents")
+    return t.to(torch.float32)

@@ -4,7 +4,9 @@ Eq. 29 mixes the left and right views: ``L* = (1 − a) L + b R``, ``R* = a L + 
 ``a = α_l→r`` and ``b = α_r→l``; each ratio is a scalar or an array broadcastable to the images (per column
 is what real dual-pixel sensors show). The inverse solves this 2 × 2 system exactly — its determinant is
 ``1 − a − b`` — instead of the paper's Eq. 32, whose printed denominator is not that of Eq. 29 (see
-../shared/DESIGN-NOTES.md). A determinant near zero would amplify noise without bound, so it is refused.
+../shared/DESIGN-NOTES.md). A determinant near zero would amplify noise without bound, so the inverse refuses it;
+every function refuses a pair whose determinant is ≤ 0 (:func:`check_pair`): each photodiode would collect as
+much of the other half's light as of its own, which no dual-pixel sensor does.
 Calibration (Eq. 30–31): with one aperture half blocked, a white wall's light reaches only one view, and the
 fraction that lands on the other one is the ratio.
 
@@ -22,7 +24,7 @@ import numpy as np
 from doefab.errors import DoefabError
 
 __all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "crosstalk_profile",
-           "simulate_calibration", "DualPixelCrosstalk"]
+           "simulate_calibration", "DualPixelCrosstalk", "check_pair"]
 
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
 
@@ -42,8 +44,31 @@ def _ratio(name: str, a, like):
     return vals
 
 
+def check_pair(alpha_lr, alpha_rl, name: str = "alpha_lr, alpha_rl") -> None:
+    """Refuse a ratio pair no dual-pixel sensor has. Each ratio is a fraction in [0, 1) of one view's light that
+    lands on the other photodiode (``_ratio``), and Eq. 29's determinant ``1 − α_l→r − α_r→l`` must be > 0: at or
+    below 0 each photodiode collects as large a share of the other half's light as of its own, so the views do
+    not separate (at 0 they are one image; below, the photodiodes are swapped, not crossed)."""
+    probe = np.zeros(1)
+    a, b = _ratio(name.split(", ")[0], alpha_lr, probe), _ratio(name.split(", ")[-1], alpha_rl, probe)
+    try:
+        det = np.atleast_1d(1.0 - a - b)
+    except ValueError:
+        raise DoefabError(f"{name} must be scalars or per-column profiles of one length, got shapes "
+                          f"{np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
+    if det.min() <= 0:
+        i = int(np.argmin(det))
+        where = f" at column {i}" if det.size > 1 else ""
+        raise DoefabError(f"{name} = ({np.broadcast_to(a, det.shape)[i]:g}, {np.broadcast_to(b, det.shape)[i]:g})"
+                          f"{where} is no dual-pixel crosstalk: 1 − α_l→r − α_r→l = {det[i]:.3g} ≤ 0, so each "
+                          f"photodiode collects as much of the other half's light as of its own and the views do not "
+                          f"separate; each ratio is the fraction of a view's light landing on the other photodiode, "
+                          f"the two summing below 1 (measured sensors: a few per cent, e.g. (0.05, 0.05))")
+
+
 def mix_crosstalk(left, right, alpha_lr, alpha_rl):
     """Seed Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch)."""
+    check_pair(alpha_lr, alpha_rl)
     a, b = _ratio("alpha_lr", alpha_lr, left), _ratio("alpha_rl", alpha_rl, left)
     return (1 - a) * left + b * right, a * left + (1 - b) * right
 
@@ -125,13 +150,10 @@ def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", 
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(_validate.seed("seed", rng))
     noise = noise_model(noise)
+    check_pair(alpha_lr, alpha_rl)  # fractions of one length (or scalars) that leave the views separable
     probe = np.zeros(1)
     a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
-    try:
-        a, b = (np.atleast_1d(x).astype(np.float64).reshape(1, -1) for x in np.broadcast_arrays(a, b))
-    except ValueError:
-        raise DoefabError(f"alpha_lr and alpha_rl must be scalars or per-column profiles of one length, got "
-                          f"shapes {np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
+    a, b = (np.atleast_1d(x).astype(np.float64).reshape(1, -1) for x in np.broadcast_arrays(a, b))
     white = np.full((int(rows), a.shape[1]), float(level))
     dark = np.zeros_like(white)
     pairs = []
@@ -153,10 +175,9 @@ class DualPixelCrosstalk:
     """
 
     def __init__(self, alpha_lr, alpha_rl, estimate=None):
-        probe = np.zeros(1)
-        _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
+        check_pair(alpha_lr, alpha_rl)
         if estimate is not None:
-            _ratio("estimated alpha_lr", estimate[0], probe), _ratio("estimated alpha_rl", estimate[1], probe)
+            check_pair(estimate[0], estimate[1], "estimated alpha_lr, estimated alpha_rl")
         self.alpha_lr, self.alpha_rl = alpha_lr, alpha_rl
         self.estimate = estimate  # (α̂_l→r, α̂_r→l), or None: the pipeline leaves the mix in
 

@@ -18,17 +18,21 @@ dataset's, not the camera's; the rawtoaces curves keep them. A user's own measur
 gains they were measured with.
 
 A CSV file (anything else is read as a path): a header line, then rows ``wavelength_nm, R, G, B`` in
-increasing wavelength, relative sensitivities ≥ 0 (any scale: ``imaging.sensor.sensor_response`` normalises).
-Measured curves often dip slightly below zero in their tails: values down to −1 % of a channel's peak are read
-as 0; below that the file is refused.
+increasing wavelength (each wavelength once), relative sensitivities ≥ 0 (any scale, up to the largest float:
+``imaging.sensor.sensor_response`` normalises). Blank lines and ``#`` comments are skipped. The file is read as
+UTF-8 (a spreadsheet's byte-order mark dropped), as UTF-16 when it starts with that byte-order mark, and as
+Latin-1 otherwise (a header such as ``Wellenlänge (nm)`` written by a Windows tool). A row that breaks a rule is
+named by its line number. Measured curves often dip slightly below zero in their tails: values down to −1 % of a
+channel's peak are read as 0; below that the file is refused.
 """
 
 from __future__ import annotations
 
+import codecs
 import functools
 import hashlib
+import math
 import os
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -64,41 +68,81 @@ def _colour_curves(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths in metres, [3, L]) of a ``wavelength_nm, R, G, B`` CSV, or one error naming the fix."""
-    fix = "give a CSV with a header line, then rows wavelength_nm, R, G, B (relative sensitivities ≥ 0)"
     if not path.is_file():
         names = ", ".join(f'"{n}"' for n in RESPONSES)
         raise DoefabError(f"camera response {str(path)!r} is neither a known camera ({names}) nor an existing CSV "
-                          f"file: {fix}")
-    try:
-        first = path.read_text(encoding="utf-8-sig").splitlines()[:1]  # a spreadsheet's byte-order mark: not data
-    except UnicodeDecodeError as exc:
-        raise DoefabError(f"{path}: not a readable CSV of numbers ({exc.reason}): {fix}") from None
-    if first and _numbers(first[0]):
-        raise DoefabError(f"{path}: its first line ({first[0][:40]!r}) is data, not a header: add a header line "
-                          f"such as wavelength_nm,R,G,B")
-    try:
-        with warnings.catch_warnings():  # an empty file: refused below, not warned about
-            warnings.simplefilter("ignore")
-            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8-sig")
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise DoefabError(f"{path}: not a readable CSV of numbers ({str(exc).splitlines()[0]}): {fix}") from None
-    if data.shape[1] != 4 or data.shape[0] < 2:
-        raise DoefabError(f"{path}: {data.shape[0]} row(s) of {data.shape[1]} column(s); need ≥ 2 rows of 4: {fix}")
+                          f"file: {_FIX}")
+    lines, data = _csv_rows(path)
     lam_nm, curves = data[:, 0], data[:, 1:].T
-    if not np.all(np.isfinite(data)):
-        raise DoefabError(f"{path}: holds NaN or infinite values: {fix}")
     for unit, top, factor in (("metres", 1e-3, 1e9), ("micrometres", 3.0, 1e3)):
         if lam_nm.max() < top:
             raise DoefabError(f"{path}: wavelengths {lam_nm.min():g}–{lam_nm.max():g} look like {unit}: write "
                               f"nanometres (e.g. {lam_nm.max() * factor:.4g})")
-    if lam_nm.min() < 200 or lam_nm.max() > 2000 or np.any(np.diff(lam_nm) <= 0):
-        raise DoefabError(f"{path}: wavelengths must increase row by row within 200–2000 nm, got "
-                          f"{lam_nm.min():g}–{lam_nm.max():g} nm")
+    _check_wavelengths(path, lam_nm, lines)
     peak = curves.max(axis=1, keepdims=True)
     if np.any(peak <= 0) or np.any(curves < -0.01 * peak):
         raise DoefabError(f"{path}: sensitivities must be ≥ 0 (tails down to −1 % of a channel's peak are read as "
                           f"0) with some light in each of R, G and B")
     return lam_nm * 1e-9, np.clip(curves, 0.0, None)
+
+
+_FIX = "give a CSV with a header line, then rows wavelength_nm, R, G, B (relative sensitivities ≥ 0)"
+
+
+def _text(path: Path) -> str:
+    """The file's text: UTF-8 (a spreadsheet's byte-order mark dropped), UTF-16 with its byte-order mark, else
+    Latin-1 — the header is only a label and the rows are numbers, which every one of these spells alike."""
+    raw = path.read_bytes()
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        return raw.decode("utf-16")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _csv_rows(path: Path) -> tuple[list[int], np.ndarray]:
+    """(the line number of each data row, [rows, 4] float64) of the file's rows after its header line; blank
+    lines and ``#`` comments are skipped."""
+    text = _text(path)
+    first = text.splitlines()[:1]
+    if first and _numbers(first[0]):
+        raise DoefabError(f"{path}: its first line ({first[0][:40]!r}) is data, not a header: add a header line "
+                          f"such as wavelength_nm,R,G,B")
+    lines, rows = [], []
+    for n, line in enumerate(text.splitlines()[1:], start=2):
+        cells = [c.strip() for c in line.split("#")[0].split(",")]
+        if cells == [""]:
+            continue
+        try:
+            rows.append([float(c) for c in cells])
+        except ValueError:
+            raise DoefabError(f"{path}: not a readable CSV of numbers (line {n}: {line.strip()[:40]!r}): "
+                              f"{_FIX}") from None
+        if len(cells) != 4:
+            raise DoefabError(f"{path}: line {n} has {len(cells)} column(s); need 4 on every row: {_FIX}")
+        if not all(math.isfinite(v) for v in rows[-1]):
+            raise DoefabError(f"{path}: line {n} holds NaN or infinite values ({line.strip()[:40]!r}): {_FIX}")
+        lines.append(n)
+    if len(rows) < 2:
+        raise DoefabError(f"{path}: {len(rows)} row(s) of data; need ≥ 2 rows of 4 columns: {_FIX}")
+    return lines, np.asarray(rows, np.float64)
+
+
+def _check_wavelengths(path: Path, lam_nm: np.ndarray, lines: list[int]) -> None:
+    """Wavelengths within 200–2000 nm, each once, in increasing order; the error names the line."""
+    out = np.flatnonzero((lam_nm < 200) | (lam_nm > 2000))
+    if out.size:
+        i = int(out[0])
+        raise DoefabError(f"{path}: line {lines[i]}: wavelength {lam_nm[i]:g} nm lies outside 200–2000 nm: "
+                          f"wavelengths are in nanometres, within the range a camera's sensitivity is measured in")
+    bad = np.flatnonzero(np.diff(lam_nm) <= 0)
+    if bad.size:
+        i = int(bad[0])
+        what = "repeats" if lam_nm[i + 1] == lam_nm[i] else "is below"
+        raise DoefabError(f"{path}: line {lines[i + 1]}: wavelength {lam_nm[i + 1]:g} nm {what} line "
+                          f"{lines[i]}'s {lam_nm[i]:g} nm: wavelengths must increase row by row, each once (sort "
+                          f"the rows by wavelength and keep one row per wavelength)")
 
 
 def _numbers(line: str) -> bool:

@@ -23,7 +23,7 @@ from doefab.imaging.responses import DEFAULT_RESPONSE, is_named, response_curves
 
 __all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE", "Sensor",
            "sensor_from_record", "noise_fields", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
-           "READ_NOISE_RANGE_E"]
+           "READ_NOISE_RANGE_E", "MIN_CHANNEL_FRACTION"]
 
 DEFAULT_FULL_WELL_E = 25_000.0  # electrons per dual-pixel photodiode at capture value 1 (module docstring)
 DEFAULT_READ_NOISE_E = 3.0  # electrons rms at base ISO
@@ -39,7 +39,8 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
     interpolated from ``source`` (a camera name of ``imaging.responses.RESPONSES`` or a CSV path).
 
     Normalised so that a flat spectrum of radiance 1 in every band gives 1 in the most sensitive channel
-    (summed over the given bands): a white spectral scene and an RGB scene of value 1 expose alike.
+    (summed over the given bands): a white spectral scene and an RGB scene of value 1 expose alike. Bands that
+    one of R, G, B barely sees (on average below ``MIN_CHANNEL_FRACTION`` of its peak) are refused.
     """
     lam = np.asarray(wavelengths, np.float64).ravel()
     if lam.size == 0 or not np.all(np.isfinite(lam)):
@@ -51,10 +52,30 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
         raise DoefabError(f"wavelengths {bands} lie outside the {response_label(source)} "
                           f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands "
                           f"within it, or give a response that covers them")
-    t = np.stack([np.interp(lam, src_lam, c) for c in curves])
-    if t.sum(axis=1).max() <= 0:
-        raise DoefabError(f"the {response_label(source)} response is zero in every one of the bands")
+    peak = curves.max(axis=1)  # > 0 for every channel (responses.py refuses a dark one)
+    seen = np.stack([np.interp(lam, src_lam, c / p) for c, p in zip(curves, peak)])  # each channel ≤ 1: no overflow
+    _check_channels_see(seen, lam, source)
+    t = seen * (peak / peak.max())[:, None]  # the channels' relative gains, as the curves give them
     return (t / t.sum(axis=1).max()).astype(np.float32)
+
+
+#: A channel must average at least this fraction of its own peak sensitivity over the bands (its integral over
+#: the band range ≥ 1 % of peak × bandwidth). Colour filters block out of band to a few % of their peak; a channel
+#: below 1 % sees the bands only through that leakage, and its capture holds little but noise.
+MIN_CHANNEL_FRACTION = 0.01
+
+
+def _check_channels_see(seen: np.ndarray, lam: np.ndarray, source) -> None:
+    """Refuse bands that one of R, G, B barely sees: ``seen`` [3, C] is each channel relative to its peak."""
+    mean = seen.mean(axis=1)
+    blind = [f"{c} {m * 100:.2g} %" if m >= 1e-4 else f"{c} < 0.01 %" for c, m in zip("RGB", mean)
+             if m < MIN_CHANNEL_FRACTION]
+    if blind:
+        bands = f"{lam.min() * 1e9:.4g}–{lam.max() * 1e9:.4g} nm" if lam.size > 1 else f"{lam[0] * 1e9:.4g} nm"
+        raise DoefabError(f"the {response_label(source)} response barely sees the bands {bands}: over them "
+                          f"{', '.join(blind)} of its peak sensitivity on average (each of R, G and B needs ≥ "
+                          f"{MIN_CHANNEL_FRACTION * 100:g} %): choose bands each channel sees, or a response "
+                          f"measured over them")
 
 
 @dataclass(frozen=True)

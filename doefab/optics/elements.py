@@ -33,7 +33,7 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
     period_pixels = number_in("period_pixels", period_pixels, 2, 1e6, unit="DOE pixels (not metres)")
     if n_levels is not None:
         n_levels = number_in("n_levels", n_levels, 2, 256, integer=True)
-    if direction not in (-1, 1):
+    if isinstance(direction, bool) or direction not in (-1, 1):
         raise DoefabError(f"direction must be +1 or -1, got {direction!r}")
     lam = camera.design_wavelength if wavelength is None else wavelength_m("wavelength", wavelength)
     h2pi = camera.material.height_2pi(lam)

@@ -8,6 +8,7 @@ half sums to about 0.5 over a large kernel.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
 
-__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor"]
+__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands"]
 
 SOURCE_PHASE_LIMIT = math.pi / 2  # max smooth phase change between neighbouring pupil samples (radians)
 
@@ -34,6 +35,8 @@ class PSFPair:
         coded, uncoded: (n_depths, n_wavelengths, K, K) tensors of energy fractions (or None when not
             asked for); rows are y (row 0 = top), columns x, pixel (K//2, K//2) on the chief ray.
         wavelengths: metres.  depths: metres (``inf`` = plane wave).  sensor_pitch: metres.
+        full: the whole aperture's PSF (when asked for).  camera: the camera it was computed for (None when
+            unknown, e.g. a measured pair).
     """
 
     coded: torch.Tensor | None
@@ -42,12 +45,43 @@ class PSFPair:
     depths: tuple[float, ...]
     sensor_pitch: float
     full: torch.Tensor | None = None
+    camera: Camera | None = None
 
     def __getitem__(self, half: str) -> torch.Tensor:
         out = getattr(self, half, None) if half in APERTURES else None
         if out is None:
             raise DoefabError(f"the {half!r} PSF was not computed: pass halves including it")
         return out
+
+    def system_differences(self, other: "PSFPair") -> list[str]:
+        """What of the system ``other`` was computed for differs from this pair's — its bands, and its camera
+        where both pairs know theirs (else its sensor pitch) — each as "what (this pair: what)"; [] when none.
+        Depth planes and the PSFs' values are not compared: a fabricated part of the same design on the same
+        camera is the same system."""
+        out = []
+        mine, theirs = tuple(self.wavelengths), tuple(other.wavelengths)
+        if len(mine) != len(theirs) or not np.allclose(mine, theirs, rtol=1e-6, atol=0.0):
+            out.append(f"{describe_bands(theirs)} (this pair: {describe_bands(mine)})")
+        if self.camera is not None and other.camera is not None:
+            out += [f"camera {f.name} {_shown(getattr(other.camera, f.name))} (this pair: "
+                    f"{_shown(getattr(self.camera, f.name))})" for f in dataclasses.fields(Camera)
+                    if getattr(other.camera, f.name) != getattr(self.camera, f.name)]
+        elif not math.isclose(self.sensor_pitch, other.sensor_pitch, rel_tol=1e-9):
+            out.append(f"sensor pitch {other.sensor_pitch * 1e6:.4g} µm (this pair: {self.sensor_pitch * 1e6:.4g} µm)")
+        return out
+
+
+def describe_bands(wavelengths) -> str:
+    """``3 bands 656, 589, 486 nm`` (the first six of ``wavelengths`` in metres)."""
+    shown = ", ".join(f"{w * 1e9:.4g}" for w in wavelengths[:6]) + (", …" if len(wavelengths) > 6 else "")
+    return f"{len(wavelengths)} band{'s' if len(wavelengths) != 1 else ''} {shown} nm"
+
+
+def _shown(value) -> str:
+    """A camera field as a person reads it: a material by name, a length with its unit."""
+    if hasattr(value, "name"):
+        return str(value.name)
+    return f"{value:g} m" if isinstance(value, float) and value < 1 else f"{value:g}"
 
 
 def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.float32) -> torch.Tensor:
@@ -56,6 +90,7 @@ def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.f
     Tensors keep their autograd graph; numpy arrays are converted.
     """
     n = camera.doe_pixels
+    _validate.full_precision(name, height)  # before any conversion: float16 heights are already rounded
     if isinstance(height, torch.Tensor):
         t = height
     else:
@@ -102,8 +137,7 @@ class PSFPlan:
         self.camera = camera
         self.wavelengths = _validate.wavelengths(wavelengths)
         self.depths = _validate.depths(depths)
-        if not isinstance(kernel_size, (int, np.integer)) or kernel_size < 1:
-            raise DoefabError(f"kernel_size must be a positive integer (sensor pixels), got {kernel_size!r}")
+        kernel_size = _validate.number_in("kernel_size", kernel_size, 1, 8191, integer=True, unit="sensor pixels")
         halves = (halves,) if isinstance(halves, str) else tuple(halves)
         if not halves or any(h not in APERTURES for h in halves):
             raise DoefabError(f"halves must be a non-empty subset of {APERTURES}, got {halves!r}")
@@ -212,11 +246,11 @@ class PSFPlan:
             if check_gap(gap) > 0 and h is not None:
                 got = self.gap_psfs(h, gap)
                 return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths,
-                               self.camera.sensor_pitch, got.get("full"))
+                               self.camera.sensor_pitch, got.get("full"), self.camera)
         coded = self.half_psf("coded", h) if "coded" in self.halves else None
         uncoded = self.half_psf("uncoded", hr) if "uncoded" in self.halves else None
         full = self.half_psf("full", h) if "full" in self.halves else None
-        return PSFPair(coded, uncoded, self.wavelengths, self.depths, self.camera.sensor_pitch, full)
+        return PSFPair(coded, uncoded, self.wavelengths, self.depths, self.camera.sensor_pitch, full, self.camera)
 
 
 def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size: int = 255,

@@ -147,8 +147,7 @@ def _sensor_checks(scene: Scene, sensor, task, cam) -> list[str]:
     try:
         sensor.rgb(task.wavelengths(cam))
     except DoefabError as exc:
-        return [f"sensor.response / optics.wavelengths_nm: {exc}: choose bands within the response, or another "
-                f"response"]
+        return [f"sensor.response / optics.wavelengths_nm: {exc}"]  # the response's message carries the fix
     return []
 
 

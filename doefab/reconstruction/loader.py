@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from doefab.errors import DoefabError
+from doefab.optics.psf import PSFPair, describe_bands
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import get_spec, psf_pair
@@ -31,6 +32,9 @@ class Reconstructor:
     ``rec(coded, uncoded)`` → [3, H, W] HDR radiance | [31, H, W] spectra | [H, W] depth in metres (numpy in,
     numpy out; torch in, torch out); ``rec(coded, uncoded, psf=pair)`` conditions the network on another (e.g.
     measured or fabricated) PSF pair instead (depth: the proposed network's cost volume uses both halves).
+    Captures that name the PSF pair they were simulated through (``simulate_captures`` gives them a ``pair``)
+    are refused without ``psf=`` when that pair's bands or camera differ from the network's ``pair``: the
+    network would read them through the wrong PSFs. Captures that name none (a camera's) are taken as they are.
     """
 
     def __init__(self, task: str, variant: str, model: torch.nn.Module, pair, design_sha256: str, meta: dict):
@@ -80,8 +84,22 @@ class Reconstructor:
             raise DoefabError(f"psf must be finite, non-negative and {tuple(self.pair.coded.shape)} per half")
         return t
 
+    def _check_system(self, captures: dict) -> None:
+        """Refuse captures simulated through a PSF pair of other bands or another camera than the network's."""
+        for name, x in captures.items():
+            made = getattr(x, "pair", None)
+            diff = self.pair.system_differences(made) if isinstance(made, PSFPair) else []
+            if diff:
+                raise DoefabError(
+                    f"{name} was simulated through a PSF pair of {'; '.join(diff).replace('this pair', 'the network')}"
+                    f": the {self.task} network reads captures through its own pair, rec.pair — simulate them through "
+                    f"rec.pair (or a part of its design on its camera), or pass psf=the pair they were made through "
+                    f"if it has the network's {describe_bands(self.pair.wavelengths)}")
+
     def __call__(self, coded, uncoded, psf=None):
         torch_in = isinstance(coded, torch.Tensor)
+        if psf is None:
+            self._check_system({"coded": coded, "uncoded": uncoded})
         views = []
         for name, x in (("coded", coded), ("uncoded", uncoded)):
             views.append(_capture(name, x)[None])

@@ -1,4 +1,5 @@
 import math
+import re
 
 import numpy as np
 import pytest
@@ -209,6 +210,58 @@ def test_crosstalk_refuses_ratios_that_are_not_fractions():
     scene, pair = _crosstalk_case()
     with pytest.raises(DoefabError, match="crosstalk must be"):
         doefab.simulate_captures(scene, pair, crosstalk="yes")
+
+
+def test_an_impossible_crosstalk_pair_is_refused_naming_the_argument():
+    """(0.6, 0.6): each a fraction, but 1 − 0.6 − 0.6 < 0 — each photodiode would hold more of the other
+    half's light than of its own (``crosstalk.check_pair``)."""
+    scene, pair = _crosstalk_case()
+    with pytest.raises(DoefabError, match=r"^crosstalk α_l→r, α_r→l = \(0\.6, 0\.6\) is no dual-pixel crosstalk.*"
+                                          r"e\.g\. \(0\.05, 0\.05\)"):
+        doefab.simulate_captures(scene, pair, crosstalk=(0.6, 0.6))
+    doefab.simulate_captures(scene, pair, crosstalk=(0.6, 0.3))  # one large ratio, the views still separate
+
+
+@pytest.mark.parametrize("scale, dtype", [(1e30, np.float32), (1e300, np.float64), (2.6e6, np.float32)])
+def test_a_scene_brighter_than_any_camera_records_is_refused_naming_scene(scale, dtype):
+    """Radiance beyond MAX_RADIANCE (1e6 × the clipping level; the scene below peaks at 0.9 × scale): one
+    DoefabError naming the scene, its peak and the factor that brings it to 100 — not numpy's Poisson overflow
+    or a float32 infinity."""
+    from doefab.imaging.captures import MAX_RADIANCE
+
+    scene, pair = _crosstalk_case()
+    top = float(scene.max()) * scale
+    with pytest.raises(DoefabError, match=rf"^scene holds radiance up to {re.escape(f'{top:.3g}')}: .* up to "
+                                          rf"1e\+06 .*multiply it by {re.escape(f'{100 / top:.3g}')}"):
+        doefab.simulate_captures((scene * scale).astype(dtype), pair)
+    bright = scene * (MAX_RADIANCE / scene.max())  # at the limit: recorded, and clipped where the light is
+    coded, _ = doefab.simulate_captures(bright, pair, seed=0)
+    assert np.isfinite(coded).all() and coded.max() == 1.0
+
+
+def test_a_response_that_would_overflow_the_noise_is_refused_naming_response():
+    """A spectral scene of radiance 1 through a response of 1e30: the RGB light would be 1e30 — one error naming
+    ``response`` and the normalised one, not numpy's Poisson overflow."""
+    psf = np.zeros((1, 1, 3, 3))
+    psf[0, :, 1, 1] = 0.5
+    pair = _pair(psf, psf, (550e-9,), (5.0,))
+    scene = np.ones((1, 8, 8), np.float32)
+    with pytest.raises(DoefabError, match=r"^response sums to 1e\+30 .* would reach 1e\+30.*doefab\.sensor_response"):
+        doefab.simulate_captures(scene, pair, response=np.full((3, 1), 1e30))
+    coded, _ = doefab.simulate_captures(scene, pair, response=np.full((3, 1), 1.0), noise="none")
+    assert np.allclose(coded, 0.5)
+
+
+def test_captures_name_the_pair_they_were_recorded_through():
+    """A capture is a numpy array (or tensor) with ``pair``: crops and arithmetic keep it, one number is a plain
+    scalar."""
+    scene, pair = _crosstalk_case()
+    coded, uncoded = doefab.simulate_captures(scene, pair, noise="none")
+    assert isinstance(coded, np.ndarray) and coded.pair is pair and uncoded.pair is pair
+    assert coded[:, 4:12].pair is pair and (2 * coded).pair is pair
+    assert type(coded.mean()) is np.float32 and type(np.asarray(coded)) is np.ndarray
+    ct, _ = doefab.simulate_captures(torch.from_numpy(scene), pair, noise="none")
+    assert type(ct) is torch.Tensor and ct.pair is pair and torch.equal(ct, torch.from_numpy(np.asarray(coded)))
 
 
 def test_a_calibrated_camera_estimates_its_ratios_from_noisy_white_walls():

@@ -60,3 +60,25 @@ def test_near_singular_determinant_is_refused():
         doefab.mix_crosstalk(x, x, 1.2, 0.0)
     with pytest.raises(DoefabError, match="lit everywhere"):
         doefab.calibrate_crosstalk((x * 0, x * 0), (x, x))
+
+
+def test_a_ratio_pair_is_physical_only_when_its_determinant_is_positive():
+    """Eq. 29's left photodiode records (1 − a) of the left view's light and b of the right's: when
+    b ≥ 1 − a (a + b ≥ 1) it collects as large a share of the other half's light as of its own, and so does the
+    right one; the views no longer separate. Refused exactly there, whatever the call, naming the argument."""
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    x = np.ones((2, 2))
+    for a in np.arange(0.0, 1.0, 0.1):
+        for b in np.arange(0.0, 1.0, 0.1):
+            physical = a + b < 1 - 1e-12
+            for call in (lambda: doefab.mix_crosstalk(x, x, a, b), lambda: DualPixelCrosstalk(a, b)):
+                if physical:
+                    call()
+                else:
+                    with pytest.raises(DoefabError, match=r"alpha_lr, alpha_rl = .* is no dual-pixel crosstalk"):
+                        call()
+    with pytest.raises(DoefabError, match=r"\(0\.7, 0\.4\) at column 2 .* 1 − α_l→r − α_r→l = -0\.1 ≤ 0"):
+        doefab.mix_crosstalk(np.ones((2, 3)), np.ones((2, 3)), np.array([0.1, 0.5, 0.7]), 0.4)
+    with pytest.raises(DoefabError, match="no dual-pixel crosstalk"):
+        doefab.simulate_calibration(0.6, 0.6, rows=8)

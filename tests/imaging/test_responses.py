@@ -1,13 +1,14 @@
 """Camera responses: the named published curves and a user's CSV."""
 
 import re
+import warnings
 
 import numpy as np
 import pytest
 
 from doefab.errors import DoefabError
 from doefab.imaging.responses import RESPONSES, response_curves, response_label, response_sha256
-from doefab.imaging.sensor import sensor_response
+from doefab.imaging.sensor import Sensor, sensor_response
 
 BANDS = np.arange(400, 701, 10) * 1e-9
 
@@ -99,3 +100,61 @@ def test_small_negative_tails_of_a_measured_curve_read_as_zero(tmp_path):
     p.write_text("wavelength_nm,R,G,B\n400,-0.005,0.5,1\n500,0.2,1,0.4\n600,1,0.3,-0.009\n")
     lam, curves = response_curves(str(p))
     assert curves.min() == 0.0 and curves[0, 0] == 0.0 and curves[1, 1] == 1.0
+
+
+def _write(path, lam, curves, header="wavelength_nm,R,G,B", encoding="utf-8"):
+    lines = [header] + [",".join(f"{v:.17g}" for v in (x, *c)) for x, c in zip(lam, np.asarray(curves).T)]
+    path.write_bytes(("\n".join(lines) + "\n").encode(encoding))
+    return str(path)
+
+
+def test_a_csv_of_huge_values_is_normalised_without_overflow(tmp_path):
+    """Sensitivities × 1e308 (any scale is relative): the same response as the file's, and no numpy warning."""
+    lam = np.arange(380, 781, 5.0)
+    curves = np.stack([_gauss(lam, mu, 30) for mu in (600, 540, 460)])
+    plain = sensor_response(BANDS, _write(tmp_path / "a.csv", lam, curves))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        huge = sensor_response(BANDS, _write(tmp_path / "b.csv", lam, curves * 1e308))
+    assert np.allclose(huge, plain, rtol=1e-6) and huge.sum(axis=1).max() == pytest.approx(1, abs=1e-6)
+
+
+@pytest.mark.parametrize("level, ok", [(0.02, True), (0.005, False)])
+def test_each_channel_must_see_the_bands(tmp_path, level, ok):
+    """Blue peaks at 380 nm and sits at ``level`` of that peak over 400–700 nm: 2 % is seen, 0.5 % is refused
+    (the threshold is 1 % of a channel's peak on average over the bands)."""
+    lam = np.arange(380, 781, 5.0)
+    blue = np.where(lam < 400, 1.0, level)
+    path = _write(tmp_path / "cam.csv", lam, [_gauss(lam, 600, 30), _gauss(lam, 540, 30), blue])
+    if ok:
+        assert sensor_response(BANDS, path)[2].min() > 0
+        return
+    with pytest.raises(DoefabError, match=r"barely sees the bands 400–700 nm: .*B 0\.5 % .*≥ 1 %"):
+        sensor_response(BANDS, path)
+    with pytest.raises(DoefabError, match="barely sees"):  # the sensor a scene or a flag names checks the same
+        Sensor(response=path).rgb(BANDS)
+
+
+@pytest.mark.parametrize("rows, needle", [
+    ([(400, 1, 1, 1), (500, 1, 1, 1), (500, 2, 2, 2), (600, 1, 1, 1)], "line 4: wavelength 500 nm repeats line 3's"),
+    ([(400, 1, 1, 1), (600, 1, 1, 1), (550, 1, 1, 1)], "line 4: wavelength 550 nm is below line 3's 600 nm"),
+    ([(400, 1, 1, 1), (2500, 1, 1, 1)], "line 3: wavelength 2500 nm lies outside 200–2000 nm"),
+])
+def test_a_wavelength_out_of_order_is_named_by_its_line(tmp_path, rows, needle):
+    p = tmp_path / "cam.csv"
+    p.write_text("wavelength_nm,R,G,B\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
+    with pytest.raises(DoefabError, match=re.escape(needle)):
+        response_curves(str(p))
+
+
+def test_a_latin1_header_is_read(tmp_path):
+    """A header written by a Windows tool in Latin-1 (``Wellenlänge``, ``µ``): the same curves as in UTF-8."""
+    lam = np.arange(400, 701, 10.0)
+    curves = np.stack([_gauss(lam, mu, 30) for mu in (600, 540, 460)])
+    header = "Wellenlänge (nm),R (µA/W),G,B"
+    latin = _write(tmp_path / "latin.csv", lam, curves, header, "latin-1")
+    utf8 = _write(tmp_path / "utf8.csv", lam, curves, header)
+    with pytest.raises(UnicodeDecodeError):
+        (tmp_path / "latin.csv").read_text(encoding="utf-8")
+    for a, b in zip(response_curves(latin), response_curves(utf8)):
+        assert np.array_equal(a, b)

@@ -68,3 +68,39 @@ def test_extreme_but_valid_inputs_stay_finite(cam):
                                      pupil_oversample=2)
     for t in (pair.coded, pair.uncoded):
         assert torch.isfinite(t).all() and (t >= -1e-9).all()
+
+
+@pytest.mark.parametrize("lams", [np.array([550e-9], np.float16), torch.tensor([550e-9], dtype=torch.float16),
+                                  torch.tensor([550e-9], dtype=torch.bfloat16), [np.float16(550e-9)]])
+def test_half_precision_wavelengths_are_refused_before_they_are_used(cam, lams):
+    """float16 has no normal number below 6.1e-5: 550e-9 m arrives as 536 nm, already rounded. float32 keeps 24
+    bits: its PSF is the float64 one."""
+    assert float(np.float16(550e-9)) == pytest.approx(5.36e-7, rel=1e-3)
+    with pytest.raises(DoefabError, match=r"wavelengths? is half precision .*pass float32 or float64"):
+        doefab.split_aperture_psf(None, cam, lams, [1.0], kernel_size=5)
+    single = doefab.split_aperture_psf(None, cam, np.array([550e-9], np.float32), [1.0], kernel_size=5)
+    double = doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=5)
+    assert torch.allclose(single.coded, double.coded, rtol=1e-5, atol=1e-9)
+
+
+def test_half_precision_depths_and_heights_are_refused(cam):
+    with pytest.raises(DoefabError, match="depths is half precision"):
+        doefab.split_aperture_psf(None, cam, [550e-9], np.array([2.7], np.float16), kernel_size=5)
+    h = np.full((24, 24), 1e-7)
+    for half in (h.astype(np.float16), torch.from_numpy(h).half(), torch.from_numpy(h).bfloat16()):
+        with pytest.raises(DoefabError, match=r"height is half precision .*pass float32 or float64"):
+            doefab.split_aperture_psf(half, cam, [550e-9], [1.0], kernel_size=5)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda cam: doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=True), "kernel_size"),
+    (lambda cam: doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=5, route="mft",
+                                           pixel_nodes=True), "pixel_nodes"),
+    (lambda cam: doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=5, route="fft",
+                                           oversample=True), "oversample"),
+    (lambda cam: doefab.blazed_grating_height(cam, direction=True), "direction"),
+])
+def test_a_boolean_is_not_taken_for_a_number(cam, call, name):
+    with pytest.raises(DoefabError, match=rf"{name} must be .*got True"):
+        call(cam)
+    assert doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=np.int64(5)).coded.shape[-1] == 5

@@ -148,3 +148,34 @@ def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_
     anyway = load_reconstructor("hyperspectral", "proposed", tmp_path / "w", other_design=True, sensor=Sensor())
     assert anyway.meta["other_sensor"] and not np.allclose(anyway.model.response.numpy(),
                                                            Sensor().rgb(rec.pair.wavelengths))
+
+
+def test_captures_of_other_bands_or_another_camera_are_refused_without_psf(weights):
+    """A network reads captures through its own PSF pair: captures simulated through a pair of other bands or
+    another camera are refused (one error naming what differs and ``psf=``) unless the caller gives ``psf=``;
+    its own pair, a part of its design on its camera and a real camera's plain arrays are taken."""
+    import dataclasses
+
+    root, _ = weights
+    rec = doefab.load_reconstructor("hdr", weights_dir=root / "weights")
+    pair = rec.pair
+    assert pair.camera == doefab.Camera.preset("hdr")  # the pair knows its camera
+    scene = np.full((3, 64, 64), 0.5, np.float32)
+    own = doefab.simulate_captures(scene, pair, noise="none")
+    rec(*own)
+    part = dataclasses.replace(pair, coded=pair.coded.roll(2, dims=-1))  # a misaligned part: same system
+    rec(*doefab.simulate_captures(scene, part, noise="none"))
+    other = dataclasses.replace(pair, camera=pair.camera.replace(sensor_pitch=4e-6))
+    coded, uncoded = doefab.simulate_captures(scene, other, noise="none")
+    with pytest.raises(DoefabError, match=r"^coded was simulated through a PSF pair of camera sensor_pitch 4e-06 m "
+                                          r"\(the network: 5\.4e-06 m\).*simulate them through rec\.pair.*psf="):
+        rec(coded, uncoded)
+    assert np.array_equal(rec(coded, uncoded, psf=other), rec(np.asarray(coded), np.asarray(uncoded), psf=other))
+    rec(np.asarray(coded), np.asarray(uncoded))  # plain arrays name no pair: a camera's captures
+    with pytest.raises(DoefabError, match="sensor_pitch 4e-06 m"):
+        rec(*doefab.simulate_captures(torch.from_numpy(scene), other, noise="none"))
+    one = doefab.PSFPair(pair.coded[:, 1:2], pair.uncoded[:, 1:2], (550e-9,), pair.depths, pair.sensor_pitch,
+                         camera=pair.camera)  # the README's old mistake: a 1-band 550 nm pair
+    coded, uncoded = doefab.simulate_captures(scene[:1], one, response=np.full((3, 1), 0.3), noise="none")
+    with pytest.raises(DoefabError, match=r"1 band 550 nm \(the network: 3 bands 656, 589, 486 nm\)"):
+        rec(coded, uncoded)

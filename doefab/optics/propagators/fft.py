@@ -13,6 +13,7 @@ import numpy as np
 import scipy.fft
 import torch
 
+from doefab._validate import number_in
 from doefab.errors import SamplingError
 from doefab.optics.propagators.base import FocalSetup, check_window, pixel_integration_matrix
 
@@ -30,7 +31,7 @@ class FFTRoute:
     name = "fft"
 
     def __init__(self, oversample: float = 4.0, max_size: int = 16384):
-        self.oversample = float(oversample)
+        self.oversample = number_in("oversample", oversample, 0, 256, lo_open=True)  # FFT samples per sensor pixel
         self.max_size = int(max_size)
 
     def _size(self, setup: FocalSetup, lam: float) -> int:

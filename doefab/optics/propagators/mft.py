@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from doefab._validate import number_in
 from doefab.optics.propagators.base import FocalSetup, check_window, gauss_legendre_pixel
 
 __all__ = ["MFTRoute", "fourier_matrix"]
@@ -42,7 +43,7 @@ class MFTRoute:
     name = "mft"
 
     def __init__(self, pixel_nodes: int = 2):
-        self.pixel_nodes = int(pixel_nodes)
+        self.pixel_nodes = number_in("pixel_nodes", pixel_nodes, 1, 64, integer=True)
 
     def check(self, setup: FocalSetup) -> None:
         check_window(setup, self.name)
