@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_psf_grid", "plot_height", "psf_pair_figure", "depth_label", "core_window", "design_psf_figure"]
+__all__ = ["plot_psf_grid", "plot_height", "psf_pair_figure", "depth_label", "core_window", "design_psf_figure",
+           "save_figure"]
 
 
 def _plt():
@@ -16,6 +17,15 @@ def _plt():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Save ``fig`` cropped to everything drawn (``bbox_inches="tight"``: no label falls outside the image) and
+    close it."""
+    path = Path(path)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight", pad_inches=0.05)
+    _plt().close(fig)
+    return path
 
 
 def plot_psf_grid(path: str | Path, panels: list[tuple[str, np.ndarray]], sensor_pitch: float, ncols: int = 3,
@@ -43,10 +53,7 @@ def plot_psf_grid(path: str | Path, panels: list[tuple[str, np.ndarray]], sensor
     if suptitle:
         fig.suptitle(suptitle, fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_height(path: str | Path, height: np.ndarray, pitch: float, title: str = "") -> Path:
@@ -62,10 +69,7 @@ def plot_height(path: str | Path, height: np.ndarray, pitch: float, title: str =
     ax.set_title(title, fontsize=9)
     fig.colorbar(im, ax=ax, label="height (nm)")
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def depth_label(z: float) -> str:
@@ -130,10 +134,7 @@ def psf_pair_figure(path: str | Path, coded: np.ndarray, uncoded: np.ndarray, de
     cb.set_label("fraction of the aperture's light per pixel" + (" (log scale)" if log else ""), fontsize=7)
     cb.ax.tick_params(labelsize=6)
     fig.suptitle(title + (" — " if title else "") + "both halves on one colour scale", fontsize=9)
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def design_psf_figure(path: str | Path, d, psf, targets, panels_max: int = 4) -> Path:

@@ -128,12 +128,20 @@ def explain(res: dict) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
-    rows += _task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"]) + _sensor_rows(res.get("sensor"))
+    rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"])
+             + _sensor_rows(res.get("sensor"), res["settings"]["design_task"]))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
 
 
-def _sensor_rows(sensor) -> list[tuple]:
-    """One capture's noise: shot-noise SNR at full scale and the range above the read-noise floor."""
+#: what a capture's clip means for the task of each design
+CLIP_MEANS = {"streak": "the HDR task recovers highlights beyond its clip from the coded half's streaks",
+              "grating": "pixels beyond its clip saturate; the spectral task does not recover them",
+              "half-ring": "pixels beyond its clip saturate; the depth task does not recover them"}
+
+
+def _sensor_rows(sensor, design_task: str) -> list[tuple]:
+    """One capture's noise: shot-noise SNR at full scale and the range above the read-noise floor, and what its
+    clip means for the task (``design_task``: streak, grating, half-ring)."""
     if sensor is None:
         return []
     fw, rn = sensor.full_well_e, sensor.read_noise_e
@@ -141,7 +149,7 @@ def _sensor_rows(sensor) -> list[tuple]:
              f"full scale: {fw / 100 / math.sqrt(fw / 100 + rn ** 2):.3g}")]
     if rn > 0:
         rows.append(("capture dynamic range", math.log2(fw / rn), "stops", f"full well over read noise ({rn:g} e⁻ "
-                     f"rms): one capture's range; the HDR task recovers highlights beyond its clip"))
+                     f"rms): one capture's range; {CLIP_MEANS[design_task]}"))
     return rows
 
 

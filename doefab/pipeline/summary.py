@@ -1,5 +1,6 @@
-"""The report's opening: what the part will deliver and how sure that is, its yield against the spec, what limits
-it and what would buy the most, and the files to send to the fab and to the printer."""
+"""The report's opening: one paragraph in plain words with units (what the part will deliver and how sure that is,
+its yield against the spec, what limits it most), then the details (what would buy the most, warnings, the
+aperture stop) and the files to send to the fab and to the printer."""
 
 from __future__ import annotations
 
@@ -31,23 +32,38 @@ def _files(out: Path, done: dict) -> list[str]:
     return items
 
 
-def summary_items(out: Path, done: dict) -> list[tuple]:
-    """The Summary section's items (("p", text), ...)."""
-    from doefab.tolerance.report import summary_lines
+def summary_items(out: Path, done: dict, task: str) -> list[tuple]:
+    """The Summary section's items: one paragraph in plain words with units, then the details and the files as a
+    list (("p", text), ("ul", [text, ...]))."""
+    from doefab.tolerance.reporttext import lead_text, summary_lines
 
-    items = []
     tol = _tolerance(out)
-    if tol is not None:
-        items += [("p", line.replace("**", "")) for line in summary_lines(tol)]
-    else:
-        items.append(("p", "No tolerance study in this scene: add a [tolerance] section for what the part delivers "
-                           "and its yield."))
-    items += [("p", f) for f in _files(out, done)]
-    return items
+    lead = lead_text(tol) if tol is not None else None
+    details = [line.removeprefix("- ") for line in summary_lines(tol)] if tol is not None else []
+    listed = details + _files(out, done)
+    return [("p", lead or _untoleranced_lead(done, task, tol is not None))] + ([("ul", listed)] if listed else [])
+
+
+def _untoleranced_lead(done: dict, task: str, studied: bool) -> str:
+    """The opening without a Monte Carlo: what the error-free part delivers through the network, if it ran."""
+    from doefab.reconstruction.metrics import DISPLAY, metric_text
+    from doefab.tolerance.spec import PRIMARY
+
+    none = ("the tolerance study ran no Monte Carlo, so nothing is said about the yield" if studied else
+            "no tolerance study ran, so nothing is said about fabricated parts or their yield: add a [tolerance] "
+            "section to the scene for what they deliver")
+    proposed = ((done.get("reconstruction") or {}).get("rows") or {}).get("proposed", {})
+    m = PRIMARY.get(task)
+    if m not in proposed:
+        return none[0].upper() + none[1:] + "."
+    return (f"The error-free part delivers {metric_text(task, m, proposed[m])} {DISPLAY[task][m][0]} through the "
+            f"task's network on held-out test scenes; {none}.")
 
 
 def tolerance_items(out: Path) -> list[tuple]:
     """The Tolerance section's tables and figures from tolerance/tolerance.json."""
+    from doefab.tolerance.reporttext import delta_text
+
     tol = _tolerance(out)
     if tol is None:
         return []
@@ -63,14 +79,13 @@ def tolerance_items(out: Path) -> list[tuple]:
              "delivered change, network told the nominal PSF", "told the part's measured PSF"]]
     for r in tol.get("tornado", []):
         d = r.get("network_delta", {})
-        cells = [", ".join(f"{k} {v:+.3g}" for k, v in d[lab].items()) if lab in d else "not judged through the network"
+        cells = [delta_text(tol["task"], d[lab]) if lab in d else "not judged through the network"
                  for lab in ("nominal_psf", "measured_psf")]
         rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}", *cells])
     items.append(("table", rows))
     for f, cap in (("tolerance/delivered.png", "what the parts deliver through the network (histogram over parts)"),
                    ("tolerance/tornado.png", "each error alone at one standard deviation of the budget (PSF metric)"),
-                   ("tolerance/yield_vs_n.png", "yield against the number of parts (95 % Wilson interval)"),
-                   ("tolerance/quantization.png", "quantization study")):
+                   ("tolerance/quantization.png", "quantization study")):  # the yield against N: a knob's figure
         if (out / f).is_file():
             items.append(("img", f, cap))
     return items

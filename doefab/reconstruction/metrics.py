@@ -6,10 +6,20 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "metrics_for", "mean_metrics", "HDR_PEAK",
-           "HIGHLIGHT_ABOVE"]
+           "HIGHLIGHT_ABOVE", "DISPLAY", "metric_label", "metric_text"]
 
 HDR_PEAK = 256.0  # Table 1: PSNR with a maximum value of 2^8
 HIGHLIGHT_ABOVE = 2.0  # highlight pixels: radiance that saturates the plain half-exposure capture
+#: each task's metrics as reports name them: name → (display name, unit as printed; "" for a ratio or for HDR
+#: radiance, which is relative: 1 is the plain capture's clip)
+DISPLAY = {
+    "hdr": {"psnr_highlight": ("highlight PSNR", "dB"), "psnr": ("PSNR", "dB"),
+            "rmse_highlight": ("highlight RMSE", ""), "rmse": ("RMSE", "")},
+    "hyperspectral": {"psnr": ("PSNR", "dB"), "ssim": ("SSIM", ""), "sam": ("spectral angle (SAM)", "rad")},
+    "depth": {"mae": ("depth MAE", "m"), "rmse": ("depth RMSE", "m"), "log10": ("mean |log10| depth error", ""),
+              "delta125": ("pixels within 25 % of the depth (δ<1.25)", "")},
+}
+DIGITS = {"dB": 2}  # decimals a report prints per unit (3 for every other)
 
 
 def _psnr(mse: float, peak: float) -> float:
@@ -55,6 +65,19 @@ def depth_metrics(pred: np.ndarray, target: np.ndarray) -> dict:
     p, err, within = depth_pixels(pred, target)
     return {"mae": float(err.mean()), "rmse": float(np.sqrt((err**2).mean())),
             "log10": float(np.abs(np.log10(p) - np.log10(target)).mean()), "delta125": float(within.mean())}
+
+
+def metric_label(task: str, name: str) -> str:
+    """A metric's column or axis label, e.g. "highlight PSNR (dB)"; an unknown name as it is."""
+    display, unit = DISPLAY.get(task, {}).get(name, (name, ""))
+    return f"{display} ({unit})" if unit else display
+
+
+def metric_text(task: str, name: str, value: float, unit: bool = True) -> str:
+    """A metric's value with its unit (``unit=False``: without), to the decimals reports print: "29.89 dB",
+    "0.387 m", "0.352 rad"."""
+    u = DISPLAY.get(task, {}).get(name, (name, ""))[1]
+    return f"{value:.{DIGITS.get(u, 3)}f}" + (f" {u}" if u and unit else "")
 
 
 def metrics_for(task: str, pred: np.ndarray, target: np.ndarray) -> dict:

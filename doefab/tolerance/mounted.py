@@ -36,16 +36,35 @@ from doefab.optics.pupil import pupil_half, source_path_difference
 __all__ = ["MountedPlan", "stop_case"]
 
 
+#: a baffle and a pupil whose diameters differ by at most this fraction are "about equal" in reports
+STOP_TOLERANCE = 0.01
+
+
 def stop_case(camera: Camera) -> str:
-    """One sentence for reports: which element is the aperture stop and what that means for the gap."""
+    """One sentence for reports: which element is the aperture stop and what that means for the gap. Diameters
+    within ``STOP_TOLERANCE`` of each other are called about equal; others are printed with the decimals that
+    tell them apart, so the words agree with the numbers shown."""
     doe, lens = camera.aperture_diameter * 1e3, camera.lens_pupil_diameter * 1e3
+    a, b = _distinct(doe, lens)
+    pupil = f"the lens's {b} mm entrance pupil (f/{camera.lens_f_number:g})"
+    doe_stop = "the dual-pixel split is conjugate to the DOE, and the DOE-to-lens gap moves nothing"
+    lens_stop = "the DOE sits in front of it, and its diffraction over the gap is propagated"
+    if abs(doe - lens) <= STOP_TOLERANCE * max(doe, lens):
+        return (f"the DOE's {a} mm baffle and {pupil} are about equal (within {STOP_TOLERANCE * 100:g} %): neither "
+                f"is clearly the stop; the model takes the {'baffle' if camera.doe_is_stop else 'lens'} as the aperture "
+                f"stop: {doe_stop if camera.doe_is_stop else lens_stop}")
     if camera.doe_is_stop:
-        return (f"the DOE's {doe:.2f} mm baffle is narrower than the lens's {lens:.1f} mm entrance pupil "
-                f"(f/{camera.lens_f_number:g}): it is the aperture stop, the dual-pixel split is conjugate to "
-                f"the DOE, and the DOE-to-lens gap moves nothing")
-    return (f"the lens's {lens:.2f} mm entrance pupil (f/{camera.lens_f_number:g}) is narrower than the DOE's "
-            f"{doe:.2f} mm baffle: the lens is the stop, the DOE sits in front of it, and its diffraction over "
-            f"the gap is propagated")
+        return f"the DOE's {a} mm baffle is narrower than {pupil}: it is the aperture stop, {doe_stop}"
+    return f"{pupil} is narrower than the DOE's {a} mm baffle: the lens is the stop, {lens_stop}"
+
+
+def _distinct(x: float, y: float) -> tuple[str, str]:
+    """``x`` and ``y`` with two decimals, or more where two would print different numbers alike."""
+    for decimals in range(2, 7):
+        a, b = f"{x:.{decimals}f}", f"{y:.{decimals}f}"
+        if a != b:
+            break
+    return a, b
 
 
 class MountedPlan:

@@ -1,6 +1,6 @@
 """The tolerance report's figures: sweeps, tornado, quantization, yield against the number of parts, the
-distribution of a delivered metric. Units on every axis; the yield band is the same Wilson interval as the
-tables."""
+distribution of a delivered metric. Units on every axis, every label inside the image (``save_figure``); the
+yield band is the same Wilson interval as the tables."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.plotting import save_figure
 from doefab.tolerance.montecarlo import wilson
 
 __all__ = ["sweep_plots", "tornado_plot", "levels_plot", "yield_plot", "distribution_plot"]
@@ -23,7 +24,7 @@ def _plt():
     return plt
 
 
-METRIC_LABEL = "PSF metric (fraction of coded light in band)"
+METRIC_UNIT = "fraction of coded light in band"  # what the PSF metric is
 
 
 def sweep_plots(path: Path, sweeps: dict, nominal: float) -> None:
@@ -39,13 +40,12 @@ def sweep_plots(path: Path, sweeps: dict, nominal: float) -> None:
         ax.plot(x, [r["worst"] for r in s["rows"]], "s--", label="worst entry")
         ax.axhline(nominal, color="grey", ls=":", lw=1, label="nominal")
         ax.set_xlabel(f"{name} ({s['unit']}; grid {s.get('grid', 1)}×)", fontsize=8)
-        ax.set_ylabel("fraction of coded light in band", fontsize=8)
+        ax.set_ylabel(METRIC_UNIT, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.legend(fontsize=6)
     for ax in list(axes.flat)[len(names):]:
         ax.axis("off")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def tornado_plot(path: Path, rows: list, nominal: float, key: str = "delta", label: str | None = None) -> None:
@@ -55,11 +55,10 @@ def tornado_plot(path: Path, rows: list, nominal: float, key: str = "delta", lab
     vals = [r[key] if key in r else np.nan for r in rows][::-1]
     ax.barh(names, vals, color=["#d65f5f" if (v or 0) < 0 else "#4878cf" for v in vals])
     ax.axvline(0, color="black", lw=0.8)
-    ax.set_xlabel(label or f"change of the {METRIC_LABEL} from the nominal {nominal:.3f}")
+    ax.set_xlabel(label or f"change of the PSF metric from the nominal {nominal:.3f}\n({METRIC_UNIT})")
     ax.set_title("each error alone at one standard deviation of the budget", fontsize=9)
     ax.tick_params(labelsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def levels_plot(path: Path, rows: list) -> None:
@@ -69,10 +68,9 @@ def levels_plot(path: Path, rows: list) -> None:
     ax.plot(labels, [r["metric"] for r in rows], "o-", label="mean")
     ax.plot(labels, [r["worst"] for r in rows], "s--", label="worst entry")
     ax.set_xlabel("quantization (levels)")
-    ax.set_ylabel("fraction of coded light in band")
+    ax.set_ylabel(METRIC_UNIT)
     ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def yield_plot(path: Path, ok: list[bool], spec_text: str) -> None:
@@ -92,8 +90,7 @@ def yield_plot(path: Path, ok: list[bool], spec_text: str) -> None:
     ax.set_title(spec_text, fontsize=8)
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def distribution_plot(path: Path, values: dict, unit: str, name: str, limit: float | None, nominal: float) -> None:
@@ -109,5 +106,4 @@ def distribution_plot(path: Path, values: dict, unit: str, name: str, limit: flo
     ax.set_xlabel(f"{name} ({unit})" if unit else name)
     ax.set_ylabel("parts")
     ax.legend(fontsize=7)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

@@ -17,26 +17,12 @@ from doefab.io import atomic_write_json, atomic_write_text
 from doefab.tolerance import plots, study
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS
+from doefab.tolerance.reporttext import REMEDY, body_lines, lead_text, spec_words, summary_lines
 
 __all__ = ["run_study", "REMEDY", "summary_lines"]
 
 HOLDOUT_SEED = 987_654  # the surrogate's own held-out parts (never the direct Monte Carlo's)
 HOLDOUT_PARTS = 16
-# what would remove each error, for the summary
-REMEDY = {
-    "etch depth (systematic)": "tighter etch-depth control (monitor wafers, an etch-stop layer)",
-    "mask overlay": "a better aligner (a stepper holds ≤ 0.2 µm; contact aligners 0.5–2 µm)",
-    "mask rotation": "a better aligner",
-    "edge bias": "CD control (exposure dose and etch calibrated on the CD ladder)",
-    "corner rounding": "a finer mask writer",
-    "surface roughness": "a smoother etch",
-    "decenter across split": "a tighter die pocket in the holder (holder clearance_mm) or an alignment pin",
-    "decenter along split": "a tighter die pocket in the holder (clearance_mm)",
-    "mount rotation": "index pins or a tighter pocket (holder clearance_mm), or turning the die to the split",
-    "axial gap": "mounting the DOE at the lens's stop",
-    "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, the paper's Eq. 30–31)",
-    "crosstalk, calibrated": "more rows or frames in the crosstalk calibration",
-}
 
 
 def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, grid="auto",
@@ -93,7 +79,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
     if do_levels:
         res["quantization"] = study.quantization_study(design_dir, supersample=mc_grid, networks=networks,
-                                                       weights_dir=weights_dir)
+                                                       weights_dir=weights_dir, progress=progress)
     _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)
     atomic_write_text(out / "report.md", "\n".join(_markdown(res)) + "\n")
@@ -227,13 +213,14 @@ def _figures(out: Path, res: dict) -> None:
         spec = res["budget"].get("spec", {})
         ok = [meets({"psf_metric": r["metric"]}, spec, res["task"], "psf", res["nominal"]["psf"])
               for r in res["samples"]]
-        plots.yield_plot(out / "yield_vs_n.png", ok, f"PSF level: {res['spec']['psf'] or 'no limit'}")
+        plots.yield_plot(out / "yield_vs_n.png", ok, f"PSF level: {spec_words(res, 'psf') or 'no limit'}")
         _delivered_figure(out, res)
 
 
 def _delivered_figure(out: Path, res: dict) -> None:
     """delivered.png: the task's primary delivered metric over the parts, per PSF the network was told."""
-    from doefab.tolerance.spec import DELIVERED, PRIMARY, spec_limits
+    from doefab.reconstruction.metrics import DISPLAY
+    from doefab.tolerance.spec import PRIMARY, spec_limits
 
     task = res["task"]
     if task not in PRIMARY or not res["samples"] or "network" not in res["samples"][0]:
@@ -245,79 +232,18 @@ def _delivered_figure(out: Path, res: dict) -> None:
     if not values:
         return
     nominal = res["nominal"].get("network", {}).get("nominal_psf", {})
-    unit = {"db": "dB"}.get(DELIVERED[task][m][0], DELIVERED[task][m][0])
+    name, unit = DISPLAY[task][m]
     limit = next((lim for _, metric, lim, _ in spec_limits(res["budget"].get("spec", {}), task, "network", nominal)
                   if metric == m), None)
-    plots.distribution_plot(out / "delivered.png", values, unit, f"delivered {m}", limit,
+    plots.distribution_plot(out / "delivered.png", values, unit, f"delivered {name}", limit,
                             nominal.get(m, float("nan")))
 
 
-def summary_lines(res: dict) -> list[str]:
-    """The report's opening: what the part delivers, its yield, what limits it and what would buy the most."""
-    from doefab.tolerance.montecarlo import interval_text
-
-    lines = []
-    s = res.get("summary")
-    if s:
-        m = s["metric"]
-        lines.append(f"- **PSF metric** {m['mean']:.3f} (95 % interval of the mean {interval_text(m['ci95'])}; "
-                     f"nominal {res['nominal']['psf']['psf_metric']:.3f}), {s['yield']['n']} parts.")
-        y = s["yield"]
-        lines.append(f"- **Yield at PSF level** ({res['spec']['psf'] or 'no limit'}): {y['value']:.2f}, 95 % Wilson "
-                     f"interval {interval_text(y['ci95'], '.2f')}.")
-        for label, v in s.get("network", {}).items():
-            ms = ", ".join(f"{k} {d['mean']:.4g} (mean's interval {interval_text(d['ci95'], '.4g')}"
-                           + (f"; parts 5–95 %: {d['parts_p05_p50_p95'][0]:.4g}–{d['parts_p05_p50_p95'][2]:.4g}"
-                              if "parts_p05_p50_p95" in d and len(res.get("samples", [])) >= 5 else "") + ")"
-                           for k, d in v["metrics"].items())
-            lines.append(f"- **Delivered, network given the {label.replace('_psf', ' PSF').replace('_', ' ')}**: {ms}; yield "
-                         f"({res.get('spec_by_label', {}).get(label) or res['spec']['network'] or 'no limit'}) "
-                         f"{v['yield']['value']:.2f} ({interval_text(v['yield']['ci95'], '.2f')}).")
-    lines += _limits_lines(res)
-    lines += [f"- **Warning:** {w}" for w in res.get("warnings", [])]
-    used = res.get("budget", {}).get("defaults_used")
-    if used:
-        lines.append(f"- Budget keys missing from {res.get('budget_file', 'the budget')}, taken from the default "
-                     f"budget: {', '.join(used)}.")
-    lines.append(f"- Aperture stop: {res['stop']}.")
-    return lines
-
-
-def _limits_lines(res: dict) -> list[str]:
-    """"Limited by" and "would buy the most": ranked by the delivered primary metric where the tornado judged
-    the errors through the network (network told the nominal PSF), else by the PSF metric."""
-    from doefab.tolerance.spec import PRIMARY, delivered_loss
-
-    rows = res["tornado"]
-    judged = [r for r in rows if "network_delta" in r and "nominal_psf" in r["network_delta"]]
-    task = res["task"]
-    if judged and task in PRIMARY:
-        metric = PRIMARY[task]
-        losses = [(delivered_loss(task, r["network_delta"]["nominal_psf"]), r) for r in judged]
-        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > 0), key=lambda t: -t[0])[:3]
-        unit = {"psnr_highlight": "dB", "psnr": "dB", "mae": "m"}.get(metric, "")
-        if not top:
-            return []
-        scope = ("" if len(judged) == len(rows) else
-                 f"; the {len(judged)} errors that cost the most PSF metric were judged through the network")
-        return ["- **Limited by** (delivered " + metric + ", network told the nominal PSF" + scope + ") " + "; ".join(
-                    f"{r['error']} at {r['value']:.3g} {r['unit']} ({loss:.3g} {unit} worse)" for loss, r in top) + ".",
-                f"- **Would buy the most:** {REMEDY.get(top[0][1]['error'], top[0][1]['error'])} (recovers up to "
-                f"{top[0][0]:.3g} {unit} of {metric}; PSF metric {-top[0][1]['delta']:.3f})."]
-    top = [r for r in rows if r["delta"] < 0][:3]
-    if not top:
-        return []
-    return ["- **Limited by** (PSF metric) " + "; ".join(
-                f"{r['error']} at {r['value']:.3g} {r['unit']} ({r['delta']:+.3f})" for r in top) + ".",
-            f"- **Would buy the most:** {REMEDY.get(top[0]['error'], top[0]['error'])} "
-            f"(recovers up to {-top[0]['delta']:.3f} of the PSF metric)."]
-
-
 def _markdown(res: dict) -> list[str]:
-    from doefab.tolerance.reporttext import body_lines
-
     reused = res.get("steps_reused") or []
     note = ([f"Reused from the interrupted run of the same study: {', '.join(reused).replace('_', ' ')} (their run "
              f"times are that run's).", ""] if reused else [])
-    return [f"# Tolerance study of {res['design']}", "", *summary_lines(res), "", *note, *body_lines(res)]
+    lead = lead_text(res)
+    return [f"# Tolerance study of {res['design']}", "", *([lead, ""] if lead else []), *summary_lines(res), "", *note,
+            *body_lines(res)]
 

@@ -137,54 +137,69 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
     return rows
 
 
-def _bar(total, desc, progress):
+def _bar(total, desc, progress, unit="part"):
+    """A progress line (tqdm: what runs, k/n done, elapsed and time left), None when ``progress`` is off."""
     if not progress:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="part")
+    return tqdm(total=total, desc=desc, unit=unit)
 
 
 def quantization_study(design_dir, levels=None, supersample: int = 1,
-                       networks: bool = False, weights_dir=None) -> list[dict]:
+                       networks: bool = False, weights_dir=None, progress: bool = True) -> list[dict]:
     """The same design at continuous (None) and N-level quantization, on the PSF metric (and, with
     ``networks``, through the network given the nominal and the quantized design's PSF). ``levels``: default
     continuous, the design's L and every fab level count below it. Each row says what it was quantized from: the
     continuous design when the folder keeps it (``height.npy`` or radial knots), else the design's L-level map
-    re-quantized (fewer levels from L are not what a coarser design would be)."""
-    from doefab.fabrication.levels import quantize_levels
+    re-quantized (fewer levels from L are not what a coarser design would be). ``progress``: a progress line
+    per level count judged."""
     from doefab.fabrication.process import LEVEL_CHOICES
 
     judge = judge_for(design_dir, supersample)
     d = judge.design
     if levels is None:
         levels = (None, *sorted((n for n in LEVEL_CHOICES if n <= d.n_levels), reverse=True))
-    rows = []
     height = continuous_height(d)
-    mapped = f"the {d.n_levels}-level map"
-    source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
+    bar = _bar(len(levels), "quantization study" + (" (networks)" if networks else ""), progress, unit="level count")
+    rows = []
     for n in levels:
-        if n is None and height is None:
-            rows.append({"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
-                         "l1_to_nominal": float("nan"), "source": f"n/a: the folder keeps only {mapped}"})
-            continue
-        h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
-        if n is None:
-            h = np.mod(height, h2pi)
-        else:
-            lv = quantize_levels(d.height if height is None else height, d.camera, n)
-            h = lv.astype(np.float64) * h2pi / n
-        if supersample > 1:
-            h = np.kron(h, np.ones((supersample, supersample)))
-        net = (network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
-               if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
-        row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
-               else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
-               **judge.score(judge.psf_from_height(h))}
-        if networks:
-            row["network"] = net
-        rows.append(row)
+        if bar is not None:
+            bar.set_postfix(levels="continuous" if n is None else n)
+        rows.append(_quantized_row(design_dir, judge, height, n, supersample, networks, weights_dir))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     return rows
+
+
+def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_dir) -> dict:
+    """One row of the quantization study: the design quantized to ``n`` levels (None: continuous)."""
+    from doefab.fabrication.levels import quantize_levels
+
+    d = judge.design
+    mapped = f"the {d.n_levels}-level map"
+    if n is None and height is None:
+        return {"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
+                "l1_to_nominal": float("nan"), "source": f"n/a: the folder keeps only {mapped}"}
+    h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
+    if n is None:
+        h = np.mod(height, h2pi)
+    else:
+        lv = quantize_levels(d.height if height is None else height, d.camera, n)
+        h = lv.astype(np.float64) * h2pi / n
+    if supersample > 1:
+        h = np.kron(h, np.ones((supersample, supersample)))
+    net = (network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
+           if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
+    source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
+    row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
+           else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
+           **judge.score(judge.psf_from_height(h))}
+    if networks:
+        row["network"] = net
+    return row
 
 
 def continuous_height(design):
