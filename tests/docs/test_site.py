@@ -297,3 +297,10 @@ def test_every_command_the_readme_and_the_guide_write_parses(page):
         except SystemExit as exc:  # --help exits 0
             if exc.code != 0:
                 raise AssertionError(f"{page}: `{c}` does not parse (exit {exc.code})") from None
+
+
+def test_the_readme_is_a_front_page():
+    """The README stays a front page: at most 200 lines, opening with the two commands."""
+    lines = (REPO / "README.md").read_text().splitlines()
+    assert len(lines) <= 200, f"README.md has {len(lines)} lines"
+    assert lines[0].startswith("# ") and lines[2] == "<!-- commands-start -->"
