@@ -33,7 +33,7 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
 
     from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
     from doefab.pipeline.stages import resolve
-    from doefab.pipeline.system import phase_step_fix, pitch_fix, source_phase_step
+    from doefab.pipeline.sampling import phase_step_fix, pitch_fix, source_phase_step
 
     res = resolve(scene)
     cam = res["camera"]

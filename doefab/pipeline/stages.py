@@ -18,7 +18,7 @@ from pathlib import Path
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import TASK_DESIGN, Scene
-from doefab.pipeline.system import resolve, scene_holder, scene_sensor
+from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress",
            "quick_sampling"]
@@ -32,20 +32,16 @@ def _h(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def quick_sampling(doe_pixels: int, sampling: int) -> int:
-    """The design grid's coarsening under ``--quick``: of the factors up to 8 that divide the grid and are
-    multiples of the scene's own ``sampling``, the one nearest 4 (the larger on a tie); the scene's own when none
-    is. Example: ``quick_sampling(3200, 1) == 4``, ``quick_sampling(2234, 1) == 2`` (2234 = 2 · 1117)."""
-    fits = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0]
-    return min(fits, key=lambda d: (abs(d - 4), -d)) if fits else sampling
-
-
-def _design_run(settings: dict, quick: bool) -> tuple[int, int]:
+def _design_run(settings: dict, quick: bool, quick_factor: int | None = None) -> tuple[int, int]:
     """(iterations, sampling) of the design stage's run for these settings (quick: at most 10 iterations on a grid
-    about 4× coarser, by a factor that divides it: ``quick_sampling``)."""
+    about 4× coarser, by ``quick_factor``: the factor ``resolve`` found that divides the grid and keeps the PSF
+    routes' sampling, ``system.quick_sampling``)."""
     iters = min(int(settings["iterations"]), 10) if quick else int(settings["iterations"])
     sampling = int(settings["sampling"])
-    return iters, quick_sampling(int(settings["camera"]["doe_pixels"]), sampling) if quick else sampling
+    if quick:
+        sampling = quick_factor if quick_factor is not None else quick_sampling(
+            int(settings["camera"]["doe_pixels"]), sampling)
+    return iters, sampling
 
 
 def redesign_note(res: dict, quick: bool) -> str:
@@ -53,7 +49,7 @@ def redesign_note(res: dict, quick: bool) -> str:
     committed design's own wall time by iterations and grid pixels) and how large its checkpoint grows."""
     s, c = res["settings"], res["committed_settings"]
     why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c[k]})" for k in res["differ"])
-    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick), _design_run(c, False)
+    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick, res.get("quick_sampling")), _design_run(c, False)
     grid, c_grid = s["camera"]["doe_pixels"] // sampling, c["camera"]["doe_pixels"] // c_sampling
     took = float(res["committed"].extra.get("wall_time_s") or 0.0)
     minutes = took * iters / max(c_iters, 1) * (grid / max(c_grid, 1)) ** 2 / 60
@@ -87,7 +83,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     else:
         s = res["settings"]
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
-        iters, sampling = _design_run(s, quick)
+        iters, sampling = _design_run(s, quick, res.get("quick_sampling"))
         params = res["task"].params()  # the scene's bands, planes and geometry, bound to its camera
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=sampling,

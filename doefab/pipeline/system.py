@@ -16,12 +16,14 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
+from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
+                                      quick_sampling, sampling_checks)
 from doefab.pipeline.scene import TASK_DESIGN, Scene
 
-__all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m", "is_custom_camera", "system_warnings",
+__all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
+           "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
            "MAX_DOE_PIXELS"]
 
-MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 _PRESET = {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}
 
 
@@ -200,41 +202,6 @@ def defocus_ring_px(cam, params: dict) -> float:
     return float(min(r, params.get("kernel_size", 63) // 2 - 3))
 
 
-def source_phase_step(cam, lam_min: float, z_near: float) -> float:
-    """The largest change of a point source's phase between pupil samples one DOE pitch apart (rad), at the
-    nearest plane and the shortest wavelength: the PSF routes refuse it above ``SOURCE_PHASE_LIMIT``."""
-    import numpy as np
-
-    from doefab.optics.pupil import source_path_difference
-
-    r = np.linspace(0, cam.aperture_diameter / 2, 20001)
-    opd = source_path_difference(r**2, z_near, cam.focus_distance)
-    return float(np.max(np.abs(np.diff(opd))) * (cam.doe_pitch / (r[1] - r[0])) * 2 * math.pi / lam_min)
-
-
-def pitch_fix(cam, pitch_max: float) -> list[str]:
-    """``camera.doe_pitch_um ≤ …`` (a scene's way to a finer pupil sampling: one sample per DOE pixel), when the
-    DOE grid that pitch gives stays within ``system.MAX_DOE_PIXELS``."""
-    um = pitch_max * 1e6 * 0.99  # below the bound after rounding to 3 digits
-    return [f"camera.doe_pitch_um ≤ {um:.3g}"] if cam.aperture_diameter / (um * 1e-6) <= MAX_DOE_PIXELS else []
-
-
-def phase_step_fix(cam, lam_min: float, z_near: float, step: float) -> str:
-    """The scene keys that bring the source's phase step per pupil sample below the limit: a nearest depth
-    farther away, or a finer DOE pitch (the step is proportional to it). The step is the wavefront's slope at the
-    pupil's edge a, 2π p / λ · (a / √(a² + z²) − a / √(a² + f²)) for a point at z nearer than the focus f."""
-    from doefab.optics.psf import SOURCE_PHASE_LIMIT
-
-    if step <= SOURCE_PHASE_LIMIT:
-        return ""
-    a, f = cam.aperture_diameter / 2, cam.focus_distance
-    c = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch) + (0.0 if math.isinf(f) else a / math.hypot(a, f))
-    fixes = [f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m (optics.depths_m)"
-             ] if c < 1 and z_near < f else []
-    fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / step)
-    return " or ".join(fixes) or "a nearest depth farther away"
-
-
 def _checks(scene: Scene, cam, task) -> list[str]:
     """Physics guards: each problem with its key and fix."""
     from doefab.fabrication.process import check_min_feature
@@ -251,7 +218,6 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         except DoefabError as exc:
             out.append(f"camera.doe_pitch_um / fabrication.min_feature_um: {exc}")
     lam_min = min(task.wavelengths(cam))
-    out += _phase_step_checks(cam, lam_min, min(task.depths(cam)))
     alias = lam_min * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
     if k / 2 + 0.5 > alias:
         out.append(f"optics.kernel_px {k} reaches beyond the DOE sampling's alias-free field ({2 * alias - 1:.0f} px "
@@ -278,29 +244,6 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
                    " keep the bands within it")
     return out
-
-
-def _phase_step_checks(cam, lam_min: float, z_near: float) -> list[str]:
-    """The nearest plane's point source must be sampled finely enough by the DOE grid (the design stage's PSF
-    route refuses it otherwise)."""
-    from doefab.optics.psf import SOURCE_PHASE_LIMIT
-
-    step = source_phase_step(cam, lam_min, z_near)
-    if step <= SOURCE_PHASE_LIMIT:
-        return []
-    return [f"optics.depths_m: a point at the nearest plane ({z_near:g} m) changes its phase by {step:.2f} rad "
-            f"between DOE pixels at {lam_min * 1e9:.0f} nm, above the {SOURCE_PHASE_LIMIT:g} rad the PSF routes "
-            f"sample: set {phase_step_fix(cam, lam_min, z_near, step)}"]
-
-
-def _sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:
-    """The design grid's coarsening (the scene's ``design.sampling``, else the committed design's) must divide
-    the DOE grid: ``doefab run`` would stop at the design stage otherwise (``--quick`` picks a factor that fits)."""
-    from doefab.design.optimize import sampling_problem
-
-    key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
-    problem = sampling_problem(cam.doe_pixels, int(scene.design.get("sampling", cfg.get("sampling", 1))), key)
-    return [problem] if problem else []
 
 
 def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
@@ -341,8 +284,10 @@ def resolve(scene: Scene) -> dict:
         except DoefabError as exc:
             problems.append(str(exc))
         else:
+            factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
-                         + _sampling_checks(scene, cam, cfg) + _holder_checks(scene, cam))
+                         + sampling_checks(scene, cam, cfg) + design_factor_checks(scene, cam, task, factor)
+                         + _holder_checks(scene, cam))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
@@ -353,6 +298,8 @@ def resolve(scene: Scene) -> dict:
             "differ": differ, "committed": committed, "committed_settings": committed_settings,
             "custom_camera": is_custom_camera(scene), "split": scene.camera.get("split", "vertical"),
             "stop": _stop(cam), "sensor": sensor, "die_m": scene_die_m(scene, cam),
+            "quick_sampling": quick_sampling(cam.doe_pixels, int(settings["sampling"]),
+                                             lambda d: not design_grid_problems(cam, task, d)),
             "warnings": system_warnings(cam, task) + _sensor_warnings(scene, sensor)}
 
 

@@ -4,6 +4,7 @@ and ``--quick`` coarsens the grid only by a factor that divides it (a sweep of l
 
 import itertools
 import math
+import re
 
 import pytest
 
@@ -11,7 +12,7 @@ from doefab.design.optimize import _design_camera
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import load_scene
 from doefab.pipeline.stages import _design_run, quick_sampling
-from doefab.pipeline.system import resolve
+from doefab.pipeline.system import design_camera, resolve
 
 
 def _scene(tmp_path, focal_mm, f_number, pitch_um, sampling=None):
@@ -47,7 +48,7 @@ def test_doctor_refuses_what_the_design_stage_would(tmp_path, focal_mm, f_number
     assert divides, f"doctor passed sampling {sampling} on a {grid}-px grid"
     assert res["camera"].doe_pixels == grid
     for quick in (False, True):  # what the design stage hands the optimiser, run and run --quick
-        iters, used = _design_run(res["settings"], quick)
+        iters, used = _design_run(res["settings"], quick, res["quick_sampling"])
         cam = _design_camera(res["camera"], used)  # the optimiser's own check: raises if it does not divide
         assert cam.doe_pixels * used == grid
 
@@ -74,7 +75,7 @@ def test_issue_camera_doctor_and_quick_run_agree(tmp_path):
     with pytest.raises(DoefabError, match=r"design.sampling 4 must divide the DOE grid \(2234 px\): use 1 or 2"):
         resolve(_scene(tmp_path, 25.0, 2.8, 4.0, 4))
     res = resolve(_scene(tmp_path, 25.0, 2.8, 4.0))
-    assert _design_run(res["settings"], True)[1] == 2
+    assert _design_run(res["settings"], True, res["quick_sampling"])[1] == 2
 
 
 def test_the_die_holds_the_pattern_and_marks_and_no_smaller_one_does(tmp_path, tiny_camera):
@@ -114,3 +115,52 @@ def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
     p.write_text(p.read_text().replace("thread_diameter_mm = 62", "thread_diameter_mm = 30.5"))
     with pytest.raises(DoefabError, match="holder .with the DOE's die and clear aperture.*thread_diameter_mm"):
         resolve(load_scene(p))
+
+
+def _design_grids_accept(res) -> list[str]:
+    """Which of the grids the design stage computes PSFs on (full, the run's, the quick run's) the PSF route itself
+    refuses (``PSFPlan`` raises SamplingError): the independent oracle for what doctor must catch."""
+    import doefab
+    from doefab.errors import SamplingError
+
+    task, cam = res["task"], res["camera"]
+    refused = []
+    for name, factor in (("full", 1), ("run", _design_run(res["settings"], False)[1]),
+                         ("quick", _design_run(res["settings"], True, res["quick_sampling"])[1])):
+        try:
+            doefab.PSFPlan(design_camera(cam, factor), task.wavelengths(cam), task.depths(cam), task.kernel_size)
+        except SamplingError as exc:
+            refused.append(f"{name} ({factor}): {exc}")
+    return refused
+
+
+def _depth_scene(tmp_path, near, pitch_um=None, sampling=None):
+    cam = "" if pitch_um is None else f"[camera]\ndoe_pitch_um = {pitch_um}\n"
+    des = "" if sampling is None else f"[design]\nsampling = {sampling}\n"
+    p = tmp_path / f"d_{near}_{pitch_um}_{sampling}.toml"
+    p.write_text(f'task = "depth"\nstages = ["design"]\n{cam}[optics]\ndepths_m = [{near}, 1.5, 2.0, 3.0]\n{des}')
+    return p
+
+
+DEPTH_SWEEP = list(itertools.product((0.12, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0), (None, 4.0, 8.0), (None, 1, 4)))
+
+
+@pytest.mark.parametrize("near,pitch_um,sampling", DEPTH_SWEEP)
+def test_doctor_passes_only_what_every_design_grid_can_sample(tmp_path, near, pitch_um, sampling):
+    """Depth scenes with near planes, other pitches and design samplings: when doctor passes, the PSF route accepts
+    the full grid, the run's design grid and the quick run's; when doctor refuses for sampling, its first
+    suggested fix, applied, passes doctor and every grid the route computes."""
+    path = _depth_scene(tmp_path, near, pitch_um, sampling)
+    try:
+        res = resolve(load_scene(path))
+    except DoefabError as exc:
+        msg = str(exc)
+        if "must divide" in msg or ("phase" not in msg and "alias" not in msg):
+            return  # refused for another reason (tested elsewhere)
+        fix = re.search(r"set (design.sampling = \d+|a nearest depth ≥ [\d.]+ m)", msg)
+        assert fix, msg
+        fixed = (_depth_scene(tmp_path, float(fix[1].split("≥ ")[1][:-2]), pitch_um, sampling)
+                 if "depth" in fix[1] else _depth_scene(tmp_path, near, pitch_um, int(fix[1].split("= ")[1])))
+        assert not _design_grids_accept(resolve(load_scene(fixed))), (msg, fix[1])
+        return
+    assert not _design_grids_accept(res), near

@@ -130,30 +130,3 @@ def test_a_scene_and_its_budget_saved_with_a_byte_order_mark_load(tmp_path):
     p.write_bytes('\ufefftask = "depth"\n[tolerance]\nbudget = "b.toml"\n'.encode())
     assert load_scene(p).task == "depth"
     assert load_budget(tmp_path / "b.toml")["etch"]["systematic_sigma_percent"] == 2.0
-
-
-def _source_step_row(path):
-    from doefab.pipeline.doctor import diagnose
-
-    rows = diagnose(load_scene(path), precision_check=False)
-    return next(r for r in rows if r["check"].startswith("source phase step"))
-
-
-def test_doctor_and_run_name_the_scene_keys_that_fix_the_source_phase_step(tmp_path):
-    """A depth scene whose nearest plane is too near for one pupil sample per DOE pixel: the scene check that
-    doctor and run share refuses it (run would stop in the design stage) with a fix made of scene keys (a farther
-    nearest depth, a finer DOE pitch), not a flag a scene cannot set; each suggested value, put in the scene,
-    passes the check and doctor's sampled-wavefront row."""
-    from doefab.pipeline.system import resolve
-
-    with pytest.raises(DoefabError) as exc:
-        resolve(load_scene(_scene(tmp_path, "[optics]\ndepths_m = [0.15, 1.0, 2.0]", task="depth")))
-    msg = str(exc.value)
-    assert "pupil" not in msg, msg
-    m = re.search(r"set a nearest depth ≥ ([\d.]+) m \(optics.depths_m\) or camera.doe_pitch_um ≤ ([\d.]+)$", msg)
-    assert m, msg
-    depth, pitch = float(m[1]), float(m[2])
-    assert 0.15 < depth < 1.0 and pitch < 5.4
-    assert _source_step_row(_scene(tmp_path, f"[optics]\ndepths_m = [{depth}, 1.0, 2.0]", task="depth"))["ok"]
-    finer = f"[camera]\ndoe_pitch_um = {pitch}\n[optics]\ndepths_m = [0.15, 1.0, 2.0]"
-    assert _source_step_row(_scene(tmp_path, finer, task="depth"))["ok"]

@@ -1,0 +1,124 @@
+"""The design grid's sampling: what the PSF routes accept on the full DOE grid and on the coarser grid the design
+stage optimises on (``design.sampling``, ``--quick``'s factor), and the scene keys that fix what they refuse.
+
+``resolve`` runs these checks before any work, so ``doefab doctor`` refuses exactly the scenes the design stage
+would stop on: a sampling that does not divide the grid, a nearest plane whose point source changes its phase too
+fast between (design) pixels, a window beyond the design grid's alias-free field. ``quick_sampling`` picks the
+``--quick`` coarsening among the factors that pass.
+"""
+
+from __future__ import annotations
+
+import math
+
+from doefab.pipeline.scene import Scene
+
+__all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
+           "design_grid_problems", "design_factor_checks", "sampling_checks"]
+
+MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
+
+
+def source_phase_step(cam, lam_min: float, z_near: float) -> float:
+    """The largest change of a point source's phase between pupil samples one DOE pitch apart (rad), at the
+    nearest plane and the shortest wavelength: the PSF routes refuse it above ``SOURCE_PHASE_LIMIT``."""
+    import numpy as np
+
+    from doefab.optics.pupil import source_path_difference
+
+    r = np.linspace(0, cam.aperture_diameter / 2, 20001)
+    opd = source_path_difference(r**2, z_near, cam.focus_distance)
+    return float(np.max(np.abs(np.diff(opd))) * (cam.doe_pitch / (r[1] - r[0])) * 2 * math.pi / lam_min)
+
+
+def pitch_fix(cam, pitch_max: float) -> list[str]:
+    """``camera.doe_pitch_um ≤ …`` (a scene's way to a finer pupil sampling: one sample per DOE pixel), when the
+    DOE grid that pitch gives stays within ``system.MAX_DOE_PIXELS``."""
+    um = pitch_max * 1e6 * 0.99  # below the bound after rounding to 3 digits
+    return [f"camera.doe_pitch_um ≤ {um:.3g}"] if cam.aperture_diameter / (um * 1e-6) <= MAX_DOE_PIXELS else []
+
+
+def phase_step_fix(cam, lam_min: float, z_near: float, step: float, factor: int = 1) -> str:
+    """The scene keys that bring the source's phase step per pupil sample below the limit on ``cam``'s grid (a
+    design grid coarsened by ``factor``: the DOE pitch it suggests is divided by it): a nearest depth farther
+    away, or a finer DOE pitch (the step is proportional to it). The step is the wavefront's slope at the pupil's
+    edge a, 2π p / λ · (a / √(a² + z²) − a / √(a² + f²)) for a point at z nearer than the focus f."""
+    from doefab.optics.psf import SOURCE_PHASE_LIMIT
+
+    if step <= SOURCE_PHASE_LIMIT:
+        return ""
+    a, f = cam.aperture_diameter / 2, cam.focus_distance
+    c = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch) + (0.0 if math.isinf(f) else a / math.hypot(a, f))
+    fixes = [f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m (optics.depths_m)"
+             ] if c < 1 and z_near < f else []
+    fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / step / factor)
+    return " or ".join(fixes) or "a nearest depth farther away"
+
+
+def quick_sampling(doe_pixels: int, sampling: int, fits=None) -> int:
+    """The design grid's coarsening under ``--quick``: of the factors up to 8 that divide the grid, are multiples
+    of the scene's own ``sampling`` and pass ``fits(factor)`` (the PSF routes' sampling at that grid), the one
+    nearest 4 (the larger on a tie); the scene's own when none is. Example: ``quick_sampling(3200, 1) == 4``,
+    ``quick_sampling(2234, 1) == 2`` (2234 = 2 · 1117)."""
+    ok = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0 and (fits is None or fits(d))]
+    return min(ok, key=lambda d: (abs(d - 4), -d)) if ok else sampling
+
+
+def design_camera(cam, factor: int):
+    """The camera the design stage optimises on: the DOE grid coarsened by ``factor`` (pitch × factor)."""
+    return cam if factor == 1 else cam.replace(doe_pixels=cam.doe_pixels // factor, doe_pitch=cam.doe_pitch * factor)
+
+
+def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:
+    """What the PSF routes would refuse on the design grid coarsened by ``factor``: a point at the nearest plane
+    sampled too coarsely, or the window beyond the alias-free field."""
+    from doefab.optics.psf import SOURCE_PHASE_LIMIT
+
+    dcam = design_camera(cam, factor)
+    lam_min, z_near = min(task.wavelengths(cam)), min(task.depths(cam))
+    out = []
+    step = source_phase_step(dcam, lam_min, z_near)
+    if step > SOURCE_PHASE_LIMIT:
+        out.append(("step", step))
+    alias = lam_min * dcam.sensor_distance / (2 * dcam.doe_pitch) / dcam.sensor_pitch
+    if task.kernel_size / 2 + 0.5 > alias:
+        out.append(("alias", alias))
+    return out
+
+
+def design_factor_checks(scene: Scene, cam, task, factor: int) -> list[str]:
+    """A point at the nearest plane must be sampled finely enough on the full DOE grid and on the design grid
+    (``design.sampling``, else the committed design's), and the window must stay inside the design grid's
+    alias-free field: the design stage computes its PSFs there. Each fix is for the design grid."""
+    from doefab.optics.psf import SOURCE_PHASE_LIMIT
+
+    lam_min, z_near = min(task.wavelengths(cam)), min(task.depths(cam))
+    factor = factor if factor >= 1 and cam.doe_pixels % factor == 0 else 1  # else ``sampling_checks`` says so
+    dcam = design_camera(cam, factor)
+    step, dstep = source_phase_step(cam, lam_min, z_near), source_phase_step(dcam, lam_min, z_near)
+    depth_fix = phase_step_fix(dcam, lam_min, z_near, dstep, factor) if dstep > SOURCE_PHASE_LIMIT else ""
+    if step > SOURCE_PHASE_LIMIT:
+        return [f"optics.depths_m: a point at the nearest plane ({z_near:g} m) changes its phase by {step:.2f} rad "
+                f"between DOE pixels at {lam_min * 1e9:.0f} nm, above the {SOURCE_PHASE_LIMIT:g} rad the PSF "
+                f"routes sample: set {depth_fix}"]
+    bad = design_grid_problems(cam, task, factor)
+    if not bad:
+        return []
+    fits = [d for d in range(1, factor) if cam.doe_pixels % d == 0 and not design_grid_problems(cam, task, d)]
+    key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
+    what = "; ".join(f"a point at the nearest plane changes its phase by {v:.2f} rad between design pixels"
+                     if k == "step" else f"optics.kernel_px {task.kernel_size} reaches beyond the alias-free field "
+                     f"({2 * v - 1:.0f} px)" for k, v in bad)
+    fix = " or ".join([f"design.sampling = {max(fits) if fits else 1}"] + ([depth_fix] if depth_fix else []))
+    return [f"{key} {factor}: the design grid ({cam.doe_pixels // factor} px of {dcam.doe_pitch * 1e6:.3g} µm) is "
+            f"too coarse for the PSF routes ({what}): set {fix}"]
+
+
+def sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:
+    """The design grid's coarsening (the scene's ``design.sampling``, else the committed design's) must divide
+    the DOE grid: ``doefab run`` would stop at the design stage otherwise (``--quick`` picks a factor that fits)."""
+    from doefab.design.optimize import sampling_problem
+
+    key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
+    problem = sampling_problem(cam.doe_pixels, int(scene.design.get("sampling", cfg.get("sampling", 1))), key)
+    return [problem] if problem else []
