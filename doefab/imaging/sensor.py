@@ -34,13 +34,17 @@ RESPONSE_SOURCE = ("Canon EOS 5D Mark II RGB sensitivities (rawtoaces), shipped 
                    "characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
 
 
-def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
+def sensor_response(wavelengths, source=DEFAULT_RESPONSE, every_channel: bool = False) -> np.ndarray:
     """[3, C] float32 RGB response for bands at ``wavelengths`` (metres, within the curves' range), linearly
     interpolated from ``source`` (a camera name of ``imaging.responses.RESPONSES`` or a CSV path).
 
     Normalised so that a flat spectrum of radiance 1 in every band gives 1 in the most sensitive channel
-    (summed over the given bands): a white spectral scene and an RGB scene of value 1 expose alike. Bands that
-    one of R, G, B barely sees (on average below ``MIN_CHANNEL_FRACTION`` of its peak) are refused.
+    (summed over the given bands): a white spectral scene and an RGB scene of value 1 expose alike. With
+    ``every_channel`` (a spectral task's bands, which every channel must image), bands that one of R, G, B barely
+    sees (on average below ``MIN_CHANNEL_FRACTION`` of its peak) are refused; without it a narrow-band source (a
+    633 nm laser, which blue does not see) is fine.
+
+    Example: ``sensor_response([633e-9])`` is [3, 1], red the largest.
     """
     lam = np.asarray(wavelengths, np.float64).ravel()
     if lam.size == 0 or not np.all(np.isfinite(lam)):
@@ -54,7 +58,8 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE) -> np.ndarray:
                           f"within it, or give a response that covers them")
     peak = curves.max(axis=1)  # > 0 for every channel (responses.py refuses a dark one)
     seen = np.stack([np.interp(lam, src_lam, c / p) for c, p in zip(curves, peak)])  # each channel ≤ 1: no overflow
-    _check_channels_see(seen, lam, source)
+    if every_channel:
+        _check_channels_see(seen, lam, source)
     t = seen * (peak / peak.max())[:, None]  # the channels' relative gains, as the curves give them
     return (t / t.sum(axis=1).max()).astype(np.float32)
 
@@ -153,8 +158,9 @@ class Sensor:
         return PoissonGaussian(float(self.full_well_e), float(self.read_noise_e))
 
     def rgb(self, wavelengths) -> np.ndarray:
-        """[3, C] response on the bands at ``wavelengths`` (metres; ``sensor_response``)."""
-        return sensor_response(wavelengths, self.response)
+        """[3, C] response on a spectral task's bands at ``wavelengths`` (metres; ``sensor_response``), each of
+        R, G and B required to see them."""
+        return sensor_response(wavelengths, self.response, every_channel=True)
 
     def has_default_response(self) -> bool:
         """Whether the response's curves are the default camera's (by content, not by name)."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from doefab.errors import DoefabError
-from doefab.imaging.responses import RESPONSES, response_curves, response_label, response_sha256
+from doefab.imaging.responses import DEFAULT_RESPONSE, RESPONSES, response_curves, response_label, response_sha256
 from doefab.imaging.sensor import Sensor, sensor_response
 
 BANDS = np.arange(400, 701, 10) * 1e-9
@@ -130,9 +130,21 @@ def test_each_channel_must_see_the_bands(tmp_path, level, ok):
         assert sensor_response(BANDS, path)[2].min() > 0
         return
     with pytest.raises(DoefabError, match=r"barely sees the bands 400–700 nm: .*B 0\.5 % .*≥ 1 %"):
-        sensor_response(BANDS, path)
+        sensor_response(BANDS, path, every_channel=True)
     with pytest.raises(DoefabError, match="barely sees"):  # the sensor a scene or a flag names checks the same
         Sensor(response=path).rgb(BANDS)
+
+
+@pytest.mark.parametrize("nm", [450.0, 550.0, 633.0, 656.0, 700.0])
+def test_a_narrow_band_source_needs_no_channel_it_misses(nm):
+    """A single line (a HeNe laser at 633 nm, the RGB task's 656 nm) is imaged by the channels that see it: the
+    API does not ask blue to see red light. The channel that sees it most gives 1 (the normalisation)."""
+    t = sensor_response([nm * 1e-9])
+    lam, curves = response_curves(DEFAULT_RESPONSE)
+    ref = np.array([np.interp(nm * 1e-9, lam, c) for c in curves])  # independent: the raw curves at that line
+    assert t.shape == (3, 1) and t[:, 0].max() == pytest.approx(1.0)
+    assert int(np.argmax(t[:, 0])) == int(np.argmax(ref))
+    np.testing.assert_allclose(t[:, 0] / t[:, 0].max(), ref / ref.max(), rtol=1e-5, atol=1e-7)
 
 
 @pytest.mark.parametrize("rows, needle", [
