@@ -387,10 +387,7 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     keep = [f for f in RESUMABLE.get(name, ()) if same and (out / f).exists()]
     out.mkdir(parents=True, exist_ok=True)
     theirs = foreign_entries(out, old)
-    for child in out.iterdir():
-        if child.name in keep or child.name == MARKER or child.name in theirs:
-            continue
-        shutil.rmtree(child) if child.is_dir() and not child.is_symlink() else child.unlink()
+    clear_stage(out, set(keep) | {MARKER}, theirs)
     if theirs:
         print(f"[doefab run] {name}: kept what doefab did not write in {out}: {', '.join(sorted(theirs))}",
               flush=True)
@@ -403,19 +400,35 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
         info["why"] = info.get("why", "") + f"; continued from the interrupted run's {', '.join(keep)}"
     mark_folder(out, STAGE_KIND, stage=name)
     info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True,
-                files=sorted(c.name for c in out.iterdir() if c.name not in theirs and c.name != "stage.json"))
+                files=sorted(set(stage_files(out)) - theirs - {"stage.json", MARKER}))
     atomic_write_json(rec_path, info)
     return info
 
 
+def stage_files(out: Path) -> list[str]:
+    """Every file under stage folder ``out``, as a path relative to it ('/'-separated)."""
+    return sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() or p.is_symlink())
+
+
 def foreign_entries(out: Path, record: dict) -> set[str]:
-    """The names in stage folder ``out`` that doefab did not write: those missing from the last finished run's
-    ``files`` list, and those an interrupted run recorded as not its own (``foreign``). A record without a list (a
-    run made before stages listed their files) names none."""
+    """The files under stage folder ``out`` (relative paths, subfolders included) that doefab did not write:
+    those missing from the last finished run's ``files`` list, and those an interrupted run recorded as not its
+    own (``foreign``). A record without a list (a run made before stages listed their files) names none."""
     if not out.is_dir():
         return set()
     theirs = set(record.get("foreign") or ())
     if isinstance(record.get("files"), list):
         ours = set(record["files"]) | {"stage.json", MARKER}
-        theirs |= {c.name for c in out.iterdir() if c.name not in ours}
-    return {n for n in theirs if (out / n).exists()}
+        theirs |= {f for f in stage_files(out) if f not in ours}
+    return {f for f in theirs if (out / f).exists()}
+
+
+def clear_stage(out: Path, keep_top: set, theirs: set) -> None:
+    """Remove what doefab wrote under ``out`` in place (nothing is moved, so an interruption loses nothing): every
+    file but those under a top-level name in ``keep_top`` and the user's ``theirs``; then the folders left empty."""
+    for f in stage_files(out):
+        if f.split("/")[0] not in keep_top and f not in theirs:
+            (out / f).unlink()
+    for d in sorted((p for p in out.rglob("*") if p.is_dir() and not p.is_symlink()), key=lambda p: -len(p.parts)):
+        if d.relative_to(out).parts[0] not in keep_top and not any(d.iterdir()):
+            d.rmdir()

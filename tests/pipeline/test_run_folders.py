@@ -79,10 +79,12 @@ def test_force_keeps_a_file_doefab_did_not_write(tmp_path):
     mine = out / "holder" / "my_measurements.txt"
     mine.write_text("flange 57.02 mm\n")
     (out / "holder" / "my_notes").mkdir()
+    (out / "holder" / "my_notes" / "a.txt").write_text("a")
     run_scene(scene, out, force=("holder",), quick=True, progress=False)
-    assert mine.read_text() == "flange 57.02 mm\n" and (out / "holder" / "my_notes").is_dir()
+    assert mine.read_text() == "flange 57.02 mm\n" and (out / "holder" / "my_notes" / "a.txt").read_text() == "a"
     rec = json.loads((out / "holder" / "stage.json").read_text())
     assert rec["complete"] and "my_measurements.txt" not in rec["files"] and "holder.stl" in rec["files"]
+
     # doefab's own files are still replaced: one that is gone from a rerun's output does not linger
     (out / "holder" / "holder.stl").write_text("stale")
     run_scene(scene, out, force=("holder",), quick=True, progress=False)
@@ -107,3 +109,32 @@ def test_the_holder_stage_is_rebuilt_when_the_holder_code_changes(tmp_path, monk
         fh.write("\n# another flange rule\n")
     assert stage_hash(scene, "holder", {}, True) != before
     assert stage_hash(scene, "design", {}, True) == stage_hash(scene, "design", {}, True)
+
+
+def test_a_users_file_inside_a_subfolder_doefab_writes_is_kept(tmp_path, monkeypatch):
+    """A stage that writes a subfolder (the masks stage's design/, say): on a rerun its own files there are
+    replaced, a file of the user's beside them is kept, and a subfolder left empty is removed."""
+    import doefab.pipeline.stages as stages
+
+    def fake_masks(scene, res, out, quick):
+        (out / "design").mkdir(exist_ok=True)
+        (out / "design" / "levels.npy").write_bytes(b"new")
+        if not (out / "old_only").exists() and not getattr(fake_masks, "second", False):
+            (out / "old_only").mkdir()
+            (out / "old_only" / "x.bin").write_bytes(b"x")
+        return {"status": "ran"}
+
+    monkeypatch.setitem(stages.STAGE_FUNCS, "masks", fake_masks)
+    scene = load_scene(_holder_scene(tmp_path))
+    root = tmp_path / "out"
+    stages.run_stage(scene, None, "masks", root, {}, True, force=False)
+    rec = json.loads((root / "masks" / "stage.json").read_text())
+    assert {"design/levels.npy", "old_only/x.bin"} <= set(rec["files"])
+    note = root / "masks" / "design" / "my_note.txt"
+    note.write_text("mine")
+    fake_masks.second = True
+    stages.run_stage(scene, None, "masks", root, {}, True, force=True)
+    assert note.read_text() == "mine" and (root / "masks" / "design" / "levels.npy").read_bytes() == b"new"
+    assert not (root / "masks" / "old_only").exists()  # doefab's own folder, emptied by the rerun, is gone
+    rec = json.loads((root / "masks" / "stage.json").read_text())
+    assert "design/my_note.txt" not in rec["files"] and "design/levels.npy" in rec["files"]
