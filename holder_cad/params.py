@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from holder_cad import derive
 
-__all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES"]
+__all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES", "given_problem"]
 
 
 class HolderError(ValueError):
@@ -56,6 +56,26 @@ PARAM_RANGES = {
     "washer_recess_mm": (0.05, 3.0, "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
     "max_doe_to_lens_mm": (0.2, 50.0, "the farthest the DOE may sit from the lens"),
 }
+
+
+def given_problem(values: dict) -> str | None:
+    """What is wrong with given holder parameters taken one at a time (None: nothing): each length positive,
+    finite and in its range, the mount and the facet count known. The checks between parameters (the die in its
+    pocket, the thread's teeth, the flange) are :class:`HolderParams`'."""
+    errs = [f"{k} must be a positive length in mm, got {v!r}" for k, v in values.items() if k.endswith("_mm") and (
+        isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0)]
+    if errs:
+        return "; ".join(errs)
+    out = [f"{k} {values[k]:g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in PARAM_RANGES.items()
+           if k in values and values[k] is not None and not lo <= values[k] <= hi]
+    if out:
+        return "; ".join(out)
+    if values.get("mount", "thread") not in ("thread", "slip"):
+        return f"mount must be 'thread' or 'slip', got {values['mount']!r}"
+    seg = values.get("segments", 128)
+    if isinstance(seg, bool) or not isinstance(seg, int) or not 32 <= seg <= 1024:
+        return f"segments must be an integer in 32..1024 (facets per circle), got {seg!r}"
+    return None
 
 
 @dataclass(frozen=True)
@@ -145,23 +165,10 @@ class HolderParams:
 
     def _check_given(self) -> None:
         """Each given length positive, finite and in its range; the mount and the facet count known."""
-        given = [f.name for f in dataclasses.fields(self) if f.name not in self._derived]
-        errs = []
-        for name in given:
-            v = getattr(self, name)
-            if name.endswith("_mm") and (isinstance(v, bool) or not isinstance(v, (int, float))
-                                         or not math.isfinite(v) or v <= 0):
-                errs.append(f"{name} must be a positive length in mm, got {v!r}")
-        if errs:
-            raise HolderError("; ".join(errs))
-        out = [f"{k} {getattr(self, k):g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in
-               PARAM_RANGES.items() if k in given and not lo <= getattr(self, k) <= hi]
-        if out:
-            raise HolderError("; ".join(out))
-        if self.mount not in ("thread", "slip"):
-            raise HolderError(f"mount must be 'thread' or 'slip', got {self.mount!r}")
-        if isinstance(self.segments, bool) or not isinstance(self.segments, int) or not 32 <= self.segments <= 1024:
-            raise HolderError(f"segments must be an integer in 32..1024 (facets per circle), got {self.segments!r}")
+        given = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in self._derived}
+        problem = given_problem(given)
+        if problem:
+            raise HolderError(problem)
 
     def _check_die_and_thread(self) -> None:
         """The die, its pocket, the washers and the thread's teeth: each conflict names a value that works."""

@@ -120,9 +120,9 @@ def main(argv: list[str] | None = None) -> int:
         status, message = EXIT_USAGE, f"error: {exc}"
     except OSError as exc:  # disk full, permissions, a path that vanished: the user's environment
         error = exc
-        where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
-        fix = ("; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)"
-               if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "")
+        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        where = f" {exc.filename}" if getattr(exc, "filename", None) else _output_folder(args) if full else ""
+        fix = "; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)" if full else ""
         status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}{fix}"
     except MemoryError:
         status, message = EXIT_USAGE, "error: out of memory: use a smaller kernel, grid or fewer wavelengths"
@@ -139,6 +139,14 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exception(error)
     print(f"{prog}: {_one_line(message)}", file=sys.stderr)
     return status
+
+
+def _output_folder(args) -> str:
+    """" a file under FOLDER" for the run's output folder (a writer that names no file: a stream, a figure)."""
+    from pathlib import Path
+
+    out = getattr(getattr(args, "outdir", None), "path", None) or getattr(args, "out", None)
+    return f" a file under {Path(out).absolute()}" if out else ""
 
 
 def _will_discard(args) -> bool:

@@ -182,16 +182,14 @@ def load_scene(path: str | Path) -> Scene:
     if hol:
         import dataclasses
 
-        from holder_cad.params import HolderError, HolderParams
+        from holder_cad.params import HolderParams, given_problem
 
         names = {f.name for f in dataclasses.fields(HolderParams)}
         bad = [k for k in hol if k not in names]
         problems += [f"unknown key holder.{k}" for k in bad]
-        if not bad:
-            try:
-                HolderParams(**hol)
-            except (HolderError, TypeError) as exc:
-                problems.append(f"holder: {exc}")
+        problem = None if bad else given_problem(hol)  # each value alone; the holder as a whole, with the DOE's
+        if problem:                                      # die and aperture, is checked by ``system.resolve``
+            problems.append(f"holder: {problem}")
     rec = raw.get("reconstruction", {})
     if "size_px" in rec and _typed(rec["size_px"], "int") and rec["size_px"] % 32:
         problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32")

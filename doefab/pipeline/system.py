@@ -102,8 +102,12 @@ def scene_die_m(scene: Scene, cam) -> float:
     h = {k: scene.holder.get(k, getattr(HolderParams, k)) for k in ("wall_mm", "aperture_margin_mm")}
     aperture_mm = cam.aperture_diameter * 1e3
     holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, **h)) + 1  # the least whole mm whose pocket holds it
-    return smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
+    need = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
                           floor_m=max(12, holder_mm) * 1e-3)
+    given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}
+    if len(given) == 1 and None not in given and given.pop() * 1e-3 >= need - 1e-9:  # a larger square die, given
+        return scene.holder["die_width_mm"] * 1e-3
+    return need
 
 
 def scene_holder(scene: Scene, cam=None) -> dict:
@@ -121,10 +125,23 @@ def _holder_checks(scene: Scene, cam) -> list[str]:
         return []
     from holder_cad.params import HolderError, HolderParams
 
+    params, out = scene_holder(scene, cam), []
+    die_mm, aperture_mm = scene_die_m(scene, cam) * 1e3, cam.aperture_diameter * 1e3
+    sides = [params["die_width_mm"], params["die_height_mm"]]
+    if sides[0] != sides[1] or sides[0] < die_mm - 1e-6:
+        out.append(f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a "
+                   f"square die of at least {die_mm:g} mm (the DOE grid, its marks and the holder's pocket): set both "
+                   f"to {max(die_mm, *sides):g}, or leave them out (they follow the DOE)")
+    if params["clear_aperture_mm"] < aperture_mm * (1 - 1e-6):
+        out.append(f"holder.clear_aperture_mm {params['clear_aperture_mm']:g} is smaller than the DOE's clear "
+                   f"aperture ({aperture_mm:.4g} mm): the holder would clip the DOE; leave it out (it follows the "
+                   f"DOE) or set it to {math.ceil(aperture_mm * 100) / 100:g} or more")
+    if out:
+        return out
     try:
-        HolderParams(**scene_holder(scene, cam))
+        HolderParams(**params)
     except (HolderError, DoefabError) as exc:
-        return [f"holder (with the DOE's die and clear aperture): {exc}"]
+        return [f"holder: {exc}"]
     return []
 
 

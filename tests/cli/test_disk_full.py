@@ -23,3 +23,19 @@ def test_a_full_disk_names_the_whole_path_and_the_fix(tmp_path, monkeypatch, cap
     assert f"cannot read or write {out}" in err and "No space left on device" in err, err
     assert "free space on that disk" in err
     assert err.count("\n") == 1  # one line
+
+
+def test_a_full_disk_in_a_writer_that_names_no_file_names_the_output_folder(tmp_path, monkeypatch, capsys):
+    """A stream or figure writer whose error carries no file name (as writing to a full disk gives): the message
+    names the output folder by its whole path, and the fix."""
+    import doefab.cli.psf as psf_cli
+
+    out = tmp_path / "deep" / "psf"
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")  # no filename, as fh.write gives
+
+    monkeypatch.setattr(psf_cli, "run", lambda args: (setattr(args, "out", str(out)), full())[1])
+    status = main(["psf", "--wavelengths-nm", "550", "--kernel", "31", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2 and f"a file under {out}" in err and "free space on that disk" in err, err

@@ -300,10 +300,14 @@ def test_row14_every_scene_check_before_the_folder_is_created(tmp_path, capsys, 
     assert not (tmp_path / "o").exists()
 
 
-def test_row15_no_stages_says_no_report_was_written(tmp_path, capsys):
-    rc, out, _ = _run(["run", _scene(tmp_path, stages="stages = []"), "--out", tmp_path / "o"], capsys)
+def test_row15_no_report_stage_says_no_report_was_written(tmp_path, capsys):
+    """A scene without the report stage says so (an empty stage list is refused: it would run nothing)."""
+    rc, out, _ = _run(["run", _scene(tmp_path, stages='stages = ["holder"]'), "--out", tmp_path / "o", "--quick"],
+                      capsys)
     assert rc == 0 and "no report written" in out and "report.html" not in out
     assert not (tmp_path / "o" / "report.html").exists()
+    rc, _, err = _run(["run", _scene(tmp_path, stages="stages = []"), "--out", tmp_path / "p"], capsys)
+    assert rc == 2 and "stages" in err and not (tmp_path / "p").exists()
 
 
 def test_row16_empty_out_is_refused(tmp_path, capsys, monkeypatch):

@@ -113,8 +113,29 @@ def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
     assert params["die_width_mm"] == 21.0 and params["clear_aperture_mm"] == pytest.approx(aperture * 1e3)
     HolderParams(**params)
     p.write_text(p.read_text().replace("thread_diameter_mm = 62", "thread_diameter_mm = 30.5"))
-    with pytest.raises(DoefabError, match="holder .with the DOE's die and clear aperture.*thread_diameter_mm"):
+    with pytest.raises(DoefabError, match="holder: .*thread_diameter_mm"):
         resolve(load_scene(p))
+
+
+@pytest.mark.parametrize("holder, needle, works", [
+    ("die_width_mm = 10\ndie_height_mm = 10", "square die of at least 12 mm", "die_width_mm = 12\ndie_height_mm = 12"),
+    ("die_width_mm = 14\ndie_height_mm = 12", "set both to 14", "die_width_mm = 14\ndie_height_mm = 14"),
+    ("clear_aperture_mm = 5", "smaller than the DOE's clear aperture (8.929 mm)", "clear_aperture_mm = 8.93"),
+])
+def test_a_holder_that_disagrees_with_the_doe_is_refused_with_a_value_that_works(tmp_path, holder, needle, works):
+    """The 25 mm f/2.8 lens of the trial (an 8.93 mm DOE): a die smaller than the mask set's, a die that is not
+    square, a hole that would clip the DOE — each refused by doctor with a value that then passes; a larger
+    square die is taken by the mask set too."""
+    base = 'task = "hdr"\nstages = ["design", "masks", "holder"]\n[camera]\nfocal_length_mm = 25.0\n' \
+           'f_number = 2.8\ndoe_pitch_um = 4.0\n[holder]\nthread_diameter_mm = 52\n'
+    p = tmp_path / "h.toml"
+    p.write_text(base + holder + "\n")
+    with pytest.raises(DoefabError, match=re.escape(needle)):
+        resolve(load_scene(p))
+    p.write_text(base + works + "\n")
+    res = resolve(load_scene(p))
+    if "die_width_mm = 14" in works:
+        assert res["die_m"] == pytest.approx(14e-3)
 
 
 def _design_grids_accept(res) -> list[str]:
