@@ -55,9 +55,10 @@ def run(args) -> int:
             raise DoefabError("--verify DIR checks an existing set; --design/--out export one: give one or the other")
         report = verify_mask_set(args.verify, use_klayout=not args.no_klayout)
         print(json.dumps({k: v for k, v in report.items()}, indent=1))
-        print(f"{args.verify}: verified (0 mismatched pixels on every etch layer, nothing outside the pixel grid; "
-              f"chrome, marks and die outline where manifest.json places them within "
-              f"{report['marks']['tolerance_nm']} nm; no other layer)")
+        files = " and ".join([report["gds"]] + ([report["oasis"]["file"]] if "oasis" in report else []))
+        print(f"{args.verify}: verified {files} (0 mismatched pixels on every etch layer, nothing outside the pixel "
+              f"grid; chrome, marks and die outline where manifest.json places them within "
+              f"{report['marks']['tolerance_nm']} nm; geometry only on the layers manifest.json lists)")
         return 0
     if not args.design or not args.out:
         raise DoefabError("give --design DIR and --out DIR (or --verify DIR)")

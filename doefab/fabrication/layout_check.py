@@ -8,19 +8,23 @@ drawing. :func:`layout_problems` compares each (layer, datatype) of the file wit
 the drawing is *extra*, area it lacks is *missing*. A difference counts where it is wider than
 ``TOLERANCE_DBU`` database units (2 nm: a vertex rounded to the 1 nm grid on either side), so a chrome aperture
 moved by 200 µm, a key moved by 1 µm, a deleted mark and a rectangle added anywhere all fail.
-:func:`stray_layers` names every (layer, datatype) that the set does not hold.
+:func:`stray_layers` names every (layer, datatype) that the set does not hold, :func:`unlisted_layers` every
+one whose layer the manifest's ``layers`` and ``other_layers`` do not list (the fab reads a layer's purpose there).
 """
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from doefab.errors import CheckFailed, DoefabError
-from doefab.fabrication.layers import CHROME_LAYER, KEY_LAYER, OUTLINE_LAYER, VERNIER_LAYER, etch_bit
+from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER, VERNIER_LAYER,
+                                      etch_bit)
 from doefab.fabrication.marks import MarkSpec, key_site, mark_layout
 
 __all__ = ["TOLERANCE_DBU", "DBU_NM", "expected_layout", "check_layout", "layout_problems", "stray_layers",
-           "layer_name"]
+           "unlisted_layers", "listed_layers", "layer_name"]
 
 DBU_NM = 1  # the layout's database unit (GDSWriter, manifest ``database_unit_m``)
 # a difference between the file and the manifest's drawing counts where it is wider than this (database units)
@@ -151,11 +155,32 @@ def stray_layers(found: dict[tuple[int, int], list[np.ndarray]], allowed: set) -
     return out
 
 
-def check_layout(found: dict, expected: dict, allowed: set) -> dict:
-    """CheckFailed naming every stray layer and every layer that differs from the manifest's drawing; else the
-    per-layer report."""
+def listed_layers(man: dict) -> set:
+    """The layer numbers the manifest's ``layers`` and ``other_layers`` list (integers, as verification checks)."""
+    return {L.get("layer") for key in ("layers", "other_layers") for L in man[key]}
+
+
+def unlisted_layers(found: dict[tuple[int, int], list[np.ndarray]], listed: set) -> list[str]:
+    """One line per (layer, datatype) of ``found`` whose layer is not in ``listed`` (the manifest's layer numbers):
+    the fab would not know what it is; the fix names the entry to add where it is a marks or outline layer."""
+    out = []
+    for layer, datatype in sorted(key for key in found if key[0] not in listed):
+        entry = {"layer": layer, "purpose": LAYER_PURPOSES.get(layer)}
+        fix = (f"add {json.dumps(entry, ensure_ascii=False)} to its other_layers, or export the set again"
+               if entry["purpose"] and layer != CHROME_LAYER else "export the set again")
+        out.append(f"layer {layer}/{datatype} ({layer_name(layer, datatype)}): {len(found[(layer, datatype)])} "
+                   f"polygon(s) on a layer manifest.json does not list in layers or other_layers (it lists "
+                   f"{', '.join(map(str, sorted(listed)))}): {fix}")
+    return out
+
+
+def check_layout(found: dict, expected: dict, allowed: set, listed: set) -> dict:
+    """CheckFailed naming every stray layer (not in ``allowed``: the (layer, datatype) pairs the set holds), every
+    layer the manifest does not list (``listed``: its layer numbers) and every layer that differs from the
+    manifest's drawing; else the per-layer report."""
     problems, report = layout_problems(found, expected)
-    problems = stray_layers(found, allowed) + problems
+    problems = stray_layers(found, allowed) + unlisted_layers(
+        {k: v for k, v in found.items() if k in allowed}, listed) + problems
     if problems:
         raise CheckFailed(f"{len(problems)} layer(s) differ from what manifest.json describes (tolerance "
                           f"{TOLERANCE_DBU * DBU_NM} nm): {' | '.join(problems)} — {_FIX}")

@@ -6,14 +6,16 @@ design wavelength (``manifest.depth_problems``), each layer listed once in the m
 the manifest says, every etch polygon inside the pixel grid and on it, zero mismatched pixels per etch layer
 (gdstk reader; KLayout's too where installed), Σ 2^m·mask_m reproduces the level map, the chrome aperture, every
 plate's keys, windows, verniers and CD ladder and the die outline equal to what the manifest describes within
-two database units (:mod:`doefab.fabrication.layout_check`), no geometry on a layer the set does not hold, every
-polygon within the vertex cap, the level map's checksum equals the manifest's, OASIS geometry identical to GDS
-(where written, KLayout). A width/space report at the critical dimension lists features below it and isolated
-single pixels.
+two database units (:mod:`doefab.fabrication.layout_check`), no geometry on a layer the set does not hold or the
+manifest does not list, every polygon within the vertex cap, the level map's checksum equals the manifest's. The
+OASIS file, where the set has one, gets every one of these layout checks too (gdstk), and KLayout finds it equal
+to the GDS file on every layer. A width/space report at the critical dimension lists features below it and
+isolated single pixels.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -24,51 +26,12 @@ from doefab.fabrication.bitplanes import bit_plane, rasterize_manhattan
 from doefab.fabrication.klayout_check import klayout_check
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import etch_layer
-from doefab.fabrication.layout_check import check_layout, expected_layout
+from doefab.fabrication.layout_check import check_layout, expected_layout, listed_layers
+from doefab.fabrication.layout_read import LayerPolygons, LayoutFile
 from doefab.fabrication.manifest import depth_problems, fab_readme, manifest_levels
 from doefab.fabrication.process import mask_count
 
-__all__ = ["verify_mask_set", "read_gds_layers", "width_space_report", "preview_names"]
-
-
-class LayerPolygons:
-    """All polygons of one (layer, datatype): concatenated int64 vertices (database units) and counts."""
-
-    def __init__(self, points: np.ndarray, counts: np.ndarray):
-        self.points, self.counts = points, counts
-
-    def __len__(self) -> int:
-        return len(self.counts)
-
-    @property
-    def max_vertices(self) -> int:
-        return int(self.counts.max(initial=0))
-
-    def polygons(self) -> list[np.ndarray]:
-        """Each polygon's (P, 2) vertices."""
-        return np.split(self.points, np.cumsum(self.counts)[:-1]) if len(self.counts) else []
-
-
-def read_gds_layers(path: Path, only: set | None = None) -> dict[tuple[int, int], LayerPolygons]:
-    """Polygons per (layer, datatype) read with gdstk (``only``: read just these (layer, datatype) pairs)."""
-    import gdstk
-
-    lib = gdstk.read_gds(str(path), filter=only)
-    tops = lib.top_level()
-    if len(tops) != 1:
-        raise CheckFailed(f"{path} must hold exactly one top cell, found {len(tops)}")
-    cell = tops[0]
-    scale = lib.unit / lib.precision
-    out = {}
-    for layer, datatype in sorted(lib.layers_and_datatypes()):
-        polys = cell.get_polygons(layer=layer, datatype=datatype)
-        if not polys:
-            continue
-        pts = [p.points for p in polys]
-        counts = np.array([len(q) for q in pts], np.int64)
-        out[(int(layer), int(datatype))] = LayerPolygons(np.rint(np.concatenate(pts) * scale).astype(np.int64),
-                                                         counts)
-    return out
+__all__ = ["verify_mask_set", "width_space_report", "preview_names"]
 
 
 def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int, shape: tuple[int, int], lay: int):
@@ -165,11 +128,15 @@ def _check_manifest(man, mpath: Path) -> None:
 
 
 def _check_listed_once(man: dict, mpath: Path) -> None:
-    """Each layer once across ``layers`` and ``other_layers``: the fab reads one purpose per layer."""
+    """Each layer, a GDS layer number, once across ``layers`` and ``other_layers``: the fab reads one purpose per
+    layer."""
     seen: dict = {}
     for key in ("layers", "other_layers"):
         for i, L in enumerate(man[key]):
             lay = L.get("layer")
+            if isinstance(lay, bool) or not isinstance(lay, int) or not 0 <= lay <= 65535:
+                raise CheckFailed(f"{mpath}: {key}[{i}].layer = {lay!r} is not a GDS layer number (0–65535, e.g. "
+                                  f"100 for the die outline); export the set again")
             if lay in seen:
                 raise CheckFailed(f"{mpath}: {key}[{i}] lists layer {lay!r} ({L.get('purpose')!r}) again, after "
                                   f"{seen[lay]}: each layer must be listed once; delete the repeated entry or export "
@@ -231,19 +198,39 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
                               f"copied-in-part set); export it again with doefab masks --force")
         _check_readme(man, folder / "README.txt")
     levels = _level_map(folder, man, levels, n_levels)
-    gds = folder / man["files"]["gds"]
     expected = expected_layout(man, n_masks)  # chrome, marks and outline as the manifest describes them
-    etch_keys = {(etch_layer(b), 0) for b in range(n_masks)}
-    others = _read(gds, _layers_in(gds) - etch_keys)  # chrome, marks, outline and anything stray: small
-    report: dict = {"gds": gds.name, "layers": {}, "ok": True}
-    report["marks"] = check_layout({k: p.polygons() for k, p in others.items()}, expected, set(expected) | etch_keys)
-    _check_cap(others, int(man["vertex_cap"]))
-    report["marks_present"] = True
-    report["layers"] = _check_etch_layers(gds, man, levels, n_levels)
-    report["levels_reproduced"] = True
+    report: dict = {"gds": man["files"]["gds"], "ok": True}
+    verified: dict = {}  # etch layer → (SHA-256 of its vertices, file) once it has passed
+    report.update(_check_layout_file(LayoutFile(folder / man["files"]["gds"]), man, levels, n_levels, expected,
+                                     verified))
+    report["marks_present"] = report["levels_reproduced"] = True
+    if man["files"].get("oasis"):  # the same checks: the fab may write either file
+        oasis = LayoutFile(folder / man["files"]["oasis"], oasis=True)
+        report["oasis"] = {"file": oasis.path.name,
+                           **_check_layout_file(oasis, man, levels, n_levels, expected, verified)}
     if use_klayout:
         report["klayout"] = klayout_check(folder, man, levels, n_levels, expected)
     return report
+
+
+def _check_layout_file(layout: LayoutFile, man: dict, levels: np.ndarray, n_levels: int, expected: dict,
+                       verified: dict) -> dict:
+    """Every layer of one layout file (GDSII or OASIS) read with gdstk: no stray or unlisted layer, the chrome,
+    marks and outline as the manifest draws them (``expected``), the vertex cap, each etch layer equal to its bit
+    plane of ``levels`` (``verified``: see :func:`_check_etch_layers`); the report (``marks``, ``layers``), else
+    CheckFailed naming the file and the layer."""
+    etch_keys = {(etch_layer(b), 0) for b in range(mask_count(n_levels))}
+    try:
+        others = layout.read(layout.layers() - etch_keys)  # chrome, marks, outline and anything stray: small
+        marks = check_layout({k: p.polygons() for k, p in others.items()}, expected, set(expected) | etch_keys,
+                             listed_layers(man))
+        _check_cap(others, int(man["vertex_cap"]))
+        return {"marks": marks, "layers": _check_etch_layers(layout, man, levels, n_levels, verified)}
+    except CheckFailed as exc:
+        msg = str(exc)
+        raise CheckFailed(msg if msg.startswith(str(layout.path)) else f"{layout.path}: {msg}") from None
+    finally:
+        layout.close()
 
 
 def _level_map(folder: Path, man: dict, levels, n_levels: int) -> np.ndarray:
@@ -272,67 +259,62 @@ def _level_map(folder: Path, man: dict, levels, n_levels: int) -> np.ndarray:
 def _check_cap(layers: dict, cap: int) -> None:
     for key, p in layers.items():
         if p.max_vertices > cap:
-            raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap}")
+            raise CheckFailed(f"layer {key[0]}/{key[1]}: a polygon has {p.max_vertices} vertices, over the cap {cap} "
+                              f"(manifest.json vertex_cap); export the set again")
 
 
-def _check_etch_layers(gds: Path, man: dict, levels: np.ndarray, n_levels: int) -> dict:
-    """Each etch layer rasterised from the file equals its bit plane of ``levels`` (as drawn), and Σ 2^m·mask_m
-    reproduces the level map; the per-layer report."""
+def _etched(polys: LayerPolygons, man: dict, shape: tuple[int, int], lay: int) -> np.ndarray:
+    """The pixels etch layer ``lay`` covers, rasterised from its polygons; CheckFailed for a polygon off the
+    pixel grid, overlapping or inverted."""
     pitch_nm = int(round(man["pitch_m"] * 1e9))
     origin_nm = (int(round(man["origin_m"][0] * 1e9)), int(round(man["origin_m"][1] * 1e9)))
-    shape = levels.shape
+    if not len(polys):
+        return np.zeros(shape, bool)
+    pix, idx = _to_pixels(polys, origin_nm, pitch_nm, shape, lay)
+    try:
+        wind = rasterize_manhattan(pix, idx, shape)
+    except DoefabError as exc:
+        raise CheckFailed(f"layer {lay}: {exc}; export the set again from its design") from None
+    if np.any(wind < 0) or np.any(wind > 1):
+        raise CheckFailed(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()}); "
+                          f"export the set again from its design")
+    return wind.astype(bool)
+
+
+def _digest(polys: LayerPolygons) -> str:
+    """SHA-256 of a layer's polygons (vertex counts and integer vertices, in order)."""
+    h = hashlib.sha256(polys.counts.tobytes())
+    h.update(polys.points.tobytes())
+    return h.hexdigest()
+
+
+def _check_etch_layers(layout: LayoutFile, man: dict, levels: np.ndarray, n_levels: int, verified: dict) -> dict:
+    """Each etch layer rasterised from the file equals its bit plane of ``levels`` (as drawn), and Σ 2^m·mask_m
+    reproduces the level map; the per-layer report. ``verified``: layer → (SHA-256 of its vertices, file) of the
+    etch layers another file of the set passed with: a layer identical to one of them (the OASIS written from the
+    GDS) has passed already and is not rasterised again; this file's layers are added to it."""
     out = {}
-    etch_sum = np.zeros(shape, np.uint8)
+    etch_sum = np.zeros(levels.shape, np.uint8)
     for bit in range(mask_count(n_levels)):
         lay = etch_layer(bit)
         # one etch layer at a time keeps the peak memory to one layer's polygons
-        polys = _read(gds, {(lay, 0)}).get(
-            (lay, 0), LayerPolygons(np.zeros((0, 2), np.int64), np.zeros(0, np.int64)))
-        if len(polys):
-            pix, idx = _to_pixels(polys, origin_nm, pitch_nm, shape, lay)
-            try:
-                wind = rasterize_manhattan(pix, idx, shape)
-            except DoefabError as exc:
-                raise CheckFailed(f"layer {lay}: {exc}; export the set again from its design") from None
-        else:
-            wind = np.zeros(shape, np.int32)
-        if np.any(wind < 0) or np.any(wind > 1):
-            raise CheckFailed(f"layer {lay}: overlapping or inverted polygons (winding number {wind.min()}..{wind.max()})")
-        got = wind.astype(bool)
-        del wind
-        mism = int(np.count_nonzero(got != bit_plane(levels, bit, n_levels)))
+        polys = layout.read({(lay, 0)}).get((lay, 0), LayerPolygons.empty())
+        digest, plane, seen = _digest(polys), bit_plane(levels, bit, n_levels), verified.get(lay)
+        same_as = seen[1] if seen and seen[0] == digest else None  # the file whose identical layer passed
+        got = plane if same_as else _etched(polys, man, levels.shape, lay)
+        mism = 0 if same_as else int(np.count_nonzero(got != plane))
         out[str(lay)] = {"polygons": len(polys), "vertices": int(polys.counts.sum()),
                          "max_vertices": polys.max_vertices, "mismatched_pixels_gdstk": mism}
+        if same_as:
+            out[str(lay)]["identical_to"] = same_as
         if mism:
-            raise CheckFailed(f"layer {lay}: {mism} pixels differ between the GDS and the design's bit plane {bit}")
+            raise CheckFailed(f"layer {lay}: {mism} pixels differ from the design's bit plane {bit}; export the set "
+                              f"again from its design")
         _check_cap({(lay, 0): polys}, int(man["vertex_cap"]))
+        verified.setdefault(lay, (digest, layout.path.name))
         etch_sum += got.astype(np.uint8) << bit
         del got, polys
     if not np.array_equal((n_levels - 1) - etch_sum.astype(np.int64), levels):
-        raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map")
+        raise CheckFailed("Σ 2^m·mask_m read back from the file does not reproduce the level map; export the set "
+                          "again from its design")
     return out
-
-
-def _read(gds: Path, only: set) -> dict:
-    try:
-        return read_gds_layers(gds, only=only)
-    except CheckFailed:
-        raise
-    except Exception as exc:  # noqa: BLE001 - gdstk reports a damaged file as RuntimeError/OSError/...
-        raise _unreadable(gds, exc) from None
-
-
-def _layers_in(gds: Path) -> set[tuple[int, int]]:
-    """Every (layer, datatype) the GDS file holds geometry on (read without loading the geometry)."""
-    import gdstk
-
-    try:
-        return {(int(a), int(b)) for a, b in gdstk.gds_info(str(gds))["layers_and_datatypes"]}
-    except Exception as exc:  # noqa: BLE001 - as in _read
-        raise _unreadable(gds, exc) from None
-
-
-def _unreadable(gds: Path, exc: Exception) -> CheckFailed:
-    return CheckFailed(f"{gds} cannot be read as GDSII ({exc.__class__.__name__}: {exc}): the file is corrupt or "
-                       f"truncated; export the set again")
-

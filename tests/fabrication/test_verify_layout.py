@@ -92,17 +92,24 @@ def test_an_untouched_copy_rewritten_by_gdstk_still_verifies(mask_set, tmp_path,
     assert "verified" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("name", list(TAMPERS))
-def test_tampered_layout_fails_naming_the_layer(mask_set, tmp_path, capsys, name):
-    edit, needle = TAMPERS[name]
-    copy = _copy(mask_set, tmp_path)
-    _edit_gds(copy, edit)
+def _refused(copy, needle, capsys) -> str:
+    """verify_mask_set (gdstk) and ``doefab masks --verify --no-klayout`` (exit 3) both refuse ``copy``, naming
+    ``needle``; the message."""
     with pytest.raises(CheckFailed) as exc:
         verify_mask_set(copy, use_klayout=False)
     assert needle in str(exc.value)
     assert main(["masks", "--verify", str(copy), "--no-klayout"]) == 3
     cap = capsys.readouterr()
     assert needle in cap.err and "verified" not in cap.out
+    return str(exc.value)
+
+
+@pytest.mark.parametrize("name", list(TAMPERS))
+def test_tampered_layout_fails_naming_the_layer(mask_set, tmp_path, capsys, name):
+    edit, needle = TAMPERS[name]
+    copy = _copy(mask_set, tmp_path)
+    _edit_gds(copy, edit)
+    _refused(copy, needle, capsys)
 
 
 @pytest.mark.parametrize("name", list(TAMPERS))
@@ -182,3 +189,87 @@ def test_the_tolerance_is_two_database_units_in_both_readers(mask_set, tmp_path,
     man = json.loads((copy / "manifest.json").read_text())
     with pytest.raises(CheckFailed, match="KLayout: layer 10/0 .*tolerance 2 nm"):
         klayout_check(copy, man, np.load(copy / "design" / "levels.npy")[:, ::-1], 16, expected_layout(man, 4))
+
+
+@pytest.fixture(scope="module")
+def oasis_set(tmp_path_factory):
+    """The small set of ``mask_set``, exported with an OASIS file beside its GDS file."""
+    cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100)
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    folder = tmp_path_factory.mktemp("oas") / "m"
+    export_masks(lv, cam, folder, MaskOptions(use_klayout=False, oasis=True), progress=False)
+    return folder
+
+
+def _edit_oas(folder, edit):
+    """Rewrite the set's OASIS file with gdstk after ``edit(cell)`` (coordinates in µm); the GDS file stays."""
+    lib = gdstk.read_oas(str(folder / "doe.oas"))
+    edit(lib.top_level()[0])
+    lib.write_oas(str(folder / "doe.oas"))
+
+
+def _delete_layer(layer, datatype):
+    def edit(cell):
+        cell.filter([(layer, datatype)], remove=True)
+    return edit
+
+
+# the grid spans x, y in [-270, 270] µm: one pixel at its top-left corner
+OAS_TAMPERS = {
+    "rectangle added on etch layer 1": (_add(1, 0, -270, 264.6, -264.6, 270), "layer 1: "),
+    "chrome aperture moved 200 µm": (_move(5, 0, 200.0), "layer 5/0 (chrome aperture"),
+    "etch layer 2 missing": (_delete_layer(2, 0), "layer 2: "),
+    "die outline missing": (_delete_layer(100, 0), "layer 100/0 (die outline): "),
+}
+
+
+def _reverse_order(cell):
+    """The same geometry with its polygons stored in the reverse order."""
+    polys = list(cell.polygons)
+    cell.remove(*polys)
+    cell.add(*polys[::-1])
+
+
+@pytest.mark.parametrize("edit, identical", [(lambda cell: None, True), (_reverse_order, False)],
+                         ids=["as written", "polygons in another order"])
+def test_an_untouched_oasis_rewritten_by_gdstk_still_verifies(oasis_set, tmp_path, capsys, edit, identical):
+    copy = _copy(oasis_set, tmp_path)
+    _edit_oas(copy, edit)
+    rep = verify_mask_set(copy, use_klayout=False)
+    assert rep["oasis"]["file"] == "doe.oas"
+    assert all(v["mismatched_pixels_gdstk"] == 0 for v in rep["oasis"]["layers"].values())
+    assert sorted(rep["oasis"]["layers"]) == ["1", "2", "3", "4"]
+    # a layer equal to the GDS file's, vertex for vertex, has passed there; another order is rasterised again
+    assert all(("identical_to" in v) == identical for v in rep["oasis"]["layers"].values())
+    assert rep["oasis"]["marks"] == rep["marks"]  # every mark layer, polygon count and area as in the GDS file
+    assert main(["masks", "--verify", str(copy), "--no-klayout"]) == 0
+    assert "verified doe.gds and doe.oas" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", list(OAS_TAMPERS))
+def test_tampered_oasis_fails_without_klayout_naming_file_and_layer(oasis_set, tmp_path, capsys, name):
+    edit, needle = OAS_TAMPERS[name]
+    copy = _copy(oasis_set, tmp_path)
+    _edit_oas(copy, edit)
+    msg = _refused(copy, f"{copy / 'doe.oas'}: ", capsys)
+    assert msg.startswith(f"{copy / 'doe.oas'}: ") and needle in msg and "export the set again" in msg
+
+
+@pytest.mark.parametrize("layer, what", [(100, "die outline"), (10, "alignment keys"), (11, "verniers")])
+def test_verify_refuses_a_layout_layer_the_manifest_does_not_list(mask_set, tmp_path, capsys, layer, what):
+    copy = _copy(mask_set, tmp_path)
+    _edit_manifest(copy, lambda man: man.update(other_layers=[L for L in man["other_layers"] if L["layer"] != layer]))
+    msg = _refused(copy, f"layer {layer}/0 ({what}", capsys)
+    assert "manifest.json does not list" in msg
+    # the fix the message names: add the entry it quotes back to other_layers
+    entry = json.loads(re.search(r"add (\{.*?\}) to its other_layers", msg).group(1))
+    assert entry["layer"] == layer
+    _edit_manifest(copy, lambda man: man["other_layers"].append(entry))
+    assert verify_mask_set(copy, use_klayout=False)["levels_reproduced"]
+
+
+@pytest.mark.parametrize("value", [[100], "100", None, True, -1])
+def test_verify_refuses_a_listed_layer_that_is_not_a_layer_number(mask_set, tmp_path, capsys, value):
+    copy = _copy(mask_set, tmp_path)
+    _edit_manifest(copy, lambda man: man["other_layers"][-1].update(layer=value))
+    _refused(copy, f"other_layers[3].layer = {value!r} is not a GDS layer number", capsys)
