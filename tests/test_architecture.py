@@ -69,7 +69,21 @@ def test_layering():
 
 
 def test_public_api_exports_resolve():
+    """Each name ``import doefab`` offers is the public object of that name in the module it comes from (listed in
+    that module's ``__all__``; a class or function carries the name, is defined in that module or its package,
+    and has the docstring the API pages are built from), and ``dir(doefab)`` lists exactly those names."""
+    import importlib
+    import inspect
+
     import doefab
 
-    for name in doefab.__all__:
-        assert getattr(doefab, name) is not None
+    assert sorted(dir(doefab)) == sorted(doefab.__all__) and "__version__" in doefab.__all__
+    for name in (n for n in doefab.__all__ if n != "__version__"):
+        home = importlib.import_module(doefab._EXPORTS[name])
+        obj = getattr(doefab, name)
+        assert name in home.__all__ and obj is getattr(home, name), f"doefab.{name} is not {home.__name__}.{name}"
+        if inspect.isclass(obj) or inspect.isfunction(obj):
+            assert obj.__name__ == name and obj.__module__.startswith(home.__name__), f"doefab.{name} is {obj!r}"
+            assert (obj.__doc__ or "").strip(), f"doefab.{name} has no docstring"
+        else:  # a constant: an instance of a public doefab class or a table of them
+            assert isinstance(obj, (dict, tuple)) or type(obj).__module__.startswith("doefab."), name

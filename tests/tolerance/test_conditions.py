@@ -121,8 +121,7 @@ def test_parts_cached_by_other_model_code_are_not_reused(honest, depth_design, c
     from doefab.tolerance import judge
 
     before = set((cache / "conditions").glob("depth-*.pt"))
-    assert before and C.model_sources_sha256() == C.model_sources_sha256() and len(C.model_sources_sha256()) == 64
-    assert C.model_sources_sha256(("optics",)) != C.model_sources_sha256()  # every part-model package counts
+    assert before
     computed = []
     real_psfs = judge.PSFJudge.psfs
     monkeypatch.setattr(judge.PSFJudge, "psfs", lambda self, *a, **k: computed.append(1) or real_psfs(self, *a, **k))
@@ -174,3 +173,73 @@ def test_make_batch_calibrates_the_crosstalk_with_the_captures_own_noise(depth_d
     make_batch("depth", "test", [1], 64, pair, noise=Sensor(full_well_e=900.0, read_noise_e=7.0).noise(),
                conditions=cond)
     assert len(seen) == 1 and (seen[0].full_well_e, seen[0].read_noise_e) == (900.0, 7.0)
+
+
+def _design(levels=None, n_levels=16, depths=(1.0, 2.0, 5.0), wavelengths=(656e-9, 589e-9, 486e-9), focus=3.5):
+    """The fixture's depth design, built afresh (new arrays, a new camera) on every call."""
+    cam = doefab.Camera(aperture_diameter=0.54e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=20e-3, focus_distance=focus)
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8) if levels is None else levels
+    lv[:, 50:] = 15
+    return Design(task="half-ring", task_params={"kernel_size": 63, "ring_law": "defocus"}, camera=cam,
+                  wavelengths=wavelengths, depths=depths, height=doefab.levels_to_height(lv, cam, n_levels),
+                  levels=lv, metrics={"name": "m", "continuous": 0.1, "quantized": 0.1}, n_levels=n_levels)
+
+
+def test_the_parts_cache_key_changes_with_every_input_and_with_nothing_else(tmp_path, monkeypatch):
+    """A cached part is reused only for the request that made it: changing any one input — the design's levels,
+    its level count, planes, wavelengths or camera, a budget value, the split, the part count, the kernel, the
+    alignment chain, the part-model code — gives another key; the same inputs built afresh (and a budget file
+    that spells out none of the defaults it takes) give the same key."""
+    from doefab.tolerance.errors import load_budget
+
+    chain = {1: 0, 2: 0, 3: 0, 4: 0}
+    key = lambda design=None, split="val", n=2, budget=None, kernel=95, ch=chain: C._key(  # noqa: E731
+        "depth", design or _design(), split, n, budget or load_budget(), kernel, ch)
+    base = key()
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")
+    defaults_listed = load_budget(empty)
+    assert defaults_listed["defaults_used"]  # the same values, but every key listed as taken from the defaults
+    assert key(budget=defaults_listed) == base == key(design=_design(levels=_design().levels.copy()), ch=dict(chain))
+    wider = tmp_path / "wider.toml"
+    wider.write_text("[overlay]\nshift_sigma_um = 1.5\n")
+    other_levels = _design().levels
+    other_levels[3, 7] = (int(other_levels[3, 7]) + 1) % 16
+    changed = {"levels": key(design=_design(levels=other_levels)), "n_levels": key(design=_design(n_levels=32)),
+               "depths": key(design=_design(depths=(1.0, 2.0, 4.0))),
+               "wavelengths": key(design=_design(wavelengths=(656e-9, 589e-9, 480e-9))),
+               "camera": key(design=_design(focus=3.0)), "budget": key(budget=load_budget(wider)),
+               "split": key(split="test"), "count": key(n=3), "kernel": key(kernel=97),
+               "chain": key(ch={1: 0, 2: 1, 3: 2, 4: 3})}
+    monkeypatch.setattr(C, "model_sources_sha256", lambda: "0" * 64)
+    changed["model code"] = key()
+    assert {k for k, v in changed.items() if v == base} == set()
+    assert len(set(changed.values())) == len(changed)  # and no two changes collide
+
+
+def test_the_model_code_digest_reads_every_part_model_source(tmp_path, monkeypatch):
+    """The digest of the part-model code changes with one byte of any file of ``optics``, ``fabrication`` or
+    ``tolerance`` and with a file's name, not with code outside them nor with where the tree lies."""
+    def tree(root, files):
+        for rel, text in files.items():
+            (root / rel).parent.mkdir(parents=True, exist_ok=True)
+            (root / rel).write_text(text)
+        return str(root / "tolerance" / "conditions.py")
+
+    files = {"optics/psf.py": "a = 1\n", "optics/propagators/fft.py": "b = 2\n", "fabrication/levels.py": "c = 3\n",
+             "tolerance/conditions.py": "d = 4\n", "tasks/hdr.py": "e = 5\n"}
+
+    def digest(files, where="a"):
+        monkeypatch.setattr(C, "__file__", tree(tmp_path / where / "doefab", files))
+        return C.model_sources_sha256()
+
+    base = digest(files)
+    assert len(base) == 64 and digest(files, "elsewhere") == base
+    assert digest({**files, "tasks/hdr.py": "e = 6\n"}, "b") == base  # not a part-model package
+    for i, rel in enumerate(f for f in files if not f.startswith("tasks")):
+        assert digest({**files, rel: files[rel].replace("=", "= 1 +")}, f"edit{i}") != base, rel
+    moved = {("optics/propagators/mft.py" if k == "optics/propagators/fft.py" else k): v for k, v in files.items()}
+    assert digest(moved, "moved") != base
+    monkeypatch.undo()
+    assert C.model_sources_sha256(("optics",)) != C.model_sources_sha256()  # every package of the real tree counts

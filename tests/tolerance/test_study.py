@@ -104,7 +104,25 @@ def test_command_writes_json_report_and_plots(design_dir, tmp_path, capsys):
     assert len(res["samples"]) == 3 and "yield" in res["summary"] and res["tornado"]
     assert [r["levels"] for r in res["quantization"]] == ["continuous", 16, 8, 4, 2]
     assert res["grid"]["monte_carlo_grid"] in (1, 2, 4, 8) and res["grid"]["kinds"]
-    assert "surrogate" in res and "agrees_with_direct" in res["surrogate"]
+    # the surrogate: its base is the base part judged directly, and at the parameter that moves the metric most
+    # its prediction from that part's own features is the directly judged metric (the fit's ±h points)
+    from doefab.tolerance.surrogate import base_part, features, parameters, predict
+
+    model, budget = res["surrogate"]["model"], load_budget()
+    judge = study.judge_for(str(design_dir), res["grid"]["monte_carlo_grid"])
+    base = base_part(budget).for_masks(judge.n_masks)
+    assert model["base"] == pytest.approx(judge.evaluate(base)["metric"], rel=1e-9)
+    params = parameters(budget, judge.chain, judge.n_masks, model["gap"])
+    j = int(np.argmax(np.abs(model["a"]) * model["h"] + np.abs(model["b"]) * np.square(model["h"])))
+    name, h, set_ = params[j]
+    assert name == model["names"][j] and abs(model["a"][j]) + abs(model["b"][j]) > 0
+    for x in (h, -h):
+        part = set_(base, x)
+        direct = judge.evaluate(part)["metric"]
+        assert predict(model, features(part, budget, judge.chain, judge.n_masks, model["gap"])) == pytest.approx(
+            direct, rel=1e-6, abs=1e-12), name
+    a, b = res["summary"]["yield"]["ci95"], res["surrogate"]["yield"]["ci95"]
+    assert res["surrogate"]["agrees_with_direct"] == (a[0] <= b[1] and b[0] <= a[1])
     text = (out / "report.md").read_text()
     assert "Yield at PSF level" in text and "Would buy the most" in text
     for f in ("report.md", "sweeps.png", "tornado.png", "quantization.png", "yield_vs_n.png"):
@@ -264,16 +282,92 @@ def test_workers_flag_takes_auto_or_a_count():
 @pytest.mark.parametrize("design", ["streak", "grating", "half-ring"])
 def test_each_committed_design_meets_its_tasks_default_spec(design):
     """Issue 21, row 5: the shipped budget's per-task PSF limit lies below what each committed design's
-    fabricated relief reaches (its quantized metric in design.json), so the main job's yield is not zero by
+    fabricated relief reaches — the nominal part's PSF metric as the tolerance study computes it (its judge, here
+    run afresh), which is the quantized metric design.json records — so the main job's yield is not zero by
     construction."""
     from doefab.design.committed import committed_dir
     from doefab.tolerance.spec import TASK_OF_DESIGN, nominal_failures
 
-    d = Design.load(committed_dir(design))
-    task = TASK_OF_DESIGN[d.task]
+    judge = study.judge_for(str(committed_dir(design)), 1)
+    nominal = judge.score(judge.nominal)["metric"]
+    task = TASK_OF_DESIGN[judge.design.task]
     spec = load_budget()["spec"]
-    assert nominal_failures(spec, task, "psf", {"psf_metric": d.metrics["quantized"]}) == []
-    assert nominal_failures(spec, task, "psf", {"psf_metric": spec[task]["psf_metric_min"] - 1e-3}) != []
+    assert nominal == pytest.approx(Design.load(committed_dir(design)).metrics["quantized"], abs=1e-6)
+    assert spec[task]["psf_metric_min"] < nominal and nominal_failures(spec, task, "psf", {"psf_metric": nominal}) == []
+
+
+def test_a_limit_between_two_parts_passes_the_better_and_fails_the_worse():
+    """Two parts of the committed streak design judged here, the error-free one (0.869) and one decentred 0.25 mm
+    across the split (0.796): an absolute limit half-way between their PSF metrics, or a loss margin of half their
+    difference, passes the first and fails the second (and a nominal part under the limit is said to fail it);
+    the two parts yield 1/2."""
+    from doefab.design.committed import committed_dir
+    from doefab.tolerance.spec import meets, nominal_failures
+
+    judge = study.judge_for(str(committed_dir("streak")), 1)
+    good = judge.score(judge.nominal)["metric"]
+    bad = judge.evaluate(PartErrors(mount_shift=(250e-6, 0.0)))["metric"]
+    assert good - bad > 0.05  # two parts the limits can tell apart
+    nominal = {"psf_metric": good}
+    for table in ({"psf_metric_min": (good + bad) / 2}, {"psf_metric_loss_max": (good - bad) / 2}):
+        spec = {"hdr": table}
+        assert [meets({"psf_metric": m}, spec, "hdr", "psf", nominal) for m in (good, bad)] == [True, False], table
+        rows = [{"metric": m, "worst": m, "l1_to_nominal": 0.0} for m in (good, bad)]
+        assert montecarlo.summarize(rows, spec, "hdr", {"psf": nominal})["yield"]["value"] == 0.5
+    spec = {"hdr": {"psf_metric_min": (good + bad) / 2}}
+    assert nominal_failures(spec, "hdr", "psf", nominal) == []
+    assert nominal_failures(spec, "hdr", "psf", {"psf_metric": bad}) != []
+
+
+def _known_surrogate_metric(hs: dict, cubic: float):
+    """A metric with a known expansion in the surrogate's parameters: 0.9 + 0.02 u₂ − 0.05 u₁² + ``cubic`` u₁³
+    − 0.04 d² − 0.02 e + 0.01 r², each u = x / h its parameter over its step (etch depth of masks 1 and 2,
+    decenter across the split, edge bias, mount rotation); the rest leave it alone."""
+    def metric(part: PartErrors) -> float:
+        u1 = (part.depth_scale[0] - 1) / hs["etch depth, mask 1"]
+        u2 = (part.depth_scale[1] - 1) / hs["etch depth, mask 2"]
+        d = part.mount_shift[0] / hs["decenter across split"]
+        e = part.edge_bias / hs["edge bias"]
+        r = part.mount_rotation / hs["mount rotation"]
+        return 0.9 + 0.02 * u2 - 0.05 * u1**2 + cubic * u1**3 - 0.04 * d**2 - 0.02 * e + 0.01 * r**2
+    return metric
+
+
+def test_the_surrogate_recovers_a_known_expansion_and_its_yield():
+    """On a metric whose expansion is known, the surrogate's coefficients are that expansion (a_j, b_j of each
+    parameter over its step h_j; a cubic term c u³ adds c/h to the slope, as central differences at ±h do), its
+    held-out residuals are the cubic's part left out, and its yield on a quadratic metric is the fraction of its
+    own draws whose metric, computed directly, meets the limit."""
+    from doefab.tolerance.errors import sample_errors
+    from doefab.tolerance.surrogate import fit_surrogate, parameters, predict, surrogate_yield
+
+    budget, chain = load_budget(), {1: 0, 2: 0, 3: 0, 4: 0}
+    hs = {name: h for name, h, _ in parameters(budget, chain, 4)}
+    quad = _known_surrogate_metric(hs, cubic=0.0)
+    model = fit_surrogate(quad, budget, chain, False, n_masks=4)
+    want = {name: (0.0, 0.0) for name in hs}
+    want.update({"etch depth, mask 1": (0.0, -0.05), "etch depth, mask 2": (0.02, 0.0),
+                 "decenter across split": (0.0, -0.04), "edge bias": (-0.02, 0.0), "mount rotation": (0.0, 0.01)})
+    got = {n: (a * h, b * h * h) for n, h, a, b in zip(model["names"], model["h"], model["a"], model["b"])}
+    assert model["base"] == pytest.approx(0.9) and got.keys() == want.keys()
+    for name, (a, b) in want.items():
+        assert got[name] == pytest.approx((a, b), abs=1e-9), name
+    cubic = fit_surrogate(_known_surrogate_metric(hs, cubic=0.03), budget, chain, False, n_masks=4)
+    assert cubic["a"][0] * hs["etch depth, mask 1"] == pytest.approx(0.03, abs=1e-9)  # c/h · h
+    children = np.random.SeedSequence(5).spawn(12)
+    held = [sample_errors(budget, np.random.default_rng(c), n_masks=4) for c in children]
+    u = np.array([(p.depth_scale[0] - 1) / hs["etch depth, mask 1"] for p in held])
+    y = surrogate_yield(cubic, budget, chain, [(p, _known_surrogate_metric(hs, 0.03)(p)) for p in held],
+                        lambda m: m >= 0.88, draws=500, n_masks=4)
+    assert y["held_out"]["bias"] == pytest.approx(float(np.mean(0.03 * (u**3 - u))), abs=1e-9)
+    # a quadratic metric: no residuals, and the yield is the draws' own (the same children the surrogate draws)
+    y = surrogate_yield(model, budget, chain, [(p, quad(p)) for p in held], lambda m: m >= 0.88, draws=500,
+                        n_masks=4)
+    draws = [quad(sample_errors(budget, np.random.default_rng(c), n_masks=4).for_masks(4))
+             for c in np.random.SeedSequence(12345).spawn(500)]
+    assert y["held_out"]["rmse"] < 1e-12 and y["value"] == pytest.approx(np.mean(np.array(draws) >= 0.88), abs=1e-12)
+    assert 0.05 < y["value"] < 0.95  # a limit inside the spread, so the count can be wrong
+    assert predict(model, np.zeros(len(hs))) == pytest.approx(0.9)
 
 
 def test_an_empty_budget_file_at_the_command_line_reports_the_defaults_it_took(design_dir, tmp_path, capsys):
@@ -452,3 +546,33 @@ def test_a_run_identity_names_the_networks_and_the_alignment_chain(design_dir, t
     rec["weights_sha256"] = "0" * 64  # retrained weights in the same folder
     (w / "hdr_proposed.json").write_text(json.dumps(rec))
     assert montecarlo.run_identity(d, budget, 0, 1, True, w)["network_sha256"] != shipped["network_sha256"]
+
+
+def test_the_quantization_study_shows_its_progress(design_dir, monkeypatch):
+    """Issue 37, row 20: the quantization study (minutes inside ``doefab run``) has a progress line like the other
+    steps: what it does, k of n level counts, and the time left (tqdm's, from the total)."""
+    import tqdm
+
+    bars = []
+
+    class Spy:
+        def __init__(self, total=None, desc="", unit="it", **kwargs):
+            self.total, self.desc, self.counts, self.closed = total, desc, [0], False
+            bars.append(self)
+
+        def update(self, n=1):
+            self.counts.append(self.counts[-1] + n)
+
+        def set_postfix(self, **kwargs):
+            pass
+
+        def close(self):
+            self.closed = True
+
+    monkeypatch.setattr(tqdm, "tqdm", Spy)
+    rows = study.quantization_study(design_dir, levels=(16, 4), progress=True)
+    (bar,) = [b for b in bars if "quantization" in b.desc]
+    assert bar.total == len(rows) == 2 and bar.counts == [0, 1, 2] and bar.closed
+    bars.clear()
+    study.quantization_study(design_dir, levels=(16, 4), progress=False)
+    assert bars == []
