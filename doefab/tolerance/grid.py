@@ -64,7 +64,14 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
 
     def bound_of(diff):
         return float(2 * (diff.abs() * masks).sum(dim=(-1, -2)).max())
+    bar = None
+    if progress:  # what runs, k of n error kinds, the time left
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(kinds), desc="grid study", unit="error kind")
     for k in kinds:
+        if bar is not None:
+            bar.set_postfix(error=k.name)
         part = k.budget_part(budget, judge.n_masks)
         psf = {}
         secs = {}
@@ -79,6 +86,10 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
         effect = bound_of(ref - judges[REFERENCE].nominal)
         out["kinds"][k.name] = {"value": k.from_budget(budget) / k.si, "unit": k.unit, "bound": bound,
                                 "effect_bound": effect, "seconds": secs, "grid": chosen}
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     out["monte_carlo_grid"] = max(v["grid"] for v in out["kinds"].values())
     return out
 

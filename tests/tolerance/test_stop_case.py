@@ -32,3 +32,4 @@ def test_the_stop_sentence_agrees_with_the_numbers_it_prints(doe_mm, pupil_mm, d
         assert "baffle is narrower than the lens's" in text and doe < pupil, text
     else:
         assert "entrance pupil (f/" in text and "is narrower than the DOE's" in text and pupil < doe, text
+
