@@ -106,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     status, message, error = EXIT_OK, "", None
     previous = _handle_sigterm()
     try:
+        _refuse_empty_values(parser, args)
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
         status, what = ((EXIT_TERMINATED, "terminated (SIGTERM)") if isinstance(exc, Terminated)
@@ -139,6 +140,18 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exception(error)
     print(f"{prog}: {_one_line(message)}", file=sys.stderr)
     return status
+
+
+def _refuse_empty_values(parser, args) -> None:
+    """A flag given an empty value (``--design ""``) is a mistake, not "use the default": refuse it by name."""
+    from doefab.errors import DoefabError
+
+    sub = parser._subparsers._group_actions[0].choices[args.command]
+    for action in sub._actions:
+        value = getattr(args, action.dest, None)
+        if action.option_strings and isinstance(value, str) and not value.strip():
+            flag = max(action.option_strings, key=len)
+            raise DoefabError(f"{flag} is empty: give a value (see doefab {args.command} --help)")
 
 
 def _output_folder(args) -> str:

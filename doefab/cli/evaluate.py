@@ -52,9 +52,9 @@ def run(args) -> int:
     if bad or not variants:
         raise DoefabError(f"--variants: unknown {bad or 'empty list'}; choose from proposed, coded_only, uncoded_only")
     sensor = sensor_arg(args, design)
+    out = claim_output(args, "evaluate", replace=args.force)  # --out checked before the networks' PSFs
     for v in variants:  # a bad weights file, or one for another sensor, is refused before any output
         load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
-    out = claim_output(args, "evaluate", replace=args.force)
     out.create()
     from doefab.tolerance.conditions import for_splits
 

@@ -107,6 +107,9 @@ def run(args) -> int:
     from doefab.tolerance.report import STEPS, run_study
 
     ddir, _ = design_folder(args.design)  # validated before any output exists
+    if args.weights_dir is not None and not args.networks:
+        raise DoefabError("--weights-dir is read only by the network-level study: add --networks, or drop "
+                          "--weights-dir")
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))

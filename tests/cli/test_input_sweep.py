@@ -3,9 +3,11 @@
 Each numeric argument is tried with NaN, a negative, zero, a value in the wrong unit and an absurd magnitude
 (the kinds that are valid for an argument — a seed of 0, a zero edge bias — are listed as such, not tried);
 each file or folder argument with a missing path, the wrong kind of path (a folder for a file, a file for a
-folder), an empty and a corrupt one. At the command line every case must give exit status 2 (3 for a mask
-set that fails verification) and one line naming the argument, with nothing created or changed; from the API
-a ``doefab.DoefabError`` naming the argument.
+folder), an empty and a corrupt one; each flag or scene key that takes a word, a switch or a text (issue 37)
+with one it does not take, a value of the wrong type and an empty one, and each ``--out`` with an empty path,
+a file, a folder of the user's and a path under a file. At the command line every case must give exit status 2
+(3 for a mask set that fails verification) and one line naming the argument, with nothing created or changed
+and no job started (the work guard ``no_work``); from the API a ``doefab.DoefabError`` naming the argument.
 """
 
 from __future__ import annotations
@@ -36,6 +38,27 @@ def _float(zero_ok: bool = False, unit=NA, big: str = "1e12"):
 
 
 SEED = {NAN: "nan", NEG: "-1", ZERO: VALID, UNIT: NA, BIG: str(2**64)}
+
+
+class WorkStarted(BaseException):
+    """Raised where a command creates its output folder or computes PSFs: it accepted the input."""
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """The work guard of every command-line case: a command that claims its output folder or computes PSFs has
+    started its job, so a case whose input gets through fails at once (WorkStarted) instead of designing or
+    training. Returns a function that guards one more step (``module, name``)."""
+    from doefab.io import OutputDir
+    from doefab.optics.psf import PSFPlan
+
+    def started(*args, **kwargs):
+        raise WorkStarted("the command started its job instead of refusing the input")
+
+    monkeypatch.setattr(OutputDir, "create", started)
+    monkeypatch.setattr(PSFPlan, "__call__", started)
+    return lambda module, name: monkeypatch.setattr(module, name, started)
+
 
 # ---------------------------------------------------------------- command line: numeric flags
 # (subcommand and the arguments it needs, flag, {kind: value}); "--out OUT" is added where the command has one
@@ -69,6 +92,9 @@ FLAGS = [
     (["train", "--task", "hdr"], "--read-noise-e", _float(zero_ok=True)),
     (["evaluate", "--task", "hdr"], "--full-well-e", _float()),
     (["evaluate", "--task", "hdr"], "--read-noise-e", _float(zero_ok=True)),
+    (["finetune", "--design", "{design}"], "--full-well-e", _float()),
+    (["finetune", "--design", "{design}"], "--read-noise-e", _float(zero_ok=True)),
+    (STREAK, "--levels", {NAN: "nan", NEG: "-16", ZERO: "0", UNIT: NA, BIG: str(10**12)}),
     (["finetune", "--design", "{design}"], "--minutes", _float(unit="36000")),
     (["finetune", "--design", "{design}"], "--doe-every", _int()),
     (["finetune", "--design", "{design}"], "--lr-doe", _float()),
@@ -115,12 +141,12 @@ def _fill(args, fixtures):
 
 
 @pytest.mark.parametrize("name, cmd, flag, value", FLAG_CASES)
-def test_numeric_flag(name, cmd, flag, value, one_clear_error):
+def test_numeric_flag(name, cmd, flag, value, one_clear_error, no_work):
     one_clear_error(lambda f, t: _fill(cmd, f) + [flag, value, "--out", t / "o"], 2, flag)
 
 
 @pytest.mark.parametrize("name, param, value", HOLDER_CASES)
-def test_holder_parameter(name, param, value, one_clear_error):
+def test_holder_parameter(name, param, value, one_clear_error, no_work):
     one_clear_error(lambda f, t: ["holder", "--out", t / "o", "--set", f"{param}={value}"], 2, param)
 
 
@@ -177,6 +203,8 @@ def _table_rows():
 
 
 SCENE_KEYS += _table_rows()
+SCENE_KEYS += [("holder", name, kinds) for name, kinds in _holder_rows()  # a scene's [holder], as --set takes them
+               if ("holder", name) not in {(sec, key) for sec, key, _ in SCENE_KEYS}]
 SCENE_CASES = _expand(SCENE_KEYS, lambda row, value: (f"scene {row[0]}.{row[1]}", row[0], row[1], value))
 
 
@@ -202,14 +230,16 @@ def _scene_with(tmp: Path, section: str, key: str, value: str) -> Path:
 
 
 @pytest.mark.parametrize("name, section, key, value", SCENE_CASES)
-def test_scene_key(name, section, key, value, one_clear_error):
+def test_scene_key(name, section, key, value, one_clear_error, no_work):
     one_clear_error(lambda f, t: ["run", _scene_with(t, section, key, value), "--out", t / "o"], 2, key)
 
 
 # ---------------------------------------------------------------- command line: what else a scene check refuses
 # (issue 37) every list key of the key table: not a list, empty, an item twice, an item below its range, a word it
 # does not take; two keys that set one quantity; every key of the budget a scene names and every limit of its spec
-# below and above its range and NaN, a whole-number key given a fraction. `run` and `doctor` both refuse each.
+# below and above its range and NaN, a whole-number key given a fraction; every key that takes a word, a switch or
+# a text, and every key of a scene's [holder]: a value of the wrong type, one it does not take, an empty one.
+# `run` and `doctor` both refuse each.
 
 def _list_rows():
     from doefab.pipeline.scenekeys import KEYS
@@ -253,9 +283,44 @@ def _budget_scene(t: Path, table: str, key: str, value: str) -> Path:
     return _scene_with(t, "tolerance", "budget", '"budget.toml"')
 
 
+UNKNOWN, EMPTY, TYPE = "unknown", "empty", "wrong type"
+SAID_AS = {"sensor.response": "response"}  # its checks say "sensor: camera response ..."
+
+
+def _word_rows():
+    """Every key of the key table that takes a word, a switch or a text: a value of the wrong type, a value it
+    does not take (a word, a file that is not there, a level count no fab makes) and an empty one."""
+    from doefab.pipeline.scenekeys import KEYS
+
+    rows = []
+    for k in (k for k in KEYS if k.kind in ("choice", "bool", "str")):
+        name = f"{k.section}.{k.name}".lstrip(".")
+        if k.kind == "bool":
+            values = {TYPE: '"true"', UNKNOWN: "1"}
+        elif k.choices and not isinstance(k.choices[0], str):  # numbers (fabrication.levels)
+            values = {TYPE: f'"{k.choices[-2]}"', UNKNOWN: f"{k.choices[0] + 1}"}
+        else:
+            values = {TYPE: "1", UNKNOWN: '"nonsense"'}
+        rows += [(f"scene {name}-{kind}", k.section, k.name, value, SAID_AS.get(name, name))
+                 for kind, value in {**values, EMPTY: '""'}.items()]
+    return rows
+
+
+def _holder_word_rows():
+    """A scene's [holder]: each length given as text, the mount a word it does not take or empty, a name that is
+    no holder parameter."""
+    from holder_cad.params import HolderParams
+
+    rows = [(f"scene holder.{name}-{TYPE}", "holder", name, '"12"', name) for name in HolderParams().to_dict()
+            if name != "mount"]
+    rows += [(f"scene holder.mount-{kind}", "holder", "mount", value, "mount")
+             for kind, value in ((UNKNOWN, '"screw"'), (EMPTY, '""'), (TYPE, "1"))]
+    return rows + [("scene holder.unknown key", "holder", "thread_diameter", "49.0", "holder.thread_diameter")]
+
+
 def _scene_check_cases():
     cases = [(name, lambda t, s=section, k=key, v=value: _scene_with(t, s, k, v), needle)
-             for name, section, key, value, needle in _list_rows() + _pair_rows()]
+             for name, section, key, value, needle in _list_rows() + _pair_rows() + _word_rows() + _holder_word_rows()]
     cases += [(name, lambda t, s=sec, k=key, v=value: _budget_scene(t, s, k, v),
                f"tolerance.budget budget.toml: {sec}.{key}") for name, sec, key, value in _budget_rows()]
     return [pytest.param(cmd, make, needle, id=f"{cmd} {name}") for name, make, needle in cases
@@ -263,7 +328,7 @@ def _scene_check_cases():
 
 
 @pytest.mark.parametrize("cmd, make, needle", _scene_check_cases())
-def test_scene_check(cmd, make, needle, one_clear_error):
+def test_scene_check(cmd, make, needle, one_clear_error, no_work):
     one_clear_error(lambda f, t: [cmd, make(t)] + (["--out", t / "o"] if cmd == "run" else []), 2, needle)
 
 
@@ -421,8 +486,125 @@ def _file_cases():
 
 
 @pytest.mark.parametrize("build, status, needle", _file_cases())
-def test_file_argument(build, status, needle, one_clear_error):
+def test_file_argument(build, status, needle, one_clear_error, no_work):
     one_clear_error(build, status, needle)
+
+
+# ---------------------------------------------------------------- command line: words, empty values, output folders
+# (issue 37) every flag that takes a word, a list of words or a path: a word it does not take, a value of the wrong
+# type, an empty value; every --out: empty, an existing file, a non-empty folder of the user's, a path under a file.
+
+HALF_RING = REPO / "masks" / "half-ring" / "design"  # the committed depth design (finetune takes no other)
+
+
+def _words(cmd, flag, unknown, wrong_type="1"):
+    """A flag that takes one of a few words: one it does not take, a number, an empty value."""
+    return [(cmd, flag, UNKNOWN, unknown, flag), (cmd, flag, TYPE, wrong_type, flag), (cmd, flag, EMPTY, "", flag)]
+
+
+# (subcommand and the arguments it needs, flag, kind, value, what the line must hold); "--out OUT" is added
+HDR_TRAIN, HDR_EVAL = ["train", "--task", "hdr"], ["evaluate", "--task", "hdr"]
+TOLERANCE = ["tolerance", "--design", "{design}"]
+WORD_FLAGS = [
+    *_words(["design"], "--task", "video"), *_words(STREAK, "--optimizer", "sgd"),
+    *_words(STREAK, "--parameterization", "spline"), *_words(STREAK, "--start", "random"),
+    *_words(["design", "--task", "half-ring"], "--ring-law", "linear"), *_words(STREAK, "--loss", "l2"),
+    *_words(STREAK, "--levels", "3", wrong_type="16.0"),
+    *_words(["psf"], "--preset", "canon"), *_words(["psf"], "--route", "raytrace"),
+    *_words(["psf"], "--precision", "float16"),
+    *_words(["masks", "--design", "{design}"], "--align-chain", "each"),
+    *_words(["masks", "--design", "{design}"], "--resist", "neutral"),
+    *_words(["masks", "--design", "{design}"], "--pattern-faces", "up"),
+    *_words(["train"], "--task", "video"), *_words(HDR_TRAIN, "--variant", "best"),
+    *_words(HDR_TRAIN, "--schedule", "step"), *_words(["evaluate"], "--task", "video"),
+    *_words(HDR_EVAL, "--split", "train"), *_words(["scene", "new"], "--task", "video"),
+    *_words(["run", REPO / "scenes" / "hdr.toml", "--quick"], "--force", "Design"),
+    *_words(TOLERANCE, "--grid", "fine", wrong_type="2.5"), *_words(TOLERANCE, "--workers", "many", wrong_type="2.5"),
+    (HDR_EVAL, "--variants", UNKNOWN, "proposed,best", "--variants"),
+    (HDR_EVAL, "--variants", TYPE, "proposed;coded_only", "--variants"),
+    (HDR_EVAL, "--variants", EMPTY, ",", "--variants"),
+    (TOLERANCE, "--scheduler", UNKNOWN, "udp://127.0.0.1:8786", "--scheduler"),
+    (TOLERANCE, "--scheduler", "no port", "tcp://127.0.0.1", "--scheduler"),
+    (TOLERANCE, "--scheduler", EMPTY, "", "--scheduler"),
+    (["masks", "--design", "{design}"], "--name", UNKNOWN, "../streak", "--name"),
+    (["masks", "--design", "{design}"], "--name", EMPTY, "", "--name"),
+    (["holder"], "--set", "no value", "thread_diameter_mm", "--set"), (["holder"], "--set", EMPTY, "", "--set"),
+    (["holder"], "--set", "unknown name", "thread_diameter=49", "thread_diameter"),
+    (["holder"], "--set", TYPE, "thread_diameter_mm=M49", "thread_diameter_mm"),
+    (["holder"], "--set", "a fraction", "segments=64.5", "segments"),
+    (["holder"], "--set", "mount " + UNKNOWN, "mount=screw", "mount"),
+    (["holder"], "--set", "mount empty", "mount=", "mount"),
+    # paths given empty
+    (["masks"], "--design", EMPTY, "", "--design"), (["masks"], "--verify", EMPTY, "", "--verify"),
+    (["finetune"], "--design", EMPTY, "", "--design is empty"),
+    (["tolerance"], "--design", EMPTY, "", "--design is empty"),
+    (TOLERANCE, "--budget", EMPTY, "", "--budget is empty"),
+    (HDR_EVAL, "--weights-dir", EMPTY, "", "--weights-dir is empty"),
+    (["train", "--task", "hyperspectral"], "--sensor-response", EMPTY, "", "--sensor-response is empty"),
+    (["evaluate", "--task", "hyperspectral"], "--sensor-response", EMPTY, "", "--sensor-response is empty"),
+]
+WORD_CASES = [pytest.param(cmd, flag, value, needle, id=f"{cmd[0]} {flag}-{kind}")
+              for cmd, flag, kind, value, needle in WORD_FLAGS]
+
+
+@pytest.mark.parametrize("cmd, flag, value, needle", WORD_CASES)
+def test_word_flag(cmd, flag, value, needle, one_clear_error, no_work):
+    one_clear_error(lambda f, t: _fill(cmd, f) + [flag, value, "--out", t / "o"], 2, needle)
+
+
+OUT_COMMANDS = {"run": ["run", REPO / "scenes" / "hdr.toml", "--quick"], "demo": ["demo"], "psf": ["psf"],
+                "design": STREAK, "masks": ["masks", "--design", "{design}"], "holder": ["holder"],
+                "train": HDR_TRAIN, "finetune": ["finetune", "--design", HALF_RING], "tolerance": TOLERANCE}
+OUT_KINDS = {EMPTY: lambda t: "", "a file": _corrupt_file, "a folder of the user's": _a_folder,
+             "under a file": lambda t: _corrupt_file(t) / "o"}
+SCENE_OUT = {EMPTY: lambda t: "", "not .toml": _corrupt_file, "an existing file": lambda t: _corrupt_file(t, "x.toml"),
+             "in no folder": lambda t: t / "nothing" / "x.toml"}
+
+
+def _out_cases():
+    cases = [pytest.param(cmd, make, id=f"{name} --out-{kind}") for name, cmd in OUT_COMMANDS.items()
+             for kind, make in OUT_KINDS.items()]
+    return cases + [pytest.param(["scene", "new", "--task", "hdr"], make, id=f"scene new --out-{kind}")
+                    for kind, make in SCENE_OUT.items()]
+
+
+@pytest.mark.parametrize("cmd, make", _out_cases())
+def test_out_flag(cmd, make, one_clear_error, no_work):
+    one_clear_error(lambda f, t: _fill(cmd, f) + ["--out", make(t)], 2, "--out")
+
+
+# Inputs refused only after the command has started its job, or not refused at all (product bugs): each case fails
+# now with WorkStarted, and fails the sweep (strict) once the product refuses the input first: then drop its mark.
+WEIGHTS = {"missing": (_missing, "no weights"), "file": (_corrupt_file, "is a file"),
+           "empty folder": (_empty_folder, "no weights"), "corrupt": (_corrupt_weights, "not valid JSON")}
+OUT = ("--out", lambda t: t / "o")
+LATE = [  # (case, arguments, what the line must hold, what the command does now)
+    *[(f"tolerance --networks --weights-dir-{kind}", [*TOLERANCE, "--networks", "--weights-dir", make, *OUT], needle,
+       "refused after making OUT and judging the nominal part") for kind, (make, needle) in WEIGHTS.items()],
+    *[(f"finetune --weights-dir-{kind}", ["finetune", "--design", HALF_RING, "--weights-dir", make, *OUT], needle,
+       "refused after 50 s of PSFs (1.7 GB)") for kind, (make, needle) in WEIGHTS.items()],
+]
+
+
+EARLY = [  # refused before any work (each was refused late, or not at all, before)
+    ("finetune --weights-dir-empty", ["finetune", "--design", HALF_RING, "--weights-dir", "", *OUT], "--weights-dir"),
+    ("tolerance --weights-dir-without --networks", [*TOLERANCE, "--weights-dir", _missing, *OUT], "--weights-dir"),
+    ("train --design-empty", [*HDR_TRAIN, "--design", "", *OUT], "--design"),
+    ("train --weights-dir-empty", [*HDR_TRAIN, "--weights-dir", "", *OUT], "--weights-dir"),
+    ("psf --height-empty", ["psf", "--height", "", *OUT], "--height"),
+    ("tolerance --holder-empty", [*TOLERANCE, "--holder", "", *OUT], "--holder"),
+    *[(f"evaluate --out-{kind}", [*HDR_EVAL, "--out", make], "--out") for kind, make in OUT_KINDS.items()],
+]
+
+
+@pytest.mark.parametrize("args, needle", [pytest.param(args, needle, id=case) for case, args, needle in EARLY]
+                         + [pytest.param(args, needle, id=case, marks=pytest.mark.xfail(
+                             raises=WorkStarted, strict=True, reason=why)) for case, args, needle, why in LATE])
+def test_refused_before_any_work(args, needle, one_clear_error, no_work):
+    import doefab.reconstruction.loader
+
+    no_work(doefab.reconstruction.loader, "psf_pair")  # a network's PSFs: evaluate's first work
+    one_clear_error(lambda f, t: [a(t) if callable(a) else a for a in _fill(args, f)], 2, needle)
 
 
 # ---------------------------------------------------------------- the public API
