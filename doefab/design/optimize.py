@@ -31,7 +31,7 @@ from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
 __all__ = ["DesignConfig", "optimize", "design_from_theta", "plain_level", "OPTIMIZERS", "coded_mask",
-           "finalize_levels", "sampling_problem"]
+           "finalize_levels", "sampling_problem", "design_camera"]
 
 OPTIMIZERS = ("adam", "lbfgs", "mma")
 
@@ -107,7 +107,10 @@ def sampling_problem(doe_pixels: int, sampling: int, key: str = "sampling") -> s
             f"{' or '.join(map(str, fits))}, or a DOE pitch or aperture whose grid it divides")
 
 
-def _design_camera(camera: Camera, sampling: int) -> Camera:
+def design_camera(camera: Camera, sampling: int) -> Camera:
+    """The camera a design is optimised on: the DOE grid coarsened by ``sampling`` (pixels / s, pitch × s); one
+    error when ``sampling`` does not divide the grid. Example: ``design_camera(cam, 2).doe_pitch == 2 * cam.doe_pitch``.
+    """
     if sampling == 1:
         return camera
     problem = sampling_problem(camera.doe_pixels, sampling)
@@ -166,7 +169,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     cam = camera or Camera.preset(task_obj.preset)
     task_obj.bind(cam)
     cfg.task_params = task_obj.params()
-    dcam = _design_camera(cam, cfg.sampling)
+    dcam = design_camera(cam, cfg.sampling)
     if cfg.start is None:
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"
     if cfg.start not in STARTS:
@@ -452,7 +455,7 @@ def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str
     cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=max(len(history), 1),
                        seed=design.seed, sampling=sampling, parameterization=parameterization,
                        knots=int(theta.numel()) if radial else 0, start="task", n_levels=design.n_levels)
-    dcam = _design_camera(design.camera, sampling)
+    dcam = design_camera(design.camera, sampling)
     param = make_parameterization(parameterization, dcam, cfg.knots)
     out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths)
     out.extra.update(extra or {})

@@ -65,8 +65,11 @@ def quick_sampling(doe_pixels: int, sampling: int, fits=None) -> int:
 
 
 def design_camera(cam, factor: int):
-    """The camera the design stage optimises on: the DOE grid coarsened by ``factor`` (pitch × factor)."""
-    return cam if factor == 1 else cam.replace(doe_pixels=cam.doe_pixels // factor, doe_pitch=cam.doe_pitch * factor)
+    """The camera the design stage optimises on: the optimiser's own coarsening (``design.optimize.design_camera``,
+    imported on use: it brings torch, which a scene's checks and the holder stage do without)."""
+    from doefab.design.optimize import design_camera as coarsen
+
+    return coarsen(cam, factor)
 
 
 def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:

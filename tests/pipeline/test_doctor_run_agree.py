@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from doefab.design.optimize import _design_camera
+from doefab.design.optimize import design_camera as optimiser_camera
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import load_scene
 from doefab.pipeline.stages import _design_run, quick_sampling
@@ -49,7 +49,7 @@ def test_doctor_refuses_what_the_design_stage_would(tmp_path, focal_mm, f_number
     assert res["camera"].doe_pixels == grid
     for quick in (False, True):  # what the design stage hands the optimiser, run and run --quick
         iters, used = _design_run(res["settings"], quick, res["quick_sampling"])
-        cam = _design_camera(res["camera"], used)  # the optimiser's own check: raises if it does not divide
+        cam = optimiser_camera(res["camera"], used)  # the optimiser's own check: raises if it does not divide
         assert cam.doe_pixels * used == grid
 
 
