@@ -1,17 +1,24 @@
 """The paper's Tables 1–3 on the held-out test split, from `doefab evaluate` outputs, as Markdown: each variant
 under honest captures (fabricated parts, crosstalk unmixed by a noisy calibration, depth between the network's
 planes; the network told the nominal PSF) beside the nominal model's own captures (`--clean`), and hyperspectral
-results for in-library and out-of-library light.
+results for in-library and out-of-library light; each table names its split, thread count, library versions and
+the weights' SHA-256.
 
-Run: .venv/bin/python benchmarks/reconstruction_tables.py out/s14/eval out/s15/eval out/s13/eval
-(each ROOT holds <task>/metrics.json and <task>_clean/metrics.json, as scripts/train_shipped.sh writes; a task is
-taken from the first ROOT that has it); writes benchmarks/results/reconstruction_tables.md. Split used: test
-(once, for these tables).
+Run: .venv/bin/python benchmarks/reconstruction_tables.py out/tables/eval
+(each ROOT holds <task>/metrics.json and <task>_clean/metrics.json, as scripts/train_shipped.sh writes, or
+`doefab evaluate --task TASK --images 12 --size 256 --out ROOT/TASK` and the same with `--clean --out
+ROOT/TASK_clean` for the shipped weights; a task is taken from the first ROOT that has it). Copies them to
+benchmarks/results/evaluate_<task>.json and evaluate_<task>_clean.json, then writes
+benchmarks/results/reconstruction_tables.md from those files alone (a task no ROOT holds keeps its committed
+files), so the tables are the JSON's numbers to their printed digits (tests/docs/test_results_consistency.py).
+Split used: test. Every evaluation of it is a read of the test split: add its row to
+benchmarks/results/test_split_reads.md.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -30,13 +37,16 @@ def _load(root: Path, name: str) -> dict | None:
 def task_table(task: str, honest: dict, clean: dict | None) -> list[str]:
     keys = KEYS[task]
     head = ["variant"] + [f"{NAMES[k]} honest" for k in keys] + ([f"{NAMES[k]} clean" for k in keys] if clean else [])
-    head.append("training steps")
-    lines = [f"**{task}**: {honest['images']} held-out test scenes of {honest['size_px']}² px "
-             f"({honest['conditions'].get('parts', 0)} fabricated parts)", "",
+    head += ["training steps", "weights SHA-256"]
+    versions = ", ".join(f"{k} {v}" for k, v in honest["versions"].items())
+    lines = [f"**{task}**: {honest['images']} held-out scenes of the {honest['split']} split, {honest['size_px']}² px "
+             f"({honest['conditions'].get('parts', 0)} fabricated parts); torch on {honest['threads']} thread; "
+             f"{versions}", "",
              "| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for v, row in honest["rows"].items():
         cells = [f"{row[k]:.4g}" for k in keys] + ([f"{clean['rows'][v][k]:.4g}" for k in keys] if clean else [])
-        lines.append(f"| {v.replace('_', '-')} | " + " | ".join(cells) + f" | {honest['weights'][v]['steps']} |")
+        w = honest["weights"][v]
+        lines.append(f"| {v.replace('_', '-')} | " + " | ".join(cells) + f" | {w['steps']} | {w['sha256'][:12]} |")
     lines += [""] + paired_lines(task, honest)
     if task == "hyperspectral" and honest.get("by_light"):
         lines += light_table(honest, clean)
@@ -99,16 +109,47 @@ def light_table(honest: dict, clean: dict | None) -> list[str]:
     return lines + [""]
 
 
-def main(roots: list[Path]) -> None:
+def tables_markdown(folder: Path = OUT) -> str:
+    """The tables from ``folder``'s evaluate_<task>.json and evaluate_<task>_clean.json."""
     lines = []
     for task in KEYS:
+        honest, clean = (folder / f"evaluate_{task}.json", folder / f"evaluate_{task}_clean.json")
+        if honest.is_file():
+            lines += task_table(task, json.loads(honest.read_text()),
+                                json.loads(clean.read_text()) if clean.is_file() else None)
+    return "\n".join(lines) + "\n"
+
+
+def _checked(f: Path, honest: Path | None = None) -> Path:
+    """``f``, an evaluation by the current `doefab evaluate` (thread count and weights' SHA-256 recorded; a clean
+    one of the same weights and split as ``honest``); else the run stops, naming the fix."""
+    ev = json.loads(f.read_text())
+    if "threads" not in ev or any("sha256" not in w for w in ev["weights"].values()):
+        sys.exit(f"{f}: made before evaluations recorded their thread count and weights' SHA-256: run doefab "
+                 f"evaluate again")
+    if honest is not None:
+        other = json.loads(honest.read_text())
+        if ev["split"] != other["split"] or any(w["sha256"] != other["weights"][v]["sha256"]
+                                                for v, w in ev["weights"].items()):
+            sys.exit(f"{f} evaluates other weights or another split than {honest}: evaluate both again")
+    return f
+
+
+def main(roots: list[Path]) -> None:
+    copies = {}  # every evaluation checked before any file is replaced
+    for task in KEYS:
         root = next((r for r in roots if _load(r, task) is not None), None)
-        if root is not None:
-            lines += task_table(task, _load(root, task), _load(root, f"{task}_clean"))
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "reconstruction_tables.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+        if root is None:
+            continue
+        honest = copies[f"evaluate_{task}.json"] = _checked(root / task / "metrics.json")
+        if (root / f"{task}_clean" / "metrics.json").is_file():
+            copies[f"evaluate_{task}_clean.json"] = _checked(root / f"{task}_clean" / "metrics.json", honest)
+    for name, f in copies.items():
+        shutil.copyfile(f, OUT / name)
+    text = tables_markdown(OUT)
+    (OUT / "reconstruction_tables.md").write_text(text)
+    print(text)
 
 
 if __name__ == "__main__":
-    main([Path(a) for a in sys.argv[1:]] or [Path("out/ship10/eval")])
+    main([Path(a) for a in sys.argv[1:]] or [Path("out/tables/eval")])

@@ -54,6 +54,10 @@ MEASUREMENTS = (
                 before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
                         "bash scripts/train_shipped.sh 500 out/s16 depth",
                         "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
+    Measurement("test_split_reads", None, (R + "test_split_reads.md",),
+                command="git log -p -- 'benchmarks/results/evaluate_*.json'",
+                note="the ledger of the test split's reads, a row for each commit that changes "
+                     "`benchmarks/results/evaluate_*.json` (the rows before the ledger from this history)"),
     Measurement("reconstruction_speed", "benchmarks/reconstruction_speed.py", (R + "reconstruction_speed.md",)),
     Measurement("training_curves", "benchmarks/training_curves.py", (R + "training_curves.png",)),
     Measurement("hdr_solve", "benchmarks/hdr_solve.py", (R + "hdr_solve.json",), json_table="hdr_solve"),
@@ -69,6 +73,7 @@ MEASUREMENTS = (
     Measurement("tolerance_grid", "benchmarks/tolerance_grid.py", (R + "tolerance_grid.md",)),
     Measurement("run_time", "benchmarks/run_time.py", (R + "run_time.md",)),
     Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
+    Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
 )
 

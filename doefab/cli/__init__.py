@@ -107,7 +107,10 @@ def main(argv: list[str] | None = None) -> int:
     previous = _handle_sigterm()
     try:
         _refuse_empty_values(parser, args)
-        return int(args.func(args) or 0)
+        from doefab._devices import using_device
+
+        with using_device(getattr(args, "device", None)):  # --device: what device=None means in this command
+            return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
         status, what = ((EXIT_TERMINATED, "terminated (SIGTERM)") if isinstance(exc, Terminated)
                         else (EXIT_INTERRUPTED, "interrupted"))

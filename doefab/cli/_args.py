@@ -7,7 +7,8 @@ import argparse
 import math
 import sys
 
-__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder", "task_design_arg"]
+__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder", "task_design_arg",
+           "add_device_arg"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -69,6 +70,25 @@ def depth_m(text: str) -> float:
     if math.isfinite(v) and v > 1e6:
         raise argparse.ArgumentTypeError(f"{text} m is beyond 1000 km: write inf for a point at infinity")
     return v
+
+
+def device_arg(text: str) -> str:
+    """``--device``: auto, cpu, cuda or cuda:N, a device this machine has (checked when the flag is parsed)."""
+    from doefab._devices import check_device
+    from doefab.errors import DoefabError
+
+    try:
+        return check_device(text, "--device")
+    except DoefabError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--device ")) from None
+
+
+def add_device_arg(p, scene: bool = False) -> None:
+    """--device: where torch computes (``scene``: the command reads a scene, whose ``device`` key it overrides)."""
+    default = "the scene's device key, else " if scene else ""
+    p.add_argument("--device", type=device_arg, default=None,
+                   help="where torch computes: auto (a CUDA GPU when torch sees one, else the CPU), cpu, cuda or "
+                        f"cuda:N (GPU N); default: {default}$DOEFAB_DEVICE, else auto")
 
 
 def plain_name_arg(text: str) -> str:

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from doefab.cli._args import number
+from doefab.cli._args import add_device_arg, number
 
 RGB_M = (656e-9, 589e-9, 486e-9)
 
@@ -20,6 +20,7 @@ def register(sub) -> None:
                                                      "any other non-empty folder is refused)")
     p.add_argument("--kernel", type=number(int, 15, 511, unit="sensor pixels"), default=255,
                    help="PSF window K (sensor pixels)")
+    add_device_arg(p)
     p.set_defaults(func=run)
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from doefab.cli._args import number
+from doefab.cli._args import add_device_arg, number
 from doefab.errors import DoefabError
 
 
@@ -46,6 +46,7 @@ def register(sub) -> None:
     p.add_argument("--ring-law", default=None, choices=["seed", "defocus"],
                    help="half-ring only: ring radius linear in depth (the paper's Eq. 25) or in inverse depth (defocus)")
     p.add_argument("--loss", default=None, choices=["band", "window", "l1"], help="task loss (default: the task's)")
+    add_device_arg(p)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="overwrite an existing design in OUT")
     p.set_defaults(func=run)

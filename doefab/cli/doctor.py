@@ -1,9 +1,12 @@
 """``doefab doctor SCENE``: what the scene's camera and task imply (f-number, diffraction limit in sensor
 pixels, DOE pixels across the aperture, depth of field, the task's geometry in pixels), then its sampling
 conditions and numerical stiff spots, each with its margin and, where it fails, the fix (exit status 3 if any
-fails). Nothing is designed or trained."""
+fails), and the device torch computes on (--device, else the scene's device key). Nothing is designed or
+trained."""
 
 from __future__ import annotations
+
+from doefab.cli._args import add_device_arg
 
 
 def register(sub) -> None:
@@ -11,21 +14,28 @@ def register(sub) -> None:
     p.add_argument("scene", help="scene TOML file")
     p.add_argument("--out", default=None, help="also write the checks as JSON to this file")
     p.add_argument("--no-precision", action="store_true", help="skip the float32 vs float64 PSF computation")
+    add_device_arg(p, scene=True)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from doefab.errors import CheckFailed
-    from doefab.io import atomic_write_json
-    from doefab.pipeline.doctor import diagnose
+    from doefab._devices import using_device
     from doefab.pipeline.scene import load_scene
-
-    from doefab.pipeline.doctor import explain
-    from doefab.pipeline.system import resolve
 
     if args.out is not None:
         check_report_file(args.out)  # before any work
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene)  # its device key checked with every other key
+    with using_device(scene.device if args.device is None else None, "scene"):
+        return _diagnose(args, scene)
+
+
+def _diagnose(args, scene) -> int:
+    from doefab._devices import describe_device
+    from doefab.errors import CheckFailed
+    from doefab.io import atomic_write_json
+    from doefab.pipeline.doctor import diagnose, explain
+    from doefab.pipeline.system import resolve
+
     res = resolve(scene)
     facts = explain(res)
     width = max(len(f["quantity"]) for f in facts)
@@ -34,6 +44,7 @@ def run(args) -> int:
         print(f"  {f['quantity']:<{width}}  {f['value']:>8.4g} {f['unit']:<10} {f['meaning']}")
     for note in res["warnings"]:
         print(f"warning: {note}")
+    print(f"device: {describe_device()}")
     print("checks")
     rows = diagnose(scene, precision_check=not args.no_precision)
     for r in rows:

@@ -3,10 +3,13 @@
 By default under the conditions a real camera makes: captures through fabricated parts drawn from the default
 tolerance budget, per-column dual-pixel crosstalk unmixed with a noisy calibration, depth between the network's
 planes — while the networks are told the nominal PSF. --clean evaluates on the nominal model's own captures.
---split val is for choices (designs, settings); the test split is for the final tables. Hyperspectral results
-are also given for in-library and out-of-library light.
+--split val is for choices (designs, settings); the test split is for the tables; --split final reads the final
+test set (new scenes and parts from the test split's content, made after every earlier test read), and each such
+read is appended to OUT/final_split_reads.md. Hyperspectral results are also given for in-library and
+out-of-library light. Torch runs on one thread while it evaluates, so the numbers do not depend on the machine's.
 
-Writes OUT/metrics.json (every variant's mean metrics) and OUT/examples.png.
+Writes OUT/metrics.json (every variant's mean metrics, the thread count, library versions, code version and each
+weights file's SHA-256) and OUT/examples.png.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from doefab.cli._args import add_sensor_args, number
+from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -31,8 +34,11 @@ def register(sub) -> None:
                    help="comma-separated variants to evaluate (default: all three)")
     p.add_argument("--clean", action="store_true",
                    help="the nominal model's own captures (no fabricated part, crosstalk or off-plane depth)")
-    p.add_argument("--split", default="test", choices=["test", "val"], help="held-out scenes to use")
+    p.add_argument("--split", default="test", choices=["test", "val", "final"],
+                   help="held-out scenes: val for choices, test for the tables, final for the final test set (each "
+                        "read logged in OUT/final_split_reads.md)")
     add_sensor_args(p)
+    add_device_arg(p)
     p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
     p.set_defaults(func=run)
 
@@ -41,7 +47,7 @@ def run(args) -> int:
     from doefab.cli._args import sensor_arg, task_design_arg
     from doefab.cli._output import claim_output
     from doefab.errors import DoefabError
-    from doefab.reconstruction.evaluate import evaluate
+    from doefab.reconstruction.evaluate import FINAL_LEDGER, evaluate, one_thread
     from doefab.reconstruction.loader import load_reconstructor
 
     if args.size % 32:
@@ -58,9 +64,12 @@ def run(args) -> int:
     out.create()
     from doefab.tolerance.conditions import for_splits
 
-    cond = for_splits(args.task, design, "clean" if args.clean else "honest", (args.split,), progress=True)
+    with one_thread():  # the fabricated parts computed (and cached) here: on one thread, as the evaluation runs
+        cond = for_splits(args.task, design, "clean" if args.clean else "honest", (args.split,), progress=True)
     res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants,
                    conditions=None if args.clean else cond[args.split], split=args.split, sensor=sensor)
     print(json.dumps({"rows": res["rows"], **({"by_light": res["by_light"]} if "by_light" in res else {})}, indent=1))
     print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
+    if args.split == "final":
+        print(f"this read of the final test set is logged in {out.path / FINAL_LEDGER}")
     return 0

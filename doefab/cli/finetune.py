@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from doefab.cli._args import add_sensor_args, number
+from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -34,6 +34,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed")
     p.add_argument("--out", required=True, help="output folder")
     add_sensor_args(p, spectral_flag=False)
+    add_device_arg(p)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier run in OUT")
     p.set_defaults(func=run)

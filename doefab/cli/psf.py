@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.cli._args import depth_m, number, wavelength_nm
+from doefab.cli._args import add_device_arg, depth_m, number, wavelength_nm
 from doefab.errors import DoefabError
 
 
@@ -27,6 +27,7 @@ def register(sub) -> None:
                    help="pupil samples per DOE pixel (near points or large windows need more)")
     p.add_argument("--route", default="spectral", choices=["spectral", "mft", "fft", "asm"], help="propagation route")
     p.add_argument("--precision", default="float32", choices=["float32", "float64"], help="arithmetic precision")
+    add_device_arg(p)
     p.add_argument("--out", required=True, help="output folder (psf.npz and psf.png)")
     p.add_argument("--force", action="store_true", help="replace an earlier psf output in OUT")
     p.set_defaults(func=run)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from doefab.cli._args import add_device_arg
+
 
 def register(sub) -> None:
     p = sub.add_parser("run", help="run a scene file end to end (the main job)", description=__doc__,
@@ -19,6 +21,7 @@ def register(sub) -> None:
     p.add_argument("--force", action="append", default=[], metavar="STAGE",
                    help="recompute this stage even if its inputs are unchanged (repeatable)")
     p.add_argument("--quick", action="store_true", help="smaller samples and images, same stages (CI)")
+    add_device_arg(p, scene=True)
     p.set_defaults(func=run)
 
 
@@ -47,7 +50,7 @@ def run(args) -> int:
     args.outdir = od  # a failure removes what this scene's run created, unless a stage finished
     args.keep_on_failure = lambda: has_progress(od.path, sc.stages)
     od.create()
-    summary = run_scene(sc, od.path, force=tuple(args.force), quick=args.quick, res=res)
+    summary = run_scene(sc, od.path, force=tuple(args.force), quick=args.quick, res=res, device=args.device)
     report = (f"report {od.path / 'report.html'}" if summary["report"] else
               "no report written (\"report\" is not in the scene's stages)")
     print(f"{sc.path}: {summary['seconds']:.0f} s; {report}")
@@ -79,7 +82,8 @@ def run_each_in_own_process(args) -> int:
     import sys
 
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
-             + (["--debug"] if getattr(args, "debug", False) else []))
+             + (["--debug"] if getattr(args, "debug", False) else [])
+             + (["--device", args.device] if args.device is not None else []))
     for scene in args.scene:
         rc, how = run_scene_process([sys.executable, "-m", "doefab", "run", scene, *flags])
         if rc != 0:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from doefab.cli._args import number
+from doefab.cli._args import add_device_arg, number
 
 
 def register(sub) -> None:
@@ -42,13 +42,16 @@ def register(sub) -> None:
                         "yield (nominal and measured PSF)")
     p.add_argument("--weights-dir", default=None, help="networks trained for this design (default: the shipped ones)")
     p.add_argument("--surrogate", action="store_true",
-                   help="also a sensitivity surrogate: fitted on simulated parts, Monte Carlo on it, checked on "
-                        "held-out parts, compared with the direct Monte Carlo")
+                   help="also a sensitivity surrogate: fitted on simulated parts, calibrated on 16 of its own, "
+                        "Monte Carlo on it, and its yield minus the direct judgement's on parts it never saw (the "
+                        "direct Monte Carlo's when there are at least 16), with a 95 %% interval")
     p.add_argument("--workers", type=_workers, default=None,
                    help="local worker processes, 1–64, or auto (default: one per core when there are at least 4 "
                         "parts per core, else in process)")
     p.add_argument("--scheduler", type=scheduler_arg, default=None,
-                   help="Dask: local:N (a LocalCluster of N = 1..64 workers) or tcp://HOST:PORT")
+                   help="Dask: local:N (a LocalCluster of N = 1..64 workers; one GPU each on a CUDA --device) or "
+                        "tcp://HOST:PORT")
+    add_device_arg(p)
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")

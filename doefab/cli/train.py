@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from doefab.cli._args import add_sensor_args, number
+from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
@@ -49,6 +49,7 @@ def register(sub) -> None:
                    help="train on the nominal model's own captures instead of each split's fabricated parts, "
                         "crosstalk and off-plane depth")
     add_sensor_args(p)
+    add_device_arg(p)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--force", action="store_true", help="replace an earlier training run in OUT")
     p.set_defaults(func=run)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab._devices import resolve_device
 from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 from doefab.design.design import Design
 from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
@@ -141,7 +142,8 @@ def finalize_levels(height: np.ndarray, camera: Camera, n_levels: int = DEFAULT_
 
 
 def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0, camera: Camera | None = None,
-             out_dir: str | Path | None = None, resume: bool = False, progress: bool = True, **settings) -> Design:
+             out_dir: str | Path | None = None, resume: bool = False, progress: bool = True, device=None,
+             **settings) -> Design:
     """Optimise a task's coded height map and return the quantized design.
 
     Args:
@@ -152,6 +154,9 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         camera: defaults to the task's preset camera.
         out_dir: folder for ``checkpoint.pt`` and ``history.csv`` while running (None: no checkpoints).
         resume: continue from ``out_dir/checkpoint.pt``.
+        device: where the PSFs and gradients are computed ("auto", "cpu", "cuda", "cuda:N"; None: the current
+            default, ``doefab._devices.default_device``). The random batches are drawn on the CPU, so a seed gives
+            the same steps on every device (the numbers agree to float32 rounding).
         **settings: other :class:`DesignConfig` fields (lr, sampling, qat_fraction, batch, fab_weight, …).
     """
     task_obj = get_task(task, **(settings.pop("task_params", None) or {}))
@@ -166,6 +171,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     cfg = DesignConfig(task=task_obj.name, task_params=task_obj.params(), iterations=iterations, optimizer=optimizer,
                        seed=seed, **settings)
     cfg.check()
+    dev = resolve_device(device)
     cam = camera or Camera.preset(task_obj.preset)
     task_obj.bind(cam)
     cfg.task_params = task_obj.params()
@@ -174,13 +180,13 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"
     if cfg.start not in STARTS:
         raise DoefabError(f"unknown start {cfg.start!r}: choose one of {STARTS}")
-    param = make_parameterization(cfg.parameterization, dcam, cfg.knots)
+    param = make_parameterization(cfg.parameterization, dcam, cfg.knots).to(dev)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     lams, depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
-    plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",))
-    mask = coded_mask(dcam)
-    theta = param.start(task_obj, rng, cfg.start).requires_grad_(True)
+    plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",), device=dev)
+    mask = coded_mask(dcam).to(dev)
+    theta = param.start(task_obj, rng, cfg.start).to(dev).requires_grad_(True)
     pairs = [(d, w) for d in range(len(depths)) for w in range(len(lams))]
     gen = torch.Generator().manual_seed(cfg.seed)
     history: list = []
@@ -239,7 +245,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     def checkpoint(step: int, elapsed: float) -> None:
         if ckpt is None:
             return
-        state = {"config": config_json, "theta": theta.detach().clone(), "step": step, "elapsed": elapsed,
+        state = {"config": config_json, "theta": theta.detach().cpu().clone(), "step": step, "elapsed": elapsed,
                  "generator": gen.get_state(), "history": history}
         if adam is not None:
             state["adam"] = adam.state_dict()
@@ -292,7 +298,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         if bar is not None:
             bar.close()
     checkpoint(cfg.iterations, time.perf_counter() - t_start)
-    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), param, history, lams, depths)
+    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), param, history, lams, depths, dev)
     design.extra["wall_time_s"] = round(time.perf_counter() - t_start, 1)
     design.extra["optimizer_time_s"] = history[-1][1] if history else 0.0
     design.extra["evaluations"] = len(history)
@@ -316,7 +322,7 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
     """
     import nlopt
 
-    idx = torch.nonzero(mask.flatten() > 0).flatten()
+    idx = torch.nonzero(mask.flatten() > 0).flatten().to(theta.device)
     if idx.numel() > NLOPT_MAX_VARIABLES:
         raise DoefabError(f"{name}: this design has {idx.numel():,} coded DOE pixels but nlopt's optimisers take at "
                           f"most {NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
@@ -329,7 +335,7 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
 
     def attempt(end: int) -> tuple[bool, str]:
         """One nlopt run from the current θ up to evaluation ``end``; returns (lowered the loss, outcome)."""
-        x0 = flat[idx].double().numpy().copy()
+        x0 = flat[idx].double().cpu().numpy().copy()
         best = {"loss": float("inf"), "x": x0, "first": None}
         stop: list = []
         opt = nlopt.opt(algo, int(idx.numel()))
@@ -340,13 +346,13 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
                 raise nlopt.ForcedStop
             try:
                 with torch.no_grad():
-                    flat[idx] = torch.from_numpy(np.array(x, copy=True)).to(theta.dtype)
+                    flat[idx] = torch.from_numpy(np.array(x, copy=True)).to(theta.device, theta.dtype)
                 theta.grad = None
                 loss = objective(min(step, iterations - 1))
                 if torch.isfinite(loss):
                     loss.backward()
                 if grad.size > 0:
-                    grad[:] = (theta.grad.detach().reshape(-1)[idx].double().numpy() if theta.grad is not None
+                    grad[:] = (theta.grad.detach().reshape(-1)[idx].double().cpu().numpy() if theta.grad is not None
                                else 0.0)
                 value = float(loss.detach())
                 record(step, value)
@@ -376,7 +382,7 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
         except Exception as exc:  # noqa: BLE001 - nlopt's own errors (RoundoffLimited, generic failure)
             outcome = f"nlopt {exc.__class__.__name__}" + (f" ({exc})" if str(exc) else "")
         with torch.no_grad():
-            flat[idx] = torch.from_numpy(best["x"]).to(theta.dtype)
+            flat[idx] = torch.from_numpy(best["x"]).to(theta.device, theta.dtype)
         first = best["first"]
         lowered = first is not None and best["loss"] < first - 1e-7 * max(1.0, abs(first))
         return lowered, outcome
@@ -406,11 +412,13 @@ def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mas
     return "; ".join(reasons) or None
 
 
-def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> Design:
-    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution.
+def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths, device=None) -> Design:
+    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution
+    (the PSFs on ``device``).
 
     A radial profile is evaluated on the full grid (its knots sit at fixed radii), not repeated per coarse pixel."""
     radial = cfg.parameterization == "radial"
+    theta, param = theta.cpu(), param.to("cpu")
     with torch.no_grad():
         if radial:
             h_design = theta_to_height(make_parameterization("radial", cam, param.knots).waves(theta), cam)
@@ -424,7 +432,7 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
     mask = coded_mask(cam).numpy() > 0
     step = level_step(cam, n_levels)
     height = np.where(mask, h_design, plain_level(n_levels) * step)
-    plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",))
+    plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",), device=device)
     with torch.no_grad():
         psf_c = plan(height).coded
         psf_q = plan(levels.astype(np.float64) * step).coded
@@ -446,9 +454,10 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths) -> De
 
 
 def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str, sampling: int, history=(),
-                      extra: dict | None = None) -> Design:
-    """A finished design (full-grid heights, ``design``'s levels, full-grid metrics) of ``design``'s task and camera
-    from parameters θ found on its grid coarsened ``sampling`` times (e.g. by end-to-end fine-tuning)."""
+                      extra: dict | None = None, device=None) -> Design:
+    """A finished design (full-grid heights, ``design``'s levels, full-grid metrics, the PSFs computed on ``device``)
+    of ``design``'s task and camera from parameters θ found on its grid coarsened ``sampling`` times (e.g. by
+    end-to-end fine-tuning)."""
     task_obj = get_task(design.task, **design.task_params)
     task_obj.bind(design.camera)
     radial = parameterization == "radial"
@@ -457,6 +466,7 @@ def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str
                        knots=int(theta.numel()) if radial else 0, start="task", n_levels=design.n_levels)
     dcam = design_camera(design.camera, sampling)
     param = make_parameterization(parameterization, dcam, cfg.knots)
-    out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths)
+    out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths,
+                  device)
     out.extra.update(extra or {})
     return out

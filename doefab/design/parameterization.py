@@ -70,6 +70,10 @@ class PixelParam:
     def variable_mask(self, coded_mask: torch.Tensor) -> torch.Tensor:
         return coded_mask
 
+    def to(self, device) -> "PixelParam":
+        """This parameterisation for θ on ``device`` (it holds no tensor)."""
+        return self
+
     def start(self, task, rng, start: str) -> torch.Tensor:
         if start == "lens":
             return torch.from_numpy(lens_difference_waves(self.camera, task)).float()
@@ -103,6 +107,11 @@ class RadialParam:
 
     def waves(self, theta: torch.Tensor) -> torch.Tensor:
         return theta[self._i0] * (1 - self._w) + theta[self._i0 + 1] * self._w
+
+    def to(self, device) -> "RadialParam":
+        """This parameterisation with its interpolation tables on ``device`` (where θ lives)."""
+        self._i0, self._w = self._i0.to(device), self._w.to(device)
+        return self
 
     def variable_mask(self, coded_mask: torch.Tensor) -> torch.Tensor:
         return torch.ones(self.knots)

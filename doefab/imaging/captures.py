@@ -15,7 +15,9 @@ capture is a half-exposure image: a uniform scene of radiance 1 gives about 0.5 
   through (``capture.pair``; a torch tensor carries the same attribute), so a reconstructor can refuse captures
   of other bands or another camera than its own (``reconstruction.loader``).
 
-Convolutions are linear (zero-padded FFT, 'same' crop), batched over bands in torch.
+Convolutions are linear (zero-padded FFT, 'same' crop), batched over bands in torch, on the ``device`` asked for
+(the CPU or a GPU); the noise and the crosstalk are drawn on the CPU from the seeded generator, so a seed gives the
+same noise on every device.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 import torch
 
 from doefab import _validate
+from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.imaging.crosstalk import DualPixelCrosstalk, check_pair
 from doefab.imaging.sensor import noise_model
@@ -113,15 +116,18 @@ def render_layers(scene: torch.Tensor, psf: torch.Tensor, masks: torch.Tensor | 
 
 
 def plane_masks(depth_map: torch.Tensor, depths) -> torch.Tensor:
-    """[D, H, W] one-hot: each pixel in the plane nearest in inverse depth (dioptres; ``inf`` allowed)."""
-    inv = torch.tensor([0.0 if math.isinf(z) else 1.0 / z for z in depths], dtype=torch.float64)
+    """[D, H, W] one-hot: each pixel in the plane nearest in inverse depth (dioptres; ``inf`` allowed), on the
+    depth map's device."""
+    inv = torch.tensor([0.0 if math.isinf(z) else 1.0 / z for z in depths], dtype=torch.float64,
+                       device=depth_map.device)
     idx = torch.argmin((1.0 / depth_map.double()[None] - inv[:, None, None]).abs(), dim=0)
     return torch.stack([idx == d for d in range(len(depths))]).to(torch.float32)
 
 
-def simulate_captures(scene, pair, depth_map=None, response=None, noise="default", seed: int = 0, crosstalk=None):
+def simulate_captures(scene, pair, depth_map=None, response=None, noise="default", seed: int = 0, crosstalk=None,
+                      device=None):
     """``(coded, uncoded)`` captures: two [3, H, W] float32 arrays in [0, 1] (numpy in, numpy out; torch in,
-    torch out).
+    torch out, on the CPU).
 
     Args:
         scene: [C, H, W] linear radiance ≥ 0, C = the pair's wavelengths.
@@ -137,8 +143,11 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             — the camera's per-column ratios mix the two views (Eq. 29) before the noise, and, when it carries a
             calibration's estimate, its pipeline unmixes them after (the captures a user's pipeline delivers).
             A ``(α_l→r, α_r→l)`` pair mixes without unmixing.
+        device: where the scene is blurred ("auto", "cpu", "cuda", "cuda:N"; None: the current default,
+            ``doefab._devices.default_device``); the captures come back to the CPU.
     """
     torch_in = isinstance(scene, torch.Tensor)
+    dev = resolve_device(device)
     seed = _validate.seed("seed", seed)
     s = _finite("scene", scene, 3)
     if bool((s < 0).any()):
@@ -149,7 +158,7 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
         raise DoefabError(f"scene holds radiance up to {top:.3g}: simulate_captures takes radiance up to "
                           f"{MAX_RADIANCE:g} times the clipping level of a full exposure (1); scale the scene, e.g. "
                           f"multiply it by {100 / top:.3g} to put its brightest point at 100")
-    s = s.to(torch.float32)
+    s = s.to(dev, torch.float32)
     if pair.coded is None or pair.uncoded is None:
         raise DoefabError("the PSF pair lacks a half: compute it with halves=('coded', 'uncoded')")
     c, h, w = s.shape
@@ -166,7 +175,7 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             raise DoefabError(f"depth_map has shape {tuple(dm.shape)}, the scene ({h}, {w})")
         if bool((dm <= 0).any()):
             raise DoefabError("depth_map must hold depths > 0 in metres")
-        masks = plane_masks(dm, pair.depths)
+        masks = plane_masks(dm.to(dev), pair.depths)
     elif len(pair.depths) != 1:
         raise DoefabError(f"the PSF pair has {len(pair.depths)} depth planes: pass depth_map (metres) or a pair "
                           f"computed for one depth")
@@ -175,10 +184,10 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
     views = []
     with torch.no_grad():
         for half in ("coded", "uncoded"):
-            psf = pair[half].detach().to(torch.float32)
+            psf = pair[half].detach().to(dev, torch.float32)
             blurred = render_layers(s, psf, masks, pair.depths)
-            rgb = torch.einsum("rc,chw->rhw", t, blurred) if t is not None else blurred
-            views.append(rgb.double().numpy())
+            rgb = torch.einsum("rc,chw->rhw", t.to(dev), blurred) if t is not None else blurred
+            views.append(rgb.double().cpu().numpy())
     out = [v.astype(np.float32) for v in _camera(crosstalk).record(views[0], views[1], noise_obj, rng)]
     return _labelled(out[0], pair, torch_in), _labelled(out[1], pair, torch_in)
 

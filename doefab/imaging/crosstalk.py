@@ -10,20 +10,27 @@ much of the other half's light as of its own, which no dual-pixel sensor does.
 Calibration (Eq. 30–31): with one aperture half blocked, a white wall's light reaches only one view, and the
 fraction that lands on the other one is the ratio.
 
-Crosstalk depends on the angle at which light reaches the sensor (the paper's Fig. 5), so the ratios change across
-the sensor's columns: :func:`crosstalk_profile` models them as linear in the column's position, rising toward
-one edge for l→r and toward the other for r→l. :func:`simulate_calibration` makes the two blocked-aperture
-white-wall captures with sensor noise and estimates the ratios from them (Eq. 31, averaged over rows), so a
-calibrated pipeline carries the calibration's own error.
+Crosstalk depends on the angle at which light reaches the sensor (the paper's Fig. 5). :class:`SensorCrosstalk` is
+a sensor's true crosstalk: each aperture half's light forms a spot under a pixel's microlens, and the ratio is
+the part of that spot beyond the photodiodes' boundary. The chief ray's angle across the split (the column's
+place) moves both halves' spots the same way, so one ratio rises and the other falls, each half by its own law;
+its angle along the split (the row's place) and across it widen the spots, raising both; the ratios vary from
+row to row and drift between the calibration and a capture session. :func:`simulate_calibration` makes the two
+blocked-aperture white-wall captures with sensor noise and estimates per-column ratios from them (Eq. 31,
+averaged over rows), as the paper does: the rows' variation, the dependence on the row's place and the drift
+stay in the calibrated captures (:meth:`SensorCrosstalk.residual`), with the calibration's own noise.
 """
 
 from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
 
 import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "crosstalk_profile",
+__all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "SensorCrosstalk",
            "simulate_calibration", "DualPixelCrosstalk", "check_pair"]
 
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
@@ -54,11 +61,12 @@ def check_pair(alpha_lr, alpha_rl, name: str = "alpha_lr, alpha_rl") -> None:
     try:
         det = np.atleast_1d(1.0 - a - b)
     except ValueError:
-        raise DoefabError(f"{name} must be scalars or per-column profiles of one length, got shapes "
-                          f"{np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
+        raise DoefabError(f"{name} must be scalars, per-column profiles or [rows, columns] maps of one shape, got "
+                          f"shapes {np.shape(alpha_lr)} and {np.shape(alpha_rl)}") from None
     if det.min() <= 0:
-        i = int(np.argmin(det))
-        where = f" at column {i}" if det.size > 1 else ""
+        i = np.unravel_index(int(np.argmin(det)), det.shape)
+        where = "" if det.size == 1 else (f" at column {i[-1]}" if det.ndim == 1 or det.shape[0] == 1 else
+                                          f" at row {i[0]}, column {i[-1]}")
         raise DoefabError(f"{name} = ({np.broadcast_to(a, det.shape)[i]:g}, {np.broadcast_to(b, det.shape)[i]:g})"
                           f"{where} is no dual-pixel crosstalk: 1 − α_l→r − α_r→l = {det[i]:.3g} ≤ 0, so each "
                           f"photodiode collects as much of the other half's light as of its own and the views do not "
@@ -124,37 +132,41 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
     return alpha_lr, alpha_rl
 
 
-def crosstalk_profile(columns, centre: float, slope: float, half_width: float):
-    """Ratios at sensor ``columns`` (pixels from the sensor's centre column): ``centre + slope · x / half_width``
-    clipped to [0, 0.499]; ``slope`` is the change from the centre to ``half_width`` columns away (the edge of
-    the calibrated region; the paper's § 5.1: 3072 px wide)."""
-    x = np.asarray(columns, np.float64)
-    return np.clip(centre + slope * x / float(half_width), 0.0, 0.499)
+def _rows(rows) -> int:
+    """``rows`` checked to be a whole number of sensor rows a calibration averages."""
+    if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
+        raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r} (the paper "
+                          f"calibrates 3072)")
+    return int(rows)
 
 
 def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", rng=0, level: float = 0.5):
     """(α̂_l→r, α̂_r→l) per column from two simulated white-wall captures of ``rows`` rows, each with one aperture
     half blocked (Eq. 30), exposed so the open half's view reaches ``level`` of full scale, with ``noise`` (a
     ``doefab.imaging.sensor`` preset name or model) on each recorded view, estimated by
-    :func:`calibrate_crosstalk`. ``rng``: a seed or a ``numpy.random.Generator``."""
-    import numbers
-
+    :func:`calibrate_crosstalk`. The true ratios are scalars, per-column profiles or [rows, columns] maps (each
+    row its own, e.g. :meth:`SensorCrosstalk.ratios`); the estimate is one per column, whatever they are.
+    ``rng``: a seed or a ``numpy.random.Generator``."""
     from doefab import _validate
     from doefab.imaging.sensor import noise_model
 
-    if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
-        raise DoefabError(f"rows must be a whole number of sensor rows in 1..100000, got {rows!r}")
+    rows = _rows(rows)
     if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level <= 1:
         raise DoefabError(f"level must be the white wall's exposure as a fraction of full scale in (0, 1], got "
                           f"{level!r}")
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(_validate.seed("seed", rng))
     noise = noise_model(noise)
-    check_pair(alpha_lr, alpha_rl)  # fractions of one length (or scalars) that leave the views separable
+    check_pair(alpha_lr, alpha_rl)  # fractions of one shape (or scalars) that leave the views separable
     probe = np.zeros(1)
     a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
-    a, b = (np.atleast_1d(x).astype(np.float64).reshape(1, -1) for x in np.broadcast_arrays(a, b))
-    white = np.full((int(rows), a.shape[1]), float(level))
+    a, b = (np.atleast_1d(x).astype(np.float64) for x in np.broadcast_arrays(a, b))
+    if a.ndim == 1:
+        a, b = a.reshape(1, -1), b.reshape(1, -1)
+    if a.ndim != 2 or a.shape[0] not in (1, rows):
+        raise DoefabError(f"alpha_lr, alpha_rl of shape {a.shape} are no ratios of a {rows}-row calibration: give "
+                          f"scalars, per-column profiles or [rows, columns] maps with rows = {rows}")
+    white = np.full((rows, a.shape[1]), float(level))
     dark = np.zeros_like(white)
     pairs = []
     for left, right in ((white, dark), (dark, white)):  # left aperture half blocked → only the left view lit
@@ -167,11 +179,12 @@ def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", 
 class DualPixelCrosstalk:
     """What a dual-pixel camera does to a pair of clean views, and what its pipeline undoes (the paper's § 5.1).
 
-    ``record(coded, uncoded, noise, rng)``: the optical mix of Eq. 29 with the true per-column ratios (light
+    ``record(coded, uncoded, noise, rng)``: the optical mix of Eq. 29 with the true ratios (light
     lands on the wrong photodiode before it is counted), the sensor's noise, clipping to [0, 1], then — when the
     camera is calibrated — the exact unmix with the *estimated* ratios, a saturated photodiode's pixel staying
     saturated (full scale) in its view. Views are [..., H, W] arrays (numpy);
-    ratios are scalars or per-column arrays of length W. The coded capture is the right view.
+    ratios are scalars, per-column arrays of length W or [H, W] maps (a real sensor's true ratios:
+    :meth:`SensorCrosstalk.camera`). The coded capture is the right view.
     """
 
     def __init__(self, alpha_lr, alpha_rl, estimate=None):
@@ -187,7 +200,8 @@ class DualPixelCrosstalk:
         """A camera with true ratios ``(alpha_lr, alpha_rl)`` (scalars or per-column profiles) whose pipeline
         unmixes with the ratios a simulated calibration estimated: two noisy white-wall captures of ``rows`` rows,
         each with one aperture half blocked (Eq. 30–31; ``noise``: a ``doefab.imaging.sensor`` preset or model).
-        The estimate's own error stays in the captures, as it does in a user's pipeline."""
+        The estimate's own error stays in the captures, as it does in a user's pipeline. The true ratios are per
+        column, all the calibration can estimate; :meth:`SensorCrosstalk.camera` is a real sensor's camera."""
         estimate = simulate_calibration(alpha_lr, alpha_rl, rows, noise, seed, level)
         a, b = (np.atleast_1d(x).astype(np.float64) for x in np.broadcast_arrays(alpha_lr, alpha_rl))
         scalar = a.size == 1 and np.ndim(alpha_lr) == 0 and np.ndim(alpha_rl) == 0
@@ -207,3 +221,136 @@ class DualPixelCrosstalk:
             left = np.where(sat_l, 1.0, np.clip(left, 0.0, 1.0))
             right = np.where(sat_r, 1.0, np.clip(right, 0.0, 1.0))
         return right, left
+
+
+SPOT_GROWTH = 0.05  # the spots' widening at the calibrated region's edge (assumed: see SensorCrosstalk)
+ROW_SIGMA = 0.02  # rms row-to-row relative change of each ratio (assumed)
+DRIFT_SIGMA = 0.03  # rms relative change of each ratio between the calibration and a capture session (assumed)
+MIN_RATIO = 1e-4  # a ratio below this counts as this (where the spot model's distance is finite)
+_ROW_PERIOD = 1 << 17  # rows of a sensor's fixed row pattern: more than any calibrated width
+
+
+def _pixels(name: str, values) -> np.ndarray:
+    """``values`` as a 1-D array of finite pixel positions."""
+    try:
+        x = np.atleast_1d(np.asarray(values, dtype=np.float64))
+    except (TypeError, ValueError):
+        x = np.array([np.nan])
+    if x.ndim != 1 or not np.all(np.isfinite(x)):
+        raise DoefabError(f"{name} must be a list of finite pixel positions from the sensor's centre (e.g. "
+                          f"[-1.5, -0.5, 0.5, 1.5]), got {values!r}")
+    return x
+
+
+@dataclass(frozen=True)
+class SensorCrosstalk:
+    """The true crosstalk of a dual-pixel sensor: what its captures are mixed by, of which a per-column white-wall
+    calibration (Eq. 30–31) captures only a part.
+
+    Light through each aperture half forms a spot on its own photodiode under a pixel's microlens; the ratio is the
+    part of that spot beyond the photodiodes' boundary, ``Φ(z)`` (Φ: the normal distribution function; ``z``: the
+    spot centre's distance from the boundary in spot widths, negative). The field position enters through the
+    chief ray's angle, whose tangent grows in proportion to the distance from the sensor's centre (``u``, ``v``:
+    the column and the row from the centre in units of half the calibrated width ``width_px``):
+
+    - across the split, the chief ray moves both halves' spots the same way: ``z_l→r = Φ⁻¹(centre[0]) + k_l·u``,
+      ``z_r→l = Φ⁻¹(centre[1]) − k_r·u``, each half with its own ``k``: α_l→r reaches ``centre[0] + slope`` and
+      α_r→l ``centre[1] − slope`` at the calibrated edge (u = 1) of the centre row;
+    - the obliquity of the light along both axes widens the spots, ``z / (1 + spot_growth·(u² + v²))``, raising
+      both ratios toward the region's edges: along a column too, where a per-column calibration takes their mean;
+    - each row's microlenses sit a little off their photodiodes: α_l→r × (1 + ρ), α_r→l × (1 − ρ), ρ drawn per
+      row (rms ``row_sigma``; the sensor's fixed pattern, the same at the calibration and in every capture);
+    - between the calibration and a capture session (temperature and focus move the microlenses' focus and the
+      exit pupil) each ratio changes by a factor 1 + δ, δ drawn per session and half (rms ``drift_sigma``).
+
+    ``centre``, ``slope`` and ``width_px`` are the tolerance budget's ``[sensor]`` values (the paper calibrates the
+    central 3072 × 3072 pixels). ``spot_growth`` = 0.05, ``row_sigma`` = 0.02 and ``drift_sigma`` = 0.03 are
+    assumptions, not measurements: the prototype's chief ray meets the calibrated region's edge at about 9°
+    (1536 px × 5.4 µm = 8.3 mm off axis, the exit pupil some 50 mm away), where a microlens spot a few per cent
+    wider is plausible; a few per cent of the ratio from row to row and from day to day are what a per-row
+    calibration repeated on another day would show. ``seed`` draws the row pattern and the sessions' drift.
+    """
+
+    centre: tuple = (0.05, 0.05)
+    slope: float = 0.0
+    spot_growth: float = SPOT_GROWTH
+    row_sigma: float = ROW_SIGMA
+    drift_sigma: float = DRIFT_SIGMA
+    width_px: int = 3072
+    seed: int = 0
+
+    def __post_init__(self):
+        from doefab import _validate
+
+        try:
+            a, b = (float(x) for x in self.centre)
+        except (TypeError, ValueError):
+            raise DoefabError(f"centre must be the pair (α_l→r, α_r→l) of ratios at the sensor's centre, got "
+                              f"{self.centre!r}; e.g. (0.05, 0.05)") from None
+        check_pair(a, b, "centre α_l→r, centre α_r→l")
+        for name, hi in (("slope", 0.5), ("spot_growth", 1.0), ("row_sigma", 0.2), ("drift_sigma", 0.2)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not 0 <= v <= hi:
+                raise DoefabError(f"{name} must be a fraction in [0, {hi:g}], got {v!r}; e.g. "
+                                  f"{getattr(SensorCrosstalk, name):g} (the default)")
+        w = self.width_px
+        if isinstance(w, bool) or not isinstance(w, numbers.Integral) or not 16 <= w <= 100_000:
+            raise DoefabError(f"width_px must be the calibrated region's width, a whole number of pixels in "
+                              f"16..100000, got {w!r}; e.g. 3072 (the paper's)")
+        _validate.seed("seed", self.seed)
+
+    def ratios(self, rows, columns, session: int | None = 0) -> tuple:
+        """(α_l→r, α_r→l) as [len(rows), len(columns)] maps at sensor ``rows`` and ``columns`` (pixels from the
+        centre), in capture ``session`` (its drift drawn from the seed; None: at the calibration, from which the
+        drift is counted)."""
+        from scipy.special import ndtr, ndtri
+
+        r, c = _pixels("rows", rows), _pixels("columns", columns)
+        u, v = c[None, :] / (self.width_px / 2), r[:, None] / (self.width_px / 2)
+        a0, b0 = (min(max(float(x), MIN_RATIO), 1 - MIN_RATIO) for x in self.centre)
+        za, zb = ndtri(a0), ndtri(b0)
+        edge = 1.0 + self.spot_growth  # the spots' widening at u = 1 on the centre row, where the slope is met
+        ka = ndtri(min(a0 + self.slope, 1 - MIN_RATIO)) * edge - za
+        kb = zb - ndtri(max(b0 - self.slope, MIN_RATIO)) * edge
+        widen = 1.0 + self.spot_growth * (u * u + v * v)
+        rho = np.random.default_rng(np.random.SeedSequence([self.seed, 37])).normal(0.0, self.row_sigma, _ROW_PERIOD)
+        rho = rho[np.floor(r).astype(np.int64) % _ROW_PERIOD][:, None]
+        da, db = self.drift(session) if session is not None else (0.0, 0.0)
+        a = ndtr((za + ka * u) / widen) * (1 + rho) * (1 + da)
+        b = ndtr((zb - kb * u) / widen) * (1 - rho) * (1 + db)
+        return np.clip(a, 0.0, 0.999), np.clip(b, 0.0, 0.999)
+
+    def drift(self, session: int) -> np.ndarray:
+        """(δ_l→r, δ_r→l): each ratio's relative change in capture ``session`` since the calibration."""
+        from doefab import _validate
+
+        s = _validate.seed("session", session)
+        return np.random.default_rng(np.random.SeedSequence([self.seed, 31, s])).normal(0.0, self.drift_sigma, 2)
+
+    def calibrate(self, columns, rows: int = 3072, noise="default", rng=0, level: float = 0.5) -> tuple:
+        """Per-column (α̂_l→r, α̂_r→l) at ``columns`` from the white-wall calibration (:func:`simulate_calibration`)
+        of ``rows`` rows spread evenly over the calibrated height, made before any capture session."""
+        n = _rows(rows)
+        at = ((np.arange(n) + 0.5) / n - 0.5) * self.width_px
+        return simulate_calibration(*self.ratios(at, columns, session=None), n, noise, rng, level)
+
+    def camera(self, rows, columns, noise="default", session: int = 0, calibration_rows: int = 3072, rng=0,
+               level: float = 0.5, calibrated: bool = True) -> "DualPixelCrosstalk":
+        """The :class:`DualPixelCrosstalk` of a crop at ``rows`` × ``columns`` (pixels from the centre) in capture
+        ``session``: mixed by the true ratios there and, ``calibrated``, unmixed with the per-column estimate of
+        a calibration of ``calibration_rows`` rows with the sensor's ``noise`` (seeded by ``rng``)."""
+        a, b = self.ratios(rows, columns, session)
+        estimate = self.calibrate(columns, calibration_rows, noise, rng, level) if calibrated else None
+        return DualPixelCrosstalk(a, b, estimate)
+
+    def residual(self, rows: int = 3072, noise="none", sessions: int = 8, grid: int = 64, rng=0) -> tuple:
+        """(l→r, r→l) RMS of true − calibrated ratio over the calibrated region (a ``grid`` × ``grid`` lattice of
+        its pixels) and capture sessions 0 … ``sessions`` − 1: what the per-column calibration of ``rows`` rows
+        leaves in the captures (``noise`` "none": the part no number of calibration rows removes)."""
+        from doefab import _validate
+
+        n_s = _validate.number_in("sessions", sessions, 1, 10_000, integer=True)
+        at = ((np.arange(_validate.number_in("grid", grid, 1, 4096, integer=True)) + 0.5) / grid - 0.5) * self.width_px
+        estimate = np.stack(self.calibrate(at, rows, noise, rng))[:, None, :]
+        gaps = np.array([np.stack(self.ratios(at, at, s)) - estimate for s in range(n_s)])
+        return tuple(float(x) for x in np.sqrt(np.mean(gaps * gaps, axis=(0, 2, 3))))

@@ -85,7 +85,7 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     dn = float(camera.material.index(wavelength)) - 1.0
     _, plain, _ = _baffle(camera)
     h = height.to(real)
-    h_ref = h[torch.from_numpy(plain)].mean() if plain.any() else h.new_zeros(())
+    h_ref = h[torch.from_numpy(plain).to(h.device)].mean() if plain.any() else h.new_zeros(())
     phase = (k * dn) * (h - h_ref)
     return gap_field(torch.polar(torch.ones_like(phase), phase), camera, wavelength, depth, g, pad)
 
@@ -108,10 +108,10 @@ def gap_field(relative: torch.Tensor, camera: Camera, wavelength: float, depth: 
     s_in = source_path_difference(r2, depth, math.inf)  # exact sphere sag of the source at the DOE
     s_out = source_path_difference(r2, depth + g if math.isfinite(depth) else depth, math.inf)
     amp = depth / (depth + g) if math.isfinite(depth) else 1.0
-    wave_in = torch.from_numpy(np.exp(1j * k * s_in)).to(cplx)
+    wave_in = torch.from_numpy(np.exp(1j * k * s_in)).to(relative.device, cplx)
     # the plain wave at the aperture plane, with the angular spectrum's own piston exp(i k g)
-    wave_out = torch.from_numpy(amp * np.exp(1j * k * (s_out + g))).to(cplx)
-    change = (relative - 1) * torch.from_numpy(circ).to(real)
+    wave_out = torch.from_numpy(amp * np.exp(1j * k * (s_out + g))).to(relative.device, cplx)
+    change = (relative - 1) * torch.from_numpy(circ).to(relative.device, real)
     if pad is None:
         sin_max = min(wavelength / (2 * camera.doe_pitch), 0.99)
         spread_px = g * sin_max / math.sqrt(1 - sin_max**2) / camera.doe_pitch

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from doefab import _validate
+from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.propagators import make_route
@@ -126,14 +127,19 @@ class PSFPlan:
         precision: ``"float32"`` (default) or ``"float64"``.
         center: (u, v) sensor position of the window's centre pixel, metres.
         check: run the routes' sampling checks (refuse rather than return a wrong PSF).
+        device: where the PSFs are computed: "auto" (CUDA when torch sees a GPU), "cpu", "cuda" or "cuda:N";
+            None: the current default (``doefab._devices.default_device``). The plan's precomputed tensors live
+            there; ``half_psf`` returns tensors there, ``__call__`` returns the pair where the height came from
+            (a tensor's device; the CPU for a numpy array or a blank DOE).
         route_options: passed to the route (``pixel_nodes`` for mft, ``oversample`` for fft, ``pad`` for asm).
     """
 
     def __init__(self, camera: Camera, wavelengths, depths, kernel_size: int = 255,
                  halves=HALVES, route="spectral", pupil_oversample: int = 1, precision: str = "float32",
-                 center=(0.0, 0.0), check: bool = True, **route_options):
+                 center=(0.0, 0.0), check: bool = True, device=None, **route_options):
         if not isinstance(camera, Camera):
             raise DoefabError(f"camera must be a doefab.Camera, got {type(camera).__name__}")
+        self.device = resolve_device(device)
         self.camera = camera
         self.wavelengths = _validate.wavelengths(wavelengths)
         self.depths = _validate.depths(depths)
@@ -163,8 +169,8 @@ class PSFPlan:
                     check_smooth_phase(self._k[int(np.argmin(self.wavelengths))] * o, support, SOURCE_PHASE_LIMIT,
                                        getattr(self.route, "name", "route"),
                                        f"wavefront of the point at {z:g} m", pupil_oversample)
-            cov = torch.from_numpy(geo.coverage).to(self.real_dtype)
-            opd_t = torch.from_numpy(opd).to(self.real_dtype)
+            cov = torch.from_numpy(geo.coverage).to(self.device, self.real_dtype)
+            opd_t = torch.from_numpy(opd).to(self.device, self.real_dtype)
             setups = {}
             for env in (False, True):
                 setup = FocalSetup(geo.x, geo.y, geo.pitch, env, self.wavelengths, camera.sensor_distance,
@@ -177,7 +183,7 @@ class PSFPlan:
     def _prepared(self, half: str, envelope: bool):
         geo, cov, opd, setups, cache = self._halves[half]
         if envelope not in cache:
-            cache[envelope] = self.route.prepare(setups[envelope])
+            cache[envelope] = to_device(self.route.prepare(setups[envelope]), self.device)
         return setups[envelope], cache[envelope]
 
     def half_psf(self, half: str, height: torch.Tensor | None, depth_indices=None,
@@ -185,7 +191,8 @@ class PSFPlan:
         """(n_depths, n_wavelengths, K, K) PSF of one half; ``height`` is the full-grid map or None (flat).
 
         ``depth_indices`` / ``wavelength_indices`` restrict the computation to those entries of the plan's
-        lists (the output then has that many depths / wavelengths, in the order given).
+        lists (the output then has that many depths / wavelengths, in the order given). The PSF is on the plan's
+        device (``height`` is moved there, its gradient kept).
         """
         geo, cov, opd, _, _ = self._halves[half]
         if depth_indices is not None:
@@ -193,7 +200,7 @@ class PSFPlan:
         wl = range(len(self.wavelengths)) if wavelength_indices is None else list(wavelength_indices)
         h = None
         if height is not None:
-            h = height[geo.rows, geo.cols]
+            h = height.to(self.device)[geo.rows, geo.cols]
             if geo.oversample > 1:
                 h = h.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
         # a flat plate is smooth; only a structured DOE has flat pixels whose far field is an envelope
@@ -236,21 +243,25 @@ class PSFPlan:
         ``gap`` (metres, default 0): the DOE sits that far in front of the aperture plane, so its diffraction
         over the gap reaches both halves (``doefab.optics.gap``; ``height_right`` is then ignored: the DOE's
         own map covers both halves).
+
+        Computed on the plan's device; the pair's tensors are on ``height``'s device when it is a tensor, else on
+        the CPU.
         """
+        back = height.device if isinstance(height, torch.Tensor) else torch.device("cpu")
         h = None if height is None else as_height_tensor(height, self.camera, "height", self.real_dtype)
         hr = None if height_right is None else as_height_tensor(height_right, self.camera, "height_right",
                                                                  self.real_dtype)
+        got = None
         if gap:
             from doefab.optics.gap import check_gap
 
             if check_gap(gap) > 0 and h is not None:
-                got = self.gap_psfs(h, gap)
-                return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths,
-                               self.camera.sensor_pitch, got.get("full"), self.camera)
-        coded = self.half_psf("coded", h) if "coded" in self.halves else None
-        uncoded = self.half_psf("uncoded", hr) if "uncoded" in self.halves else None
-        full = self.half_psf("full", h) if "full" in self.halves else None
-        return PSFPair(coded, uncoded, self.wavelengths, self.depths, self.camera.sensor_pitch, full, self.camera)
+                got = self.gap_psfs(h.to(self.device), gap)
+        if got is None:
+            got = {half: self.half_psf(half, hr if half == "uncoded" else h) for half in self.halves}
+        got = to_device(got, back)
+        return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths, self.camera.sensor_pitch,
+                       got.get("full"), self.camera)
 
 
 def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size: int = 255,
@@ -266,7 +277,8 @@ def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size:
         kernel_size: K (sensor pixels); output (n_depths, n_wavelengths, K, K).
         halves: ``("coded",)``, ``("uncoded",)`` or both; only what is asked is computed.
         h_right: optional (N, N) height map whose x > 0 half acts on the uncoded half (default 0).
-        **options: see :class:`PSFPlan` (route, pupil_oversample, precision, center, check, pixel_nodes…).
+        **options: see :class:`PSFPlan` (route, pupil_oversample, precision, center, check, device,
+            pixel_nodes…).
     Returns:
         PSFPair with energy fractions of the whole aperture's light per sensor pixel.
     """

@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from doefab._devices import describe_device, using_device
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, folder_lock, owned_by_doefab
 from doefab.pipeline.scene import STAGES, Scene
@@ -38,14 +39,16 @@ def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> dict:
 
 
 def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = False, progress: bool = True,
-              res: dict | None = None) -> dict:
-    """Run ``scene`` into ``out`` (``res``: ``prepare_scene``'s result, computed here when not given)."""
+              res: dict | None = None, device=None) -> dict:
+    """Run ``scene`` into ``out`` (``res``: ``prepare_scene``'s result, computed here when not given) on ``device``
+    (None: the scene's ``device`` key, else the default device)."""
     out = Path(out)
     t0 = time.perf_counter()
-    res = res if res is not None else prepare_scene(scene, out, force)
-    out.mkdir(parents=True, exist_ok=True)
-    with folder_lock(out, f"doefab run {scene.path}"):  # a second run on this folder is refused, not interleaved
-        return _run_locked(scene, out, res, force, quick, progress, t0)
+    with using_device(*((device, "device") if device is not None else (scene.device, "scene"))):  # checked first
+        res = res if res is not None else prepare_scene(scene, out, force)
+        out.mkdir(parents=True, exist_ok=True)
+        with folder_lock(out, f"doefab run {scene.path}"):  # a second run on this folder is refused, not interleaved
+            return _run_locked(scene, out, res, force, quick, progress, t0)
 
 
 def _run_locked(scene: Scene, out: Path, res: dict, force: tuple, quick: bool, progress: bool, t0: float) -> dict:
@@ -72,6 +75,7 @@ def _run_locked(scene: Scene, out: Path, res: dict, force: tuple, quick: bool, p
     summary = {"scene": str(scene.path), "task": scene.task, "quick": quick,
                "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash",
                                                         "reused_from_previous_run")} for k, v in done.items()},
-               "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.get("warnings", [])}
+               "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.get("warnings", []),
+               "device": describe_device()}
     atomic_write_json(out / "run.json", summary)
     return summary

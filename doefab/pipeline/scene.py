@@ -41,6 +41,7 @@ class Scene:
     tolerance: dict | None = None
     sensor: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict)
+    device: str | None = None  # the scene's device key (None: not given, the default device)
 
     def budget_path(self) -> Path | None:
         """The tolerance budget file: None for the shipped default, else relative to the scene file or as given."""
@@ -199,7 +200,7 @@ def load_scene(path: str | Path) -> Scene:
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
-                 reconstruction=rec, tolerance=tol, sensor=raw.get("sensor", {}), raw=raw)
+                 reconstruction=rec, tolerance=tol, sensor=raw.get("sensor", {}), raw=raw, device=raw.get("device"))
 
 
 def _budget_file(scene_path: Path, budget: str) -> Path:

@@ -8,8 +8,10 @@ new`` and is the scene-key reference of the documentation. Units are in the key 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
+from doefab._devices import DEVICE_WORDS, check_device
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.materials import SUBSTRATES, substrate_name
 
@@ -46,6 +48,9 @@ KEYS = (
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
     Key("", "stages", "list", choices=STAGES, item="choice", default="all",
         help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
+    Key("", "device", "choice", choices=DEVICE_WORDS, resolve=partial(check_device, name="scene"), default="auto",
+        help="where torch computes (design, networks, tolerance): auto (a CUDA GPU when torch sees one, else the "
+             "CPU), cpu, cuda or cuda:N (GPU N); doefab run --device overrides it"),
     Key("camera", "preset", "choice", choices=("default", "hdr", "hyperspectral", "depth"), default="the task's",
         help="the paper's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
              "below replace its values"),

@@ -221,7 +221,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     size = 128 if quick else int(rec.get("size_px", 256))
     cond = for_splits(task, design, "honest", ("test",), parts, budget=budget)["test"]
     r = evaluate(task, out, images=images, size=size, weights_dir=weights_dir, design=design, conditions=cond,
-                 other_design=mode == "shipped-anyway", sensor=sensor)
+                 other_design=mode == "shipped-anyway", sensor=sensor, split="test")
     why = {"shipped": "shipped networks of the committed design",
            "train": "trained here for this design (" + ", ".join(
                f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" if w else
@@ -230,10 +230,11 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
                              "sensor, evaluated on this system's captures (told its PSFs); train networks for it "
                              "for fair numbers"}[mode]
     return {"status": "ran" if weights_dir else "reused",
-            "why": why + f"; evaluated on {images} held-out test scenes of {size}² px, captured through {parts} "
+            "why": why + f"; evaluated on {images} held-out scenes of {size}² px from the test split (not the final "
+                         f"test set, which only doefab evaluate --split final reads), captured through {parts} "
                          f"fabricated parts with crosstalk unmixed by a noisy calibration (the network told the "
                          f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor, task)})",
-            "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode,
+            "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode, "split": r["split"],
             "design_levels_sha256": _design_sha(out.parent / "design")}
 
 
@@ -276,7 +277,9 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     """The scene's part judged through its task's network: delivered quality, its yield against the budget's
     [spec], a tornado in delivered terms for the errors that matter most, the grid each error needs; the
     quantization study at PSF level. A rerun after an interruption continues from the saved parts."""
+    from doefab.imaging.sensor import Sensor
     from doefab.tolerance.errors import holder_mounting, load_budget
+    from doefab.tolerance.netjudge import SCENES
     from doefab.tolerance.report import run_study
 
     tol = scene.tolerance
@@ -287,21 +290,30 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     holder = out.parent / "holder" / "holder.json"
     if holder.is_file():  # the mounting errors of the holder this scene built
         budget.setdefault("mounting", {}).update(holder_mounting(holder))
+    noise, default = scene_sensor(scene).record(with_response=False), Sensor().record(with_response=False)
+    # the scene's sensor noise (where not the default's): the PSF-level judge's crosstalk calibration draws it
+    budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
     samples = 3 if quick else int(tol.get("samples", 20))
     weights = out.parent / "reconstruction" / "weights"
     shipped_fits = res["reuse"] and not shipped_sensor_differs(scene.task, res.get("sensor"))
     networks = shipped_fits or weights.is_dir()
+    # the parts' captures: the reconstruction table's split and scene size (``netjudge``), SCENES per part
+    judge = {"images": 2 if quick else SCENES, "size": 128 if quick else int(scene.reconstruction.get("size_px", 256)),
+             "split": "test"}
     out.mkdir(parents=True, exist_ok=True)
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
                   grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
-                  budget_path=path, networks=networks, weights_dir=None if shipped_fits else weights,
+                  budget_path=path, networks=judge if networks else False,
+                  weights_dir=None if shipped_fits else weights,
                   network_top=2 if quick else 5)
     return {"status": "ran", "why": f"{samples} Monte Carlo parts " + ("through the network" if networks else
                                                                       "at PSF level (no network for this system)")
             + ("" if quick else " and the quantization study")
             + ("; mounting errors from this scene's holder" if holder.is_file() else "")
             + ("" if networks or not res["reuse"] else "; the shipped networks are for another sensor")
-            + ("" if not networks else "; captures by the sensor its network was trained for"),
+            + ("" if not networks else f"; each part judged on {judge['images']} test scenes of {judge['size']}² px "
+                                        f"(the reconstruction table's split and size) captured by the sensor its "
+                                        f"network was trained for"),
             "summary": r.get("summary"), "level": r["level"]}
 
 

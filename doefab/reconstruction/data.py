@@ -4,8 +4,9 @@ Every sample is drawn from its own ``numpy.random.SeedSequence([split seed, inde
 never share content: each of scikit-image's photographs (``skimage.data``, converted to linear radiance)
 belongs to one split only (``IMAGES``), and so does each measured reflectance family and each family of light
 but the illuminant library the proposed network searches (``spectra``; ``tests/reconstruction/test_splits.py``
-checks every pair of splits). A third of the textures are procedural (smooth noise, stripes, checkers), so the
-networks see natural image statistics and sharp synthetic edges.
+checks every pair of splits). A fourth split, ``final`` (the final test set), draws new scenes from the test
+split's content (``CONTENT``). A third of the textures are procedural (smooth noise, stripes, checkers), so the
+networks see natural image statistics and sharp synthetic edges. ``split_digest`` names what makes the scenes.
 
 Why these are fair stand-ins for the paper's datasets:
 - HDR (the paper's § 4.3 uses HDR photographs): textured scenes at ordinary exposure plus highlights — light sources,
@@ -21,13 +22,26 @@ Why these are fair stand-ins for the paper's datasets:
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SPLIT_SEEDS", "sample_rng", "texture", "hdr_sample", "spectral_sample",
-           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands"]
+__all__ = ["SPLIT_SEEDS", "PART_SEEDS", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
+           "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands",
+           "split_digest", "split_components", "CONTENT_COMPONENTS"]
 
-SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017}
+SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017, "final": 4_000_037}
+PART_SEEDS = {"train": 11, "val": 22, "test": 33, "final": 44}  # fabricated parts: a split's are never another's
+PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose code computes a fabricated part's PSF
+# The content pool each split draws its scenes from. "final" is the final test set, made after every earlier read
+# of the test split (benchmarks/results/test_split_reads.md) and read only by ``doefab evaluate --split final``:
+# new scenes (its own seed) through new fabricated parts (its own part seed), drawn from the test split's pool —
+# its photographs, reflectance families and lights, which earlier test reads saw (scikit-image ships no further
+# colour photograph to give it content of its own).
+CONTENT = {"train": "train", "val": "val", "test": "test", "final": "test"}
+_PACKAGE = Path(__file__).resolve().parents[1]  # doefab/
 HS_WAVELENGTHS_M = tuple(float(x) * 1e-9 for x in range(400, 701, 10))
 # scikit-image's photographs, each in one split only (cat and chelsea are the same picture: chelsea, test)
 IMAGES = {"train": ("astronaut", "camera", "rocket", "coins", "moon", "brick", "grass", "hubble_deep_field", "page",
@@ -43,14 +57,14 @@ def sample_rng(split: str, index: int) -> np.random.Generator:
 
 def split_images(split: str) -> tuple:
     """The split's photographs as linear-radiance [H, W, 3] arrays (for content checks and benchmarks)."""
-    return _images(split)
+    return _images(CONTENT[split])
 
 
 @functools.lru_cache(maxsize=None)
-def _images(split: str) -> tuple:
+def _images(pool: str) -> tuple:
     import skimage.data as skd
 
-    names = IMAGES[split]
+    names = IMAGES[pool]
     out = []
     for name in names:
         a = getattr(skd, name)()
@@ -73,7 +87,7 @@ def _smooth_noise(rng, size: int, scale: float) -> np.ndarray:
 def texture(rng: np.random.Generator, size: int, split: str) -> np.ndarray:
     """[3, size, size] linear radiance in [0, 1]: a random crop of a shipped photograph, or a procedural one."""
     if rng.random() < 2 / 3:
-        imgs = _images(split)
+        imgs = _images(CONTENT[split])
         img = imgs[rng.integers(len(imgs))]
         h, w = img.shape[:2]
         step = int(rng.choice([1, 1, 2])) if min(h, w) >= 2 * size else 1
@@ -175,10 +189,10 @@ def illuminant_spectra() -> tuple[tuple[str, ...], np.ndarray]:
 def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str | None = None) -> np.ndarray:
     """[31, S, S] spectral radiance (400–700 nm): reflectances of the split (measured, and in training also
     synthetic) in regions that follow a real image's edges, shaded, under one light (peak 1): ``light`` is
-    "in-library" or "out-of-library" (``spectra.light_kind``; default: the split's library light)."""
+    "in-library" or "out-of-library" (``spectra.light_kind``; default: the split's own)."""
     from doefab.reconstruction.spectra import reflectances, scene_illuminant, synthetic_reflectance
 
-    refl = reflectances(split)
+    refl = reflectances(CONTENT[split])
     k = int(rng.integers(3, 9))
     lum = texture(rng, size, split).mean(axis=0)
     edges = np.quantile(lum, np.linspace(0, 1, k + 1)[1:-1])
@@ -187,7 +201,7 @@ def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str 
     if split == "train":  # half the regions synthetic: the networks must not learn a few dozen spectra
         picks = np.array([synthetic_reflectance(rng) if rng.random() < 0.5 else p for p in picks])
     shading = 0.4 + 0.6 * _smooth_noise(rng, size, rng.uniform(2, 10))
-    e = scene_illuminant(rng, split, light or "in-library")
+    e = scene_illuminant(rng, CONTENT[split], light)
     scene = picks[regions].transpose(2, 0, 1) * shading[None] * e[:, None, None]
     # exposure: the brightest pixel's band-mean radiance is 0.6–1.2 (a flat spectrum of 1 fills an RGB channel)
     return (scene * rng.uniform(0.6, 1.2) / max(scene.mean(axis=0).max(), 1e-6)).astype(np.float32)
@@ -252,19 +266,66 @@ def depth_sample(rng: np.random.Generator, size: int, split: str, near: float = 
     return scene.astype(np.float32), depth
 
 
-def split_digest(task: str) -> str:
-    """SHA-256 of what the splits hold for ``task``: the photographs' names and the seeds of every split, and for
-    hyperspectral the measured reflectances of each split and the held-out lights (values to 1e-6). A network's
-    weights record it, so an evaluation can tell when the networks were trained on another split definition (and
-    the test scenes may then hold their training content)."""
-    import hashlib
-    import json
+CONTENT_COMPONENTS = ("splits", "reflectances", "lights")  # which content each split holds; the other components
+# say how that content is made into scenes and captures
 
-    h = hashlib.sha256(json.dumps({"images": IMAGES, "seeds": SPLIT_SEEDS}, sort_keys=True).encode())
+
+def split_components(task: str) -> dict[str, str]:
+    """SHA-256 of each thing that makes ``task``'s scenes and the fabricated parts they are captured through:
+    ``splits`` — which photographs, scene seeds and part seeds each split takes (``IMAGES``, ``SPLIT_SEEDS``,
+    ``CONTENT``, ``PART_SEEDS``); ``photographs`` — their pixels as the scenes use them (as the installed
+    scikit-image reads its files); ``generator`` — the source of the modules that draw the scenes (this one, and
+    ``spectra`` for hyperspectral); ``parts`` — the source of the subpackages that compute a fabricated part
+    (``PART_MODEL``) and the shipped tolerance budget the parts are drawn from; for hyperspectral also
+    ``reflectances`` (each split's measured reflectances, to 1e-6) and ``lights`` (the held-out lights, to 1e-6,
+    and the bytes of the illuminant library ``illuminants.csv``)."""
+    from doefab.io import sources_sha256
+
+    names = {"images": IMAGES, "seeds": SPLIT_SEEDS, "content": CONTENT, "part_seeds": PART_SEEDS}
+    photos = hashlib.sha256()
+    for pool in IMAGES:
+        for name, a in zip(IMAGES[pool], _images(pool)):
+            photos.update(f"{pool}/{name}{a.shape}".encode() + a.tobytes())
+    sources = [Path(__file__)]
+    out = {"splits": _sha(json.dumps(names, sort_keys=True).encode()), "photographs": photos.hexdigest(),
+           "parts": _sha(sources_sha256(_PACKAGE, PART_MODEL).encode(),
+                         (_PACKAGE / "tolerance" / "budget.toml").read_bytes())}
+    if task == "hyperspectral":
+        from doefab.reconstruction import spectra
+        from doefab.reconstruction.illuminant import LIBRARY_PATH
+
+        sources.append(Path(spectra.__file__))
+        out["reflectances"] = _sha(*(np.round(spectra.reflectances(s), 6).tobytes() for s in IMAGES))
+        out["lights"] = _sha(np.round(spectra.val_lights(), 6).tobytes(), np.round(spectra.test_lights(), 6).tobytes(),
+                             LIBRARY_PATH.read_bytes())
+    out["generator"] = _sha(*(f.read_bytes() for f in sources))
+    return out
+
+
+def split_digest(task: str, components: dict | None = None) -> str:
+    """SHA-256 of ``split_components`` (given, or computed): a network's weights record it and the components, so
+    an evaluation can tell when the networks were trained on another split definition (the test scenes may then
+    hold their training content) or on the same content made by other code or files."""
+    return _sha(json.dumps(components or split_components(task), sort_keys=True).encode())
+
+
+def split_digest_v1(task: str) -> str:
+    """The digest weights recorded before ``split_components``: the photographs' names and the seeds of the
+    train, val and test splits, and for hyperspectral each split's measured reflectances and the held-out lights
+    (to 1e-6)."""
+    seeds = {s: SPLIT_SEEDS[s] for s in ("train", "val", "test")}
+    h = hashlib.sha256(json.dumps({"images": IMAGES, "seeds": seeds}, sort_keys=True).encode())
     if task == "hyperspectral":
         from doefab.reconstruction import spectra
 
         for arr in [spectra.reflectances(s) for s in ("train", "val", "test")] + [spectra.val_lights(),
                                                                                 spectra.test_lights()]:
             h.update(np.round(np.asarray(arr, np.float64), 6).tobytes())
+    return h.hexdigest()
+
+
+def _sha(*chunks: bytes) -> str:
+    h = hashlib.sha256()
+    for c in chunks:
+        h.update(c)
     return h.hexdigest()

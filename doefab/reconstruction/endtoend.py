@@ -11,7 +11,9 @@ form, so gradients pass), and trains the network on L1 + gradient depth loss (th
 aware: straight-through rounding to the 16 levels the masks will have); the other steps reuse the last PSF, since
 one PSF with gradients costs as much as many network steps on this CPU. The PSFs are computed on the design grid
 coarsened ``sampling`` times (as the design stage does); the finished DOE is re-evaluated on the full grid.
-Checkpoints every ``val_every`` steps; ``resume`` continues exactly.
+Checkpoints every ``val_every`` steps; ``resume`` continues exactly. ``device`` says where the PSFs, the rendering
+and the network run; the scenes and the noise are drawn on the CPU (seeded), so a run takes the same steps on every
+device.
 """
 
 from __future__ import annotations
@@ -30,8 +32,8 @@ __all__ = ["finetune_end_to_end", "render_depth_batch"]
 def render_depth_batch(indices, split: str, size: int, psf_coded: torch.Tensor, psf_uncoded: torch.Tensor,
                        depths, margin: int, noise_seed: int, full_well: float | None = None,
                        read_noise: float | None = None):
-    """(coded, uncoded, depth) for depth scenes ``indices`` of ``split``, differentiable in ``psf_coded``;
-    ``full_well``, ``read_noise``: electrons (default: the default sensor's)."""
+    """(coded, uncoded, depth) for depth scenes ``indices`` of ``split``, differentiable in ``psf_coded``, on
+    ``psf_coded``'s device; ``full_well``, ``read_noise``: electrons (default: the default sensor's)."""
     from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
     from doefab.imaging.captures import plane_masks, render_layers
     from doefab.reconstruction.data import depth_sample, sample_rng
@@ -39,20 +41,21 @@ def render_depth_batch(indices, split: str, size: int, psf_coded: torch.Tensor, 
     full_well = DEFAULT_FULL_WELL_E if full_well is None else full_well
     read_noise = DEFAULT_READ_NOISE_E if read_noise is None else read_noise
     big = size + 2 * margin
+    dev = psf_coded.device
     gen = torch.Generator().manual_seed(int(noise_seed))
     out_c, out_u, out_d = [], [], []
     for i in indices:
         scene, depth = depth_sample(sample_rng(split, i), big, split)
-        masks = plane_masks(torch.from_numpy(depth), depths)
-        s = torch.from_numpy(scene)
+        masks = plane_masks(torch.from_numpy(depth).to(dev), depths)
+        s = torch.from_numpy(scene).to(dev)
         views = []
         for psf in (psf_coded, psf_uncoded):
             b = render_layers(s, psf.to(torch.float32), masks, depths)[:, margin:margin + size, margin:margin + size]
             sigma = torch.sqrt(b.clamp_min(0) / full_well + (read_noise / full_well) ** 2)
-            views.append((b + sigma * torch.randn(b.shape, generator=gen)).clamp(0, 1))
+            views.append((b + sigma * torch.randn(b.shape, generator=gen).to(dev)).clamp(0, 1))
         out_c.append(views[0])
         out_u.append(views[1])
-        out_d.append(torch.from_numpy(np.ascontiguousarray(depth[margin:margin + size, margin:margin + size])))
+        out_d.append(torch.from_numpy(np.ascontiguousarray(depth[margin:margin + size, margin:margin + size])).to(dev))
     return torch.stack(out_c), torch.stack(out_u), torch.stack(out_d)
 
 
@@ -79,7 +82,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
                         seed: int = 0,
                         val_images: int = 8, val_every: int = 20, sampling: int = 2, parameterization: str | None = None,
                         resume: bool = False, progress: bool = True, max_steps: int | None = None,
-                        sensor=None) -> dict:
+                        sensor=None, device=None) -> dict:
     """Fine-tune the DOE of ``design_dir`` and a depth network together for ``minutes`` of wall time.
 
     Writes ``out_dir/design/`` (the fine-tuned design, full-grid metrics), ``out_dir/weights/`` (the jointly trained
@@ -87,8 +90,10 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     wall time, loss, validation MAE in metres) and ``checkpoint.pt``. Returns a summary with the MAE gained per
     minute. ``crop``: the training crop side in pixels (default: the depth networks', ``TaskSpec.crop``).
     ``sensor``: the ``imaging.sensor.Sensor`` whose noise the captures carry (None: the default sensor's); a
-    starting network trained for another sensor's noise is refused.
+    starting network trained for another sensor's noise is refused. ``device``: where the PSFs, the rendering and
+    the network run ("auto", "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``).
     """
+    from doefab._devices import resolve_device
     from doefab.design.design import Design
     from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.loop import run_loop
@@ -98,6 +103,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop("depth", crop)
     sensor = sensor or Sensor()
+    dev = resolve_device(device)
     design = Design.load(design_dir)
     if design.task != "half-ring":
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")
@@ -106,7 +112,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     pname = parameterization or ("radial" if design.extra.get("config", {}).get("parameterization") == "radial"
                                  else "pixel")
-    run = _JointRun(design, design_dir, pname, sampling, weights_dir, sensor, seed, lr_doe, lr_net)
+    run = _JointRun(design, design_dir, pname, sampling, weights_dir, sensor, seed, lr_doe, lr_net, dev)
     config = {"design": str(Path(design_dir).resolve()), "parameterization": pname, "sampling": sampling,
               "doe_every": doe_every, "lr_doe": lr_doe, "lr_net": lr_net, "batch": batch, "crop": crop, "seed": seed,
               "weights_dir": None if weights_dir is None else str(weights_dir), "val_images": val_images}
@@ -131,23 +137,25 @@ class _JointRun:
     validation, its training step and its outputs."""
 
     def __init__(self, design, design_dir, pname: str, sampling: int, weights_dir, sensor, seed: int,
-                 lr_doe: float, lr_net: float):
+                 lr_doe: float, lr_net: float, device):
         from doefab.optics.psf import PSFPlan
         from doefab.reconstruction.specs import crop_margin, psf_pair
 
-        self.design, self.pname, self.sampling, self.seed = design, pname, sampling, seed
+        self.design, self.pname, self.sampling, self.seed, self.device = design, pname, sampling, seed, device
         self.noise = {"full_well": sensor.full_well_e, "read_noise": sensor.read_noise_e}
         self.sensor = sensor
         self.dcam = design.camera.replace(doe_pixels=design.camera.doe_pixels // sampling,
                                           doe_pitch=design.camera.doe_pitch * sampling)
-        self.theta, self.param = _start_theta(design, pname, self.dcam, sampling)
-        self.theta.requires_grad_(True)
+        theta, param = _start_theta(design, pname, self.dcam, sampling)
+        self.theta, self.param = theta.to(device).requires_grad_(True), param.to(device)
         nominal, _ = psf_pair("depth", design_dir)
-        self.psf_u = nominal.uncoded.to(torch.float32)
-        self.plan = PSFPlan(self.dcam, design.wavelengths, design.depths, nominal.coded.shape[-1], halves=("coded",))
+        self.psf_u = nominal.uncoded.to(device, torch.float32)
+        self.plan = PSFPlan(self.dcam, design.wavelengths, design.depths, nominal.coded.shape[-1], halves=("coded",),
+                            device=device)
         self.margin = crop_margin("depth", nominal)
         torch.manual_seed(seed)
         self.net, self.arch, self.start_from = _start_network(design, design_dir, weights_dir, sensor)
+        self.net.to(device)
         self.opt_net = torch.optim.Adam(self.net.parameters(), lr=lr_net)
         self.opt_doe = torch.optim.Adam([self.theta], lr=lr_doe)
         self.current = {}
@@ -203,7 +211,7 @@ class _JointRun:
         from doefab.reconstruction.weights import write_weights
 
         new = design_from_theta(self.design, self.theta.detach(), self.pname, self.sampling, history=[],
-                                extra={"end_to_end": record})
+                                extra={"end_to_end": record}, device=self.device)
         new.save(out / "design")
         write_weights(out / "weights", "depth", "proposed", self.net,
                       {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": self.arch,
@@ -222,7 +230,7 @@ def _start_network(design, design_dir, weights_dir, sensor):
     if weights_dir is None:
         arch = {**default_arch("depth", "proposed"), "planes": len(design.depths)}
         return build_model("depth", "proposed", arch), arch, "a fresh network"
-    rec = load_reconstructor("depth", "proposed", weights_dir, design_dir, sensor=sensor)
+    rec = load_reconstructor("depth", "proposed", weights_dir, design_dir, sensor=sensor, device="cpu")
     net = build_model("depth", "proposed", rec.meta["arch"])
     net.load_state_dict(rec.model.state_dict())
     return net, rec.meta["arch"], f"the network in {weights_dir}"

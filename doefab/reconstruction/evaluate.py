@@ -1,31 +1,47 @@
 """The paper's Tables 1–3: every variant's network on the same held-out scenes, under the conditions a real camera
 makes (``conditions``: ``doefab.tolerance.conditions.honest`` — a fabricated part's PSF, per-column crosstalk
 unmixed with a noisy calibration, depth between the network's planes — while the network is told the nominal
-PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None). The test split is for the final tables; ``split="val"`` is for
-every choice made along the way.
+PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None).
 
-``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "conditions", "images", "size_px",
-"rows": {variant: means}, "by_light": {"in-library" | "out-of-library": {variant: means}}, "per_image":
-{"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for hyperspectral) and
-``examples.png`` (inputs, each variant's output, ground truth, error map).
+Splits (``SPLITS``): ``val`` for every choice made along the way, ``test`` for the published tables (every read of
+it is listed in ``benchmarks/results/test_split_reads.md``) and ``final``, the final test set, made after every
+earlier read and read only when asked for by name; each read of it appends a line to ``final_split_reads.md``
+in the output folder (``FINAL_LEDGER``).
+
+An evaluation runs torch on one thread (``THREADS``; restored after): a reduction split over threads adds in
+another order, and the HDR solve's iterations carry that difference to tenths of a dB, so a table is reproducible
+to its printed digits only at a fixed thread count.
+
+``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "seed", "conditions", "images",
+"size_px", "threads", "versions": {library: version}, "code", "parts_sha256", "rows": {variant: means},
+"by_light": {"in-library" | "out-of-library": {variant: means}}, "weights": {variant: {"sha256", "steps", ...,
+"splits"}}, "per_image": {"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for
+hyperspectral) and ``examples.png`` (inputs, each variant's output, ground truth, error map).
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_json
-from doefab.reconstruction.data import SPLIT_SEEDS, split_digest
+from doefab.io import atomic_write_json, atomic_write_text
+from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_components, split_digest, split_digest_v1
 from doefab.reconstruction.loader import load_reconstructor
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import make_batch, psf_pair
 
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "SPLITS", "THREADS", "FINAL_LEDGER", "one_thread", "library_versions", "code_version"]
+
+SPLITS = ("val", "test", "final")
+THREADS = 1
+FINAL_LEDGER = "final_split_reads.md"
+LIBRARIES = ("torch", "numpy", "scipy", "scikit-image", "colour-science")
 
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
@@ -34,23 +50,49 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     """``conditions``: the split's capture conditions (``doefab.tolerance.conditions``; None: clean).
     ``sensor``: the camera's ``imaging.sensor.Sensor`` that makes the captures (response, noise; None: the
     default camera's). ``other_design``: evaluate networks trained for another design or sensor on these
-    captures (they are told ``design``'s PSFs); the result says so."""
+    captures (they are told ``design``'s PSFs); the result says so. ``split``: one of ``SPLITS``."""
     from doefab.imaging.sensor import Sensor
-    from doefab.reconstruction.spectra import light_kind
-    from doefab.reconstruction.train import sensor_response_for
 
-    if split not in ("val", "test"):
-        raise DoefabError(f"split must be val or test, got {split!r}")
+    if split not in SPLITS:
+        raise DoefabError(f"split {split!r} is not one of {', '.join(SPLITS)}: val for choices along the way, test "
+                          f"for the tables, final for the final test set")
     out = Path(out_dir)
     sensor = sensor or Sensor()
     recs = {v: load_reconstructor(task, v, weights_dir, design, other_design, sensor)
             for v in variants}  # refuse first
+    with one_thread():
+        rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress)
+    components = split_components(task)
+    result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
+              "conditions": conditions.describe() if conditions is not None else {"name": "clean"},
+              "parts_sha256": _parts_sha256(conditions),
+              "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
+              else "default (Poisson–Gaussian)", **sensor.entry(task == "hyperspectral"),
+              "threads": THREADS, "versions": library_versions(), "code": code_version(),
+              "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
+              "weights": {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}}
+    result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
+    if task == "hyperspectral":
+        result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}
+                              for k in ("in-library", "out-of-library") if k in kinds}
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "metrics.json", result)
+    _figure(out / "examples.png", task, split, *example)
+    if split == "final":
+        _log_final_read(out / FINAL_LEDGER, result)
+    return result
+
+
+def _score(task, split, images, size, recs, design, sensor, cond, progress) -> tuple[dict, list, tuple]:
+    """Every variant's metrics on each of the split's ``images`` scenes, the scenes' kinds of light and the first
+    scene's (coded, uncoded, target, {variant: output}) for the figure."""
+    from doefab.reconstruction.spectra import light_kind
+    from doefab.reconstruction.train import sensor_response_for
+
     pair, _ = psf_pair(task, design)
     response = sensor_response_for(task, pair, sensor)
-    cond = conditions
-    rows = {v: [] for v in variants}
-    kinds = []
-    example = None
+    rows = {v: [] for v in recs}
+    kinds, example = [], None
     it = range(images)
     if progress:
         from tqdm import tqdm
@@ -67,35 +109,110 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
             rows[v].append(metrics_for(task, preds[v], target[0].numpy()))
         if example is None:
             example = (coded[0].numpy(), uncoded[0].numpy(), target[0].numpy(), preds)
-    digest = split_digest(task)
-    result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
-              "conditions": cond.describe() if cond is not None else {"name": "clean"},
-              "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
-              else "default (Poisson–Gaussian)", **sensor.entry(task == "hyperspectral"),
-              "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
-              "weights": {v: {"steps": r.meta["training"]["steps"], "wall_time_s": r.meta["training"]["wall_time_s"],
-                              "lr_schedule": r.meta["training"].get("schedule", "constant"),
-                              "trained_under": _trained_under(r.meta),
-                              "for_this_design": not r.meta.get("other_design", False),
-                              **({"for_this_sensor": False} if r.meta.get("other_sensor") else {}),
-                              "splits": _splits_state(r.meta, digest)}
-                          for v, r in recs.items()}}
-    result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
-    if task == "hyperspectral":
-        result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}
-                              for k in ("in-library", "out-of-library") if k in kinds}
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out / "metrics.json", result)
-    _figure(out / "examples.png", task, *example)
-    return result
+    return rows, kinds, example
 
 
-def _splits_state(meta: dict, digest: str) -> str:
-    """Whether a network was trained on the split definition this evaluation draws its scenes from."""
-    got = meta.get("splits_sha256")
+@contextlib.contextmanager
+def one_thread():
+    """torch on ``THREADS`` thread(s) inside the block, its earlier thread count restored after."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(THREADS)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def library_versions() -> dict:
+    """{name: installed version} of the libraries an evaluation's numbers depend on (``LIBRARIES``) and Python."""
+    import platform
+    from importlib import metadata
+
+    found = {"python": platform.python_version()}
+    for name in LIBRARIES:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = "not installed"
+    return found
+
+
+def code_version() -> str:
+    """The git commit of the doefab source tree that runs (with "with uncommitted changes" when its tracked files
+    differ from it), or doefab's version when it is not a git checkout."""
+    import subprocess
+
+    import doefab
+
+    root = Path(__file__).resolve().parents[2]
+    if (root / ".git").exists():
+        try:
+            git = ["git", "-C", str(root)]
+            head = subprocess.run(git + ["rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, timeout=30)
+            dirty = subprocess.run(git + ["status", "--porcelain", "--untracked-files=no"], capture_output=True,
+                                   text=True, timeout=60)
+            if head.returncode == 0:
+                return f"git {head.stdout.strip()}" + (" with uncommitted changes" if dirty.stdout.strip() else "")
+        except (OSError, subprocess.SubprocessError):
+            pass
+    return f"doefab {doefab.__version__} (not a git checkout)"
+
+
+def _parts_sha256(cond) -> str | None:
+    """SHA-256 of the fabricated parts' PSFs the captures were made through (None: the nominal PSF)."""
+    parts = getattr(cond, "parts", None)
+    if not parts:
+        return None
+    h = hashlib.sha256()
+    for pair in parts:
+        for t in (pair.coded, pair.uncoded):
+            h.update(t.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+def _weights_entry(meta: dict, task: str, components: dict) -> dict:
+    """What identifies a network and how it was trained, for ``metrics.json``."""
+    return {"sha256": meta["weights_sha256"], "steps": meta["training"]["steps"],
+            "wall_time_s": meta["training"]["wall_time_s"],
+            "lr_schedule": meta["training"].get("schedule", "constant"),
+            "trained_under": _trained_under(meta),
+            "for_this_design": not meta.get("other_design", False),
+            **({"for_this_sensor": False} if meta.get("other_sensor") else {}),
+            "splits": _splits_state(meta, task, components)}
+
+
+def _splits_state(meta: dict, task: str, components: dict) -> str:
+    """Whether a network was trained on the scenes this evaluation draws from: the same split definition, the same
+    content made by other code or files, or another split definition."""
+    got, theirs = meta.get("splits_sha256"), meta.get("splits_components")
     if got is None:
         return "not recorded (trained before the weights named their splits)"
-    return "the same splits" if got == digest else "ANOTHER split definition: the test scenes may hold training content"
+    if got == split_digest(task, components):
+        return "the same splits"
+    if isinstance(theirs, dict):
+        differ = [k for k in components if theirs.get(k) != components[k]]
+        if not set(differ) & set(CONTENT_COMPONENTS):
+            return f"the same split content, made by other code or files since training ({', '.join(differ)})"
+        return f"ANOTHER split definition ({', '.join(differ)}): the test scenes may hold training content"
+    if got == split_digest_v1(task):
+        return ("the same photographs, seeds and spectra by name (recorded before the weights named the "
+                "photographs' pixels, the scene generator's code, the light library and the fabricated parts)")
+    return "ANOTHER split definition: the test scenes may hold training content"
+
+
+def _log_final_read(path: Path, result: dict) -> None:
+    """Append this read of the final test set to the output folder's ledger (a Markdown table)."""
+    import datetime
+
+    head = "| date (UTC) | code | task | what was read |\n| --- | --- | --- | --- |\n"
+    text = path.read_text() if path.is_file() else head
+    cond = result["conditions"]
+    parts = f", {cond['parts']} fabricated parts" if cond.get("parts") else ""
+    nets = ", ".join(f"{v} (weights {w['sha256'][:12]})" for v, w in result["weights"].items())
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")
+    line = (f"| {when} | {result['code']} | {result['task']} | {result['images']} scenes of {result['size_px']}² px, "
+            f"{cond['name']} captures{parts}; {nets} |\n")
+    atomic_write_text(path, text + line)
 
 
 def _trained_under(meta: dict) -> str:
@@ -112,7 +229,7 @@ def _show(task, arr):
     return arr
 
 
-def _figure(path: Path, task: str, coded, uncoded, target, preds) -> None:
+def _figure(path: Path, task: str, split: str, coded, uncoded, target, preds) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,6 +261,6 @@ def _figure(path: Path, task: str, coded, uncoded, target, preds) -> None:
             c.ax.tick_params(labelsize=6)
     for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
-    fig.suptitle(f"{task}: held-out test scene", fontsize=10)
+    fig.suptitle(f"{task}: a held-out scene of the {split} split", fontsize=10)
     fig.savefig(path, dpi=100)
     plt.close(fig)

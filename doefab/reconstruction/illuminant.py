@@ -162,11 +162,11 @@ def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
         if scale > 0 and float(b.abs().sum()) > 0:  # a black or wholly clipped capture says nothing: below
             # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16)
             q, r = torch.linalg.qr(a.T)  # Aᵀ = QR: min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant
-            w, _ = nnls(r.numpy(), (q.T @ b).numpy())
+            w, _ = nnls(r.cpu().numpy(), (q.T @ b).cpu().numpy())  # scipy's solver, on the CPU
             w = w if np.isfinite(w).all() and w.sum() > 0 else None
         if w is None:  # the single best member (or the first, when nothing can be told apart)
             cost = (((p - t[None]) ** 2) * v[None]).sum(dim=(-2, -1))
             w = np.zeros(p.shape[0])
             w[int(cost.argmin())] = 1.0
         out.append(torch.from_numpy(np.asarray(w, np.float64)))
-    return torch.stack(out).float()
+    return torch.stack(out).float().to(coded.device)

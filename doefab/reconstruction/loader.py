@@ -2,7 +2,8 @@
 
 A weights file is refused — with its path and the command that retrains it — when it is missing, when its
 SHA-256 differs from its metadata record (changed or corrupt), when the record names another design than the
-committed one, or when torch cannot read it (always ``torch.load(..., weights_only=True)``).
+committed one, or when torch cannot read it (always ``torch.load(..., weights_only=True)``, onto the CPU; the network
+then moves to the device it runs on).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
 from doefab.reconstruction.models import build_model
@@ -35,10 +37,14 @@ class Reconstructor:
     Captures that name the PSF pair they were simulated through (``simulate_captures`` gives them a ``pair``)
     are refused without ``psf=`` when that pair's bands or camera differ from the network's ``pair``: the
     network would read them through the wrong PSFs. Captures that name none (a camera's) are taken as they are.
+    The network runs on ``device`` (a ``torch.device``; ``self.model`` lives there); a numpy result comes back as
+    numpy, a torch result on the captures' device.
     """
 
-    def __init__(self, task: str, variant: str, model: torch.nn.Module, pair, design_sha256: str, meta: dict):
-        self.task, self.variant, self.model = task, variant, model.eval()
+    def __init__(self, task: str, variant: str, model: torch.nn.Module, pair, design_sha256: str, meta: dict,
+                 device=None):
+        self.device = resolve_device(device)
+        self.task, self.variant, self.model = task, variant, model.to(self.device).eval()
         self.pair, self.design_sha256, self.meta = pair, design_sha256, meta
 
     def _psf(self, psf):
@@ -105,10 +111,10 @@ class Reconstructor:
             views.append(_capture(name, x)[None])
         if views[0].shape != views[1].shape:
             raise DoefabError(f"coded {tuple(views[0].shape[1:])} and uncoded {tuple(views[1].shape[1:])} differ in shape")
-        p = self._psf(psf)
+        p = self._psf(psf).to(self.device)
         with torch.no_grad():
-            out = self.model(views[0], views[1], p)[0]
-        return out if torch_in else out.numpy()
+            out = self.model(views[0].to(self.device), views[1].to(self.device), p)[0]
+        return out.to(coded.device) if torch_in else out.cpu().numpy()
 
 
 def _capture(name: str, x) -> torch.Tensor:
@@ -158,14 +164,18 @@ def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, des
 
 
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
-                       design: str | Path | None = None, other_design: bool = False, sensor=None) -> Reconstructor:
+                       design: str | Path | None = None, other_design: bool = False, sensor=None,
+                       device=None) -> Reconstructor:
     """The shipped (or ``weights_dir``'s) network for ``task`` ("hdr" | "hyperspectral" | "depth"), trained for the
     committed design (or for the design folder ``design``: candidates under comparison). ``other_design``: use
     weights trained for another design anyway (they take ``design``'s PSFs at call time; ``meta`` then says
     ``"other_design": true``) when their shapes fit it. ``sensor``: the ``imaging.sensor.Sensor`` whose captures the
     network will see (None: no check); weights trained for another sensor's noise (or, hyperspectral, response)
-    are refused unless ``other_design`` (``meta`` then says ``"other_sensor": true``)."""
+    are refused unless ``other_design`` (``meta`` then says ``"other_sensor": true``). ``device``: where the network
+    runs ("auto", "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``); the
+    weights load onto the CPU (``map_location``, ``weights_only=True``) and move there."""
     get_spec(task)
+    device = resolve_device(device)
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
     if weights_dir is not None and Path(weights_dir).is_file():
@@ -210,7 +220,7 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
         model.load_state_dict(renamed_state(state))
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
-    return Reconstructor(task, variant, model, pair, sha, meta)
+    return Reconstructor(task, variant, model, pair, sha, meta, device)
 
 
 def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dict:

@@ -116,8 +116,8 @@ def crop_margin(task: str, pair=None) -> int:
     return (pair.coded.shape[-1] if pair is not None else get_spec(task).kernel) // 2
 
 
-def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", crosstalk=None,
-               conditions=None, images: int | None = None):
+def make_batch(task: str, split: str, indices, size: int, pair, response=None, noise="default", conditions=None,
+               images: int | None = None):
     """Scenes, targets and simulated captures for sample ``indices`` of ``split``.
 
     Each scene is generated with a margin of half a PSF window on every side, blurred, and cropped back to
@@ -125,9 +125,9 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
     (``reconstruction.conditions``): what the camera adds — scene i rendered through ``conditions.pair_for(i)``
     (a fabricated part's PSFs, for depth at finer planes), its views mixed by crosstalk and unmixed by a
     calibrated pipeline; default: ``pair`` and clean views; ``images``: how many scenes the crops are spread
-    across on the sensor (each sees the crosstalk of its place; default ``len(indices)``). ``crosstalk(i)``
-    overrides the views' camera (``DualPixelCrosstalk``). Hyperspectral scenes are lit per
-    ``spectra.light_kind(split, i)``.
+    across on the sensor (each sees the crosstalk of its place; default ``len(indices)``). Training, evaluation
+    and the tolerance study's network judge (one fabricated part's conditions) all make their captures here.
+    Hyperspectral scenes are lit per ``spectra.light_kind(split, i)``.
     Returns (coded [B, 3, S, S], uncoded [B, 3, S, S], target [B, C, S, S] or depth [B, S, S]) tensors.
     """
     from doefab.imaging.crosstalk import DualPixelCrosstalk
@@ -143,8 +143,7 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
         rng = sample_rng(split, i)
         p = conditions.pair_for(i, pair) if conditions is not None else pair
         scene, target, views = render_scene(task, split, i, rng, size + 2 * m, p, t)
-        xt = crosstalk(i) if crosstalk is not None else (conditions.crosstalk_for(i, n, size, nm)
-                                                         if conditions is not None else None)
+        xt = conditions.crosstalk_for(i, n, size, nm) if conditions is not None else None
         c_view, u_view = (xt or DualPixelCrosstalk(0.0, 0.0)).record(
             *(v[:, m:m + size, m:m + size].double().numpy() for v in views), nm, rng)
         coded.append(torch.from_numpy(c_view.astype(np.float32)))

@@ -1,4 +1,4 @@
-"""Train a reconstruction network for a design on this machine's CPU, with exact resume.
+"""Train a reconstruction network for a design on this machine's CPU (or a GPU, ``device``), with exact resume.
 
 Every step draws its batch from the training split by sample index (``step · batch + b``), so a resumed run
 sees exactly the batches an uninterrupted one would. ``conditions`` ({"train": ..., "val": ...}, e.g.
@@ -7,7 +7,8 @@ honest conditions (fabricated parts' PSFs, per-column crosstalk with a calibrate
 network's planes) while the network is told the nominal PSF: the domain randomisation that prepares it for a
 real camera; None trains on the nominal model's own captures. The loop (budget, cosine schedule, checkpoints, history, progress) is ``reconstruction.loop``; the
 weights and their metadata record go to ``weights_dir`` or else the run folder ``out_dir``
-(``reconstruction.weights``).
+(``reconstruction.weights``). The captures are made on the CPU (their noise from seeded generators, the same on every
+device) and each batch moves to the device; the network, its optimiser and the PSFs it is told live there.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab._devices import resolve_device
 from doefab.errors import DoefabError
-from doefab.reconstruction.data import split_digest
+from doefab.reconstruction.data import split_components, split_digest
 from doefab.reconstruction.loop import run_loop
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
@@ -89,13 +91,14 @@ def arch_for_design(task: str, pair, sensor=None) -> dict:
 
 
 def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4) -> dict:
-    """Mean of the task's metrics over a batch (model in eval mode, no gradients)."""
+    """Mean of the task's metrics over a batch (model in eval mode, no gradients; each chunk on ``psf``'s device)."""
     model.eval()
     rows = []
+    dev = psf.device
     with torch.no_grad():
         for i in range(0, coded.shape[0], chunk):
-            pred = model(coded[i:i + chunk], uncoded[i:i + chunk], psf)
-            for p, t in zip(pred.numpy(), target[i:i + chunk].numpy()):
+            pred = model(coded[i:i + chunk].to(dev), uncoded[i:i + chunk].to(dev), psf)
+            for p, t in zip(pred.cpu().numpy(), target[i:i + chunk].numpy()):
                 rows.append(metrics_for(task, p, t))
     model.train()
     return mean_metrics(rows)
@@ -106,7 +109,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
           progress: bool = True, command: str = "", max_steps: int | None = None, design=None,
           schedule: str = "cosine", replace_shipped: bool = False, conditions: dict | None = None,
-          warm_start: str | Path | None = None, sensor=None) -> dict:
+          warm_start: str | Path | None = None, sensor=None, device=None) -> dict:
     """Train ``task``/``variant`` for ``minutes`` of wall time (or ``max_steps`` steps, whichever comes first);
     returns the metadata record written (``weights_path``: where the weights went). ``design``: a design folder
     other than the committed one. Weights go to ``weights_dir`` or else ``out_dir``; the shipped ones are
@@ -114,9 +117,11 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     (None: the nominal model's own captures). ``warm_start``: a weights folder (e.g. ``WEIGHTS_DIR``) whose
     network of this task and variant starts the training wherever a tensor's name and shape match. ``sensor``:
     the camera's ``imaging.sensor.Sensor`` (response and noise; None: the default camera's), recorded with the
-    weights."""
+    weights. ``device``: where the network trains ("auto", "cpu", "cuda", "cuda:N"; None: the current default,
+    ``doefab._devices.default_device``); a run may resume on another device."""
     from doefab.imaging.sensor import Sensor
 
+    dev = resolve_device(device)
     spec = get_spec(task)
     weights_dir = weights_target(weights_dir, out_dir, replace_shipped, design, task, variant)
     if not (0 < minutes <= 24 * 60):
@@ -132,12 +137,13 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     config.update(sensor.entry(task == "hyperspectral"))  # none for the default sensor: old runs resume
     pair, sha = psf_pair(task, design)
     arch = {**arch, **arch_for_design(task, pair, sensor)}
-    psf = model_inputs(task, pair)
+    psf = model_inputs(task, pair).to(dev)
     response, noise = sensor_response_for(task, pair, sensor), sensor.noise()
     cond = conditions or {"train": None, "val": None}
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
     warm = copy_matching(model, task, variant, warm_start) if warm_start is not None and not resume else None
+    model.to(dev)  # built and warm-started on the CPU: the same first weights on every device
     warm = _warm_record(Path(out_dir), warm, resume)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     val = make_batch(task, "val", range(val_images), crop, pair, response, noise, conditions=cond["val"])
@@ -146,7 +152,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
         coded, uncoded, target = make_batch(task, "train", range(step * batch, (step + 1) * batch), crop, pair,
                                             response, noise, conditions=cond["train"])
         opt.zero_grad()
-        loss = loss_fn(task, model(coded, uncoded, psf), target)
+        loss = loss_fn(task, model(coded.to(dev), uncoded.to(dev), psf), target.to(dev))
         if torch.isfinite(loss):
             loss.backward()
             opt.step()
@@ -167,7 +173,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
               "validation": {"images": val_images, "crop_px": crop, **final},
               **sensor.entry(task == "hyperspectral"),
-              "splits_sha256": split_digest(task)}
+              "splits_sha256": split_digest(task), "splits_components": split_components(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 
 

@@ -82,9 +82,15 @@ def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[P
 def write_weights(folder: str | Path, task: str, variant: str, model: torch.nn.Module, record: dict,
                   history_csv: bytes | None = None) -> dict:
     """Write ``model``'s weights, their metadata (``record`` plus format, task, variant, SHA-256 and file name)
-    and the validation curve into ``folder``; returns the metadata with ``weights_path``."""
+    and the validation curve into ``folder``; returns the metadata with ``weights_path``. The file holds CPU
+    tensors whatever device ``model`` is on."""
+    state = model.state_dict()
+    if any(t.device.type != "cpu" for t in state.values()):
+        import copy
+
+        state = copy.deepcopy(model).cpu().state_dict()
     buf = io.BytesIO()
-    torch.save(model.state_dict(), buf)
+    torch.save(state, buf)
     data = buf.getvalue()
     pt, meta_path = weights_paths(task, variant, folder)
     meta = {"format": WEIGHTS_FORMAT, "task": task, "variant": variant, **record,

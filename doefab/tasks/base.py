@@ -98,7 +98,7 @@ class Task:
             masks = masks[list(depth_idx)]
         if wl_idx is not None:
             masks = masks[:, list(wl_idx)]
-        return masked_fraction(psf, masks.to(psf.dtype))
+        return masked_fraction(psf, masks.to(psf.device, psf.dtype))
 
     def loss_from_fractions(self, frac: torch.Tensor) -> torch.Tensor:
         """Band and window losses from in-band fractions of any set of (depth, wavelength) entries."""
@@ -119,7 +119,7 @@ class Task:
                 tg = tg[list(depth_idx)]
             if wl_idx is not None:
                 tg = tg[:, list(wl_idx)]
-            return (psf - tg.to(psf.dtype)).abs().sum(dim=(-1, -2)).mean()
+            return (psf - tg.to(psf.device, psf.dtype)).abs().sum(dim=(-1, -2)).mean()
         raise ValueError(f"unknown loss_kind {self.loss_kind!r}")
 
     def metric(self, psf: torch.Tensor, camera: Camera) -> dict:

@@ -5,8 +5,11 @@
 - ``parts``: PSF pairs of as-fabricated parts drawn from the tolerance budget (relief as its masks made it,
   mount errors; ``doefab.tolerance``), one per scene in turn — while the network is told the nominal PSF (or
   the part's, when a user measured it);
-- ``crosstalk``: per-column dual-pixel crosstalk mixed per Eq. 29 at each scene's place on the sensor, then
-  unmixed with ratios a simulated noisy white-wall calibration estimated (the user's pipeline);
+- ``crosstalk``: a real sensor's dual-pixel crosstalk (``imaging.crosstalk.SensorCrosstalk``: dependent on the
+  light's angle along both axes of the field and on the half it came through, varying from row to row, drifted
+  since the calibration) mixed per Eq. 29 at each scene's place on the sensor, then unmixed with per-column ratios
+  a simulated noisy white-wall calibration estimated (the user's pipeline): the part of the crosstalk a
+  per-column calibration cannot hold stays in the captures (``describe()["crosstalk_residual_rms"]``);
 - ``depth_planes``: depth scenes rendered through PSFs at planes ``depth_refine`` times finer (in inverse
   depth) than the network's cost volume scans, so depths fall between them;
 - the sensor's noise (always).
@@ -29,12 +32,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
+
 __all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits", "CONDITIONS",
-           "model_sources_sha256"]
+           "model_sources_sha256", "crop_rows", "crosstalk_residual"]
 
 CONDITIONS = ("honest", "clean")
 
-PART_SEEDS = {"train": 11, "val": 22, "test": 33}  # parts of one split are never another's
 DEPTH_REFINE = 4
 
 
@@ -50,8 +54,10 @@ class Conditions:
         return self.parts[index % len(self.parts)] if self.parts else nominal
 
     def crosstalk_for(self, index: int, images: int, size: int, noise="default"):
-        """The DualPixelCrosstalk of scene ``index`` (its crop spread across the calibrated width; calibrated with
-        the sensor's ``noise``, the captures' own), or None."""
+        """The DualPixelCrosstalk of scene ``index``: the true crosstalk of a sensor of its own (``SensorCrosstalk``,
+        over its crop's rows and columns, the crops spread across the calibrated region by :func:`crop_rows`), in a
+        capture session of its own, unmixed with the per-column estimate of a calibration with the sensor's
+        ``noise`` (the captures' own); or None."""
         if self.crosstalk is None:
             return None
         from dataclasses import replace
@@ -62,13 +68,35 @@ class Conditions:
 
         err = replace(self.crosstalk, seed=int(np.random.SeedSequence([PART_SEEDS[self.split], index])
                                                .generate_state(1)[0]))
-        a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(index % max(images, 1), images, size,
-                                                                err.calibrated_width_px), noise)
+        place = (index % max(images, 1), images, size, err.calibrated_width_px)
+        a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(*place), noise, rows=crop_rows(*place))
         return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
 
     def describe(self) -> dict:
-        return {"name": self.name, "parts": len(self.parts), "crosstalk": self.crosstalk is not None,
+        """What the conditions are; ``crosstalk_residual_rms``: the (l→r, r→l) RMS of true − calibrated crosstalk
+        ratio over the calibrated region that a noise-free calibration leaves (``SensorCrosstalk.residual``;
+        None without crosstalk or calibration)."""
+        xt = self.crosstalk
+        return {"name": self.name, "parts": len(self.parts), "crosstalk": xt is not None,
+                "crosstalk_residual_rms": crosstalk_residual(xt) if xt is not None and xt.calibrated else None,
                 "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
+
+
+def crop_rows(index: int, images: int, size: int, width_px: int) -> np.ndarray:
+    """Sensor rows (pixels from the centre row) of scene ``index``'s crop: ``netjudge.crop_columns`` in reverse
+    order, so the crops lie along the calibrated region's diagonal and see its crosstalk along both axes."""
+    from doefab.tolerance.netjudge import crop_columns
+
+    return crop_columns(max(images - 1 - index, 0), images, size, width_px)
+
+
+def crosstalk_residual(err) -> list:
+    """(l→r, r→l) RMS of true − calibrated crosstalk ratio over the calibrated region and 8 capture sessions of the
+    sensor of ``err`` (a ``PartErrors``), its calibration of ``err.calibration_rows`` rows without noise: what the
+    per-column calibration cannot remove (rounded to 3 significant digits)."""
+    from doefab.tolerance.errors import sensor_crosstalk
+
+    return [float(f"{x:.3g}") for x in sensor_crosstalk(err).residual(err.calibration_rows)]
 
 
 def clean() -> Conditions:
@@ -97,9 +125,6 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
     digest = hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
     return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split,
                       budget_sha256=digest)
-
-
-PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose code computes a fabricated part's PSF
 
 
 def model_sources_sha256(packages=PART_MODEL) -> str:

@@ -14,10 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, PoissonGaussian
 from doefab.io import read_toml
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
-           "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios"]
+           "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios",
+           "sensor_crosstalk"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -61,6 +63,8 @@ class PartErrors:
     calibration_rows: int = 3072  # rows averaged per column by that calibration (the paper's § 5.1: 3072 × 3072)
     calibration_level: float = 0.5  # the white wall's exposure, fraction of full scale
     calibrated_width_px: int = 3072
+    full_well_e: float = DEFAULT_FULL_WELL_E  # the sensor's noise, which its crosstalk calibration draws
+    read_noise_e: float = DEFAULT_READ_NOISE_E
     seed: int = 0
     extra: dict = field(default_factory=dict)
 
@@ -168,29 +172,39 @@ def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0, *, n_ma
 
 
 def sensor_errors(budget: dict) -> dict:
-    """The ``PartErrors`` fields of the budget's ``[sensor]`` section (dual-pixel crosstalk and its calibration)."""
+    """The ``PartErrors`` fields of the budget's ``[sensor]`` section (dual-pixel crosstalk and its calibration; the
+    sensor's noise where a scene's ``[sensor]`` put it there, the default sensor's otherwise)."""
     g = partial(budget_value, budget, "sensor")
     return {"crosstalk": (g("crosstalk_lr_percent") / 100, g("crosstalk_rl_percent") / 100),
             "crosstalk_slope": g("crosstalk_slope_percent") / 100,
             "calibrated": bool(budget.get("sensor", {}).get("calibrated", True)),
             "calibration_rows": int(g("calibration_rows", 3072)), "calibration_level": g("calibration_level", 0.5),
-            "calibrated_width_px": int(g("calibrated_width_px", 3072))}
+            "calibrated_width_px": int(g("calibrated_width_px", 3072)),
+            "full_well_e": g("full_well_e", DEFAULT_FULL_WELL_E),
+            "read_noise_e": g("read_noise_e", DEFAULT_READ_NOISE_E)}
 
 
-def crosstalk_ratios(err: PartErrors, columns, noise="default") -> tuple:
+def sensor_crosstalk(err: PartErrors):
+    """The true crosstalk (``imaging.crosstalk.SensorCrosstalk``) of the part's camera's sensor, seeded by the part."""
+    from doefab.imaging.crosstalk import SensorCrosstalk
+
+    return SensorCrosstalk(err.crosstalk, err.crosstalk_slope, width_px=err.calibrated_width_px, seed=err.seed)
+
+
+def crosstalk_ratios(err: PartErrors, columns, noise=None, rows=None) -> tuple:
     """(α_l→r, α_r→l, α̂_l→r, α̂_r→l) at sensor ``columns`` (pixels from the centre column): the part's camera's
-    crosstalk profile, and the estimate its calibration gives (simulated white-wall captures with the sensor's
-    ``noise``, seeded by the part; the estimate is the true profile when the camera is not calibrated — it is
-    then not used)."""
-    from doefab.imaging.crosstalk import crosstalk_profile, simulate_calibration
-
-    half = err.calibrated_width_px / 2
-    a = crosstalk_profile(columns, err.crosstalk[0], err.crosstalk_slope, half)
-    b = crosstalk_profile(columns, err.crosstalk[1], -err.crosstalk_slope, half)
+    true crosstalk (``imaging.crosstalk.SensorCrosstalk`` of its sensor, seeded by the part, in its capture
+    session) as [len(rows), len(columns)] maps at sensor ``rows`` (None: per column on the centre row), and the
+    per-column estimate its calibration gives (simulated white-wall captures with ``noise``, None: the part's
+    sensor's; the estimate is the true ratios when the camera is not calibrated — it is then not used)."""
+    sensor = sensor_crosstalk(err)
+    a, b = sensor.ratios([0.0] if rows is None else rows, columns)
+    a, b = (a[0], b[0]) if rows is None else (a, b)
     if not err.calibrated:
         return a, b, a, b
+    noise = PoissonGaussian(err.full_well_e, err.read_noise_e) if noise is None else noise
     rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
-    a_hat, b_hat = simulate_calibration(a, b, err.calibration_rows, noise, rng, err.calibration_level)
+    a_hat, b_hat = sensor.calibrate(columns, err.calibration_rows, noise, rng, err.calibration_level)
     return a, b, a_hat, b_hat
 
 

@@ -5,8 +5,13 @@ judged on a block of the design — ``block``² DOE pixels from the middle of it
 aperture — on grids refined s = 1, 2, 4 times and on a reference s = 8 times, each part carrying only that error
 at the budget's value. The task metric is a sum of the coded PSF over the task's metric pixels divided by the
 coded half's light (0.5), so twice the summed absolute PSF difference to the reference over those pixels bounds
-the metric's error; the grid chosen for a kind is the coarsest whose bound is within ``tolerance``, and a Monte Carlo part is simulated on the finest
-grid any of its errors needs — and no finer.
+the metric's error on the block. The block's aperture is smaller than the design's, so its PSF is broader and its
+metric pixels catch less of its light and of the changes an error makes: each band's bound is multiplied by the
+ratio of the light the metric pixels hold for the whole design to that for the block (error-free parts, at least
+1; ``block_to_full``), which brings the block's bound to the whole design's scale (on the committed grating the
+whole design's own 1×−2× difference lies within it: ``benchmarks/tolerance_grid.py``). The grid chosen for a
+kind is the coarsest whose scaled bound is within ``tolerance``, and a Monte Carlo part is simulated on the
+finest grid any of its errors needs — and no finer.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import torch
 
 from doefab.tolerance.kinds import KINDS
 
-__all__ = ["grid_study", "judge_grid", "GRIDS", "REFERENCE", "TOLERANCE", "block_design"]
+__all__ = ["grid_study", "judge_grid", "GRIDS", "REFERENCE", "TOLERANCE", "block_design", "block_to_full"]
 
 GRIDS = (1, 2, 4)
 REFERENCE = 8
@@ -45,9 +50,10 @@ def block_design(design, block: int):
 
 
 def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERANCE, progress: bool = False) -> dict:
-    """{kind: {"value", "unit", "bound": {s: metric-error bound}, "seconds": {s: ...}, "grid": chosen s}} for the
-    grid-dependent kinds present in ``budget``, and "monte_carlo_grid": the finest of the chosen grids
-    (``judge``: the design's ``PSFJudge``; its alignment chain is used on the block too)."""
+    """{kind: {"value", "unit", "bound": {s: metric-error bound, scaled to the whole design}, "block_bound": {s:
+    the block's own}, "seconds": {s: ...}, "grid": chosen s}} for the grid-dependent kinds present in ``budget``,
+    "block_to_full": the scale per band, and "monte_carlo_grid": the finest of the chosen grids (``judge``: the
+    design's ``PSFJudge``; its alignment chain is used on the block too, its error-free PSF gives the scale)."""
     from doefab.tolerance.judge import PSFJudge
 
     kinds = [k for k in KINDS if k.grid and k.from_budget(budget) != 0.0]
@@ -61,9 +67,12 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
     # the metric sums the coded PSF over these pixels (fractions of the coded half's 0.5): twice the summed
     # absolute PSF error inside them bounds the metric's error
     masks = judge.task.band_masks(judge.fine)[[piece.extra["depth"]]][:, piece.extra["bands"]].double()
+    scale = block_to_full(judge, piece, judges[1], masks)
+    out["block_to_full"] = [round(float(v), 4) for v in scale.flatten()]
 
-    def bound_of(diff):
-        return float(2 * (diff.abs() * masks).sum(dim=(-1, -2)).max())
+    def bound_of(diff, to_full=True):
+        per_band = 2 * (diff.abs() * masks).sum(dim=(-1, -2))
+        return float((per_band * scale if to_full else per_band).max())
     bar = None
     if progress:  # what runs, k of n error kinds, the time left
         from tqdm import tqdm
@@ -85,6 +94,7 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
         chosen = next((s for s in GRIDS if bound[s] <= tolerance), REFERENCE)
         effect = bound_of(ref - judges[REFERENCE].nominal)
         out["kinds"][k.name] = {"value": k.from_budget(budget) / k.si, "unit": k.unit, "bound": bound,
+                                "block_bound": {s: bound_of(psf[s] - ref, False) for s in GRIDS},
                                 "effect_bound": effect, "seconds": secs, "grid": chosen}
         if bar is not None:
             bar.update(1)
@@ -92,6 +102,15 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
         bar.close()
     out["monte_carlo_grid"] = max(v["grid"] for v in out["kinds"].values())
     return out
+
+
+def block_to_full(judge, piece, block_judge, masks) -> torch.Tensor:
+    """[depth, band] how many times more of the coded light the whole design's metric pixels hold than the
+    block's (error-free parts; at least 1): the factor by which the block's PSF, broader for its smaller aperture,
+    dilutes both its light and an error's change in those pixels."""
+    whole = judge.nominal[[piece.extra["depth"]]][:, piece.extra["bands"]]
+    light = (block_judge.nominal * masks).sum(dim=(-1, -2))
+    return ((whole * masks).sum(dim=(-1, -2)) / light.clamp_min(1e-30)).clamp_min(1.0)
 
 
 def judge_grid(study: dict, part, n_masks: int) -> int:

@@ -12,6 +12,9 @@
   white-wall captures (Eq. 30–31), so the calibration's own error reaches the result. At PSF level the plain
   half is the nominal one (the part's differs only by relief slivers that cross the split, and it enters
   weighted by the crosstalk ratio); the network judge uses both halves of the part.
+
+The relief is built on the CPU; its transmittance moves to the judge's ``device`` once per part, where the PSFs are
+propagated; the PSFs the judge returns and keeps are on the CPU.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
@@ -75,18 +79,20 @@ def compose_overlay(err: PartErrors, chain: dict, n_masks: int) -> tuple[list, l
 class PSFJudge:
     """PSF-level judge of one design folder (``design.json`` + ``levels.npy``, or a ``Design``) on the design grid
     refined ``supersample``× (cells per DOE pixel and axis). ``chain``: the mask set's alignment chain (default:
-    read from the manifest beside the design folder)."""
+    read from the manifest beside the design folder). ``device``: where the PSFs are propagated ("auto", "cpu",
+    "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``)."""
 
     KEEP_BYTES = 256 * 2**20  # PSFs ``reuse`` keeps: a tornado's coded halves (12 of 4.5 MB for a 31-band grating)
 
     def __init__(self, design_dir, supersample: int = 1, threads: int | None = None, margin: float = DEFAULT_MARGIN,
-                 chain: dict | None = None):
+                 chain: dict | None = None, device=None):
         from doefab.design.design import Design
         from doefab.fabrication.bitplanes import bit_planes
         from doefab.fabrication.levels import level_step
         from doefab.tasks import get_task
         from doefab.tolerance.relief import ReliefModel, corner_bias, plain_columns
 
+        self.device = resolve_device(device)
         if threads:
             torch.set_num_threads(threads)
         if isinstance(design_dir, Design):  # an in-memory design (a block of one, for the grid study)
@@ -173,7 +179,7 @@ class PSFJudge:
         key = (tuple(halves), margin, k)
         if key not in self._plans:
             d = self.design
-            self._plans[key] = MountedPlan(self.fine, d.wavelengths, d.depths, k, halves, margin)
+            self._plans[key] = MountedPlan(self.fine, d.wavelengths, d.depths, k, halves, margin, device=self.device)
         return self._plans[key]
 
     def mask_errors(self, err: PartErrors):
@@ -201,10 +207,11 @@ class PSFJudge:
         c_end = min(cells, max(c0 + 1, int(self.plain_from + reach)))
         key = (json.dumps(err.to_json(), sort_keys=True, default=str), r0, r1, c0, c_end)
         if self._relief_cache[0] != key:  # one part's relief serves its coded-only and its two-half PSFs
-            self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)))
+            self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)).to(self.device))
         fields = self._relief_cache[1].reshape(-1, r1 - r0, c_end - c0)[:, :, :c1 - c0]
         if c_end < c1:  # plain glass beyond the relief's reach
-            fields = torch.cat([fields, torch.ones(fields.shape[0], r1 - r0, c1 - c_end, dtype=fields.dtype)], dim=2)
+            fields = torch.cat([fields, torch.ones(fields.shape[0], r1 - r0, c1 - c_end, dtype=fields.dtype,
+                                                   device=fields.device)], dim=2)
 
         def at(i: int) -> torch.Tensor:
             return fields[i]
@@ -252,7 +259,8 @@ class PSFJudge:
 
         def compute(todo):
             plan = self.plan(halves, err.mount_shift[0], big)
-            return plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
+            got = plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
+            return to_device(got, "cpu")
         return self.reuse(source, halves, k, compute) if shared else compute(halves)
 
     def uncoded(self) -> torch.Tensor:
@@ -269,13 +277,13 @@ class PSFJudge:
         def compute(todo):
             plan = self.plan(halves, 0.0, kernel)
             (r0, r1), (c0, c1) = plan.window
-            rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1)
+            rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1).to(self.device)
 
             def at(i: int) -> torch.Tensor:
                 ph = (plan.phase_per_metre(i) * rel).float()
                 return torch.polar(torch.ones_like(ph), ph)
             with torch.no_grad():
-                return plan.psfs(at, halves=todo)
+                return to_device(plan.psfs(at, halves=todo), "cpu")
         return self.reuse(source, halves, kernel, compute)
 
     def psf_from_height(self, height) -> torch.Tensor:

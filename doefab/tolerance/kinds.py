@@ -19,7 +19,8 @@ __all__ = ["Kind", "KINDS", "kind", "budget_part"]
 
 
 def _overlay(v: float, n_masks: int) -> PartErrors:
-    """Every plate off by v relative to the one it aligns to, in the four diagonal directions in turn."""
+    """Every plate off by v (the length of its 2-D shift) relative to the one it aligns to, in the four diagonal
+    directions in turn."""
     s = v / math.sqrt(2)
     turns = ((s, s), (-s, s), (-s, -s), (s, -s))
     return replace(PartErrors(), overlay=tuple(turns[m % 4] for m in range(n_masks)))
@@ -33,10 +34,13 @@ def _mask_rotation(v: float, n_masks: int) -> PartErrors:
 @dataclass(frozen=True)
 class Kind:
     """One error kind. ``build(v, n_masks)``: the part with only this error, of magnitude v (SI), for a design of
-    ``n_masks`` masks; ``from_budget``: one standard deviation of the budget's distribution of it (SI; a uniform
-    decenter ±d: d/√3; the etch depth: the systematic and random parts added in quadrature), so every kind is
-    judged at the same probability point and the ranking compares like with like; 0 when the budget has none of
-    it."""
+    ``n_masks`` masks; ``from_budget``: one standard deviation of what ``errors.sample_errors`` draws of it (SI;
+    a uniform decenter ±d: d/√3 per axis; the etch depth: the systematic and random parts added in quadrature;
+    a plate's 2-D overlay shift: the rms of its length, √2 × the per-axis sigma), so every kind is judged at the
+    same probability point and the ranking compares like with like; an error every part carries alike (corner
+    rounding, roughness, crosstalk, the holder's nominal axial gap) at that value; 0 when the budget has none of
+    it. ``base_from_budget``: the part a deviation is measured from where the draws do not centre on the
+    error-free part (the axial gap's spread about its nominal value); None: the error-free part."""
 
     name: str
     unit: str
@@ -46,12 +50,17 @@ class Kind:
     from_budget: Callable[[dict], float]
     grid: bool
     part_from_budget: Callable[[dict], PartErrors] | None = None
+    base_from_budget: Callable[[dict], PartErrors] | None = None
 
     def budget_part(self, budget: dict, n_masks: int) -> PartErrors:
         """The part with one standard deviation of this error alone, for a design of ``n_masks`` masks."""
         if self.part_from_budget is not None:
             return self.part_from_budget(budget)
         return self.build(self.from_budget(budget), n_masks)
+
+    def base_part(self, budget: dict) -> PartErrors:
+        """The part this kind's change is measured from: the error-free part, or the draws' centre."""
+        return PartErrors() if self.base_from_budget is None else self.base_from_budget(budget)
 
 
 def _g(budget, sec, key, default=0.0):
@@ -62,6 +71,16 @@ def _crosstalk(calibrated: bool):
     def build(v, n_masks):
         return replace(PartErrors(), crosstalk=(v, v), calibrated=calibrated)
     return build
+
+
+def _gap_sigma(budget) -> float:
+    """One standard deviation (m) of the axial gap about the holder's nominal gap."""
+    return _g(budget, "mounting", "axial_gap_sigma_mm") * 1e-3
+
+
+def _gap_part(offset):
+    """The part whose axial gap is the nominal gap plus ``offset(budget)`` (m)."""
+    return lambda b: replace(PartErrors(), axial_gap=nominal_gap(b) + offset(b))
 
 
 def _decenter_sigma(budget) -> float:
@@ -90,8 +109,8 @@ KINDS = (
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
          lambda b: math.hypot(_g(b, "etch", "systematic_sigma_percent"), _g(b, "etch", "random_sigma_percent")) / 100,
          False),
-    Kind("mask overlay", "µm", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
-         lambda b: _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
+    Kind("mask overlay", "µm rms length", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
+         lambda b: math.sqrt(2) * _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
     Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
          lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True),
     Kind("edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
@@ -110,7 +129,9 @@ KINDS = (
          lambda v, n: replace(PartErrors(), mount_rotation=v),
          lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
     Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
-         lambda b: nominal_gap(b) + _g(b, "mounting", "axial_gap_sigma_mm") * 1e-3, False),
+         nominal_gap, False),
+    Kind("axial gap spread", "mm about the nominal gap", 1e-3, (), lambda v, n: replace(PartErrors(), axial_gap=v),
+         _gap_sigma, False, _gap_part(_gap_sigma), _gap_part(lambda b: 0.0)),
     Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value(False), False,
          _crosstalk_part(False)),
     Kind("crosstalk, calibrated", "%", 0.01, (2, 5, 10), _crosstalk(True), _crosstalk_value(True), False,

@@ -5,6 +5,12 @@ whatever the number of workers or the backend. ``samples.jsonl`` opens with the 
 checksum, budget, seed, grid, level) and then one line per finished part, so an interrupted run resumes where
 it stopped — and a file written for another run is refused instead of mixed in. A lost Dask worker's parts are
 recomputed by Dask (futures are retried), never lost.
+
+On a CUDA device the parts run in this process by default (the GPU computes each part's PSFs in parallel);
+``workers`` > 1 then starts them with ``spawn`` (a forked process cannot use CUDA), all on that device. A
+``local:N`` Dask cluster gives each worker one GPU of its own (``CUDA_VISIBLE_DEVICES``, round robin over the GPUs
+this process sees; all on GPU N for ``cuda:N``); the workers of a ``tcp://`` scheduler use what they were started
+with (e.g. ``CUDA_VISIBLE_DEVICES=i dask worker ...`` per GPU) and the device asked for.
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, wei
                  chain: dict | None = None) -> dict:
     """What a samples.jsonl must have been written for to be resumed: the design (level map, camera, bands,
     planes, levels), the budget, seed, grid, the mask set's alignment chain and, through networks, the network's
-    weights (their SHA-256)."""
+    weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
     system = {"camera": design.camera.to_dict(), "wavelengths_m": list(design.wavelengths), "n_levels": design.n_levels,
               "depths_m": [z if math.isfinite(z) else "inf" for z in design.depths]}
@@ -43,7 +49,10 @@ def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, wei
            "budget_sha256": _digest(b), "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf",
            "alignment_chain": {str(k): int(v) for k, v in sorted((chain or {}).items())}}
     if networks:
+        from doefab.tolerance.netjudge import judge_settings
+
         out["network_sha256"] = network_weights_sha(design.task, weights_dir)
+        out["network_judge"] = judge_settings(networks)  # the scenes each part is judged on
     return out
 
 
@@ -95,14 +104,23 @@ def _read_log(log: Path, identity: dict) -> dict:
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
                 scheduler: str | None = None, workers: int | None = None, progress: bool = True,
-                networks: bool = False, weights_dir=None) -> list[dict]:
+                networks: bool = False, weights_dir=None, device=None) -> list[dict]:
     """``n`` sampled parts; returns every sample's errors and metrics (ordered by index). ``networks``: judge
     each part through its task's proposed network too (from ``weights_dir``; None: the shipped one).
 
-    scheduler: None (in process, or a local process pool of ``workers``; None: ``auto_workers``), ``"local:N"`` (a Dask
-    ``LocalCluster`` of N workers) or ``"tcp://HOST:PORT"`` (an existing Dask scheduler).
+    scheduler: None (in process, or a local process pool of ``workers``; None: ``auto_workers``, in process on a
+    CUDA device), ``"local:N"`` (a Dask ``LocalCluster`` of N workers, one GPU each on a CUDA device) or
+    ``"tcp://HOST:PORT"`` (an existing Dask scheduler). ``device``: where the parts' PSFs and networks run ("auto",
+    "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``).
     """
+    from doefab._devices import resolve_device, using_device
     from doefab.tolerance.study import evaluate_part, judge_for
+
+    if device is not None:  # the default device of this call and of the workers it starts
+        with using_device(device, "device"):
+            return monte_carlo(design_dir, budget, n, out_dir, seed, supersample, scheduler, workers, progress,
+                               networks, weights_dir)
+    cuda = resolve_device(None).type == "cuda"
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -133,14 +151,16 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
 
     ddir = str(design_dir)
     wdir = None if weights_dir is None else str(weights_dir)
-    workers = workers or auto_workers(len(todo))
+    workers = workers or (1 if cuda else auto_workers(len(todo)))
     try:
         if scheduler:
             _run_dask(scheduler, ddir, supersample, todo, errs, record, networks, weights_dir)
         elif workers > 1:
+            import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            ex = ProcessPoolExecutor(workers, initializer=_worker_init)
+            ex = ProcessPoolExecutor(workers, initializer=_worker_init,
+                                     mp_context=multiprocessing.get_context("spawn") if cuda else None)
             try:
                 futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks, wdir): i for i in todo}
                 for f in as_completed(futs):
@@ -235,11 +255,13 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         raise DoefabError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     cluster = None
     if nw is not None:
-        cluster = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None,
-                               env={"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1", **_MALLOC_ENV})
+        cluster = _local_cluster(LocalCluster, worker_envs(nw))
         client = Client(cluster)
     else:
+        from doefab._devices import default_device
+
         client = Client(scheduler)
+        client.run(_set_default_device, default_device())  # the device asked for, on each worker's own GPUs
     try:
         futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
@@ -250,6 +272,55 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _set_default_device(text: str) -> None:
+    """Run on a Dask worker: ``device=None`` means ``text`` there."""
+    from doefab._devices import ENV
+
+    os.environ[ENV] = text
+
+
+def worker_envs(n_workers: int, device=None) -> list[dict]:
+    """The environment of each of ``n_workers`` local Dask workers on ``device`` (None: the default device): on a
+    CUDA device one GPU each — ``CUDA_VISIBLE_DEVICES`` round robin over the GPUs this process sees (GPU N alone for
+    ``cuda:N``) and ``DOEFAB_DEVICE=cuda`` (the worker's one GPU); on the CPU none.
+
+    Example: with ``CUDA_VISIBLE_DEVICES=4,5``, ``worker_envs(3, "cuda")`` puts the workers on GPUs 4, 5 and 4.
+    """
+    from doefab._devices import ENV, resolve_device
+
+    dev = resolve_device(device)
+    if dev.type != "cuda":
+        return [{} for _ in range(n_workers)]
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if visible is not None:
+        gpus = [g.strip() for g in visible.split(",") if g.strip()]
+    else:
+        import torch
+
+        gpus = [str(i) for i in range(torch.cuda.device_count())]
+    if dev.index is not None:
+        gpus = [gpus[dev.index]]
+    return [{"CUDA_VISIBLE_DEVICES": gpus[i % len(gpus)], ENV: "cuda"} for i in range(n_workers)]
+
+
+def _local_cluster(local_cluster, envs: list[dict]):
+    """A Dask ``LocalCluster`` (the class ``local_cluster``) of ``len(envs)`` single-threaded worker processes,
+    worker i started with ``envs[i]`` added to its environment."""
+    base = {"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1", **_MALLOC_ENV}
+    options = dict(threads_per_worker=1, processes=True, dashboard_address=None, env=base)
+    if not any(envs):
+        return local_cluster(n_workers=len(envs), **options)
+    import copy
+
+    cluster = local_cluster(n_workers=0, **options)
+    for i, extra in enumerate(envs):  # each worker's own environment (its GPU), kept when Dask restarts it
+        spec = copy.deepcopy(cluster.new_spec)
+        spec["options"]["env"] = {**base, **extra}
+        cluster.worker_spec[f"doefab-{i}"] = spec
+    cluster.scale(len(envs))
+    return cluster
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

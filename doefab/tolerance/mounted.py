@@ -73,11 +73,15 @@ class MountedPlan:
     ``psfs(field, decenter, gap)`` → {half: (n_depths, n_wavelengths, K, K)} energy fractions of the whole
     aperture, with ``field(i)`` the relief's complex transmittance at wavelength i on the window
     ``self.window`` (rows, cols) of the grid, relative to the plain glass (heights above the unetched level:
-    ``relief.pattern_heights(...) − (L − 1)·d``).
+    ``relief.pattern_heights(...) − (L − 1)·d``). Its tensors and the PSFs live on ``device`` (a ``torch.device``,
+    default the CPU).
     """
 
     def __init__(self, camera: Camera, wavelengths, depths, kernel: int, halves=("coded",), margin: float = 0.0,
-                 route: str = "spectral"):
+                 route: str = "spectral", device=None):
+        from doefab._devices import to_device
+
+        self.device = torch.device("cpu") if device is None else torch.device(device)
         self.camera, self.wavelengths, self.depths = camera, tuple(wavelengths), tuple(depths)
         self.kernel, self.halves, self.margin = int(kernel), tuple(halves), float(margin)
         self.route = make_route(route)
@@ -90,7 +94,7 @@ class MountedPlan:
                                camera.sensor_pitch, self.kernel, (0.0, 0.0), torch.float32, None)
             self.route.check(setup)
             self.geo[half] = geo
-            self._prepared[half] = (setup, self.route.prepare(setup))
+            self._prepared[half] = (setup, to_device(self.route.prepare(setup), self.device))
         rows = [g.rows for g in self.geo.values()]
         cols = [g.cols for g in self.geo.values()]
         self.window = ((min(r.start for r in rows), max(r.stop for r in rows)),
@@ -108,7 +112,7 @@ class MountedPlan:
         key = (half, round(dx, 15))
         if key not in self._cov:
             geo = pupil_half(self.camera, half, 1, -dx, self.margin)
-            self._cov[key] = torch.from_numpy(geo.coverage).float()
+            self._cov[key] = torch.from_numpy(geo.coverage).to(self.device, torch.float32)
             if len(self._cov) > 8:
                 self._cov.pop(next(iter(self._cov)))
         return self._cov[key]
@@ -124,7 +128,7 @@ class MountedPlan:
         opd = {h: self._opd(h, dx, dy) for h in halves}
         d = len(self.depths)
         for i in range(len(self.wavelengths)):
-            t = field(i).reshape(r1 - r0, c1 - c0)
+            t = field(i).reshape(r1 - r0, c1 - c0).to(self.device)
             t = torch.stack([self._through_gap(t, i, j, gap) for j in range(d)]) if propagate else t[None]
             for half in halves:
                 geo = self.geo[half]
@@ -149,7 +153,7 @@ class MountedPlan:
         geo = self.geo[half]
         r2 = (geo.y[:, None] + dy) ** 2 + (geo.x[None, :] + dx) ** 2
         return torch.from_numpy(np.stack([source_path_difference(r2, z, self.camera.focus_distance)
-                                          for z in self.depths])).float()
+                                          for z in self.depths])).to(self.device, torch.float32)
 
     def _through_gap(self, t: torch.Tensor, i: int, j: int, gap: float) -> torch.Tensor:
         """The window's transmittance carried over the gap to the lens's stop for the source at depth j
@@ -158,6 +162,6 @@ class MountedPlan:
 
         n = self.camera.doe_pixels
         (r0, r1), (c0, c1) = self.window
-        full = torch.ones((n, n), dtype=torch.complex64)
+        full = torch.ones((n, n), dtype=torch.complex64, device=t.device)
         full[r0:r1, c0:c1] = t
         return gap_field(full, self.camera, self.wavelengths[i], self.depths[j], gap)[r0:r1, c0:c1]

@@ -1,13 +1,19 @@
 """Judge a part by what the camera delivers: captures through the part, reconstructed by the task's network.
 
-For each part the judge computes both halves of the part's PSF (``PSFJudge``: relief as made, mount, stop),
-renders a fixed set of validation scenes through them, and records them as the part's camera does
-(``DualPixelCrosstalk``: Eq. 29's mix with per-column ratios at the crop's place on the sensor, shot and read
-noise of the sensor the network was trained for (its weights record), then the unmix with the ratios its
-simulated white-wall calibration estimated). The proposed network
-reconstructs each capture twice — told the nominal PSF it was trained with, and told the part's own PSF pair
-(as a user gets after measuring the part) — and the task's delivered metrics are averaged over the scenes.
-Validation scenes, not test ones: the test split belongs to the final tables.
+For each part the judge computes both halves of the part's PSF (``PSFJudge``: relief as made, mount, stop) and
+renders scenes through them on the path ``doefab evaluate`` takes (``specs.make_batch`` under a
+``tolerance.conditions.Conditions`` of that one part): depth scenes through the part's PSFs at planes
+``DEPTH_REFINE`` times finer than the network's (depths fall between its planes), the views mixed by the
+sensor's crosstalk at each crop's place and unmixed with a calibration drawn with the captures' noise, the
+sensor's shot and read noise (the sensor the network was trained for: in a scene's run, the scene's). The
+proposed network reconstructs each capture twice — told the nominal PSF it was trained with, and told the
+part's own PSF pair at its planes (as a user gets after measuring the part) — on one torch thread, and each
+scene's delivered metrics are kept (``scenes``) as well as their means (``evaluate``). The error-free part
+judged on the scenes an evaluation reads scores what that evaluation scores through the error-free part.
+
+The scenes are the test split's, as the reconstruction tables' (the study states what parts deliver; nothing is
+chosen on it), ``SIZE`` px square as ``doefab evaluate``'s, ``SCENES`` per part by default: scene noise on a
+part's value, measured by ``delivered.variance_components``, is then below the part-to-part spread.
 """
 
 from __future__ import annotations
@@ -18,11 +24,35 @@ import numpy as np
 import torch
 
 from doefab.errors import DoefabError
-from doefab.tolerance.errors import PartErrors, crosstalk_ratios
+from doefab.tolerance.errors import PartErrors
 
-__all__ = ["NetworkJudge", "RECON_TASK", "crop_columns"]
+__all__ = ["NetworkJudge", "RECON_TASK", "crop_columns", "judge_settings", "SCENES", "SIZE", "SPLIT", "LABELS"]
 
 RECON_TASK = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
+SCENES = 8  # scenes per part (benchmarks/delivered_scene_noise.py measures the scene noise against the spread)
+SIZE = 256  # scene side (px), as ``doefab evaluate``'s
+SPLIT = "test"  # the reconstruction tables' scenes
+SPLITS = ("val", "test")
+LABELS = ("nominal_psf", "measured_psf")  # what the network is told: the nominal PSF, the part's measured pair
+
+
+def judge_settings(networks) -> dict:
+    """The judge's scenes a study's ``networks`` argument asks for: ``True`` the defaults, a dict some of
+    {"images": scenes per part ≥ 1, "size": px, a multiple of 32 ≥ 64, "split": "val" or "test"} (the rest
+    default). A DoefabError names a bad entry, its value and one that works."""
+    given = networks if isinstance(networks, dict) else {}
+    unknown = sorted(set(given) - {"images", "size", "split"})
+    if unknown:
+        raise DoefabError(f"network judge settings {unknown} are not known: give images, size or split")
+    s = {"images": SCENES, "size": SIZE, "split": SPLIT, **given}
+    images, size = s["images"], s["size"]
+    if isinstance(images, bool) or not isinstance(images, int) or images < 1:
+        raise DoefabError(f"network judge images = {images!r} must be a whole number of scenes ≥ 1, e.g. {SCENES}")
+    if isinstance(size, bool) or not isinstance(size, int) or size < 64 or size % 32:
+        raise DoefabError(f"network judge size = {size!r} px must be a multiple of 32 and at least 64, e.g. {SIZE}")
+    if s["split"] not in SPLITS:
+        raise DoefabError(f"network judge split = {s['split']!r} must be one of {', '.join(SPLITS)}, e.g. {SPLIT}")
+    return s
 
 
 def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarray:
@@ -33,12 +63,15 @@ def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarra
 
 
 class NetworkJudge:
-    """Network-level judge of a design through the shipped proposed network of its task (or ``weights_dir``'s)."""
+    """Network-level judge of a design through the proposed network of its task (the shipped one, or
+    ``weights_dir``'s): ``images`` scenes of ``size``² px from ``split``, rendered as ``doefab evaluate`` renders
+    them (``judge_settings`` checks the three)."""
 
-    def __init__(self, psf_judge, images: int = 4, size: int = 128, weights_dir=None):
+    def __init__(self, psf_judge, images: int = SCENES, size: int = SIZE, weights_dir=None, split: str = SPLIT):
         from doefab.fabrication.levels import levels_sha256
         from doefab.reconstruction.loader import load_reconstructor
 
+        s = judge_settings({"images": images, "size": size, "split": split})
         self.base = psf_judge
         d = psf_judge.design
         if d.task not in RECON_TASK:
@@ -48,66 +81,100 @@ class NetworkJudge:
         if self.rec.design_sha256 != levels_sha256(d.levels):
             raise DoefabError("the network was trained for another design than this one: network-level judgement "
                               "needs weights trained for it (doefab train --design ...)")
-        self.images, self.size = images, size
+        self.images, self.size, self.split = s["images"], s["size"], s["split"]
+        self._fine = None
         self._nominal = None
 
-    def pair(self, err: PartErrors, height=None):
-        """The part's PSF pair (both halves) at the network's kernel (or that of an explicit ``height`` map)."""
+    @property
+    def render_judge(self):
+        """The ``PSFJudge`` whose PSFs make the captures: for depth one on ``conditions.fine_planes`` of the
+        design's planes (the scenes' depths fall between the network's planes, as in ``doefab evaluate``), else
+        the design's own."""
+        if self.task != "depth":
+            return self.base
+        if self._fine is None:
+            from dataclasses import replace
+
+            from doefab.tolerance.conditions import fine_planes
+            from doefab.tolerance.judge import PSFJudge
+
+            b = self.base
+            self._fine = PSFJudge(replace(b.design, depths=fine_planes(b.design.depths)), b.supersample,
+                                  margin=b.margin, chain=b.chain, device=b.device)
+        return self._fine
+
+    def pair(self, err: PartErrors, height=None, judge=None):
+        """The part's PSF pair (both halves) at the network's kernel (or that of an explicit ``height`` map), on
+        ``judge``'s planes (default: the network's — the pair a user measures and tells the network)."""
         import dataclasses
 
+        judge = judge or self.base
         halves, k = ("coded", "uncoded"), self.rec.pair.coded.shape[-1]
         with torch.no_grad():
-            got = (self.base.psfs(err, halves=halves, kernel=k) if height is None
-                   else self.base.height_psfs(height, halves, k))
-        return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float())
+            got = (judge.psfs(err, halves=halves, kernel=k) if height is None
+                   else judge.height_psfs(height, halves, k))
+        return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float(),
+                                   depths=tuple(judge.design.depths))
 
-    def crosstalk(self, err: PartErrors):
-        """``index → DualPixelCrosstalk`` of the part's camera for each scene's crop."""
-        from doefab.imaging.crosstalk import DualPixelCrosstalk
+    def conditions(self, err: PartErrors, rendered):
+        """The ``Conditions`` of one part (``tolerance.conditions``): its captures made through ``rendered`` (its
+        PSF pair on the rendering planes), its camera's crosstalk unmixed with a calibration drawn with the
+        captures' noise, the scenes of the judge's split."""
+        from doefab.tolerance.conditions import Conditions
 
-        noise = self.noise()
-
-        def at(i: int):
-            if not any(err.crosstalk):
-                return None
-            a, b, a_hat, b_hat = crosstalk_ratios(err, crop_columns(i, self.images, self.size,
-                                                                    err.calibrated_width_px), noise)
-            return DualPixelCrosstalk(a, b, (a_hat, b_hat) if err.calibrated else None)
-        return at
+        return Conditions(name="part", parts=[rendered], crosstalk=err if any(err.crosstalk) else None,
+                          split=self.split)
 
     def sensor(self):
         """(response [3, C] or None, noise model) of the sensor the network was trained for: its record's noise
-        and, hyperspectral, the response its architecture record holds (the default camera's when none)."""
+        and, hyperspectral, the response its architecture record holds (the default camera's when none). The
+        pipeline judges through a network only when it was trained for the scene's sensor, so this is the
+        scene's."""
+        from doefab.imaging.sensor import sensor_from_record
         from doefab.reconstruction.models import arch_response
 
         spectral = self.task == "hyperspectral"
         response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if spectral else None
-        return response, self.noise()
+        return response, sensor_from_record(self.rec.meta.get("sensor")).noise()
 
-    def noise(self):
-        """The noise model of the sensor the network was trained for (its weights record's)."""
-        from doefab.imaging.sensor import sensor_from_record
-
-        return sensor_from_record(self.rec.meta.get("sensor")).noise()
-
-    def evaluate(self, err: PartErrors, height=None) -> dict:
-        """{"nominal_psf": metrics, "measured_psf": metrics} of the part (means over the scenes); ``height``: an
-        explicit height map instead of the part's relief (the quantization study)."""
-        from doefab.reconstruction.metrics import mean_metrics, metrics_for
+    def scenes(self, err: PartErrors, height=None) -> dict:
+        """{label: {metric: [value on each scene]}} of the part, the network told the nominal PSF
+        ("nominal_psf") and the part's own pair ("measured_psf"); ``height``: an explicit height map instead of
+        the part's relief (the quantization study). Each scene is made by ``specs.make_batch`` under the part's
+        ``conditions`` and scored on one torch thread, exactly as ``doefab evaluate`` scores the proposed network
+        on the same scenes."""
+        from doefab.reconstruction.evaluate import one_thread
+        from doefab.reconstruction.metrics import metrics_for
         from doefab.reconstruction.specs import make_batch
 
         nominal = height is None and err == PartErrors()
         if nominal and self._nominal is not None:  # the error-free part: judged once (the tornado's base)
             return copy.deepcopy(self._nominal)
-        pair = self.pair(err, height)
+        measured = self.pair(err, height)
+        rendered = measured if self.render_judge is self.base else self.pair(err, height, self.render_judge)
+        cond = self.conditions(err, rendered)
         response, noise = self.sensor()
-        coded, uncoded, target = make_batch(self.task, "val", range(self.images), self.size, pair, response, noise,
-                                            crosstalk=self.crosstalk(err))
-        out = {}
-        for label, psf in (("nominal_psf", None), ("measured_psf", pair)):
-            rows = [metrics_for(self.task, np.asarray(self.rec(c, u, psf=psf)), t.numpy())
-                    for c, u, t in zip(coded, uncoded, target)]
-            out[label] = mean_metrics(rows)
+        rows = {label: [] for label in LABELS}
+        with one_thread():
+            for i in range(self.images):
+                coded, uncoded, target = make_batch(self.task, self.split, [i], self.size, self.rec.pair, response,
+                                                    noise, conditions=cond, images=self.images)
+                for label, psf in zip(LABELS, (None, measured)):
+                    out = np.asarray(self.rec(coded[0], uncoded[0], psf=psf))
+                    rows[label].append(metrics_for(self.task, out, target[0].numpy()))
+        got = {label: {k: [float(r[k]) for r in rs] for k in rs[0]} for label, rs in rows.items()}
         if nominal:
-            self._nominal = copy.deepcopy(out)
-        return out
+            self._nominal = copy.deepcopy(got)
+        return got
+
+    @staticmethod
+    def means(per_scene: dict) -> dict:
+        """{label: {metric: mean over the scenes that define it}} of ``scenes``' result (``mean_metrics``)."""
+        from doefab.reconstruction.metrics import mean_metrics
+
+        return {label: mean_metrics([dict(zip(m, vals)) for vals in zip(*m.values())])
+                for label, m in per_scene.items()}
+
+    def evaluate(self, err: PartErrors, height=None) -> dict:
+        """{"nominal_psf": metrics, "measured_psf": metrics} of the part: ``scenes``' means over the scenes."""
+        return self.means(self.scenes(err, height))

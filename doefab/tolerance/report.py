@@ -21,8 +21,9 @@ from doefab.tolerance.reporttext import REMEDY, body_lines, lead_text, spec_word
 
 __all__ = ["run_study", "REMEDY", "summary_lines"]
 
-HOLDOUT_SEED = 987_654  # the surrogate's own held-out parts (never the direct Monte Carlo's)
-HOLDOUT_PARTS = 16
+SURROGATE_SEED = 987_654  # the surrogate's own parts: spawn key (0,) calibrates it, (1,) validates it
+CALIBRATION_PARTS = 16
+HOLDOUT_PARTS = 16  # validation parts, where the study has fewer direct Monte Carlo parts than this
 
 
 def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, grid="auto",
@@ -32,7 +33,8 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
               network_top: int | None = None) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
-    Monte Carlo (None: one per core when there are enough parts)."""
+    Monte Carlo (None: one per core when there are enough parts). ``networks``: False, True (the network judge's
+    default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
     from doefab.tolerance.montecarlo import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
 
@@ -47,12 +49,18 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
                  "n_levels": judge.design.n_levels,
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
                  "level": "network" if networks else "psf"}
+    if networks:
+        from doefab.tolerance.netjudge import judge_settings
+
+        res["network_judge"] = judge_settings(networks)  # the scenes every part is judged on
     res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
     key = _step_key(judge, budget, grid, networks, weights_dir, network_top)
     res["steps_reused"] = reused = []
     if networks:
-        res["nominal"]["network"] = cached_step(out, "nominal_network", key, lambda: study.evaluate_part(
-            str(design_dir), 1, PartErrors().to_json(), True, weights_dir)["network"], reused)
+        nom = cached_step(out, "nominal_network", key, lambda: {k: v for k, v in study.evaluate_part(
+            str(design_dir), 1, PartErrors().to_json(), networks, weights_dir).items() if k.startswith("network")},
+            reused)
+        res["nominal"]["network"], res["nominal"]["network_scenes"] = nom["network"], nom["network_scenes"]
     res["warnings"] = [f"the nominal part already fails the spec ({w}): no part can meet it"
                        for lvl in ("psf", "network") if lvl in res["nominal"] or lvl == "psf"
                        for w in nominal_failures(spec, task, lvl, _flat_nominal(res["nominal"], lvl))]
@@ -160,6 +168,10 @@ def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, w
     res["samples"] = rows
     nominal = {"psf": res["nominal"]["psf"], "network": res["nominal"].get("network", {})}
     res["summary"] = summarize(rows, spec, task, nominal)
+    if networks:  # the delivered quality's mean and yield with the scenes' noise, and that noise against the spread
+        from doefab.tolerance.delivered import delivered_summary
+
+        res["summary"]["delivered"] = delivered_summary(rows, res["nominal"]["network_scenes"], spec, task, seed)
     conv = []
     for n in sorted({k for k in (5, 10, 20, 40, 80, 160, 320, 640, samples) if 2 <= k <= samples}):
         ok = [meets({"psf_metric": r["metric"]}, spec, task, "psf", res["nominal"]["psf"]) for r in rows[:n]]
@@ -170,27 +182,40 @@ def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, w
 
 
 def _surrogate(res, design_dir, budget, grid, spec, task, progress) -> None:
-    from doefab.tolerance.errors import sample_errors
-    from doefab.tolerance.spec import meets
-    from doefab.tolerance.surrogate import fit_surrogate, surrogate_yield
+    """The surrogate: fitted, calibrated on parts of its own, its yield, and validated on parts it never saw (the
+    direct Monte Carlo's where the study has at least ``HOLDOUT_PARTS`` of them, paired part by part)."""
+    from doefab.tolerance.spec import spec_limits
+    from doefab.tolerance.surrogate import calibrate, fit_surrogate, surrogate_yield, validate
 
     judge = study.judge_for(str(design_dir), grid)
     model = fit_surrogate(lambda p: judge.evaluate(p)["metric"], budget, judge.chain, progress, n_masks=judge.n_masks,
                           gap=not judge.fine.doe_is_stop)
-    # held-out parts of its own (never the direct Monte Carlo's), so its agreement with the direct run is a check
-    children = np.random.SeedSequence(HOLDOUT_SEED).spawn(HOLDOUT_PARTS)
-    held = [(p, judge.evaluate(p)["metric"]) for p in
-            (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=judge.n_masks)
-             for c in children)]
     t = time.perf_counter()
-    y = surrogate_yield(model, budget, judge.chain, held,
-                        lambda m: meets({"psf_metric": m}, spec, task, "psf", res["nominal"]["psf"]), n_masks=judge.n_masks)
+    model = calibrate(model, budget, judge.chain, _own_parts(judge, budget, 0, CALIBRATION_PARTS),
+                      n_masks=judge.n_masks)
+    limit = max((lim for _, _, lim, _ in spec_limits(spec, task, "psf", res["nominal"]["psf"])), default=-math.inf)
+    y = surrogate_yield(model, budget, judge.chain, limit, n_masks=judge.n_masks)
     model["seconds_total"] = round(model["seconds"] + time.perf_counter() - t, 1)
-    res["surrogate"] = {"model": model, "yield": y}
-    direct = res.get("summary", {}).get("yield")
-    if direct:
-        a, b = direct["ci95"], y["ci95"]
-        res["surrogate"]["agrees_with_direct"] = bool(a[0] <= b[1] and b[0] <= a[1])
+    rows = res.get("samples") or []
+    if len(rows) >= HOLDOUT_PARTS:
+        held, against = [(PartErrors(**{k: _tup(v) for k, v in r["errors"].items()}), r["metric"]) for r in rows], \
+            "the direct Monte Carlo's parts"
+    else:
+        held, against = _own_parts(judge, budget, 1, HOLDOUT_PARTS), "held-out parts of its own"
+    res["surrogate"] = {"model": model, "yield": y,
+                        "validation": {**validate(model, budget, judge.chain, held, limit, n_masks=judge.n_masks),
+                                       "parts": against}}
+
+
+def _own_parts(judge, budget, role: int, n: int) -> list:
+    """``n`` parts of the surrogate's own, drawn from the budget and judged directly: ``role`` 0 calibrates it,
+    1 validates it. Their streams' spawn keys, (role, i), are never a direct Monte Carlo's, (i,)."""
+    from doefab.tolerance.errors import sample_errors
+
+    children = np.random.SeedSequence(SURROGATE_SEED, spawn_key=(role,)).spawn(n)
+    parts = (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=judge.n_masks)
+             for c in children)
+    return [(p, judge.evaluate(p)["metric"]) for p in parts]
 
 
 def _tup(v):

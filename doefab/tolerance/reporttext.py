@@ -22,8 +22,10 @@ REMEDY = {
     "decenter along split": "a tighter die pocket in the holder (clearance_mm)",
     "mount rotation": "index pins or a tighter pocket (holder clearance_mm), or turning the die to the split",
     "axial gap": "mounting the DOE at the lens's stop",
+    "axial gap spread": "a tighter thread stop or print tolerance of the holder (axial_gap_sigma_mm)",
     "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, the paper's Eq. 30–31)",
-    "crosstalk, calibrated": "more rows or frames in the crosstalk calibration",
+    "crosstalk, calibrated": "a per-pixel crosstalk calibration repeated before each capture session (a per-column "
+                             "one leaves the rows' variation, the field's along the columns and the drift)",
 }
 PSF_WORDS = "of its coded light where the task wants it (the PSF metric)"
 
@@ -73,10 +75,13 @@ def lead_text(res: dict) -> str | None:
     net, m = s.get("network", {}).get("nominal_psf"), PRIMARY.get(res["task"])
     if net and m in net["metrics"]:
         d, nominal = net["metrics"][m], res["nominal"]["network"]["nominal_psf"].get(m, float("nan"))
+        two = s.get("delivered", {}).get("nominal_psf")  # intervals over parts and scenes, where judged per scene
         first = (f"This part delivers {metric_text(task, m, d['mean'])} {_name(task, m)}, the mean over {parts} "
-                 f"reconstructed by the task's network told the nominal PSF (95 % interval of the mean "
-                 f"{_interval(task, m, d['ci95'])}; the error-free part {metric_text(task, m, nominal)}).")
-        level, y = "network", net["yield"]
+                 f"reconstructed by the task's network told the nominal PSF (95 % interval of the mean"
+                 f"{' over parts and scenes' if two else ''} {_interval(task, m, two['mean_ci95'] if two else d['ci95'])}"
+                 f"; the error-free part {metric_text(task, m, nominal)}).")
+        level, y = "network", ({"value": two["yield"], "ci95": two["yield_ci95"], "name": "interval over parts and "
+                                "scenes"} if two else net["yield"])
     else:
         d = s["metric"]
         first = (f"This part puts {d['mean']:.3f} {PSF_WORDS}, the mean over {parts} (95 % interval of the mean "
@@ -84,7 +89,8 @@ def lead_text(res: dict) -> str | None:
         level, y = "psf", s["yield"]
     spec = spec_words(res, level)
     lo, hi = (float(x) for x in y["ci95"])
-    second = (f"{100 * y['value']:.0f} % of the parts (95 % Wilson interval {100 * lo:.0f}–{100 * hi:.0f} %) meet "
+    second = (f"{100 * y['value']:.0f} % of the parts (95 % {y.get('name', 'Wilson interval')} {100 * lo:.0f}–"
+              f"{100 * hi:.0f} %) meet "
               f"the spec ({spec})." if spec and math.isfinite(lo) and math.isfinite(hi) else
               f"{100 * y['value']:.0f} % of the parts meet the spec ({spec})." if spec else
               f"The budget's [spec.{task}] sets no limit at this level, so no yield is stated.")
@@ -125,7 +131,7 @@ def summary_lines(res: dict) -> list[str]:
             lines.append(f"- **Delivered, network given the {label.replace('_psf', ' PSF').replace('_', ' ')}**: {ms}; yield "
                          f"({spec_words(res, 'network', label) or 'no limit'}) "
                          f"{v['yield']['value']:.2f} ({interval_text(v['yield']['ci95'], '.2f')}).")
-    lines += _limits_lines(res)
+    lines += _delivered_lines(res) + _limits_lines(res)
     lines += [f"- **Warning:** {w}" for w in res.get("warnings", [])]
     used = res.get("budget", {}).get("defaults_used")
     if used:
@@ -133,6 +139,36 @@ def summary_lines(res: dict) -> list[str]:
                      f"budget: {', '.join(used)}.")
     lines.append(f"- Aperture stop: {res['stop']}.")
     return lines
+
+
+def _delivered_lines(res: dict) -> list[str]:
+    """The delivered-quality yield with its interval over parts and scenes, and the scene noise on a part's value
+    against the part-to-part spread (``tolerance.delivered``), network told the nominal PSF."""
+    d = res.get("summary", {}).get("delivered", {}).get("nominal_psf")
+    if not d:
+        return []
+    task, m, c = res["task"], d["metric"], d["components"]
+    judge = res.get("network_judge", {})
+    n = judge.get("images", c["scenes"])
+    where = (f"{n} {judge.get('split', '')} scenes of {judge.get('size', '?')}² px per part".replace("  ", " ")
+             + (f", {c['scenes']} of which define it" if c["scenes"] != n else ""))
+    if not math.isfinite(c["part_sd"]):
+        noise = f"scene noise not measured (needs two parts and two scenes; {where})"
+    else:
+        verdict = ("below it" if c["part_noise_sd"] < c["part_sd"] else
+                   f"NOT below it: judge each part on at least {c['scenes_needed']} scenes" if c["scenes_needed"] else
+                   "NOT below it: the parts do not differ measurably")
+        noise = (f"scene noise on a part's {_name(task, m)} {metric_text(task, m, c['part_noise_sd'])} ({where}) "
+                 f"against a part-to-part spread of {metric_text(task, m, c['part_sd'])}: {verdict}; the scene set's "
+                 f"offset common to every part {metric_text(task, m, c['common_noise_sd'])}")
+    y = d["yield"]
+    yield_text = ("no limit at network level" if y is None else
+                  f"{y:.2f}, 95 % interval {interval_text(d['yield_ci95'], '.2f')} over parts and scenes (two-level "
+                  f"bootstrap, {d['draws']} draws, joined with the parts' Wilson interval "
+                  f"{interval_text(d['wilson_ci95'], '.2f')})")
+    return [f"- **Delivered-quality yield** ({spec_words(res, 'network') or 'no limit'}; network told the nominal "
+            f"PSF): {yield_text}; mean {_name(task, m)} {metric_text(task, m, d['mean'])} "
+            f"({_interval(task, m, d['mean_ci95'])}); {noise}."]
 
 
 def _limits(res: dict) -> tuple[str | None, list[tuple[float, dict]]]:
@@ -192,9 +228,9 @@ def _grid(res: dict) -> list[str]:
     lines = ["## Simulation grid", "",
              f"Each grid-dependent error alone at one standard deviation of the budget on a {g['block_px']}² block of the design, on "
              f"grids 1×, 2×, 4× against {g['reference_grid']}× (bound on the PSF metric's error: twice the summed "
-             f"absolute PSF difference over the metric's pixels; tolerance {g['tolerance']}). The Monte Carlo runs "
-             f"on the {g['monte_carlo_grid']}× grid. Errors not listed are exact on any grid (etch depth, decenter, "
-             f"gap, crosstalk).", "",
+             f"absolute PSF difference over the metric's pixels{_scaled(g)}; tolerance {g['tolerance']}). "
+             f"The Monte Carlo runs on the {g['monte_carlo_grid']}× grid. Errors not listed are exact on any grid "
+             f"(etch depth, decenter, gap, crosstalk).", "",
              "| error | budget 1σ | bound 1× | bound 2× | bound 4× | its own effect (8×) | grid used |",
              "| --- | --- | --- | --- | --- | --- | --- |"]
     for name, v in g["kinds"].items():
@@ -203,6 +239,13 @@ def _grid(res: dict) -> list[str]:
                      f"{b[2] if 2 in b else b['2']:.2g} | {b[4] if 4 in b else b['4']:.2g} | {v['effect_bound']:.2g} | "
                      f"{v['grid']}× |")
     return lines + [""]
+
+
+def _scaled(g: dict) -> str:
+    """How the grid study brought the block's bound to the whole design (``grid.block_to_full``)."""
+    s = g.get("block_to_full")
+    return (f", scaled to the whole design by the ratio of the light its metric pixels hold to the block's, "
+            f"{min(s):.1f}–{max(s):.1f}× over the bands" if s else "")
 
 
 def _tornado(res: dict) -> list[str]:
@@ -240,16 +283,24 @@ def _monte_carlo(res: dict) -> list[str]:
 
 
 def _surrogate(res: dict) -> list[str]:
-    m, y = res["surrogate"]["model"], res["surrogate"]["yield"]
-    h = y["held_out"]
-    agree = res["surrogate"].get("agrees_with_direct")
+    m, y, v = res["surrogate"]["model"], res["surrogate"]["yield"], res["surrogate"]["validation"]
+    c, curves = m["calibration"], list(m.get("curves", {}))
+    signed = lambda ci, f: f"{ci[0]:{f}} to {ci[1]:{f}}"  # noqa: E731
+    verdict = ("" if v["consistent"] else " **The surrogate is biased on these parts**: by the difference above "
+               "(its interval excludes zero); trust the direct Monte Carlo.")
     return ["## Surrogate", "",
-            f"Additive quadratic sensitivity model of the PSF metric in {len(m['names'])} error parameters, fitted on "
-            f"{m['parts']} simulated parts ({m['seconds']} s); checked on {h['n']} held-out simulated parts: RMSE "
-            f"{h['rmse']:.4f}, mean residual {h['bias']:+.4f} ± {h['bias_se']:.4f}, largest {h['max_abs']:.4f}. "
-            f"Yield on {y['draws']} surrogate parts: {y['value']:.3f}, interval {y['ci95'][0]:.3f}–{y['ci95'][1]:.3f}"
-            + ("" if agree is None else f"; {'overlaps' if agree else 'does NOT overlap'} the direct Monte Carlo's")
-            + ".", ""]
+            f"Sensitivity model of the PSF metric in {len(m['names'])} error parameters, fitted on {m['parts']} "
+            f"simulated parts, each error alone ({m['seconds']} s): a quadratic through ±h (h = 2σ, or a uniform "
+            f"error's bound), or for the {len(curves)} largest losses ({', '.join(curves) or 'none'}) the curve "
+            f"through ±h/2, ±h and, for a normal error, ±3h/2. "
+            f"Calibrated on {c['n']} parts drawn from the budget: metric = {c['beta']:.3f} × model "
+            f"{'+' if c['alpha'] >= 0 else '−'} {abs(c['alpha']):.4f} (RMSE {c['rmse_uncalibrated']:.4f} → "
+            f"{c['rmse']:.4f}), with their scatter about it. Yield on {y['draws']} surrogate parts: {y['value']:.3f} "
+            f"(95 % interval {interval_text(y['ci95'])}, bootstrap over the calibration parts).", "",
+            f"Checked on {v['n']} parts it never saw ({v['parts']}), part by part: surrogate − direct yield "
+            f"{v['yield_difference']:+.3f} (95 % interval {signed(v['yield_difference_ci95'], '+.3f')}; "
+            f"{v['yield_surrogate']:.3f} against {v['yield_direct']:.3f}), PSF metric {v['metric_difference']:+.4f} "
+            f"({signed(v['metric_difference_ci95'], '+.4f')}), RMSE {v['rmse']:.4f}." + verdict, ""]
 
 
 def _quantization(res: dict) -> list[str]:

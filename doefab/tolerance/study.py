@@ -23,8 +23,10 @@ _NET_JUDGES: dict = {}
 
 
 def judge_for(design_dir, supersample: int = 1):
-    """The ``PSFJudge`` of a design folder on a grid (one per process)."""
-    key = (str(design_dir), int(supersample))
+    """The ``PSFJudge`` of a design folder on a grid (one per process and default device)."""
+    from doefab._devices import resolve_device
+
+    key = (str(design_dir), int(supersample), str(resolve_device(None)))
     if key not in _JUDGES:
         import torch
 
@@ -35,31 +37,36 @@ def judge_for(design_dir, supersample: int = 1):
     return _JUDGES[key]
 
 
-def network_judge_for(design_dir, supersample: int = 1, weights_dir=None):
-    """The ``NetworkJudge`` of a design folder (its task's proposed network; one per process)."""
-    key = (str(design_dir), int(supersample), str(weights_dir))
-    if key not in _NET_JUDGES:
-        from doefab.tolerance.netjudge import NetworkJudge
+def network_judge_for(design_dir, supersample: int = 1, weights_dir=None, networks=True):
+    """The ``NetworkJudge`` of a design folder (its task's proposed network; one per process) on the scenes
+    ``networks`` asks for (``netjudge.judge_settings``: True, the defaults)."""
+    from doefab.tolerance.netjudge import NetworkJudge, judge_settings
 
-        _NET_JUDGES[key] = NetworkJudge(judge_for(design_dir, supersample), weights_dir=weights_dir)
+    judge = judge_for(design_dir, supersample)
+    settings = judge_settings(networks)
+    key = (str(design_dir), int(supersample), str(weights_dir), str(judge.device), str(sorted(settings.items())))
+    if key not in _NET_JUDGES:
+        _NET_JUDGES[key] = NetworkJudge(judge, weights_dir=weights_dir, **settings)
     return _NET_JUDGES[key]
 
 
 def evaluate_part(design_dir: str, supersample: int, errors: dict, networks: bool = False,
                   weights_dir=None) -> dict:
-    """PSF metrics of a part given as ``PartErrors`` fields (and, with ``networks``, its delivered quality)."""
+    """PSF metrics of a part given as ``PartErrors`` fields (and, with ``networks``, its delivered quality: the
+    means over the scenes under "network", each scene's values under "network_scenes")."""
     err = PartErrors(**errors)
     # the network's PSF pair first: the PSF metric's coded PSF is its crop (``PSFJudge.reuse``)
-    net = network_judge_for(design_dir, supersample, weights_dir).evaluate(err) if networks else None
+    net = network_judge_for(design_dir, supersample, weights_dir, networks).scenes(err) if networks else None
     res = judge_for(design_dir, supersample).evaluate(err)
     if networks:
-        res["network"] = net
+        res["network"], res["network_scenes"] = network_judge_for(design_dir, supersample, weights_dir,
+                                                                  networks).means(net), net
     return res
 
 
 def sweep_names() -> list[str]:
-    """Every error kind, in the order reports list them."""
-    return [k.name for k in KINDS]
+    """Every error kind with a sweep, in the order reports list them."""
+    return [k.name for k in KINDS if k.sweep]
 
 
 def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = True) -> dict:
@@ -96,7 +103,7 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
-        kernel = network_judge_for(design_dir, 1, weights_dir).rec.pair.coded.shape[-1]  # the network's
+        kernel = network_judge_for(design_dir, 1, weights_dir, networks).rec.pair.coded.shape[-1]  # the network's
         with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up
             for s in {int(grids.get(k.name, 1)) for k in present}:
                 stack.enter_context(judge_for(design_dir, s).computing_at(kernel))
@@ -122,11 +129,13 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
             base[s] = evaluate_part(str(design_dir), s, PartErrors().to_json(), networks, weights_dir)
             base[s]["metric"] = j.score(j.nominal)["metric"]
         r = evaluate_part(str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks, weights_dir)
+        b = base[s] if k.base_from_budget is None else evaluate_part(  # a spread about a nominal value: from it
+            str(design_dir), s, k.base_part(budget).to_json(), networks, weights_dir)
         row = {"error": k.name, "value": k.from_budget(budget) / k.si, "unit": k.unit, "grid": s,
-               "metric": r["metric"], "delta": r["metric"] - base[s]["metric"]}
+               "metric": r["metric"], "delta": r["metric"] - b["metric"]}
         if networks:
             row["network"] = r["network"]
-            row["network_delta"] = {lab: {m: v - base[s]["network"][lab][m] for m, v in vals.items()}
+            row["network_delta"] = {lab: {m: v - b["network"][lab][m] for m, v in vals.items()}
                                     for lab, vals in r["network"].items()}
         rows.append(row)
         if bar is not None:
@@ -191,7 +200,7 @@ def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_
         h = lv.astype(np.float64) * h2pi / n
     if supersample > 1:
         h = np.kron(h, np.ones((supersample, supersample)))
-    net = (network_judge_for(design_dir, supersample, weights_dir).evaluate(PartErrors(), height=h)
+    net = (network_judge_for(design_dir, supersample, weights_dir, networks).evaluate(PartErrors(), height=h)
            if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
     source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
     row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None

@@ -505,6 +505,8 @@ def _words(cmd, flag, unknown, wrong_type="1"):
 # (subcommand and the arguments it needs, flag, kind, value, what the line must hold); "--out OUT" is added
 HDR_TRAIN, HDR_EVAL = ["train", "--task", "hdr"], ["evaluate", "--task", "hdr"]
 TOLERANCE = ["tolerance", "--design", "{design}"]
+DEVICE_COMMANDS = [STREAK, ["psf"], ["demo"], HDR_TRAIN, HDR_EVAL, ["finetune", "--design", HALF_RING], TOLERANCE,
+                   ["run", REPO / "scenes" / "hdr.toml", "--quick"], ["doctor", REPO / "scenes" / "hdr.toml"]]
 WORD_FLAGS = [
     *_words(["design"], "--task", "video"), *_words(STREAK, "--optimizer", "sgd"),
     *_words(STREAK, "--parameterization", "spline"), *_words(STREAK, "--start", "random"),
@@ -542,6 +544,10 @@ WORD_FLAGS = [
     (HDR_EVAL, "--weights-dir", EMPTY, "", "--weights-dir is empty"),
     (["train", "--task", "hyperspectral"], "--sensor-response", EMPTY, "", "--sensor-response is empty"),
     (["evaluate", "--task", "hyperspectral"], "--sensor-response", EMPTY, "", "--sensor-response is empty"),
+    # --device on every command that computes: words that are no device, a GPU that is not there
+    *[(cmd, "--device", kind, value, needle) for cmd in DEVICE_COMMANDS
+      for kind, value, needle in ((UNKNOWN, "gpu", "'gpu' is not a device"), (TYPE, "cuda:x", "is not a device"),
+                                  (EMPTY, "", "is not a device"), ("absent GPU", "cuda:4096", "CUDA device"))],
 ]
 WORD_CASES = [pytest.param(cmd, flag, value, needle, id=f"{cmd[0]} {flag}-{kind}")
               for cmd, flag, kind, value, needle in WORD_FLAGS]

@@ -1,40 +1,117 @@
-"""The committed Tables 1–3 are the shipped networks' evaluation: the tables file, the evaluate_<task>.json it is
-made from and the weights in doefab/weights/ describe the same runs (a table rebuilt from stale evaluation
-folders, or weights replaced without re-evaluating, fails here)."""
+"""The published Tables 1–3 are the shipped networks' evaluation, to every printed digit: the tables file
+(shown on the results pages) is rebuilt from the evaluate_<task>.json it is made from, the README's table rounds
+those numbers as printed, each evaluation names the shipped weights it scored by their SHA-256 and the one torch
+thread it ran on, and every change to the evaluations is a read of the test split with its row in the ledger."""
 
+import hashlib
+import importlib.util
 import json
+import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "benchmarks" / "results"
-VARIANTS = {"proposed": "proposed", "coded-only": "coded_only", "uncoded-only": "uncoded_only"}
+TASKS = ("hdr", "hyperspectral", "depth")
+EVALUATIONS = "benchmarks/results/evaluate_*.json"
+LEDGER = "benchmarks/results/test_split_reads.md"
+# the README's reconstruction table: (task cell, metric cell) -> (task, light group or None, metric keys)
+README_ROWS = {("HDR", "highlight PSNR (dB)"): ("hdr", None, ("psnr_highlight",)),
+               ("HDR", "PSNR (dB)"): ("hdr", None, ("psnr",)),
+               ("spectra", "PSNR (dB)"): ("hyperspectral", None, ("psnr",)),
+               ("spectra", "SAM (rad)"): ("hyperspectral", None, ("sam",)),
+               ("spectra, light in the network's library", "PSNR (dB) / SAM (rad)"):
+                   ("hyperspectral", "in-library", ("psnr", "sam")),
+               ("spectra, light outside it", "PSNR (dB) / SAM (rad)"):
+                   ("hyperspectral", "out-of-library", ("psnr", "sam")),
+               ("depth", "MAE (m)"): ("depth", None, ("mae",)),
+               ("depth", "δ<1.25"): ("depth", None, ("delta125",))}
+README_COLUMNS = (("proposed", ""), ("coded_only", ""), ("uncoded_only", ""), ("proposed", "_clean"))
 
 
-def _table_rows(task: str) -> dict:
-    """{variant: [numbers of its row]} of the task's section of reconstruction_tables.md."""
-    text = (RESULTS / "reconstruction_tables.md").read_text()
-    section = text.split(f"**{task}**", 1)[1].split("\n\n**", 1)[0]
+def _evaluation(task: str, kind: str = "") -> dict:
+    return json.loads((RESULTS / f"evaluate_{task}{kind}.json").read_text())
+
+
+def test_the_tables_file_is_the_evaluations_to_every_printed_digit():
+    spec = importlib.util.spec_from_file_location("reconstruction_tables",
+                                                  ROOT / "benchmarks" / "reconstruction_tables.py")
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    assert tables.tables_markdown(RESULTS) == (RESULTS / "reconstruction_tables.md").read_text()
+
+
+@pytest.mark.parametrize("kind", ["", "_clean"])
+@pytest.mark.parametrize("task", TASKS)
+def test_each_evaluation_scored_the_shipped_weights_on_one_thread(task, kind):
+    ev = _evaluation(task, kind)
+    assert "threads" in ev, (f"evaluate_{task}{kind}.json records no thread count: evaluate again as "
+                             f"benchmarks/reconstruction_tables.py says")
+    assert ev["split"] == "test" and ev["conditions"]["name"] == ("clean" if kind else "honest")
+    assert ev["threads"] == 1 and {"torch", "numpy", "scipy", "scikit-image"} <= set(ev["versions"])
+    assert set(ev["weights"]) == {"proposed", "coded_only", "uncoded_only"}
+    for variant, w in ev["weights"].items():
+        shipped = (ROOT / "doefab" / "weights" / f"{task}_{variant}.pt").read_bytes()
+        assert w["sha256"] == hashlib.sha256(shipped).hexdigest(), (task, variant)
+
+
+def _readme_rows() -> dict:
+    """{(task cell, metric cell): [cell text of each variant column]} of the README's reconstruction table."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split("**Reconstruction**", 1)[1].split("\n\n**", 1)[0]
     rows = {}
     for line in section.splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if cells and cells[0] in VARIANTS and VARIANTS[cells[0]] not in rows:
-            rows[VARIANTS[cells[0]]] = [float(c) for c in cells[1:]]
+        if len(cells) == 6 and cells[0] not in ("task", "---"):
+            rows[tuple(cells[:2])] = cells[2:]
     return rows
 
 
-@pytest.mark.parametrize("task", ["hdr", "hyperspectral", "depth"])
-def test_tables_show_the_shipped_networks_evaluation(task):
-    ev = json.loads((RESULTS / f"evaluate_{task}.json").read_text())
-    assert ev["split"] == "test" and ev["conditions"]["name"] == "honest"
-    rows = _table_rows(task)
-    assert set(rows) == set(VARIANTS.values())
-    for variant, numbers in rows.items():
-        values = [v for v in ev["rows"][variant].values() if v == v]
-        for x in numbers[:3]:  # the honest columns: each one of the evaluation's means, as printed
-            assert any(abs(x - v) <= 0.006 * abs(v) + 1e-3 for v in values), (task, variant, x, values)
-        shipped = json.loads((ROOT / "doefab" / "weights" / f"{task}_{variant}.json").read_text())["training"]
-        assert ev["weights"][variant]["wall_time_s"] == shipped["wall_time_s"]  # evaluated the shipped weights
-        assert ev["weights"][variant]["steps"] == shipped["steps"]
+def test_the_readme_table_is_the_evaluations_to_every_printed_digit():
+    rows = _readme_rows()
+    assert set(rows) <= set(README_ROWS), f"rows this test cannot tie to an evaluation: {set(rows) - set(README_ROWS)}"
+    assert {k for k, (_, light, _) in README_ROWS.items() if light is None} <= set(rows)
+    for (label, metric), cells in rows.items():
+        task, light, keys = README_ROWS[(label, metric)]
+        for (variant, kind), cell in zip(README_COLUMNS, cells):
+            ev = _evaluation(task, kind)
+            means = ev["by_light"][light][variant] if light else ev["rows"][variant]
+            printed = [p.strip().strip("*") for p in cell.split("/")]
+            assert len(printed) == len(keys), (label, metric, cell)
+            for key, p in zip(keys, printed):
+                digits = len(p.split(".")[1]) if "." in p else 0
+                assert f"{means[key]:.{digits}f}" == p, (label, metric, variant + kind, key, means[key], p)
 
+
+def _git(*args: str) -> str:
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True, check=True).stdout
+
+
+def _ledger_rows(text: str) -> list[str]:
+    return re.findall(r"^\| [^|\n]*\| ([^|\n]*) \|", text, flags=re.M)
+
+
+def test_every_change_to_the_evaluations_has_its_row_in_the_test_split_ledger():
+    """A commit that changed evaluate_*.json is listed by its hash or adds a row to the ledger itself; evaluations
+    changed in the working tree need a row added there too."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout: the history the ledger follows is not here")
+    listed = [c.strip() for c in _ledger_rows((ROOT / LEDGER).read_text())]
+    missing = []
+    for commit in _git("log", "--format=%H", "--", EVALUATIONS).split():
+        if any(c and commit.startswith(c) for c in listed if re.fullmatch(r"[0-9a-f]{7,40}", c)):
+            continue
+        added = _git("show", "--format=", commit, "--", LEDGER)
+        if not re.search(r"^\+\| ", added, flags=re.M):
+            missing.append(commit[:7])
+    assert not missing, f"reads of the test split with no row in {LEDGER}: {missing}"
+    if _git("status", "--porcelain", "--", EVALUATIONS).strip():
+        try:
+            before = _git("show", f"HEAD:{LEDGER}")
+        except subprocess.CalledProcessError:  # the ledger is new
+            before = ""
+        assert len(_ledger_rows((ROOT / LEDGER).read_text())) > len(_ledger_rows(before)), \
+            f"evaluate_*.json changed: add the read's row to {LEDGER}"

@@ -200,3 +200,34 @@ def test_the_dynamic_range_row_speaks_of_the_scenes_own_task(name):
               if r[0] == "capture dynamic range"]
     assert ("HDR task recovers highlights" in row[2]) == (name == "hdr")
     assert {"hdr": "HDR", "hyperspectral": "spectral", "depth": "depth"}[name] in row[2]
+
+
+def test_the_reconstruction_table_is_shown_beside_the_tolerance_judges_error_free_part(tmp_path):
+    """Row 12 of issue 38: the table's proposed highlight PSNR (read on 4 test scenes through 2 fabricated parts)
+    sits beside the tolerance judge's error-free part and its parts' mean (8 test scenes each), and the report says
+    why they differ: the fabricated parts and the scenes. With the same scenes and clean captures no reason is left
+    but the depth planes of a clean table."""
+    out, done = _run_folder(tmp_path)
+    tol = json.loads((out / "tolerance" / "tolerance.json").read_text())
+    tol["network_judge"] = {"images": 8, "size": 256, "split": "test"}
+    (out / "tolerance" / "tolerance.json").write_text(json.dumps(tol))
+    (out / "reconstruction").mkdir()
+    (out / "reconstruction" / "metrics.json").write_text(json.dumps(
+        {"images": 4, "size_px": 256, "split": "test", "conditions": {"name": "honest", "parts": 2}}))
+    write_report(out, load_scene(REPO / "scenes" / "hdr.toml"), done, SETTINGS)
+    section = (out / "report.md").read_text().split("## Reconstruction\n", 1)[1].split("\n## ", 1)[0]
+    assert "the table's proposed highlight PSNR, 29.90 dB, is read on 4 test scenes of 256² px captured through 2 " \
+           "fabricated parts" in section
+    assert "each part on 8 test scenes of 256² px: the error-free part 29.90 dB, the mean of its 12 simulated " \
+           "parts 29.12 dB" in section
+    assert "They differ because the table's captures are made through 2 fabricated parts" in section
+    assert "the scenes differ (4 test scenes of 256² px against 8 test scenes of 256² px" in section
+    html = (out / "report.html").read_text().split('<section id="reconstruction">', 1)[1].split("</section>", 1)[0]
+    assert "the error-free part 29.90 dB" in html
+    from doefab.pipeline.report import beside_tolerance
+
+    (out / "reconstruction" / "metrics.json").write_text(json.dumps(
+        {"images": 8, "size_px": 256, "split": "test", "conditions": {"name": "clean"}}))
+    (text,) = [t for _, t in beside_tolerance(out, "hdr", done["reconstruction"]["rows"])]
+    assert "(clean captures)" in text and "the scenes differ" not in text and "fabricated parts drawn" not in text
+    assert text.endswith("the table's captures are clean (the nominal model's own: depth on the network's own planes).")

@@ -60,12 +60,14 @@ def test_evaluate_writes_the_three_rows(tmp_path):
         assert saved["rows"][v]["psnr"] == pytest.approx(np.mean(psnr[v]), abs=1e-3) == res["rows"][v]["psnr"]
     assert len({round(p[0], 3) for p in psnr.values()}) == 3  # three networks, three reconstructions
     # the weights name the splits they were trained on, and the evaluation says whether its scenes come from them
-    assert all(saved["weights"][v]["splits"] == "the same splits" for v in saved["weights"])
+    states = {v: w["splits"] for v, w in saved["weights"].items()}
+    assert set(states.values()) == {"the same splits"}, states
     import doefab.reconstruction.evaluate as ev
 
     rec = json.loads((tmp_path / "w" / "hdr_proposed.json").read_text())
     assert len(rec["splits_sha256"]) == 64
-    assert ev._splits_state(rec, "0" * 64).startswith("ANOTHER split definition")
+    other = {**rec["splits_components"], "splits": "0" * 64}
+    assert ev._splits_state(rec, "hdr", other).startswith("ANOTHER split definition (splits)")
 
 
 def test_the_evaluation_records_the_cameras_sensor_and_its_noise_reaches_the_captures(tmp_path):

@@ -161,9 +161,9 @@ def test_make_batch_calibrates_the_crosstalk_with_the_captures_own_noise(depth_d
 
     real, seen = errors.crosstalk_ratios, []
 
-    def spy(err, columns, noise="default"):
+    def spy(err, columns, noise=None, rows=None):
         seen.append(noise)
-        return real(err, columns, noise)
+        return real(err, columns, noise, rows=rows)
 
     monkeypatch.setattr(errors, "crosstalk_ratios", spy)
     budget = load_budget()
@@ -243,3 +243,78 @@ def test_the_model_code_digest_reads_every_part_model_source(tmp_path, monkeypat
     assert digest(moved, "moved") != base
     monkeypatch.undo()
     assert C.model_sources_sha256(("optics",)) != C.model_sources_sha256()  # every package of the real tree counts
+
+
+def _budget_sensor(**changes):
+    """The default budget's sensor (crosstalk, its slope and calibration) as a PartErrors."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import load_budget, sensor_errors
+    from doefab.tolerance.surrogate import base_part
+
+    budget = load_budget()
+    return replace(base_part(budget), **{**sensor_errors(budget), **changes})
+
+
+def test_honest_captures_are_mixed_by_the_sensors_true_crosstalk_not_a_per_column_one(depth_design):
+    """A scene's views are mixed by the true crosstalk of its sensor over its crop (rows and columns, the crops
+    along the calibrated region's diagonal): ratios that change from row to row, which the captures carry as
+    Eq. 29 with that map predicts."""
+    from doefab.imaging.crosstalk import SensorCrosstalk
+    from doefab.reconstruction.specs import psf_pair
+
+    sensor = _budget_sensor(calibrated=False)
+    raw = C.Conditions(name="x", crosstalk=sensor, split="test")
+    xt = raw.crosstalk_for(1, 4, 64)
+    assert np.shape(xt.alpha_lr) == (64, 64) == np.shape(xt.alpha_rl)
+    assert float(np.ptp(xt.alpha_lr, axis=0).min()) > 1e-4  # every column's ratio changes along its rows
+    seed = int(np.random.SeedSequence([C.PART_SEEDS["test"], 1]).generate_state(1)[0])
+    offset = np.arange(64) - 31.5
+    rows, cols = (2 / 3 - 0.5) * 0.8 * 3072 + offset, (1 / 3 - 0.5) * 0.8 * 3072 + offset
+    a, b = SensorCrosstalk(sensor.crosstalk, sensor.crosstalk_slope, seed=seed).ratios(rows, cols, session=0)
+    np.testing.assert_array_equal(xt.alpha_lr, a)
+    np.testing.assert_array_equal(xt.alpha_rl, b)
+    pair, _ = psf_pair("depth", depth_design)
+    clean = make_batch("depth", "test", [1], 64, pair, noise="none")
+    mixed = make_batch("depth", "test", [1], 64, pair, noise="none", conditions=raw, images=4)
+    coded, plain = clean[0][0].double().numpy(), clean[1][0].double().numpy()
+    want = np.clip(a * plain + (1 - b) * coded, 0, 1)  # Eq. 29: R* = α_l→r L + (1 − α_r→l) R, R the coded view
+    np.testing.assert_allclose(mixed[0][0].double().numpy(), want, atol=2e-6)
+
+
+def test_honest_conditions_state_the_residual_their_calibration_leaves():
+    """``describe()`` states the RMS of true − calibrated ratio that the per-column calibration leaves (the
+    sensor's ``SensorCrosstalk.residual``): a few per cent of the 5 % ratios; none without a calibration."""
+    from doefab.tolerance.errors import sensor_crosstalk
+
+    sensor = _budget_sensor()
+    got = C.Conditions(name="honest", crosstalk=sensor, split="test").describe()["crosstalk_residual_rms"]
+    want = sensor_crosstalk(sensor).residual(sensor.calibration_rows)
+    np.testing.assert_allclose(got, want, rtol=5e-3)
+    assert 1e-3 < min(got) and max(got) < 0.01
+    assert C.Conditions(name="x", crosstalk=_budget_sensor(calibrated=False)).describe()[
+        "crosstalk_residual_rms"] is None
+
+
+def test_the_psf_level_judge_calibrates_with_the_parts_own_sensor(monkeypatch):
+    """The PSF-level judge's unmix uses a calibration drawn with the part's sensor noise (the scene's, carried by
+    ``PartErrors``), not the default sensor's: a 200 e⁻ full well scatters the estimate √125 ≈ 11× more than
+    25 000 e⁻ (shot noise, no read noise)."""
+    from types import SimpleNamespace
+
+    import doefab.imaging.crosstalk as X
+    from doefab.tolerance.errors import PartErrors, crosstalk_ratios, sensor_crosstalk
+    from doefab.tolerance.judge import PSFJudge
+
+    real, seen = X.simulate_calibration, []
+    monkeypatch.setattr(X, "simulate_calibration", lambda *a, **k: seen.append(a[3]) or real(*a, **k))
+    err = PartErrors(crosstalk=(0.05, 0.05), full_well_e=900.0, read_noise_e=7.0, calibration_rows=64)
+    coded, plain = torch.rand(3, 1, 9, 9, dtype=torch.float64), torch.rand(3, 1, 9, 9, dtype=torch.float64)
+    PSFJudge.coded_view(SimpleNamespace(uncoded=lambda: plain), coded, err)
+    assert len(seen) == 1 and (seen[0].full_well_e, seen[0].read_noise_e) == (900.0, 7.0)
+    cols, scatter = np.arange(512) - 255.5, []
+    for full_well in (25_000.0, 200.0):
+        part = PartErrors(crosstalk=(0.03, 0.03), calibration_rows=256, full_well_e=full_well, read_noise_e=0.0)
+        a_hat = crosstalk_ratios(part, cols)[2]
+        scatter.append(np.std(a_hat - sensor_crosstalk(part).calibrate(cols, 256, "none")[0]))
+    assert scatter[1] / scatter[0] == pytest.approx(np.sqrt(25_000 / 200), rel=0.15)

@@ -16,7 +16,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def judge():
-    return NetworkJudge(PSFJudge(REPO / "masks" / "half-ring" / "design", supersample=1), images=1, size=64)
+    """One validation scene of 64² px (the scene the numbers below were read on)."""
+    return NetworkJudge(PSFJudge(REPO / "masks" / "half-ring" / "design", supersample=1), images=1, size=64,
+                        split="val")
 
 
 def test_perfect_part_reads_the_same_with_either_psf(judge):
@@ -28,12 +30,13 @@ def test_perfect_part_reads_the_same_with_either_psf(judge):
 
 def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_it_back(judge, monkeypatch):
     """The DOE off centre across the split line: told the nominal PSF, the depth network reads the part's
-    captures worse the larger the decenter (MAE 0.41 m perfect, 0.56 m at 0.2 mm, 0.93 m at 0.4 mm), at 0.4 mm
+    captures worse the larger the decenter (MAE 0.42 m perfect, 0.57 m at 0.2 mm, 0.88 m at 0.4 mm), at 0.4 mm
     worse than a depth-blind guess (the scene's median depth everywhere, 0.84 m) that the perfect part's reading
     halves; told the part's own PSF pair, it reads them about as well as the perfect part's (within 15 %). The
     judge's 0.4 mm numbers are those of the captures it rendered, each reconstruction repeated here and its MAE
-    computed with numpy."""
+    computed with numpy (on one torch thread, as the judge reconstructs)."""
     import doefab.reconstruction.specs as specs
+    from doefab.reconstruction.evaluate import one_thread
 
     perfect = judge.evaluate(PartErrors())["nominal_psf"]["mae"]
     small = judge.evaluate(PartErrors(mount_shift=(200e-6, 0.0)))
@@ -44,8 +47,9 @@ def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_i
     r = judge.evaluate(PartErrors(mount_shift=(400e-6, 0.0)))
     coded, uncoded, target = seen["batch"]
     t = target[0].numpy()
-    mae = {label: float(np.abs(np.asarray(judge.rec(coded[0], uncoded[0], psf=psf)) - t).mean())
-           for label, psf in (("nominal_psf", None), ("measured_psf", seen["pair"]))}
+    with one_thread():
+        mae = {label: float(np.abs(np.asarray(judge.rec(coded[0], uncoded[0], psf=psf)) - t).mean())
+               for label, psf in (("nominal_psf", None), ("measured_psf", seen["pair"]))}
     for label, value in mae.items():
         assert r[label]["mae"] == pytest.approx(value, rel=1e-5), label
     blind = float(np.abs(t - np.median(t)).mean())
@@ -59,7 +63,7 @@ def test_the_error_free_part_is_judged_once_and_handed_out_by_copy(judge):
     first = judge.evaluate(PartErrors())
     first["nominal_psf"]["mae"] = -1.0  # a caller's edit must not reach the next call
     again = judge.evaluate(PartErrors())
-    cold = NetworkJudge(judge.base, images=1, size=64).evaluate(PartErrors())
+    cold = NetworkJudge(judge.base, images=1, size=64, split="val").evaluate(PartErrors())
     assert again["nominal_psf"]["mae"] > 0
     for label in ("nominal_psf", "measured_psf"):
         for k, v in cold[label].items():
@@ -73,6 +77,7 @@ def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for(
     import os
     from types import SimpleNamespace
 
+    import doefab.reconstruction.evaluate  # noqa: F401 - imported before make_batch is replaced, as in use
     import doefab.reconstruction.specs as specs
     from colour.characterisation.aces_it import ROOT_RESOURCES_RAWTOACES
     from doefab.imaging.sensor import Sensor
@@ -80,17 +85,18 @@ def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for(
     bands = np.arange(400, 701, 10) * 1e-9
     nikon = Sensor("Nikon D5100", full_well_e=5000.0, read_noise_e=4.0)
     judge = NetworkJudge.__new__(NetworkJudge)
-    judge.task, judge.images, judge.size, judge._nominal = "hyperspectral", 2, 64, None
+    judge.task, judge.images, judge.size, judge.split, judge._nominal = "hyperspectral", 2, 64, "test", None
+    judge.base = judge._fine = None
     judge.rec = SimpleNamespace(meta={"arch": {"response": nikon.rgb(bands).tolist()}, "sensor": nikon.record()},
                                 pair=SimpleNamespace(wavelengths=bands))
-    judge.pair = lambda err, height=None: judge.rec.pair
+    judge.pair = lambda err, height=None, judge_=None: judge.rec.pair
     seen = {}
 
     class Stop(Exception):
         pass
 
-    def spy(task, split, indices, size, pair, response=None, noise="default", crosstalk=None, **kw):
-        seen.update(response=response, noise=noise, crosstalk=crosstalk)
+    def spy(task, split, indices, size, pair, response=None, noise="default", conditions=None, **kw):
+        seen.update(response=response, noise=noise, conditions=conditions)
         raise Stop
 
     monkeypatch.setattr(specs, "make_batch", spy)
@@ -99,10 +105,10 @@ def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for(
     assert np.allclose(seen["response"], nikon.rgb(bands))
     assert (seen["noise"].full_well_e, seen["noise"].read_noise_e) == (5000.0, 4.0)
     calls = []
-    import doefab.tolerance.netjudge as nj
+    import doefab.tolerance.errors as errors
 
-    monkeypatch.setattr(nj, "crosstalk_ratios", lambda err, cols, noise: calls.append(noise) or (0, 0, 0, 0))
-    seen["crosstalk"](0)
+    monkeypatch.setattr(errors, "crosstalk_ratios", lambda err, cols, noise, **_: calls.append(noise) or (0, 0, 0, 0))
+    seen["conditions"].crosstalk_for(0, 2, 64, seen["noise"])  # as make_batch calls it, with the captures' noise
     assert (calls[0].full_well_e, calls[0].read_noise_e) == (5000.0, 4.0)
 
     judge.rec.meta = {"arch": {}}  # shipped weights recorded before sensors were
@@ -112,3 +118,116 @@ def test_the_judge_records_captures_with_the_sensor_its_network_was_trained_for(
     canon = np.stack([np.interp(bands * 1e9, data["wavelength"], data[c]) for c in ("R", "G", "B")])
     assert np.allclose(t, canon / canon.sum(axis=1).max(), atol=1e-6)
     assert (noise.full_well_e, noise.read_noise_e) == (25000.0, 3.0)
+
+
+def _bare_judge(task: str, images: int, size: int):
+    """A NetworkJudge of ``task``'s shipped proposed network whose PSF judges are not built (a test sets them)."""
+    from doefab.reconstruction.loader import load_reconstructor
+
+    judge = NetworkJudge.__new__(NetworkJudge)
+    judge.task, judge.images, judge.size, judge.split, judge._nominal, judge._fine = task, images, size, "test", None, None
+    judge.rec = load_reconstructor(task, "proposed")
+    return judge
+
+
+def test_the_error_free_part_scores_what_the_evaluation_scores_on_the_same_scenes(tmp_path):
+    """The judge's captures are the evaluation's: the error-free part (the nominal PSF pair) in a camera with the
+    shipped budget's crosstalk, judged on two test scenes of 64² px, scores on each scene exactly what ``doefab
+    evaluate``'s proposed network scores on the same two scenes captured through that part under that crosstalk
+    (its table's number for a test run through the error-free part)."""
+    from dataclasses import replace
+
+    from doefab.reconstruction.evaluate import evaluate
+    from doefab.reconstruction.specs import psf_pair
+    from doefab.tolerance.conditions import Conditions
+    from doefab.tolerance.errors import load_budget, sensor_errors
+
+    judge = _bare_judge("hdr", 2, 64)
+    judge.base = None  # HDR renders through the network's own planes
+    pair, _ = psf_pair("hdr")
+    judge.pair = lambda err, height=None, judge_=None: pair
+    camera = replace(PartErrors(), **sensor_errors(load_budget()))
+    assert any(camera.crosstalk) and camera.calibrated
+    got = judge.scenes(camera)
+    table = evaluate("hdr", tmp_path, images=2, size=64, variants=("proposed",), progress=False, split="test",
+                     conditions=Conditions(name="honest", parts=[pair], crosstalk=camera, split="test"))
+    rows, means = table["per_image"]["rows"]["proposed"], judge.means(got)["nominal_psf"]
+    for k in rows[0]:
+        assert got["nominal_psf"][k] == pytest.approx([r[k] for r in rows], rel=1e-9, abs=1e-12), k
+        assert means[k] == pytest.approx(table["rows"]["proposed"][k], rel=1e-9), k
+
+
+def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_part_at_its_own(monkeypatch):
+    """Depth scenes are rendered through the part's PSFs at the evaluation's fine planes (``fine_planes``: 65
+    between 1 and 5 m, uniform in inverse depth, all but 6 of them between two of the network's planes, which are
+    uniform in depth), while the network, told the part's measured pair, gets it at its own 17 planes; both pairs
+    are computed for the part's errors."""
+    import torch
+
+    import doefab.reconstruction.evaluate  # noqa: F401 - imported before make_batch is replaced, as in use
+    import doefab.reconstruction.specs as specs
+    import doefab.tolerance.judge as judge_mod
+    from doefab.tolerance.conditions import fine_planes
+
+    judge = _bare_judge("depth", 1, 64)
+    network_planes = np.array(judge.rec.pair.depths)
+    asked = []
+
+    class FakeJudge:  # PSFs whose value names the planes they were computed on; records what it was asked
+        def __init__(self, design, supersample=1, margin=None, chain=None, device=None):
+            self.design, self.supersample, self.margin, self.chain, self.device = design, supersample, margin, chain, device
+
+        def psfs(self, err, halves, kernel):
+            asked.append((len(self.design.depths), err))
+            shape = (len(self.design.depths), len(self.design.wavelengths), kernel, kernel)
+            return {h: torch.full(shape, float(len(self.design.depths))) for h in halves}
+
+    from doefab.design.design import Design
+
+    judge.base = FakeJudge(Design.load(REPO / "masks" / "half-ring" / "design"))
+    monkeypatch.setattr(judge_mod, "PSFJudge", FakeJudge)
+    seen, told = {}, []
+
+    def batch(task, split, indices, size, pair, response=None, noise="default", conditions=None, images=None):
+        seen["rendered"] = conditions.pair_for(indices[0], pair)
+        return torch.zeros(1, 3, size, size), torch.zeros(1, 3, size, size), torch.full((1, size, size), 2.0)
+
+    monkeypatch.setattr(specs, "make_batch", batch)
+    monkeypatch.setattr(judge, "rec", type("Rec", (), {
+        "pair": judge.rec.pair, "meta": judge.rec.meta,
+        "__call__": lambda self, c, u, psf=None: told.append(psf) or np.full((64, 64), 2.5)})())
+    err = PartErrors(mount_shift=(1e-4, 0.0))
+    judge.evaluate(err)
+    fine = np.array(fine_planes(network_planes))
+    rendered = np.array(seen["rendered"].depths)
+    assert rendered == pytest.approx(fine) and len(rendered) == 65
+    on_a_network_plane = np.isclose(rendered[:, None], network_planes[None, :], rtol=0, atol=1e-9).any(axis=1)
+    assert int(on_a_network_plane.sum()) == 6  # 1, 1.25, 2, 2.5, 4 and 5 m
+    assert float(seen["rendered"].coded[0, 0, 0, 0]) == 65.0  # computed on the fine planes
+    measured = told[1]
+    assert told[0] is None and np.array(measured.depths) == pytest.approx(network_planes)
+    assert float(measured.coded[0, 0, 0, 0]) == 17.0 and sorted(n for n, _ in asked) == [17, 65]
+    assert all(e == err for _, e in asked)
+
+
+def test_the_judges_scenes_are_checked_before_any_work_and_name_the_studys_run():
+    """A bad scene count, size or split is refused naming the setting, its value and one that works; the scenes a
+    study's parts were judged on are part of its run's identity (a study resumed on other scenes is another run)."""
+    from doefab.design.design import Design
+    from doefab.errors import DoefabError
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.montecarlo import run_identity
+    from doefab.tolerance.netjudge import SCENES, SIZE, judge_settings
+
+    assert judge_settings(True) == {"images": SCENES, "size": SIZE, "split": "test"}
+    for bad, needle in (({"images": 0}, r"images = 0 .* e\.g\. 8"), ({"size": 100}, r"size = 100 px .* e\.g\. 256"),
+                        ({"split": "train"}, r"split = 'train' .* val, test, e\.g\. test"),
+                        ({"scenes": 3}, r"\['scenes'\] are not known: give images, size or split")):
+        with pytest.raises(DoefabError, match=needle):
+            judge_settings(bad)
+    d, budget = Design.load(REPO / "masks" / "streak" / "design"), load_budget()
+    two = run_identity(d, budget, 0, 1, {"images": 2, "size": 64})
+    assert two["network_judge"] == {"images": 2, "size": 64, "split": "test"}
+    assert two != run_identity(d, budget, 0, 1, {"images": 3, "size": 64})
+    assert run_identity(d, budget, 0, 1, True)["network_judge"]["images"] == SCENES
+    assert "network_judge" not in run_identity(d, budget, 0, 1, False)

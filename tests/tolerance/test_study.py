@@ -28,11 +28,12 @@ def design_dir(tmp_path_factory):
     return root / "design"
 
 
-def test_a_noisy_calibration_leaves_its_own_error_and_no_more(design_dir):
+def test_a_noisy_calibration_leaves_its_own_error_and_what_it_cannot_hold(design_dir):
     """Uncalibrated crosstalk costs; calibrated, the coded view is what the 2 × 2 algebra of Eq. 29 predicts for
     the estimated ratios (here written with numpy's inverse): the nominal view plus the calibration's error
-    times the two halves — which vanishes as the calibration gets exact."""
-    from doefab.tolerance.errors import crosstalk_ratios
+    times the two halves. The calibration's noise shrinks with its rows; what a per-column calibration cannot
+    hold of the sensor's true crosstalk (its row's variation, the session's drift) stays."""
+    from doefab.tolerance.errors import crosstalk_ratios, sensor_crosstalk
 
     j = study.judge_for(str(design_dir), 1)
     coded, plain = j.nominal, j.uncoded()
@@ -46,10 +47,12 @@ def test_a_noisy_calibration_leaves_its_own_error_and_no_more(design_dir):
         predicted = k[1, 0] * plain + k[1, 1] * coded
         got = j.coded_view(coded, err)
         assert float((got - predicted).abs().max()) < 1e-6 * float(coded.max())
-        gaps.append(abs(a_hat - a) + abs(b_hat - b))
+        a_ref, b_ref = (float(v[0]) for v in sensor_crosstalk(err).calibrate([0.0], rows, "none"))
+        gaps.append(abs(a_hat - a_ref) + abs(b_hat - b_ref))  # the calibration's noise
+        assert abs(a - a_ref) + abs(b - b_ref) > 1e-3  # the true crosstalk's residual
         bound = abs(k[1, 0]) * float(plain.abs().sum()) + abs(k[1, 1] - 1) * float(coded.abs().sum())
         assert float((got - coded).abs().sum()) <= bound * (1 + 1e-9)
-    assert gaps[0] > gaps[2] > 0  # more rows, a better estimate
+    assert gaps[0] > gaps[2] > 0  # more rows, a less noisy estimate
 
 
 def test_same_seed_same_numbers_in_process_pool_and_dask(design_dir, tmp_path):
@@ -121,9 +124,11 @@ def test_command_writes_json_report_and_plots(design_dir, tmp_path, capsys):
         direct = judge.evaluate(part)["metric"]
         assert predict(model, features(part, budget, judge.chain, judge.n_masks, model["gap"])) == pytest.approx(
             direct, rel=1e-6, abs=1e-12), name
-    a, b = res["summary"]["yield"]["ci95"], res["surrogate"]["yield"]["ci95"]
-    assert res["surrogate"]["agrees_with_direct"] == (a[0] <= b[1] and b[0] <= a[1])
+    # 3 direct parts are too few to validate on: it is checked on 16 held-out parts of its own
+    v = res["surrogate"]["validation"]
+    assert v["n"] == 16 and v["parts"] == "held-out parts of its own" and model["calibration"]["n"] == 16
     text = (out / "report.md").read_text()
+    assert f"surrogate − direct yield {v['yield_difference']:+.3f}" in text
     assert "Yield at PSF level" in text and "Would buy the most" in text
     for f in ("report.md", "sweeps.png", "tornado.png", "quantization.png", "yield_vs_n.png"):
         assert (out / f).stat().st_size > 500
@@ -212,7 +217,8 @@ def test_the_yield_band_is_wilsons_everywhere(design_dir, tmp_path):
     from doefab.tolerance.report import run_study
 
     p = tmp_path / "b.toml"
-    p.write_text("[spec.hdr]\npsf_metric_min = 0.0\n")
+    # no crosstalk: its calibrated residual can take this toy design's near-zero metric below 0
+    p.write_text("[sensor]\ncrosstalk_lr_percent = 0.0\ncrosstalk_rl_percent = 0.0\n[spec.hdr]\npsf_metric_min = 0.0\n")
     res = run_study(design_dir, load_budget(p), tmp_path / "w", samples=5, grid=1, progress=False)
     conv = res["convergence"][-1]
     assert conv["yield"] == 1.0 and conv["yield_ci95"] == pytest.approx(list(montecarlo.wilson(5, 5)))
@@ -336,10 +342,10 @@ def _known_surrogate_metric(hs: dict, cubic: float):
 def test_the_surrogate_recovers_a_known_expansion_and_its_yield():
     """On a metric whose expansion is known, the surrogate's coefficients are that expansion (a_j, b_j of each
     parameter over its step h_j; a cubic term c u³ adds c/h to the slope, as central differences at ±h do), its
-    held-out residuals are the cubic's part left out, and its yield on a quadratic metric is the fraction of its
-    own draws whose metric, computed directly, meets the limit."""
+    largest losses are judged at more points (a cubic's among them), and its yield on a quadratic metric is the
+    fraction of its own draws whose metric, computed directly, meets the limit."""
     from doefab.tolerance.errors import sample_errors
-    from doefab.tolerance.surrogate import fit_surrogate, parameters, predict, surrogate_yield
+    from doefab.tolerance.surrogate import calibrate, fit_surrogate, parameters, predict, surrogate_yield
 
     budget, chain = load_budget(), {1: 0, 2: 0, 3: 0, 4: 0}
     hs = {name: h for name, h, _ in parameters(budget, chain, 4)}
@@ -354,18 +360,20 @@ def test_the_surrogate_recovers_a_known_expansion_and_its_yield():
         assert got[name] == pytest.approx((a, b), abs=1e-9), name
     cubic = fit_surrogate(_known_surrogate_metric(hs, cubic=0.03), budget, chain, False, n_masks=4)
     assert cubic["a"][0] * hs["etch depth, mask 1"] == pytest.approx(0.03, abs=1e-9)  # c/h · h
+    curve = cubic["curves"]["etch depth, mask 1"]  # its largest loss: judged at more points, cubic term and all
+    assert curve["metric"] == pytest.approx([0.9 - 0.05 * u**2 + 0.03 * u**3 for u in curve["u"]], abs=1e-12)
+    # a quadratic metric fitted without curves, calibrated on parts of it: the line is m = m̂ with no scatter, and
+    # the yield is the draws' own (the same children the surrogate draws)
     children = np.random.SeedSequence(5).spawn(12)
     held = [sample_errors(budget, np.random.default_rng(c), n_masks=4) for c in children]
-    u = np.array([(p.depth_scale[0] - 1) / hs["etch depth, mask 1"] for p in held])
-    y = surrogate_yield(cubic, budget, chain, [(p, _known_surrogate_metric(hs, 0.03)(p)) for p in held],
-                        lambda m: m >= 0.88, draws=500, n_masks=4)
-    assert y["held_out"]["bias"] == pytest.approx(float(np.mean(0.03 * (u**3 - u))), abs=1e-9)
-    # a quadratic metric: no residuals, and the yield is the draws' own (the same children the surrogate draws)
-    y = surrogate_yield(model, budget, chain, [(p, quad(p)) for p in held], lambda m: m >= 0.88, draws=500,
-                        n_masks=4)
+    plain = calibrate(fit_surrogate(quad, budget, chain, False, n_masks=4, refine=float("inf")), budget, chain,
+                      [(p, quad(p)) for p in held], n_masks=4)
+    cal = plain["calibration"]
+    assert (cal["alpha"], cal["beta"], cal["rmse"]) == pytest.approx((0.0, 1.0, 0.0), abs=1e-9)
+    y = surrogate_yield(plain, budget, chain, 0.88, draws=500, n_masks=4)
     draws = [quad(sample_errors(budget, np.random.default_rng(c), n_masks=4).for_masks(4))
              for c in np.random.SeedSequence(12345).spawn(500)]
-    assert y["held_out"]["rmse"] < 1e-12 and y["value"] == pytest.approx(np.mean(np.array(draws) >= 0.88), abs=1e-12)
+    assert y["value"] == pytest.approx(np.mean(np.array(draws) >= 0.88), abs=1e-12)
     assert 0.05 < y["value"] < 0.95  # a limit inside the spread, so the count can be wrong
     assert predict(model, np.zeros(len(hs))) == pytest.approx(0.9)
 

@@ -62,7 +62,8 @@ def test_every_kind_and_sampled_part_follows_the_design_masks(design_dir, tmp_pa
     names = [p[0] for p in parameters(budget, j.chain, 3)]
     assert "etch depth, mask 3" in names and not any(n.endswith("mask 4") for n in names)
     model = fit_surrogate(lambda p: j.evaluate(p)["metric"], budget, j.chain, False, n_masks=3)
-    assert model["parts"] == 2 * len(names) + 1
+    assert model["names"] == names  # ±h for each, and the points its judged curves add (3 of theirs are ±h and 0)
+    assert model["parts"] == 2 * len(names) + 1 + sum(len(c["u"]) - 3 for c in model["curves"].values())
 
 
 def test_quantization_study_starts_at_the_design_levels(design_dir):
@@ -79,7 +80,6 @@ def test_each_kind_is_judged_at_one_standard_deviation_of_the_parts_the_budget_d
     rng = np.random.default_rng(11)
     parts = [sample_errors(budget, rng, n_masks=4) for _ in range(4000)]
     drawn = {"etch depth (systematic)": [p.depth_scale[0] - 1 for p in parts],
-             "mask overlay": [p.overlay[1][0] for p in parts],
              "mask rotation": [p.rotation[2] for p in parts],
              "edge bias": [p.edge_bias for p in parts],
              "decenter across split": [p.mount_shift[0] for p in parts],

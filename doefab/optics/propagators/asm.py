@@ -62,7 +62,7 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
                 f"{lim:.4g} cycles/m for z = {distance:g} m on this grid (limit {max_cut:.1%}). Fix: a larger "
                 f"padding (pad > {pad}), a shorter distance, or a Fourier-transform route for long distances.")
     h = np.where(keep, np.exp(2j * np.pi * distance * np.sqrt(np.maximum(arg, 0.0))), 0.0)
-    h = torch.from_numpy(h).to(field.dtype)
+    h = torch.from_numpy(h).to(field.device, field.dtype)
     out = torch.fft.ifft2(spec * h)
     return out[..., :ny, :nx]
 
@@ -123,7 +123,7 @@ class ASMRoute:
         lam = setup.wavelengths[index]
         field = pupil * lenses[index]
         ny, nx = field.shape[-2:]
-        big = torch.zeros(*field.shape[:-2], n, n, dtype=field.dtype)
+        big = torch.zeros(*field.shape[:-2], n, n, dtype=field.dtype, device=field.device)
         big[..., i0:i0 + ny, j0:j0 + nx] = field
         out = angular_spectrum(big, setup.pitch, lam, setup.sensor_distance, pad=1, check=False)
         inten = out.real**2 + out.imag**2

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# On a machine with a CUDA GPU and PyTorch installed (no network needed: the other packages as wheels in .whl/):
+# the CUDA tests, then the CPU-against-GPU table (benchmarks/gpu_table.py). Writes into ${OUT:-out/gpu}.
+#   bash benchmarks/gpu_run.sh [gpu_table.py options]
+set -uo pipefail
+OUT=${OUT:-out/gpu}
+mkdir -p "$OUT"
+if [ -d .whl ]; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
+    || exit 1
+  export PYTHONPATH=/tmp/site
+fi
+export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 DOEFAB_CACHE=/tmp/doefab-cache
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$OUT/gpu.txt"
+python3 -c "import torch, numpy; print('torch', torch.__version__, 'cuda', torch.version.cuda, 'numpy', numpy.__version__)" \
+  | tee -a "$OUT/gpu.txt"
+timeout 240 python3 -m pytest -q -m cuda -p no:cacheprovider tests/ 2>&1 | tail -40 | tee "$OUT/cuda_tests.txt"
+python3 benchmarks/gpu_table.py --out "$OUT" "$@" 2>&1 | tee "$OUT/gpu_table.log"

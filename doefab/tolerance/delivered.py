@@ -1,0 +1,138 @@
+"""What the parts deliver through the network, with the noise of the scenes they were judged on.
+
+Every part is judged on the same scenes (``netjudge``), so a part's delivered value — the mean over those scenes —
+carries two kinds of scene noise besides the part-to-part spread it is meant to show: the scene set's difficulty,
+common to every part (and to the error-free part a relative spec is measured from), and the part × scene
+interaction, each part's own. ``variance_components`` separates the three (a two-way analysis of variance without
+replication); ``bootstrap`` resamples the parts and then the scenes — one draw of scenes for all the parts of a
+replicate, since they share them — so an interval of the mean or of the yield holds both sources of noise.
+``delivered_summary`` gives both for each PSF the network was told.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+__all__ = ["variance_components", "bootstrap", "delivered_summary", "scene_table", "BOOT_DRAWS"]
+
+BOOT_DRAWS = 2000  # bootstrap replicates: the 2.5 % and 97.5 % quantiles move by well under their width's 1 %
+
+
+def variance_components(x) -> dict:
+    """Variance components of one metric on a [parts, scenes] table (every part on the same scenes; a scene
+    where the metric is nan for some part, e.g. a highlight metric without highlights, is left out):
+
+    ``part_sd``: spread of the parts' values over infinitely many scenes; ``scene_sd``: spread of the scenes'
+    difficulty; ``interaction_sd``: a part's own scene-to-scene noise; ``part_noise_sd`` = interaction_sd / √scenes,
+    the scene noise on a part's value relative to the other parts' (what blurs which parts pass);
+    ``common_noise_sd`` = scene_sd / √scenes, the scene set's offset shared by every part; ``scenes_needed``: the
+    fewest scenes that put part_noise_sd below part_sd (None when part_sd is 0). Needs two parts and two scenes
+    (else the values are nan)."""
+    x = np.asarray(x, np.float64)
+    x = x[:, np.all(np.isfinite(x), axis=0)] if x.ndim == 2 else np.empty((0, 0))
+    p, s = x.shape if x.size else (0, 0)
+    out = {"parts": int(p), "scenes": int(s)}
+    if p < 2 or s < 2:
+        nan = float("nan")
+        return {**out, "part_sd": nan, "scene_sd": nan, "interaction_sd": nan, "part_noise_sd": nan,
+                "common_noise_sd": nan, "scenes_needed": None}
+    grand, rows, cols = x.mean(), x.mean(axis=1), x.mean(axis=0)
+    ms_part = s * np.sum((rows - grand) ** 2) / (p - 1)
+    ms_scene = p * np.sum((cols - grand) ** 2) / (s - 1)
+    ms_rest = np.sum((x - rows[:, None] - cols[None, :] + grand) ** 2) / ((p - 1) * (s - 1))
+    v_part, v_scene = max(0.0, (ms_part - ms_rest) / s), max(0.0, (ms_scene - ms_rest) / p)
+    return {**out, "part_sd": math.sqrt(v_part), "scene_sd": math.sqrt(v_scene), "interaction_sd": math.sqrt(ms_rest),
+            "part_noise_sd": math.sqrt(ms_rest / s), "common_noise_sd": math.sqrt(v_scene / s),
+            "scenes_needed": int(ms_rest // v_part) + 1 if v_part > 0 else None}
+
+
+def bootstrap(x, passes=None, nominal=None, primary: int = 0, draws: int = BOOT_DRAWS, seed: int = 0,
+              scenes: bool = True) -> dict:
+    """Two-level bootstrap of the parts' mean delivered value and yield.
+
+    ``x``: [parts, scenes, metrics] values (every part on the same scenes); ``nominal``: the error-free part's
+    [scenes, metrics] values (a relative spec's reference) or None; ``passes(part_means [parts, metrics],
+    nominal_means [metrics] or None) → bool [parts]``: which parts meet the spec (None: no yield). Each replicate
+    draws the parts with replacement and then, with ``scenes``, the scenes with replacement (one draw for every
+    part and the error-free one), each part's value being its mean over the drawn scenes. Without ``scenes`` it
+    is the part-level bootstrap, and with the same ``seed`` it draws the same parts. Returns {"mean",
+    "mean_ci95", "yield", "yield_ci95", "draws", "scenes_resampled"}: the point values from all parts and
+    scenes, the intervals the 2.5–97.5 % percentiles over the replicates (``primary``: the metric whose mean)."""
+    x = np.asarray(x, np.float64)
+    n_parts, n_scenes = x.shape[:2]
+    nom = None if nominal is None else np.asarray(nominal, np.float64)
+    rng_parts = np.random.default_rng(np.random.SeedSequence([seed, 0]))
+    rng_scenes = np.random.default_rng(np.random.SeedSequence([seed, 1]))
+    parts = rng_parts.integers(n_parts, size=(draws, n_parts))
+    drawn = (rng_scenes.integers(n_scenes, size=(draws, n_scenes)) if scenes
+             else np.broadcast_to(np.arange(n_scenes), (draws, n_scenes)))
+    point = _stats(x, nom, passes, primary, np.arange(n_parts)[None], np.arange(n_scenes)[None])
+    chunk = max(1, 2**22 // max(1, x.size))  # replicates at a time: a few tens of MB of drawn values
+    reps = np.concatenate([_stats(x, nom, passes, primary, parts[i:i + chunk], drawn[i:i + chunk])
+                           for i in range(0, draws, chunk)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanpercentile(reps, [2.5, 97.5], axis=0)
+    return {"mean": float(point[0, 0]), "mean_ci95": [float(lo[0]), float(hi[0])],
+            "yield": float(point[0, 1]) if passes else None,
+            "yield_ci95": [float(lo[1]), float(hi[1])] if passes else None, "draws": int(draws),
+            "scenes_resampled": bool(scenes)}
+
+
+def _stats(x, nom, passes, primary, parts, drawn) -> np.ndarray:
+    """[replicates, 2] (mean of the primary metric over the parts, yield) of replicates that take parts
+    ``parts[r]`` and scenes ``drawn[r]``."""
+    with warnings.catch_warnings():  # a metric no drawn scene defines: nan, as ``mean_metrics`` gives
+        warnings.simplefilter("ignore", RuntimeWarning)
+        means = np.nanmean(x[parts[:, :, None], drawn[:, None, :]], axis=2)  # [r, parts, metrics]
+        refs = None if nom is None else np.nanmean(nom[drawn], axis=1)  # [r, metrics]
+        mean = np.nanmean(means[:, :, primary], axis=1)
+    if passes is None:
+        return np.stack([mean, np.full_like(mean, np.nan)], axis=1)
+    y = [np.mean(passes(m, None if refs is None else refs[r])) for r, m in enumerate(means)]
+    return np.stack([mean, np.asarray(y, np.float64)], axis=1)
+
+
+def scene_table(samples: list[dict], label: str) -> tuple[list[str], np.ndarray]:
+    """(metric names, [parts, scenes, metrics] values) of the parts the network judged, told ``label``'s PSF."""
+    per = [s["network_scenes"][label] for s in samples]
+    names = list(per[0])
+    return names, np.array([[m[k] for k in names] for m in per], np.float64).transpose(0, 2, 1)
+
+
+def delivered_summary(samples: list[dict], nominal_scenes: dict, spec: dict, task: str, seed: int = 0) -> dict:
+    """{label: {"metric", "mean", "mean_ci95", "yield", "yield_ci95", "bootstrap_yield_ci95", "wilson_ci95",
+    "components", "draws"}} for each PSF the network was told: the task's primary delivered metric, its mean
+    over the parts and the yield against ``spec`` (relative limits against the error-free part on the same
+    scenes, ``nominal_scenes[label]``: {metric: [value per scene]}) with two-level bootstrap intervals, and its
+    variance components. ``yield_ci95`` is the hull of the bootstrap's and the parts' Wilson interval: resampled
+    parts cannot fail when every part passed, Wilson's stays honest there. Empty without per-scene values."""
+    from doefab.tolerance.montecarlo import wilson
+    from doefab.tolerance.spec import PRIMARY, spec_limits
+
+    if not samples or "network_scenes" not in samples[0] or task not in PRIMARY:
+        return {}
+    out = {}
+    for label in samples[0]["network_scenes"]:
+        names, x = scene_table(samples, label)
+        nom = np.array([nominal_scenes[label][k] for k in names], np.float64).T
+        primary = names.index(PRIMARY[task])
+
+        def passes(means, nominal_means):  # ``spec.meets`` of every part at once
+            ok = np.ones(len(means), bool)
+            for _, metric, limit, op in spec_limits(spec, task, "network", dict(zip(names, nominal_means))):
+                v = means[:, names.index(metric)] if metric in names else np.full(len(means), np.nan)
+                with np.errstate(invalid="ignore"):
+                    ok &= np.isfinite(v) & (v >= limit if op == "≥" else v <= limit)
+            return ok
+        b = bootstrap(x, passes, nom, primary, seed=seed)
+        k = int(round(b["yield"] * len(samples)))
+        w = wilson(k, len(samples))
+        out[label] = {"metric": PRIMARY[task], "mean": b["mean"], "mean_ci95": b["mean_ci95"], "yield": b["yield"],
+                      "yield_ci95": [min(w[0], b["yield_ci95"][0]), max(w[1], b["yield_ci95"][1])],
+                      "bootstrap_yield_ci95": b["yield_ci95"], "wilson_ci95": list(w), "draws": b["draws"],
+                      "components": variance_components(x[:, :, primary])}
+    return out

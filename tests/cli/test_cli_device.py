@@ -1,0 +1,46 @@
+"""``--device`` on every command that computes: it sets what ``device=None`` means while the command runs (and
+only then), and a scene's ``device`` key that names a GPU this machine lacks is refused by ``run`` and ``doctor``
+before any work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO = Path(__file__).resolve().parents[2]
+HDR = REPO / "scenes" / "hdr.toml"
+COMMANDS = {"design": ["design", "--task", "streak"], "psf": ["psf"], "demo": ["demo"],
+            "train": ["train", "--task", "hdr"], "evaluate": ["evaluate", "--task", "hdr"],
+            "finetune": ["finetune", "--design", "d"], "tolerance": ["tolerance", "--design", "d"],
+            "run": ["run", str(HDR)], "doctor": ["doctor", str(HDR)]}
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_the_command_computes_on_the_device_its_flag_names(name, monkeypatch):
+    import importlib
+
+    from doefab._devices import ENV, default_device
+    from doefab.cli import main
+
+    seen = []
+    monkeypatch.setattr(importlib.import_module(f"doefab.cli.{name}"), "run",
+                        lambda args: seen.append((default_device(), args.device)) or 0)
+    monkeypatch.setenv(ENV, "gpu")  # what None would mean without the flag: not a device at all
+    assert main([*COMMANDS[name], "--device", "CPU", "--out", "o"]) == 0
+    assert seen == [("cpu", "cpu")]
+    import os
+
+    assert os.environ[ENV] == "gpu"  # the command's device ends with it
+
+
+@pytest.mark.parametrize("cmd", ["run", "doctor"])
+def test_a_scene_naming_a_gpu_this_machine_lacks_is_refused_before_any_work(cmd, one_clear_error, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+
+    def build(fixtures, tmp):
+        (tmp / "s.toml").write_text('device = "cuda:1"\n' + HDR.read_text())
+        return [cmd, tmp / "s.toml"] + (["--out", tmp / "o"] if cmd == "run" else [])
+    line = one_clear_error(build, 2, "device: 'cuda:1': torch")
+    assert 'device = "cpu"' in line and "sees no CUDA device" in line

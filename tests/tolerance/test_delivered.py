@@ -1,0 +1,141 @@
+"""The delivered quality's statistics: variance components of a parts × scenes table against the values that made
+it, and the two-level bootstrap against the part-level one and the analytic spread of a crossed design."""
+
+import math
+
+import numpy as np
+import pytest
+
+from doefab.tolerance.delivered import bootstrap, delivered_summary, variance_components
+
+
+def _table(parts=12, scenes=8, part_sd=0.5, scene_sd=0.0, noise_sd=0.0, seed=1):
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(0, part_sd, parts), rng.normal(0, scene_sd, scenes)
+    return 30.0 + a[:, None] + b[None, :] + rng.normal(0, noise_sd, (parts, scenes)), a, b
+
+
+def test_components_of_an_additive_table_are_its_parts_and_scenes_spreads_exactly():
+    x, a, b = _table(scene_sd=2.0)
+    c = variance_components(x)
+    assert c["part_sd"] == pytest.approx(np.std(a, ddof=1), rel=1e-9)
+    assert c["scene_sd"] == pytest.approx(np.std(b, ddof=1), rel=1e-9)
+    assert c["interaction_sd"] == pytest.approx(0.0, abs=1e-9) and c["scenes_needed"] == 1
+    assert c["common_noise_sd"] == pytest.approx(np.std(b, ddof=1) / math.sqrt(8), rel=1e-9)
+
+
+def test_components_recover_the_spreads_that_made_a_noisy_table():
+    """400 parts × 20 scenes drawn with part 0.3, scene 2 and interaction 1.5: the part and scene spreads are
+    those of the drawn part and scene values (the interaction's share of the parts' means taken out), the
+    interaction its 1.5; a part's scene noise is 1.5/√20, and 1.5²/0.3² = 25 → 26 scenes put it below the part
+    spread."""
+    x, a, b = _table(parts=400, scenes=20, part_sd=0.3, scene_sd=2.0, noise_sd=1.5, seed=3)
+    c = variance_components(x)
+    assert c["part_sd"] == pytest.approx(np.std(a, ddof=1), rel=0.1)
+    assert c["scene_sd"] == pytest.approx(np.std(b, ddof=1), rel=0.02)
+    assert c["interaction_sd"] == pytest.approx(1.5, rel=0.03)
+    assert c["part_noise_sd"] == pytest.approx(c["interaction_sd"] / math.sqrt(20), rel=1e-9)
+    assert c["scenes_needed"] == int(c["interaction_sd"] ** 2 // c["part_sd"] ** 2) + 1
+    assert 20 <= c["scenes_needed"] <= 32
+    nan_scene = x.copy()
+    nan_scene[3, 7] = np.nan  # a scene some part leaves undefined drops out
+    assert variance_components(nan_scene)["scenes"] == 19
+
+
+def _passes(limit):
+    return lambda means, nominal: means[:, 0] >= (nominal[0] - limit if nominal is not None else limit)
+
+
+def test_without_scene_noise_the_two_level_bootstrap_is_the_part_level_one():
+    x, _, _ = _table()
+    x = x[:, :, None]
+    two = bootstrap(x, _passes(29.8), draws=500, seed=4)
+    one = bootstrap(x, _passes(29.8), draws=500, seed=4, scenes=False)
+    assert two == {**one, "scenes_resampled": True}
+    assert one["mean"] == pytest.approx(x.mean()) and one["yield"] == pytest.approx(np.mean(x[:, 0, 0] >= 29.8))
+    # and it is the ordinary bootstrap of the parts' values
+    rng = np.random.default_rng(np.random.SeedSequence([4, 0]))
+    means = [x[rng.integers(12, size=12), 0, 0].mean() for _ in range(500)]
+    assert one["mean_ci95"] == pytest.approx(list(np.percentile(means, [2.5, 97.5])))
+
+
+def test_scene_noise_widens_the_intervals_as_a_crossed_design_predicts():
+    """40 parts (spread 0.1) on 30 shared scenes whose difficulty spreads 3: the mean's two-level interval is
+    about 2 × 1.96 × 3/√30 wide (the scene set's common offset), the part-level one about 2 × 1.96 × 0.1/√40; the
+    yield against a limit 0.05 below the error-free part on the same scenes barely moves (the offset cancels),
+    against an absolute limit it spreads over most of 0–1."""
+    x, _, b = _table(parts=40, scenes=30, part_sd=0.1, scene_sd=3.0, noise_sd=0.02, seed=5)
+    x = x[:, :, None]
+    nominal = (30.0 + b)[:, None]
+    two = bootstrap(x, _passes(0.05), nominal, draws=1000, seed=6)
+    one = bootstrap(x, _passes(0.05), nominal, draws=1000, seed=6, scenes=False)
+    width = two["mean_ci95"][1] - two["mean_ci95"][0]
+    expected = 2 * 1.96 * math.sqrt(np.var(b, ddof=1) / 30 + 0.1 ** 2 / 40)
+    assert width == pytest.approx(expected, rel=0.2)
+    assert one["mean_ci95"][1] - one["mean_ci95"][0] == pytest.approx(2 * 1.96 * 0.1 / math.sqrt(40), rel=0.3)
+    relative = two["yield_ci95"][1] - two["yield_ci95"][0]
+    assert relative <= 1.3 * (one["yield_ci95"][1] - one["yield_ci95"][0]) + 0.05
+    absolute = bootstrap(x, _passes(float(np.median(x))), None, draws=1000, seed=6)
+    assert absolute["yield_ci95"][1] - absolute["yield_ci95"][0] > 0.6
+
+
+def test_the_summary_yield_is_the_parts_share_and_its_interval_holds_wilsons():
+    """Per label: the yield is the share of parts whose scene mean meets the spec against the error-free part's
+    scene mean (as ``summarize`` counts it), and its interval joins the bootstrap's with Wilson's, which stays
+    open at a yield of 1."""
+    from doefab.tolerance.montecarlo import summarize, wilson
+
+    x, _, b = _table(parts=10, scenes=4, part_sd=0.3, scene_sd=1.0, noise_sd=0.1, seed=7)
+    samples = [{"metric": 0.8, "worst": 0.7, "l1_to_nominal": 0.1,
+                "network": {"nominal_psf": {"psnr_highlight": float(r.mean()), "psnr": 40.0}},
+                "network_scenes": {"nominal_psf": {"psnr_highlight": list(r), "psnr": [40.0] * 4}}} for r in x]
+    nominal = {"psnr_highlight": list(30.0 + b), "psnr": [40.0] * 4}
+    spec = {"hdr": {"psnr_highlight_db_loss_max": 0.2}}
+    got = delivered_summary(samples, {"nominal_psf": nominal}, spec, "hdr")["nominal_psf"]
+    old = summarize(samples, spec, "hdr", {"psf": {}, "network": {"nominal_psf": {
+        "psnr_highlight": float(np.mean(nominal["psnr_highlight"])), "psnr": 40.0}}})
+    assert got["yield"] == old["network"]["nominal_psf"]["yield"]["value"]
+    assert got["mean"] == pytest.approx(x.mean())
+    lo, hi = got["yield_ci95"]
+    assert lo <= min(got["bootstrap_yield_ci95"][0], got["wilson_ci95"][0]) + 1e-12
+    assert hi >= max(got["bootstrap_yield_ci95"][1], got["wilson_ci95"][1]) - 1e-12
+    everyone = delivered_summary(samples, {"nominal_psf": nominal}, {"hdr": {"psnr_highlight_db_loss_max": 50.0}},
+                                 "hdr")["nominal_psf"]
+    assert everyone["yield"] == 1.0 and everyone["bootstrap_yield_ci95"] == [1.0, 1.0]
+    assert everyone["yield_ci95"] == pytest.approx([wilson(10, 10)[0], 1.0])
+    assert got["components"]["parts"] == 10 and got["components"]["scenes"] == 4
+
+
+def test_the_report_states_the_delivered_yield_its_interval_and_the_scene_noise_against_the_spread():
+    """The summary's opening takes the delivered mean's and yield's intervals over parts and scenes; its list
+    gives the delivered-quality yield with both intervals and says whether a part's scene noise lies below the
+    part-to-part spread, or how many scenes would put it there."""
+    from doefab.tolerance.montecarlo import summarize
+    from doefab.tolerance.reporttext import lead_text, summary_lines
+
+    def res_for(noise_sd):
+        x, _, b = _table(parts=10, scenes=4, part_sd=0.5, scene_sd=1.0, noise_sd=noise_sd, seed=8)
+        samples = [{"metric": 0.85, "worst": 0.8, "l1_to_nominal": 0.1,
+                    "network": {"nominal_psf": {"psnr_highlight": float(r.mean())}},
+                    "network_scenes": {"nominal_psf": {"psnr_highlight": list(r)}}} for r in x]
+        scenes = {"nominal_psf": {"psnr_highlight": list(30.2 + b)}}
+        nominal = {"psf": {"psf_metric": 0.869}, "network": {"nominal_psf": {"psnr_highlight": 30.2 + b.mean()}}}
+        spec = {"hdr": {"psf_metric_min": 0.8, "psnr_highlight_db_loss_max": 0.5}}
+        summary = summarize(samples, spec, "hdr", nominal)
+        summary["delivered"] = delivered_summary(samples, scenes, spec, "hdr")
+        return {"task": "hdr", "summary": summary, "nominal": nominal, "budget": {"spec": spec}, "tornado": [],
+                "stop": "the DOE", "network_judge": {"images": 4, "size": 256, "split": "test"}}, summary
+
+    res, s = res_for(0.05)
+    d = s["delivered"]["nominal_psf"]
+    lead = lead_text(res)
+    assert f"(95 % interval of the mean over parts and scenes {d['mean_ci95'][0]:.2f}–{d['mean_ci95'][1]:.2f} dB" in lead
+    lo, hi = d["yield_ci95"]
+    assert f"{100 * d['yield']:.0f} % of the parts (95 % interval over parts and scenes {100 * lo:.0f}–{100 * hi:.0f} %)" in lead
+    (line,) = [x for x in summary_lines(res) if x.startswith("- **Delivered-quality yield**")]
+    assert f"{d['yield']:.2f}, 95 % interval {lo:.2f}–{hi:.2f} over parts and scenes" in line
+    assert "4 test scenes of 256² px per part" in line and ": below it;" in line
+    noisy, s = res_for(1.2)
+    (line,) = [x for x in summary_lines(noisy) if x.startswith("- **Delivered-quality yield**")]
+    needed = s["delivered"]["nominal_psf"]["components"]["scenes_needed"]
+    assert needed > 4 and f"NOT below it: judge each part on at least {needed} scenes" in line
