@@ -14,5 +14,11 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1 DOEFAB_CA
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$OUT/gpu.txt"
 python3 -c "import torch, numpy; print('torch', torch.__version__, 'cuda', torch.version.cuda, 'numpy', numpy.__version__)" \
   | tee -a "$OUT/gpu.txt"
-timeout 240 python3 -m pytest -q -m cuda -p no:cacheprovider tests/ 2>&1 | tail -40 | tee "$OUT/cuda_tests.txt"
-python3 benchmarks/gpu_table.py --out "$OUT" "$@" 2>&1 | tee "$OUT/gpu_table.log"
+timeout "${TEST_TIMEOUT:-150}" python3 -m pytest -q -m cuda -p no:cacheprovider tests/ 2>&1 | tail -40 | tee "$OUT/cuda_tests.txt"
+for wt in ${WORKLOADS:-psf:60 design:90 train:150 judge:120}; do  # WORKLOAD:SECONDS, each on its own clock
+  w=${wt%%:*}
+  timeout "${wt##*:}" python3 benchmarks/gpu_table.py --only "$w" --out "$OUT/$w" "$@" 2>&1 \
+    | tee -a "$OUT/gpu_table.log"
+done
+cat "$OUT"/*/gpu_table.md > "$OUT/gpu_table.md" 2>/dev/null
+for w in psf design train judge; do rm -rf "${OUT:?}/$w"; done

@@ -6,8 +6,8 @@ Workloads (each timed as wall time, the GPU synchronised before the clock stops;
 - ``design``: ``doefab.optimize("streak", iterations=N)`` (Adam on the design grid, N iterations);
 - ``train``: ``max_steps`` training steps of each task's proposed network (``doefab.train``; its own data and
   validation included);
-- ``judge``: ``doefab tolerance --design masks/DESIGN --samples P --networks`` for the grating (PSF and network
-  judge per part; one process, ``--workers 1``).
+- ``judge``: ``tolerance.montecarlo.monte_carlo(masks/grating, default budget, P, networks=True, workers=1)``: P
+  parts, each judged at PSF level and through the hyperspectral network (one process, design grid).
 
 Thread count: torch's intra-op threads are recorded (``torch.get_num_threads()``); the CPU rows use every core of the
 machine they run on. Writes ``gpu_table.{md,json}`` into ``--out`` (default benchmarks/results).
@@ -22,8 +22,6 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -74,20 +72,20 @@ def design_case(device: str, iterations: int) -> float:
 
 
 def train_case(device: str, task: str, steps: int, tmp: Path) -> float:
-    import doefab
+    from doefab.reconstruction.train import train
 
     out = tmp / f"train_{task}_{device.replace(':', '')}"
-    return timed(lambda: doefab.train(task, "proposed", minutes=60, out_dir=out, max_steps=steps, progress=False,
+    return timed(lambda: train(task, "proposed", minutes=60, out_dir=out, max_steps=steps, progress=False,
                                       val_every=10 ** 6, device=device), device)
 
 
 def judge_case(device: str, design: str, parts: int, tmp: Path) -> float:
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.montecarlo import monte_carlo
+
     out = tmp / f"judge_{design}_{device.replace(':', '')}"
-    cmd = [sys.executable, "-m", "doefab", "tolerance", "--design", f"masks/{design}", "--samples", str(parts),
-           "--networks", "--workers", "1", "--device", device, "--out", str(out)]
-    t = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    return timed(lambda: monte_carlo(Path("masks") / design / "design", load_budget(), parts, out, workers=1, progress=False,
+                                     networks=True, device=device), device)
 
 
 def main(argv=None) -> int:
@@ -96,9 +94,10 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small sizes: check the script, not the machine")
     ap.add_argument("--only", nargs="*", default=["psf", "design", "train", "judge"])
     ap.add_argument("--devices", nargs="*", default=["cuda", "cpu"])
+    ap.add_argument("--tasks", nargs="*", default=["hdr", "hyperspectral", "depth"], help="networks trained")
     args = ap.parse_args(argv)
     q = args.quick
-    bands, kernel, iters, steps, parts = (5, 64, 3, 2, 1) if q else (31, 512, 50, 100, 30)
+    bands, kernel, iters, steps, parts = (5, 64, 2, 2, 1) if q else (31, 512, 10, 100, 30)
     rows, data = [], {"torch": torch.__version__, "threads": torch.get_num_threads(), "cores": os.cpu_count(),
                       "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None, "rows": {}}
     cases = []
@@ -107,7 +106,7 @@ def main(argv=None) -> int:
     if "design" in args.only:
         cases.append((f"streak design, {iters} Adam iterations", lambda d, t: design_case(d, iters)))
     if "train" in args.only:
-        for task in ("hdr", "hyperspectral", "depth"):
+        for task in args.tasks:
             cases.append((f"{steps} training steps, {task} proposed",
                           lambda d, t, task=task: train_case(d, task, steps, t)))
     if "judge" in args.only:

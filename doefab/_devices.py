@@ -54,7 +54,8 @@ def check_device(device, name: str = "device") -> str:
         return text
     if not torch.cuda.is_available():
         raise DoefabError(f"{who}: torch {torch.__version__} sees no CUDA device on this machine: use "
-                          f"{_example(name, 'cpu')} (or auto), or install a CUDA build of torch (docs/guide/install.md)")
+                          f"{_example(name, 'cpu')} (or auto), or install a CUDA build of torch "
+                          f"(docs/guide/install.md)")
     count = torch.cuda.device_count()
     if m.group(2) and int(m.group(2)[1:]) >= count:
         have = ", ".join(f"cuda:{i}" for i in range(count))
