@@ -8,12 +8,14 @@ the delivered-quality yield and mean with their two-level (parts, then scenes) b
 spread, the scene noise on one part's value, the scene set's offset common to all parts and the fewest scenes
 per part that put the scene noise below the spread (what ``netjudge.SCENES`` is chosen by).
 
-The published numbers (about 2 h on 2 cores; nothing else on the machine):
+The published numbers (hours on 2 cores: each part is 8 scenes of 256² px through the network, depth parts also
+their PSFs at 65 planes; nothing else on the machine):
     .venv/bin/python benchmarks/delivered_yield.py --parts 24 --scenes 8 --size 256
 The scene-noise measurement behind ``netjudge.SCENES`` takes more scenes per part (the components do not
 depend on the count; more scenes measure them better):
     .venv/bin/python benchmarks/delivered_yield.py --parts 12 --scenes 16 --size 256 --name delivered_scene_noise
-A toy run that checks the script (a few minutes; its numbers mean nothing):
+A toy run that checks the script (its numbers mean nothing; measured on 2 shared cores: streak 790 s, grating
+552 s, half-ring 522 s):
     .venv/bin/python benchmarks/delivered_yield.py --parts 3 --scenes 2 --size 64 --grid 1 --out /tmp/delivered_toy
 
 Writes OUT/NAME.md and OUT/NAME.json (default benchmarks/results/delivered_yield.*); the parts' samples go to

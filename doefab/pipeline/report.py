@@ -128,7 +128,7 @@ def _json(path: Path) -> dict:
 
 
 def _scenes_text(n, split, size) -> str:
-    return f"{n} {split} scenes of {size}² px"
+    return f"{n} {split} scene{'' if n == 1 else 's'} of {size}² px"
 
 
 def beside_tolerance(out: Path, task: str, rows: dict) -> list[tuple]:

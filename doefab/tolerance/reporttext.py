@@ -150,7 +150,8 @@ def _delivered_lines(res: dict) -> list[str]:
     task, m, c = res["task"], d["metric"], d["components"]
     judge = res.get("network_judge", {})
     n = judge.get("images", c["scenes"])
-    where = (f"{n} {judge.get('split', '')} scenes of {judge.get('size', '?')}² px per part".replace("  ", " ")
+    where = (f"{n} {judge.get('split', '')} scene{'' if n == 1 else 's'} of {judge.get('size', '?')}² px per "
+             f"part".replace("  ", " ")
              + (f", {c['scenes']} of which define it" if c["scenes"] != n else ""))
     if not math.isfinite(c["part_sd"]):
         noise = f"scene noise not measured (needs two parts and two scenes; {where})"
@@ -173,31 +174,36 @@ def _delivered_lines(res: dict) -> list[str]:
 
 def _limits(res: dict) -> tuple[str | None, list[tuple[float, dict]]]:
     """(metric, [(loss, tornado row)]) of the three errors that cost the most: the delivered primary metric's loss
-    where the tornado judged errors through the network (network told the nominal PSF), else (None, the PSF
-    metric's)."""
+    where the tornado judged errors through the network (network told the nominal PSF) and one of them costs
+    some, else (None, the PSF metric's)."""
     from doefab.tolerance.spec import PRIMARY, delivered_loss
 
     rows = res["tornado"]
     judged = [r for r in rows if "network_delta" in r and "nominal_psf" in r["network_delta"]]
     if judged and res["task"] in PRIMARY:
         losses = [(delivered_loss(res["task"], r["network_delta"]["nominal_psf"]), r) for r in judged]
-        return PRIMARY[res["task"]], sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > 0),
-                                            key=lambda t: -t[0])[:3]
+        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > 0), key=lambda t: -t[0])[:3]
+        if top:
+            return PRIMARY[res["task"]], top
     return None, [(-r["delta"], r) for r in rows if r["delta"] < 0][:3]
 
 
 def _limits_lines(res: dict) -> list[str]:
     """"Limited by" and "would buy the most", ranked as ``_limits`` ranks them."""
+    from doefab.tolerance.spec import PRIMARY
+
     metric, top = _limits(res)
     if not top:
         return []
     task, rows = res["task"], res["tornado"]
+    judged = sum("network_delta" in r and "nominal_psf" in r["network_delta"] for r in rows)
     if metric is None:
-        return ["- **Limited by** (PSF metric) " + "; ".join(
+        none = (f"; no error of the {judged} judged through the network lowered the delivered "
+                f"{_name(task, PRIMARY.get(task, ''))} on the judge's scenes" if judged and task in PRIMARY else "")
+        return [f"- **Limited by** (PSF metric{none}) " + "; ".join(
                     f"{r['error']} at {r['value']:.3g} {r['unit']} ({-loss:+.3f})" for loss, r in top) + ".",
                 f"- **Would buy the most:** {REMEDY.get(top[0][1]['error'], top[0][1]['error'])} "
                 f"(recovers up to {top[0][0]:.3f} of the PSF metric)."]
-    judged = sum("network_delta" in r and "nominal_psf" in r["network_delta"] for r in rows)
     unit = _unit(task, metric)
     scope = ("" if judged == len(rows) else
              f"; the {judged} errors that cost the most PSF metric were judged through the network")

@@ -139,3 +139,29 @@ def test_the_report_states_the_delivered_yield_its_interval_and_the_scene_noise_
     (line,) = [x for x in summary_lines(noisy) if x.startswith("- **Delivered-quality yield**")]
     needed = s["delivered"]["nominal_psf"]["components"]["scenes_needed"]
     assert needed > 4 and f"NOT below it: judge each part on at least {needed} scenes" in line
+
+
+def test_when_no_error_judged_through_the_network_costs_delivered_quality_the_psf_metric_says_what_limits():
+    """On a few scenes the judged errors can leave the delivered metric unchanged or better: the summary then
+    ranks by the PSF metric and says that no judged error lowered the delivered one, rather than naming nothing."""
+    from doefab.tolerance.reporttext import lead_text, summary_lines
+
+    gain = {"nominal_psf": {"psnr_highlight": 0.13, "psnr": 0.1}, "measured_psf": {"psnr_highlight": 0.1, "psnr": 0.1}}
+    rows = [{"error": "mask overlay", "value": 0.707, "unit": "µm rms length", "grid": 1, "metric": 0.81,
+             "delta": -0.062, "network_delta": gain},
+            {"error": "decenter across split", "value": 0.144, "unit": "mm", "grid": 1, "metric": 0.83,
+             "delta": -0.042, "network_delta": gain},
+            {"error": "edge bias", "value": 0.1, "unit": "µm", "grid": 1, "metric": 0.85, "delta": -0.018}]
+    res = {"task": "hdr", "tornado": rows, "stop": "the DOE", "budget": {"spec": {}}, "nominal": {"psf": {}}}
+    lines = summary_lines(res)
+    assert ("- **Limited by** (PSF metric; no error of the 2 judged through the network lowered the delivered "
+            "highlight PSNR on the judge's scenes) mask overlay at 0.707 µm rms length (-0.062); decenter across "
+            "split at 0.144 mm (-0.042); edge bias at 0.1 µm (-0.018).") in lines
+    assert any(x.startswith("- **Would buy the most:** a better aligner") and "(recovers up to 0.062 of the PSF metric)"
+               in x for x in lines)
+    rows[1]["network_delta"] = {"nominal_psf": {"psnr_highlight": -0.4, "psnr": 0.0}}
+    lines = summary_lines(res)
+    assert any(x.startswith("- **Limited by** (delivered highlight PSNR, network told the nominal PSF; the 2 errors "
+                            "that cost the most PSF metric were judged through the network) decenter across split")
+               for x in lines)
+    assert lead_text(res) is None  # no Monte Carlo: no opening paragraph
