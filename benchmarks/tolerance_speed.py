@@ -5,7 +5,7 @@ study, default workers: one process per core); then the same study resumed with 
 surrogate, calibrated on parts of its own): its yield, and its difference from the direct judgement on the direct
 run's 300 parts, part by part, with a 95 % interval.
 ``network``: parts per minute through each task's network (``--networks``, 6 parts each; the network judge
-renders validation scenes — split used: val).
+renders the reconstruction tables' test scenes, ``doefab.tolerance.netjudge.SPLIT``).
 Writes benchmarks/results/tolerance_speed.{md,json}. Run with nothing else on the machine:
     .venv/bin/python benchmarks/tolerance_speed.py psf network
 """

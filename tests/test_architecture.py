@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "doefab"
-HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya", "colour", "skimage"}
+HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya", "colour", "skimage", "rawpy", "OpenEXR", "spectral",
+         "tifffile", "imageio"}
 # a stage may import from the stages listed for it (and itself); lower layers never import upper ones
 ALLOWED = {
     "optics": {"optics"},
@@ -16,6 +17,7 @@ ALLOWED = {
     "imaging": {"optics", "imaging"},
     "reconstruction": {"optics", "fabrication", "design", "imaging", "reconstruction"},
     "tolerance": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance"},
+    "lab": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance", "lab"},
     "cli": None,  # the command line may use everything
 }
 

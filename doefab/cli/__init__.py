@@ -71,14 +71,15 @@ class _TopFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from doefab.cli import (demo, design, doctor, evaluate, finetune, holder, masks, psf, run, scene, tolerance,
-                            train)
+    from doefab.cli import (calibrate, demo, design, diagnose, doctor, evaluate, finetune, holder, masks, psf,
+                            reconstruct, run, scene, tolerance, train)
 
     parser = OneLineParser(prog="doefab", description=DESCRIPTION, epilog=EPILOG, formatter_class=_TopFormatter)
     parser.add_argument("--version", action="version", version=f"doefab {__import__('doefab').__version__}")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=OneLineParser)
-    for module in (run, scene, doctor, demo, psf, design, masks, holder, train, evaluate, finetune, tolerance):
+    for module in (run, scene, doctor, demo, psf, design, masks, holder, train, evaluate, finetune, tolerance,
+                   calibrate, diagnose, reconstruct):
         module.register(sub)
     for name, subparser in sub.choices.items():
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,

@@ -8,8 +8,14 @@ test set (new scenes and parts from the test split's content, made after every e
 read is appended to OUT/final_split_reads.md. Hyperspectral results are also given for in-library and
 out-of-library light. Torch runs on one thread while it evaluates, so the numbers do not depend on the machine's.
 
-Writes OUT/metrics.json (every variant's mean metrics, the thread count, library versions, code version and each
-weights file's SHA-256) and OUT/examples.png.
+--psf FILE (a psf_pair.npz of doefab calibrate or diagnose): the networks are told that pair — a fabricated part's
+— and the scenes are captured through the same pair (the measured part is the truth), with the camera's crosstalk
+unless --clean; --capture-psf FILE captures them through another pair instead (e.g. diagnose's
+psf_pair_fitted.npz; alone, the networks are told their nominal pair). A pair whose bands, depth planes or sensor
+pitch differ from the networks' design is refused.
+
+Writes OUT/metrics.json (every variant's mean metrics, the thread count, library versions, code version, each
+weights file's SHA-256 and, with --psf, each pair's file, SHA-256 and provenance) and OUT/examples.png.
 """
 
 from __future__ import annotations
@@ -33,10 +39,16 @@ def register(sub) -> None:
     p.add_argument("--variants", default="proposed,coded_only,uncoded_only",
                    help="comma-separated variants to evaluate (default: all three)")
     p.add_argument("--clean", action="store_true",
-                   help="the nominal model's own captures (no fabricated part, crosstalk or off-plane depth)")
+                   help="the nominal model's own captures (no fabricated part, crosstalk or off-plane depth; with "
+                        "--psf: that pair's, without crosstalk)")
     p.add_argument("--split", default="test", choices=["test", "val", "final"],
                    help="held-out scenes: val for choices, test for the tables, final for the final test set (each "
                         "read logged in OUT/final_split_reads.md)")
+    p.add_argument("--psf", default=None, metavar="FILE",
+                   help="a psf_pair.npz (doefab calibrate / diagnose): the networks are told it and the scenes are "
+                        "captured through it")
+    p.add_argument("--capture-psf", default=None, metavar="FILE",
+                   help="capture the scenes through this psf_pair.npz instead (e.g. a fitted model)")
     add_sensor_args(p)
     add_device_arg(p)
     p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
@@ -47,7 +59,7 @@ def run(args) -> int:
     from doefab.cli._args import sensor_arg, task_design_arg
     from doefab.cli._output import claim_output
     from doefab.errors import DoefabError
-    from doefab.reconstruction.evaluate import FINAL_LEDGER, evaluate, one_thread
+    from doefab.reconstruction.evaluate import FINAL_LEDGER, evaluate
     from doefab.reconstruction.loader import load_reconstructor
 
     if args.size % 32:
@@ -58,18 +70,61 @@ def run(args) -> int:
     if bad or not variants:
         raise DoefabError(f"--variants: unknown {bad or 'empty list'}; choose from proposed, coded_only, uncoded_only")
     sensor = sensor_arg(args, design)
+    told, told_rec = read_psf_arg(args.psf, "--psf")
+    capture, capture_rec = read_psf_arg(args.capture_psf, "--capture-psf")
     out = claim_output(args, "evaluate", replace=args.force)  # --out checked before the networks' PSFs
-    for v in variants:  # a bad weights file, or one for another sensor, is refused before any output
-        load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
+    for v in variants:  # a bad weights file, or one for another sensor, or a pair they cannot take: refused first
+        rec = load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
+    check_psf_args(args.task, rec.pair, told, capture)
     out.create()
-    from doefab.tolerance.conditions import for_splits
-
-    with one_thread():  # the fabricated parts computed (and cached) here: on one thread, as the evaluation runs
-        cond = for_splits(args.task, design, "clean" if args.clean else "honest", (args.split,), progress=True)
+    cond = _conditions(args, design, capture if capture is not None else told)
+    records = {"told": told_rec or "the design's nominal pair", "captured_through": capture_rec or told_rec}
     res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants,
-                   conditions=None if args.clean else cond[args.split], split=args.split, sensor=sensor)
+                   conditions=cond, split=args.split, sensor=sensor, psf=told, capture_psf=capture,
+                   psf_records=None if told is None and capture is None else records)
     print(json.dumps({"rows": res["rows"], **({"by_light": res["by_light"]} if "by_light" in res else {})}, indent=1))
     print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
     if args.split == "final":
         print(f"this read of the final test set is logged in {out.path / FINAL_LEDGER}")
     return 0
+
+
+def _conditions(args, design, part):
+    """The split's capture conditions: through ``part`` (a given pair) with the camera's crosstalk, or the honest
+    ones (fabricated parts from the budget); None with --clean (through ``part`` or the nominal pair, no
+    crosstalk)."""
+    from doefab.reconstruction.evaluate import one_thread
+    from doefab.tolerance.conditions import for_splits, measured
+
+    if args.clean:
+        return None
+    if part is not None:
+        return measured(part, args.split)
+    with one_thread():  # the fabricated parts computed (and cached) here: on one thread, as the evaluation runs
+        return for_splits(args.task, design, "honest", (args.split,), progress=True)[args.split]
+
+
+def read_psf_arg(path, flag: str):
+    """(PSFPair, its record: file, SHA-256, provenance...) of a ``psf_pair.npz`` flag, read and checked before any
+    work; (None, None) when the flag is not given."""
+    from doefab.errors import DoefabError
+    from doefab.optics.psffile import load_psf_pair
+    from doefab.reconstruction.partfinetune import pair_record
+
+    if path is None:
+        return None, None
+    try:
+        pair = load_psf_pair(path)
+    except DoefabError as exc:
+        raise DoefabError(f"{flag}: {exc}") from None
+    return pair, pair_record(pair, path)
+
+
+def check_psf_args(task: str, network_pair, told, capture) -> None:
+    """Refuse, before any output, a --psf pair the networks cannot be told or a --capture-psf of another camera."""
+    from doefab.reconstruction.partfinetune import check_capture, fit_to_network
+
+    if told is not None:
+        fit_to_network(told, network_pair, task, "--psf")
+    if capture is not None:
+        check_capture(capture, network_pair, "--capture-psf")

@@ -31,7 +31,7 @@ import numpy as np
 from doefab.errors import DoefabError
 
 __all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "SensorCrosstalk",
-           "simulate_calibration", "DualPixelCrosstalk", "check_pair"]
+           "simulate_calibration", "DualPixelCrosstalk", "check_pair", "save_crosstalk"]
 
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
 
@@ -132,6 +132,14 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
     return alpha_lr, alpha_rl
 
 
+def save_crosstalk(path, alpha_lr, alpha_rl, se_lr, se_rl, meta: dict | None = None):
+    """Write ``crosstalk.json`` atomically: per-column ratios α_l→r, α_r→l and their standard errors, plus ``meta``
+    (:mod:`doefab.imaging.crosstalkfile`); :meth:`DualPixelCrosstalk.load` reads it. Returns the path."""
+    from doefab.imaging.crosstalkfile import save_crosstalk as save
+
+    return save(path, alpha_lr, alpha_rl, se_lr, se_rl, meta)
+
+
 def _rows(rows) -> int:
     """``rows`` checked to be a whole number of sensor rows a calibration averages."""
     if isinstance(rows, bool) or not isinstance(rows, numbers.Integral) or not 1 <= rows <= 100_000:
@@ -193,6 +201,20 @@ class DualPixelCrosstalk:
             check_pair(estimate[0], estimate[1], "estimated alpha_lr, estimated alpha_rl")
         self.alpha_lr, self.alpha_rl = alpha_lr, alpha_rl
         self.estimate = estimate  # (α̂_l→r, α̂_r→l), or None: the pipeline leaves the mix in
+        self.standard_error = None  # (se of α̂_l→r, se of α̂_r→l) per column, for a camera read from crosstalk.json
+
+    @classmethod
+    def load(cls, path) -> "DualPixelCrosstalk":
+        """The camera as calibrated, from ``crosstalk.json`` (written by ``doefab calibrate``; checked by
+        :func:`doefab.imaging.crosstalkfile.read_crosstalk`): the per-column ratios are both its mix and its
+        pipeline's estimate, ``DualPixelCrosstalk(a, b, estimate=(a, b))``; ``standard_error`` holds their
+        per-column standard errors."""
+        from doefab.imaging.crosstalkfile import read_crosstalk
+
+        p, _ = read_crosstalk(path)
+        cam = cls(p["alpha_lr"], p["alpha_rl"], estimate=(p["alpha_lr"], p["alpha_rl"]))
+        cam.standard_error = (p["alpha_lr_se"], p["alpha_rl_se"])
+        return cam
 
     @classmethod
     def calibrated(cls, alpha_lr, alpha_rl, rows: int = 3072, noise="default", seed: int = 0,

@@ -38,6 +38,8 @@ class PSFPair:
         wavelengths: metres.  depths: metres (``inf`` = plane wave).  sensor_pitch: metres.
         full: the whole aperture's PSF (when asked for).  camera: the camera it was computed for (None when
             unknown, e.g. a measured pair).
+        provenance: where a pair read from or written to ``psf_pair.npz`` comes from (``source``,
+            ``levels_sha256``, ``recordings_sha256``, ``shifts_px``...; ``doefab.optics.psffile``), or None.
     """
 
     coded: torch.Tensor | None
@@ -47,6 +49,20 @@ class PSFPair:
     sensor_pitch: float
     full: torch.Tensor | None = None
     camera: Camera | None = None
+    provenance: dict | None = None
+
+    def save(self, path, provenance: dict | None = None):
+        """Write ``psf_pair.npz`` (:func:`doefab.optics.psffile.save_psf_pair`); returns its path."""
+        from doefab.optics.psffile import save_psf_pair
+
+        return save_psf_pair(self, path, provenance)
+
+    @classmethod
+    def load(cls, path) -> "PSFPair":
+        """Read and check ``psf_pair.npz`` (:func:`doefab.optics.psffile.load_psf_pair`)."""
+        from doefab.optics.psffile import load_psf_pair
+
+        return load_psf_pair(path)
 
     def __getitem__(self, half: str) -> torch.Tensor:
         out = getattr(self, half, None) if half in APERTURES else None

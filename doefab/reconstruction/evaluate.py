@@ -1,7 +1,10 @@
 """The paper's Tables 1–3: every variant's network on the same held-out scenes, under the conditions a real camera
 makes (``conditions``: ``doefab.tolerance.conditions.honest`` — a fabricated part's PSF, per-column crosstalk
 unmixed with a noisy calibration, depth between the network's planes — while the network is told the nominal
-PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None).
+PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None). With ``psf=`` (``doefab evaluate
+--psf``) the networks are told a given pair instead — a measured part's — and the scenes are captured through that
+pair (``conditions.measured``) or through ``capture_psf`` (a model fitted to it, say; alone: the networks told
+their nominal pair).
 
 Splits (``SPLITS``): ``val`` for every choice made along the way, ``test`` for the published tables (every read of
 it is listed in ``benchmarks/results/test_split_reads.md``) and ``final``, the final test set, made after every
@@ -15,8 +18,10 @@ to its printed digits only at a fixed thread count.
 ``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "seed", "conditions", "images",
 "size_px", "threads", "versions": {library: version}, "code", "parts_sha256", "rows": {variant: means},
 "by_light": {"in-library" | "out-of-library": {variant: means}}, "weights": {variant: {"sha256", "steps", ...,
-"splits"}}, "per_image": {"light", "rows": {variant: [metrics of each scene]}}}``; the light groups for
-hyperspectral) and ``examples.png`` (inputs, each variant's output, ground truth, error map).
+"splits"}}, "per_image": {"light", "rows": {variant: [metrics of each scene]}}, "psf": {"told",
+"captured_through"}}``; the light groups for hyperspectral; ``psf`` with a given pair: each pair's file,
+SHA-256, provenance, bands, planes and window) and ``examples.png`` (inputs, each variant's output, ground truth,
+error map).
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_co
 from doefab.reconstruction.loader import load_reconstructor
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.networks import VARIANTS
+from doefab.reconstruction.partfinetune import check_capture, fit_to_network, pair_record
 from doefab.reconstruction.specs import make_batch, psf_pair
 
 __all__ = ["evaluate", "SPLITS", "THREADS", "FINAL_LEDGER", "one_thread", "library_versions", "code_version"]
@@ -46,11 +52,15 @@ LIBRARIES = ("torch", "numpy", "scipy", "scikit-image", "colour-science")
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
              progress: bool = True, design=None, variants=VARIANTS, conditions=None, split: str = "test",
-             other_design: bool = False, sensor=None) -> dict:
+             other_design: bool = False, sensor=None, psf=None, capture_psf=None, psf_records=None) -> dict:
     """``conditions``: the split's capture conditions (``doefab.tolerance.conditions``; None: clean).
     ``sensor``: the camera's ``imaging.sensor.Sensor`` that makes the captures (response, noise; None: the
     default camera's). ``other_design``: evaluate networks trained for another design or sensor on these
-    captures (they are told ``design``'s PSFs); the result says so. ``split``: one of ``SPLITS``."""
+    captures (they are told ``design``'s PSFs); the result says so. ``split``: one of ``SPLITS``.
+    ``psf``: a PSF pair the networks are told instead of their design's (a measured part's, checked by
+    ``partfinetune.fit_to_network``); the captures are rendered through ``capture_psf`` (default ``psf``; alone:
+    a part the networks are not told of) where ``conditions`` give no part of their own. ``psf_records``: what
+    identifies them in ``metrics.json`` (``{"told", "captured_through"}``, ``partfinetune.pair_record``)."""
     from doefab.imaging.sensor import Sensor
 
     if split not in SPLITS:
@@ -60,8 +70,12 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     sensor = sensor or Sensor()
     recs = {v: load_reconstructor(task, v, weights_dir, design, other_design, sensor)
             for v in variants}  # refuse first
+    told = None if psf is None else fit_to_network(psf, next(iter(recs.values())).pair, task)
+    if capture_psf is not None:
+        check_capture(capture_psf, next(iter(recs.values())).pair, "capture_psf")
     with one_thread():
-        rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress)
+        rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress, told,
+                                      capture_psf if capture_psf is not None else psf)
     components = split_components(task)
     result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
               "conditions": conditions.describe() if conditions is not None else {"name": "clean"},
@@ -71,6 +85,10 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               "threads": THREADS, "versions": library_versions(), "code": code_version(),
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               "weights": {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}}
+    if psf is not None or capture_psf is not None:
+        result["psf"] = psf_records or {
+            "told": "the design's nominal pair" if psf is None else pair_record(psf),
+            "captured_through": pair_record(capture_psf if capture_psf is not None else psf)}
     result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
     if task == "hyperspectral":
         result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}
@@ -83,14 +101,17 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     return result
 
 
-def _score(task, split, images, size, recs, design, sensor, cond, progress) -> tuple[dict, list, tuple]:
-    """Every variant's metrics on each of the split's ``images`` scenes, the scenes' kinds of light and the first
-    scene's (coded, uncoded, target, {variant: output}) for the figure."""
+def _score(task, split, images, size, recs, design, sensor, cond, progress, told=None,
+           render=None) -> tuple[dict, list, tuple]:
+    """Every variant's metrics on each of the split's ``images`` scenes (rendered through ``render``, default the
+    design's pair, where ``cond`` gives no part; the networks told ``told``, default their own pair), the scenes'
+    kinds of light and the first scene's (coded, uncoded, target, {variant: output}) for the figure."""
     from doefab.reconstruction.spectra import light_kind
     from doefab.reconstruction.train import sensor_response_for
 
     pair, _ = psf_pair(task, design)
     response = sensor_response_for(task, pair, sensor)
+    pair = render if render is not None else pair
     rows = {v: [] for v in recs}
     kinds, example = [], None
     it = range(images)
@@ -104,7 +125,7 @@ def _score(task, split, images, size, recs, design, sensor, cond, progress) -> t
         kinds.append(light_kind(split, i))
         preds = {}
         for v, rec in recs.items():
-            p = rec(coded[0], uncoded[0])  # told the nominal PSF, whatever made the captures
+            p = rec(coded[0], uncoded[0], psf=told)  # told the nominal PSF (or told), whatever made the captures
             preds[v] = p.numpy() if isinstance(p, torch.Tensor) else p
             rows[v].append(metrics_for(task, preds[v], target[0].numpy()))
         if example is None:

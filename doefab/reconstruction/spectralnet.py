@@ -90,8 +90,15 @@ class SpectralNet(nn.Module):
         y = self.unet(torch.cat(parts, dim=1)) + self._baseline(coded, uncoded, psf)
         return y if self.training else y.clamp_min(0.0)
 
+    # [1, J] weights of the candidate lights fixed by the caller (None: estimated from each input): a tiled
+    # reconstruction (doefab.lab.reconstruct) estimates a scene's light once, for all its tiles
+    light = None
+
     def _baseline(self, coded, uncoded, psf) -> torch.Tensor:
         if self.variant == "proposed" and self.inverses is not None:
+            if self.light is not None:
+                w = self.light.expand(uncoded.shape[0], -1)
+                return torch.einsum("bj,joc,bchw->bohw", w, self.inverses, uncoded)
             if self.mix:
                 w = mix_illuminants(coded, uncoded, psf[0], self.response, self.inverses)
                 w = w / w.sum(dim=1, keepdim=True).clamp_min(1e-12)  # a blend of estimates, not a gain

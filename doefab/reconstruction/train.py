@@ -27,7 +27,8 @@ from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair, training_crop
 from doefab.reconstruction.weights import weights_target, write_weights
 
-__all__ = ["train", "model_inputs", "evaluate_batch", "sensor_response_for", "arch_for_design", "copy_matching"]
+__all__ = ["train", "fit_network", "model_inputs", "evaluate_batch", "sensor_response_for", "arch_for_design",
+           "copy_matching"]
 
 
 def model_inputs(task: str, pair) -> torch.Tensor | None:
@@ -139,12 +140,40 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     arch = {**arch, **arch_for_design(task, pair, sensor)}
     psf = model_inputs(task, pair).to(dev)
     response, noise = sensor_response_for(task, pair, sensor), sensor.noise()
-    cond = conditions or {"train": None, "val": None}
     torch.manual_seed(seed)
     model = build_model(task, variant, arch)
     warm = copy_matching(model, task, variant, warm_start) if warm_start is not None and not resume else None
     model.to(dev)  # built and warm-started on the CPU: the same first weights on every device
     warm = _warm_record(Path(out_dir), warm, resume)
+    steps, history, wall, final = fit_network(task, model, psf, pair, (response, noise), conditions, out, config,
+                                              minutes, lr=lr, batch=batch, crop=crop, val_images=val_images,
+                                              val_every=val_every, schedule=schedule, resume=resume,
+                                              progress=progress, desc=f"train {task} ({variant})",
+                                              max_steps=max_steps)
+    record = {"design": spec.design if design is None else str(design), "design_levels_sha256": sha, "arch": arch,
+              "psf": {"kernel_px": int(pair.coded.shape[-1]), "wavelengths_m": list(pair.wavelengths),
+                      "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",
+                      "from": f"the design's {_design_levels(task, design)}-level level map (levels.npy)"},
+              "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
+                           "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
+                           "conditions": config["conditions"] or "clean", "warm_start": warm},
+              "validation": {"images": val_images, "crop_px": crop, **final},
+              **sensor.entry(task == "hyperspectral"),
+              "splits_sha256": split_digest(task), "splits_components": split_components(task)}
+    return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
+
+
+def fit_network(task: str, model, psf, pair, sensor: tuple, conditions, out: Path, config: dict, minutes: float, *,
+                lr: float, batch: int, crop: int, val_images: int, val_every: int, schedule: str = "cosine",
+                resume: bool = False, progress: bool = True, desc: str = "train", max_steps: int | None = None,
+                validate_first: bool = False) -> tuple[int, list, float, dict]:
+    """Train ``model`` (told ``psf``, on its device) with Adam on ``task``'s training scenes, captured through
+    ``pair`` (or ``conditions``' parts: {"train", "val"}, None: clean) with ``sensor`` = (response, noise), in the
+    loop of ``reconstruction.loop`` (``config``: what a resume must share); returns (steps, history, seconds, the
+    final validation metrics on ``val_images`` scenes)."""
+    response, noise = sensor
+    cond = conditions or {"train": None, "val": None}
+    dev, metric = psf.device, get_spec(task).metric
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     val = make_batch(task, "val", range(val_images), crop, pair, response, noise, conditions=cond["val"])
 
@@ -160,21 +189,10 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
 
     model.train()
     steps, history, wall = run_loop(out, config, minutes, step_fn,
-                                    lambda: evaluate_batch(task, model, *val, psf)[spec.metric],
-                                    {"model": model, "optimizer": opt}, [(opt, lr)], schedule, spec.metric, val_every,
-                                    resume, progress, f"train {task} ({variant})", max_steps)
-    final = evaluate_batch(task, model, *val, psf)
-    record = {"design": spec.design if design is None else str(design), "design_levels_sha256": sha, "arch": arch,
-              "psf": {"kernel_px": int(pair.coded.shape[-1]), "wavelengths_m": list(pair.wavelengths),
-                      "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",
-                      "from": f"the design's {_design_levels(task, design)}-level level map (levels.npy)"},
-              "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
-                           "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
-                           "conditions": config["conditions"] or "clean", "warm_start": warm},
-              "validation": {"images": val_images, "crop_px": crop, **final},
-              **sensor.entry(task == "hyperspectral"),
-              "splits_sha256": split_digest(task), "splits_components": split_components(task)}
-    return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
+                                    lambda: evaluate_batch(task, model, *val, psf)[metric],
+                                    {"model": model, "optimizer": opt}, [(opt, lr)], schedule, metric, val_every,
+                                    resume, progress, desc, max_steps, validate_first=validate_first)
+    return steps, history, wall, evaluate_batch(task, model, *val, psf)
 
 
 def _design_levels(task: str, design) -> int:

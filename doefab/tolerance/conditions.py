@@ -16,9 +16,10 @@
 
 ``honest(task, design, split)`` draws them for a split (its own parts: training, validation and test never
 share one; cached on disk, as the PSFs of dozens of fine planes cost minutes); ``clean()`` is the old,
-inverse-crime setting: the nominal PSF at the network's planes, no crosstalk. ``doefab train`` and ``doefab
-evaluate`` hand them to ``reconstruction.train`` / ``reconstruction.evaluate``, which render through whatever
-they are given (``specs.make_batch``).
+inverse-crime setting: the nominal PSF at the network's planes, no crosstalk; ``measured(pair, split)``: one given
+part (a measured ``psf_pair.npz``) with the budget's crosstalk (``evaluate --psf``, ``finetune --psf``). ``doefab
+train`` and ``doefab evaluate`` hand them to ``reconstruction.train`` / ``reconstruction.evaluate``, which render
+through whatever they are given (``specs.make_batch``).
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ import torch
 
 from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
 
-__all__ = ["Conditions", "honest", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits", "CONDITIONS",
-           "model_sources_sha256", "crop_rows", "crosstalk_residual"]
+__all__ = ["Conditions", "honest", "measured", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits",
+           "CONDITIONS", "model_sources_sha256", "crop_rows", "crosstalk_residual"]
 
 CONDITIONS = ("honest", "clean")
 
@@ -113,18 +114,35 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
            progress: bool = False) -> Conditions:
     """A split's honest conditions: ``parts`` fabricated parts from ``budget`` (default: the shipped one), the
     budget's crosstalk with calibration, and for depth PSFs at ``DEPTH_REFINE``× finer planes."""
-    from dataclasses import replace
-
-    from doefab.tolerance.errors import load_budget, sensor_errors
-    from doefab.tolerance.surrogate import base_part
+    from doefab.tolerance.errors import load_budget
 
     budget = budget or load_budget()
     pairs = _parts(task, Path(design_dir), split, parts, budget, progress)
+    return Conditions(name="honest", parts=pairs, split=split, **_budget_crosstalk(budget))
+
+
+def measured(pair, split: str, budget: dict | None = None, crosstalk: bool = True) -> Conditions:
+    """Captures through one given part: every scene of ``split`` rendered through ``pair`` (a ``PSFPair`` with both
+    halves: a measured part's ``psf_pair.npz``, or a model fitted to it), with the budget's crosstalk unmixed by
+    a noisy calibration as in :func:`honest` (``crosstalk``; default budget: the shipped one). Depth scenes fall
+    on ``pair``'s planes."""
+    from doefab.tolerance.errors import load_budget
+
+    xt = _budget_crosstalk(budget or load_budget())
+    return Conditions(name="measured", parts=[pair], split=split, **(xt if crosstalk else {}))
+
+
+def _budget_crosstalk(budget: dict) -> dict:
+    """``Conditions`` fields of ``budget``'s sensor: its crosstalk (None when it has none) and the budget's digest."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import sensor_errors
+    from doefab.tolerance.surrogate import base_part
+
     sensor = replace(base_part(budget), **sensor_errors(budget))
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
     digest = hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
-    return Conditions(name="honest", parts=pairs, crosstalk=sensor if any(sensor.crosstalk) else None, split=split,
-                      budget_sha256=digest)
+    return {"crosstalk": sensor if any(sensor.crosstalk) else None, "budget_sha256": digest}
 
 
 def model_sources_sha256(packages=PART_MODEL) -> str:

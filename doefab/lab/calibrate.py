@@ -1,0 +1,278 @@
+"""``doefab calibrate``: a fabricated part's own recordings → ``psf_pair.npz``, ``crosstalk.json``,
+``calibration.html``.
+
+Each ``[[psf]]`` recording is averaged, its darks' mean (or the file's ``black_level``) subtracted, registered to
+the design's nominal PSF of that half, band and plane (:func:`doefab.lab.measure.register`; the shift is the
+source's or the sensor's offset, not a fab error, and is reported), resampled onto the design's kernel with
+the chief ray on its centre pixel, and normalised to the nominal half's share of the light over that kernel.
+``channels = "rgb"`` frames give one PSF per channel: R, G and B are the design's three bands in order of
+decreasing wavelength. ``[[wall]]`` pairs give the per-column crosstalk (Eq. 30–31) with standard errors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+from doefab.lab.measure import extract, normalise, photon_transfer, register, wall_ratios
+from doefab.lab.recordings import Recordings, band_index, check_recordings, plane_index, recordings_sha256
+
+__all__ = ["calibrate", "measure_recordings", "write_calibration", "Calibration", "psf_grid", "nominal_psfs",
+           "calibrate_recording", "measure_walls", "rgb_bands", "PSFGrid"]
+
+PAIR_HALF = {"coded": "coded", "plain": "uncoded"}  # a recording's half → the PSFPair's
+
+
+@dataclass
+class PSFGrid:
+    """Which design planes and bands were recorded (indices into the design's lists, in its order) and, for each
+    (half, plane, band), the recording and its colour channel (None: a monochrome frame)."""
+
+    planes: list[int]
+    bands: list[int]
+    entries: dict
+
+
+def rgb_bands(wavelengths_m) -> list[int]:
+    """The design bands that the R, G and B channels record: its three bands in order of decreasing wavelength."""
+    return sorted(range(len(wavelengths_m)), key=lambda i: -wavelengths_m[i])
+
+
+def _bands_of(r, wavelengths_m) -> list[tuple[int, int | None]]:
+    """[(band index, channel)] a recording gives."""
+    if r.channels == "rgb":
+        return [(b, c) for c, b in enumerate(rgb_bands(wavelengths_m))]
+    return [(band_index(r.wavelength_m, wavelengths_m), None)]
+
+
+def _name(z: float, w: float) -> str:
+    return f"{'inf' if math.isinf(z) else f'{z:g} m'}, {w * 1e9:g} nm"
+
+
+def psf_grid(rec: Recordings, wavelengths_m, depths_m) -> PSFGrid:
+    """The (planes × bands) grid the ``[[psf]]`` recordings form for both halves. Refuses, in one error, a recording
+    whose half is not its view (the crosstalk's leak: that is what ``[[wall]]`` pairs measure), two recordings of
+    one (half, plane, band), and a grid with holes (every missing (half, depth, band) named)."""
+    problems, entries = [], {}
+    for r in rec.psf:
+        if r.half != r.view:
+            problems.append(f"{r.name}: half = {r.half!r} but view = {r.view!r}: the other view of a blocked half is "
+                            f"the sensor's crosstalk, which the white-wall pairs measure: record it as a [[wall]] "
+                            f"(half, coded_view, plain_view) and keep [[psf]] to view = half")
+            continue
+        z = plane_index(r.depth_m, depths_m)
+        bands = _bands_of(r, wavelengths_m)
+        if z is None or any(b is None for b, _ in bands) or (r.channels == "rgb" and len(wavelengths_m) != 3):
+            problems.append(f"{r.name}: its depth or band is none of the design's (check_recordings names the fix)")
+            continue
+        for b, c in bands:
+            key = (r.half, z, b)
+            if key in entries:
+                problems.append(f"{r.name} records {r.half} at {_name(depths_m[z], wavelengths_m[b])} as "
+                                f"{entries[key][0].name} does: list all frames of one source in one recording")
+            entries[key] = (r, c)
+    planes = sorted({k[1] for k in entries})
+    bands = sorted({k[2] for k in entries})
+    missing = [f"{h} at {_name(depths_m[z], wavelengths_m[b])}" for h in PAIR_HALF for z in planes for b in bands
+               if (h, z, b) not in entries]
+    if missing:
+        problems.append(f"the [[psf]] recordings are no full grid of both halves × planes × bands: missing "
+                        f"{'; '.join(missing)}: record them, or leave out the planes/bands they belong to")
+    if not entries and not problems:
+        problems.append("no [[psf]] recording: add point-source recordings of both halves (half = view)")
+    if problems:
+        raise DoefabError(f"{rec.path}: " + "\n  - ".join(["the PSF recordings cannot be calibrated:"] + problems))
+    return PSFGrid(planes, bands, entries)
+
+
+def nominal_psfs(design, grid: PSFGrid, kernel: int) -> dict:
+    """{half: (planes, bands, K, K) float64} PSFs of the design's L-level part (no fab error) on its camera."""
+    import torch
+
+    from doefab.fabrication.levels import levels_to_height
+    from doefab.optics.psf import PSFPlan
+
+    plan = PSFPlan(design.camera, [design.wavelengths[b] for b in grid.bands],
+                   [design.depths[z] for z in grid.planes], kernel, halves=("coded", "uncoded"))
+    with torch.no_grad():
+        pair = plan(levels_to_height(design.levels, design.camera, design.n_levels))
+    return {"coded": pair.coded.double().numpy(), "uncoded": pair.uncoded.double().numpy()}
+
+
+def _read(paths, fmt: str):
+    """The frames ``paths`` averaged (``doefab.lab.framechecks.read_set``; checked before, so a problem here is
+    raised)."""
+    from doefab.lab.framechecks import read_set
+
+    problems: list[str] = []
+    got = read_set(paths, fmt, problems)
+    if problems or got is None:
+        raise DoefabError(problems[0] if problems else "a recording lists no readable frame")
+    return got
+
+
+def _light(frames, dark, black: float, k: int) -> dict:
+    """The recording's signal (DN) and signal-to-noise ratio in the kernel window around its peak
+    (``doefab.lab.framechecks.measure_psf``, summed over channels) and its detected photons: per channel the
+    window's signal over the conversion gain that the frames' photon transfer gives (None with one frame, or
+    when the fit finds no shot noise)."""
+    from doefab.lab.framechecks import measure_psf
+
+    got = measure_psf(frames, dark, black, k)
+    photons = 0.0
+    for c in range(len(got.total)):
+        s = got.signal[got.window] if got.signal.ndim == 2 else got.signal[got.window][..., c]
+        v = None if frames.var is None else (frames.var[got.window] if frames.var.ndim == 2
+                                              else frames.var[got.window][..., c])
+        gain = None if v is None else photon_transfer(s, v)
+        photons = None if gain is None or photons is None else photons + got.total[c] / gain
+    noise = math.sqrt(sum((t / max(q, 1e-300)) ** 2 for t, q in zip(got.total, got.kernel_snr)))
+    noiseless = noise <= 1e-100 * max(abs(float(sum(got.total))), 1.0)  # identical frames (a simulation)
+    return {"signal": got.signal, "signal_dn": float(sum(got.total)), "photons": photons,
+            "snr": math.inf if noiseless else float(sum(got.total)) / noise,
+            "peak_snr": math.inf if noiseless else float(min(got.peak_snr)), "noise": got.noise}
+
+
+def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float) -> dict:
+    """One recording registered, resampled and normalised: {(plane, band): PSF} of its half, the chief ray's
+    position and shift from the frame's centre pixel (rows, columns), and its light (:func:`_light`)."""
+    half = PAIR_HALF[r.half]
+    keys = [(z, b, c) for (h, z, b), (rr, c) in grid.entries.items() if rr is r and h == r.half]
+    refs = [nominal[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
+    k = refs[0].shape[-1]
+    frames = _read(r.frames, fmt)
+    light = _light(frames, _read(r.dark, fmt) if r.dark else None, black, k)
+    signal = light.pop("signal")
+    chans = [signal if c is None else signal[..., c] for _, _, c in keys]
+    chief = register(np.sum(chans, axis=0), np.sum(refs, axis=0))
+    what = f"{r.name} ({r.frames[0]})"
+    psfs = {(z, b): normalise(extract(ch, chief, k), float(ref.sum()), what)
+            for (z, b, _), ch, ref in zip(keys, chans, refs)}
+    centre = np.array(signal.shape[:2]) // 2
+    return {"psfs": psfs, "chief_px": chief.tolist(), "shift_px": (chief - centre).tolist(), "frames": frames.n,
+            "darks": len(r.dark), **light}
+
+
+def _wall_view(paths, dark, fmt: str, black: float) -> np.ndarray:
+    s = _read(paths, fmt).mean - (_read(dark, fmt).mean if dark else black)
+    return s if s.ndim == 2 else s.sum(axis=-1)  # colour walls: the channels' sum (the ratio is per photodiode)
+
+
+def measure_walls(rec: Recordings) -> dict | None:
+    """Per-column crosstalk from the ``[[wall]]`` pairs (None without any): both halves needed, one pair each."""
+    if not rec.wall:
+        return None
+    by_half = {}
+    for w in rec.wall:
+        if w.half in by_half:
+            raise DoefabError(f"{rec.path}: {w.name} and {by_half[w.half].name} both record the {w.half} half open: "
+                              f"list all frames of one half in one [[wall]]")
+        by_half[w.half] = w
+    if len(by_half) != 2:
+        miss = ({"coded", "plain"} - set(by_half)).pop()
+        raise DoefabError(f"{rec.path}: the crosstalk needs a white-wall pair with each half open; there is none with "
+                          f"half = {miss!r}: add a [[wall]] with half = {miss!r} (the other half blocked)")
+    views = {h: (_wall_view(w.plain_view, w.dark, rec.pixel_format, rec.black_level),
+                 _wall_view(w.coded_view, w.dark, rec.pixel_format, rec.black_level)) for h, w in by_half.items()}
+    a, b, sa, sb = wall_ratios(views["plain"], views["coded"])
+    return {"alpha_lr": a, "alpha_rl": b, "alpha_lr_se": sa, "alpha_rl_se": sb,
+            "rows": int(views["plain"][0].shape[0])}
+
+
+def _design_of(rec: Recordings):
+    from doefab.design.design import Design
+    from doefab.tasks import get_task
+
+    if rec.design is None:
+        raise DoefabError(f"{rec.path} names no design: set design = \"path/to/design\" in it, or pass --design DIR "
+                          f"(the design folder or mask set the part was made from)")
+    d = Design.load(rec.design)
+    return d, int(get_task(d.task, **d.task_params).kernel_size)
+
+
+@dataclass
+class Calibration:
+    """What the recordings gave, before anything is written: the calibrated ``pair`` (with its provenance), the
+    design's ``nominal`` PSFs on the same grid ({half: array}), per recording a summary ``rows`` (shift, frames,
+    signal, photons, SNR), and the crosstalk ``walls`` (per-column arrays and rows; None without ``[[wall]]``)."""
+
+    pair: object
+    nominal: dict
+    rows: list
+    walls: dict | None
+
+
+def measure_recordings(recordings: Recordings, progress: bool = False) -> Calibration:
+    """Check ``recordings`` (every frame, :func:`check_recordings`; the grid, :func:`psf_grid`; the wall pairs)
+    and calibrate them; nothing is written.
+
+    Normalisation: each half's PSF over the design's kernel sums to the *nominal* half's sum over that kernel —
+    a recording cannot know the absolute energy (exposure, source power and transmission are unknown), so the
+    share of the light is the model's."""
+    import torch
+
+    from doefab.fabrication.levels import levels_sha256
+    from doefab.optics.psf import PSFPair
+
+    design, kernel = _design_of(recordings)
+    check_recordings(recordings, design.wavelengths, design.depths, kernel)
+    grid = psf_grid(recordings, design.wavelengths, design.depths)
+    walls = measure_walls(recordings)
+    nominal = nominal_psfs(design, grid, kernel)
+    measured = {h: np.zeros_like(v) for h, v in nominal.items()}
+    rows = []
+    for r in recordings.psf:
+        m = calibrate_recording(r, grid, nominal, recordings.pixel_format, recordings.black_level)
+        for (z, b), psf in m.pop("psfs").items():
+            measured[PAIR_HALF[r.half]][grid.planes.index(z), grid.bands.index(b)] = psf
+        rows.append({"recording": r.name, "half": r.half, "depth_m": r.depth_m, "channels": r.channels,
+                     "wavelength_m": r.wavelength_m, "exposure_s": r.exposure_s, **m})
+        if progress:
+            print(f"[calibrate] {r.name}: shift {m['shift_px'][0]:+.2f}, {m['shift_px'][1]:+.2f} px (rows, columns)",
+                  flush=True)
+    prov = {"source": "calibrate", "levels_sha256": levels_sha256(design.levels),
+            "recordings_sha256": recordings_sha256(recordings), "shifts_px": [row["shift_px"] for row in rows],
+            "shift_axes": "[rows down, columns right]: sensor pixels from each [[psf]] frame's centre pixel "
+                          "(H//2, W//2) to the chief ray, in the recordings file's order",
+            "design": str(recordings.design)}
+    pair = PSFPair(torch.from_numpy(measured["coded"].astype(np.float32)),
+                   torch.from_numpy(measured["uncoded"].astype(np.float32)),
+                   tuple(design.wavelengths[b] for b in grid.bands), tuple(design.depths[z] for z in grid.planes),
+                   design.camera.sensor_pitch, provenance=prov)
+    return Calibration(pair, nominal, rows, walls)
+
+
+def write_calibration(cal: Calibration, out_dir) -> dict:
+    """Write ``psf_pair.npz``, ``crosstalk.json`` (with wall pairs) and ``calibration.html`` into ``out_dir`` (each
+    atomically); returns a summary: the files, per recording its shift, frames, signal (DN), photons and SNR, the
+    provenance and the crosstalk's column means."""
+    from doefab.lab.calreport import write_report
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    prov = cal.pair.provenance
+    files = [cal.pair.save(out / "psf_pair.npz")]
+    if cal.walls is not None:
+        from doefab.imaging.crosstalk import save_crosstalk
+
+        w = cal.walls
+        files.append(save_crosstalk(out / "crosstalk.json", w["alpha_lr"], w["alpha_rl"], w["alpha_lr_se"],
+                                    w["alpha_rl_se"], {"rows": w["rows"], "source": "calibrate",
+                                                       "recordings_sha256": prov["recordings_sha256"]}))
+    files.append(write_report(out / "calibration.html", cal.pair, cal.nominal, cal.rows, cal.walls, prov))
+    summary = {"files": [str(f) for f in files], "recordings": cal.rows, "provenance": prov}
+    if cal.walls is not None:
+        summary["crosstalk"] = {k: float(np.mean(cal.walls[k])) for k in ("alpha_lr", "alpha_rl")}
+    return summary
+
+
+def calibrate(recordings: Recordings, out_dir, progress: bool = False) -> dict:
+    """Calibrate the part and camera from ``recordings`` (:func:`doefab.lab.recordings.load_recordings`;
+    :func:`measure_recordings`: every check before any work) and write ``psf_pair.npz``, ``crosstalk.json``
+    (with ``[[wall]]`` pairs) and ``calibration.html`` into ``out_dir`` (:func:`write_calibration`), nothing when
+    a check fails. Returns :func:`write_calibration`'s summary."""
+    return write_calibration(measure_recordings(recordings, progress), out_dir)

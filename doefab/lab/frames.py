@@ -1,0 +1,293 @@
+"""Camera frames as a lab has them: NumPy arrays, 8/16-bit PNG, 8/16/32-bit and float TIFF, raw/DNG.
+
+Every reader returns float64 digital numbers (DN) as stored, shape (H, W) or (H, W, 3); nothing is subtracted or
+scaled (black level and darks are the recordings' business, ``doefab.lab.recordings``). A raw file goes through
+LibRaw (rawpy): its visible Bayer mosaic binned 2×2 into R, G (mean of the two greens) and B at half resolution
+(:func:`bin_bayer`); its white level is :func:`full_scale` and its black level per channel :func:`raw_black_level`.
+
+- ``pixel_format`` ``"auto"`` picks by extension: ``.npy``; ``.png``; ``.tif``/``.tiff``; a camera raw
+  (``.dng``, ``.nef``, ``.cr2``, ``.cr3``, ``.arw``, ``.raf``, ``.orf``, ``.rw2``, ``.pef``, ``.srw``, ``.raw`` …).
+- A 16-bit *colour* PNG is refused: Pillow, which reads PNGs, keeps only 8 of its bits (save it as a TIFF).
+- :func:`full_scale` is the largest DN the file can hold: ``2**bits - 1`` of an integer file (a TIFF's
+  BitsPerSample, so a 12-bit TIFF gives 4095), the raw's white level; a float file is taken as normalised
+  (1.0) when its values are ≤ 1, else no clipping level is known (``inf``).
+"""
+
+from __future__ import annotations
+
+import glob
+import io
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+from doefab.io import atomic_write_bytes
+
+__all__ = ["PIXEL_FORMATS", "RAW_EXTENSIONS", "frame_format", "expand", "read_frame", "full_scale",
+           "raw_black_level", "bin_bayer", "mean_frames", "write_frame"]
+
+PIXEL_FORMATS = ("auto", "npy", "png", "tiff", "raw")
+RAW_EXTENSIONS = (".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
+                  ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".mos", ".erf", ".kdc", ".mrw", ".raw", ".rwl")
+_BY_EXT = {".npy": "npy", ".png": "png", ".tif": "tiff", ".tiff": "tiff", **{e: "raw" for e in RAW_EXTENSIONS}}
+
+
+def frame_format(path: str | Path, pixel_format: str = "auto") -> str:
+    """The reader for ``path``: ``pixel_format`` itself, or under ``"auto"`` the one its extension names."""
+    if pixel_format not in PIXEL_FORMATS:
+        raise DoefabError(f"pixel_format {pixel_format!r} is not known: use one of {', '.join(PIXEL_FORMATS)}")
+    if pixel_format != "auto":
+        return pixel_format
+    fmt = _BY_EXT.get(Path(path).suffix.lower())
+    if fmt is None:
+        raise DoefabError(f"{path}: the extension {Path(path).suffix or '(none)'!r} names no frame format: use "
+                          f".npy, .png, .tif/.tiff or a camera raw (.dng, .nef, .cr2, .arw ...), or set "
+                          f"pixel_format to one of {', '.join(PIXEL_FORMATS[1:])}")
+    return fmt
+
+
+def expand(patterns: list[str] | str, base: Path, what: str) -> list[Path]:
+    """The files ``patterns`` (globs, ``**`` allowed; relative to ``base`` unless absolute) match, each pattern's
+    matches sorted by name, in the patterns' order, each file once; an error naming ``what`` and the pattern
+    that matches no file."""
+    if isinstance(patterns, (str, os.PathLike)):
+        patterns = [patterns]
+    if not isinstance(patterns, (list, tuple)) or not patterns:
+        raise DoefabError(f"{what} must be a file pattern or a list of them (e.g. [\"psf/frame_*.tiff\"]), "
+                          f"got {patterns!r}")
+    out: list[Path] = []
+    seen: set[Path] = set()
+    for pattern in patterns:
+        if not isinstance(pattern, (str, os.PathLike)) or not str(pattern):
+            raise DoefabError(f"{what}: {pattern!r} is not a file pattern: give a path or glob such as "
+                              f"\"psf/frame_*.tiff\" (relative to {base})")
+        full = str(pattern) if os.path.isabs(pattern) else os.path.join(glob.escape(str(base)), str(pattern))
+        found = sorted(Path(p) for p in glob.glob(full, recursive=True) if os.path.isfile(p))
+        if not found:
+            raise DoefabError(f"{what}: no file matches {str(pattern)!r} (looked in {base}): check the path, "
+                              f"which is relative to the recordings file's folder, and the glob")
+        for p in found:
+            if p not in seen:
+                seen.add(p)
+                out.append(p)
+    return out
+
+
+def bin_bayer(mosaic: np.ndarray, pattern: str | np.ndarray) -> np.ndarray:
+    """A Bayer mosaic (H, W) binned 2×2 to (H//2, W//2, 3): R, G (the mean of the two greens), B.
+
+    ``pattern`` is the colour of each pixel of the top-left 2×2 cell, row by row (``"RGGB"``, ``"BGGR"``,
+    ``"GRBG"``, ``"GBRG"``, or a 2×2 array of those letters); an odd last row or column is dropped."""
+    cell = np.asarray(list(pattern) if isinstance(pattern, str) else pattern).reshape(-1)
+    letters = "".join(str(c).upper() for c in cell)
+    if len(letters) != 4 or sorted(letters) != ["B", "G", "G", "R"]:
+        raise DoefabError(f"Bayer pattern {letters!r} is not a 2×2 cell of one R, two G and one B: use e.g. "
+                          f"'RGGB', 'BGGR', 'GRBG' or 'GBRG'")
+    m = np.asarray(mosaic, dtype=np.float64)
+    if m.ndim != 2 or m.shape[0] < 2 or m.shape[1] < 2:
+        raise DoefabError(f"a Bayer mosaic must be a 2-D array of at least 2×2 pixels, got shape {m.shape}")
+    h, w = (m.shape[0] // 2) * 2, (m.shape[1] // 2) * 2
+    sub = [m[i:h:2, j:w:2] for i in (0, 1) for j in (0, 1)]  # the cell's four pixels, row by row
+    greens = [s for s, c in zip(sub, letters) if c == "G"]
+    return np.stack([sub[letters.index("R")], 0.5 * (greens[0] + greens[1]), sub[letters.index("B")]], axis=-1)
+
+
+def _unreadable(path, fmt: str, exc: BaseException) -> DoefabError:
+    return DoefabError(f"{path} cannot be read as {fmt} ({type(exc).__name__}: {exc}): check that the file is a "
+                       f"complete frame, or set pixel_format to the format it is in ({', '.join(PIXEL_FORMATS[1:])})")
+
+
+def _png_header(path: Path) -> tuple[int, int]:
+    """(bit depth, colour type) from a PNG's IHDR chunk."""
+    with open(path, "rb") as fh:
+        head = fh.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        raise DoefabError(f"{path} is not a PNG file (no PNG signature): check the file, or set pixel_format to "
+                          f"the format it is in")
+    return head[24], head[25]
+
+
+def _read_png(path: Path) -> np.ndarray:
+    import imageio.v3 as iio
+
+    bits, colour = _png_header(path)
+    if bits not in (8, 16) or colour not in (0, 2):
+        kind = {0: "grey", 2: "RGB", 3: "palette", 4: "grey+alpha", 6: "RGBA"}.get(colour, f"type {colour}")
+        raise DoefabError(f"{path} is a {bits}-bit {kind} PNG: frames must be 8- or 16-bit grey or 8-bit RGB PNGs "
+                          f"without alpha; save the camera's values as a 16-bit TIFF or .npy")
+    if bits == 16 and colour == 2:
+        raise DoefabError(f"{path} is a 16-bit colour PNG, of which Pillow (the PNG reader) keeps only 8 bits: "
+                          f"save the frame as a 16-bit TIFF (tifffile) or .npy")
+    return iio.imread(path, extension=".png")
+
+
+def _read_tiff(path: Path) -> np.ndarray:
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        series = tif.series[0]
+        arr, axes = series.asarray(), series.axes
+    if arr.ndim == 3 and axes.startswith("S") and arr.shape[0] == 3:  # planar RGB
+        arr = np.moveaxis(arr, 0, -1)
+    if arr.ndim == 3 and arr.shape[-1] != 3:
+        raise DoefabError(f"{path} holds a stack of {arr.shape[0]} images (shape {arr.shape}): write one frame "
+                          f"per file (a glob such as \"frame_*.tiff\" takes them all)")
+    return arr
+
+
+def _raw(path: Path):
+    import rawpy
+
+    try:
+        return rawpy.imread(str(path))
+    except Exception as exc:  # LibRaw's errors have several types
+        raise _unreadable(path, "raw", exc) from None
+
+
+def _raw_pattern(raw, path: Path) -> str:
+    colors = np.asarray(raw.raw_colors_visible)
+    desc = raw.color_desc.decode("ascii", "replace")
+    block = colors[:6, :6]
+    periodic = block.shape == (6, 6) and np.array_equal(block, np.tile(block[:2, :2], (3, 3)))
+    letters = "".join(desc[int(c)] for c in block[:2, :2].reshape(-1)) if periodic else ""
+    if sorted(letters) != ["B", "G", "G", "R"]:
+        raise DoefabError(f"{path} is not a 2×2 Bayer (R, G, G, B) raw (colours {desc!r}, e.g. X-Trans or "
+                          f"Foveon): convert the frames to linear 16-bit TIFFs (e.g. `dcraw -4 -T -o 0`) and "
+                          f"read those")
+    return letters
+
+
+def _read_raw(path: Path) -> np.ndarray:
+    with _raw(path) as raw:
+        return bin_bayer(np.asarray(raw.raw_image_visible), _raw_pattern(raw, path))
+
+
+def raw_black_level(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
+    """The black level (DN) a raw file's metadata states for R, G, B (LibRaw's ``black_level_per_channel``
+    binned as :func:`bin_bayer` bins the mosaic); zeros for the other formats, which state none."""
+    path = Path(path)
+    if frame_format(path, pixel_format) != "raw":
+        return np.zeros(3)
+    with _raw(path) as raw:
+        letters = _raw_pattern(raw, path)
+        per = np.asarray(raw.black_level_per_channel, dtype=np.float64)
+        colors = np.asarray(raw.raw_colors_visible)[:2, :2].reshape(-1)
+        cell = np.array([per[int(c)] for c in colors])
+    return bin_bayer(cell.reshape(2, 2), letters).reshape(3)
+
+
+def read_frame(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
+    """One frame as float64 digital numbers, (H, W) or (H, W, 3); an error naming the file when it cannot be read,
+    holds non-finite values or has a type or shape that is no camera frame."""
+    path = Path(path)
+    fmt = frame_format(path, pixel_format)
+    if not path.is_file():
+        raise DoefabError(f"{path} not found: check the path (relative to the recordings file's folder)")
+    readers = {"npy": lambda p: np.load(p, allow_pickle=False), "png": _read_png, "tiff": _read_tiff,
+               "raw": _read_raw}
+    try:
+        arr = readers[fmt](path)
+    except DoefabError:
+        raise
+    except Exception as exc:  # each library raises its own types for a damaged or foreign file
+        raise _unreadable(path, fmt, exc) from None
+    arr = np.asarray(arr)
+    if arr.dtype.kind not in "uif":
+        raise DoefabError(f"{path} holds {arr.dtype} values: frames must be unsigned or signed integers or floats "
+                          f"(digital numbers)")
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[-1] == 3)):
+        raise DoefabError(f"{path} has shape {arr.shape}: a frame must be (H, W) monochrome or (H, W, 3) colour")
+    out = arr.astype(np.float64)
+    if not np.isfinite(out).all():
+        raise DoefabError(f"{path} holds non-finite values (NaN or inf): re-export the frame from the camera")
+    return out
+
+
+def _int_scale(dtype: np.dtype, bits: int | None = None) -> float:
+    return float(2 ** bits - 1) if bits else float(np.iinfo(dtype).max)
+
+
+def full_scale(path: str | Path, pixel_format: str = "auto") -> float:
+    """The largest digital number the file can hold: ``2**bits - 1`` of an integer file, a raw's white level, 1.0
+    for a float file of values ≤ 1 (normalised), ``inf`` for a float file of larger values (no clip level)."""
+    path = Path(path)
+    fmt = frame_format(path, pixel_format)
+    if fmt == "raw":
+        with _raw(path) as raw:
+            return float(raw.white_level)
+    if fmt == "png":
+        return _int_scale(np.dtype(np.uint16), _png_header(path)[0])
+    bits = None
+    if fmt == "tiff":
+        import tifffile
+
+        try:
+            with tifffile.TiffFile(path) as tif:
+                page, dtype = tif.pages[0], tif.series[0].dtype
+                bits = page.bitspersample if dtype.kind in "ui" else None
+        except Exception as exc:
+            raise _unreadable(path, fmt, exc) from None
+    else:
+        try:
+            dtype = np.load(path, mmap_mode="r", allow_pickle=False).dtype
+        except Exception as exc:
+            raise _unreadable(path, fmt, exc) from None
+    if dtype.kind in "ui":
+        return _int_scale(dtype, bits)
+    return 1.0 if float(read_frame(path, fmt).max(initial=0.0)) <= 1.0 else math.inf
+
+
+def mean_frames(paths, pixel_format: str = "auto") -> tuple[np.ndarray, int]:
+    """The mean of the frames ``paths`` (float64 DN) and their number; an error naming the first file whose shape
+    differs from the first file's."""
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise DoefabError("no frames to average: give at least one file")
+    total = read_frame(paths[0], pixel_format)
+    for p in paths[1:]:
+        frame = read_frame(p, pixel_format)
+        if frame.shape != total.shape:
+            raise DoefabError(f"{p} is {_shape(frame.shape)} but {paths[0]} is {_shape(total.shape)}: every frame "
+                              f"of one recording must have the same size and channels (re-record or remove it)")
+        total += frame
+    return total / len(paths), len(paths)
+
+
+def _shape(shape) -> str:
+    return f"{shape[1]}×{shape[0]} px" + (f" × {shape[2]} channels" if len(shape) == 3 else "")
+
+
+def write_frame(path: str | Path, array, bits: int = 16) -> Path:
+    """Write ``array`` (DN, (H, W) or (H, W, 3)) as an integer TIFF (``.tif``/``.tiff``), PNG or ``.npy`` of
+    ``bits`` (8 or 16) per sample, rounded, atomically; an error when a value does not fit."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if bits not in (8, 16):
+        raise DoefabError(f"bits must be 8 or 16, got {bits!r}")
+    if ext not in (".tif", ".tiff", ".png", ".npy"):
+        raise DoefabError(f"{path}: write_frame writes .tif/.tiff, .png or .npy frames, not {ext or '(none)'!r}")
+    a = np.asarray(array, dtype=np.float64)
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[-1] == 3)):
+        raise DoefabError(f"a frame must be (H, W) or (H, W, 3), got shape {a.shape}")
+    top = 2 ** bits - 1
+    if not np.isfinite(a).all() or a.min(initial=0) < 0 or a.max(initial=0) > top:
+        raise DoefabError(f"{path}: a {bits}-bit frame holds 0 … {top} DN, the array spans "
+                          f"{np.nanmin(a):g} … {np.nanmax(a):g}: clip or rescale it (or write 16 bits)")
+    data = np.rint(a).astype(np.uint16 if bits == 16 else np.uint8)
+    buf = io.BytesIO()
+    if ext == ".npy":
+        np.save(buf, data, allow_pickle=False)
+    elif ext == ".png":
+        import imageio.v3 as iio
+
+        if bits == 16 and data.ndim == 3:
+            raise DoefabError(f"{path}: a 16-bit colour PNG cannot be written by Pillow: write a .tiff instead")
+        buf.write(iio.imwrite("<bytes>", data, extension=".png"))
+    else:
+        import tifffile
+
+        tifffile.imwrite(buf, data, photometric="rgb" if data.ndim == 3 else "minisblack")
+    return atomic_write_bytes(path, buf.getvalue())

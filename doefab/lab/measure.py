@@ -1,0 +1,109 @@
+"""The calibration's arithmetic on arrays: registration of a recorded PSF to the nominal one,
+resampling onto the design's kernel, the light share, photon transfer, and the white-wall crosstalk ratios.
+
+Conventions: frames are (H, W) digital numbers (DN), rows = y (row 0 top); a position is (row, column) in
+pixels, sub-pixel where stated; a PSF window has its chief ray on pixel (K//2, K//2), as ``PSFPair``'s have.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["window", "register", "extract", "normalise", "photon_transfer", "wall_ratios", "UPSAMPLE"]
+
+UPSAMPLE = 100  # cross-correlation refined to 1/100 pixel
+_PAD = 8  # pixels of frame kept around a kernel while it is shifted (the Fourier shift's wrap stays outside)
+
+
+def window(frame: np.ndarray, centre, size: int) -> np.ndarray:
+    """The ``size`` × ``size`` window of ``frame`` whose pixel (size//2, size//2) is frame pixel ``centre``
+    (integers); zeros where it reaches beyond the frame."""
+    h, w = frame.shape
+    r0, c0 = int(centre[0]) - size // 2, int(centre[1]) - size // 2
+    out = np.zeros((size, size))
+    rs, cs = max(r0, 0), max(c0, 0)
+    re, ce = min(r0 + size, h), min(c0 + size, w)
+    if rs < re and cs < ce:
+        out[rs - r0:re - r0, cs - c0:ce - c0] = frame[rs:re, cs:ce]
+    return out
+
+
+def register(frame: np.ndarray, nominal: np.ndarray, upsample: int = UPSAMPLE) -> np.ndarray:
+    """The chief ray's sub-pixel (row, column) in ``frame`` (a dark-subtracted recording, DN): where ``nominal``
+    (the design's K × K PSF, chief ray at (K//2, K//2)) fits it best.
+
+    The brightest pixel of the frame (smoothed over 3 × 3 against a hot pixel) is taken as the nominal's
+    brightest, which places the chief ray to a pixel or so; then the frame is cropped around it (K plus K//2 on
+    each side) and cross-correlated with the nominal (``skimage.registration.phase_cross_correlation`` without
+    spectral whitening, refined ``upsample`` times): a part's PSF whose brightest lobe is not the design's is
+    still found within ±K/2 pixels."""
+    from scipy.ndimage import uniform_filter
+    from skimage.registration import phase_cross_correlation
+
+    k = nominal.shape[-1]
+    peak = np.array(np.unravel_index(np.argmax(uniform_filter(frame, 3, mode="constant")), frame.shape))
+    nom_peak = np.array(np.unravel_index(np.argmax(uniform_filter(nominal, 3, mode="constant")), nominal.shape))
+    coarse = peak - (nom_peak - k // 2)
+    margin = max(k // 2, 4)
+    size = k + 2 * margin
+    crop = window(frame, coarse, size)
+    ref = np.zeros((size, size))
+    ref[margin:margin + k, margin:margin + k] = nominal
+    shift, _, _ = phase_cross_correlation(ref, crop, upsample_factor=upsample, normalization=None)
+    return coarse - np.asarray(shift, dtype=np.float64)
+
+
+def extract(frame: np.ndarray, chief, k: int) -> np.ndarray:
+    """The K × K window of ``frame`` resampled (a Fourier shift: band-limited interpolation) so that the sub-pixel
+    position ``chief`` (row, column) lands on pixel (K//2, K//2). Exact for a PSF sampled above Nyquist (its
+    cut-off D / (λ f) below 1 / (2 · pitch)); an undersampled band keeps its aliasing's error (a few per cent of
+    the light at 1.2× the Nyquist frequency)."""
+    from scipy.ndimage import fourier_shift
+
+    chief = np.asarray(chief, dtype=np.float64)
+    whole = np.rint(chief)
+    size = k + 2 * _PAD
+    crop = window(frame, whole, size)
+    moved = np.fft.ifft2(fourier_shift(np.fft.fft2(crop), whole - chief)).real
+    return moved[_PAD:_PAD + k, _PAD:_PAD + k]
+
+
+def normalise(psf: np.ndarray, share: float, what: str) -> np.ndarray:
+    """``psf`` (DN) as energy fractions summing to ``share``: negative values (the dark's noise, the resampling's
+    ringing) are set to 0 first, so a dark background adds about 0.4 σ per pixel (σ: its noise) to the sum."""
+    p = np.clip(psf, 0.0, None)
+    total = float(p.sum())
+    if not np.isfinite(total) or total <= 0:
+        raise DoefabError(f"{what}: no light in the kernel after the dark is subtracted: check that the source was "
+                          f"on and the darks (or black_level) belong to these frames")
+    return p * (share / total)
+
+
+def photon_transfer(signal: np.ndarray, variance: np.ndarray) -> float | None:
+    """The conversion gain (DN per detected photon) from the photon-transfer relation ``variance = gain · signal
+    + read variance`` fitted by least squares over the pixels given (signal: dark-subtracted DN; variance: from
+    frame to frame, DN²); None when the fit finds no shot noise (a flat or too dim window)."""
+    s, v = np.asarray(signal, np.float64).ravel(), np.asarray(variance, np.float64).ravel()
+    if s.size < 3 or float(np.ptp(s)) <= 0:
+        return None
+    gain, _ = np.polyfit(s, v, 1)
+    return float(gain) if np.isfinite(gain) and gain > 0 else None
+
+
+def wall_ratios(plain_open, coded_open) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-column ``(α_l→r, α_r→l, se of α_l→r, se of α_r→l)`` from two white-wall pairs ``(plain view,
+    coded view)`` (dark-subtracted DN, (rows, columns)): ``plain_open`` recorded with the coded half blocked (only the
+    left, plain view lit: α_l→r = R* / (L* + R*)), ``coded_open`` with the plain half blocked (α_r→l = L* /
+    (L* + R*)): Eq. 30–31 by :func:`doefab.imaging.crosstalk.calibrate_crosstalk`, averaged over rows. Each
+    standard error is the row-to-row scatter of the pixels' ratios in that column, std / √rows."""
+    from doefab.imaging.crosstalk import calibrate_crosstalk
+
+    pairs = [tuple(np.asarray(v, np.float64) for v in p) for p in (plain_open, coded_open)]
+    a, b = calibrate_crosstalk(pairs[0], pairs[1])
+    rows = pairs[0][0].shape[0]
+    if rows < 2 or pairs[1][0].shape[0] < 2:
+        raise DoefabError("white-wall frames need at least 2 rows for the ratios' standard errors")
+    se = [np.std(p[i] / (p[0] + p[1]), axis=0, ddof=1) / np.sqrt(p[0].shape[0]) for p, i in zip(pairs, (1, 0))]
+    return a.ravel(), b.ravel(), se[0], se[1]

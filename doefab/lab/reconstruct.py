@@ -1,0 +1,294 @@
+"""A camera's own captures reconstructed: read, scaled, unmixed with the calibrated crosstalk, then run through a
+task's network in overlapping tiles, so that what the network computes at once does not grow with the image.
+
+**Captures.** :func:`read_capture` reads a frame with :func:`doefab.lab.frames.read_frame` and scales it to
+[0, 1]: ``(DN − black) / (white − black)``, ``white`` the file's full scale (:func:`doefab.lab.frames.full_scale`:
+``2**bits − 1``, a raw's white level) unless given, ``black`` the raw's own black level (0 for other files) unless
+given; values outside [0, 1] are clipped (noise below black, nothing above white). The networks read colour
+captures (3 channels) quantised to at least 8 bits. :func:`unmix_views` undoes the dual-pixel crosstalk with a
+calibration's per-column ratios (``crosstalk.json``; the coded capture is the right view, the plain one the left,
+:mod:`doefab.imaging.crosstalk`); a photodiode that saturated stays saturated, as in the camera model's pipeline.
+
+**Tiles.** The networks take sides that are multiples of 32 (at least 64). The image is extended by edge
+replication at the bottom and right to multiples of 32 (the whole-image network would need the same) and cut
+into tiles of ``tile`` × ``tile`` pixels — an image narrower than that along an axis is one tile across — whose
+starts are multiples of 32: consecutive tiles share ``overlap`` pixels (a multiple of 32, at most half a tile) and
+the last tile of a row or column ends at the image's end. Each tile is reconstructed alone. A pixel near a tile's
+edge lacks the light that the PSF brought from beyond it and the context the network would see, so the tiles are
+blended with a raised-cosine window: along each shared edge the weight is 0 over the outer quarter of the
+overlap, rises as ``sin²`` over its middle half and is 1 beyond; the two tiles' weights sum to 1 there, and every
+result is divided by the sum of the weights. The default overlap is the PSF's kernel (the reach of its light)
+rounded up to a multiple of 32. A network that reads a few pixels around each pixel gives, tiled, exactly its
+whole-image result; the shipped networks see farther (the depth network's trunk, the HDR network's
+least-squares solve, whose conjugate-gradient steps depend on the whole frame), so their tiled results differ from
+the whole-image ones by a stated tolerance (``docs/guide/after-the-fab.md``).
+
+The proposed hyperspectral network estimates the scene's light from the central 256² pixels of its input (one
+light per scene); a tile would estimate its own. :func:`iter_tiled` estimates it once, from the centre of the
+whole (extended) image as the whole-image network would, and every tile uses it.
+
+Memory: the tile's working set (the network, its FFT canvases) does not grow with the image; the image's own
+arrays do — the two captures (2 × 3 × 4 bytes per pixel), the result (4 bytes per channel per pixel) and a band of
+one tile's height across the image (the blend) — ``benchmarks/reconstruct_memory.py`` measures both parts.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from doefab.errors import DoefabError
+
+__all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
+           "iter_tiled", "reconstruct_tiled", "output_channels", "read_capture", "unmix_views", "load_views"]
+
+MULTIPLE = 32  # the networks' sides are multiples of this (``reconstruction.networks.check_input``) ...
+MIN_SIDE = 64  # ... and at least this
+DEFAULT_TILE = 512  # pixels: 0.5–1.3 GB of working set for the shipped networks (benchmarks/reconstruct_memory.py)
+MIN_BITS = 8  # captures quantised more coarsely than this are refused
+
+
+def _round_up(n: int, m: int = MULTIPLE) -> int:
+    return -(-int(n) // m) * m
+
+
+def default_overlap(rec, psf=None) -> int:
+    """The overlap of consecutive tiles: the largest PSF kernel (the network's, ``psf``'s) rounded up to a
+    multiple of 32 (a pixel's light comes from up to half a kernel away)."""
+    k = max(int(rec.pair.coded.shape[-1]), int(psf.coded.shape[-1]) if getattr(psf, "coded", None) is not None else 0)
+    return _round_up(k)
+
+
+def check_tiling(tile: int, overlap: int, shape: tuple[int, int], what: str = "the captures") -> None:
+    """Refuse a tile or overlap the networks cannot take, or an image smaller than their smallest input, with
+    values that work (``tile``, ``overlap``: the ``--tile`` and ``--overlap`` of ``doefab reconstruct``)."""
+    for name, v, lo in (("tile", tile, MIN_SIDE), ("overlap", overlap, MULTIPLE)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or v % MULTIPLE:
+            good = max(lo, _round_up(v)) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else lo
+            raise DoefabError(f"{name} {v!r} must be a multiple of {MULTIPLE} pixels, at least {lo} (the networks' "
+                              f"input sides are multiples of {MULTIPLE}): e.g. {name} {good} (--{name} {good})")
+    if 2 * overlap > tile:
+        raise DoefabError(f"overlap {overlap} px is more than half the tile ({tile} px): give a tile of at least "
+                          f"{2 * overlap} px (--tile {_round_up(2 * overlap)}) or an overlap of at most "
+                          f"{tile // 2 // MULTIPLE * MULTIPLE} px (--overlap {tile // 2 // MULTIPLE * MULTIPLE})")
+    h, w = shape
+    if min(h, w) < MIN_SIDE:
+        raise DoefabError(f"{what} are {w}×{h} px: the networks need at least {MIN_SIDE} px on each side: capture "
+                          f"(or crop) at least {MIN_SIDE}×{MIN_SIDE} pixels")
+
+
+def tile_starts(length: int, tile: int, overlap: int) -> list[int]:
+    """Starts of the tiles along an axis of ``length`` pixels (already a multiple of 32): every ``tile −
+    overlap`` pixels, the last one ending at the end; one tile when it spans the axis."""
+    if tile >= length:
+        return [0]
+    step = tile - overlap
+    starts = list(range(0, length - tile + 1, step))
+    if starts[-1] + tile < length:
+        starts.append(length - tile)
+    return starts
+
+
+def blend_window(tile: int, overlap: int, first: bool, last: bool) -> np.ndarray:
+    """The 1-D blending weight over a tile: 0 over the outer quarter of the overlap on each shared side, ``sin²``
+    up to 1 over its middle half, 1 in the core (a side at the image's edge (``first``/``last``) keeps 1)."""
+    x = np.arange(tile) + 0.5
+    guard = overlap / 4
+    ramp = np.sin(0.5 * np.pi * np.clip((x - guard) / (overlap - 2 * guard), 0.0, 1.0)) ** 2
+    w = np.ones(tile)
+    if not first:
+        w = w * ramp
+    if not last:
+        w = w * ramp[::-1]
+    return w
+
+
+def output_channels(rec) -> int:
+    """Channels of the network's result: 3 (HDR radiance), one per band (spectra), 1 (depth in metres)."""
+    return {"hdr": 3, "depth": 1}.get(rec.task, len(rec.pair.wavelengths))
+
+
+def _check_captures(coded, uncoded) -> tuple[int, int]:
+    for name, x in (("coded", coded), ("uncoded", uncoded)):
+        if not isinstance(x, np.ndarray) or x.ndim != 3 or x.shape[0] != 3 or x.dtype.kind != "f":
+            raise DoefabError(f"{name} must be a [3, H, W] float array in [0, 1] (a colour capture scaled to the "
+                              f"sensor's white level: read_capture), got "
+                              f"{getattr(x, 'dtype', type(x).__name__)} {getattr(x, 'shape', '')}")
+        lo, hi = float(x.min()), float(x.max())
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or hi > 1:
+            raise DoefabError(f"{name} holds values {lo:.4g}–{hi:.4g}: captures are in [0, 1] (0 = black, 1 = the "
+                              f"sensor's white level): scale and clip them first (read_capture does)")
+    if coded.shape != uncoded.shape:
+        raise DoefabError(f"coded {coded.shape[2]}×{coded.shape[1]} px and uncoded {uncoded.shape[2]}×"
+                          f"{uncoded.shape[1]} px differ in size: give the two views of one exposure")
+    return coded.shape[1], coded.shape[2]
+
+
+def _tile(x: np.ndarray, r: int, c: int, rows: int, cols: int) -> np.ndarray:
+    """``x[:, r:r+rows, c:c+cols]``, extended by edge replication where it runs past the image."""
+    t = x[:, r:r + rows, c:c + cols]
+    short = (rows - t.shape[1], cols - t.shape[2])
+    return np.pad(t, ((0, 0), (0, short[0]), (0, short[1])), mode="edge") if any(short) else np.ascontiguousarray(t)
+
+
+_LIGHT_SIDE = 256  # the proposed spectral network's light comes from the central 256² (illuminant.max_side)
+
+
+@contextmanager
+def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int]):
+    """The proposed hyperspectral network's light, estimated once from the centre of the whole extended image
+    (the pixels the whole-image network would use) and fixed for every tile (``SpectralNet.light``)."""
+    model = rec.model
+    if rec.task != "hyperspectral" or rec.variant != "proposed" or getattr(model, "inverses", None) is None:
+        yield
+        return
+    import torch
+
+    from doefab.reconstruction.illuminant import mix_illuminants, search_illuminant
+
+    (hp, wp), side = padded, _LIGHT_SIDE
+    r0, c0 = max(0, (hp - side) // 2), max(0, (wp - side) // 2)
+    crop = [torch.from_numpy(_tile(x, r0, c0, min(side, hp), min(side, wp)))[None].float() for x in (coded, uncoded)]
+    args = (*crop, rec._psf(psf)[0].float().cpu(), model.response.cpu(), model.inverses.cpu())
+    if model.mix:
+        w = mix_illuminants(*args)
+        w = w / w.sum(dim=1, keepdim=True).clamp_min(1e-12)
+    else:
+        w = torch.nn.functional.one_hot(search_illuminant(*args)[0], model.inverses.shape[0]).float()
+    model.light = w.to(rec.device)
+    try:
+        yield
+    finally:
+        model.light = None
+
+
+def iter_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = DEFAULT_TILE, overlap: int | None = None,
+               psf=None, progress: bool = False):
+    """Yield ``(row, block)``: the result of rows ``row`` … ``row + len`` of the image, [C, rows, W] float32 (C:
+    :func:`output_channels`), top to bottom, each as soon as no later tile reaches it (module docstring). The
+    spectral network's light stays fixed until the generator is exhausted or closed.
+
+    Args:
+        rec: a ``doefab.reconstruction.loader.Reconstructor``.  coded, uncoded: [3, H, W] float captures in [0, 1].
+        tile, overlap: pixels, multiples of 32 (overlap None: :func:`default_overlap`).  psf: a PSF pair the
+            network is conditioned on instead of its own (a measured part's).  progress: a tqdm bar over tiles.
+    """
+    from tqdm.auto import tqdm
+
+    h, w = _check_captures(coded, uncoded)
+    overlap = default_overlap(rec, psf) if overlap is None else overlap
+    check_tiling(tile, overlap, (h, w))
+    rec._psf(psf)  # a PSF pair the network cannot take is refused before any tile
+    hp, wp = _round_up(h), _round_up(w)
+    th, tw = min(tile, hp), min(tile, wp)  # an image narrower than a tile is one tile across
+    rows, cols = tile_starts(hp, th, overlap), tile_starts(wp, tw, overlap)
+    ch = output_channels(rec)
+    col_w = [blend_window(tw, overlap, i == 0, i == len(cols) - 1).astype(np.float32) for i in range(len(cols))]
+    acc = np.zeros((ch, th, wp), np.float32)  # the band of rows [row, row + th): weighted sums ...
+    wsum = np.zeros((th, wp), np.float32)  # ... and their weights
+    with _scene_light(rec, coded, uncoded, psf, (hp, wp)), \
+            tqdm(total=len(rows) * len(cols), desc=f"{rec.task} tiles", unit="tile", disable=not progress) as bar:
+        for i, r in enumerate(rows):
+            row_w = blend_window(th, overlap, i == 0, i == len(rows) - 1).astype(np.float32)
+            for c, cw in zip(cols, col_w):
+                y = rec(_tile(coded, r, c, th, tw), _tile(uncoded, r, c, th, tw), psf=psf)
+                wt = row_w[:, None] * cw[None, :]
+                acc[:, :, c:c + tw] += y.reshape(ch, th, tw) * wt
+                wsum[:, c:c + tw] += wt
+                bar.update()
+            done = (rows[i + 1] if i + 1 < len(rows) else hp) - r  # rows no later tile reaches
+            n = min(done, h - r)
+            yield r, acc[:, :n, :w] / wsum[:n, :w]
+            acc[:, :th - done], acc[:, th - done:] = acc[:, done:].copy(), 0.0
+            wsum[:th - done], wsum[th - done:] = wsum[done:].copy(), 0.0
+
+
+def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = DEFAULT_TILE,
+                      overlap: int | None = None, psf=None, progress: bool = False) -> np.ndarray:
+    """The network's result for a whole capture pair, reconstructed in blended tiles (:func:`iter_tiled`):
+    [3, H, W] HDR radiance (1 = the clipping level) | [C, H, W] spectra | [H, W] depth in metres, float32."""
+    h, w = _check_captures(coded, uncoded)
+    out = np.empty((output_channels(rec), h, w), np.float32)
+    for r, block in iter_tiled(rec, coded, uncoded, tile, overlap, psf, progress):
+        out[:, r:r + block.shape[1]] = block
+    return out[0] if rec.task == "depth" else out
+
+
+def read_capture(path, black_level: float | None = None, white_level: float | None = None,
+                 pixel_format: str = "auto") -> np.ndarray:
+    """One view of a capture as a [3, H, W] float32 array in [0, 1] (module docstring); refuses, naming the file
+    and the fix, a frame that is not colour, one of fewer than 8 bits and one with no known white level.
+
+    ``black_level``, ``white_level``: digital numbers (None: the raw's own black level, else 0; the file's full
+    scale)."""
+    from doefab.lab.frames import full_scale, raw_black_level, read_frame
+
+    path = Path(path)
+    dn = read_frame(path, pixel_format)
+    if dn.ndim != 3:
+        raise DoefabError(f"{path} is a monochrome frame ({dn.shape[1]}×{dn.shape[0]} px): the networks read colour "
+                          f"captures (R, G, B): give the camera's colour frames (a 16-bit RGB TIFF, or the raw/DNG, "
+                          f"which is binned to R, G, B)")
+    white = full_scale(path, pixel_format) if white_level is None else float(white_level)
+    if not math.isfinite(white):
+        raise DoefabError(f"{path} holds floats above 1 ({dn.max():.4g}) and so states no white level: give "
+                          f"--white-level (the sensor's clipping level in the file's units), or save it scaled to "
+                          f"[0, 1]")
+    if white_level is None and 1 < white < 2**MIN_BITS - 1:  # (1.0: a float file, normalised)
+        raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks need captures "
+                          f"of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or give the raw/DNG")
+    black = (float(np.mean(raw_black_level(path, pixel_format))) if black_level is None else float(black_level))
+    if not white > black >= 0:
+        raise DoefabError(f"{path}: black level {black:g} DN must be ≥ 0 and below the white level {white:g} DN: "
+                          f"give --black-level of the dark frames' mean (e.g. 0, or 2048 for many 14-bit raws)")
+    out = np.empty((3, *dn.shape[:2]), np.float32)
+    for k in range(3):  # channel by channel: no full-size float64 temporary beyond the frame itself
+        out[k] = np.clip((dn[..., k] - black) / (white - black), 0.0, 1.0)
+    return out
+
+
+def unmix_views(coded: np.ndarray, uncoded: np.ndarray, crosstalk, where: str = "the captures",
+                rows: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """``(coded, uncoded)`` with the dual-pixel crosstalk undone by ``crosstalk`` (a ``DualPixelCrosstalk`` whose
+    ``estimate`` holds the calibrated per-column ratios, e.g. ``DualPixelCrosstalk.load(crosstalk.json)``), in
+    place, ``rows`` rows at a time; a saturated view stays saturated (1), the rest clipped to [0, 1]."""
+    from doefab.imaging.crosstalk import unmix_crosstalk
+
+    a, b = (np.asarray(x, np.float64) for x in (crosstalk.estimate or (None, None)))
+    if crosstalk.estimate is None or a.ndim > 1 or b.ndim > 1:
+        raise DoefabError("crosstalk must be a calibrated camera with per-column ratios (DualPixelCrosstalk.load of "
+                          "the crosstalk.json that doefab calibrate wrote)")
+    w = coded.shape[-1]
+    if a.size not in (1, w):
+        raise DoefabError(f"the crosstalk calibration holds {a.size} columns but {where} are {w} px wide: the "
+                          f"ratios are per sensor column, so calibrate with white-wall frames of the captures' size "
+                          f"and format (doefab calibrate), or give captures {a.size} px wide")
+    for r in range(0, coded.shape[-2], rows):
+        c, u = coded[:, r:r + rows], uncoded[:, r:r + rows]
+        sat_c, sat_u = c >= 1.0, u >= 1.0
+        left, right = unmix_crosstalk(u, c, a, b)  # the plain half's light is the left view, the coded the right
+        c[...] = np.where(sat_c, 1.0, np.clip(right, 0.0, 1.0))
+        u[...] = np.where(sat_u, 1.0, np.clip(left, 0.0, 1.0))
+    return coded, uncoded
+
+
+def load_views(coded_path, uncoded_path, crosstalk=None, black_level: float | None = None,
+               white_level: float | None = None, pixel_format: str = "auto", tile: int | None = None,
+               overlap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The two views of one exposure, read (:func:`read_capture`), checked to be of one size (and, ``tile``
+    given, one that the tiling takes: :func:`check_tiling`), and unmixed (:func:`unmix_views`) when
+    ``crosstalk`` is given: ``(coded, uncoded)`` [3, H, W]."""
+    coded = read_capture(coded_path, black_level, white_level, pixel_format)
+    uncoded = read_capture(uncoded_path, black_level, white_level, pixel_format)
+    if coded.shape != uncoded.shape:
+        raise DoefabError(f"{coded_path} is {coded.shape[2]}×{coded.shape[1]} px but {uncoded_path} is "
+                          f"{uncoded.shape[2]}×{uncoded.shape[1]} px: pair the two views of one exposure (the files "
+                          f"are paired in sorted order)")
+    if tile is not None:
+        check_tiling(tile, overlap, coded.shape[1:], f"{coded_path} and {uncoded_path}")
+    if crosstalk is not None:
+        unmix_views(coded, uncoded, crosstalk, f"{coded_path} and {uncoded_path}")
+    return coded, uncoded

@@ -1,0 +1,127 @@
+"""``doefab reconstruct``: a user's own 16-bit captures in, files other programs open out; every unusable input
+refused with one line (exit 2) before anything is written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import doefab
+from doefab.cli import main
+from doefab.lab.frames import write_frame
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    """Two exposures of 96×128 px as a camera delivers them: depth scenes through the shipped depth network's
+    PSFs, mixed by per-column crosstalk, 16-bit colour TIFFs (coded and plain views in two folders), the
+    crosstalk.json of that camera and the network's own PSF pair as psf_pair.npz."""
+    from doefab.imaging.crosstalk import mix_crosstalk, save_crosstalk
+    from doefab.reconstruction import data
+
+    root = tmp_path_factory.mktemp("shots")
+    rec = doefab.load_reconstructor("depth")
+    a, b = np.linspace(0.03, 0.07, 128), np.linspace(0.06, 0.04, 128)
+    for i in range(2):
+        scene, dm = data.depth_sample(np.random.default_rng(i), 128, "val")
+        c, u = doefab.simulate_captures(scene[:, :96], rec.pair, depth_map=dm[:96], seed=i, noise="none")
+        left, right = mix_crosstalk(np.asarray(u), np.asarray(c), a, b)  # the plain view is the left one
+        write_frame(root / "coded" / f"shot{i}.tiff", np.moveaxis(np.clip(right, 0, 1), 0, -1) * 65535)
+        write_frame(root / "plain" / f"shot{i}_L.tiff", np.moveaxis(np.clip(left, 0, 1), 0, -1) * 65535)
+    save_crosstalk(root / "crosstalk.json", a, b, np.full(128, 1e-4), np.full(128, 1e-4), {"source": "test"})
+    rec.pair.save(root / "psf_pair.npz", {"source": "simulation"})
+    return root
+
+
+def test_depth_pairs_reconstructed_with_psf_and_crosstalk(shots, tmp_path, capsys):
+    import tifffile
+
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+    from doefab.lab.reconstruct import load_views, reconstruct_tiled
+
+    out = tmp_path / "out"
+    rc = main(["reconstruct", "--task", "depth", "--coded", str(shots / "coded" / "*.tiff"), "--uncoded",
+               str(shots / "plain" / "*.tiff"), "--psf", str(shots / "psf_pair.npz"), "--crosstalk",
+               str(shots / "crosstalk.json"), "--tile", "64", "--overlap", "32", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    names = {p.name for p in out.iterdir()}
+    for stem in ("shot0", "shot1"):
+        assert {f"{stem}.depth_m.tiff", f"{stem}.depth_mm.png", f"{stem}.png"} <= names
+    record = json.loads((out / "reconstruct.json").read_text())
+    first = record["pairs"][0]
+    assert first["coded"].endswith("shot0.tiff") and first["uncoded"].endswith("shot0_L.tiff")
+    import hashlib
+
+    assert first["coded_sha256"] == hashlib.sha256((shots / "coded" / "shot0.tiff").read_bytes()).hexdigest()
+    assert record["tile_px"] == 64 and record["overlap_px"] == 32 and record["psf"]["provenance"]["source"] == "simulation"
+    assert record["crosstalk"]["sha256"] and record["versions"]["OpenEXR"] and record["weights"]["sha256"]
+    # the file holds what the API gives for the unmixed views
+    rec = doefab.load_reconstructor("depth")
+    cam = DualPixelCrosstalk.load(shots / "crosstalk.json")
+    coded, uncoded = load_views(shots / "coded" / "shot0.tiff", shots / "plain" / "shot0_L.tiff", cam)
+    want = reconstruct_tiled(rec, coded, uncoded, 64, 32, psf=doefab.PSFPair.load(shots / "psf_pair.npz"))
+    got = tifffile.imread(out / "shot0.depth_m.tiff")
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
+    # the crosstalk was undone: the unmixed coded view is not the recorded one
+    from doefab.lab.reconstruct import read_capture
+
+    assert np.abs(read_capture(shots / "coded" / "shot0.tiff") - coded).max() > 1e-3
+
+
+@pytest.mark.parametrize("task, files", [("hdr", ["x.exr", "x.png"]), ("hyperspectral", ["x.hdr", "x.img", "x.png"])])
+def test_hdr_and_spectra_write_their_formats(task, files, tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    for name in ("c/x.tiff", "u/x.tiff"):
+        write_frame(tmp_path / name, rng.uniform(0, 65535, (96, 128, 3)))
+    rc = main(["reconstruct", "--task", task, "--coded", str(tmp_path / "c/x.tiff"), "--uncoded",
+               str(tmp_path / "u/x.tiff"), "--out", str(tmp_path / "o")])  # 96×128 px: one tile
+    assert rc == 0, capsys.readouterr().err
+    assert set(files) | {"reconstruct.json", ".doefab-output.json"} == {p.name for p in (tmp_path / "o").iterdir()}
+
+
+def _pair(work, size=(96, 128), channels=3, name="x"):
+    shape = (*size, channels) if channels == 3 else size
+    for folder in ("c", "u"):
+        write_frame(work / folder / f"{name}.tiff", np.full(shape, 1000.0))
+    return ["--coded", work / "c" / f"{name}.tiff", "--uncoded", work / "u" / f"{name}.tiff"]
+
+
+def _two_sizes(work):
+    args = _pair(work)
+    write_frame(work / "u" / "x.tiff", np.full((96, 96, 3), 1000.0))
+    return args
+
+
+@pytest.mark.parametrize("build, needle", [
+    (lambda w: ["--coded", w / "*.tiff", "--uncoded", w / "*.png"] if _pair(w) else [], "no file matches"),
+    (lambda w: _pair(w) + ["--coded", w / "c" / "x.tiff", w / "u" / "x.tiff"], "--coded matches 2 files and"),
+    (lambda w: _two_sizes(w), "u/x.tiff is 96×96 px: pair the two views"),
+    (lambda w: _pair(w, channels=1), "x.tiff is a monochrome frame (128×96 px)"),
+    (lambda w: _pair(w, size=(48, 128)), "are 128×48 px: the networks need at least 64 px on each side"),
+    (lambda w: _pair(w) + ["--tile", "128"], "more than half the tile (128 px): give a tile of at least 192 px (--tile"),
+    (lambda w: _pair(w) + ["--tile", "80", "--overlap", "32"], "tile 80 must be a multiple of 32"),
+    (lambda w: _pair(w) + ["--overlap", "32", "--black-level", "70000"], "below the white level 65535 DN"),
+])
+def test_unusable_captures_are_one_clear_error_and_nothing_is_written(build, needle, one_clear_error):
+    one_clear_error(lambda f, w: ["reconstruct", "--task", "depth", *build(w), "--out", w / "o"], 2, needle)
+
+
+def test_a_crosstalk_of_another_width_is_refused(one_clear_error, tmp_path):
+    from doefab.imaging.crosstalk import save_crosstalk
+
+    save_crosstalk(tmp_path / "ct.json", *(np.full(100, v) for v in (0.05, 0.05, 1e-4, 1e-4)))
+    one_clear_error(lambda f, w: ["reconstruct", "--task", "depth", *_pair(w), "--overlap", "32", "--crosstalk",
+                                  tmp_path / "ct.json", "--out", w / "o"], 2,
+                    "holds 100 columns but")
+
+
+def test_a_psf_of_other_bands_is_refused_with_the_fitted_pair_as_the_fix(shots, one_clear_error, tmp_path):
+    from doefab.optics.psf import PSFPair
+
+    pair = doefab.PSFPair.load(shots / "psf_pair.npz")
+    one_band = PSFPair(pair.coded[:, :1], pair.uncoded[:, :1], pair.wavelengths[:1], pair.depths, pair.sensor_pitch)
+    one_band.save(tmp_path / "one_band.npz")
+    one_clear_error(lambda f, w: ["reconstruct", "--task", "depth", *_pair(w), "--psf", tmp_path / "one_band.npz",
+                                  "--out", w / "o"], 2, "psf_pair_fitted.npz")

@@ -1,0 +1,225 @@
+"""Tiled reconstruction (doefab.lab.reconstruct): the tiles and their blend, the shipped networks' tiled results
+against their whole-image results, reading and scaling a camera's frames, and the calibrated crosstalk unmix."""
+
+from __future__ import annotations
+
+import re
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.lab import reconstruct as R
+from doefab.lab.frames import write_frame
+
+
+class LocalNet:
+    """A stand-in network whose output at a pixel is the 5×5 mean of ``coded + 2·uncoded`` around it (edge
+    replicated at its input's borders): it reads only 2 px around a pixel, so a tile's result equals the
+    whole image's wherever the pixel lies ≥ 2 px inside the tile."""
+
+    task, variant, model = "hdr", "proposed", None
+    pair = SimpleNamespace(coded=np.zeros((1, 3, 31, 31)), wavelengths=(6.5e-7, 5.5e-7, 4.5e-7))
+
+    def _psf(self, psf):
+        return None
+
+    def __call__(self, coded, uncoded, psf=None):
+        x = coded + 2.0 * uncoded
+        h, w = x.shape[1:]
+        p = np.pad(x, ((0, 0), (2, 2), (2, 2)), mode="edge")
+        return sum(p[:, i:i + h, j:j + w] for i in range(5) for j in range(5)) / 25.0
+
+
+def _views(h, w, seed=0):
+    rng = np.random.default_rng(seed)
+    return (rng.uniform(0, 1, (3, h, w)).astype(np.float32), rng.uniform(0, 1, (3, h, w)).astype(np.float32))
+
+
+def _whole(rec, coded, uncoded):
+    """The network on the whole image, extended at the bottom and right to multiples of 32 as the tiling is."""
+    h, w = coded.shape[1:]
+    pad = ((0, 0), (0, -h % 32), (0, -w % 32))
+    out = rec(np.pad(coded, pad, mode="edge"), np.pad(uncoded, pad, mode="edge"))
+    return out[..., :h, :w]
+
+
+def test_blend_weights_sum_to_one_across_a_shared_edge_and_vanish_at_it():
+    tile, overlap = 128, 64
+    a = R.blend_window(tile, overlap, first=True, last=False)
+    b = R.blend_window(tile, overlap, first=False, last=True)
+    shared = a[tile - overlap:] + b[:overlap]  # the next tile starts tile − overlap further on
+    np.testing.assert_allclose(shared, 1.0, atol=1e-12)
+    assert np.all(a[-overlap // 4:] == 0) and np.all(b[:overlap // 4] == 0)  # the outer quarter: weight 0
+    assert np.all(a[:tile - overlap] == 1)
+    assert R.tile_starts(160, 64, 32) == [0, 32, 64, 96] and R.tile_starts(128, 64, 32) == [0, 32, 64]
+    assert R.tile_starts(192, 128, 32) == [0, 64]  # the last tile ends at the end
+    assert R.tile_starts(96, 96, 192) == [0]  # one tile spans the axis, whatever the overlap
+
+
+@pytest.mark.parametrize("shape", [(100, 150), (96, 128), (64, 200)])
+def test_tiled_equals_whole_for_a_network_that_reads_2_px(shape):
+    """Every pixel the blend reads lies ≥ overlap/4 = 8 px inside its tile, so a network that reads 2 px around
+    a pixel gives the whole-image result exactly, at any image size (extended to multiples of 32)."""
+    coded, uncoded = _views(*shape)
+    rec = LocalNet()
+    tiled = R.reconstruct_tiled(rec, coded, uncoded, tile=64, overlap=32)
+    assert tiled.shape == (3, *shape) and tiled.dtype == np.float32
+    np.testing.assert_allclose(tiled, _whole(rec, coded, uncoded), rtol=0, atol=2e-6)
+
+
+def test_rows_come_out_in_order_each_once():
+    coded, uncoded = _views(100, 70)
+    rows = [(r, b.shape[1]) for r, b in R.iter_tiled(LocalNet(), coded, uncoded, tile=64, overlap=32)]
+    assert [r for r, _ in rows] == sorted(r for r, _ in rows) and rows[0][0] == 0
+    assert all(r + n == r2 for (r, n), (r2, _) in zip(rows, rows[1:])) and rows[-1][0] + rows[-1][1] == 100
+
+
+@pytest.fixture(scope="module")
+def captures():
+    """96×128 captures of validation scenes through each shipped network's own PSF pair."""
+    import functools
+
+    from doefab.reconstruction import data
+
+    @functools.lru_cache(maxsize=None)
+    def make(task):
+        rec = doefab.load_reconstructor(task)
+        rng = np.random.default_rng(3)
+        dm, resp = None, None
+        if task == "hyperspectral":
+            scene, resp = data.spectral_sample(rng, 128, "val"), doefab.sensor_response(rec.pair.wavelengths)
+        else:
+            scene, dm = data.depth_sample(rng, 128, "val")
+            dm = dm[:96]
+        c, u = doefab.simulate_captures(scene[:, :96], rec.pair, depth_map=dm, response=resp, seed=0)
+        return rec, np.asarray(c), np.asarray(u)
+
+    return make
+
+
+# the stated tolerance (docs/guide/after-the-fab.md): relative to the mean |result|, 96×128 px in tiles of 64 with
+# 32 px of overlap — the smallest tiling the networks take, so nearly every pixel lies in a blend
+@pytest.mark.parametrize("task, mean_tol, max_tol", [("depth", 1e-2, 5e-2), ("hyperspectral", 1e-3, 2e-2)])
+def test_tiled_matches_the_whole_image_with_the_shipped_network(captures, task, mean_tol, max_tol):
+    rec, coded, uncoded = captures(task)
+    whole = rec(coded, uncoded)
+    tiled = R.reconstruct_tiled(rec, coded, uncoded, tile=64, overlap=32)
+    assert tiled.shape == whole.shape
+    scale = float(np.abs(whole).mean())
+    diff = np.abs(tiled - whole)
+    assert diff.mean() / scale < mean_tol and diff.max() / scale < max_tol, (diff.mean() / scale, diff.max() / scale)
+
+
+def test_the_spectral_networks_light_is_estimated_once_for_all_tiles(captures, monkeypatch):
+    """Each 64² tile would estimate its own light; the whole image's estimate (its central 256²) is used for
+    every tile, and the network is left as it was."""
+    import doefab.reconstruction.illuminant as ill
+    import doefab.reconstruction.spectralnet as sn
+
+    rec, coded, uncoded = captures("hyperspectral")
+    calls = []
+    real = ill.mix_illuminants
+
+    def spy(c, *a, **k):
+        calls.append(tuple(c.shape))
+        return real(c, *a, **k)
+
+    for module in (ill, sn):  # the tiling's estimate and the network's own
+        monkeypatch.setattr(module, "mix_illuminants", spy)
+    R.reconstruct_tiled(rec, coded, uncoded, tile=64, overlap=32)
+    assert calls == [(1, 3, 96, 128)] and rec.model.light is None
+
+
+def test_tiling_refusals_name_the_value_and_a_fix():
+    coded, uncoded = _views(96, 128)
+    rec = LocalNet()
+    for kw, needle in (({"tile": 80}, "tile 80 must be a multiple of 32"), ({"overlap": 48}, "--overlap 64"),
+                       ({"tile": 64, "overlap": 64}, "more than half the tile (64 px): give a tile of at least 128")):
+        with pytest.raises(DoefabError, match=re.escape(needle)):
+            R.reconstruct_tiled(rec, coded, uncoded, **{"tile": 64, "overlap": 32, **kw})
+    with pytest.raises(DoefabError, match="differ in size"):
+        R.reconstruct_tiled(rec, coded, uncoded[:, :64], tile=64, overlap=32)
+    with pytest.raises(DoefabError, match="captures are in \\[0, 1\\]"):
+        R.reconstruct_tiled(rec, coded * 2, uncoded, tile=64, overlap=32)
+    with pytest.raises(DoefabError, match="200×48 px: the networks need at least 64 px on each side"):
+        R.check_tiling(64, 32, (48, 200))
+
+
+def test_an_image_narrower_than_a_tile_is_one_tile_across():
+    """96×200 px in tiles of at most 128: one tile of 96 rows down, two of 128 columns across (the second ending
+    at the extended image's end), exactly the whole image's result for the 2-px network."""
+    coded, uncoded = _views(96, 200)
+    calls = []
+    net = LocalNet()
+
+    class Counting(LocalNet):
+        def __call__(self, c, u, psf=None):
+            calls.append(c.shape)
+            return net(c, u)
+
+    tiled = R.reconstruct_tiled(Counting(), coded, uncoded, tile=128, overlap=32)
+    assert calls == [(3, 96, 128), (3, 96, 128)]
+    np.testing.assert_allclose(tiled, _whole(net, coded, uncoded), rtol=0, atol=2e-6)
+
+
+def test_read_capture_scales_by_the_files_full_scale_after_the_black_level(tmp_path):
+    dn = np.random.default_rng(1).integers(0, 65536, (32, 40, 3)).astype(np.float64)
+    write_frame(tmp_path / "c.tiff", dn)
+    got = R.read_capture(tmp_path / "c.tiff", black_level=1000)
+    want = np.clip((np.moveaxis(dn, -1, 0) - 1000) / (65535 - 1000), 0, 1)
+    assert got.shape == (3, 32, 40) and got.dtype == np.float32
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+    at_4095 = np.clip(np.moveaxis(dn, -1, 0) / 4095, 0, 1)  # a 12-bit camera's values in a 16-bit file
+    np.testing.assert_allclose(R.read_capture(tmp_path / "c.tiff", white_level=4095), at_4095, rtol=1e-6)
+    write_frame(tmp_path / "m.tiff", dn[..., 0])
+    with pytest.raises(DoefabError, match=r"m\.tiff is a monochrome frame .*colour"):
+        R.read_capture(tmp_path / "m.tiff")
+    with pytest.raises(DoefabError, match="below the white level"):
+        R.read_capture(tmp_path / "c.tiff", black_level=70000)
+
+
+def test_read_capture_refuses_fewer_than_8_bits(tmp_path, monkeypatch):
+    import doefab.lab.frames as frames
+
+    write_frame(tmp_path / "c.tiff", np.full((8, 8, 3), 7.0))
+    monkeypatch.setattr(frames, "full_scale", lambda *a, **k: 15.0)  # a 4-bit file
+    with pytest.raises(DoefabError, match=r"c\.tiff holds 4-bit values .* at least 8 bits"):
+        R.read_capture(tmp_path / "c.tiff")
+
+
+def test_unmix_undoes_the_per_column_mix_and_keeps_saturation():
+    from doefab.imaging.crosstalk import DualPixelCrosstalk, mix_crosstalk
+
+    w = 48
+    a, b = np.linspace(0.02, 0.08, w), np.linspace(0.06, 0.03, w)
+    coded, uncoded = (x * 0.8 for x in _views(16, w, seed=2))
+    left, right = mix_crosstalk(uncoded, coded, a, b)  # the plain view is the left one (Eq. 29)
+    # both photodiodes saturated in the last column, where α l→r = 0.08 > α r→l = 0.03: the exact unmix of (1, 1)
+    # gives the coded view (1 − 2·0.08) / (1 − 0.11) = 0.94 there, yet it received at least full scale
+    right[0, 0, -1] = left[0, 0, -1] = 1.0
+    cam = DualPixelCrosstalk(a, b, estimate=(a, b))
+    c, u = R.unmix_views(right.astype(np.float32), left.astype(np.float32), cam)
+    mask = np.ones_like(c, bool)
+    mask[0, 0, -1] = False
+    np.testing.assert_allclose(c[mask], coded[mask], atol=2e-6)
+    np.testing.assert_allclose(u[mask], uncoded[mask], atol=2e-6)
+    assert c[0, 0, -1] == 1.0 and u[0, 0, -1] == 1.0
+    with pytest.raises(DoefabError, match="holds 48 columns but the captures are 40 px wide"):
+        R.unmix_views(c[..., :40].copy(), u[..., :40].copy(), cam)
+
+
+def test_load_views_refuses_two_sizes_naming_both_files(tmp_path):
+    write_frame(tmp_path / "c.tiff", np.zeros((64, 64, 3)))
+    write_frame(tmp_path / "u.tiff", np.zeros((64, 96, 3)))
+    with pytest.raises(DoefabError, match=r"c\.tiff is 64×64 px but .*u\.tiff is 96×64 px"):
+        R.load_views(tmp_path / "c.tiff", tmp_path / "u.tiff")
+
+
+def test_default_overlap_is_the_kernel_rounded_up_to_32():
+    assert R.default_overlap(LocalNet()) == 32  # K = 31
+    assert R.default_overlap(SimpleNamespace(pair=SimpleNamespace(coded=np.zeros((1, 1, 191, 191))))) == 192
+    psf = SimpleNamespace(coded=np.zeros((1, 3, 95, 95)))  # a measured pair of a larger kernel than the network's
+    assert R.default_overlap(LocalNet(), psf) == 96

@@ -1,0 +1,202 @@
+"""The recordings file: its schema refused key by key, and every frame problem a calibration could not use named
+with its file and its fix, all of them in one error; good recordings pass."""
+
+import math
+
+import numpy as np
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.lab.framechecks import MIN_KERNEL_SNR, psf_signal
+from doefab.lab.frames import write_frame
+from doefab.lab.recordings import (band_index, check_recordings, load_recordings, plane_index, recording_problems,
+                                   recordings_sha256)
+
+BANDS = (450e-9, 550e-9, 650e-9)
+PLANES = (2.0, math.inf)
+K = 31
+BLACK = 64.0
+
+
+def _spot(size=64, photons=2e5, sigma=2.0, centre=(30.3, 33.6)):
+    y, x = np.mgrid[:size, :size]
+    g = np.exp(-((y - centre[0]) ** 2 + (x - centre[1]) ** 2) / (2 * sigma**2))
+    return photons * g / g.sum()
+
+
+def _frames(folder, name, expected, n=4, read=2.0, seed=0):
+    """``n`` frames (gain 1 e/DN, black level 64 DN) of ``expected`` electrons, shot and read noise."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        e = rng.poisson(expected) + rng.normal(0, read, expected.shape) + BLACK
+        write_frame(folder / f"{name}_{i}.tiff", np.clip(np.rint(e), 0, 65535))
+
+
+def _write(folder, body: str):
+    (folder / "rec.toml").write_text('pixel_format = "auto"\nblack_level = 64\n' + body)
+    return folder / "rec.toml"
+
+
+PSF = """
+[[psf]]
+half = "coded"
+view = "coded"
+depth_m = {depth}
+{source}
+frames = ["{frames}_*.tiff"]
+{dark}
+"""
+
+
+def _psf(frames="psf/f", depth="2.0", source="wavelength_nm = 550", dark='dark = ["psf/dark_*.tiff"]'):
+    return PSF.format(frames=frames, depth=depth, source=source, dark=dark)
+
+
+@pytest.fixture
+def lab(tmp_path):
+    (tmp_path / "psf").mkdir()
+    _frames(tmp_path / "psf", "f", _spot())
+    _frames(tmp_path / "psf", "dark", np.zeros((64, 64)), n=2, seed=1)
+    return tmp_path
+
+
+def test_good_recordings_pass_and_their_light_is_measured(lab):
+    rec = load_recordings(_write(lab, _psf() + _psf(depth='"inf"', dark="")))
+    assert [r.depth_m for r in rec.psf] == [2.0, math.inf] and rec.psf[0].wavelength_m == pytest.approx(550e-9)
+    assert rec.psf[0].frames == sorted((lab / "psf").glob("f_*.tiff")) and len(rec.psf[0].dark) == 2
+    assert recording_problems(rec, BANDS, PLANES, K) == []
+    check_recordings(rec, BANDS, PLANES, K)
+    got = psf_signal(rec, rec.psf[0], K)
+    assert got.total[0] == pytest.approx(2e5, rel=0.01)  # the spot's electrons (gain 1), all in the window
+    # the sum's noise: shot noise and read noise (2 e) of 4 frames, read noise of the 2 darks' mean
+    sigma = math.sqrt((2e5 + K * K * 4.0) / 4 + K * K * 4.0 / 2)
+    assert got.kernel_snr[0] == pytest.approx(2e5 / sigma, rel=0.15)
+    assert abs(got.peak[0] - 30) <= 1 and abs(got.peak[1] - 34) <= 1
+
+
+def test_schema_problems_are_listed_together_with_their_keys(tmp_path):
+    body = """
+colour = "yes"
+black_level = -3
+[[psf]]
+half = "left"
+view = "coded"
+depth_m = 0
+wavelength_nm = 550
+channels = "rgb"
+frames = ["missing_*.tiff"]
+exposure = 0.1
+[[wall]]
+half = "plain"
+coded_view = "w/c.tiff"
+"""
+    (tmp_path / "rec.toml").write_text(body)
+    with pytest.raises(DoefabError) as exc:
+        load_recordings(tmp_path / "rec.toml")
+    msg = str(exc.value)
+    for part in ("colour is not a key of the recordings file: the keys are design, pixel_format, black_level, psf, "
+                 "wall",
+                 "black_level = -3 must be a finite number ≥ 0 (DN)",
+                 "[[psf]] 1 half = 'left' is not one of 'coded', 'plain'",
+                 "[[psf]] 1 depth_m = 0 must be a distance > 0 in metres, or \"inf\"",
+                 "[[psf]] 1 wavelength_nm and channels: give exactly one",
+                 "[[psf]] 1 frames: no file matches 'missing_*.tiff'",
+                 "[[psf]] 1 exposure is not a key of [[psf]]: the keys are half, view, depth_m, wavelength_nm",
+                 "[[wall]] 1 coded_view: no file matches 'w/c.tiff'",
+                 "[[wall]] 1 plain_view is missing"):
+        assert part in msg, part
+    assert msg.count("\n  - ") == 9
+
+
+def test_wavelength_in_metres_gets_the_unit_hint_and_design_is_resolved(lab, tmp_path):
+    with pytest.raises(DoefabError, match=r"wavelength_nm = 5.5e-07 .*550 nm"):
+        load_recordings(_write(lab, _psf(source="wavelength_nm = 5.5e-7")))
+    with pytest.raises(DoefabError, match=r"\[\[psf\]\] 1 wavelength_nm and channels: give exactly one"):
+        load_recordings(_write(lab, _psf(source="")))
+    with pytest.raises(DoefabError, match=r"design: .*nowhere is not a design folder .*--design"):
+        load_recordings(_write(lab, 'design = "nowhere"\n' + _psf()))
+    (lab / "d").mkdir()
+    (lab / "d" / "design.json").write_text("{}")
+    assert load_recordings(_write(lab, 'design = "d"\n' + _psf())).design == lab / "d"
+    assert load_recordings(_write(lab, _psf()), design=lab / "d").design == lab / "d"
+
+
+def _problems(lab, body, bands=BANDS, planes=PLANES, kernel=K):
+    rec = load_recordings(_write(lab, body))
+    before = sorted(p.name for p in lab.rglob("*"))
+    with pytest.raises(DoefabError) as exc:
+        check_recordings(rec, bands, planes, kernel)
+    assert sorted(p.name for p in lab.rglob("*")) == before  # nothing written
+    return str(exc.value)
+
+
+def test_each_frame_problem_names_its_file_and_fix(lab):
+    psf = lab / "psf"
+    (psf / "cut_0.tiff").write_bytes(b"II*\x00broken")
+    write_frame(psf / "cut_1.tiff", np.full((64, 64), 70.0))
+    write_frame(psf / "cut_2.tiff", np.full((60, 64), 70.0))  # a problem after an unreadable file is found too
+    _frames(psf, "size", _spot(), n=2)
+    write_frame(psf / "size_9.tiff", np.full((64, 60), 70.0))
+    _frames(psf, "dark40", np.zeros((40, 40)), n=2)
+    _frames(psf, "sat", _spot(photons=4e7), n=2)
+    _frames(psf, "dim", _spot(photons=300.0), n=4)
+    _frames(psf, "small", _spot(size=24, centre=(12, 12)), n=2)
+    msg = _problems(lab, _psf("psf/cut") + _psf("psf/size") + _psf(dark='dark = ["psf/dark40_*.tiff"]')
+                    + _psf("psf/sat") + _psf("psf/dim") + _psf("psf/small", dark=""))
+    assert "cut_0.tiff cannot be read as tiff" in msg and "cut_2.tiff is 64×60 px but" in msg
+    assert "size_9.tiff is 60×64 px but" in msg and "must have the same size" in msg
+    assert "dark40_0.tiff is 40×40 px but [[psf]] 3's frames" in msg and "record the dark frames at the frames' size" \
+        in msg
+    assert "sat_0.tiff: its brightest pixel" in msg and "reduce the exposure or the source power" in msg
+    assert "sat_1.tiff" in msg  # every saturated frame, not the first only
+    assert f"dim_0.tiff ([[psf]] 5, 4 frames): too few photons for the {K}×{K}-px kernel" in msg
+    assert f"needs ≥ {MIN_KERNEL_SNR:g}" in msg and "record more light" in msg
+    assert f"small_0.tiff: [[psf]] 6's frames are 24×24 px, smaller than the design's {K}×{K}-px kernel" in msg
+    assert msg.count("\n  - ") == 8  # one per problem, every recording checked
+
+
+def test_wavelengths_depths_and_channels_the_design_cannot_use(lab):
+    _frames(lab / "psf", "rgb", np.stack([_spot()] * 3, axis=-1), n=2)
+    body = (_psf(source="wavelength_nm = 552") + _psf(depth="2.05") + _psf(depth='"inf"')
+            + _psf("psf/rgb", source='channels = "rgb"', dark="") + _psf("psf/f", source='channels = "rgb"'))
+    msg = _problems(lab, body, bands=(450e-9, 550e-9), planes=(2.0, 5.0))
+    assert "[[psf]] 1 wavelength_nm = 552 is no band of the design (within 1 nm): record at one of 450, 550 nm" in msg
+    assert "[[psf]] 2 depth_m = 2.05 is no plane of the design (within 1%): place the source at one of 2, 5 m" in msg
+    assert "[[psf]] 3 depth_m = inf is no plane" in msg
+    assert "[[psf]] 4 channels = \"rgb\": one PSF per colour channel needs a 3-band design, this design has 2" in msg
+    assert "f_0.tiff: [[psf]] 5 has channels = \"rgb\" but its frames are monochrome" in msg
+    assert load_recordings(_write(lab, _psf("psf/rgb", source='channels = "rgb"', dark=""))) is not None
+    rgb = load_recordings(_write(lab, _psf("psf/rgb", source='channels = "rgb"', dark="")))
+    assert recording_problems(rgb, BANDS, PLANES, K) == []  # a broadband recording of a 3-band design
+    narrow = load_recordings(_write(lab, _psf("psf/rgb", dark="")))
+    assert "is a narrow-band recording (wavelength_nm) but its frames are colour" in \
+        recording_problems(narrow, BANDS, PLANES, K)[0]
+
+
+def test_wall_views_of_different_sizes(lab):
+    (lab / "w").mkdir()
+    _frames(lab / "w", "c", np.full((64, 64), 3e4), n=2)
+    _frames(lab / "w", "p", np.full((64, 62), 1e3), n=2)
+    _frames(lab / "w", "s", np.full((64, 64), 66000.0), n=1)
+    body = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/c_*.tiff"\nplain_view = "w/p_*.tiff"\n'
+            '[[wall]]\nhalf = "plain"\ncoded_view = "w/c_*.tiff"\nplain_view = "w/s_*.tiff"\n')
+    msg = _problems(lab, body)
+    assert "p_0.tiff (plain view) is 62×64 px but" in msg and "[[wall]] 1's two views must be of one capture" in msg
+    assert "s_0.tiff: its brightest pixel" in msg and "reduce the exposure or the wall's illumination" in msg
+
+
+def test_band_and_plane_tolerances():
+    assert band_index(550.9e-9, BANDS) == 1 and band_index(551.1e-9, BANDS) is None
+    assert plane_index(2.019, PLANES) == 0 and plane_index(2.021, PLANES) is None
+    assert plane_index(math.inf, PLANES) == 1 and plane_index(1e6, PLANES) is None
+
+
+def test_sha256_covers_every_frame(lab):
+    rec = load_recordings(_write(lab, _psf()))
+    first = recordings_sha256(rec)
+    assert recordings_sha256(load_recordings(_write(lab, _psf()))) == first
+    dark = lab / "psf" / "dark_1.tiff"
+    data = bytearray(dark.read_bytes())
+    data[-1] ^= 1
+    dark.write_bytes(bytes(data))
+    assert recordings_sha256(rec) != first
