@@ -1,9 +1,9 @@
 """Peak memory (and time) of ``doefab reconstruct``'s tiled reconstruction at camera sizes, per task.
 
-Each (task, size) runs in a process of its own: the shipped network is loaded, a capture pair of that size is made (a simulated
-256² validation scene through the network's PSFs, repeated across the frame: the content a camera gives, at no
-cost), what the writer keeps for the whole image is allocated and touched (the result; for spectra its XYZ, the
-cube itself streaming to its ENVI file), and the first ``--rows`` rows of tiles are reconstructed
+Each (task, size) runs in a process of its own: the shipped network is loaded, a capture pair of that size is
+made (a simulated 256² validation scene through the network's PSFs, repeated across the frame: the content a
+camera gives, at no cost), what the writer keeps for the whole image is allocated and touched (the result; for
+spectra its XYZ, the cube itself streaming to its ENVI file), and the first ``--rows`` rows of tiles are reconstructed
 (``doefab.lab.reconstruct.iter_tiled``). Rows of tiles repeat the same work, so the peak of the first rows is the
 peak of the reconstruction; the time of the whole run is extrapolated from the time per tile (labelled so).
 ``--rows 0`` runs every row and writes the files as ``doefab reconstruct`` does (``write_result_rows``, to a
@@ -14,7 +14,7 @@ allocations in the same span.
 The peak is split into what the image itself needs — the two captures (3 × 4 bytes per pixel each), what the
 writer keeps (4 bytes per kept channel per pixel) and the blend's band (one tile's height across the image,
 channels + 1 float32) — and the rest: the network, the libraries and the tile's working set, which do not grow
-with the image. Two or more sizes show that (the script fits peak = a + b · pixels).
+with the image. Two or more sizes show that (the script fits peak − RSS after loading = a + b · megapixels).
 
 Run (the published numbers: 24 megapixels, 6000 × 4000, and a quarter of it, every task, one row of tiles each;
 about half an hour on 2 cores):
@@ -212,12 +212,13 @@ def main() -> None:
 
 
 def _fit(rows: list[dict]) -> dict:
-    """peak = a + b · megapixels per task (least squares), where two or more sizes were measured."""
+    """The memory the reconstruction adds to the loaded network, peak − RSS after loading = a + b · megapixels,
+    per task (least squares), where two or more sizes were measured."""
     import numpy as np
 
     fits = {}
     for task in dict.fromkeys(r["task"] for r in rows):
-        pts = [(r["megapixels"], r["peak_rss_mb"]) for r in rows if r["task"] == task]
+        pts = [(r["megapixels"], r["peak_rss_mb"] - r["rss_after_network_mb"]) for r in rows if r["task"] == task]
         if len({p for p, _ in pts}) >= 2:
             b, a = np.polyfit(*zip(*pts), 1)
             fits[task] = {"mb_fixed": round(float(a), 1), "mb_per_megapixel": round(float(b), 1)}
@@ -227,7 +228,8 @@ def _fit(rows: list[dict]) -> dict:
 def _write(rows: list[dict], out: Path, a) -> None:
     out.mkdir(parents=True, exist_ok=True)
     fits = _fit(rows)
-    (out / "reconstruct_memory.json").write_text(json.dumps({"rows": rows, "fits": fits, "command": sys.argv}, indent=1))
+    record = {"rows": rows, "fits": fits, "command": sys.argv}
+    (out / "reconstruct_memory.json").write_text(json.dumps(record, indent=1))
     lines = ["| task | size (px) | tile / overlap (px) | peak RSS (MB) | image arrays (MB) | rest (MB) | "
              "s per tile | whole run (s) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
@@ -236,7 +238,8 @@ def _write(rows: list[dict], out: Path, a) -> None:
                      f"{r['seconds_per_tile']:.2f} | {r['extrapolated_total_s']:.0f} ({r['tiles']} tiles, "
                      f"{r['tiles_run']} run{', files written' if r['files_written'] else ': extrapolated'}) |")
     for task, f in fits.items():
-        lines.append(f"\n{task}: peak ≈ {f['mb_fixed']:.0f} MB + {f['mb_per_megapixel']:.1f} MB per megapixel")
+        lines.append(f"\n{task}: the reconstruction adds ≈ {f['mb_fixed']:.0f} MB + {f['mb_per_megapixel']:.1f} MB "
+                     f"per megapixel to the loaded network")
     text = "\n".join(lines) + "\n"
     (out / "reconstruct_memory.md").write_text(text)
     print(text)

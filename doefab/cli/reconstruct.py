@@ -15,8 +15,8 @@ of its design's. Every pair is read and checked before anything is written.
 Writes, per pair (STEM: the coded file's name without its extension): HDR: OUT/STEM.exr (linear, half float) and
 OUT/STEM.png (tone-mapped); spectra: OUT/STEM.hdr + OUT/STEM.img (ENVI, wavelengths in nm) and OUT/STEM.png (sRGB);
 depth: OUT/STEM.depth_m.tiff (float32 metres), OUT/STEM.depth_mm.png (16-bit millimetres, clipped at 65.535 m) and
-OUT/STEM.png (colour preview). OUT/reconstruct.json records the inputs with their SHA-256, the weights, PSF, crosstalk, tiling
-and library versions.
+OUT/STEM.png (colour preview). OUT/reconstruct.json records the inputs with their SHA-256, the weights, PSF,
+crosstalk, tiling and library versions.
 """
 
 from __future__ import annotations

@@ -238,8 +238,9 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
                           f"--white-level (the sensor's clipping level in the file's units), or save it scaled to "
                           f"[0, 1]")
     if white_level is None and 1 < white < 2**MIN_BITS - 1:  # (1.0: a float file, normalised)
-        raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks need captures "
-                          f"of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or give the raw/DNG")
+        raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks "
+                          f"need captures of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or "
+                          f"give the raw/DNG")
     black = (float(np.mean(raw_black_level(path, pixel_format))) if black_level is None else float(black_level))
     if not white > black >= 0:
         raise DoefabError(f"{path}: black level {black:g} DN must be ≥ 0 and below the white level {white:g} DN: "

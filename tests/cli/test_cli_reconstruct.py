@@ -55,7 +55,8 @@ def test_depth_pairs_reconstructed_with_psf_and_crosstalk(shots, tmp_path, capsy
     import hashlib
 
     assert first["coded_sha256"] == hashlib.sha256((shots / "coded" / "shot0.tiff").read_bytes()).hexdigest()
-    assert record["tile_px"] == 64 and record["overlap_px"] == 32 and record["psf"]["provenance"]["source"] == "simulation"
+    assert record["tile_px"] == 64 and record["overlap_px"] == 32
+    assert record["psf"]["provenance"]["source"] == "simulation"
     assert record["crosstalk"]["sha256"] and record["versions"]["OpenEXR"] and record["weights"]["sha256"]
     # the file holds what the API gives for the unmixed views
     rec = doefab.load_reconstructor("depth")
@@ -100,7 +101,7 @@ def _two_sizes(work):
     (lambda w: _two_sizes(w), "u/x.tiff is 96×96 px: pair the two views"),
     (lambda w: _pair(w, channels=1), "x.tiff is a monochrome frame (128×96 px)"),
     (lambda w: _pair(w, size=(48, 128)), "are 128×48 px: the networks need at least 64 px on each side"),
-    (lambda w: _pair(w) + ["--tile", "128"], "more than half the tile (128 px): give a tile of at least 192 px (--tile"),
+    (lambda w: _pair(w) + ["--tile", "128"], "more than half the tile (128 px): give a tile of at least 192 px"),
     (lambda w: _pair(w) + ["--tile", "80", "--overlap", "32"], "tile 80 must be a multiple of 32"),
     (lambda w: _pair(w) + ["--overlap", "32", "--black-level", "70000"], "below the white level 65535 DN"),
 ])

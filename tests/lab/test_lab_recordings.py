@@ -200,3 +200,22 @@ def test_sha256_covers_every_frame(lab):
     data[-1] ^= 1
     dark.write_bytes(bytes(data))
     assert recordings_sha256(rec) != first
+
+
+def test_raw_frames_without_darks_or_black_level_are_refused(tmp_path):
+    """A raw file's own pedestal must not stay in the signal: with no dark frames and black_level = 0 the recording
+    is refused, naming the file's black level as the fix; giving that black level clears the problem."""
+    from test_lab_frames import _write_dng
+
+    (tmp_path / "w").mkdir()
+    m = np.full((64, 64), 2000, np.uint16)
+    for v in ("c", "p"):
+        _write_dng(tmp_path / "w" / f"{v}_0.dng", m, "RGGB", black=(512,), white=16383)
+    wall = ('[[wall]]\nhalf = "coded"\ncoded_view = ["w/c_*.dng"]\nplain_view = ["w/p_*.dng"]\n')
+    (tmp_path / "rec.toml").write_text('black_level = 0\n' + wall)
+    problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
+    raw = [p for p in problems if "black level of 512 DN" in p]
+    assert len(raw) == 1 and "black_level = 512" in raw[0] and "c_0.dng" in raw[0]
+    (tmp_path / "rec.toml").write_text('black_level = 512\n' + wall)
+    assert not [p for p in recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
+                if "black level of" in p]
