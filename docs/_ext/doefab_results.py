@@ -67,6 +67,9 @@ MEASUREMENTS = (
     Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
                 json_table="hdr_real_images"),
     Measurement("tolerance_studies", "benchmarks/tolerance_studies.py", (R + "tolerance_studies.md",)),
+    Measurement("delivered_yield_streak", None, (R + "delivered_yield_streak.md",),
+                command=".venv/bin/python benchmarks/delivered_yield.py streak --parts 24 --scenes 8 --size 256 "
+                        "--name delivered_yield_streak"),
     *(Measurement(f"tolerance_{d}", "benchmarks/tolerance_studies.py", (R + f"tolerance_{d}/report.md",),
                   note=f"the report.md of `doefab tolerance --design masks/{d} …` and its figures, kept in "
                        f"`benchmarks/results/tolerance_{d}/`") for d in ("streak", "grating", "halfring")),
