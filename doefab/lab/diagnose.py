@@ -4,20 +4,27 @@
 the measured ones (both scaled per half, plane and band to the error-free part's light in the kernel).
 
 **Fit.** Levenberg–Marquardt (``scipy.optimize.least_squares``, trust-region reflective, bounded at ±``BOUND``
-budget σ) on the residual vector, its Jacobian by finite differences: the relief's exact-area histogram is
+budget σ) on the residual vector, its Jacobian by forward differences: the relief's exact-area histogram is
 piecewise linear in the overlays and the judge has no gradient through it, but the misfit is a sum of squares,
 which a Gauss–Newton method solves in far fewer parts than a derivative-free one (nlopt's BOBYQA took 600 parts
-on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this reached it in about 500). It runs
-from the error-free part and ``starts − 1`` parts drawn from the budget (``tolerance.errors.sample_errors``), the
-best kept; then the pixels are weighed by a noise model fitted to the residuals (``PartModel.reweight``: shot
-noise makes the PSF's bright core far noisier than its tails, and unweighted residuals would overstate what the
-core tells) and the fit is resumed, ``REWEIGHT`` times.
+on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this reached it in about 500).
 
-**Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹ at the optimum, J the central-difference Jacobian of the
-weighted residual vector in budget σ, s² = weighted misfit / (n − p). **Identifiable**: the model responds to the
-error at all (``partmodel.Param.reason`` lists the ones it cannot), its σ is below half its budget σ (the
-recordings tell clearly more than the budget) and its |correlation| with every other fitted error is below
-``MAX_CORRELATION`` (the recordings tell them apart).
+1. From the error-free part (its overlays nudged off the kink at zero) and ``starts − 1`` parts drawn from the
+   budget (``tolerance.errors.sample_errors``); a PSF responds to an overlay's size more than to its sign, with
+   a kink where a mask crosses another, so the misfit has many local minima.
+2. The pixels weighed by a noise model fitted to the best start's residuals (``PartModel.reweight``: shot noise
+   makes the PSF's core far noisier than its tails) and the fit resumed, ``REWEIGHT`` times; the starts whose
+   misfit came within ``RIVAL`` of the best are resumed weighted too, and the best kept.
+3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); a better mirror is taken.
+4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
+
+**Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹, J the central-difference Jacobian of the weighted
+residual vector in budget σ, s² = weighted misfit / (n − p); a third of step 4's shift added in quadrature (what a
+finer grid still would move); each σ widened to half the distance to any other fit found (step 2's rivals, step
+3's mirrors) within ``MIRROR_CHI2`` s² of the best. **Identifiable**: the model responds to the error at all
+(``partmodel.Param.reason`` lists the ones it cannot), its σ is below ``MAX_SIGMA`` budget σ (the recordings tell
+clearly more than the budget), its |correlation| with every other fitted error is below ``MAX_CORRELATION`` (the
+recordings tell them apart) and, for an overlay, its mirror fits worse by ``MIRROR_CHI2`` s² (its sign is told).
 """
 
 from __future__ import annotations
@@ -28,8 +35,7 @@ import time
 import numpy as np
 import torch
 
-from doefab.errors import DoefabError
-from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, scaled, to_errors
+from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, scaled
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "MAX_CORRELATION",
@@ -69,7 +75,7 @@ def _solve(model: PartModel, x0: np.ndarray) -> tuple[np.ndarray, float]:
     return got.x, 2.0 * float(got.cost)
 
 
-def fit(model: PartModel, starts: int = 3, seed: int = 0) -> dict:
+def fit(model: PartModel, starts: int = 4, seed: int = 0) -> dict:
     """{"x": the optimum (budget σ), "r", "jac": the weighted residual (on the finer grid) and the Jacobian there,
     "mirror": each fitted overlay's mirror test (``mirror``), "others": [(point, rise of the weighted misfit in
     s²)] of the other fits found (rival starts, mirrors), "grid": each error's grid uncertainty (budget σ),
@@ -90,9 +96,9 @@ def fit(model: PartModel, starts: int = 3, seed: int = 0) -> dict:
     found.sort(key=lambda e: e[1])
     x = found[0][0]
     r, jac = jacobian(model, x)
-    for _ in range(2):  # a mirrored overlay that fits better is taken, and the fit resumed from there once more
+    for turn in range(3):  # a mirrored overlay that fits better is taken and the fit resumed from it, twice at most
         flipped, dchi, mirrors = mirror(model, x, r, jac)
-        if flipped is None:
+        if flipped is None or turn == 2:
             break
         found.append((x, float(r @ r)))
         x = _solve(model, flipped)[0]
@@ -104,13 +110,13 @@ def fit(model: PartModel, starts: int = 3, seed: int = 0) -> dict:
             "starts": runs, "noise": noise}
 
 
-def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int = REFINE) -> tuple[np.ndarray, np.ndarray]:
+def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Newton steps from ``x`` on the part model ``partmodel.FINE`` times finer than the design grid, with the
     design grid's Jacobian ``jac`` (the grids' Jacobians differ far less than their PSFs), each halved up to three
     times until it lowers the misfit: (the refined point, its weighted residual on the finer grid). The design
     grid's flat cells misplace the slivers a mask's overlay or bias cuts; the finer grid halves that error."""
     r = model.residual(x, fine=True)
-    for _ in range(steps):
+    for _ in range(REFINE if steps is None else steps):
         delta = -np.linalg.lstsq(jac, r, rcond=None)[0]
         for scale in (1.0, 0.5, 0.25, 0.125):
             trial = np.clip(x + scale * delta, -BOUND, BOUND)
@@ -123,7 +129,8 @@ def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int = REFINE
     return x, r
 
 
-def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
+def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray | None, np.ndarray,
+                                                                                   list]:
     """The overlays' signs tested: a PSF responds to how far a mask moved against the others and against the
     chrome almost alike either way, so the part with one overlay negated, and the part with every overlay along
     one axis negated, may fit as well. Each is tried with the other errors moved by one Gauss–Newton step
@@ -179,10 +186,10 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
         cov = s2 * np.linalg.pinv(jl.T @ jl, rcond=1e-12, hermitian=True)
         sl = np.sqrt(np.maximum(np.diag(cov), 0.0))
         sigma[live] = np.hypot(sl, 0.0 if grid is None else np.asarray(grid)[live])
+        corr[np.ix_(live, live)] = np.clip(cov / np.maximum(np.outer(sl, sl), 1e-300), -1.0, 1.0)
     for xo, rise in others:
         if rise < MIRROR_CHI2:
             sigma = np.maximum(sigma, np.abs(np.asarray(xo) - x) / 2)
-        corr[np.ix_(live, live)] = np.clip(cov / np.maximum(np.outer(sl, sl), 1e-300), -1.0, 1.0)
     ok, why = [], []
     for i in range(p):
         partner = max(((abs(corr[i, j]), params[j].label) for j in range(p) if j != i and live[j]), default=(0.0, ""))
@@ -192,7 +199,8 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
             reason = (f"its uncertainty ({sigma[i]:.2g} budget σ) is not clearly below the budget's spread: the "
                       f"recordings do not pin it down")
         elif partner[0] >= MAX_CORRELATION:
-            reason = f"it is correlated (|r| = {partner[0]:.2f}) with {partner[1]}: the recordings cannot tell the two apart"
+            reason = (f"it is correlated (|r| = {partner[0]:.2f}) with {partner[1]}: the recordings cannot tell the "
+                      f"two apart")
         elif mirrored is not None and mirrored[i] < MIRROR_CHI2:
             reason = (f"its sign is not identified: the opposite overlay fits within 2σ (the misfit rises by "
                       f"{max(float(mirrored[i]), 0.0):.2g} s²); its size is")
@@ -207,7 +215,7 @@ def psf_metric(model: PartModel, x: np.ndarray) -> dict:
     """The design's task metric (the coded light's fraction in the task's pixels, mean over the measured bands and
     planes) of the error-free part, the measured pair and the fitted part (scaled as the measured one), and of the
     fitted part with its own light (``as_fitted_with_losses``: as the tolerance study judges it, the light it
-    scatters out of the kernel lost)."""
+    scatters out of the kernel lost); the model's parts on the finer grid the fit ends on."""
     task, cam = model.judge.task, model.judge.fine
     c = model.halves.index("coded")
 
@@ -215,28 +223,29 @@ def psf_metric(model: PartModel, x: np.ndarray) -> dict:
         t = torch.as_tensor(np.ascontiguousarray(coded), dtype=torch.float64)
         return float(task.fractions(t, cam, model.dz, model.wl).mean())
     fitted = model.errors(x)
-    return {"nominal": value(model.psfs(PartErrors())[c]), "as_measured": value(model.measured[c]),
+    return {"nominal": value(model.psfs(PartErrors(), fine=True)[c]), "as_measured": value(model.measured[c]),
             "as_fitted": value(model.psfs(fitted, fine=True)[c]),
             "as_fitted_with_losses": value(model.psfs(fitted, fine=True, scale=False)[c])}
 
 
-def diagnose(measured, design_dir, budget=None, starts: int = 3, seed: int = 0, progress: bool = False,
+def diagnose(measured, design_dir, budget=None, starts: int = 4, seed: int = 0, progress: bool = False,
              delivered: bool = False, device=None) -> dict:
     """The diagnosis of the part whose PSF pair is ``measured`` (a ``PSFPair``, e.g. ``PSFPair.load(psf_pair.npz)``)
     made from ``design_dir`` (a design folder, a mask set or a ``Design``): the ``diagnosis.json`` record
     (``lab.diagreport.assemble``). ``budget``: a budget file, a loaded budget or None (the shipped one);
     ``starts``: fits from the error-free part and ``starts − 1`` parts drawn from the budget with ``seed``;
-    ``delivered``: also judge the fitted part through the task's shipped network (``lab.diagreport.delivered``).
+    ``delivered``: also judge the fitted part through the task's shipped network (``lab.diagreport.delivered_metric``).
     A pair made from another design (its provenance's ``levels_sha256``) is refused before any work."""
     from doefab import _validate as v
+    from doefab.design.design import Design
     from doefab.lab.diagreport import assemble, check_design, delivered_metric
     from doefab.tolerance.errors import load_budget
 
     v.number_in("starts", starts, 1, 100, integer=True)
     v.seed("seed", seed)
     b = budget if isinstance(budget, dict) else load_budget(budget)
+    check_design(measured, design_dir if isinstance(design_dir, Design) else Design.load(design_folder(design_dir)))
     model = PartModel(design_dir, measured, b, device=device)
-    check_design(measured, model.design)
     t0 = time.perf_counter()
     bar = _bar(progress, model, starts)
     try:
@@ -247,7 +256,7 @@ def diagnose(measured, design_dir, budget=None, starts: int = 3, seed: int = 0, 
     cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"])
     seconds = time.perf_counter() - t0
     err = model.errors(got["x"])
-    misfit = {"nominal": _plain_misfit(model, PartErrors()), "fitted": _plain_misfit(model, err, fine=True)}
+    misfit = {"nominal": _plain_misfit(model, PartErrors(), fine=True), "fitted": _plain_misfit(model, err, fine=True)}
     net = delivered_metric(model, err, delivered)
     return assemble(model, got, cur, misfit, psf_metric(model, got["x"]), net,
                     {"seconds": seconds, "parts": model.evaluations, "starts": got["starts"]})

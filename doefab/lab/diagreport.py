@@ -21,8 +21,10 @@ import numpy as np
 
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_text
+from doefab.lab.partmodel import BOUND, FINE
 
-__all__ = ["assemble", "check_design", "delivered_metric", "actions", "write_report", "OUTSIDE", "FINETUNE_LOSS",
+__all__ = ["assemble", "check_design", "delivered_metric", "actions", "write_report", "deviations", "OUTSIDE",
+           "FINETUNE_LOSS",
            "DELIVERED_SCENES", "DELIVERED_SIZE", "FORMAT", "VERSION"]
 
 FORMAT, VERSION = "doefab-diagnosis", 1
@@ -58,7 +60,7 @@ def _rows(model, x, cur) -> list[dict]:
         v = _value(p, 0.0 if i is None else x[i])
         out.append({"p": p, "value": v, "sigma": sig, "identifiable": bool(i is not None and cur["identifiable"][i]),
                     "reason": p.reason or (cur["reason"][i] if i is not None else ""),
-                    "z": 0.0 if i is None else float(x[i]), "at_bound": i is not None and abs(x[i]) >= 0.999 * 6.0})
+                    "z": 0.0 if i is None else float(x[i]), "at_bound": i is not None and abs(x[i]) >= 0.999 * BOUND})
     return out
 
 
@@ -84,8 +86,8 @@ def _errors(rows: list[dict], n_masks: int) -> dict:
 
 
 def _against(rows: list[dict]) -> list[dict]:
-    """Every error's deviation from nominal (etch depth in %, the gap from the holder's nominal gap) over the
-    budget's σ, in the error's unit."""
+    """Every error's deviation from nominal (etch depth in %, the gap from the holder's nominal gap), its σ (None:
+    not computed) and the budget's σ in the error's unit, and z = deviation / budget σ."""
     out = []
     for r in rows:
         p = r["p"]
@@ -94,8 +96,21 @@ def _against(rows: list[dict]) -> list[dict]:
         name = p.label + (" (from the holder's nominal gap)" if p.key == "axial_gap" else "")
         group = "mask" if p.mask is not None else "lithography" if p.key == "edge_bias" else "mount"
         out.append({"error": name, "value": dev, "budget_sigma": p.sigma / p.si * per, "unit": unit,
+                    "sigma": None if r["sigma"] is None else r["sigma"] * per,
                     "z": r["z"], "identifiable": r["identifiable"], "group": group,
                     "mask": None if p.mask is None else p.mask + 1, **({"reason": r["reason"]} if r["reason"] else {})})
+    return out
+
+
+def deviations(err, n_masks: int) -> dict:
+    """{``against_budget`` error name: the deviation from nominal of the part ``err`` (a ``PartErrors``, SI) in
+    that row's unit}: a known part's errors as a diagnosis states them, to set the two side by side."""
+    t = err.for_masks(n_masks)
+    out = {f"etch depth mask {m + 1}": (t.depth_scale[m] - 1) * 100 for m in range(n_masks)}
+    for m in range(n_masks):
+        out[f"overlay mask {m + 1} x"], out[f"overlay mask {m + 1} y"] = (v * 1e6 for v in t.overlay[m])
+    out.update({"edge bias": t.edge_bias * 1e6, "decenter x": t.mount_shift[0] * 1e3,
+                "decenter y": t.mount_shift[1] * 1e3, "mount rotation": math.degrees(t.mount_rotation)})
     return out
 
 
@@ -112,8 +127,9 @@ def assemble(model, got: dict, cur: dict, misfit: dict, psf_metric: dict, delive
            "uncertainty": {"method": "curvature", "s2": cur["s2"],
                            "noise_model": "per half, plane and band: pixel variance a·PSF + b, fitted to the residuals",
                            "noise": got["noise"]},
-           "fit": {"optimizer": "levenberg-marquardt (scipy.optimize.least_squares, trf)", "bound_budget_sigma": 6.0,
-                   "grid": "the design grid (1×)", "parts": run["parts"], "seconds": run["seconds"],
+           "fit": {"optimizer": "levenberg-marquardt (scipy.optimize.least_squares, trf)", "bound_budget_sigma": BOUND,
+                   "grid": f"the design grid (1×), then Gauss–Newton steps on a {FINE}× grid",
+                   "parts": run["parts"], "seconds": run["seconds"],
                    "starts": run["starts"], "at_bound": [r["p"].label for r in rows if r["at_bound"]]},
            "measured": {"halves": list(model.halves), "wavelengths_nm": [d.wavelengths[i] * 1e9 for i in model.wl],
                         "depths_m": [d.depths[i] if math.isfinite(d.depths[i]) else "inf" for i in model.dz]},
@@ -164,8 +180,10 @@ def actions(diag: dict) -> list[str]:
     out_rows = [r for r in diag["against_budget"] if r["identifiable"] and abs(r["z"]) > OUTSIDE]
     todo = []
     for k in sorted({r["mask"] for r in out_rows if r["group"] == "mask"}):
-        which = "; ".join(_dev(r) for r in out_rows if r["mask"] == k)
-        todo.append(f"re-make mask {k}'s step (plate {k}: realign it, or etch it to its nominal depth): {which}")
+        rows = [r for r in out_rows if r["mask"] == k]
+        fixes = [f for f, key in (("realign it", "overlay"), ("etch it to its nominal depth", "etch"))
+                 if any(r["error"].startswith(key) for r in rows)]
+        todo.append(f"re-make mask {k}'s step (plate {k}: {' and '.join(fixes)}): {'; '.join(map(_dev, rows))}")
     litho = [r for r in out_rows if r["group"] == "lithography"]
     if litho:
         todo.append(f"re-make the lithography (exposure dose, etch undercut): {_dev(litho[0])}")
@@ -252,8 +270,8 @@ def _summary(diag: dict) -> list[str]:
         parts.append(f" Delivered quality: {html.escape(dl.get('reason', 'not computed'))}.")
     out = ["".join(parts) + "</p>"]
     outside = [r for r in diag["against_budget"] if r["identifiable"] and abs(r["z"]) > OUTSIDE]
-    out.append("<p><b>Outside the budget</b> (identified errors beyond ±"
-               f"{OUTSIDE:g} σ): " + (", ".join(html.escape(_dev(r)) for r in outside) if outside else "none") + ".</p>")
+    listed = ", ".join(html.escape(_dev(r)) for r in outside) if outside else "none"
+    out.append(f"<p><b>Outside the budget</b> (identified errors beyond ±{OUTSIDE:g} σ): {listed}.</p>")
     out.append("<p><b>What to do.</b></p><ul>" + "".join(f"<li>{html.escape(a)}</li>" for a in diag["actions"])
                + "</ul>")
     hidden = [r for r in diag["against_budget"] if not r["identifiable"]]
@@ -262,7 +280,7 @@ def _summary(diag: dict) -> list[str]:
                    + "".join(f"<li>{html.escape(r['error'])}: {html.escape(r['reason'])}</li>" for r in hidden)
                    + "</ul>")
     if diag["fit"]["at_bound"]:
-        out.append("<p>At the fit's bound (±6 budget σ), so larger than the budget allows for: "
+        out.append(f"<p>At the fit's bound (±{BOUND:g} budget σ), so larger than the budget allows for: "
                    + html.escape(", ".join(diag["fit"]["at_bound"])) + "; give a wider budget to see how large.</p>")
     return out
 
@@ -272,8 +290,9 @@ def write_report(path, diag: dict, measured, fitted) -> str:
     ``fitted`` the fitted part's pair (``diagnose.fitted_pair``). Returns the path."""
     from doefab.lab.calreport import _STYLE
 
-    rows = [[r["error"], f"{r['value']:+.4g}", r["unit"], f"{r['budget_sigma']:.3g}", f"{r['z']:+.2f}",
-             "yes" if r["identifiable"] else "no"] for r in diag["against_budget"]]
+    rows = [[r["error"], f"{r['value']:+.4g}", "—" if r["sigma"] is None else f"{r['sigma']:.2g}", r["unit"],
+             f"{r['budget_sigma']:.3g}", f"{r['z']:+.2f}", "yes" if r["identifiable"] else "no"]
+            for r in diag["against_budget"]]
     resid = []
     for e in _entries(measured, fitted):
         for h in ("coded", "uncoded"):
@@ -282,9 +301,10 @@ def write_report(path, diag: dict, measured, fitted) -> str:
                           f"{float(np.abs(m - f).sum() / max(m.sum(), 1e-300)):.3f}"])
     fit = diag["fit"]
     parts = ["<h1>Diagnosis of a fabricated part</h1>", *_summary(diag), "<h2>Each error against the budget</h2>",
-             _table(["error", "deviation from nominal", "unit", "budget σ", "z (σ)", "identified"], rows),
-             "<p>Overlays are relative to the plate each mask aligns to (the manifest's alignment chain), x right and y "
-             "up in the design's frame seen from the scene; mask 1 is the shallowest etch. Uncertainties: "
+             _table(["error", "deviation from nominal", "σ", "unit", "budget σ", "z (budget σ)", "identified"],
+                    rows),
+             "<p>Overlays are relative to the plate each mask aligns to (the manifest's alignment chain), x right and "
+             "y up in the design's frame seen from the scene; mask 1 is the shallowest etch. Uncertainties: "
              f"{html.escape(diag['uncertainty']['method'])} (see diagnosis.json).</p>",
              "<h2>Misfit and PSF metric</h2>",
              _table(["part", "misfit (Σ squared PSF difference)", "PSF metric"],

@@ -102,7 +102,8 @@ def to_errors(params: list[Param], x, base: PartErrors, n_masks: int) -> PartErr
             v[(p.key, p.axis)] = val
     return replace(base, depth_scale=tuple(depth), overlay=tuple(tuple(o) for o in ov),
                    edge_bias=v[("edge_bias", None)], mount_rotation=v[("mount_rotation", None)],
-                   mount_shift=(v[("mount_decenter", "x")], v[("mount_decenter", "y")]), axial_gap=v[("axial_gap", None)])
+                   mount_shift=(v[("mount_decenter", "x")], v[("mount_decenter", "y")]),
+                   axial_gap=v[("axial_gap", None)])
 
 
 def scaled(params: list[Param], err: PartErrors, n_masks: int) -> np.ndarray:

@@ -1,0 +1,244 @@
+"""The diagnosis fits the tolerance study's part model to a measured PSF pair.
+
+A part of known errors, computed on a grid twice finer than the fit's design grid and recorded with photon noise,
+is recovered; the pieces — the curvature's σ and identifiability, the noise model, the refusals, the words — are
+checked against independent computations."""
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+import doefab
+from doefab.errors import DoefabError
+from doefab.tolerance.errors import PartErrors
+
+STREAK = Path(__file__).resolve().parents[2] / "masks" / "streak" / "design"
+PHOTONS = 1e6  # detected photons per recorded PSF
+# etch depths 3 % deep … 2 % shallow, mask 2 off by 2 µm along x, a small bias, decenter and mount rotation
+TRUTH = PartErrors(depth_scale=(1.03, 0.98, 1.02, 0.99), overlay=((0.0, 0.0), (2e-6, 0.0), (0.0, 0.0), (0.0, 0.0)),
+                   edge_bias=0.03e-6, mount_shift=(1.5e-6, 0.0), mount_rotation=math.radians(0.2),
+                   corner_rounding=0.3e-6)
+
+
+@pytest.fixture(scope="module")
+def small_design(tmp_path_factory):
+    """A 64-pixel block of the committed streak design where all four masks have edges (its coded half's outer
+    part), the right half plain, at its 2.7 µm pitch; a 20 mm sensor distance, a 63-pixel kernel, two bands."""
+    from doefab.design.design import Design
+
+    full = Design.load(STREAK)
+    n, big = 64, full.camera.doe_pixels
+    lv = np.ascontiguousarray(full.levels[(big - n) // 2:(big + n) // 2, big // 8:big // 8 + n]).copy()
+    lv[:, n // 2:] = 15
+    cam = dataclasses.replace(full.camera, doe_pixels=n, aperture_diameter=n * full.camera.doe_pitch,
+                              sensor_distance=20e-3)
+    d = Design(task="streak", task_params={**full.task_params, "kernel_size": 63, "arm_px": 21}, camera=cam,
+               wavelengths=(full.wavelengths[0], full.wavelengths[2]), depths=full.depths,
+               height=doefab.levels_to_height(lv, cam), levels=lv,
+               metrics={"name": "fraction of coded light within 1 px of the cross", "continuous": 0.5,
+                        "quantized": 0.5})
+    root = tmp_path_factory.mktemp("small")
+    d.save(root / "design")
+    return root / "design"
+
+
+@pytest.fixture(scope="module")
+def budget():
+    """The shipped budget, its decenter scaled to the block's 0.17 mm aperture as the holder's 0.25 mm is to 8.64 mm."""
+    from doefab.tolerance.errors import load_budget
+
+    b = load_budget()
+    b["mounting"] = {**b["mounting"], "decenter_max_mm": 0.005}
+    return b
+
+
+def recorded(design_dir, err, supersample=2, photons=PHOTONS, seed=0):
+    """The pair a lab records of part ``err``: its PSFs at ``supersample`` cells per DOE pixel, each (half, band)
+    drawn as ``photons`` detected photons (Poisson)."""
+    from doefab.design.design import Design
+    from doefab.fabrication.levels import levels_sha256
+    from doefab.tolerance.judge import PSFJudge
+
+    d = Design.load(design_dir)
+    with torch.no_grad():
+        got = PSFJudge(d, supersample).psfs(err, halves=("coded", "uncoded"))
+    rng = np.random.default_rng(seed)
+
+    def noisy(p):
+        p = p.double().numpy()
+        s = p.sum(axis=(-1, -2), keepdims=True)
+        return torch.from_numpy(rng.poisson(p / s * photons) / photons * s)
+    return doefab.PSFPair(noisy(got["coded"]), noisy(got["uncoded"]), d.wavelengths, d.depths,
+                          d.camera.sensor_pitch, provenance={"source": "simulation",
+                                                             "levels_sha256": levels_sha256(d.levels)})
+
+
+@pytest.fixture(scope="module")
+def diagnosis(small_design, budget):
+    from doefab.lab.diagnose import diagnose
+
+    return diagnose(recorded(small_design, TRUTH), small_design, budget, starts=1, seed=0)
+
+
+def test_a_part_of_known_errors_is_recovered(diagnosis):
+    """At least 90 % of the identified errors lie within 2σ of the truth (each has a 95 % chance to), the identified
+    etch depth scales within 2 %, the 2 µm overlay of mask 2 within 0.5 µm, and the words name mask 2."""
+    from doefab.lab.diagreport import deviations
+
+    truth = deviations(TRUTH, 4)
+    rows = {r["error"]: r for r in diagnosis["against_budget"] if r["identifiable"]}
+    assert len(rows) >= 9  # most of the 14 errors the PSFs can see are pinned down
+    z = {name: (r["value"] - truth[name]) / r["sigma"] for name, r in rows.items()}
+    assert np.mean([abs(v) <= 2 for v in z.values()]) >= 0.9, z
+    etch = [r for n, r in rows.items() if n.startswith("etch")]
+    assert len(etch) >= 3 and all(abs(r["value"] - truth[r["error"]]) <= 2.0 for r in etch)
+    assert abs(rows["overlay mask 2 x"]["value"] - 2.0) <= 0.5
+    assert any(a.startswith("re-make mask 2") for a in diagnosis["actions"])
+    assert not any(a.startswith(("re-make mask 1", "re-make mask 3", "re-make mask 4")) for a in diagnosis["actions"])
+
+
+def test_errors_the_psf_cannot_see_are_held_with_their_reason(diagnosis, budget):
+    """The DOE is this camera's aperture stop (0.17 mm against the lens's pupil): the gap moves nothing and stays at
+    the holder's nominal gap; the source is at the focus distance: a decenter along the split is not seen."""
+    from doefab.tolerance.errors import nominal_gap
+
+    gap = diagnosis["errors"]["axial_gap_mm"]
+    assert gap["identifiable"] is False and "aperture stop" in gap["reason"] and gap["sigma"] is None
+    assert gap["value"] == pytest.approx(nominal_gap(budget) * 1e3)
+    dec = diagnosis["errors"]["mount_decenter_mm"]
+    assert dec["identifiable_y"] is False and "focus distance" in dec["reason"] and dec["y"] == 0.0
+
+
+def test_the_diagnosis_record_keeps_its_contract(diagnosis, small_design):
+    """diagnosis.json as the issue states it (units in the keys, one entry per mask), strict JSON, every error
+    against the budget with z = deviation / budget σ, and the fitted part rebuilt from it."""
+    from doefab.design.design import Design
+    from doefab.fabrication.levels import levels_sha256
+    from doefab.lab.diagnose import part_errors
+
+    json.dumps(diagnosis, allow_nan=False)
+    e = diagnosis["errors"]
+    assert set(e) == {"etch_depth_scale", "overlay_um", "edge_bias_um", "mount_decenter_mm", "mount_rotation_deg",
+                      "axial_gap_mm"}
+    assert len(e["etch_depth_scale"]) == len(e["overlay_um"]) == 4
+    assert set(e["overlay_um"][0]) >= {"x", "y", "sigma_x", "sigma_y", "identifiable"}
+    assert set(diagnosis["misfit"]) == {"nominal", "fitted"} and diagnosis["misfit"]["fitted"] < diagnosis["misfit"][
+        "nominal"]
+    assert set(diagnosis["psf_metric"]) >= {"nominal", "as_measured", "as_fitted"}
+    assert set(diagnosis["delivered"]) >= {"metric", "nominal", "as_fitted"}
+    assert diagnosis["uncertainty"]["method"] == "curvature"
+    assert diagnosis["design_levels_sha256"] == levels_sha256(Design.load(small_design).levels)
+    rows = diagnosis["against_budget"]
+    assert len(rows) == 4 + 8 + 1 + 2 + 1 + 1
+    for r in rows:
+        assert r["z"] == pytest.approx(r["value"] / r["budget_sigma"], abs=1e-9)
+    err = part_errors(diagnosis)
+    assert err.depth_scale[1] == e["etch_depth_scale"][1]["value"]
+    assert err.overlay[1][0] == pytest.approx(e["overlay_um"][1]["x"] * 1e-6)
+    assert err.mount_rotation == pytest.approx(math.radians(e["mount_rotation_deg"]["value"]))
+
+
+def test_the_curvature_gives_the_least_squares_covariance():
+    """σ = √(s² (JᵀJ)⁻¹) with s² = rᵀr / (n − p), computed independently; a column the residual does not change is
+    not identified; two columns alike are; a σ above half the budget's is not; a mirror within 2σ is not."""
+    from doefab.lab.diagnose import curvature
+    from doefab.lab.partmodel import Param
+
+    rng = np.random.default_rng(3)
+    n = 400
+    jac = rng.normal(size=(n, 4)) * np.array([50.0, 40.0, 30.0, 0.05])  # σ ≈ 1 / (scale · √n)
+    r = rng.normal(size=n)
+    params = [Param("edge_bias", None, None, "µm", 1e-6, 1e-7, 0.0) for _ in range(4)]
+    got = curvature(params, r, jac)
+    s2 = float(r @ r) / (n - 4)
+    want = np.sqrt(s2 * np.diag(np.linalg.inv(jac.T @ jac)))
+    np.testing.assert_allclose(got["sigma"], want, rtol=1e-9)
+    assert got["identifiable"] == [True, True, True, False]  # the last: σ ≈ 1 budget σ
+    assert "not clearly below" in got["reason"][3]
+    dead = jac.copy()
+    dead[:, 1] = 0.0
+    assert "do not change" in curvature(params, r, dead)["reason"][1]
+    twin = jac.copy()
+    twin[:, 2] = jac[:, 0] * 0.75 + rng.normal(size=n) * 0.5
+    assert "correlated" in curvature(params, r, twin)["reason"][2]
+    mirrored = np.array([np.inf, 1.0, np.inf, np.inf])
+    assert "sign is not identified" in curvature(params, r, jac, mirrored)["reason"][1]
+    x = np.zeros(4)
+    wide = curvature(params, r, jac, x=x, others=[(np.array([0.0, 0.0, 0.3, 0.0]), 2.0)])
+    assert wide["sigma"][2] == pytest.approx(max(want[2], 0.15))
+
+
+def test_the_noise_model_is_fitted_to_the_residuals():
+    """Pixels drawn with variance a·PSF + b give back a and b (each half, plane and band its own)."""
+    from doefab.lab.partmodel import PartModel
+
+    rng = np.random.default_rng(5)
+    k = 101
+    yy, xx = np.mgrid[:k, :k] - k // 2
+    psf = np.exp(-(xx ** 2 + yy ** 2) / 600.0)  # a broad spot: the shot noise's share is measured on many pixels
+    model = np.stack([psf / psf.sum() * s for s in (0.5, 0.4)])[:, None, None]  # [halves, 1, 1, K, K]
+    a, b = np.array([2e-7, 5e-7]), np.array([1e-11, 3e-11])
+    var = a[:, None, None, None, None] * model + b[:, None, None, None, None]
+    fake = SimpleNamespace(psfs=lambda err: model, errors=lambda x: None, measured=model + rng.normal(size=model.shape)
+                           * np.sqrt(var))
+    got = PartModel.reweight(fake, None)
+    for g, ai, bi in zip(got, a, b):
+        assert g["a"] == pytest.approx(ai, rel=0.2) and g["b"] == pytest.approx(bi, rel=0.2)
+    ab = np.array([[g["a"], g["b"]] for g in got])[:, :, None, None, None, None]
+    np.testing.assert_allclose(fake.weight, 1 / np.sqrt(ab[:, 0] * model + ab[:, 1]), rtol=1e-12)
+
+
+def test_a_pair_of_another_design_is_refused(small_design):
+    """Its provenance's levels_sha256 names another level map: refused with the fix, before any fit."""
+    from doefab.design.design import Design
+    from doefab.lab.diagreport import check_design
+
+    pair = SimpleNamespace(provenance={"levels_sha256": "0" * 64, "design": "elsewhere/design"})
+    with pytest.raises(DoefabError, match=r"levels_sha256 0{16}.*elsewhere/design.*give --design"):
+        check_design(pair, Design.load(small_design))
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"wavelengths": (700e-9, 486e-9)}, "band of 700 nm that the design does not have"),
+    ({"sensor_pitch": 4.0e-6}, "sensor pitch 4 µm differs"),
+    ({"kernel": 61}, "61 px across but the design's task uses 63 px"),
+])
+def test_a_pair_the_design_cannot_model_is_refused(small_design, change, words):
+    from doefab.design.design import Design
+    from doefab.lab.partmodel import check_pair
+
+    d = Design.load(small_design)
+    k = change.get("kernel", 63)
+    psf = torch.zeros(1, 2, k, k)
+    pair = doefab.PSFPair(psf, psf, change.get("wavelengths", d.wavelengths), d.depths,
+                          change.get("sensor_pitch", d.camera.sensor_pitch))
+    with pytest.raises(DoefabError, match=words):
+        check_pair(pair, d)
+
+
+def _row(error, z, group, mask=None):
+    return {"error": error, "value": z, "budget_sigma": 1.0, "unit": "µm", "z": z, "identifiable": True,
+            "group": group, "mask": mask}
+
+
+@pytest.mark.parametrize("rows, metric, first", [
+    ([_row("overlay mask 3 x", 3.1, "mask", 3), _row("overlay mask 1 x", 1.9, "mask", 1)], 0.86, "re-make mask 3"),
+    ([_row("decenter x", -2.5, "mount")], 0.86, "re-mount the die"),
+    ([_row("edge bias", 2.2, "lithography")], 0.86, "re-make the lithography"),
+    ([_row("overlay mask 2 y", 1.5, "mask", 2)], 0.80, "fine-tune the networks"),
+    ([_row("overlay mask 2 y", 1.5, "mask", 2)], 0.865, "nothing"),
+])
+def test_the_words_follow_the_budget(rows, metric, first):
+    """Outside the budget (|z| > 2, identified) → re-make that mask / the lithography, or re-mount; inside it → the
+    networks fine-tuned when the PSF metric lost more than 0.01, else nothing."""
+    from doefab.lab.diagreport import actions
+
+    got = actions({"against_budget": rows, "psf_metric": {"nominal": 0.87, "as_measured": metric}})
+    assert got[0].startswith(first)
+    assert len([a for a in got if a.startswith("re-make mask")]) == (1 if first == "re-make mask 3" else 0)
