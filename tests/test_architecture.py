@@ -89,3 +89,18 @@ def test_public_api_exports_resolve():
             assert (obj.__doc__ or "").strip(), f"doefab.{name} has no docstring"
         else:  # a constant: an instance of a public doefab class or a table of them
             assert isinstance(obj, (dict, tuple)) or type(obj).__module__.startswith("doefab."), name
+
+
+def test_no_function_a_reader_cannot_hold():
+    """No function or method in ``doefab/`` or ``holder_cad/`` runs over 80 lines (decorators and docstring
+    included)."""
+    long = []
+    for root in (PKG, PKG.parent / "holder_cad"):
+        for path in root.rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+                    if node.end_lineno - first + 1 > 80:
+                        long.append(f"{path.relative_to(PKG.parent)}:{node.lineno} {node.name} "
+                                    f"({node.end_lineno - first + 1} lines)")
+    assert not long, "functions over 80 lines: " + "; ".join(long)

@@ -21,6 +21,7 @@ import torch
 from doefab._devices import resolve_device
 from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 from doefab.design.design import Design
+from doefab.design.nloptrun import run_nlopt
 from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
                                             theta_to_height)
 from doefab.errors import DoefabError
@@ -175,30 +176,48 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     cam = camera or Camera.preset(task_obj.preset)
     task_obj.bind(cam)
     cfg.task_params = task_obj.params()
-    dcam = design_camera(cam, cfg.sampling)
     if cfg.start is None:
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"
     if cfg.start not in STARTS:
         raise DoefabError(f"unknown start {cfg.start!r}: choose one of {STARTS}")
-    param = make_parameterization(cfg.parameterization, dcam, cfg.knots).to(dev)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    lams, depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
-    plan = PSFPlan(dcam, lams, depths, task_obj.kernel_size, halves=("coded",), device=dev)
-    mask = coded_mask(dcam).to(dev)
-    theta = param.start(task_obj, rng, cfg.start).to(dev).requires_grad_(True)
-    pairs = [(d, w) for d in range(len(depths)) for w in range(len(lams))]
-    gen = torch.Generator().manual_seed(cfg.seed)
-    history: list = []
-    step0, elapsed0 = 0, 0.0
-    out = Path(out_dir) if out_dir is not None else None
-    ckpt = out / "checkpoint.pt" if out is not None else None
-    config_json = json.dumps(cfg.key(), sort_keys=True)
-    adam = torch.optim.Adam([theta], lr=cfg.lr) if optimizer == "adam" else None
+    run = DesignRun(task_obj, cfg, cam, out_dir, dev)
     if resume:
+        run.resume()
+    return run.run(progress)
+
+
+class DesignRun:
+    """One design optimisation: set up from a checked ``DesignConfig`` (the start drawn with its seed), optionally
+    resumed from ``out_dir/checkpoint.pt``, then ``run``: the optimiser's steps (Adam here, nlopt through
+    ``nloptrun.run_nlopt``), each recorded and checkpointed, and the quantized design."""
+
+    def __init__(self, task_obj, cfg: DesignConfig, cam: Camera, out_dir, dev):
+        self.task, self.cfg, self.cam, self.dev = task_obj, cfg, cam, dev
+        self.dcam = dcam = design_camera(cam, cfg.sampling)
+        self.param = make_parameterization(cfg.parameterization, dcam, cfg.knots).to(dev)
+        torch.manual_seed(cfg.seed)
+        rng = np.random.default_rng(cfg.seed)
+        self.lams, self.depths = task_obj.wavelengths(dcam), task_obj.depths(dcam)
+        self.plan = PSFPlan(dcam, self.lams, self.depths, task_obj.kernel_size, halves=("coded",), device=dev)
+        self.mask = coded_mask(dcam).to(dev)
+        self.theta = self.param.start(task_obj, rng, cfg.start).to(dev).requires_grad_(True)
+        self.pairs = [(d, w) for d in range(len(self.depths)) for w in range(len(self.lams))]
+        self.gen = torch.Generator().manual_seed(cfg.seed)
+        self.history: list = []
+        self.step0, self.elapsed0 = 0, 0.0
+        self.ckpt = Path(out_dir) / "checkpoint.pt" if out_dir is not None else None
+        self.config_json = json.dumps(cfg.key(), sort_keys=True)
+        self.adam = torch.optim.Adam([self.theta], lr=cfg.lr) if cfg.optimizer == "adam" else None
+        self.qat_start = (int(round(cfg.iterations * (1 - cfg.qat_fraction))) if cfg.qat_fraction > 0
+                          else cfg.iterations)
+        self.bar, self.t_start, self.last_metric = None, 0.0, float("nan")
+
+    def resume(self) -> None:
+        """θ, the optimiser's state, the batches' generator and the history from ``checkpoint.pt``."""
+        ckpt, cfg, theta = self.ckpt, self.cfg, self.theta
         if ckpt is None:
             raise DoefabError("resume needs out_dir (where checkpoint.pt lives)")
-        state = load_checkpoint(ckpt, json.loads(config_json), ignore=("iterations",))
+        state = load_checkpoint(ckpt, json.loads(self.config_json), ignore=("iterations",))
         if tuple(state["theta"].shape) != tuple(theta.shape):
             raise DoefabError(f"checkpoint {ckpt} holds a {tuple(state['theta'].shape)} design, this run a "
                               f"{tuple(theta.shape)} one: start a new --out folder")
@@ -207,16 +226,17 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
                               f"{cfg.iterations}: resume with at least that many iterations")
         with torch.no_grad():
             theta.copy_(state["theta"])
-        if adam is not None and "adam" in state:
-            adam.load_state_dict(state["adam"])
-        gen.set_state(state["generator"])
-        step0, elapsed0 = int(state["step"]), float(state["elapsed"])
-        history = [list(r) for r in state["history"]]
-    qat_start = int(round(cfg.iterations * (1 - cfg.qat_fraction))) if cfg.qat_fraction > 0 else cfg.iterations
+        if self.adam is not None and "adam" in state:
+            self.adam.load_state_dict(state["adam"])
+        self.gen.set_state(state["generator"])
+        self.step0, self.elapsed0 = int(state["step"]), float(state["elapsed"])
+        self.history = [list(r) for r in state["history"]]
 
-    def objective(step: int, batch_pairs=None):
-        h = theta_to_height(param.waves(theta), dcam)
-        if step >= qat_start:
+    def objective(self, step: int, batch_pairs=None):
+        """The task's loss at ``step`` (quantization-aware from ``qat_start``) over ``batch_pairs`` (None: all)."""
+        task_obj, dcam, plan, cfg = self.task, self.dcam, self.plan, self.cfg
+        h = theta_to_height(self.param.waves(self.theta), dcam)
+        if step >= self.qat_start:
             h = quantize_ste(h, dcam, cfg.n_levels)
         if batch_pairs is None:
             psf = plan.half_psf("coded", h)
@@ -232,184 +252,87 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
                 psf = plan.half_psf("coded", h, depth_indices=[d], wavelength_indices=[w])
                 loss = loss + task_obj.loss(psf, dcam, [d], [w]) / len(batch_pairs)
         if cfg.fab_weight > 0:
-            loss = loss + cfg.fab_weight * isolated_pixel_penalty(param.waves(theta), mask)
+            loss = loss + cfg.fab_weight * isolated_pixel_penalty(self.param.waves(self.theta), self.mask)
         return loss
 
-    def full_metric(quantized: bool) -> dict:
+    def full_metric(self, quantized: bool) -> dict:
         with torch.no_grad():
-            h = theta_to_height(param.waves(theta), dcam)
+            h = theta_to_height(self.param.waves(self.theta), self.dcam)
             if quantized:
-                h = quantize_ste(h, dcam, cfg.n_levels)
-            return task_obj.metric(plan.half_psf("coded", h), dcam)
+                h = quantize_ste(h, self.dcam, self.cfg.n_levels)
+            return self.task.metric(self.plan.half_psf("coded", h), self.dcam)
 
-    def checkpoint(step: int, elapsed: float) -> None:
-        if ckpt is None:
+    def checkpoint(self, step: int, elapsed: float) -> None:
+        if self.ckpt is None:
             return
-        state = {"config": config_json, "theta": theta.detach().cpu().clone(), "step": step, "elapsed": elapsed,
-                 "generator": gen.get_state(), "history": history}
-        if adam is not None:
-            state["adam"] = adam.state_dict()
-        save_checkpoint(ckpt, state)
+        state = {"config": self.config_json, "theta": self.theta.detach().cpu().clone(), "step": step,
+                 "elapsed": elapsed, "generator": self.gen.get_state(), "history": self.history}
+        if self.adam is not None:
+            state["adam"] = self.adam.state_dict()
+        save_checkpoint(self.ckpt, state)
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=cfg.iterations, initial=step0, desc=f"design {task_obj.name} ({optimizer})", unit="step")
-    t_start = time.perf_counter() - elapsed0
-    last_metric = history[-1][3] if history else float("nan")
-
-    def record(step: int, loss_value: float) -> None:
-        nonlocal last_metric
+    def record(self, step: int, loss_value: float) -> None:
+        """One evaluation into the history (the full metric every ``eval_every``), the bar and the checkpoint."""
+        cfg, ckpt = self.cfg, self.ckpt
         if not math.isfinite(loss_value):
             raise DoefabError(f"the loss became {loss_value} at step {step}: stopping; the last good checkpoint "
                               f"is kept{'' if ckpt is None else ' in ' + str(ckpt)} (lower the learning rate)")
         if step % cfg.eval_every == 0 or step == cfg.iterations - 1:
-            last_metric = full_metric(step >= qat_start)["value"]
-        history.append([step, round(time.perf_counter() - t_start, 3), loss_value, last_metric])
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(loss=f"{loss_value:.4f}", metric=f"{last_metric:.4f}")
+            self.last_metric = self.full_metric(step >= self.qat_start)["value"]
+        self.history.append([step, round(time.perf_counter() - self.t_start, 3), loss_value, self.last_metric])
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(loss=f"{loss_value:.4f}", metric=f"{self.last_metric:.4f}")
         if (step + 1) % cfg.checkpoint_every == 0:
-            checkpoint(step + 1, time.perf_counter() - t_start)
+            self.checkpoint(step + 1, time.perf_counter() - self.t_start)
 
-    stop_reason = None
-    try:
-        if optimizer == "adam":
-            for step in range(step0, cfg.iterations):
-                batch_pairs = None
-                if cfg.batch < 0:  # stratified: every depth, one random wavelength each
-                    wl = torch.randint(len(lams), (len(depths),), generator=gen).tolist()
-                    batch_pairs = [(d, wl[d]) for d in range(len(depths))]
-                elif 0 < cfg.batch < len(pairs):
-                    idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
-                    batch_pairs = [pairs[i] for i in sorted(idx)]
-                adam.zero_grad()
-                loss = objective(step, batch_pairs)
-                if not torch.isfinite(loss):
-                    record(step, float(loss.detach()))
-                loss.backward()
-                adam.step()
-                record(step, float(loss.detach()))
-        else:
-            stop_reason = _run_nlopt(optimizer, theta, objective, record, step0, cfg.iterations, qat_start,
-                                     param.variable_mask(mask))
-    finally:
-        if bar is not None:
-            bar.close()
-    checkpoint(cfg.iterations, time.perf_counter() - t_start)
-    design = _finish(task_obj, cfg, cam, dcam, theta.detach(), param, history, lams, depths, dev)
-    design.extra["wall_time_s"] = round(time.perf_counter() - t_start, 1)
-    design.extra["optimizer_time_s"] = history[-1][1] if history else 0.0
-    design.extra["evaluations"] = len(history)
-    if stop_reason:
-        design.extra["stop_reason"] = stop_reason
-    return design
+    def _adam_steps(self) -> None:
+        cfg, gen, pairs = self.cfg, self.gen, self.pairs
+        for step in range(self.step0, cfg.iterations):
+            batch_pairs = None
+            if cfg.batch < 0:  # stratified: every depth, one random wavelength each
+                wl = torch.randint(len(self.lams), (len(self.depths),), generator=gen).tolist()
+                batch_pairs = [(d, wl[d]) for d in range(len(self.depths))]
+            elif 0 < cfg.batch < len(pairs):
+                idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
+                batch_pairs = [pairs[i] for i in sorted(idx)]
+            self.adam.zero_grad()
+            loss = self.objective(step, batch_pairs)
+            if not torch.isfinite(loss):
+                self.record(step, float(loss.detach()))
+            loss.backward()
+            self.adam.step()
+            self.record(step, float(loss.detach()))
 
+    def run(self, progress: bool = True) -> Design:
+        """The optimiser's steps from ``step0``, then the quantized design (``_finish``) with its run times."""
+        cfg = self.cfg
+        if progress:
+            from tqdm import tqdm
 
-NLOPT_MAX_VARIABLES = 2_000_000  # nlopt 2.x's L-BFGS fails (runtime_error) from about 2.1 M variables
-
-
-def _run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mask) -> str | None:
-    """nlopt driven by torch gradients, run to its evaluation budget.
-
-    The continuous and the quantization-aware stages are separate nlopt runs (the straight-through objective
-    is a different function), each keeping its best point. nlopt ends early when its line search cannot
-    progress (e.g. ``RoundoffLimited`` on these wrapped-phase objectives); doefab then restarts it from the
-    best point (a fresh L-BFGS memory / MMA model) while the budget lasts. A first attempt that does not
-    lower the loss at all is an error; a later restart without progress ends the run with a stated reason,
-    which is returned (None when the whole budget ran). Only the coded pixels (``mask``) are variables.
-    """
-    import nlopt
-
-    idx = torch.nonzero(mask.flatten() > 0).flatten().to(theta.device)
-    if idx.numel() > NLOPT_MAX_VARIABLES:
-        raise DoefabError(f"{name}: this design has {idx.numel():,} coded DOE pixels but nlopt's optimisers take at "
-                          f"most {NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
-    flat = theta.data.view(-1)
-
-    algo = {"lbfgs": nlopt.LD_LBFGS, "mma": nlopt.LD_MMA}[name]
-    label = {"lbfgs": "L-BFGS", "mma": "MMA"}[name]
-    counter = {"step": step0}
-    reasons: list[str] = []
-
-    def attempt(end: int) -> tuple[bool, str]:
-        """One nlopt run from the current θ up to evaluation ``end``; returns (lowered the loss, outcome)."""
-        x0 = flat[idx].double().cpu().numpy().copy()
-        best = {"loss": float("inf"), "x": x0, "first": None}
-        stop: list = []
-        opt = nlopt.opt(algo, int(idx.numel()))
-
-        def f(x, grad):
-            step = counter["step"]
-            if step >= end:  # nlopt may ask for one more than maxeval: the budget is ours to keep
-                raise nlopt.ForcedStop
-            try:
-                with torch.no_grad():
-                    flat[idx] = torch.from_numpy(np.array(x, copy=True)).to(theta.device, theta.dtype)
-                theta.grad = None
-                loss = objective(min(step, iterations - 1))
-                if torch.isfinite(loss):
-                    loss.backward()
-                if grad.size > 0:
-                    grad[:] = (theta.grad.detach().reshape(-1)[idx].double().cpu().numpy() if theta.grad is not None
-                               else 0.0)
-                value = float(loss.detach())
-                record(step, value)
-            except (DoefabError, KeyboardInterrupt) as exc:  # nlopt would swallow it: keep it and stop
-                stop.append(exc)
-                raise nlopt.ForcedStop from None
-            if best["first"] is None:
-                best["first"] = value
-            if value < best["loss"]:
-                best["loss"], best["x"] = value, np.array(x, copy=True)
-            counter["step"] += 1
-            return value
-
-        opt.set_min_objective(f)
-        opt.set_maxeval(max(end - counter["step"], 1))
-        if name == "mma":  # MMA needs bounds; θ is periodic, so a wide box is no constraint in practice
-            opt.set_lower_bounds(x0 - 1e3)
-            opt.set_upper_bounds(x0 + 1e3)
-        outcome = "budget reached"
+            self.bar = tqdm(total=cfg.iterations, initial=self.step0, desc=f"design {self.task.name} "
+                            f"({cfg.optimizer})", unit="step")
+        self.t_start = time.perf_counter() - self.elapsed0
+        self.last_metric = self.history[-1][3] if self.history else float("nan")
+        stop_reason = None
         try:
-            opt.optimize(x0)
-            if counter["step"] < end:
-                outcome = f"returned code {opt.last_optimize_result()}"
-        except nlopt.ForcedStop:
-            if stop:
-                raise stop[0] from None
-        except Exception as exc:  # noqa: BLE001 - nlopt's own errors (RoundoffLimited, generic failure)
-            outcome = f"nlopt {exc.__class__.__name__}" + (f" ({exc})" if str(exc) else "")
-        with torch.no_grad():
-            flat[idx] = torch.from_numpy(best["x"]).to(theta.device, theta.dtype)
-        first = best["first"]
-        lowered = first is not None and best["loss"] < first - 1e-7 * max(1.0, abs(first))
-        return lowered, outcome
-
-    def run_stage(end: int, stage: str) -> bool:
-        tries = 0
-        while counter["step"] < end:
-            before = counter["step"]
-            lowered, outcome = attempt(end)
-            tries += 1
-            if counter["step"] >= end:
-                return True
-            if not lowered:
-                if tries == 1 and counter["step"] - before <= 3 and before == step0:
-                    raise DoefabError(f"{label} stopped after {counter['step'] - before} evaluations of {iterations} "
-                                      f"without lowering the loss ({outcome}): no design was made; use "
-                                      f"--optimizer adam")
-                reasons.append(f"{label} ({stage}) stopped at evaluation {counter['step']} of {iterations}: "
-                               f"{outcome}, and a restart from the best point did not lower the loss")
-                return False
-        return True
-
-    run_stage(min(qat_start, iterations), "continuous stage")
-    if qat_start < iterations:  # a continuous stage that gave up early leaves its budget unused; QAT still runs
-        counter["step"] = max(counter["step"], qat_start)
-        run_stage(iterations, "quantization-aware stage")
-    return "; ".join(reasons) or None
+            if cfg.optimizer == "adam":
+                self._adam_steps()
+            else:
+                stop_reason = run_nlopt(cfg.optimizer, self.theta, self.objective, self.record, self.step0,
+                                        cfg.iterations, self.qat_start, self.param.variable_mask(self.mask))
+        finally:
+            if self.bar is not None:
+                self.bar.close()
+        self.checkpoint(cfg.iterations, time.perf_counter() - self.t_start)
+        design = _finish(self.task, cfg, self.cam, self.dcam, self.theta.detach(), self.param, self.history,
+                         self.lams, self.depths, self.dev)
+        design.extra["wall_time_s"] = round(time.perf_counter() - self.t_start, 1)
+        design.extra["optimizer_time_s"] = self.history[-1][1] if self.history else 0.0
+        design.extra["evaluations"] = len(self.history)
+        if stop_reason:
+            design.extra["stop_reason"] = stop_reason
+        return design
 
 
 def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths, device=None) -> Design:

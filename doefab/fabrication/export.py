@@ -111,21 +111,10 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
-    layer_stats = {}
-    for bit in range(n_masks):  # one plane at a time: the 8640² case stays within a few GB
-        r = plane_rectangles(bit_plane(layout, bit, n_levels))
-        x0 = origin_nm[0] + r[:, 0] * pitch_nm
-        x1 = origin_nm[0] + r[:, 2] * pitch_nm
-        y1 = origin_nm[1] - r[:, 1] * pitch_nm
-        y0 = origin_nm[1] - r[:, 3] * pitch_nm
-        writer.add_rectangles(np.stack([x0, y0, x1, y1], axis=1), etch_layer(bit))
-        layer_stats[etch_layer(bit)] = len(r)
+    layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
     spec = MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
                     cd_nm=cd_nm)
-    align_to = {}
-    for k, lay in enumerate(order):
-        prev = 0 if (opts.align_chain == "chrome" or k == 0) else etch_bit(order[k - 1]) + 1
-        align_to[etch_bit(lay) + 1] = prev
+    align_to = _alignment(order, opts.align_chain)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
     with staging_dir(out) as stage:
@@ -164,6 +153,31 @@ def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptio
         atomic_write_text(stage / "README.txt", fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
+
+
+def _write_etch_layers(writer: GDSWriter, layout: np.ndarray, n_levels: int, pitch_nm: int,
+                       origin_nm: tuple[int, int]) -> dict:
+    """Each etch layer's rectangles added to ``writer`` (nm, y up, ``origin_nm`` the top-left corner of pixel
+    (0, 0)), one bit plane at a time (the 8640² case stays within a few GB): {layer: rectangles written}."""
+    stats = {}
+    for bit in range(mask_count(n_levels)):
+        r = plane_rectangles(bit_plane(layout, bit, n_levels))
+        x0 = origin_nm[0] + r[:, 0] * pitch_nm
+        x1 = origin_nm[0] + r[:, 2] * pitch_nm
+        y1 = origin_nm[1] - r[:, 1] * pitch_nm
+        y0 = origin_nm[1] - r[:, 3] * pitch_nm
+        writer.add_rectangles(np.stack([x0, y0, x1, y1], axis=1), etch_layer(bit))
+        stats[etch_layer(bit)] = len(r)
+    return stats
+
+
+def _alignment(order: list[int], chain: str) -> dict:
+    """{mask number (etch bit + 1): the plate it aligns to (0: the chrome)} for the etch layers in process order:
+    every mask to the chrome (``chain`` "chrome"), or each to the one etched before it."""
+    out = {}
+    for k, lay in enumerate(order):
+        out[etch_bit(lay) + 1] = 0 if (chain == "chrome" or k == 0) else etch_bit(order[k - 1]) + 1
+    return out
 
 
 def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
