@@ -78,6 +78,7 @@ MEASUREMENTS = (
     Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
     Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
+    Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
     Measurement("gpu_table", None, (R + "gpu_table.md",), command="bash benchmarks/gpu_run.sh",
                 note="CPU against GPU on one machine with a CUDA GPU: the CUDA tests, then "
                      "`benchmarks/gpu_table.py` one workload at a time"),

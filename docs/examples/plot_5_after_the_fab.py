@@ -58,7 +58,7 @@ print(f"bands {', '.join(f'{w * 1e9:g}' for w in design.wavelengths)} nm, plane 
 # bands, 589 nm and 486 nm; for each, four frames with the plain half blocked (the coded view) and four with the
 # coded half blocked (the plain view); dark frames; a white-wall pair with each half open for the crosstalk.
 # The frames are 16-bit TIFFs with photon and read noise and a black level of 64 DN, the spot off the frame's
-# centre, its peak below 70 % of full scale; the part is computed on a grid 4× finer than the diagnosis uses.
+# centre, its peak below 70 % of full scale; the part is computed on a grid 4× finer than the design's.
 # The recordings file lists them.
 toml = write_lab_recordings(work / "lab", work / "design", truth, supersample=4, wavelengths_m=[589e-9, 486e-9],
                             photons=3e6, shift_px=(1.0, -2.0), frames=4, dark_frames=2, size=128,
@@ -125,10 +125,11 @@ print("what to do:", *diagnosis["actions"], sep="\n- ")
 # %%
 # The diagnosis finds both etches shallow, the second mask moved along x and the first one not, but not
 # exactly: each etch depth within two percentage points of the true 8 %, the overlay's size low. The differences
-# are larger than the σ, which measure the recordings' noise, not the model's own error: the fit computes the
-# part on the design's own grid, where a 2 µm shift is a tenth of a DOE pixel, and the registration of the
-# recordings to the design's PSF leaves a fraction of a pixel in them (:doc:`/guide/after-the-fab` lists what a
-# PSF can and cannot tell). ``diagnosis.html`` says it in words first.
+# are larger than the σ, which hold the recordings' noise and the budget's unfitted errors (the masks' rotations,
+# the roughness), not the model's own error: the fit computes the part on a grid twice finer than the design's,
+# where a 2 µm shift is still a fifth of a pixel, this part was made on one four times finer, and the
+# registration of the recordings to the design's PSF leaves a fraction of a pixel in them
+# (:doc:`/guide/after-the-fab` lists what a PSF can and cannot tell). ``diagnosis.html`` says it in words first.
 #
 # Measured and fitted PSFs
 # ------------------------

@@ -178,6 +178,15 @@ def measure_walls(rec: Recordings) -> dict | None:
                           f"half = {miss!r}: add a [[wall]] with half = {miss!r} (the other half blocked)")
     views = {h: (_wall_view(w.plain_view, w.dark, rec.pixel_format, rec.black_level),
                  _wall_view(w.coded_view, w.dark, rec.pixel_format, rec.black_level)) for h, w in by_half.items()}
+    for h, (lv, cv) in views.items():
+        total = lv + cv
+        dark = ~np.isfinite(total) | (total <= 0)
+        if dark.any():
+            w = by_half[h]
+            raise DoefabError(f"{rec.path}: {w.name} (half = {h!r} open): {int(dark.sum())} of {dark.size} pixels get "
+                              f"no light once the dark is subtracted (both views summed, first "
+                              f"{Path(w.coded_view[0]).name}); the ratios need every pixel lit: expose the white "
+                              f"wall longer (about half full scale) and check that the dark frames are the wall's")
     a, b, sa, sb = wall_ratios(views["plain"], views["coded"])
     return {"alpha_lr": a, "alpha_rl": b, "alpha_lr_se": sa, "alpha_rl_se": sb,
             "rows": int(views["plain"][0].shape[0])}

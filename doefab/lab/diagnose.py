@@ -19,7 +19,9 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
 **Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹, J the central-difference Jacobian of the weighted
-residual vector in budget σ, s² = weighted misfit / (n − p); a third of step 4's shift added in quadrature (what a
+residual vector in budget σ, s² = weighted misfit / (n − p); plus the spread that the errors the fit holds give
+the fitted ones (``held_errors``: ``HELD_DRAWS`` parts with the masks' rotations, the roughness and each held error
+drawn from the budget, their PSF changes taken through −J⁺); a third of step 4's shift added in quadrature (what a
 finer grid still would move); each σ widened to half the distance to any other fit found (step 2's rivals, step
 3's mirrors) within ``MIRROR_CHI2`` s² of the best. **Identifiable**: the model responds to the error at all
 (``partmodel.Param.reason`` lists the ones it cannot), its σ is below ``MAX_SIGMA`` budget σ (the recordings tell
@@ -38,8 +40,8 @@ import torch
 from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, scaled
 from doefab.tolerance.errors import PartErrors
 
-__all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "MAX_CORRELATION",
-           "MAX_SIGMA", "REWEIGHT"]
+__all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "held_errors",
+           "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS"]
 
 MAX_CORRELATION = 0.95  # at or above it two errors are not told apart
 MAX_SIGMA = 0.5  # an identifiable error's σ is below this many budget σ
@@ -49,6 +51,7 @@ REFINE = 8  # Gauss–Newton steps at most on the finer grid
 RIVAL = 0.2  # starts whose unweighted misfit is within this fraction of the best's are fitted weighted too
 NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
 MIRROR_CHI2 = 4.0  # an overlay's sign is identified when its mirror fits worse by this much (2σ), in units of s²
+HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
 
 
 def _starts(model: PartModel, starts: int, seed: int) -> list[np.ndarray]:
@@ -168,14 +171,41 @@ def jacobian(model: PartModel, x: np.ndarray, step: float = STEP) -> tuple[np.nd
     return r0, np.stack(cols, axis=1)
 
 
+def held_errors(model: PartModel, x: np.ndarray, draws: int = HELD_DRAWS, seed: int = 0) -> np.ndarray:
+    """[draws, n] the weighted change of the fitted part's PSFs (on the finer grid) when the errors the fit holds
+    take values drawn from the budget (``tolerance.errors.sample_errors``): the masks' rotations and the surface
+    roughness, and each error held for a reason (a decenter along the split at focus, an axial gap at the stop).
+    A real part carries them; ``curvature`` turns them into the fitted errors' spread."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import sample_errors
+
+    fitted = model.errors(x)
+    held = {(p.key, p.axis) for p in model.params if p.reason and p.sigma > 0}
+    rng = np.random.default_rng([seed, 40])
+    base = model.psfs(fitted, fine=True)
+    out = []
+    for i in range(draws):
+        d = sample_errors(model.budget, rng, seed=10**6 + 1000 * seed + i, n_masks=model.n_masks)
+        y = d.mount_shift[1] if ("mount_decenter", "y") in held else fitted.mount_shift[1]
+        part = replace(fitted, rotation=d.rotation, roughness=d.roughness, roughness_corr=d.roughness_corr,
+                       seed=d.seed, mount_shift=(fitted.mount_shift[0], y),
+                       axial_gap=d.axial_gap if ("axial_gap", None) in held else fitted.axial_gap)
+        out.append(((model.psfs(part, fine=True) - base) * model.weight).ravel())
+    return np.stack(out)
+
+
 def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None, grid=None, x=None,
-              others=()) -> dict:
+              others=(), held=None) -> dict:
     """{"sigma": [budget σ; inf where the PSFs do not respond], "correlation": [p, p], "identifiable": [bool],
     "reason": [str], "s2"} of the fitted errors from the residual ``r`` and Jacobian ``jac`` at the optimum, the
     overlays' mirror tests (``mirror``'s rise of the misfit, in s²; None: none made), the grid's share of the
     uncertainty (budget σ, added in quadrature; None: none) and the ``others`` fits found [(point, rise of the
     misfit in s²)]: one within ``MIRROR_CHI2`` of the optimum ``x`` lies inside every error's 2σ interval, so
-    each σ is widened to half its distance from ``x`` where smaller."""
+    each σ is widened to half its distance from ``x`` where smaller. ``held``: [k, n] weighted changes of the
+    PSFs that the errors the fit holds make (``held_errors``); the fitted errors' linear response to each,
+    −J⁺·δ, adds its covariance (the unfitted errors' share: they move the fit alike in every pixel, which no
+    per-pixel noise model holds)."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     response = np.linalg.norm(jac, axis=0)
@@ -184,6 +214,9 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
     if live.any():
         jl = jac[:, live]
         cov = s2 * np.linalg.pinv(jl.T @ jl, rcond=1e-12, hermitian=True)
+        if held is not None and len(held):
+            moved = -np.asarray(held) @ np.linalg.pinv(jl, rcond=1e-12).T  # [k, live]
+            cov = cov + moved.T @ moved / len(moved)
         sl = np.sqrt(np.maximum(np.diag(cov), 0.0))
         sigma[live] = np.hypot(sl, 0.0 if grid is None else np.asarray(grid)[live])
         corr[np.ix_(live, live)] = np.clip(cov / np.maximum(np.outer(sl, sl), 1e-300), -1.0, 1.0)
@@ -253,7 +286,10 @@ def diagnose(measured, design_dir, budget=None, starts: int = 4, seed: int = 0, 
     finally:
         if bar is not None:
             bar.close()
-    cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"])
+    held = held_errors(model, got["x"], seed=seed)
+    cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"], held)
+    cur["held"] = {"draws": len(held), "errors": ["mask rotations", "surface roughness"]
+                   + [p.label for p in model.params if p.reason and p.sigma > 0]}
     seconds = time.perf_counter() - t0
     err = model.errors(got["x"])
     misfit = {"nominal": _plain_misfit(model, PartErrors(), fine=True), "fitted": _plain_misfit(model, err, fine=True)}

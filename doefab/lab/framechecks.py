@@ -51,10 +51,11 @@ def _shape(a: np.ndarray) -> str:
     return f"{a.shape[1]}×{a.shape[0]} px" + (" × 3 channels" if a.ndim == 3 else "")
 
 
-def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None = None) -> FrameSet | None:
+def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None = None,
+             white_level: float | None = None) -> FrameSet | None:
     """Read every file of ``paths``, noting in ``problems`` each unreadable one, each of another size than the
-    first and (``saturated_fix``: the fix to name) each saturated one; the readable frames of the first's size
-    averaged (None when none is)."""
+    first and (``saturated_fix``: the fix to name) each saturated one, against ``white_level`` (DN; None: the
+    file's full scale); the readable frames of the first's size averaged (None when none is)."""
     total = sq = first = None
     n = 0
     for p in paths:
@@ -70,11 +71,12 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
                             f"have the same size and channels (re-record it or remove it from the list)")
             continue
         if saturated_fix:
-            top, peak = full_scale(p, pixel_format), float(f.max(initial=0.0))
+            top = full_scale(p, pixel_format) if white_level is None else white_level
+            peak, what = float(f.max(initial=0.0)), "the file's full scale" if white_level is None else "white_level"
             if peak >= SATURATION * top:
-                problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of the file's full "
-                                f"scale ({top:.6g} DN), so the peak is clipped: {saturated_fix} (keep the peak "
-                                f"below {SATURATION:.0%} of full scale)")
+                problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of {what} "
+                                f"({top:.6g} DN), so the peak is clipped: {saturated_fix} (keep the peak "
+                                f"below {SATURATION:.0%} of it)")
         total += f
         sq += f * f
         n += 1
@@ -175,7 +177,7 @@ def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[st
 def psf_frame_problems(rec, r, kernel: int) -> list[str]:
     """Every problem of the ``Recordings`` ``rec``'s PSF recording ``r``, each naming the file and the fix."""
     out: list[str] = []
-    frames = read_set(r.frames, rec.pixel_format, out, "reduce the exposure or the source power")
+    frames = read_set(r.frames, rec.pixel_format, out, "reduce the exposure or the source power", rec.white_level)
     dark = read_set(r.dark, rec.pixel_format, out) if r.dark else None
     if frames is None:
         return out
@@ -207,8 +209,8 @@ def wall_frame_problems(rec, w) -> list[str]:
     """Every problem of the ``Recordings`` ``rec``'s white-wall recording ``w``, each naming the file and the fix."""
     out: list[str] = []
     fix = "reduce the exposure or the wall's illumination"
-    coded = read_set(w.coded_view, rec.pixel_format, out, fix)
-    plain = read_set(w.plain_view, rec.pixel_format, out, fix)
+    coded = read_set(w.coded_view, rec.pixel_format, out, fix, rec.white_level)
+    plain = read_set(w.plain_view, rec.pixel_format, out, fix, rec.white_level)
     dark = read_set(w.dark, rec.pixel_format, out) if w.dark else None
     if coded is not None and plain is not None and coded.mean.shape != plain.mean.shape:
         out.append(f"{plain.first} (plain view) is {_shape(plain.mean)} but {coded.first} (coded view) is "

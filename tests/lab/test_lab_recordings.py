@@ -94,8 +94,8 @@ coded_view = "w/c.tiff"
     with pytest.raises(DoefabError) as exc:
         load_recordings(tmp_path / "rec.toml")
     msg = str(exc.value)
-    for part in ("colour is not a key of the recordings file: the keys are design, pixel_format, black_level, psf, "
-                 "wall",
+    for part in ("colour is not a key of the recordings file: the keys are design, pixel_format, black_level, "
+                 "white_level, psf, wall",
                  "black_level = -3 must be a finite number ≥ 0 (DN)",
                  "[[psf]] 1 half = 'left' is not one of 'coded', 'plain'",
                  "[[psf]] 1 depth_m = 0 must be a distance > 0 in metres, or \"inf\"",
@@ -219,3 +219,40 @@ def test_raw_frames_without_darks_or_black_level_are_refused(tmp_path):
     (tmp_path / "rec.toml").write_text('black_level = 512\n' + wall)
     assert not [p for p in recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
                 if "black level of" in p]
+
+
+def test_a_wall_left_unlit_names_its_files(lab):
+    """A wall pair with pixels that get no light once the dark is subtracted (its exposure below the dark's
+    level) is refused naming the wall, the count of unlit pixels and the fix."""
+    from doefab.lab.calibrate import measure_walls
+
+    (lab / "w").mkdir()
+    _frames(lab / "w", "lit", np.full((64, 64), 3e3), n=2)
+    _frames(lab / "w", "dim", np.full((64, 64), 0.0), n=2, read=0.0)
+    body = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n'
+            '[[wall]]\nhalf = "plain"\ncoded_view = "w/dim_*.tiff"\nplain_view = "w/dim_*.tiff"\n')
+    with pytest.raises(DoefabError) as got:
+        measure_walls(load_recordings(_write(lab, body)))
+    msg = str(got.value)
+    assert "[[wall]] 2 (half = 'plain' open): 4096 of 4096 pixels get no light" in msg and "dim_0.tiff" in msg
+    assert "expose the white wall longer" in msg
+    lit = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n'
+           '[[wall]]\nhalf = "plain"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n')
+    assert measure_walls(load_recordings(_write(lab, lit)))["alpha_lr"] == pytest.approx(0.5, abs=0.01)
+
+
+def test_white_level_is_the_sensors_clip(lab):
+    """A 12-bit sensor's frames in 16-bit TIFFs: a peak at its 4095 DN clip passes the file's full scale (65535)
+    unnoticed, and is refused once the file states white_level = 4095; a white level at or below the black level
+    is refused with its key."""
+    spot = _spot(photons=2e5)
+    _frames(lab / "psf", "clip", np.minimum(spot * (4095 - BLACK) / spot.max(), 4095 - BLACK), n=3)
+    body = _psf("psf/clip")
+    with_white = lab / "white.toml"
+    with_white.write_text('pixel_format = "auto"\nblack_level = 64\nwhite_level = 4095\n' + body)
+    assert "brightest pixel" not in "; ".join(recording_problems(load_recordings(_write(lab, body)), BANDS, PLANES, K))
+    got = "; ".join(recording_problems(load_recordings(with_white), BANDS, PLANES, K))
+    assert "clip_0.tiff: its brightest pixel" in got and "of white_level (4095 DN)" in got
+    with_white.write_text('black_level = 64\nwhite_level = 64\n' + body)
+    with pytest.raises(DoefabError, match="white_level = 64 DN must be above black_level"):
+        load_recordings(with_white)
