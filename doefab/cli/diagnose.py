@@ -66,10 +66,11 @@ def run(args) -> int:
     from doefab.lab.diagnose import diagnose, fitted_pair
     from doefab.lab.diagreport import check_design, write_report
     from doefab.lab.partmodel import check_pair
-    from doefab.optics.psffile import load_psf_pair, save_psf_pair
+    from doefab.optics.psf import PSFPair
+    from doefab.optics.psffile import save_psf_pair
     from doefab.tolerance.errors import load_budget
 
-    pair = load_psf_pair(args.psf)
+    pair = PSFPair.load(args.psf)
     folder, design = design_folder(design_of(pair, args.design))
     check_design(pair, design)
     check_pair(pair, design)

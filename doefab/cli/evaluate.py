@@ -108,13 +108,13 @@ def read_psf_arg(path, flag: str):
     """(PSFPair, its record: file, SHA-256, provenance...) of a ``psf_pair.npz`` flag, read and checked before any
     work; (None, None) when the flag is not given."""
     from doefab.errors import DoefabError
-    from doefab.optics.psffile import load_psf_pair
+    from doefab.optics.psf import PSFPair
     from doefab.reconstruction.partfinetune import pair_record
 
     if path is None:
         return None, None
     try:
-        pair = load_psf_pair(path)
+        pair = PSFPair.load(path)
     except DoefabError as exc:
         raise DoefabError(f"{flag}: {exc}") from None
     return pair, pair_record(pair, path)

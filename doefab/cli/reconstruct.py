@@ -119,11 +119,11 @@ def _versions() -> dict:
 def _psf(args, rec):
     """--psf read and checked against the network (its bands and planes) before any work; None without it."""
     from doefab.errors import DoefabError
-    from doefab.optics.psffile import load_psf_pair
+    from doefab.optics.psf import PSFPair
 
     if args.psf is None:
         return None
-    pair = load_psf_pair(args.psf)
+    pair = PSFPair.load(args.psf)
     try:
         rec._psf(pair)
     except DoefabError as exc:

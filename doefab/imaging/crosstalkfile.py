@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.imaging.crossratios import check_pair
 from doefab.io import atomic_write_text
 
 __all__ = ["save_crosstalk", "read_crosstalk", "FORMAT", "VERSION"]
@@ -24,9 +25,7 @@ KEYS = ("alpha_lr", "alpha_rl", "alpha_lr_se", "alpha_rl_se")
 
 def _profiles(values: dict, where: str) -> dict:
     """The four per-column lists as 1-D float arrays of one length, checked: ratios a dual-pixel sensor can have
-    (``crosstalk.check_pair``), standard errors finite and ≥ 0."""
-    from doefab.imaging.crosstalk import check_pair
-
+    (``crossratios.check_pair``), standard errors finite and ≥ 0."""
     out = {}
     for k in KEYS:
         try:

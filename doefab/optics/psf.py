@@ -59,10 +59,13 @@ class PSFPair:
 
     @classmethod
     def load(cls, path) -> "PSFPair":
-        """Read and check ``psf_pair.npz`` (:func:`doefab.optics.psffile.load_psf_pair`)."""
-        from doefab.optics.psffile import load_psf_pair
+        """Read and check ``psf_pair.npz`` (:func:`doefab.optics.psffile.read_psf_pair`): float32 CPU tensors,
+        ``camera`` None, ``provenance`` the stored dict.
 
-        return load_psf_pair(path)
+        Example: ``pair = doefab.PSFPair.load("out/cal/psf_pair.npz")``"""
+        from doefab.optics.psffile import read_psf_pair
+
+        return cls(**read_psf_pair(path))
 
     def __getitem__(self, half: str) -> torch.Tensor:
         out = getattr(self, half, None) if half in APERTURES else None

@@ -33,7 +33,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
 
-__all__ = ["save_psf_pair", "load_psf_pair", "FORMAT", "VERSION"]
+__all__ = ["save_psf_pair", "read_psf_pair", "FORMAT", "VERSION"]
 
 FORMAT = "doefab-psf-pair"
 VERSION = 1
@@ -119,13 +119,12 @@ def _read(path: Path) -> dict:
                           f"PSFPair.save") from None
 
 
-def load_psf_pair(path):
-    """Read ``psf_pair.npz`` (see the module docstring) into a :class:`PSFPair` (float32 CPU tensors, ``camera``
-    None, ``provenance`` the stored dict). Refuses, naming the file and the problem, a file of another format or
+def read_psf_pair(path) -> dict:
+    """Read ``psf_pair.npz`` (see the module docstring): the :class:`~doefab.optics.psf.PSFPair` fields it holds
+    (``coded``, ``uncoded``: float32 CPU tensors; ``wavelengths``, ``depths``, ``sensor_pitch``; ``provenance``
+    the stored dict), which ``PSFPair.load`` builds the pair from. Refuses, naming the file and the problem, a file of another format or
     version, a missing key, a wrong shape, NaN / infinite or negative PSF values and implausible units."""
     import torch
-
-    from doefab.optics.psf import PSFPair
 
     path = Path(path)
     z = _read(path)
@@ -150,7 +149,8 @@ def load_psf_pair(path):
         prov = None
     if not isinstance(prov, dict):
         raise DoefabError(f"{path}: provenance is not a JSON object: write the file again (doefab calibrate)")
-    return PSFPair(torch.from_numpy(np.ascontiguousarray(arrays["coded"], np.float32)),
-                   torch.from_numpy(np.ascontiguousarray(arrays["uncoded"], np.float32)),
-                   tuple(float(w) for w in arrays["wavelengths_m"]), tuple(float(d) for d in arrays["depths_m"]),
-                   float(arrays["sensor_pitch_m"]), provenance=prov)
+    return {"coded": torch.from_numpy(np.ascontiguousarray(arrays["coded"], np.float32)),
+            "uncoded": torch.from_numpy(np.ascontiguousarray(arrays["uncoded"], np.float32)),
+            "wavelengths": tuple(float(w) for w in arrays["wavelengths_m"]),
+            "depths": tuple(float(d) for d in arrays["depths_m"]), "sensor_pitch": float(arrays["sensor_pitch_m"]),
+            "provenance": prov}

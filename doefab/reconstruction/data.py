@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
+
 __all__ = ["SPLIT_SEEDS", "PART_SEEDS", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
            "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands",
            "split_digest", "split_components", "CONTENT_COMPONENTS"]
@@ -42,7 +44,6 @@ PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose cod
 # colour photograph to give it content of its own).
 CONTENT = {"train": "train", "val": "val", "test": "test", "final": "test"}
 _PACKAGE = Path(__file__).resolve().parents[1]  # doefab/
-HS_WAVELENGTHS_M = tuple(float(x) * 1e-9 for x in range(400, 701, 10))
 # scikit-image's photographs, each in one split only (cat and chelsea are the same picture: chelsea, test)
 IMAGES = {"train": ("astronaut", "camera", "rocket", "coins", "moon", "brick", "grass", "hubble_deep_field", "page",
                     "clock", "cell", "text"),
@@ -165,27 +166,6 @@ def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: 
     return np.minimum(scene, 256.0).astype(np.float32)
 
 
-def _on_bands(sd) -> np.ndarray:
-    """A colour-science spectral distribution on the 31 bands 400–700 nm (10 nm)."""
-    from doefab.reconstruction.spectra import on_bands
-
-    return on_bands(sd)
-
-
-@functools.lru_cache(maxsize=None)
-def illuminant_spectra() -> tuple[tuple[str, ...], np.ndarray]:
-    """(names, [I, 31]) colour-science's illuminants on 400–700 nm, ISO ones excluded, normalised to peak 1."""
-    import colour
-
-    names, rows = [], []
-    for n in colour.SDS_ILLUMINANTS:
-        e = _on_bands(colour.SDS_ILLUMINANTS[n])
-        if not n.startswith("ISO") and np.all(np.isfinite(e)) and e.max() > 0:
-            names.append(n)
-            rows.append(e / e.max())
-    return tuple(names), np.array(rows)
-
-
 def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str | None = None) -> np.ndarray:
     """[31, S, S] spectral radiance (400–700 nm): reflectances of the split (measured, and in training also
     synthetic) in regions that follow a real image's edges, shaded, under one light (peak 1): ``light`` is
@@ -275,7 +255,7 @@ def split_components(task: str) -> dict[str, str]:
     ``splits`` — which photographs, scene seeds and part seeds each split takes (``IMAGES``, ``SPLIT_SEEDS``,
     ``CONTENT``, ``PART_SEEDS``); ``photographs`` — their pixels as the scenes use them (as the installed
     scikit-image reads its files); ``generator`` — the source of the modules that draw the scenes (this one, and
-    ``spectra`` for hyperspectral); ``parts`` — the source of the subpackages that compute a fabricated part
+    ``spectra`` and ``bands`` for hyperspectral); ``parts`` — the source of the subpackages that compute a fabricated part
     (``PART_MODEL``) and the shipped tolerance budget the parts are drawn from; for hyperspectral also
     ``reflectances`` (each split's measured reflectances, to 1e-6) and ``lights`` (the held-out lights, to 1e-6,
     and the bytes of the illuminant library ``illuminants.csv``)."""
@@ -291,10 +271,10 @@ def split_components(task: str) -> dict[str, str]:
            "parts": _sha(sources_sha256(_PACKAGE, PART_MODEL).encode(),
                          (_PACKAGE / "tolerance" / "budget.toml").read_bytes())}
     if task == "hyperspectral":
-        from doefab.reconstruction import spectra
+        from doefab.reconstruction import bands, spectra
         from doefab.reconstruction.illuminant import LIBRARY_PATH
 
-        sources.append(Path(spectra.__file__))
+        sources += [Path(spectra.__file__), Path(bands.__file__)]
         out["reflectances"] = _sha(*(np.round(spectra.reflectances(s), 6).tobytes() for s in IMAGES))
         out["lights"] = _sha(np.round(spectra.val_lights(), 6).tobytes(), np.round(spectra.test_lights(), 6).tobytes(),
                              LIBRARY_PATH.read_bytes())

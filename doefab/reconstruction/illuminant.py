@@ -36,13 +36,13 @@ LIBRARY_PATH = Path(__file__).resolve().parents[1] / "weights" / "illuminants.cs
 
 
 def write_illuminant_library(path: str | Path = LIBRARY_PATH) -> Path:
-    """Write the installed colour-science's illuminants (``data.illuminant_spectra``) as the shipped library
+    """Write the installed colour-science's illuminants (``bands.illuminant_spectra``) as the shipped library
     (``name,400nm,...,700nm``)."""
     import csv
     import io
 
     from doefab.io import atomic_write_text
-    from doefab.reconstruction.data import HS_WAVELENGTHS_M, illuminant_spectra
+    from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
 
     names, spectra = illuminant_spectra()
     buf = io.StringIO()
@@ -66,7 +66,7 @@ def _read_library(path: str) -> tuple[tuple[str, ...], np.ndarray]:
         raise DoefabError(f"cannot read the illuminant library {path}: {exc}; restore it from the package "
                           "(git checkout doefab/weights/illuminants.csv) or rewrite it with "
                           "doefab.reconstruction.illuminant.write_illuminant_library()") from None
-    from doefab.reconstruction.data import HS_WAVELENGTHS_M
+    from doefab.reconstruction.bands import HS_WAVELENGTHS_M
 
     bands = len(HS_WAVELENGTHS_M)
     if spectra.ndim != 2 or spectra.shape[1] != bands or not np.all(np.isfinite(spectra)):

@@ -23,9 +23,9 @@ from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.specs import get_spec, psf_pair
 from doefab.reconstruction.train import model_inputs
-from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, weights_paths
+from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, renamed_state, weights_paths
 
-__all__ = ["load_reconstructor", "Reconstructor", "renamed_state"]
+__all__ = ["load_reconstructor", "Reconstructor"]
 
 
 class Reconstructor:
@@ -140,12 +140,6 @@ def _capture(name: str, x) -> torch.Tensor:
 def _float_tensor(x) -> torch.Tensor:
     """A float32 tensor of an array or a tensor (detached: inference only)."""
     return torch.as_tensor(x.detach() if isinstance(x, torch.Tensor) else np.asarray(x)).float()
-
-
-def renamed_state(state: dict) -> dict:
-    """Weights saved before the coded branch had its own module (``coded.``) load under today's names."""
-    old = ("feat_coded.", "wiener.")
-    return {("coded." + k if k.startswith(old) else k): v for k, v in state.items()}
 
 
 def _retrain(task: str, variant: str, weights_dir, design) -> str:

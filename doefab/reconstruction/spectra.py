@@ -37,6 +37,8 @@ import functools
 
 import numpy as np
 
+from doefab.reconstruction.bands import on_bands
+
 __all__ = ["reflectances", "reflectance_names", "synthetic_reflectance", "spectral_distance", "scene_illuminant",
            "light_kind", "held_out_light_sources", "val_lights", "test_lights", "on_bands", "COPY", "DUPLICATE",
            "REFLECTANCE_FAMILIES", "SPLIT_RANK", "MAX_DRAWS"]
@@ -57,13 +59,6 @@ MAX_DRAWS = 10_000  # a synthetic reflectance drawn this often next to a held-ou
 _VAL_LIGHTS = ("FL", "F32T8", "F34", "F40", "T8 ", "TL-84", "Kolor", "HPS", "LPS", "Mercury", "Metal Halide", "H38",
                "MHC100", "SDW-T", "Natural")
 _TEST_LIGHTS = ("LED", "PHOS", "Luxeon", "Kinoton", "Neodimium")
-
-
-def on_bands(sd) -> np.ndarray:
-    """A colour-science spectral distribution on the 31 bands 400–700 nm (10 nm)."""
-    import colour
-
-    return np.asarray(sd.copy().align(colour.SpectralShape(400, 700, 10)).values, np.float64)
 
 
 def _collection(kind: str, name: str):

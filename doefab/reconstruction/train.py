@@ -55,8 +55,7 @@ def sensor_response_for(task: str, pair, sensor=None):
 def copy_matching(model: torch.nn.Module, task: str, variant: str, folder) -> dict:
     """Copy into ``model`` every tensor of ``folder``'s ``task``/``variant`` weights whose name and shape match
     (a warm start); returns {"from", "tensors", "of"}."""
-    from doefab.reconstruction.loader import renamed_state
-    from doefab.reconstruction.weights import weights_paths
+    from doefab.reconstruction.weights import renamed_state, weights_paths
 
     pt, _ = weights_paths(task, variant, folder)
     if not pt.is_file():

@@ -14,7 +14,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes, atomic_write_json
 
-__all__ = ["WEIGHTS_DIR", "weights_paths", "history_path", "is_shipped", "weights_target", "write_weights",
+__all__ = ["renamed_state", "WEIGHTS_DIR", "weights_paths", "history_path", "is_shipped", "weights_target", "write_weights",
            "WEIGHTS_FORMAT", "foreign_weights_files"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
@@ -100,3 +100,9 @@ def write_weights(folder: str | Path, task: str, variant: str, model: torch.nn.M
     if history_csv is not None:
         atomic_write_bytes(history_path(task, variant, folder), history_csv)
     return {**meta, "weights_path": str(pt.resolve())}
+
+
+def renamed_state(state: dict) -> dict:
+    """Weights saved before the coded branch had its own module (``coded.``) load under today's names."""
+    old = ("feat_coded.", "wiener.")
+    return {("coded." + k if k.startswith(old) else k): v for k, v in state.items()}

@@ -36,7 +36,7 @@ import torch
 from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
 
 __all__ = ["Conditions", "honest", "measured", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits",
-           "CONDITIONS", "model_sources_sha256", "crop_rows", "crosstalk_residual"]
+           "CONDITIONS", "model_sources_sha256", "crop_columns", "crop_rows", "crosstalk_residual"]
 
 CONDITIONS = ("honest", "clean")
 
@@ -65,7 +65,6 @@ class Conditions:
 
         from doefab.imaging.crosstalk import DualPixelCrosstalk
         from doefab.tolerance.errors import crosstalk_ratios
-        from doefab.tolerance.netjudge import crop_columns
 
         err = replace(self.crosstalk, seed=int(np.random.SeedSequence([PART_SEEDS[self.split], index])
                                                .generate_state(1)[0]))
@@ -83,11 +82,16 @@ class Conditions:
                 "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
 
 
-def crop_rows(index: int, images: int, size: int, width_px: int) -> np.ndarray:
-    """Sensor rows (pixels from the centre row) of scene ``index``'s crop: ``netjudge.crop_columns`` in reverse
-    order, so the crops lie along the calibrated region's diagonal and see its crosstalk along both axes."""
-    from doefab.tolerance.netjudge import crop_columns
+def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarray:
+    """Sensor columns (pixels from the centre column) of scene ``index``'s crop: the scenes are spread across
+    80 % of the calibrated width, so the crosstalk they see ranges over its profile."""
+    centre = 0.0 if images < 2 else (index / (images - 1) - 0.5) * 0.8 * width_px
+    return centre + np.arange(size) - (size - 1) / 2
 
+
+def crop_rows(index: int, images: int, size: int, width_px: int) -> np.ndarray:
+    """Sensor rows (pixels from the centre row) of scene ``index``'s crop: ``crop_columns`` in reverse
+    order, so the crops lie along the calibrated region's diagonal and see its crosstalk along both axes."""
     return crop_columns(max(images - 1 - index, 0), images, size, width_px)
 
 
@@ -175,7 +179,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from doefab.reconstruction.specs import network_kernel
     from doefab.tolerance.errors import sample_errors
     from doefab.tolerance.judge import PSFJudge, alignment_chain
-    from doefab.tolerance.montecarlo import keep_freed_memory
+    from doefab.tolerance.memory import keep_freed_memory
 
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if task == "depth" else design.depths

@@ -26,6 +26,7 @@ import numpy as np
 
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import sample_errors
+from doefab.tolerance.memory import keep_freed_memory
 
 __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
@@ -33,7 +34,6 @@ __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "kee
 # glibc: serve every allocation from the heap and never trim it (a part allocates and frees tens of MB per
 # wavelength; fresh mmap pages for each cost a third of a part in page faults)
 _MALLOC_ENV = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(2**31 - 1)}
-_MALLOC_SET = False
 
 
 def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, weights_dir=None,
@@ -183,27 +183,6 @@ def _bar(total, desc, progress):
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="part")
-
-
-def keep_freed_memory() -> bool:
-    """Let this process reuse the memory it frees instead of returning it to the system and faulting it back in
-    (glibc's ``mallopt``: no mmap'd blocks, no heap trimming). A Monte Carlo part allocates and frees several
-    blocks of tens of MB per wavelength; with the default settings each is a fresh mmap whose page faults cost
-    about a third of the part's time (measured: 5.7 → 4.0 s per grating part on one thread). The process keeps
-    its peak memory until it exits: called only in processes that judge parts. Returns whether it applied
-    (False off glibc)."""
-    global _MALLOC_SET
-    if _MALLOC_SET:
-        return True
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL("libc.so.6")
-        ok = libc.mallopt(-4, 0) == 1 and libc.mallopt(-1, 2**31 - 1) == 1  # M_MMAP_MAX, M_TRIM_THRESHOLD
-    except (OSError, AttributeError):
-        return False
-    _MALLOC_SET = bool(ok)
-    return _MALLOC_SET
 
 
 def auto_workers(samples: int) -> int:

@@ -26,7 +26,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
-__all__ = ["NetworkJudge", "RECON_TASK", "crop_columns", "judge_settings", "SCENES", "SIZE", "SPLIT", "LABELS"]
+__all__ = ["NetworkJudge", "RECON_TASK", "judge_settings", "SCENES", "SIZE", "SPLIT", "LABELS"]
 
 RECON_TASK = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
 SCENES = 8  # scenes per part (benchmarks/delivered_scene_noise.py measures the scene noise against the spread)
@@ -53,13 +53,6 @@ def judge_settings(networks) -> dict:
     if s["split"] not in SPLITS:
         raise DoefabError(f"network judge split = {s['split']!r} must be one of {', '.join(SPLITS)}, e.g. {SPLIT}")
     return s
-
-
-def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarray:
-    """Sensor columns (pixels from the centre column) of scene ``index``'s crop: the scenes are spread across
-    80 % of the calibrated width, so the crosstalk they see ranges over its profile."""
-    centre = 0.0 if images < 2 else (index / (images - 1) - 0.5) * 0.8 * width_px
-    return centre + np.arange(size) - (size - 1) / 2
 
 
 class NetworkJudge:

@@ -9,7 +9,8 @@ import torch
 
 import doefab
 from doefab.errors import DoefabError
-from doefab.optics.psffile import load_psf_pair, save_psf_pair
+from doefab.optics.psf import PSFPair
+from doefab.optics.psffile import save_psf_pair
 
 
 def _pair(d=2, w=3, k=7, seed=0):
@@ -37,7 +38,7 @@ def test_round_trip_is_bit_exact_with_provenance(tmp_path):
         assert json.loads(str(z["provenance"])) == prov
     # a pair read back saves its own provenance again
     again = back.save(tmp_path / "again.npz")
-    assert load_psf_pair(again).provenance == prov
+    assert PSFPair.load(again).provenance == prov
 
 
 def _rewrite(src, dst, **changes):
@@ -77,10 +78,10 @@ def test_nan_and_negative_psfs_are_refused_on_load_and_on_save(tmp_path):
         coded = z["coded"].copy()
     coded[0, 0, 3, 3] = np.nan
     with pytest.raises(DoefabError, match="coded holds 1 NaN"):
-        load_psf_pair(_rewrite(good, tmp_path / "nan.npz", coded=coded))
+        PSFPair.load(_rewrite(good, tmp_path / "nan.npz", coded=coded))
     coded[0, 0, 3, 3] = -0.5
     with pytest.raises(DoefabError, match="negative"):
-        load_psf_pair(_rewrite(good, tmp_path / "neg.npz", coded=coded))
+        PSFPair.load(_rewrite(good, tmp_path / "neg.npz", coded=coded))
     pair = _pair()
     pair.uncoded[0, 0, 0, 0] = float("nan")
     with pytest.raises(DoefabError, match="uncoded holds 1 NaN"):
@@ -97,6 +98,6 @@ def test_nan_and_negative_psfs_are_refused_on_load_and_on_save(tmp_path):
 def test_a_pickle_or_foreign_file_is_refused(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(DoefabError, match="not a readable .npz"):
-        load_psf_pair(tmp_path / "junk.npz")
+        PSFPair.load(tmp_path / "junk.npz")
     with pytest.raises(DoefabError, match="not found"):
-        load_psf_pair(tmp_path / "missing.npz")
+        PSFPair.load(tmp_path / "missing.npz")
