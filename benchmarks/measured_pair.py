@@ -9,9 +9,13 @@ The shipped proposed network's task metric on those captures when it is
   (c) told the measured pair after a network-only fine-tune on captures through it (``doefab finetune --psf
       --minutes M``: the shipped network as warm start, the training split's scenes, the DOE untouched).
 
-    .venv/bin/python benchmarks/measured_pair.py [--tasks hdr,hyperspectral,depth] [--parts 3] [--images 8]
-        [--size 256] [--minutes 10] [--steps N] [--supersample 2] [--work out/bench/measured_pair]
-        [--results benchmarks/results]
+The published table (about 30 minutes on 2 cores):
+
+    .venv/bin/python benchmarks/measured_pair.py --parts 2 --images 8 --minutes 3
+
+Options: ``--tasks`` (hdr,hyperspectral,depth), ``--parts`` (3), ``--images`` (8), ``--size`` (256),
+``--minutes`` (10), ``--steps N``, ``--supersample`` (2), ``--work`` (out/bench/measured_pair), ``--results``
+(benchmarks/results).
 
 Writes RESULTS/measured_pair.md (one row per part and a mean per task) and RESULTS/measured_pair.json (every
 metric of every row, each part's errors and PSF checksum, the settings and the seconds each step took). The

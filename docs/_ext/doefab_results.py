@@ -79,6 +79,8 @@ MEASUREMENTS = (
     Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
+    Measurement("measured_pair", "benchmarks/measured_pair.py", (R + "measured_pair.md",)),
+    Measurement("reconstruct_memory", "benchmarks/reconstruct_memory.py", (R + "reconstruct_memory.md",)),
     Measurement("gpu_table", None, (R + "gpu_table.md",), command="bash benchmarks/gpu_run.sh",
                 note="CPU against GPU on one machine with a CUDA GPU: the CUDA tests, then "
                      "`benchmarks/gpu_table.py` one workload at a time"),
