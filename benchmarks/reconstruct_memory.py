@@ -44,7 +44,7 @@ TASKS = ("hdr", "hyperspectral", "depth")
 
 
 def _status_mb(key: str = "VmRSS") -> float:
-    """``key`` of /proc/self/status (Linux) in MB: VmRSS, the resident set size now; VmHWM, its peak."""
+    """``key`` of /proc/self/status (Linux) in MiB: VmRSS, the resident set size now; VmHWM, its peak."""
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith(key + ":"):
             return int(line.split()[1]) / 1024
@@ -230,7 +230,9 @@ def _write(rows: list[dict], out: Path, a) -> None:
     fits = _fit(rows)
     record = {"rows": rows, "fits": fits, "command": sys.argv}
     (out / "reconstruct_memory.json").write_text(json.dumps(record, indent=1))
-    lines = ["| task | size (px) | tile / overlap (px) | peak RSS (MB) | image arrays (MB) | rest (MB) | "
+    lines = ["Peak resident memory in MiB (2²⁰ bytes) from the captures in memory on (the peak is reset once they are "
+             "made); without --rows 0 the files are not written.\n",
+             "| task | size (px) | tile / overlap (px) | peak RSS (MiB) | image arrays (MiB) | rest (MiB) | "
              "s per tile | whole run (s) |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
         lines.append(f"| {r['task']} | {r['width_px']} × {r['height_px']} | {r['tile_px']} / {r['overlap_px']} | "
@@ -238,7 +240,7 @@ def _write(rows: list[dict], out: Path, a) -> None:
                      f"{r['seconds_per_tile']:.2f} | {r['extrapolated_total_s']:.0f} ({r['tiles']} tiles, "
                      f"{r['tiles_run']} run{', files written' if r['files_written'] else ': extrapolated'}) |")
     for task, f in fits.items():
-        lines.append(f"\n{task}: the reconstruction adds ≈ {f['mb_fixed']:.0f} MB + {f['mb_per_megapixel']:.1f} MB "
+        lines.append(f"\n{task}: the reconstruction adds ≈ {f['mb_fixed']:.0f} MiB + {f['mb_per_megapixel']:.1f} MiB "
                      f"per megapixel to the loaded network")
     text = "\n".join(lines) + "\n"
     (out / "reconstruct_memory.md").write_text(text)

@@ -30,7 +30,8 @@ def register(sub) -> None:
                                                   "default: the shipped one")
     p.add_argument("--starts", type=number(int, 1, 100, unit="fits"), default=4,
                    help="fits from the error-free part and from parts drawn from the budget; the best is kept")
-    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0, help="seed of the starts' draws")
+    p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0,
+                   help="seed of the starts' draws and of the held errors' draws")
     p.add_argument("--delivered", action="store_true",
                    help="also judge the fitted part through the task's shipped network (a few minutes on a CPU)")
     p.add_argument("--out", required=True, help="output folder (diagnosis.json, psf_pair_fitted.npz, diagnosis.html)")

@@ -212,10 +212,11 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
     live = response > 1e-9 * max(float(response.max(initial=0.0)), 1e-300)
     sigma, corr = np.full(p, np.inf), np.eye(p)
     if live.any():
-        jl = jac[:, live]
-        cov = s2 * np.linalg.pinv(jl.T @ jl, rcond=1e-12, hermitian=True)
+        u, sv, vt = np.linalg.svd(jac[:, live], full_matrices=False)
+        keep = sv > 1e-6 * sv.max()  # the directions the PSFs tell (JᵀJ's eigenvalues above 1e-12 of its largest)
+        cov = s2 * (vt[keep].T / sv[keep] ** 2) @ vt[keep]
         if held is not None and len(held):
-            moved = -np.asarray(held) @ np.linalg.pinv(jl, rcond=1e-12).T  # [k, live]
+            moved = -(np.asarray(held) @ u[:, keep] / sv[keep]) @ vt[keep]  # −J⁺δ per draw, [k, live]
             cov = cov + moved.T @ moved / len(moved)
         sl = np.sqrt(np.maximum(np.diag(cov), 0.0))
         sigma[live] = np.hypot(sl, 0.0 if grid is None else np.asarray(grid)[live])

@@ -177,6 +177,8 @@ def test_the_curvature_gives_the_least_squares_covariance():
     v = rng.normal(size=(64, 4)) * np.array([0.1, 0.0, 0.2, 0.0])
     held = curvature(params, r, jac, held=v @ jac.T)
     np.testing.assert_allclose(held["sigma"], np.sqrt(want ** 2 + np.mean(v ** 2, axis=0)), rtol=1e-6)
+    full = s2 * np.linalg.inv(jac.T @ jac) + v.T @ v / len(v)
+    np.testing.assert_allclose(held["correlation"], full / np.sqrt(np.outer(np.diag(full), np.diag(full))), atol=1e-6)
 
 
 def test_the_noise_model_is_fitted_to_the_residuals():
@@ -247,3 +249,32 @@ def test_the_words_follow_the_budget(rows, metric, first):
     got = actions({"against_budget": rows, "psf_metric": {"nominal": 0.87, "as_measured": metric}})
     assert got[0].startswith(first)
     assert len([a for a in got if a.startswith("re-make mask")]) == (1 if first == "re-make mask 3" else 0)
+
+
+def test_the_held_errors_are_the_budgets_unfitted_ones(small_design, budget):
+    """A budget without mask rotations, roughness or spread in the errors the fit holds gives held draws that
+    change nothing; its mask rotations alone change the PSFs, each draw differently and with another seed
+    otherwise; the changes are weighted as the residuals are."""
+    import copy
+
+    from doefab.lab.diagnose import held_errors
+    from doefab.lab.partmodel import PartModel
+
+    pair = recorded(small_design, TRUTH)
+    quiet = copy.deepcopy(budget)
+    quiet["overlay"]["rotation_sigma_urad"] = 0.0
+    quiet["surface"]["roughness_rms_nm"] = 0.0
+    quiet["mounting"] = {**quiet["mounting"], "decenter_max_mm": 0.0, "axial_gap_sigma_mm": 0.0}
+    model = PartModel(small_design, pair, quiet)
+    x = np.zeros(len(model.free))
+    assert np.all(held_errors(model, x, draws=3) == 0.0)
+    rotated = copy.deepcopy(quiet)
+    rotated["overlay"]["rotation_sigma_urad"] = 2000.0
+    model = PartModel(small_design, pair, rotated)
+    x = np.zeros(len(model.free))
+    got = held_errors(model, x, draws=2, seed=1)
+    assert got.shape == (2, model.measured.size) and np.abs(got).max() > 0
+    assert np.abs(got[0] - got[1]).max() > 0 and np.abs(held_errors(model, x, draws=2, seed=2) - got).max() > 0
+    model.weight = model.weight * 3.0
+    np.testing.assert_allclose(held_errors(model, x, draws=2, seed=1), 3.0 * got, rtol=1e-9, atol=1e-15)
+
