@@ -2,7 +2,7 @@
 (``tolerance.errors.sample_errors``: every error it draws, mask rotations and roughness included), their PSF pairs
 computed on a grid ``--supersample``× finer than the fit's design grid and recorded with photon noise
 (``--photons`` detected photons per half, band and plane, Poisson), each diagnosed (``doefab.lab.diagnose``) as
-``doefab diagnose`` does. The published numbers (about 15 minutes on 2 cores):
+``doefab diagnose`` does, torch on one thread. The published numbers (about 15 minutes on 2 cores):
 
     .venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20
 
@@ -123,7 +123,7 @@ def table(result: dict) -> str:
     lines = [f"# Diagnosis coverage on parts of known errors\n",
              f"`.venv/bin/python benchmarks/diagnose_coverage.py {a['argv']}`: {a['parts']} parts of {where} drawn "
              f"from the shipped budget, recorded at {a['supersample']}× the fit's grid with {a['photons']:.3g} "
-             f"photons per PSF, {a['starts']} starts per fit, on {a['cpus']} CPU cores.\n",
+             f"photons per PSF, {a['starts']} starts per fit, torch on one thread ({a['cpus']} CPU cores).\n",
              f"- identified errors whose truth lies within the stated 2σ: **{_pct(s['coverage_2sigma_all'])}** of "
              f"{s['identified_rows']}",
              f"- identified etch depth scales: largest error {_num(s['etch_scale_max_error_percent'])} %",
@@ -156,6 +156,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=41)
     ap.add_argument("--results", default=str(RESULTS))
     args = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)  # the fits' times comparable from machine to machine (the published run: one thread)
     budget = load_budget()
     with tempfile.TemporaryDirectory() as tmp:
         design = Path(args.design)
