@@ -33,6 +33,7 @@ __all__ = ["Param", "parameters", "to_errors", "scaled", "check_pair", "PartMode
 BOUND = 6.0  # the fit's bounds, budget σ either side of nominal
 FINE = 2  # the grid of the fit's last steps, times the design grid
 STEP = 0.05  # the Jacobian's central-difference step, budget σ
+RECENT = 4  # parts whose PSFs a model keeps
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ class PartModel:
         reach = budget.get("mounting", {}).get("decenter_max_mm", 0.0) * 1e-3
         self.judge = PSFJudge(sub, 1, margin=max(DEFAULT_MARGIN, 1.2 * reach),
                               chain=alignment_chain(self.design_dir, self.n_masks), device=device)
-        self._fine = None
+        self._fine, self._recent = None, {}
         with torch.no_grad():
             nominal = self.judge.psfs(PartErrors(), halves=self.halves, kernel=self.kernel)
         self.light = np.stack([nominal[h].double().numpy().sum(axis=(-1, -2), keepdims=True) for h in self.halves])
@@ -203,6 +204,17 @@ class PartModel:
         """[halves, D, W, K, K] the part's PSFs at the measured entries, scaled as the measured ones (``scale``
         False: with their own light); ``fine``: on the grid ``FINE`` times finer (``PSFJudge(supersample=FINE)``,
         built on first use)."""
+        key = (repr(err), fine)
+        out = self._recent.pop(key, None)
+        if out is None:
+            out = self._compute(err, fine)
+        self._recent[key] = out  # the last few parts: a diagnosis asks for its fitted part's PSFs several times
+        while len(self._recent) > RECENT:
+            self._recent.pop(next(iter(self._recent)))
+        return self._scaled(out) if scale else out.copy()
+
+    def _compute(self, err: PartErrors, fine: bool) -> np.ndarray:
+        """[halves, D, W, K, K] the part's PSFs with their own light (one part computed, ``evaluations`` counts)."""
         judge = self.judge
         if fine:
             if self._fine is None:
@@ -216,8 +228,7 @@ class PartModel:
         self.evaluations += 1
         if self.tick is not None:
             self.tick()
-        out = np.stack([got[h].double().numpy() for h in self.halves])
-        return self._scaled(out) if scale else out
+        return np.stack([got[h].double().numpy() for h in self.halves])
 
     def residual(self, x, fine: bool = False) -> np.ndarray:
         """The weighted residual vector of the part ``x`` (budget σ) against the measured pair."""

@@ -278,3 +278,18 @@ def test_the_held_errors_are_the_budgets_unfitted_ones(small_design, budget):
     model.weight = model.weight * 3.0
     np.testing.assert_allclose(held_errors(model, x, draws=2, seed=1), 3.0 * got, rtol=1e-9, atol=1e-15)
 
+
+
+def test_a_part_asked_again_is_not_computed_again(small_design, budget):
+    """The model keeps its last parts' PSFs: the same part asked again costs no part, the same numbers come back,
+    a caller's change to what it got does not reach the next caller, and another part is computed."""
+    from doefab.lab.partmodel import PartModel
+
+    model = PartModel(small_design, recorded(small_design, TRUTH), budget)
+    first = model.psfs(TRUTH, scale=False)
+    first[...] = -1.0
+    again = model.psfs(TRUTH, scale=False)
+    assert model.evaluations == 1 and again.min() >= 0.0
+    np.testing.assert_array_equal(model.psfs(TRUTH), model._scaled(again))
+    model.psfs(dataclasses.replace(TRUTH, edge_bias=0.0))
+    assert model.evaluations == 2
