@@ -22,6 +22,10 @@ import shutil
 import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from doefab.applications import APPLICATIONS  # noqa: E402
+
 OUT = Path(__file__).parent / "results"
 KEYS = {"hdr": ("psnr", "psnr_highlight", "rmse_highlight"), "hyperspectral": ("psnr", "ssim", "sam"),
         "depth": ("mae", "rmse", "delta125")}
@@ -53,7 +57,7 @@ def task_table(task: str, honest: dict, clean: dict | None) -> list[str]:
     return lines + [""]
 
 
-PRIMARY = {"hdr": ("psnr_highlight", "dB"), "hyperspectral": ("psnr", "dB"), "depth": ("mae", "m")}
+PRIMARY = {a.name: (a.primary_metric, a.primary_unit) for a in APPLICATIONS.values()}
 
 
 def paired_lines(task: str, honest: dict) -> list[str]:
@@ -65,7 +69,7 @@ def paired_lines(task: str, honest: dict) -> list[str]:
     if not per:
         return []
     key, unit = PRIMARY[task]
-    sign = -1.0 if key == "mae" else 1.0  # lower MAE is better
+    sign = 1.0 if APPLICATIONS[task].higher_is_better else -1.0
     lights = honest["per_image"].get("light")
     groups = [("all scenes", None)] + ([("in-library light", "in-library"), ("out-of-library light",
                                                                            "out-of-library")] if lights else [])

@@ -5,7 +5,8 @@ tolerance budget, per-column dual-pixel crosstalk unmixed with a noisy calibrati
 planes — while the networks are told the nominal PSF. --clean evaluates on the nominal model's own captures.
 --split val is for choices (designs, settings); the test split is for the tables; --split final reads the final
 test set (new scenes and parts from the test split's content, made after every earlier test read), and each such
-read is appended to OUT/final_split_reads.md. Hyperspectral results are also given for in-library and
+read is appended to OUT/final_split_reads.md; --split real is the measured-data validation set (HDR radiance
+maps, a measured depth map, light of a measured family no split holds: doefab.reconstruction.realdata). Hyperspectral results are also given for in-library and
 out-of-library light. Torch runs on one thread while it evaluates, so the numbers do not depend on the machine's.
 
 --psf FILE (a psf_pair.npz of doefab calibrate or diagnose): the networks are told that pair — a fabricated part's
@@ -41,9 +42,9 @@ def register(sub) -> None:
     p.add_argument("--clean", action="store_true",
                    help="the nominal model's own captures (no fabricated part, crosstalk or off-plane depth; with "
                         "--psf: that pair's, without crosstalk)")
-    p.add_argument("--split", default="test", choices=["test", "val", "final"],
+    p.add_argument("--split", default="test", choices=["test", "val", "final", "real"],
                    help="held-out scenes: val for choices, test for the tables, final for the final test set (each "
-                        "read logged in OUT/final_split_reads.md)")
+                        "read logged in OUT/final_split_reads.md), real for the measured-data validation set")
     p.add_argument("--psf", default=None, metavar="FILE",
                    help="a psf_pair.npz (doefab calibrate / diagnose): the networks are told it and the scenes are "
                         "captured through it")

@@ -144,11 +144,11 @@ def delivered_metric(model, err, compute: bool) -> dict:
     """The task's primary delivered metric through its shipped network (``tolerance.netjudge.NetworkJudge``,
     ``DELIVERED_SCENES`` scenes of ``DELIVERED_SIZE``² px) for the error-free and the fitted part, the network told
     the part's own pair; or why it was not computed."""
+    from doefab.applications import of_design
     from doefab.tolerance.errors import PartErrors
-    from doefab.tolerance.netjudge import RECON_TASK
     from doefab.tolerance.spec import PRIMARY
 
-    task = RECON_TASK.get(model.design.task)
+    task = getattr(of_design(model.design.task), "name", None)
     out = {"metric": PRIMARY.get(task, "none"), "nominal": None, "as_fitted": None, "computed": False}
     if not compute:
         return {**out, "reason": "not computed: it renders scenes through the part's network (minutes on a CPU); "

@@ -86,12 +86,12 @@ def _design_knob(out: Path, scene, rdir: Path):
         ax.legend(fontsize=8)
         save_figure(fig, rdir / "knob_design.png", dpi=100)
         return "Optimiser iterations", "report_files/knob_design.png", "this run's design history"
-    from doefab.pipeline.scene import TASK_DESIGN
+    from doefab.applications import application
 
-    rows = _benchmark_designs(TASK_DESIGN[scene.task])
+    rows = _benchmark_designs(application(scene.task).design_task)
     if not rows:
         return None
-    point, note = committed_point(TASK_DESIGN[scene.task], out / "design")
+    point, note = committed_point(application(scene.task).design_task, out / "design")
     fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
     right = max(r[2] for r in rows + ([("", point[0], point[1])] if point else []))
     for name, metric, secs in rows:

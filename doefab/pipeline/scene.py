@@ -15,13 +15,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from doefab._validate import metres_hint, unit_hint
+from doefab.applications import APPLICATIONS
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.pipeline.scenekeys import STAGES, item_text, keys_of, toml_value, values_text
 
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
-TASK_DESIGN = {"hdr": "streak", "hyperspectral": "grating", "depth": "half-ring"}
+TASK_DESIGN = {a.name: a.design_task for a in APPLICATIONS.values()}  # a view of the registry, for callers
 # keys that set the same quantity: a scene gives at most one of each group
 SAME_QUANTITY = ((("focal_length_mm", "sensor_distance_mm", "sensor_distance_m"), "the lens-to-sensor distance"),
                  (("aperture_diameter_mm", "f_number"), "the DOE's aperture"))
@@ -170,8 +171,8 @@ def load_scene(path: str | Path) -> Scene:
     raw = read_toml(p, "scene file")
     problems = _schema_problems(raw)
     task = raw.get("task")
-    if task not in TASK_DESIGN:
-        problems.append(f"task must be one of {sorted(TASK_DESIGN)}, got {task!r}")
+    if task not in APPLICATIONS:
+        problems.append(f"task must be one of {sorted(APPLICATIONS)}, got {task!r}")
     stages = raw.get("stages", STAGES)
     stages = tuple(stages) if isinstance(stages, list) else STAGES  # not a list: named by the schema check
     problems += _stage_problems(stages)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
-from doefab.pipeline.scene import TASK_DESIGN, Scene
+from doefab.pipeline.scene import Scene
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress",

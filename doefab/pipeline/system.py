@@ -18,7 +18,8 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
                                       quick_sampling, sampling_checks)
-from doefab.pipeline.scene import TASK_DESIGN, Scene
+from doefab.applications import application
+from doefab.pipeline.scene import Scene
 
 __all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
            "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
@@ -174,7 +175,7 @@ def scene_task(scene: Scene, committed, cam):
     """The scene's task: the committed design's parameters, replaced by the scene's bands, planes and geometry."""
     from doefab.tasks import get_task
 
-    dname = TASK_DESIGN[scene.task]
+    dname = application(scene.task).design_task
     params = {k: v for k, v in committed.task_params.items() if k != "period_m"}
     own = get_task(dname, **params)
     o, d = scene.optics, scene.design
@@ -288,7 +289,7 @@ def resolve(scene: Scene) -> dict:
     from doefab.design.design import Design
     from doefab.optics.camera import Camera
 
-    dname = TASK_DESIGN[scene.task]
+    dname = application(scene.task).design_task
     cdir = committed_dir(dname)
     committed = Design.load(cdir)
     cfg = committed.extra.get("config", {})

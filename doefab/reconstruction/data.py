@@ -5,7 +5,8 @@ never share content: each of scikit-image's photographs (``skimage.data``, conve
 belongs to one split only (``IMAGES``), and so does each measured reflectance family and each family of light
 but the illuminant library the proposed network searches (``spectra``; ``tests/reconstruction/test_splits.py``
 checks every pair of splits). A fourth split, ``final`` (the final test set), draws new scenes from the test
-split's content (``CONTENT``). A third of the textures are procedural (smooth noise, stripes, checkers), so the
+split's content (``CONTENT``). A fifth, ``real``, is measured data doefab did not make (``realdata``): it
+validates, it is never trained on. A third of the textures are procedural (smooth noise, stripes, checkers), so the
 networks see natural image statistics and sharp synthetic edges. ``split_digest`` names what makes the scenes.
 
 Why these are fair stand-ins for the paper's datasets:
@@ -30,19 +31,22 @@ import numpy as np
 
 from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
 
-__all__ = ["SPLIT_SEEDS", "PART_SEEDS", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
+__all__ = ["SPLIT_SEEDS", "PART_SEEDS", "SYNTHETIC", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
            "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands",
            "split_digest", "split_components", "CONTENT_COMPONENTS"]
 
-SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017, "final": 4_000_037}
-PART_SEEDS = {"train": 11, "val": 22, "test": 33, "final": 44}  # fabricated parts: a split's are never another's
+SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017, "final": 4_000_037, "real": 5_000_011}
+PART_SEEDS = {"train": 11, "val": 22, "test": 33, "final": 44, "real": 55}  # a split's parts are never another's
+SYNTHETIC = ("train", "val", "test", "final")  # the splits of generated scenes; "real": ``realdata``, measured
 PART_MODEL = ("optics", "fabrication", "tolerance")  # the subpackages whose code computes a fabricated part's PSF
 # The content pool each split draws its scenes from. "final" is the final test set, made after every earlier read
 # of the test split (benchmarks/results/test_split_reads.md) and read only by ``doefab evaluate --split final``:
 # new scenes (its own seed) through new fabricated parts (its own part seed), drawn from the test split's pool —
 # its photographs, reflectance families and lights, which earlier test reads saw (scikit-image ships no further
 # colour photograph to give it content of its own).
-CONTENT = {"train": "train", "val": "val", "test": "test", "final": "test"}
+# "real", the measured-data validation set (``realdata``), takes the validation pool where it needs one (the
+# hyperspectral scenes' reflectances and layouts; their light is measured, of a family no split holds).
+CONTENT = {"train": "train", "val": "val", "test": "test", "final": "test", "real": "val"}
 _PACKAGE = Path(__file__).resolve().parents[1]  # doefab/
 # scikit-image's photographs, each in one split only (cat and chelsea are the same picture: chelsea, test)
 IMAGES = {"train": ("astronaut", "camera", "rocket", "coins", "moon", "brick", "grass", "hubble_deep_field", "page",
@@ -181,7 +185,12 @@ def spectral_sample(rng: np.random.Generator, size: int, split: str, light: str 
     if split == "train":  # half the regions synthetic: the networks must not learn a few dozen spectra
         picks = np.array([synthetic_reflectance(rng) if rng.random() < 0.5 else p for p in picks])
     shading = 0.4 + 0.6 * _smooth_noise(rng, size, rng.uniform(2, 10))
-    e = scene_illuminant(rng, CONTENT[split], light)
+    if split == "real":
+        from doefab.reconstruction.realdata import real_light
+
+        e = real_light(rng)
+    else:
+        e = scene_illuminant(rng, CONTENT[split], light)
     scene = picks[regions].transpose(2, 0, 1) * shading[None] * e[:, None, None]
     # exposure: the brightest pixel's band-mean radiance is 0.6–1.2 (a flat spectrum of 1 fills an RGB channel)
     return (scene * rng.uniform(0.6, 1.2) / max(scene.mean(axis=0).max(), 1e-6)).astype(np.float32)
@@ -261,7 +270,9 @@ def split_components(task: str) -> dict[str, str]:
     and the bytes of the illuminant library ``illuminants.csv``)."""
     from doefab.io import sources_sha256
 
-    names = {"images": IMAGES, "seeds": SPLIT_SEEDS, "content": CONTENT, "part_seeds": PART_SEEDS}
+    # the generated splits' definition (the measured set's content is its files, none of it in training)
+    names = {"images": IMAGES, "seeds": {s: SPLIT_SEEDS[s] for s in SYNTHETIC},
+             "content": {s: CONTENT[s] for s in SYNTHETIC}, "part_seeds": {s: PART_SEEDS[s] for s in SYNTHETIC}}
     photos = hashlib.sha256()
     for pool in IMAGES:
         for name, a in zip(IMAGES[pool], _images(pool)):

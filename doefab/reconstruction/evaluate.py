@@ -9,7 +9,8 @@ their nominal pair).
 Splits (``SPLITS``): ``val`` for every choice made along the way, ``test`` for the published tables (every read of
 it is listed in ``benchmarks/results/test_split_reads.md``) and ``final``, the final test set, made after every
 earlier read and read only when asked for by name; each read of it appends a line to ``final_split_reads.md``
-in the output folder (``FINAL_LEDGER``).
+in the output folder (``FINAL_LEDGER``); ``real``, the measured-data validation set (``realdata``: scenes made of
+measured data doefab did not make, never trained on), under the same conditions.
 
 An evaluation runs torch on one thread (``THREADS``; restored after): a reduction split over threads adds in
 another order, and the HDR solve's iterations carry that difference to tenths of a dB, so a table is reproducible
@@ -44,7 +45,7 @@ from doefab.reconstruction.specs import make_batch, psf_pair
 
 __all__ = ["evaluate", "SPLITS", "THREADS", "FINAL_LEDGER", "one_thread", "library_versions", "code_version"]
 
-SPLITS = ("val", "test", "final")
+SPLITS = ("val", "test", "final", "real")
 THREADS = 1
 FINAL_LEDGER = "final_split_reads.md"
 LIBRARIES = ("torch", "numpy", "scipy", "scikit-image", "colour-science")
@@ -65,7 +66,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
 
     if split not in SPLITS:
         raise DoefabError(f"split {split!r} is not one of {', '.join(SPLITS)}: val for choices along the way, test "
-                          f"for the tables, final for the final test set")
+                          f"for the tables, final for the final test set, real for the measured-data validation set")
     out = Path(out_dir)
     sensor = sensor or Sensor()
     recs = {v: load_reconstructor(task, v, weights_dir, design, other_design, sensor)

@@ -61,7 +61,10 @@ def depth_pixels(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def depth_metrics(pred: np.ndarray, target: np.ndarray) -> dict:
-    """[H, W] metres each."""
+    """[H, W] metres each; pixels whose target is NaN (not measured) are left out."""
+    known = np.isfinite(target)
+    if not known.all():
+        pred, target = pred[known], target[known]
     p, err, within = depth_pixels(pred, target)
     return {"mae": float(err.mean()), "rmse": float(np.sqrt((err**2).mean())),
             "log10": float(np.abs(np.log10(p) - np.log10(target)).mean()), "delta125": float(within.mean())}

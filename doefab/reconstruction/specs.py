@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import application
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
@@ -37,9 +38,9 @@ class TaskSpec:
 
 
 SPECS = {
-    "hdr": TaskSpec("hdr", "streak", 95, 3, "psnr"),
-    "hyperspectral": TaskSpec("hyperspectral", "grating", 191, 31, "psnr"),
-    "depth": TaskSpec("depth", "half-ring", 95, 1, "mae", crop=128),
+    "hdr": TaskSpec("hdr", application("hdr").design_task, 95, 3, "psnr"),
+    "hyperspectral": TaskSpec("hyperspectral", application("hyperspectral").design_task, 191, 31, "psnr"),
+    "depth": TaskSpec("depth", application("depth").design_task, 95, 1, "mae", crop=128),
 }
 
 
@@ -154,24 +155,31 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
 
 
 def render_scene(task: str, split: str, index: int, rng, big: int, pair, response):
-    """(scene, target, (coded, uncoded) clean views before noise) of one generated scene of side ``big``."""
+    """(scene, target, (coded, uncoded) clean views before noise) of one scene of side ``big``: generated, or for
+    split ``real`` made of measured data (``realdata``; depth: NaN where the target was not measured)."""
     from doefab.imaging.captures import plane_masks, render_layers
     from doefab.reconstruction.data import depth_sample, hdr_sample, resample_bands, spectral_sample
+    from doefab.reconstruction.realdata import depth_real_sample, hdr_real_sample
     from doefab.reconstruction.spectra import light_kind
 
-    masks, target = None, None
+    masks, target, known = None, None, None
     if task == "hdr":
-        scene = hdr_sample(rng, big, split)
+        scene = hdr_real_sample(rng, big) if split == "real" else hdr_sample(rng, big, split)
     elif task == "hyperspectral":  # on the design's bands
         scene = np.ascontiguousarray(resample_bands(spectral_sample(rng, big, split, light_kind(split, index)),
                                                     pair.wavelengths))
     else:  # between the design's nearest and farthest planes
         finite = [z for z in pair.depths if np.isfinite(z)]
-        scene, target = depth_sample(rng, big, split, near=min(finite), far=max(finite))
+        if split == "real":  # measured depth; where it was not measured, rendered at a neighbour's, not scored
+            scene, target, known = depth_real_sample(rng, big, near=min(finite), far=max(finite))
+        else:
+            scene, target = depth_sample(rng, big, split, near=min(finite), far=max(finite))
         masks = plane_masks(torch.from_numpy(target), pair.depths)
     s = torch.from_numpy(scene)
     views = []
     for psf in (pair.coded.to(torch.float32), pair.uncoded.to(torch.float32)):
         b = render_layers(s, psf, masks, pair.depths)
         views.append(torch.einsum("rc,chw->rhw", response, b) if response is not None else b)
+    if known is not None:
+        target = np.where(known, target, np.float32(np.nan))
     return scene, target, views

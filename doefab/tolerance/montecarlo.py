@@ -63,9 +63,9 @@ def _digest(obj) -> str:
 def network_weights_sha(design_task: str, weights_dir=None) -> str | None:
     """The SHA-256 its record gives of the proposed network a design of ``design_task`` is judged through."""
     from doefab.reconstruction.weights import weights_paths
-    from doefab.tolerance.netjudge import RECON_TASK
+    from doefab.applications import of_design
 
-    task = RECON_TASK.get(design_task)
+    task = getattr(of_design(design_task), "name", None)
     if task is None:
         return None
     try:

@@ -23,12 +23,13 @@ import copy
 import numpy as np
 import torch
 
+from doefab.applications import APPLICATIONS, of_design
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["NetworkJudge", "RECON_TASK", "judge_settings", "SCENES", "SIZE", "SPLIT", "LABELS"]
 
-RECON_TASK = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
+RECON_TASK = {a.design_task: a.name for a in APPLICATIONS.values()}  # a view of ``doefab.applications``
 SCENES = 8  # scenes per part (benchmarks/delivered_scene_noise.py measures the scene noise against the spread)
 SIZE = 256  # scene side (px), as ``doefab evaluate``'s
 SPLIT = "test"  # the reconstruction tables' scenes
@@ -67,9 +68,9 @@ class NetworkJudge:
         s = judge_settings({"images": images, "size": size, "split": split})
         self.base = psf_judge
         d = psf_judge.design
-        if d.task not in RECON_TASK:
+        if of_design(d.task) is None:
             raise DoefabError(f"no reconstruction network for design task {d.task!r}")
-        self.task = RECON_TASK[d.task]
+        self.task = of_design(d.task).name
         self.rec = load_reconstructor(self.task, "proposed", weights_dir, design=psf_judge.design_dir)
         if self.rec.design_sha256 != levels_sha256(d.levels):
             raise DoefabError("the network was trained for another design than this one: network-level judgement "

@@ -39,11 +39,12 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     from doefab.tolerance.mounted import stop_case
 
     keep_freed_memory()
-    from doefab.tolerance.spec import TASK_OF_DESIGN, limits_text, nominal_failures
+    from doefab.applications import of_design
+    from doefab.tolerance.spec import limits_text, nominal_failures
 
     out = Path(out)
     judge = study.judge_for(str(design_dir), 1)
-    task = TASK_OF_DESIGN.get(judge.design.task, judge.design.task)
+    task = getattr(of_design(judge.design.task), "name", judge.design.task)
     spec = budget.get("spec", {})
     res: dict = {"design": str(design_dir), "task": task, "seed": seed, "stop": stop_case(judge.fine),
                  "n_levels": judge.design.n_levels,

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+from doefab.applications import APPLICATIONS
 from doefab.errors import DoefabError
 from doefab.reconstruction.metrics import HDR_PEAK
 
@@ -40,9 +41,10 @@ SPAN = {
     "hyperspectral": {"psnr": (0.0, 100.0), "sam": (0.0, math.pi), "ssim": (-1.0, 1.0)},
     "depth": {"mae": (0.0, 1000.0), "rmse": (0.0, 1000.0), "delta125": (0.0, 1.0), "log10": (0.0, 10.0)},
 }
-TASK_OF_DESIGN = {"streak": "hdr", "grating": "hyperspectral", "half-ring": "depth"}
-#: the delivered metric a task's summary, histogram and "what limits it" are ranked by
-PRIMARY = {"hdr": "psnr_highlight", "hyperspectral": "psnr", "depth": "mae"}
+# views of the application registry (``doefab.applications``): design task → application, and the delivered
+# metric a task's summary, histogram and "what limits it" are ranked by
+TASK_OF_DESIGN = {a.design_task: a.name for a in APPLICATIONS.values()}
+PRIMARY = {a.name: a.primary_metric for a in APPLICATIONS.values()}
 
 
 def delivered_loss(task: str, delta: dict) -> float:

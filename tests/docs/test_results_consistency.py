@@ -115,3 +115,22 @@ def test_every_change_to_the_evaluations_has_its_row_in_the_test_split_ledger():
             before = ""
         assert len(_ledger_rows((ROOT / LEDGER).read_text())) > len(_ledger_rows(before)), \
             f"evaluate_*.json changed: add the read's row to {LEDGER}"
+
+
+def test_the_readme_measured_data_line_is_real_validation_json():
+    """The README's measured-data numbers round the committed ``real_validation.json`` (proposed / coded only /
+    uncoded only on each task's primary metric, SAM, and the proposed depth δ<1.25)."""
+    import json
+    import re
+
+    runs = json.loads((ROOT / "benchmarks" / "results" / "real_validation.json").read_text())
+    text = " ".join((ROOT / "README.md").read_text().split())
+    line = text[text.index("**On measured data**"):]
+    variants = ("proposed", "coded_only", "uncoded_only")
+    for label, task, key, digits in (("highlight PSNR", "hdr", "psnr_highlight", 1),
+                                     ("SAM", "hyperspectral", "sam", 2), ("MAE", "depth", "mae", 2)):
+        got = re.search(re.escape(label) + r" ([\d.]+) / ([\d.]+) / ([\d.]+)", line).groups()
+        want = [f"{runs[task]['real']['rows'][v][key]:.{digits}f}" for v in variants]
+        assert list(got) == want, (label, got, want)
+    d = re.search(r"δ<1.25 ([\d.]+) \(one scene", line).group(1)
+    assert d == f"{runs['depth']['real']['rows']['proposed']['delta125']:.2f}"

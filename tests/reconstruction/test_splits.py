@@ -240,3 +240,24 @@ def test_the_training_reflectances_are_those_the_shipped_networks_were_trained_o
     draws = iter([yellow, ramp])
     monkeypatch.setattr(spectra, "_smooth_draw", lambda rng: next(draws))
     assert np.array_equal(spectra.synthetic_reflectance(np.random.default_rng(0)), ramp)
+
+
+def test_the_measured_sets_photographs_are_no_training_photograph(photographs):
+    """The measured-data validation set (``realdata``): no HDR radiance map and not the depth scene's image is a
+    training photograph, as a crop, shift or rescale of one (their tone-mapped pictures against each training
+    photograph)."""
+    from skimage.data import stereo_motorcycle
+
+    from doefab.reconstruction.realdata import _hdr_maps
+
+    measured = [m / max(float(np.quantile(m, 0.99)), 1e-6) for m in _hdr_maps()]
+    measured = [np.clip(m, 0, 1) for m in measured] + [(stereo_motorcycle()[0] / 255.0) ** 2.2]
+    feats = [_features(m) for m in measured]
+    pairs = {(i, n): _matched(f, ft) for i, f in enumerate(feats) for n, _, ft in photographs["train"]}
+    assert not {k: v for k, v in pairs.items() if v >= MATCHED}
+    # the check sees a measured picture in itself shifted and rescaled
+    from skimage.transform import rescale
+
+    s = round(min(measured[0].shape[:2]) / 8)
+    assert _matched(feats[0], _features(rescale(measured[0][s:, s:], 0.5, anti_aliasing=True,
+                                                channel_axis=2))) >= MATCHED

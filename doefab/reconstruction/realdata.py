@@ -1,0 +1,147 @@
+"""The measured-data validation set: split ``real``, scenes whose content doefab did not make.
+
+Every network is scored on it under the same honest captures as the synthetic splits (``doefab evaluate --split
+real``); none of it is in training (``tests/reconstruction/test_realdata.py``). ``SOURCES`` is its table: what is
+measured, where it comes from, its license and what it is used for. Per task:
+
+- **hdr** — six OpenEXR sample photographs' radiance maps (``doefab/measured/hdr_radiance.npz``, written by
+  ``scripts/measured_hdr.py``): a crop at a drawn place, exposed so that a drawn 1–5 % of its pixels lie above the
+  half-exposure capture's clip (2.0, as the synthetic scenes; the exposure is the camera's choice, the highlights'
+  shapes, sizes and contrasts are the photograph's), capped at 2^8.
+- **depth** — the Middlebury 2014 *Motorcycle* as scikit-image ships it: the left image (sRGB decoded to linear,
+  the synthetic scenes' exposure range) and its ground-truth disparity turned into metres with the published
+  calibration, Z = f·B / (d + doffs): 2.11–5.02 m, inside the shipped design's 1–5 m, so used as measured (clipped
+  to the design's planes). The 7 % of pixels without ground truth take their nearest measured neighbour's depth to
+  be rendered and are left out of the scores (the target holds NaN there).
+- **hyperspectral** — measured light of a family that no split, no synthetic draw and no illuminant library holds:
+  two displays' measured RGB primaries (``colour.MSDS_DISPLAY_PRIMARIES``) mixed at drawn weights, an RGB emitter
+  (colour-science's measured incandescent lamps are not used: both lie within 0.02 of the library's illuminant A,
+  the rule by which ``spectra`` leaves a light out as a library member); the reflectances are the validation split's measured set (NIST CQS), laid out
+  along the validation photographs' edges as in the synthetic scenes (that layout is doefab's).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_light", "real_lights",
+           "MOTORCYCLE", "HDR_FILE"]
+
+HDR_FILE = Path(__file__).resolve().parents[1] / "measured" / "hdr_radiance.npz"
+# Middlebury 2014 Motorcycle at scikit-image's quarter resolution (skimage.data.stereo_motorcycle's docstring)
+MOTORCYCLE = {"focal_px": 994.978, "baseline_m": 0.193001, "doffs_px": 31.086}
+DISPLAYS = ("Typical CRT Brainard 1997", "Apple Studio Display")
+CLIP = 2.0  # where the half-exposure capture of a scene of value 1 clips (data.hdr_sample's saturate_above)
+PEAK = 256.0
+
+
+@dataclass(frozen=True)
+class Source:
+    task: str
+    name: str
+    measured: str
+    origin: str
+    license: str
+    use: str
+
+
+SOURCES = (
+    Source("hdr", "OpenEXR sample images: Cannon, Desk, MtTamWest, StillLife, CandleGlass, GoldenGate",
+           "radiance maps of photographed scenes (multi-exposure HDR, Rec. 709 primaries)",
+           "github.com/AcademySoftwareFoundation/openexr-images (ScanLines/, Tiles/)",
+           "BSD-3-Clause, © Industrial Light & Magic and the OpenEXR contributors (doefab/measured/"
+           "openexr-images-COPYING.txt)", "scene radiance: crops, exposure drawn, capped at 2^8"),
+    Source("depth", "Middlebury 2014 Motorcycle (Scharstein et al., GCPR 2014), as scikit-image ships it",
+           "ground-truth disparity (structured light) and the left image",
+           "skimage.data.stereo_motorcycle (scikit-image's data files)",
+           "Middlebury stereo data: free for research use with citation of Scharstein et al. 2014",
+           "depth in metres from the published calibration; the image as the scene's radiance"),
+    Source("hyperspectral", "measured display primaries: Typical CRT (Brainard 1997), Apple Studio Display",
+           "emission spectra of each display's R, G, B primaries", "colour-science: colour.MSDS_DISPLAY_PRIMARIES",
+           "BSD-3-Clause (colour-science)", "scene light: the three primaries at drawn weights"),
+)
+
+
+@functools.lru_cache(maxsize=1)
+def _hdr_maps() -> tuple[np.ndarray, ...]:
+    with np.load(HDR_FILE) as z:
+        names = list(json.loads(str(z["sources"])))
+        return tuple(np.asarray(z[n], np.float32) for n in names)
+
+
+def _crop(rng, shape, size: int) -> tuple[slice, slice]:
+    from doefab.errors import DoefabError
+
+    h, w = shape[:2]
+    if size > min(h, w):
+        raise DoefabError(f"a {size}-px scene (the crop and the PSF's margin) is larger than a measured map's "
+                          f"{h}×{w} px: evaluate the real split at a smaller --size")
+    y, x = int(rng.integers(0, h - size + 1)), int(rng.integers(0, w - size + 1))
+    return slice(y, y + size), slice(x, x + size)
+
+
+def hdr_real_sample(rng: np.random.Generator, size: int) -> np.ndarray:
+    """[3, S, S] radiance from a measured HDR map: a drawn map and crop, exposed so that a drawn 1–5 % of its
+    pixels exceed ``CLIP`` in some channel (fewer where the crop's range is too small), capped at ``PEAK``."""
+    maps = _hdr_maps()
+    m = maps[int(rng.integers(len(maps)))]
+    ys, xs = _crop(rng, m.shape, size)
+    crop = m[ys, xs].transpose(2, 0, 1)
+    bright = crop.max(axis=0)
+    level = float(np.quantile(bright, 1.0 - rng.uniform(0.01, 0.05)))
+    gain = CLIP / max(level, 1e-6)
+    return np.minimum(crop * gain, PEAK).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=1)
+def _motorcycle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(linear image [H, W, 3], depth [H, W] metres with every pixel filled, whether measured [H, W])."""
+    from scipy.ndimage import distance_transform_edt
+    from skimage.data import stereo_motorcycle
+
+    left, _, disp = stereo_motorcycle()
+    c = MOTORCYCLE
+    known = np.isfinite(disp)
+    z = np.where(known, c["focal_px"] * c["baseline_m"] / (np.where(known, disp, 0.0) + c["doffs_px"]), np.nan)
+    idx = distance_transform_edt(~known, return_distances=False, return_indices=True)
+    filled = z[idx[0], idx[1]]
+    img = (np.asarray(left, np.float32) / 255.0) ** 2.2
+    return img, filled.astype(np.float32), known
+
+
+def depth_real_sample(rng: np.random.Generator, size: int, near: float, far: float):
+    """(scene [3, S, S] radiance, depth to render [S, S] metres, measured [S, S] bool): a drawn crop of the
+    measured Motorcycle, its depth clipped to [``near``, ``far``]."""
+    img, depth, known = _motorcycle()
+    ys, xs = _crop(rng, depth.shape, size)
+    gain = rng.uniform(0.8, 1.8)  # the synthetic depth scenes' exposure range
+    scene = img[ys, xs].transpose(2, 0, 1) * gain
+    return (np.ascontiguousarray(scene, np.float32), np.clip(depth[ys, xs], near, far).astype(np.float32),
+            known[ys, xs].copy())
+
+
+@functools.lru_cache(maxsize=1)
+def real_lights() -> dict:
+    """{display: [3, 31] its measured R, G, B primaries on the 31 bands, each peak 1}."""
+    import colour
+
+    from doefab.reconstruction.bands import on_bands
+
+    out = {}
+    for name in DISPLAYS:
+        msd = colour.characterisation.MSDS_DISPLAY_PRIMARIES[name]
+        rows = np.array([on_bands(sd) for sd in msd.to_sds()])
+        out[name] = np.clip(rows, 0, None) / rows.max(axis=1, keepdims=True)
+    return out
+
+
+def real_light(rng: np.random.Generator) -> np.ndarray:
+    """[31] one scene's light, peak 1: a drawn display's primaries at weights drawn in [0.2, 1]."""
+    rows = real_lights()[DISPLAYS[int(rng.integers(len(DISPLAYS)))]]
+    e = rng.uniform(0.2, 1.0, len(rows)) @ rows
+    return (e / e.max()).astype(np.float64)

@@ -1,0 +1,54 @@
+"""The application registry: one row per application, and the layers that look it up agree with it."""
+
+import numpy as np
+import pytest
+
+from doefab.applications import APPLICATIONS, application, of_design
+from doefab.errors import DoefabError
+
+
+def test_an_unknown_application_is_one_error_naming_the_choices():
+    with pytest.raises(DoefabError, match="hdr, hyperspectral, depth"):
+        application("polarization")
+    assert of_design("no-such-design") is None
+
+
+@pytest.mark.parametrize("name", list(APPLICATIONS))
+def test_each_application_is_served_by_a_design_task_and_judged_by_a_metric_it_reports(name):
+    """Its design task is one doefab.tasks builds, and maps back to it; its primary metric is one the task's
+    metrics return on a reconstruction, with the direction the tolerance study's delivered table gives it; a
+    reconstruction worse by that metric's direction scores worse."""
+    from doefab.reconstruction.metrics import metrics_for
+    from doefab.tasks import TASKS
+    from doefab.tolerance.spec import DELIVERED
+
+    app = application(name)
+    assert app.design_task in TASKS and of_design(app.design_task) is app
+    rng = np.random.default_rng(0)
+    if name == "depth":
+        target = rng.uniform(1, 5, (32, 32))
+        near, far = target * 1.02, target * 1.4
+    else:
+        shape = (3 if name == "hdr" else 31, 32, 32)
+        target = rng.uniform(0, 4 if name == "hdr" else 1, shape)
+        target[:, :4, :4] = 100.0 if name == "hdr" else target[:, :4, :4]  # a highlight for the HDR metrics
+        near, far = target + rng.normal(0, 0.01, shape), target + rng.normal(0, 0.5, shape)
+    good, bad = metrics_for(name, near, target), metrics_for(name, far, target)
+    m = app.primary_metric
+    assert m in good and (DELIVERED[name][m][1] == "+") == app.higher_is_better
+    assert (good[m] > bad[m]) == app.higher_is_better
+
+
+def test_the_tables_that_were_copies_are_the_registry():
+    """The four application ↔ design tables that had to agree (scene, tolerance spec, network judge,
+    reconstruction specs) and the tolerance study's primary metric equal the registry's rows."""
+    from doefab.pipeline.scene import TASK_DESIGN
+    from doefab.reconstruction.specs import SPECS
+    from doefab.tolerance.netjudge import RECON_TASK
+    from doefab.tolerance.spec import PRIMARY, TASK_OF_DESIGN
+
+    rows = {n: a.design_task for n, a in APPLICATIONS.items()}
+    assert rows == {"hdr": "streak", "hyperspectral": "grating", "depth": "half-ring"}  # the paper's pairing
+    assert TASK_DESIGN == rows == {n: s.design for n, s in SPECS.items()}
+    assert TASK_OF_DESIGN == RECON_TASK == {d: n for n, d in rows.items()}
+    assert PRIMARY == {n: a.primary_metric for n, a in APPLICATIONS.items()}
