@@ -3,7 +3,11 @@ map, light of a measured family no split holds; ``doefab.reconstruction.realdata
 validation split, both under honest captures (fabricated parts, crosstalk unmixed by a noisy calibration, depth
 between the network's planes; the networks told the nominal PSF), torch on one thread.
 
-    .venv/bin/python benchmarks/real_validation.py --images 12 --size 256
+    .venv/bin/python benchmarks/real_validation.py --images 12 --size 256 --seed-weights out/seeds/s1/weights out/seeds/s2/weights
+
+The seed folders hold each task's proposed network trained as the shipped one but from another seed
+(``doefab train --task T --variant proposed --steps N --seed S --weights-dir out/seeds/sS/weights``, N as the
+shipped weights record); a task with fewer than three seeds (the shipped one included) has no spread.
 
 Evaluations go to out/real_validation/<task>_<split>/ (an evaluation already there for the same weights is
 reused: the run resumes); writes benchmarks/results/real_validation.json (each evaluation's metrics.json) and
@@ -38,22 +42,62 @@ DECISIONS = (
 )
 
 
-def evaluate_split(task: str, split: str, images: int, size: int, work: Path) -> dict:
+def evaluate_split(task: str, split: str, images: int, size: int, work: Path, weights_dir=None,
+                   variants=("proposed", "coded_only", "uncoded_only"), name: str | None = None) -> dict:
+    """``task``'s networks (``weights_dir``'s, default the shipped ones) on ``split``, honest captures; an
+    evaluation already in ``work`` for the same weights, scenes and size is reused."""
     from doefab.reconstruction.evaluate import evaluate
     from doefab.reconstruction.loader import load_reconstructor
+    from doefab.reconstruction.data import real_components
     from doefab.tolerance.conditions import for_splits
 
-    out = work / f"{task}_{split}"
+    out = work / (name or f"{task}_{split}")
     f = out / "metrics.json"
     if f.is_file():
         done = json.loads(f.read_text())
-        shipped = {v: load_reconstructor(task, v).meta["weights_sha256"] for v in done["weights"]}
-        if (done["images"], done["size_px"]) == (images, size) and all(
-                w["sha256"] == shipped[v] for v, w in done["weights"].items()):
+        shas = {v: load_reconstructor(task, v, weights_dir).meta["weights_sha256"] for v in variants}
+        same_set = split != "real" or done.get("real_sha256") == real_components()
+        if (done["images"], done["size_px"]) == (images, size) and set(done["weights"]) == set(variants) and all(
+                w["sha256"] == shas[v] for v, w in done["weights"].items()) and same_set:
             print(f"{task} {split}: reusing {f}")
             return done
     cond = for_splits(task, None, "honest", (split,), progress=True)[split]
-    return evaluate(task, out, images=images, size=size, conditions=cond, split=split)
+    return evaluate(task, out, images=images, size=size, conditions=cond, split=split, weights_dir=weights_dir,
+                    variants=variants)
+
+
+def seed_runs(task: str, seed_dirs: list[Path], images: int, size: int, work: Path) -> list[dict]:
+    """The proposed network of each seed folder that holds one for ``task``, on the measured set."""
+    runs = []
+    for d in seed_dirs:
+        if (d / f"{task}_proposed.json").is_file():
+            runs.append(evaluate_split(task, "real", images, size, work, weights_dir=d, variants=("proposed",),
+                                       name=f"{task}_real_" + "_".join(d.resolve().parts[-2:])))
+    return runs
+
+
+def spread_lines(runs: dict, seeds: dict) -> list[str]:
+    """Run-to-run spread of each task's primary metric on the measured set: the shipped proposed network and the
+    same training from other seeds."""
+    import numpy as np
+
+    from doefab.applications import APPLICATIONS
+
+    lines = ["Run-to-run spread of the proposed network's primary metric on the measured set, over training seeds "
+             "(the shipped network is seed 0; the other seeds were trained with `doefab train --task T --variant "
+             "proposed --steps N --seed S` at this code, the shipped ones at the code their weights record):", "",
+             "| task | metric | shipped (seed 0) | other seeds | mean | SD over seeds |", "| --- | --- | --- | --- | --- | --- |"]
+    for task, others in seeds.items():
+        if not others:
+            continue
+        key = APPLICATIONS[task].primary_metric
+        vals = [runs[task]["real"]["rows"]["proposed"][key]] + [r["rows"]["proposed"][key] for r in others]
+        if len(vals) < 3:
+            continue  # the rule's spread needs three seeds at least
+        lines.append(f"| {task} | {NAMES[key]} | {vals[0]:.4g} | {', '.join(f'{v:.4g}' for v in vals[1:])} | "
+                     f"{np.mean(vals):.4g} | {np.std(vals, ddof=1):.3g} |")
+    return lines + [""] if len(lines) > 4 else ["No task has three seeds of its proposed network on the measured set "
+                                                "yet: the spread, and so the rule, is not measured.", ""]
 
 
 def task_lines(task: str, runs: dict, test_depth: dict | None) -> list[str]:
@@ -68,12 +112,27 @@ def task_lines(task: str, runs: dict, test_depth: dict | None) -> list[str]:
         cells = [f"{real['rows'][v][k]:.4g}" for k in keys] + [f"{val['rows'][v][k]:.4g}" for k in keys]
         lines.append(f"| {v.replace('_', '-')} | " + " | ".join(cells) + " |")
     lines += ["", "On the measured set (split real):", ""] + paired_lines(task, real)[2:]
+    if task == "hdr":
+        peaks = hdr_peaks(real["images"], real["size_px"])
+        lines += ["Peak radiance of each measured HDR scene (the half-exposure capture clips at 2, the scenes are "
+                  "capped at 2^8): " + ", ".join(f"{p:.3g}" for p in peaks) + ".", ""]
     if task == "depth" and test_depth is not None:
         d_real, d_test = real["rows"]["proposed"]["delta125"], test_depth["rows"]["proposed"]["delta125"]
         lines += [f"Depth δ<1.25 of the proposed network: {d_real:.3f} on the measured set, {d_test:.3f} on the "
                   f"committed test-split table (benchmarks/results/evaluate_depth.json): a gap of "
                   f"{d_real - d_test:+.3f}.", ""]
     return lines
+
+
+def hdr_peaks(images: int, size: int) -> list[float]:
+    """Peak radiance (× the scene's ordinary exposure; the half-exposure capture clips at 2) of each measured HDR
+    scene as the evaluation draws it (the scene with its PSF margin)."""
+    from doefab.reconstruction.data import sample_rng
+    from doefab.reconstruction.realdata import hdr_real_sample
+    from doefab.reconstruction.specs import crop_margin
+
+    big = size + 2 * crop_margin("hdr")
+    return [float(hdr_real_sample(sample_rng("real", i), big).max()) for i in range(images)]
 
 
 def sources_lines() -> list[str]:
@@ -84,16 +143,16 @@ def sources_lines() -> list[str]:
     return lines + [""]
 
 
-def markdown(runs: dict, test_depth: dict | None) -> str:
+def markdown(runs: dict, test_depth: dict | None, seeds: dict | None = None, command: str = "") -> str:
     lines = ["# Shipped networks on measured data", "",
-             "Produced by `.venv/bin/python benchmarks/real_validation.py --images "
-             f"{next(iter(runs.values()))['real']['images']} --size {next(iter(runs.values()))['real']['size_px']}`.",
+             f"Produced by `{command}`.",
              "", "## Sources (none of them in training)", ""] + sources_lines()
     lines += ["## Scores: measured set (real) beside the synthetic validation split (val)", ""]
     for task in KEYS:
         if task in runs:
             lines += task_lines(task, runs[task], test_depth if task == "depth" else None)
-    lines += ["## Shipping rule", "", RULE, "", "| date | task | candidate | compared | decision |",
+    lines += ["## Shipping rule", "", RULE, ""] + spread_lines(runs, seeds or {})
+    lines += ["| date | task | candidate | compared | decision |",
               "| --- | --- | --- | --- | --- |"] + [f"| {' | '.join(d)} |" for d in DECISIONS] + [""]
     return "\n".join(lines)
 
@@ -104,15 +163,22 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--tasks", default=",".join(KEYS))
     ap.add_argument("--work", type=Path, default=ROOT / "out" / "real_validation")
+    ap.add_argument("--seed-weights", type=Path, nargs="*", default=[],
+                    help="weights folders of the proposed networks trained from other seeds")
     args = ap.parse_args()
     runs = {t: {s: evaluate_split(t, s, args.images, args.size, args.work) for s in SPLITS}
             for t in args.tasks.split(",")}
+    seeds = {t: seed_runs(t, args.seed_weights, args.images, args.size, args.work) for t in runs}
+    for t, others in seeds.items():
+        runs[t]["seeds"] = others
     f = RESULTS / "evaluate_depth.json"
     test_depth = json.loads(f.read_text()) if f.is_file() else None
     from doefab.io import atomic_write_json, atomic_write_text
 
     atomic_write_json(RESULTS / "real_validation.json", runs)
-    atomic_write_text(RESULTS / "real_validation.md", markdown(runs, test_depth))
+    command = " ".join([".venv/bin/python benchmarks/real_validation.py", "--images", str(args.images), "--size",
+                        str(args.size)] + (["--seed-weights", *map(str, args.seed_weights)] if args.seed_weights else []))
+    atomic_write_text(RESULTS / "real_validation.md", markdown(runs, test_depth, seeds, command))
     print(f"wrote {RESULTS / 'real_validation.md'}")
 
 

@@ -49,6 +49,9 @@ def test_the_tables_that_were_copies_are_the_registry():
 
     rows = {n: a.design_task for n, a in APPLICATIONS.items()}
     assert rows == {"hdr": "streak", "hyperspectral": "grating", "depth": "half-ring"}  # the paper's pairing
+    # the paper's headline metric of each table: highlight PSNR (Table 1), PSNR (Table 2), MAE (Table 3)
+    assert {n: (a.primary_metric, a.primary_unit) for n, a in APPLICATIONS.items()} == {
+        "hdr": ("psnr_highlight", "dB"), "hyperspectral": ("psnr", "dB"), "depth": ("mae", "m")}
     assert TASK_DESIGN == rows == {n: s.design for n, s in SPECS.items()}
     assert TASK_OF_DESIGN == RECON_TASK == {d: n for n, d in rows.items()}
     assert PRIMARY == {n: a.primary_metric for n, a in APPLICATIONS.items()}

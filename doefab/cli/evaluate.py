@@ -24,13 +24,14 @@ from __future__ import annotations
 import argparse
 import json
 
+from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="score reconstruction networks on held-out test scenes",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
+    p.add_argument("--task", required=True, choices=list(APPLICATIONS), help="task")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--images", type=number(int, 1, 10_000), default=16, help="test scenes")
     p.add_argument("--size", type=number(int, 64, 2048, unit="pixels; a multiple of 32"), default=256,
@@ -77,6 +78,10 @@ def run(args) -> int:
     for v in variants:  # a bad weights file, or one for another sensor, or a pair they cannot take: refused first
         rec = load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
     check_psf_args(args.task, rec.pair, told, capture)
+    if args.split == "real":  # a scene larger than the measured maps: refused before the parts are made
+        from doefab.reconstruction.realdata import check_side
+
+        check_side(args.task, args.size, rec.pair.coded.shape[-1] // 2)
     out.create()
     cond = _conditions(args, design, capture if capture is not None else told)
     records = {"told": told_rec or "the design's nominal pair", "captured_through": capture_rec or told_rec}

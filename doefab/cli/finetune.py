@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
@@ -35,7 +36,7 @@ def register(sub) -> None:
                         "the network was trained for (default: the committed one)")
     p.add_argument("--psf", default=None, metavar="FILE",
                    help="fine-tune the network alone on this psf_pair.npz (doefab calibrate / diagnose)")
-    p.add_argument("--task", default=None, choices=["hdr", "hyperspectral", "depth"],
+    p.add_argument("--task", default=None, choices=list(APPLICATIONS),
                    help="with --psf: the task whose proposed network is fine-tuned")
     p.add_argument("--weights-dir", default=None,
                    help="start from the network in this folder (end to end: the depth network trained for "

@@ -25,13 +25,14 @@ import argparse
 import hashlib
 from pathlib import Path
 
+from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, number
 
 
 def register(sub) -> None:
     p = sub.add_parser("reconstruct", help="your own captures to EXR, ENVI, TIFF and PNG files",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="the network's task")
+    p.add_argument("--task", required=True, choices=list(APPLICATIONS), help="the network's task")
     p.add_argument("--coded", required=True, nargs="+", metavar="FILE",
                    help="the coded (right) view of each exposure: files or globs")
     p.add_argument("--uncoded", required=True, nargs="+", metavar="FILE",

@@ -4,13 +4,15 @@ Check a scene with ``doefab doctor FILE`` and run it with ``doefab run FILE``.""
 
 from __future__ import annotations
 
+from doefab.applications import APPLICATIONS
+
 
 def register(sub) -> None:
     p = sub.add_parser("scene", help="write a scene template, or list every key with its unit",
                        description=__doc__)
     actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     new = actions.add_parser("new", help="write a commented scene file for a task", description=__doc__)
-    new.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="the scene's task")
+    new.add_argument("--task", required=True, choices=list(APPLICATIONS), help="the scene's task")
     new.add_argument("--out", required=True, help="the scene file to write (.toml; never replaces a file)")
     new.set_defaults(func=run_new)
     keys = actions.add_parser("keys", help="print every scene key (Markdown table)", description=__doc__)

@@ -17,13 +17,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a reconstruction network on this machine",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--task", required=True, choices=["hdr", "hyperspectral", "depth"], help="task")
+    p.add_argument("--task", required=True, choices=list(APPLICATIONS), help="task")
     p.add_argument("--variant", default="proposed", choices=["proposed", "coded_only", "uncoded_only"],
                    help="network variant (the ablations use the same architecture and budget)")
     p.add_argument("--minutes", type=number(float, 0, 1440, lo_open=True, unit="minutes of wall time"), default=10.0,

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Callable
 
+from doefab.applications import APPLICATIONS
 from doefab._devices import DEVICE_WORDS, check_device
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.materials import SUBSTRATES, substrate_name
@@ -44,7 +45,7 @@ class Key:
 
 
 KEYS = (
-    Key("", "task", "choice", choices=("hdr", "hyperspectral", "depth"), default="required",
+    Key("", "task", "choice", choices=tuple(APPLICATIONS), default="required",
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
     Key("", "stages", "list", choices=STAGES, item="choice", default="all",
         help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),

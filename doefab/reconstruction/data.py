@@ -33,7 +33,7 @@ from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
 
 __all__ = ["SPLIT_SEEDS", "PART_SEEDS", "SYNTHETIC", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
            "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands",
-           "split_digest", "split_components", "CONTENT_COMPONENTS"]
+           "split_digest", "split_components", "CONTENT_COMPONENTS", "real_components"]
 
 SPLIT_SEEDS = {"train": 1_000_003, "val": 2_000_029, "test": 3_000_017, "final": 4_000_037, "real": 5_000_011}
 PART_SEEDS = {"train": 11, "val": 22, "test": 33, "final": 44, "real": 55}  # a split's parts are never another's
@@ -53,6 +53,14 @@ IMAGES = {"train": ("astronaut", "camera", "rocket", "coins", "moon", "brick", "
                     "clock", "cell", "text"),
           "val": ("immunohistochemistry", "gravel", "stereo_motorcycle"),
           "test": ("coffee", "chelsea", "colorwheel", "retina")}
+
+
+def _generated_only(split: str) -> None:
+    if split not in SYNTHETIC:
+        from doefab.errors import DoefabError
+
+        raise DoefabError(f"split {split!r} has no generated HDR or depth scenes: the measured set's come from "
+                          f"doefab.reconstruction.realdata (specs.render_scene draws them)")
 
 
 def sample_rng(split: str, index: int) -> np.random.Generator:
@@ -155,6 +163,7 @@ def _highlight(rng, size: int, split: str) -> tuple[np.ndarray, np.ndarray]:
 def hdr_sample(rng: np.random.Generator, size: int, split: str, saturate_above: float = 2.0) -> np.ndarray:
     """[3, S, S] HDR radiance: texture at ordinary exposure plus highlights (``_highlight``), 1–5 % of pixels
     above ``saturate_above`` (2.0: where a half-exposure capture of value 1 clips), peaks up to 2^8."""
+    _generated_only(split)
     scene = texture(rng, size, split) * rng.uniform(0.3, 1.0)
     target = rng.uniform(0.01, 0.05) * size * size
     covered = np.zeros((size, size), bool)
@@ -233,6 +242,7 @@ def _shape_mask(rng, size):
 def depth_sample(rng: np.random.Generator, size: int, split: str, near: float = 1.0, far: float = 5.0):
     """(scene [3, S, S] radiance, depth [S, S] metres): background (often a receding ground plane) and 2–6
     occluding textured objects between ``near`` and ``far``, drawn far to near."""
+    _generated_only(split)
     gain = rng.uniform(0.8, 1.8)  # exposure: radiance up to ~2, so a half-exposure capture reaches ~1
     scene = texture(rng, size, split) * gain
     z_bg = rng.uniform(0.7 * far, far)
@@ -320,3 +330,16 @@ def _sha(*chunks: bytes) -> str:
     for c in chunks:
         h.update(c)
     return h.hexdigest()
+
+
+def real_components() -> dict[str, str]:
+    """SHA-256 of what makes the measured set's scenes (split ``real``, ``realdata``): its seeds and content pool,
+    ``realdata``'s source, its HDR file, the Motorcycle's image and depth as scikit-image reads them, and the
+    displays' primaries (to 1e-6); ``metrics.json`` of a ``real`` evaluation records them."""
+    from doefab.reconstruction import realdata
+
+    img, depth, known = realdata._motorcycle()
+    names = json.dumps({"seed": SPLIT_SEEDS["real"], "part_seed": PART_SEEDS["real"], "content": CONTENT["real"]})
+    return {"definition": _sha(names.encode(), Path(realdata.__file__).read_bytes()), "hdr": realdata.HDR_SHA256,
+            "depth": _sha(img.tobytes(), depth.tobytes(), known.tobytes()),
+            "light": _sha(*(np.round(v, 6).tobytes() for v in realdata.real_lights().values()))}

@@ -74,6 +74,11 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     told = None if psf is None else fit_to_network(psf, next(iter(recs.values())).pair, task)
     if capture_psf is not None:
         check_capture(capture_psf, next(iter(recs.values())).pair, "capture_psf")
+    if split == "real":
+        from doefab.reconstruction.data import real_components
+        from doefab.reconstruction.realdata import check_side
+
+        check_side(task, size, next(iter(recs.values())).pair.coded.shape[-1] // 2)
     with one_thread():
         rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress, told,
                                       capture_psf if capture_psf is not None else psf)
@@ -90,6 +95,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
         result["psf"] = psf_records or {
             "told": "the design's nominal pair" if psf is None else pair_record(psf),
             "captured_through": pair_record(capture_psf if capture_psf is not None else psf)}
+    if split == "real":
+        result["real_sha256"] = real_components()  # what made the measured set's scenes
     result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
     if task == "hyperspectral":
         result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}

@@ -30,9 +30,10 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_light", "real_lights",
-           "MOTORCYCLE", "HDR_FILE"]
+           "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "check_side"]
 
 HDR_FILE = Path(__file__).resolve().parents[1] / "measured" / "hdr_radiance.npz"
+HDR_SHA256 = "159a5e0a1118c1c891dc5e0700d39f341430fa9070f26feddeb91a3272da50da"  # as scripts/measured_hdr.py wrote it
 # Middlebury 2014 Motorcycle at scikit-image's quarter resolution (skimage.data.stereo_motorcycle's docstring)
 MOTORCYCLE = {"focal_px": 994.978, "baseline_m": 0.193001, "doffs_px": 31.086}
 DISPLAYS = ("Typical CRT Brainard 1997", "Apple Studio Display")
@@ -60,7 +61,8 @@ SOURCES = (
            "ground-truth disparity (structured light) and the left image",
            "skimage.data.stereo_motorcycle (scikit-image's data files)",
            "Middlebury stereo data: free for research use with citation of Scharstein et al. 2014",
-           "depth in metres from the published calibration; the image as the scene's radiance"),
+           "depth in metres from the published calibration; the image as the scene's radiance (it is also one of "
+           "the synthetic validation split's photographs, never a training one)"),
     Source("hyperspectral", "measured display primaries: Typical CRT (Brainard 1997), Apple Studio Display",
            "emission spectra of each display's R, G, B primaries", "colour-science: colour.MSDS_DISPLAY_PRIMARIES",
            "BSD-3-Clause (colour-science)", "scene light: the three primaries at drawn weights"),
@@ -69,18 +71,37 @@ SOURCES = (
 
 @functools.lru_cache(maxsize=1)
 def _hdr_maps() -> tuple[np.ndarray, ...]:
+    import hashlib
+
+    from doefab.errors import DoefabError
+
+    if hashlib.sha256(HDR_FILE.read_bytes()).hexdigest() != HDR_SHA256:
+        raise DoefabError(f"{HDR_FILE} is not the file scripts/measured_hdr.py wrote (SHA-256 differs): restore it "
+                          f"from the package (git checkout, or reinstall doefab)")
     with np.load(HDR_FILE) as z:
         names = list(json.loads(str(z["sources"])))
         return tuple(np.asarray(z[n], np.float32) for n in names)
 
 
-def _crop(rng, shape, size: int) -> tuple[slice, slice]:
+def check_side(task: str, size: int, margin: int = 0) -> None:
+    """A DoefabError unless every measured map of ``task`` holds a scene of ``size`` pixels with ``margin`` more
+    on each side (the PSF's half window): checked before any capture is made."""
     from doefab.errors import DoefabError
 
+    if task == "hdr":
+        small = min(min(m.shape[:2]) for m in _hdr_maps())
+    elif task == "depth":
+        small = min(_motorcycle()[1].shape)
+    else:
+        return  # hyperspectral: the validation photographs' layout, any size
+    if size + 2 * margin > small:
+        raise DoefabError(f"a {size}-px scene with its {margin}-px PSF margin on each side is larger than the "
+                          f"smallest measured {task} map ({small} px on its short side): evaluate the real split "
+                          f"at --size {small - 2 * margin} or less")
+
+
+def _crop(rng, shape, size: int) -> tuple[slice, slice]:
     h, w = shape[:2]
-    if size > min(h, w):
-        raise DoefabError(f"a {size}-px scene (the crop and the PSF's margin) is larger than a measured map's "
-                          f"{h}×{w} px: evaluate the real split at a smaller --size")
     y, x = int(rng.integers(0, h - size + 1)), int(rng.integers(0, w - size + 1))
     return slice(y, y + size), slice(x, x + size)
 
@@ -88,6 +109,7 @@ def _crop(rng, shape, size: int) -> tuple[slice, slice]:
 def hdr_real_sample(rng: np.random.Generator, size: int) -> np.ndarray:
     """[3, S, S] radiance from a measured HDR map: a drawn map and crop, exposed so that a drawn 1–5 % of its
     pixels exceed ``CLIP`` in some channel (fewer where the crop's range is too small), capped at ``PEAK``."""
+    check_side("hdr", size)
     maps = _hdr_maps()
     m = maps[int(rng.integers(len(maps)))]
     ys, xs = _crop(rng, m.shape, size)
@@ -117,6 +139,7 @@ def _motorcycle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def depth_real_sample(rng: np.random.Generator, size: int, near: float, far: float):
     """(scene [3, S, S] radiance, depth to render [S, S] metres, measured [S, S] bool): a drawn crop of the
     measured Motorcycle, its depth clipped to [``near``, ``far``]."""
+    check_side("depth", size)
     img, depth, known = _motorcycle()
     ys, xs = _crop(rng, depth.shape, size)
     gain = rng.uniform(0.8, 1.8)  # the synthetic depth scenes' exposure range
@@ -145,3 +168,4 @@ def real_light(rng: np.random.Generator) -> np.ndarray:
     rows = real_lights()[DISPLAYS[int(rng.integers(len(DISPLAYS)))]]
     e = rng.uniform(0.2, 1.0, len(rows)) @ rows
     return (e / e.max()).astype(np.float64)
+

@@ -27,12 +27,52 @@ def test_depth_is_the_published_calibration_of_the_measured_disparity():
         assert np.isclose(depth[uy[i], ux[i]], nearest, rtol=1e-6).any()
 
 
-def test_a_depth_sample_is_a_crop_clipped_to_the_planes():
+def _find(picture: np.ndarray, patch: np.ndarray) -> tuple[int, int]:
+    """Where ``patch`` [S, S] sits in ``picture`` [H, W] (normalised cross-correlation: blind to a gain)."""
+    from skimage.feature import match_template
+
+    r = match_template(picture, patch)
+    return tuple(int(v) for v in np.unravel_index(np.argmax(r), r.shape))
+
+
+def test_a_depth_sample_is_one_crop_of_image_depth_and_mask_clipped_to_the_planes():
+    """Image, depth and mask are cut at the same place (found by matching the crop in the image), the image
+    scaled by one gain in the synthetic scenes' range and the depth clipped to the planes."""
+    from skimage.data import stereo_motorcycle
+
+    left, _, disp = stereo_motorcycle()
     scene, depth, known = realdata.depth_real_sample(np.random.default_rng(3), 120, 2.8, 3.2)
     assert scene.shape == (3, 120, 120) and depth.shape == known.shape == (120, 120)
+    lin = (left.astype(np.float64) / 255.0) ** 2.2
+    y, x = _find(lin[..., 1], scene[1])
+    crop = lin[y:y + 120, x:x + 120].transpose(2, 0, 1)
+    gain = scene.sum() / crop.sum()
+    assert 0.8 <= gain <= 1.8 and np.allclose(scene, crop * gain, rtol=1e-4, atol=1e-6)
+    assert np.array_equal(known, np.isfinite(disp[y:y + 120, x:x + 120]))
+    z = 994.978 * 0.193001 / (disp[y:y + 120, x:x + 120] + 31.086)
+    assert np.allclose(depth[known], np.clip(z[known], 2.8, 3.2), rtol=1e-6)
     assert depth.min() == np.float32(2.8) and depth.max() == np.float32(3.2)
-    with pytest.raises(Exception, match="smaller --size"):
-        realdata.depth_real_sample(np.random.default_rng(3), 600, 1.0, 5.0)
+
+
+def test_a_scene_larger_than_the_measured_maps_is_one_error_naming_the_size_that_fits():
+    from doefab.errors import DoefabError
+
+    with pytest.raises(DoefabError, match=r"--size 406 or less"):
+        realdata.check_side("depth", 407, 47)  # the Motorcycle is 500 px high: 406 + 2 × 47 = 500
+    with pytest.raises(DoefabError, match="smallest measured hdr map"):
+        realdata.hdr_real_sample(np.random.default_rng(0), 401)
+    realdata.check_side("depth", 406, 47)
+    realdata.check_side("hyperspectral", 4096, 95)  # its layout takes any size
+
+
+def test_generated_scene_functions_refuse_the_measured_split():
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.data import depth_sample, hdr_sample
+
+    for f in (lambda: hdr_sample(np.random.default_rng(0), 16, "real"),
+              lambda: depth_sample(np.random.default_rng(0), 16, "real")):
+        with pytest.raises(DoefabError, match="realdata"):
+            f()
 
 
 def test_hdr_exposure_clips_one_to_five_percent_and_keeps_the_maps_contrast():
@@ -46,6 +86,19 @@ def test_hdr_exposure_clips_one_to_five_percent_and_keeps_the_maps_contrast():
         above = (s.max(axis=0) > 2.0).mean()
         assert above <= 0.05 + 1 / 150**2
         assert above >= 0.01 - 1 / 150**2 or s.max() < 2.0 + 1e-3
+        # below the cap, one map's crop (channels in order) times one gain
+        found = False
+        for m in maps:
+            if min(m.shape[:2]) < 150:
+                continue
+            y, x = _find(m[..., 1], s[1])
+            crop = m[y:y + 150, x:x + 150].transpose(2, 0, 1)
+            below = s < 255.0
+            g = np.median(s[below] / np.maximum(crop[below], 1e-12))
+            if np.allclose(s[below], crop[below] * g, rtol=1e-4, atol=1e-6):
+                found = True
+                break
+        assert found
     # the stored maps hold real dynamic range: at least three of them span over 2^8 between median and peak
     spans = [float(m.max() / max(np.median(m), 1e-9)) for m in maps]
     assert sum(x > 256 for x in spans) >= 3
@@ -82,7 +135,7 @@ def test_training_never_draws_the_measured_set(monkeypatch):
         monkeypatch.setattr(realdata, name, refuse)
     for task in ("hdr", "hyperspectral", "depth"):
         pair, _ = psf_pair(task, None)
-        for split in ("train", "val"):
+        for split in ("train", "val", "test", "final"):
             make_batch(task, split, [0], 16, pair)
         with pytest.raises(AssertionError, match="measured data drawn"):
             make_batch(task, "real", [0], 16, pair)
@@ -91,12 +144,16 @@ def test_training_never_draws_the_measured_set(monkeypatch):
 def test_a_real_depth_batch_scores_only_measured_pixels():
     """The target is NaN exactly where the disparity was not measured, and the metrics equal those computed by
     hand on the measured pixels alone."""
+    from doefab.reconstruction.data import sample_rng
     from doefab.reconstruction.metrics import depth_metrics
-    from doefab.reconstruction.specs import make_batch, psf_pair
+    from doefab.reconstruction.specs import crop_margin, make_batch, psf_pair
 
     pair, _ = psf_pair("depth", None)
     _, _, target = make_batch("depth", "real", [4], 64, pair)
     t = target[0].numpy()
+    m_px = crop_margin("depth", pair)
+    _, _, known = realdata.depth_real_sample(sample_rng("real", 4), 64 + 2 * m_px, 1.0, 5.0)
+    assert np.array_equal(np.isnan(t), ~known[m_px:m_px + 64, m_px:m_px + 64])
     assert np.isnan(t).any() and np.isfinite(t).any()
     pred = np.full_like(t, 3.0)
     m = depth_metrics(pred, t)
@@ -114,8 +171,40 @@ def test_adding_the_measured_split_leaves_the_synthetic_split_digest(monkeypatch
     monkeypatch.setitem(data.SPLIT_SEEDS, "real", 123)
     monkeypatch.setitem(data.PART_SEEDS, "real", 321)
     assert data.split_components("depth")["splits"] == before
+    monkeypatch.setitem(data.CONTENT, "real", "test")
+    assert data.split_components("depth")["splits"] == before
     monkeypatch.setitem(data.SPLIT_SEEDS, "val", 123)
     assert data.split_components("depth")["splits"] != before
+
+
+def test_the_measured_set_takes_no_training_or_test_content_and_its_digest_sees_a_change(monkeypatch):
+    """The measured set's content pool is the validation split's; its digest (recorded by a real evaluation)
+    changes with its seed and its content pool."""
+    from doefab.reconstruction import data
+
+    assert data.CONTENT["real"] not in ("train", "test")
+    before = data.real_components()
+    monkeypatch.setitem(data.SPLIT_SEEDS, "real", 1)
+    assert data.real_components()["definition"] != before["definition"]
+    monkeypatch.undo()
+    monkeypatch.setitem(data.CONTENT, "real", "test")
+    assert data.real_components()["definition"] != before["definition"]
+
+
+def test_a_changed_measured_file_is_refused(tmp_path, monkeypatch):
+    from doefab.errors import DoefabError
+
+    bad = tmp_path / "hdr_radiance.npz"
+    data = bytearray(realdata.HDR_FILE.read_bytes())
+    data[len(data) // 2] ^= 0xFF  # one byte changed
+    bad.write_bytes(bytes(data))
+    monkeypatch.setattr(realdata, "HDR_FILE", bad)
+    realdata._hdr_maps.cache_clear()
+    try:
+        with pytest.raises(DoefabError, match="SHA-256 differs"):
+            realdata._hdr_maps()
+    finally:
+        realdata._hdr_maps.cache_clear()
 
 
 def test_the_measured_file_is_what_its_script_wrote():

@@ -243,9 +243,9 @@ def test_the_training_reflectances_are_those_the_shipped_networks_were_trained_o
 
 
 def test_the_measured_sets_photographs_are_no_training_photograph(photographs):
-    """The measured-data validation set (``realdata``): no HDR radiance map and not the depth scene's image is a
-    training photograph, as a crop, shift or rescale of one (their tone-mapped pictures against each training
-    photograph)."""
+    """The measured-data validation set (``realdata``): no HDR radiance map is a photograph of any split, and the
+    depth scene's image is none of training or test (it is one of the validation split's photographs), as a
+    crop, shift or rescale of one (their tone-mapped pictures against each photograph)."""
     from skimage.data import stereo_motorcycle
 
     from doefab.reconstruction.realdata import _hdr_maps
@@ -253,8 +253,10 @@ def test_the_measured_sets_photographs_are_no_training_photograph(photographs):
     measured = [m / max(float(np.quantile(m, 0.99)), 1e-6) for m in _hdr_maps()]
     measured = [np.clip(m, 0, 1) for m in measured] + [(stereo_motorcycle()[0] / 255.0) ** 2.2]
     feats = [_features(m) for m in measured]
-    pairs = {(i, n): _matched(f, ft) for i, f in enumerate(feats) for n, _, ft in photographs["train"]}
+    pairs = {(i, split, n): _matched(f, ft) for i, f in enumerate(feats) for split in SPLITS
+             for n, _, ft in photographs[split] if not (i == len(feats) - 1 and split == "val")}
     assert not {k: v for k, v in pairs.items() if v >= MATCHED}
+    assert _matched(feats[-1], dict((n, f) for n, _, f in photographs["val"])["stereo_motorcycle"]) >= MATCHED
     # the check sees a measured picture in itself shifted and rescaled
     from skimage.transform import rescale
 
