@@ -65,7 +65,7 @@ def test_layering():
             parts = name.split(".")
             if parts[0] != "doefab" or len(parts) < 2 or parts[1].startswith("_"):
                 continue
-            if parts[1] in ("errors", "io", "plotting", "applications"):
+            if parts[1] in ("errors", "io", "plotting", "applications", "validate"):
                 continue
             assert parts[1] in allowed, f"{path}: stage '{stage}' must not import doefab.{parts[1]}"
     # the application registry sits below every stage: it imports doefab.errors and nothing else of doefab

@@ -78,7 +78,7 @@ class DesignConfig:
 
     def check(self) -> None:
         """Every numeric setting within its range (one error naming it), before any work."""
-        from doefab._validate import number_in
+        from doefab.validate import number_in
 
         for name, lo, hi, integer in (("iterations", 1, 1_000_000, True), ("lr", 0, 10, False),
                                       ("seed", 0, 2**32 - 1, True), ("sampling", 1, 16, True),

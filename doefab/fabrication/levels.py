@@ -14,7 +14,7 @@ import hashlib
 import numpy as np
 import torch
 
-from doefab._validate import heights, number_in
+from doefab.validate import heights, number_in
 from doefab.errors import DoefabError
 from doefab.fabrication.process import DEFAULT_LEVELS
 from doefab.optics.camera import Camera

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from doefab._validate import length_m
+from doefab.validate import length_m
 from doefab.errors import DoefabError
 
 __all__ = ["LEVEL_CHOICES", "DEFAULT_LEVELS", "MAX_MASKS", "check_levels", "mask_count", "check_min_feature"]

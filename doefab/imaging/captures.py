@@ -27,7 +27,7 @@ import math
 import numpy as np
 import torch
 
-from doefab import _validate
+from doefab import validate as _validate
 from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.imaging.crosstalk import DualPixelCrosstalk, check_pair

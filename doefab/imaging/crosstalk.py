@@ -119,7 +119,7 @@ def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", 
     :func:`calibrate_crosstalk`. The true ratios are scalars, per-column profiles or [rows, columns] maps (each
     row its own, e.g. :meth:`SensorCrosstalk.ratios`); the estimate is one per column, whatever they are.
     ``rng``: a seed or a ``numpy.random.Generator``."""
-    from doefab import _validate
+    from doefab import validate as _validate
     from doefab.imaging.sensor import noise_model
 
     rows = _rows(rows)
@@ -266,7 +266,7 @@ class SensorCrosstalk:
     seed: int = 0
 
     def __post_init__(self):
-        from doefab import _validate
+        from doefab import validate as _validate
 
         try:
             a, b = (float(x) for x in self.centre)
@@ -308,7 +308,7 @@ class SensorCrosstalk:
 
     def drift(self, session: int) -> np.ndarray:
         """(δ_l→r, δ_r→l): each ratio's relative change in capture ``session`` since the calibration."""
-        from doefab import _validate
+        from doefab import validate as _validate
 
         s = _validate.seed("session", session)
         return np.random.default_rng(np.random.SeedSequence([self.seed, 31, s])).normal(0.0, self.drift_sigma, 2)
@@ -333,7 +333,7 @@ class SensorCrosstalk:
         """(l→r, r→l) RMS of true − calibrated ratio over the calibrated region (a ``grid`` × ``grid`` lattice of
         its pixels) and capture sessions 0 … ``sessions`` − 1: what the per-column calibration of ``rows`` rows
         leaves in the captures (``noise`` "none": the part no number of calibration rows removes)."""
-        from doefab import _validate
+        from doefab import validate as _validate
 
         n_s = _validate.number_in("sessions", sessions, 1, 10_000, integer=True)
         at = ((np.arange(_validate.number_in("grid", grid, 1, 4096, integer=True)) + 0.5) / grid - 0.5) * self.width_px

@@ -29,8 +29,8 @@ import math
 import numpy as np
 import torch
 
-from doefab._validate import depths as _validate_depths
-from doefab._validate import number_in
+from doefab.validate import depths as _validate_depths
+from doefab.validate import number_in
 from doefab.errors import DoefabError
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
 

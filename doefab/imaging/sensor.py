@@ -146,7 +146,7 @@ class Sensor:
     read_noise_e: float = DEFAULT_READ_NOISE_E
 
     def __post_init__(self):
-        from doefab._validate import number_in
+        from doefab.validate import number_in
 
         number_in("full_well_e", self.full_well_e, *FULL_WELL_RANGE_E, unit="electrons")
         number_in("read_noise_e", self.read_noise_e, *READ_NOISE_RANGE_E, unit="electrons rms")

@@ -270,7 +270,7 @@ def diagnose(measured, design_dir, budget=None, starts: int = 4, seed: int = 0, 
     ``starts``: fits from the error-free part and ``starts − 1`` parts drawn from the budget with ``seed``;
     ``delivered``: also judge the fitted part through the task's shipped network (``lab.diagreport.delivered_metric``).
     A pair made from another design (its provenance's ``levels_sha256``) is refused before any work."""
-    from doefab import _validate as v
+    from doefab import validate as v
     from doefab.design.design import Design
     from doefab.lab.diagreport import assemble, check_design, delivered_metric
     from doefab.tolerance.errors import load_budget

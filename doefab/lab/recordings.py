@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from doefab._validate import unit_hint
+from doefab.validate import unit_hint
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.lab.frames import PIXEL_FORMATS, expand

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab import _validate as v
+from doefab import validate as v
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_json, atomic_write_text
 from doefab.lab.frames import write_frame

@@ -11,7 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from doefab._validate import metres_hint
+from doefab.validate import metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 

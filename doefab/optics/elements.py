@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from doefab._validate import number_in, wavelength_m
+from doefab.validate import number_in, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 

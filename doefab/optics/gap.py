@@ -28,7 +28,7 @@ import math
 import numpy as np
 import torch
 
-from doefab._validate import depths, heights, wavelength_m
+from doefab.validate import depths, heights, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.propagators.asm import angular_spectrum

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from doefab import _validate
+from doefab import validate as _validate
 from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera

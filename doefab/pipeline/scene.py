@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from doefab._validate import metres_hint, unit_hint
+from doefab.validate import metres_hint, unit_hint
 from doefab.applications import APPLICATIONS
 from doefab.errors import DoefabError
 from doefab.io import read_toml

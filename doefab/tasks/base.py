@@ -62,13 +62,13 @@ class Task:
     RANGES = {"kernel_size": (3, 4095, True, "sensor pixels")}
 
     def __post_init__(self) -> None:
-        from doefab._validate import number_in
+        from doefab.validate import number_in
 
         for name, (lo, hi, integer, unit) in self.RANGES.items():
             if getattr(self, name) is not None:
                 number_in(name, getattr(self, name), lo, hi, integer, unit)
         if self.wavelengths_m is not None:
-            from doefab._validate import wavelengths
+            from doefab.validate import wavelengths
 
             self.wavelengths_m = wavelengths(self.wavelengths_m)
 

@@ -70,7 +70,7 @@ class HalfRingTask(Task):
 
         super().__post_init__()
         if self.planes_m is not None:
-            from doefab._validate import depths
+            from doefab.validate import depths
 
             planes = depths(self.planes_m)
             if len(planes) < 2 or not all(0 < z < float("inf") for z in planes):

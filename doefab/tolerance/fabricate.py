@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from doefab._validate import length_m, wavelength_m
-from doefab._validate import seed as seed_value
+from doefab.validate import length_m, wavelength_m
+from doefab.validate import seed as seed_value
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_planes
 from doefab.fabrication.levels import material_level_step

@@ -174,7 +174,7 @@ SCENE_KEYS = [
 
 def _wrong_unit(key) -> str:
     """A valid value of a length key written in another unit that leaves the range (else NA)."""
-    from doefab._validate import LENGTH_UNITS
+    from doefab.validate import LENGTH_UNITS
 
     if key.unit not in LENGTH_UNITS or not key.lo or key.lo <= 0:
         return NA

@@ -14,7 +14,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from doefab._validate import length_m, number_in, wavelength_m
+from doefab.validate import length_m, number_in, wavelength_m
 from doefab.errors import SamplingError
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, pixel_integration_matrix
 

@@ -13,7 +13,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from doefab._validate import number_in
+from doefab.validate import number_in
 from doefab.errors import SamplingError
 from doefab.optics.propagators.base import FocalSetup, check_window, pixel_integration_matrix
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from doefab._validate import number_in
+from doefab.validate import number_in
 from doefab.optics.propagators.base import FocalSetup, check_window, gauss_legendre_pixel
 
 __all__ = ["MFTRoute", "fourier_matrix"]
