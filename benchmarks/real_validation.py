@@ -46,7 +46,7 @@ def evaluate_split(task: str, split: str, images: int, size: int, work: Path, we
                    variants=("proposed", "coded_only", "uncoded_only"), name: str | None = None) -> dict:
     """``task``'s networks (``weights_dir``'s, default the shipped ones) on ``split``, honest captures; an
     evaluation already in ``work`` for the same weights, scenes and size is reused."""
-    from doefab.reconstruction.evaluate import evaluate
+    from doefab.reconstruction.evaluate import evaluate, one_thread
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.data import real_components
     from doefab.tolerance.conditions import for_splits
@@ -61,7 +61,8 @@ def evaluate_split(task: str, split: str, images: int, size: int, work: Path, we
                 w["sha256"] == shas[v] for v, w in done["weights"].items()) and same_set:
             print(f"{task} {split}: reusing {f}")
             return done
-    cond = for_splits(task, None, "honest", (split,), progress=True)[split]
+    with one_thread():  # the parts computed on one thread, as the CLI computes them
+        cond = for_splits(task, None, "honest", (split,), progress=True)[split]
     return evaluate(task, out, images=images, size=size, conditions=cond, split=split, weights_dir=weights_dir,
                     variants=variants)
 
