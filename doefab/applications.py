@@ -21,14 +21,19 @@ from dataclasses import dataclass
 
 from doefab.errors import DoefabError
 
-__all__ = ["Application", "APPLICATIONS", "application", "of_design", "NAMES", "DESIGN_TASKS"]
+__all__ = ["Application", "APPLICATIONS", "application", "of_design", "has", "design_is", "NAMES", "DESIGN_TASKS",
+           "PROPERTIES"]
 
 
 @dataclass(frozen=True)
 class Application:
     """name: the scene file's ``task``.  design_task: the DOE design task that serves it.  primary_metric: the
     reconstruction metric it is judged by first, in ``primary_unit`` ("dB", "m"); ``higher_is_better`` its
-    direction.  summary: one line for help texts."""
+    direction.  summary: one line for help texts.  What its scenes are, which every layer asks instead of the
+    name: ``spectral`` — spectra on the design's bands, seen through the sensor's RGB response (its sensor
+    record holds the response); ``depth`` — the network estimates metres, the scenes span depths between the
+    design's planes (a PSF per plane); ``highlights`` — the scenes clip and the network's solve reads both halves'
+    PSFs."""
 
     name: str
     design_task: str
@@ -36,18 +41,22 @@ class Application:
     primary_unit: str
     higher_is_better: bool
     summary: str
+    spectral: bool = False
+    depth: bool = False
+    highlights: bool = False
 
 
 APPLICATIONS = {a.name: a for a in (
     Application("hdr", "streak", "psnr_highlight", "dB", True,
-                "high dynamic range from one exposure: a streak PSF spreads clipped highlights"),
+                "high dynamic range from one exposure: a streak PSF spreads clipped highlights", highlights=True),
     Application("hyperspectral", "grating", "psnr", "dB", True,
-                "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half"),
+                "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half", spectral=True),
     Application("depth", "half-ring", "mae", "m", False,
-                "depth from one exposure: a half-ring PSF that changes with distance"),
+                "depth from one exposure: a half-ring PSF that changes with distance", depth=True),
 )}
 NAMES = tuple(APPLICATIONS)
 DESIGN_TASKS = tuple(a.design_task for a in APPLICATIONS.values())
+PROPERTIES = ("spectral", "depth", "highlights")
 
 
 def application(name: str) -> Application:
@@ -64,3 +73,22 @@ def of_design(design_task: str) -> Application | None:
 
     Example: ``of_design("grating").name`` → ``"hyperspectral"``."""
     return next((a for a in APPLICATIONS.values() if a.design_task == design_task), None)
+
+
+def has(name: str, what: str) -> bool:
+    """Whether the application ``name`` (a scene file's ``task``) has the property ``what`` ("spectral", "depth"
+    or "highlights"; ``Application``): False for a name no application has (a test's toy task).
+
+    Example: ``has("hyperspectral", "spectral")`` → True; ``has("hdr", "depth")`` → False."""
+    if what not in PROPERTIES:
+        raise DoefabError(f"unknown application property {what!r}: choose one of {', '.join(PROPERTIES)}")
+    return bool(name in APPLICATIONS and getattr(APPLICATIONS[name], what))
+
+
+def design_is(design_task: str, what: str) -> bool:
+    """Whether the application a design task serves has the property ``what`` (``has``); False for a design task
+    no application uses.
+
+    Example: ``design_is("half-ring", "depth")`` → True."""
+    app = of_design(design_task)
+    return app is not None and has(app.name, what)

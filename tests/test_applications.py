@@ -55,3 +55,30 @@ def test_the_tables_that_were_copies_are_the_registry():
     assert TASK_DESIGN == rows == {n: s.design for n, s in SPECS.items()}
     assert TASK_OF_DESIGN == RECON_TASK == {d: n for n, d in rows.items()}
     assert PRIMARY == {n: a.primary_metric for n, a in APPLICATIONS.items()}
+
+
+@pytest.mark.parametrize("name", list(APPLICATIONS))
+def test_each_property_is_what_the_design_task_and_metric_make_the_application(name):
+    """``spectral``: its design task images more bands than the sensor's three colours; ``depth``: its design
+    task works at more than one plane; ``highlights``: it is judged by highlight PSNR — each read from the task
+    and the metric tables, not from the registry."""
+    from doefab.applications import design_is, has
+    from doefab.optics.camera import PRESETS, Camera
+    from doefab.tasks import get_task
+
+    app = application(name)
+    task = get_task(app.design_task)
+    cam = Camera.preset(name if name in PRESETS else next(iter(PRESETS)))
+    task.bind(cam)
+    assert has(name, "spectral") == app.spectral == (len(task.wavelengths(cam)) > 3)
+    assert has(name, "depth") == app.depth == (len(task.depths(cam)) > 1)
+    assert has(name, "highlights") == app.highlights == (app.primary_metric == "psnr_highlight")
+    assert all(design_is(app.design_task, p) == has(name, p) for p in ("spectral", "depth", "highlights"))
+
+
+def test_a_property_of_an_unknown_application_is_false_and_an_unknown_property_one_error():
+    from doefab.applications import design_is, has
+
+    assert not has("polarization", "spectral") and not design_is("no-such-design", "depth")
+    with pytest.raises(DoefabError, match="spectral, depth, highlights"):
+        has("hdr", "colour")

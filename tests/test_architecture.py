@@ -183,3 +183,31 @@ def test_no_new_import_circle():
     new = [sorted(c) for c in found if c not in KNOWN_CIRCLES]
     assert not new, f"import circles: {new}"
     assert set(found) == KNOWN_CIRCLES, f"circles broken since: remove them from KNOWN_CIRCLES ({KNOWN_CIRCLES - set(found)})"
+
+
+def _name_comparisons(tree: ast.AST, names: set) -> list[int]:
+    """Lines where a string in ``names`` is compared (==, !=, in, not in) with anything."""
+    def named(node):
+        if isinstance(node, ast.Constant) and node.value in names:
+            return True
+        return isinstance(node, (ast.Tuple, ast.List, ast.Set)) and any(named(e) for e in node.elts)
+
+    return [n.lineno for n in ast.walk(tree) if isinstance(n, ast.Compare)
+            and any(isinstance(op, (ast.Eq, ast.NotEq, ast.In, ast.NotIn)) for op in n.ops)
+            and any(named(side) for side in (n.left, *n.comparators))]
+
+
+def test_no_application_name_compared_as_a_string():
+    """Code asks the application registry (``doefab.applications``: ``has``, ``design_is``, ``application``)
+    what an application or its design task is, never compares their names; the finder finds the forms it
+    forbids."""
+    from doefab.applications import DESIGN_TASKS, NAMES
+
+    names = set(NAMES) | set(DESIGN_TASKS)
+    planted = ast.parse('a = t == "hdr"\nb = "half-ring" != t\nc = t in ("x", "depth")\nd = t == "other"\n'
+                        'e = {"hdr": 1}["hdr"]\n')
+    assert _name_comparisons(planted, names) == [1, 2, 3]
+    root = PKG.parent
+    found = {str(p.relative_to(root)): lines for p in [*PKG.rglob("*.py"), *(root / "holder_cad").rglob("*.py")]
+             if p.name != "applications.py" and (lines := _name_comparisons(ast.parse(p.read_text()), names))}
+    assert not found, f"application or design-task names compared as strings (ask doefab.applications): {found}"

@@ -7,6 +7,8 @@ import argparse
 import math
 import sys
 
+from doefab.applications import has
+
 __all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder", "task_design_arg",
            "add_device_arg"]
 
@@ -155,10 +157,10 @@ def sensor_arg(args, design=None):
     task = getattr(args, "task", "depth")
     sensor = Sensor(**({"response": response} if response is not None else {}), full_well_e=args.full_well_e,
                     read_noise_e=args.read_noise_e)
-    if response is not None and task != "hyperspectral" and not sensor.has_default_response():
+    if response is not None and not has(task, "spectral") and not sensor.has_default_response():
         raise DoefabError(f"--sensor-response forms the hyperspectral task's captures only; the {task} task's "
                           f"scenes are the camera's own RGB: drop it (the noise flags apply)")
-    if task == "hyperspectral":  # the design's bands within the response (the default's too)
+    if has(task, "spectral"):  # the design's bands within the response (the default's too)
         from doefab.reconstruction.specs import psf_pair
 
         try:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from doefab.applications import design_is
 from doefab.cli._args import add_device_arg, number
 from doefab.errors import DoefabError
 
@@ -78,7 +79,7 @@ def run(args) -> int:
         settings["batch"] = args.batch
     if args.knots is not None and args.parameterization != "radial":
         raise DoefabError("--knots applies to --parameterization radial only")
-    if args.ring_law and args.task != "half-ring":
+    if args.ring_law and not design_is(args.task, "depth"):
         raise DoefabError(f"--ring-law applies to the half-ring task, not {args.task}")
     settings.update(parameterization=args.parameterization, knots=args.knots or 0, start=args.start)
     params = {}

@@ -24,7 +24,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from doefab.applications import APPLICATIONS
+from doefab.applications import APPLICATIONS, design_is
 from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
@@ -82,7 +82,7 @@ def run(args) -> int:
     for k, v in E2E_DEFAULTS.items():
         setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
     d, design = design_folder(args.design)
-    if design.task != "half-ring":
+    if not design_is(design.task, "depth"):
         raise DoefabError(f"{d}: end-to-end fine-tuning is for depth (half-ring) designs")
     sensor = sensor_arg(args)
     if args.resume and args.force:

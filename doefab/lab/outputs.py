@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import apply_umask
 
@@ -284,10 +285,10 @@ def write_result(task: str, result, folder, stem: str, wavelengths_m=None, depth
     float32 TIFF, 16-bit millimetre PNG and the preview over ``depth_range_m`` (near, far)."""
     folder = Path(folder)
     names = [folder / n for n in result_names(task, stem)]
-    if task == "hdr":
+    if has(task, "highlights"):
         write_hdr_exr(names[0], result)
         write_tonemapped_png(names[1], result)
-    elif task == "hyperspectral":
+    elif has(task, "spectral"):
         write_envi(names[0], result, wavelengths_m)
         write_srgb_preview(names[2], result, wavelengths_m)
     else:
@@ -304,11 +305,11 @@ def write_result_rows(task: str, blocks, shape: tuple[int, int, int], folder, st
     they come, with their XYZ kept for the preview (3 floats per pixel, not C); HDR and depth are gathered first
     (OpenEXR, TIFF and PNG write whole images)."""
     c, h, w = shape
-    if task != "hyperspectral":
+    if not has(task, "spectral"):
         out = np.empty((c, h, w), np.float32)
         for row, block in blocks:
             out[:, row:row + block.shape[1]] = block
-        return write_result(task, out[0] if task == "depth" else out, folder, stem, wavelengths_m, depth_range_m)
+        return write_result(task, out[0] if has(task, "depth") else out, folder, stem, wavelengths_m, depth_range_m)
     names = [Path(folder) / n for n in result_names(task, stem)]
     xyz = np.empty((3, h, w), np.float32)
 

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 
 __all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
@@ -142,7 +143,7 @@ def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int]):
     """The proposed hyperspectral network's light, estimated once from the centre of the whole extended image
     (the pixels the whole-image network would use) and fixed for every tile (``SpectralNet.light``)."""
     model = rec.model
-    if rec.task != "hyperspectral" or rec.variant != "proposed" or getattr(model, "inverses", None) is None:
+    if not has(rec.task, "spectral") or rec.variant != "proposed" or getattr(model, "inverses", None) is None:
         yield
         return
     import torch
@@ -214,7 +215,7 @@ def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = D
     out = np.empty((output_channels(rec), h, w), np.float32)
     for r, block in iter_tiled(rec, coded, uncoded, tile, overlap, psf, progress):
         out[:, r:r + block.shape[1]] = block
-    return out[0] if rec.task == "depth" else out
+    return out[0] if has(rec.task, "depth") else out
 
 
 def read_capture(path, black_level: float | None = None, white_level: float | None = None,

@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from doefab.applications import has
+
 __all__ = ["diagnose", "explain"]
 
 
@@ -91,7 +93,7 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
     try:
         from doefab.reconstruction.loader import load_reconstructor
 
-        if scene.task != "depth":
+        if not has(scene.task, "depth"):
             rec = load_reconstructor(scene.task, "proposed")
             lam_w = float(rec.model.coded.wiener.lam.detach().min())
             gain = 1 / (2 * math.sqrt(lam_w))

@@ -13,6 +13,7 @@ import json
 import re
 from pathlib import Path
 
+from doefab.applications import design_is
 from doefab.io import atomic_write_text
 from doefab.pipeline.knobs import BENCHMARK, REPO, knob_plots
 
@@ -226,7 +227,7 @@ def system_table(res: dict) -> list[list[str]]:
             ["fabrication", f"{res['settings']['levels']} levels on {cam.material.name}",
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
     if res.get("sensor") is not None:
-        spectral = res["settings"].get("design_task") == "grating"
+        spectral = design_is(res["settings"].get("design_task"), "spectral")
         own = res["sensor"].differs_from(None, spectral)
         rows.append(["sensor", res["sensor"].describe(with_response=spectral),
                      "this camera's sensor" if own else "the default (prototype) sensor"])

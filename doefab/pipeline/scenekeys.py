@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Callable
 
-from doefab.applications import APPLICATIONS
+from doefab.applications import APPLICATIONS, has
 from doefab._devices import DEVICE_WORDS, check_device
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.materials import SUBSTRATES, substrate_name
@@ -191,7 +191,7 @@ def template(task: str) -> str:
     """A commented scene file for ``task`` with every key, its unit and range (values: a 35 mm f/4 camera)."""
     ex = _EXAMPLES[task]
     values = {("camera", "focal_length_mm"): 35.0, ("camera", "f_number"): 4.0, ("camera", "lens_f_number"): 2.0,
-              ("camera", "focus_distance_m"): 3.5 if task == "depth" else 5.0, ("camera", "sensor_pitch_um"): 3.76,
+              ("camera", "focus_distance_m"): 3.5 if has(task, "depth") else 5.0, ("camera", "sensor_pitch_um"): 3.76,
               ("camera", "doe_pitch_um"): 4.0, ("fabrication", "levels"): 16,
               ("fabrication", "material"): "fused silica", ("fabrication", "min_feature_um"): 2.0,
               ("reconstruction", "weights"): "train", ("reconstruction", "minutes"): 6.0,

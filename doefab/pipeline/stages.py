@@ -15,6 +15,7 @@ import shutil
 import time
 from pathlib import Path
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.scene import Scene
@@ -249,13 +250,13 @@ def shipped_sensor_differs(task: str, sensor) -> list[str]:
     except (OSError, ValueError):
         meta = {}
     return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
-                               spectral=task == "hyperspectral")
+                               spectral=has(task, "spectral"))
 
 
 def _sensor_text(sensor, task: str) -> str:
     from doefab.imaging.sensor import Sensor
 
-    return (sensor or Sensor()).describe(with_response=task == "hyperspectral")
+    return (sensor or Sensor()).describe(with_response=has(task, "spectral"))
 
 
 def _scene_budget(scene) -> dict | None:
@@ -367,7 +368,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
-            parts.update(scene_sensor(scene).entry(scene.task == "hyperspectral"))
+            parts.update(scene_sensor(scene).entry(has(scene.task, "spectral")))
     return _h(parts)
 
 

@@ -18,7 +18,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
                                       quick_sampling, sampling_checks)
-from doefab.applications import application
+from doefab.applications import application, design_is, has
 from doefab.pipeline.scene import Scene
 
 __all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
@@ -162,7 +162,7 @@ def scene_sensor(scene: Scene, problems: list | None = None):
 
 def _sensor_checks(scene: Scene, sensor, task, cam) -> list[str]:
     """The response must cover a spectral task's bands."""
-    if scene.task != "hyperspectral":
+    if not has(scene.task, "spectral"):
         return []
     try:
         sensor.rgb(task.wavelengths(cam))
@@ -184,13 +184,13 @@ def scene_task(scene: Scene, committed, cam):
     if "wavelengths_nm" in o and [round(w, 6) for w in o["wavelengths_nm"]] != [
             round(w * 1e9, 6) for w in own.wavelengths(cam)]:
         params["wavelengths_m"] = tuple(w * 1e-9 for w in o["wavelengths_nm"])
-        if dname == "grating":
+        if design_is(dname, "spectral"):
             params["n_bands"] = len(o["wavelengths_nm"])
     planes = [math.inf if z == "inf" else float(z) for z in o.get("depths_m", [])]
-    if dname == "half-ring" and any(math.isinf(z) for z in planes):
+    if design_is(dname, "depth") and any(math.isinf(z) for z in planes):
         raise DoefabError(f"optics.depths_m {o['depths_m']}: a depth design's planes are finite distances (its ring "
                           f"law needs 1/z at every plane): drop \"inf\"")
-    if planes and dname == "half-ring" and [round(z, 9) for z in planes] != [round(z, 9) for z in own.depths(cam)]:
+    if planes and design_is(dname, "depth") and [round(z, 9) for z in planes] != [round(z, 9) for z in own.depths(cam)]:
         params["planes_m"] = tuple(planes)
     for key, name, scale in (("streak_arm_px", "arm_px", 1), ("streak_band_px", "band_px", 1),
                              ("grating_box_px", "box_px", 1), ("ring_max_px", "ring_max_px", 1),
@@ -200,7 +200,7 @@ def scene_task(scene: Scene, committed, cam):
             params[name] = d[key] if scale is None else d[key] * scale
     if "grating_period_um" in d:
         params["period_m"] = d["grating_period_um"] * 1e-6
-    if dname == "half-ring" and is_custom_camera(scene) and "ring_max_px" not in d:
+    if design_is(dname, "depth") and is_custom_camera(scene) and "ring_max_px" not in d:
         params["ring_max_px"] = defocus_ring_px(cam, params)
     try:
         task = get_task(dname, **params)
@@ -258,7 +258,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
                    f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
-    if scene.task == "hyperspectral" and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
+    if has(scene.task, "spectral") and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
         out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
                    " keep the bands within it")
     return out
@@ -275,9 +275,9 @@ def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -
          "parameterization": design.get("parameterization", cfg.get("parameterization", "pixel")),
          "knots": design.get("knots", cfg.get("knots", 0)),
          "levels": int(fab.get("levels", committed.n_levels))}
-    if dname == "half-ring":
+    if design_is(dname, "depth"):
         s["ring_law"] = task.ring_law
-    if dname == "grating":  # the period in metres (task_params hold it only as the preset's pixel count)
+    if design_is(dname, "spectral"):  # the period in metres (task_params hold it only as the preset's pixel count)
         s["grating_period_m"] = round(task.period(cam), 12)
     return s
 
@@ -322,7 +322,7 @@ def resolve(scene: Scene) -> dict:
 
 
 def _sensor_warnings(scene: Scene, sensor) -> list[str]:
-    if scene.task != "hyperspectral" and "response" in scene.sensor and not sensor.has_default_response():
+    if not has(scene.task, "spectral") and "response" in scene.sensor and not sensor.has_default_response():
         return [f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes are "
                 f"the camera's own RGB (only the noise applies)"]
     return []

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.applications import has
 from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
 
 __all__ = ["SPLIT_SEEDS", "PART_SEEDS", "SYNTHETIC", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
@@ -291,7 +292,7 @@ def split_components(task: str) -> dict[str, str]:
     out = {"splits": _sha(json.dumps(names, sort_keys=True).encode()), "photographs": photos.hexdigest(),
            "parts": _sha(sources_sha256(_PACKAGE, PART_MODEL).encode(),
                          (_PACKAGE / "tolerance" / "budget.toml").read_bytes())}
-    if task == "hyperspectral":
+    if has(task, "spectral"):
         from doefab.reconstruction import bands, spectra
         from doefab.reconstruction.illuminant import LIBRARY_PATH
 
@@ -316,7 +317,7 @@ def split_digest_v1(task: str) -> str:
     (to 1e-6)."""
     seeds = {s: SPLIT_SEEDS[s] for s in ("train", "val", "test")}
     h = hashlib.sha256(json.dumps({"images": IMAGES, "seeds": seeds}, sort_keys=True).encode())
-    if task == "hyperspectral":
+    if has(task, "spectral"):
         from doefab.reconstruction import spectra
 
         for arr in [spectra.reflectances(s) for s in ("train", "val", "test")] + [spectra.val_lights(),

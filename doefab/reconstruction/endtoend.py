@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import design_is
 from doefab.errors import DoefabError
 
 __all__ = ["finetune_end_to_end", "render_depth_batch"]
@@ -105,7 +106,7 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     sensor = sensor or Sensor()
     dev = resolve_device(device)
     design = Design.load(design_dir)
-    if design.task != "half-ring":
+    if not design_is(design.task, "depth"):
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")
     if design.camera.doe_pixels % sampling:
         raise DoefabError(f"sampling {sampling} must divide the DOE grid ({design.camera.doe_pixels} px)")

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_json, atomic_write_text
 from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_components, split_digest, split_digest_v1
@@ -87,7 +88,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               "conditions": conditions.describe() if conditions is not None else {"name": "clean"},
               "parts_sha256": _parts_sha256(conditions),
               "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
-              else "default (Poisson–Gaussian)", **sensor.entry(task == "hyperspectral"),
+              else "default (Poisson–Gaussian)", **sensor.entry(has(task, "spectral")),
               "threads": THREADS, "versions": library_versions(), "code": code_version(),
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               "weights": {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}}
@@ -97,8 +98,8 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
             "captured_through": pair_record(capture_psf if capture_psf is not None else psf)}
     if split == "real":
         result["real_sha256"] = real_components()  # what made the measured set's scenes
-    result["per_image"] = {"light": kinds if task == "hyperspectral" else None, "rows": rows}  # for intervals
-    if task == "hyperspectral":
+    result["per_image"] = {"light": kinds if has(task, "spectral") else None, "rows": rows}  # for intervals
+    if has(task, "spectral"):
         result["by_light"] = {k: {v: mean_metrics([r for r, kk in zip(rs, kinds) if kk == k]) for v, rs in rows.items()}
                               for k in ("in-library", "out-of-library") if k in kinds}
     out.mkdir(parents=True, exist_ok=True)
@@ -251,9 +252,9 @@ def _trained_under(meta: dict) -> str:
 
 def _show(task, arr):
     """An image for display: HDR tone-mapped (log), spectra as their band mean, depth as is."""
-    if task == "hdr":
+    if has(task, "highlights"):
         return np.clip(np.log1p(np.moveaxis(arr, 0, -1)) / np.log1p(256.0), 0, 1)
-    if task == "hyperspectral":
+    if has(task, "spectral"):
         return arr.mean(axis=0)
     return arr
 
@@ -277,7 +278,7 @@ def _figure(path: Path, task: str, split: str, coded, uncoded, target, preds) ->
     fig, axes = plt.subplots(2, 4, figsize=(13, 6.6), layout="constrained")
     for ax, (title, img, cb) in zip(axes.flat, panels):
         kw = {"cmap": "viridis"} if img.ndim == 2 else {}
-        if task == "depth" and cb == "depth (m)":
+        if has(task, "depth") and cb == "depth (m)":
             kw.update(vmin=1.0, vmax=5.0)
         im = ax.imshow(np.clip(img, 0, None) if img.ndim == 3 else img, **kw)
         ax.set_title(title, fontsize=9)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import has
 from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
@@ -50,7 +51,7 @@ class Reconstructor:
     def _psf(self, psf):
         if psf is None:
             return model_inputs(self.task, self.pair)
-        if self.task == "depth":
+        if has(self.task, "depth"):
             return self._depth_psf(psf)
         coded = getattr(psf, "coded", psf)
         t = _float_tensor(coded)
@@ -64,7 +65,7 @@ class Reconstructor:
             raise DoefabError("the PSF pair's wavelengths differ from the ones the network was trained for")
         if not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
             raise DoefabError("psf must be finite and non-negative")
-        if self.task != "hdr":
+        if not has(self.task, "highlights"):
             return t[None]
         # HDR: the least-squares solve needs the plain half too — the pair's, or the network's own when only
         # coded PSFs are given (the plain half carries no DOE)
@@ -223,13 +224,13 @@ def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dic
     if sensor is None:
         return meta
     task, variant, weights_dir, design = who
-    if task == "hyperspectral":  # a response that misses the bands: no network can be trained for it either
+    if has(task, "spectral"):  # a response that misses the bands: no network can be trained for it either
         sensor.rgb(psf_pair(task, design)[0].wavelengths)
-    diff = sensor.differs_from(meta.get("sensor"), spectral=task == "hyperspectral")
+    diff = sensor.differs_from(meta.get("sensor"), spectral=has(task, "spectral"))
     if not diff:
         return meta
     if not anyway:
-        flags = ("--sensor-response, " if task == "hyperspectral" else "") + "--full-well-e and --read-noise-e"
+        flags = ("--sensor-response, " if has(task, "spectral") else "") + "--full-well-e and --read-noise-e"
         raise DoefabError(f"{pt}: trained for another sensor ({'; '.join(diff)}): train networks for this camera "
                           f"with doefab train --task {task} --variant {variant} and its {flags} into a --weights-dir")
     return {**meta, "other_sensor": True}

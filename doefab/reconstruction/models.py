@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.reconstruction.networks import VARIANTS, DepthNet, depth_loss
 from doefab.reconstruction.specs import get_spec
@@ -16,9 +17,9 @@ def default_arch(task: str, variant: str = "proposed") -> dict:
     proposed depth network adds the two captures' cross-blur cost volume (it needs both captures); the HDR
     networks start from a least-squares solve of the captures their variant sees (40 iterations, then 40 more
     in 8 bounded restarts)."""
-    if get_spec(task).name == "depth":
+    if has(get_spec(task).name, "depth"):
         return {"width": 16, "cost_volume": variant == "proposed", "planes": 17}
-    if task == "hyperspectral":
+    if has(task, "spectral"):
         return {"features": 2, "width": 16, "illuminant_search": variant == "proposed",
                 "illuminant_mix": variant == "proposed"}
     return {"hdr": {"features": 4, "width": 16, "highlight_iters": 40, "bound_iters": 40, "bound_rounds": 8}}[task]
@@ -29,11 +30,11 @@ def build_model(task: str, variant: str, arch: dict | None = None) -> torch.nn.M
     if variant not in VARIANTS:
         raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
     arch = arch or default_arch(task, variant)
-    if task == "depth":  # records without "cost_volume" predate it (networks without one)
+    if has(task, "depth"):  # records without "cost_volume" predate it (networks without one)
         return DepthNet(variant, width=int(arch["width"]), cost_volume=bool(arch.get("cost_volume", False)),
                         planes=int(arch.get("planes", 17)),  # 17: the paper's planes, 1–5 m in 0.25 m steps
                         max_depth_m=float(arch.get("max_depth_m", 6.0)))
-    if task == "hdr":
+    if has(task, "highlights"):
         from doefab.reconstruction.hdrnet import HDRNet
 
         return HDRNet(variant, features=int(arch["features"]), width=int(arch["width"]),
@@ -96,8 +97,8 @@ def loss_fn(task: str, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor
     their radiance did not help (``benchmarks/hdr_loss_pilot.py``: three seeds per loss, highlight PSNR 0.22 dB
     lower on average, paired 95 % interval −1.18 to +0.74 dB), so the log term stands alone. Hyperspectral: L1;
     depth: L1 + gradient (Eq. 28)."""
-    if task == "hdr":
+    if has(task, "highlights"):
         return (torch.log1p(pred) - torch.log1p(target)).abs().mean()
-    if task == "depth":
+    if has(task, "depth"):
         return depth_loss(pred, target)
     return (pred - target).abs().mean()

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
 
@@ -129,7 +130,7 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
               "lr": lr, "val_images": val_images, "start_weights_sha256": start.meta["weights_sha256"],
               "told_sha256": _tensor_sha256(told), "captured_sha256": _tensor_sha256(render),
               "conditions": {k: c.describe() for k, c in (conditions or {}).items() if c is not None},
-              **sensor.entry(task == "hyperspectral")}
+              **sensor.entry(has(task, "spectral"))}
     steps, history, wall, final = fit_network(task, model, psf, render, (response, noise), conditions, out, config,
                                               minutes, lr=lr, batch=batch, crop=crop, val_images=val_images,
                                               val_every=val_every, resume=resume, progress=progress,

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.applications import has
+
 __all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_light", "real_lights",
            "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "check_side"]
 
@@ -88,9 +90,9 @@ def check_side(task: str, size: int, margin: int = 0) -> None:
     on each side (the PSF's half window): checked before any capture is made."""
     from doefab.errors import DoefabError
 
-    if task == "hdr":
+    if has(task, "highlights"):
         small = min(min(m.shape[:2]) for m in _hdr_maps())
-    elif task == "depth":
+    elif has(task, "depth"):
         small = min(_motorcycle()[1].shape)
     else:
         return  # hyperspectral: the validation photographs' layout, any size

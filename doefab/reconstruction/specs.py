@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from doefab.applications import application
+from doefab.applications import application, has
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
@@ -149,7 +149,7 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
             *(v[:, m:m + size, m:m + size].double().numpy() for v in views), nm, rng)
         coded.append(torch.from_numpy(c_view.astype(np.float32)))
         uncoded.append(torch.from_numpy(u_view.astype(np.float32)))
-        tgt = target[m:m + size, m:m + size] if task == "depth" else scene[:, m:m + size, m:m + size]
+        tgt = target[m:m + size, m:m + size] if has(task, "depth") else scene[:, m:m + size, m:m + size]
         targets.append(torch.from_numpy(np.ascontiguousarray(tgt)))
     return torch.stack(coded), torch.stack(uncoded), torch.stack(targets)
 
@@ -163,9 +163,9 @@ def render_scene(task: str, split: str, index: int, rng, big: int, pair, respons
     from doefab.reconstruction.spectra import light_kind
 
     masks, target, known = None, None, None
-    if task == "hdr":
+    if has(task, "highlights"):
         scene = hdr_real_sample(rng, big) if split == "real" else hdr_sample(rng, big, split)
-    elif task == "hyperspectral":  # on the design's bands
+    elif has(task, "spectral"):  # on the design's bands
         scene = np.ascontiguousarray(resample_bands(spectral_sample(rng, big, split, light_kind(split, index)),
                                                     pair.wavelengths))
     else:  # between the design's nearest and farthest planes

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import has
 from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.reconstruction.data import split_components, split_digest
@@ -35,9 +36,9 @@ def model_inputs(task: str, pair) -> torch.Tensor | None:
     """The PSFs the network is conditioned on: the coded PSF per band, [1, C, K, K] (hyperspectral); the coded
     then the uncoded RGB PSF, [1, 6, K, K] (HDR: its least-squares solve uses both halves); the coded and
     uncoded PSFs of every depth plane, [2, D, 3, K, K] (depth: its cross-blur cost volume)."""
-    if task == "depth":
+    if has(task, "depth"):
         return torch.stack([pair.coded, pair.uncoded]).to(torch.float32)
-    if task == "hdr":
+    if has(task, "highlights"):
         return torch.cat([pair.coded[0], pair.uncoded[0]])[None].to(torch.float32)
     return pair.coded[0][None].to(torch.float32)
 
@@ -45,7 +46,7 @@ def model_inputs(task: str, pair) -> torch.Tensor | None:
 def sensor_response_for(task: str, pair, sensor=None):
     """The [3, C] RGB response that forms a task's captures from its bands (hyperspectral), or None (RGB).
     ``sensor``: an ``imaging.sensor.Sensor`` (None: the default camera's)."""
-    if task != "hyperspectral":
+    if not has(task, "spectral"):
         return None
     from doefab.imaging.sensor import Sensor
 
@@ -75,10 +76,10 @@ def arch_for_design(task: str, pair, sensor=None) -> dict:
     range (outputs up to 1.2× the farthest plane); a spectral design's bands (one output each) and, for a
     ``sensor`` whose response is not the default camera's, that response on the bands (its inverses are built
     from it)."""
-    if task == "depth":
+    if has(task, "depth"):
         far = max(z for z in pair.depths if np.isfinite(z))
         return {"planes": len(pair.depths), "max_depth_m": round(1.2 * far, 6)}
-    if task == "hyperspectral":
+    if has(task, "spectral"):
         from doefab.reconstruction.data import HS_WAVELENGTHS_M
 
         lams = [float(w) for w in pair.wavelengths]
@@ -134,7 +135,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
               "schedule": schedule, "val_images": val_images, "design": None if design is None else str(design),
               "conditions": {k: c.describe() for k, c in (conditions or {}).items()}}
-    config.update(sensor.entry(task == "hyperspectral"))  # none for the default sensor: old runs resume
+    config.update(sensor.entry(has(task, "spectral")))  # none for the default sensor: old runs resume
     pair, sha = psf_pair(task, design)
     arch = {**arch, **arch_for_design(task, pair, sensor)}
     psf = model_inputs(task, pair).to(dev)
@@ -157,7 +158,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm},
               "validation": {"images": val_images, "crop_px": crop, **final},
-              **sensor.entry(task == "hyperspectral"),
+              **sensor.entry(has(task, "spectral")),
               "splits_sha256": split_digest(task), "splits_components": split_components(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from doefab.applications import has
 from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
 
 __all__ = ["Conditions", "honest", "measured", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits",
@@ -182,7 +183,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from doefab.tolerance.memory import keep_freed_memory
 
     design = Design.load(design_dir)
-    depths = fine_planes(design.depths) if task == "depth" else design.depths
+    depths = fine_planes(design.depths) if has(task, "depth") else design.depths
     kernel = network_kernel(task, design.task_params.get("kernel_size"))
     chain = alignment_chain(design_dir, mask_count(design.n_levels))
     # fabricated parts' PSFs take minutes: kept between runs in the cache (``doefab.io.cache_root``)

@@ -23,7 +23,7 @@ import copy
 import numpy as np
 import torch
 
-from doefab.applications import APPLICATIONS, of_design
+from doefab.applications import APPLICATIONS, has, of_design
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
@@ -84,7 +84,7 @@ class NetworkJudge:
         """The ``PSFJudge`` whose PSFs make the captures: for depth one on ``conditions.fine_planes`` of the
         design's planes (the scenes' depths fall between the network's planes, as in ``doefab evaluate``), else
         the design's own."""
-        if self.task != "depth":
+        if not has(self.task, "depth"):
             return self.base
         if self._fine is None:
             from dataclasses import replace
@@ -127,7 +127,7 @@ class NetworkJudge:
         from doefab.imaging.sensor import sensor_from_record
         from doefab.reconstruction.models import arch_response
 
-        spectral = self.task == "hyperspectral"
+        spectral = has(self.task, "spectral")
         response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if spectral else None
         return response, sensor_from_record(self.rec.meta.get("sensor")).noise()
 
