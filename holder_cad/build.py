@@ -133,11 +133,17 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
         report["files"].append("holder.step")
         report["step_seconds"] = round(time.perf_counter() - t1, 3)
     if renders:
-        from holder_cad.render import render_views
-
-        report["files"] += render_views(p, out)
+        report["files"] += _renders(p, out)
     atomic_write_json(out / "holder.json", report)
     return report
+
+
+def _renders(p: HolderParams, out: Path) -> list[str]:
+    """The assembly's PNG views (``render.render_views``) of a coarse build (48 facets round: flat shading)."""
+    from holder_cad.render import render_views
+
+    coarse = p.replace(segments=48)
+    return render_views(coarse, assembly(build_parts(coarse), coarse), out)
 
 
 def _bbox(solid) -> tuple:

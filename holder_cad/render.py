@@ -16,18 +16,15 @@ VIEWS = {"render_front.png": (90, -90, False, "z"), "render_side.png": (5, -90, 
          "render_iso.png": (30, -60, False, None)}
 
 
-def render_views(p: HolderParams, out: Path) -> list[str]:
+def render_views(p: HolderParams, asm: list, out: Path) -> list[str]:
+    """Write the three views of ``asm`` (the assembled base and cartridge, manifold3d meshes: a coarse build of
+    ``p`` is enough) into ``out``; return the file names."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from holder_cad.build import assembly, build_parts
-
-    coarse = p.replace(segments=48)
-    parts = build_parts(coarse)
-    asm = assembly(parts, coarse)
     colors = ["#4878cf", "#d65f5f"]
     light = np.array([0.3, -0.5, 0.8])
     light /= np.linalg.norm(light)

@@ -16,15 +16,12 @@ import sys
 import traceback
 
 from doefab.cli._args import OneLineParser
+from doefab.cli._exits import (EXIT_CHECK, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, EXIT_USAGE,
+                               Terminated)
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_CHECK", "EXIT_INTERRUPTED",
            "EXIT_TERMINATED", "Terminated"]
 
-EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_CHECK, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so it unwinds (staging folders, partial outputs) like Ctrl-C."""
 
 
 def _on_sigterm(signum, frame):

@@ -100,7 +100,7 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
     import signal
     import subprocess
 
-    from doefab.cli import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
 
     child = None
     try:
@@ -129,7 +129,7 @@ def describe_status(rc: int) -> str:
     """A scene process's exit status in words."""
     import signal
 
-    from doefab.cli import EXIT_INTERRUPTED, EXIT_TERMINATED
+    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED
 
     if rc in (EXIT_INTERRUPTED, EXIT_TERMINATED):
         return "was interrupted (Ctrl-C)" if rc == EXIT_INTERRUPTED else "was terminated (SIGTERM)"
