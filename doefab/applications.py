@@ -33,7 +33,8 @@ class Application:
     name: ``spectral`` — spectra on the design's bands, seen through the sensor's RGB response (its sensor
     record holds the response); ``depth`` — the network estimates metres, the scenes span depths between the
     design's planes (a PSF per plane); ``highlights`` — the scenes clip and the network's solve reads both halves'
-    PSFs."""
+    PSFs.  camera_preset: the ``doefab.optics.camera.PRESETS`` row its scenes start from (the authors' camera
+    for it)."""
 
     name: str
     design_task: str
@@ -41,6 +42,7 @@ class Application:
     primary_unit: str
     higher_is_better: bool
     summary: str
+    camera_preset: str = "default"
     spectral: bool = False
     depth: bool = False
     highlights: bool = False
@@ -48,11 +50,14 @@ class Application:
 
 APPLICATIONS = {a.name: a for a in (
     Application("hdr", "streak", "psnr_highlight", "dB", True,
-                "high dynamic range from one exposure: a streak PSF spreads clipped highlights", highlights=True),
+                "high dynamic range from one exposure: a streak PSF spreads clipped highlights", camera_preset="hdr",
+                highlights=True),
     Application("hyperspectral", "grating", "psnr", "dB", True,
-                "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half", spectral=True),
+                "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half",
+                camera_preset="hyperspectral", spectral=True),
     Application("depth", "half-ring", "mae", "m", False,
-                "depth from one exposure: a half-ring PSF that changes with distance", depth=True),
+                "depth from one exposure: a half-ring PSF that changes with distance",
+                camera_preset="depth", depth=True),
 )}
 NAMES = tuple(APPLICATIONS)
 DESIGN_TASKS = tuple(a.design_task for a in APPLICATIONS.values())

@@ -22,8 +22,11 @@ def test_each_application_is_served_by_a_design_task_and_judged_by_a_metric_it_r
     from doefab.tasks import TASKS
     from doefab.tolerance.spec import DELIVERED
 
+    from doefab.optics.camera import PRESETS
+
     app = application(name)
     assert app.design_task in TASKS and of_design(app.design_task) is app
+    assert app.camera_preset in PRESETS
     rng = np.random.default_rng(0)
     if name == "depth":
         target = rng.uniform(1, 5, (32, 32))
@@ -63,12 +66,12 @@ def test_each_property_is_what_the_design_task_and_metric_make_the_application(n
     task works at more than one plane; ``highlights``: it is judged by highlight PSNR — each read from the task
     and the metric tables, not from the registry."""
     from doefab.applications import design_is, has
-    from doefab.optics.camera import PRESETS, Camera
+    from doefab.optics.camera import Camera
     from doefab.tasks import get_task
 
     app = application(name)
     task = get_task(app.design_task)
-    cam = Camera.preset(name if name in PRESETS else next(iter(PRESETS)))
+    cam = Camera.preset(app.camera_preset)
     task.bind(cam)
     assert has(name, "spectral") == app.spectral == (len(task.wavelengths(cam)) > 3)
     assert has(name, "depth") == app.depth == (len(task.depths(cam)) > 1)

@@ -18,8 +18,15 @@ ALLOWED = {
     "reconstruction": {"optics", "fabrication", "design", "imaging", "reconstruction"},
     "tolerance": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance"},
     "lab": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance", "lab"},
+    "pipeline": {"optics", "fabrication", "design", "tasks", "imaging", "reconstruction", "tolerance", "lab",
+                 "pipeline"},
     "cli": None,  # the command line may use everything
 }
+# below every stage: each may import these, and they import only one another
+BASE = {"errors", "io", "plotting", "applications", "validate", "_devices"}
+# holder_cad is a library beside the stages: it may import doefab's base modules only, but for its command line
+# (``python -m holder_cad`` is ``doefab holder``)
+HOLDER_CLI = {"cli.py", "__main__.py"}
 
 
 def _imports(path: Path):
@@ -54,20 +61,38 @@ def test_heavy_packages_only_inside_functions():
                 assert n.split(".")[0] not in HEAVY, f"{path}: module-level import of {n}"
 
 
+def _doefab_imports(path: Path):
+    """The doefab modules ``path`` imports (anywhere in its body), as their first component below doefab."""
+    for name, _ in _imports(path):
+        parts = name.split(".")
+        if parts[0] == "doefab" and len(parts) > 1:
+            yield parts[1]
+
+
 def test_layering():
+    """Every module of every stage imports only the stages listed for it and the base modules; the base modules
+    (underscore ones included) import only one another; holder_cad imports only the base; the top-level
+    ``doefab/__init__`` and ``__main__`` are the package's doors (lazy re-exports, the command line)."""
+    stages = {p.name for p in PKG.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    assert stages - {"designs", "measured", "weights"} <= set(ALLOWED) | {"cli"}, "a package the test does not know"
     for path in PKG.rglob("*.py"):
         rel = path.relative_to(PKG).parts
-        stage = rel[0] if len(rel) > 1 else None
-        allowed = ALLOWED.get(stage)
+        if len(rel) == 1:
+            if path.stem in ("__init__", "__main__"):
+                continue
+            assert path.stem in BASE, f"{path}: a top-level module must be listed in BASE (or moved into a stage)"
+            bad = set(_doefab_imports(path)) - BASE
+            assert not bad, f"{path}: a base module must not import doefab.{sorted(bad)}"
+            continue
+        allowed = ALLOWED.get(rel[0])
         if allowed is None:
             continue
-        for name, _ in _imports(path):
-            parts = name.split(".")
-            if parts[0] != "doefab" or len(parts) < 2 or parts[1].startswith("_"):
-                continue
-            if parts[1] in ("errors", "io", "plotting", "applications", "validate"):
-                continue
-            assert parts[1] in allowed, f"{path}: stage '{stage}' must not import doefab.{parts[1]}"
+        for name in _doefab_imports(path):
+            assert name in allowed | BASE, f"{path}: stage '{rel[0]}' must not import doefab.{name}"
+    for path in (PKG.parent / "holder_cad").rglob("*.py"):
+        if path.name not in HOLDER_CLI:
+            bad = set(_doefab_imports(path)) - BASE
+            assert not bad, f"{path}: holder_cad must import only doefab's base modules, not doefab.{sorted(bad)}"
     # the application registry sits below every stage: it imports doefab.errors and nothing else of doefab
     own = {n for n, _ in _imports(PKG / "applications.py") if n.startswith("doefab")}
     assert own == {"doefab.errors"}, own
@@ -208,3 +233,34 @@ def test_no_application_name_compared_as_a_string():
     found = {str(p.relative_to(root)): lines for p in [*PKG.rglob("*.py"), *(root / "holder_cad").rglob("*.py")]
              if p.name != "applications.py" and (lines := _name_comparisons(ast.parse(p.read_text()), names))}
     assert not found, f"application or design-task names compared as strings (ask doefab.applications): {found}"
+
+
+def _section(name: str) -> str:
+    page = (PKG.parent / "docs" / "guide" / "architecture.md").read_text()
+    return page.split(f"<!-- {name}-start -->")[1].split(f"<!-- {name}-end -->")[0]
+
+
+def test_the_architecture_page_states_the_rules_the_test_enforces():
+    """docs/guide/architecture.md's layer table is ``ALLOWED`` (every stage, what it may import), its base
+    modules are ``BASE``, and its list of per-application tables names every module that keys a table by an
+    application's or design task's name (at least two of them); each check fails on a planted difference."""
+    rows = {}
+    for line in _section("layers").strip().splitlines()[2:]:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows[cells[0].strip("`")] = None if cells[2] == "everything" else {c.strip() for c in cells[2].split(",")}
+    assert rows == ALLOWED
+    page = (PKG.parent / "docs" / "guide" / "architecture.md").read_text()
+    assert all(f"`doefab.{b}`" in page for b in BASE)
+    from doefab.applications import DESIGN_TASKS, NAMES
+
+    names = set(NAMES) | set(DESIGN_TASKS)
+    listed = _section("application-tables")
+    keyed = set()
+    for path in PKG.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            # a table: two keys or more named after applications or design tasks (one may be a word: "depth")
+            if isinstance(node, ast.Dict) and sum(isinstance(k, ast.Constant) and k.value in names
+                                                  for k in node.keys) >= 2:
+                keyed.add(str(path.relative_to(PKG.parent)))
+    missing = sorted(f for f in keyed if f"`{f}`" not in listed and f != "doefab/applications.py")
+    assert not missing, f"modules keying a table by application name, not listed on the architecture page: {missing}"

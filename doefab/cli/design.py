@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from doefab.applications import design_is
+from doefab.applications import DESIGN_TASKS, design_is
 from doefab.cli._args import add_device_arg, number
 from doefab.errors import DoefabError
 
@@ -16,7 +16,7 @@ from doefab.errors import DoefabError
 def register(sub) -> None:
     p = sub.add_parser("design", help="optimise a DOE for a task and quantize it to L levels",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--task", required=True, choices=["streak", "grating", "half-ring"], help="task")
+    p.add_argument("--task", required=True, choices=list(DESIGN_TASKS), help="task")
     p.add_argument("--out", required=True, help="design folder to write")
     p.add_argument("--iterations", type=number(int, 1, 1_000_000, unit="steps"), default=None,
                    help="optimiser steps (default: the task's)")

@@ -10,13 +10,14 @@ import numpy as np
 
 from doefab.cli._args import add_device_arg, depth_m, number, wavelength_nm
 from doefab.errors import DoefabError
+from doefab.optics.camera import PRESETS
 
 
 def register(sub) -> None:
     p = sub.add_parser("psf", help="compute the split-aperture PSFs of a height map",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--height", help="height map .npy in metres, (N, N) of the preset's DOE grid (default: blank DOE)")
-    p.add_argument("--preset", default="default", choices=["default", "hdr", "hyperspectral", "depth"],
+    p.add_argument("--preset", default="default", choices=list(PRESETS),
                    help="camera preset (sets the DOE grid the height map must match)")
     p.add_argument("--wavelengths-nm", type=wavelength_nm, nargs="+", default=[656, 589, 486],
                    help="wavelengths (nm)")

@@ -14,6 +14,7 @@ from typing import Callable
 from doefab.applications import APPLICATIONS, has
 from doefab._devices import DEVICE_WORDS, check_device
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
+from doefab.optics.camera import PRESETS
 from doefab.optics.materials import SUBSTRATES, substrate_name
 
 __all__ = ["Key", "KEYS", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
@@ -52,7 +53,7 @@ KEYS = (
     Key("", "device", "choice", choices=DEVICE_WORDS, resolve=partial(check_device, name="scene"), default="auto",
         help="where torch computes (design, networks, tolerance): auto (a CUDA GPU when torch sees one, else the "
              "CPU), cpu, cuda or cuda:N (GPU N); doefab run --device overrides it"),
-    Key("camera", "preset", "choice", choices=("default", "hdr", "hyperspectral", "depth"), default="the task's",
+    Key("camera", "preset", "choice", choices=tuple(PRESETS), default="the task's",
         help="the paper's prototype (Canon EF 50 mm f/1.8, 8.64 mm DOE, 5.4 µm pixels) to start from; the keys "
              "below replace its values"),
     Key("camera", "focal_length_mm", "float", "mm", 1.0, 2000.0, default="49.5 (prototype)",

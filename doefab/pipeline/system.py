@@ -25,14 +25,13 @@ __all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holde
            "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
            "MAX_DOE_PIXELS"]
 
-_PRESET = {"hdr": "hdr", "hyperspectral": "hyperspectral", "depth": "depth"}
 
 
 def is_custom_camera(scene: Scene) -> bool:
     """Whether the scene's camera differs from its preset (a key equal to the preset's value changes nothing)."""
     from doefab.optics.camera import Camera
 
-    base = Camera.preset(scene.camera.get("preset", _PRESET[scene.task]))
+    base = Camera.preset(scene.camera.get("preset", application(scene.task).camera_preset))
     return scene_camera(scene, []).to_dict() != base.to_dict()  # its problems are resolve's to report
 
 
@@ -48,7 +47,7 @@ def scene_camera(scene: Scene, problems: list | None = None):
         problems.append(text)
 
     c, fab = scene.camera, scene.fabrication
-    base = Camera.preset(c.get("preset", _PRESET[scene.task]))
+    base = Camera.preset(c.get("preset", application(scene.task).camera_preset))
     focus = float(c.get("focus_distance_m", base.focus_distance))
     inv_focus = 0.0 if math.isinf(focus) else 1.0 / focus
     if "sensor_distance_mm" in c or "sensor_distance_m" in c:
