@@ -304,3 +304,24 @@ def test_the_readme_is_a_front_page():
     lines = (REPO / "README.md").read_text().splitlines()
     assert len(lines) <= 200, f"README.md has {len(lines)} lines"
     assert lines[0].startswith("# ") and lines[2] == "<!-- commands-start -->"
+
+
+def test_the_citing_page_and_citation_cff_cite_the_same_paper_and_version():
+    """CITATION.cff parses, names the package's version, and its paper (title, DOI, every author, year) is the
+    one the Citing page's BibTeX gives."""
+    import yaml
+
+    import doefab
+
+    root = Path(__file__).resolve().parents[2]
+    cff = yaml.safe_load((root / "CITATION.cff").read_text())
+    page = (root / "docs" / "citing.md").read_text()
+    assert cff["cff-version"] == "1.2.0" and cff["version"] == doefab.__version__
+    assert f"version = {{{doefab.__version__}}}" in page
+    paper = cff["references"][0]
+    assert paper["title"] in page and f"doi     = {{{paper['doi']}}}" in page and f"year    = {{{paper['year']}}}" in page
+    bib = page.split("author  = {", 1)[1].split("},\n", 1)[0]
+    names = " ".join(bib.split()).split(" and ")
+    ascii_family = {"Côté": "C{\\^o}t{\\'e}"}
+    assert names == [f"{ascii_family.get(a['family-names'], a['family-names'])}, {a['given-names']}"
+                     for a in paper["authors"]]
