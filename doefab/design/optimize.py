@@ -159,6 +159,16 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
             default, ``doefab._devices.default_device``). The random batches are drawn on the CPU, so a seed gives
             the same steps on every device (the numbers agree to float32 rounding).
         **settings: other :class:`DesignConfig` fields (lr, sampling, qat_fraction, batch, fab_weight, …).
+
+    Example:
+        Two Adam steps of the streak on a coarse 256-pixel grid (a real design takes the task's default steps on
+        the preset's grid), quantized to the default 16 levels:
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
+        >>> design = doefab.optimize("streak", iterations=2, camera=cam, progress=False)
+        >>> design.levels.shape, design.n_levels
+        ((256, 256), 16)
     """
     task_obj = get_task(task, **(settings.pop("task_params", None) or {}))
     iterations = task_obj.default_iterations if iterations is None else iterations

@@ -34,6 +34,14 @@ class Camera:
         lens_f_number: the lens's own f-number wide open (1.8, the EF 50 mm f/1.8 STM); its entrance pupil is
             focal_length / lens_f_number across. It decides which element is the aperture stop
             (:attr:`doe_is_stop`).
+
+    Example:
+        The prototype's 8.64 mm DOE on a coarser grid (256 pixels of 33.75 µm), for a quick computation:
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
+        >>> round(cam.aperture_diameter * 1e3, 2), cam.doe_is_stop
+        (8.64, True)
     """
 
     aperture_diameter: float = 8.64e-3

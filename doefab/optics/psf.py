@@ -40,6 +40,13 @@ class PSFPair:
             unknown, e.g. a measured pair).
         provenance: where a pair read from or written to ``psf_pair.npz`` comes from (``source``,
             ``levels_sha256``, ``recordings_sha256``, ``shifts_px``...; ``doefab.optics.psffile``), or None.
+
+    Example:
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
+        >>> pair = doefab.split_aperture_psf(None, cam, [656e-9, 589e-9, 486e-9], [float("inf")], kernel_size=15)
+        >>> tuple(pair.coded.shape), pair.depths  # (depths, wavelengths, K, K)
+        ((1, 3, 15, 15), (inf,))
     """
 
     coded: torch.Tensor | None
@@ -300,6 +307,18 @@ def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size:
             pixel_nodes…).
     Returns:
         PSFPair with energy fractions of the whole aperture's light per sensor pixel.
+
+    Example:
+        A blank DOE (both halves plain) at one wavelength and a plane wave: each half carries half the light, and a
+        31-pixel window holds nearly all of it.
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
+        >>> pair = doefab.split_aperture_psf(None, cam, [550e-9], [float("inf")], kernel_size=31)
+        >>> tuple(pair.coded.shape)
+        (1, 1, 31, 31)
+        >>> round(float(pair.coded.sum()), 2), round(float(pair.uncoded.sum()), 2)
+        (0.49, 0.49)
     """
     plan = PSFPlan(camera, wavelengths, depths, kernel_size, halves, **options)
     return plan(height, h_right)

@@ -168,7 +168,16 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     network will see (None: no check); weights trained for another sensor's noise (or, hyperspectral, response)
     are refused unless ``other_design`` (``meta`` then says ``"other_sensor": true``). ``device``: where the network
     runs ("auto", "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``); the
-    weights load onto the CPU (``map_location``, ``weights_only=True``) and move there."""
+    weights load onto the CPU (``map_location``, ``weights_only=True``) and move there.
+
+    Example:
+        The shipped depth network, which is told the committed half-ring's PSFs at its 17 planes:
+
+        >>> import doefab
+        >>> rec = doefab.load_reconstructor("depth")
+        >>> rec.task, rec.variant, len(rec.pair.depths)
+        ('depth', 'proposed', 17)
+    """
     get_spec(task)
     device = resolve_device(device)
     if variant not in VARIANTS:
