@@ -27,7 +27,7 @@ import doefab.reconstruction.models as models  # noqa: E402
 import doefab.reconstruction.train as train_mod  # noqa: E402
 from doefab.reconstruction.evaluate import evaluate  # noqa: E402
 from doefab.reconstruction.loader import load_reconstructor  # noqa: E402
-from doefab.reconstruction.networks import depth_loss  # noqa: E402
+from doefab.reconstruction.depthnet import depth_loss  # noqa: E402
 from doefab.tolerance.conditions import for_splits  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results"

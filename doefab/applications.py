@@ -34,7 +34,8 @@ class Application:
     record holds the response); ``depth`` — the network estimates metres, the scenes span depths between the
     design's planes (a PSF per plane); ``highlights`` — the scenes clip and the network's solve reads both halves'
     PSFs.  camera_preset: the ``doefab.optics.camera.PRESETS`` row its scenes start from (the authors' camera
-    for it)."""
+    for it).  network: the module of its reconstruction network, which has ``default_arch(variant)``,
+    ``build(variant, arch)`` and ``loss(pred, target)`` (imported only when a network is built)."""
 
     name: str
     design_task: str
@@ -43,6 +44,7 @@ class Application:
     higher_is_better: bool
     summary: str
     camera_preset: str = "default"
+    network: str = ""
     spectral: bool = False
     depth: bool = False
     highlights: bool = False
@@ -51,13 +53,13 @@ class Application:
 APPLICATIONS = {a.name: a for a in (
     Application("hdr", "streak", "psnr_highlight", "dB", True,
                 "high dynamic range from one exposure: a streak PSF spreads clipped highlights", camera_preset="hdr",
-                highlights=True),
+                network="doefab.reconstruction.hdrnet", highlights=True),
     Application("hyperspectral", "grating", "psnr", "dB", True,
                 "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half",
-                camera_preset="hyperspectral", spectral=True),
+                camera_preset="hyperspectral", network="doefab.reconstruction.spectralnet", spectral=True),
     Application("depth", "half-ring", "mae", "m", False,
                 "depth from one exposure: a half-ring PSF that changes with distance",
-                camera_preset="depth", depth=True),
+                camera_preset="depth", network="doefab.reconstruction.depthnet", depth=True),
 )}
 NAMES = tuple(APPLICATIONS)
 DESIGN_TASKS = tuple(a.design_task for a in APPLICATIONS.values())

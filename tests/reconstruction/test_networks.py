@@ -4,7 +4,7 @@ import torch
 
 from doefab.errors import DoefabError
 from doefab.reconstruction.hdrnet import HDRNet
-from doefab.reconstruction.networks import DepthNet, depth_loss
+from doefab.reconstruction.depthnet import DepthNet, depth_loss
 from doefab.reconstruction.spectralnet import SpectralNet
 from doefab.reconstruction.resnet import ResNet18Trunk
 
@@ -159,3 +159,43 @@ def test_the_proposed_spectral_network_starts_at_the_mixture_of_illuminant_estim
     assert torch.allclose(out[0], want, atol=1e-5)
     old = build_model("hyperspectral", "proposed", {**arch, "illuminant_mix": False}).eval()
     assert not old.mix  # a record written before the mixture keeps the single best member
+
+
+def test_each_application_names_a_network_module_that_builds_its_networks():
+    """Every application's ``network`` module builds the three variants from its default record (each seeing
+    the captures ``VIEWS`` gives it) and has a loss; ``build_model`` is that module's ``build``."""
+    import importlib
+
+    from doefab.applications import APPLICATIONS
+    from doefab.reconstruction.models import build_model, default_arch
+    from doefab.reconstruction.networks import VIEWS
+
+    for name, app in APPLICATIONS.items():
+        mod = importlib.import_module(app.network)
+        assert callable(mod.loss)
+        for variant, views in VIEWS.items():
+            net = mod.build(variant, mod.default_arch(variant))
+            assert net.views == views and type(build_model(name, variant)) is type(net)
+            assert default_arch(name, variant) == mod.default_arch(variant)
+
+
+def test_no_network_switches_on_its_variant_inside_forward():
+    """The variant is chosen when a network is built (its branches and estimate): no method a call runs reads
+    ``self.variant`` (the planted method is found)."""
+    import ast
+    import inspect
+    import textwrap
+
+    from doefab.reconstruction.depthnet import DepthNet
+    from doefab.reconstruction.hdrnet import HDRNet
+    from doefab.reconstruction.spectralnet import SpectralNet
+
+    def reads_variant(src: str) -> bool:
+        return any(isinstance(n, ast.Attribute) and n.attr == "variant" and isinstance(n.value, ast.Name)
+                   and n.value.id == "self" for n in ast.walk(ast.parse(src)))
+
+    assert reads_variant("class A:\n    def forward(self):\n        return self.variant == 'x'\n")
+    for cls in (DepthNet, HDRNet, SpectralNet):
+        for name, fn in inspect.getmembers(cls, inspect.isfunction):
+            if name != "__init__" and fn.__qualname__.startswith(cls.__name__):
+                assert not reads_variant(textwrap.dedent(inspect.getsource(fn))), f"{cls.__name__}.{name}"
