@@ -134,3 +134,28 @@ def test_the_readme_measured_data_line_is_real_validation_json():
         assert list(got) == want, (label, got, want)
     d = re.search(r"δ<1.25 ([\d.]+) \(one scene", line).group(1)
     assert d == f"{runs['depth']['real']['rows']['proposed']['delta125']:.2f}"
+
+
+def _table(text: str, first_header: str) -> dict:
+    """{first cell: cells} of the Markdown table whose header starts with ``first_header``."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first_header} |"))
+    rows = {}
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        rows[cells[0]] = cells
+    return rows
+
+
+def test_the_readme_tolerance_table_is_the_tolerance_studies_file():
+    """Each design's row of the README's tolerance table holds the tolerance studies' numbers as that file prints
+    them: nominal metric, mean and interval, yield and interval at the spec, and the largest single loss."""
+    studies = _table((RESULTS / "tolerance_studies.md").read_text(), "design | nominal PSF metric")
+    readme = _table((ROOT / "README.md").read_text(), "design | nominal PSF metric")
+    assert set(studies) == {"streak", "grating", "half-ring"}
+    for design, (_, nominal, mean, spec, yld, losses) in studies.items():
+        row = readme[design]
+        assert row[1:4] == [nominal, mean, f"{yld} at {spec}"], design
+        assert row[4] == losses.split(";")[0].strip(), design
