@@ -11,6 +11,8 @@ per part that put the scene noise below the spread (what ``netjudge.SCENES`` is 
 The published numbers (hours on 2 cores: each part is 8 scenes of 256² px through the network, depth parts also
 their PSFs at 65 planes; nothing else on the machine):
     .venv/bin/python benchmarks/delivered_yield.py --parts 24 --scenes 8 --size 256
+(the grating's parts take about 11 GB each: on a 23 GB machine judge it alone with ``--workers 1``; the numbers
+do not depend on the worker count)
 The scene-noise measurement behind ``netjudge.SCENES`` takes more scenes per part (the components do not
 depend on the count; more scenes measure them better):
     .venv/bin/python benchmarks/delivered_yield.py --parts 12 --scenes 16 --size 256 --name delivered_scene_noise
@@ -33,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DESIGNS = ("streak", "grating", "half-ring")
 
 
-def judge_design(design: str, parts: int, networks: dict, grid, seed: int, work: Path) -> dict:
+def judge_design(design: str, parts: int, networks: dict, grid, seed: int, work: Path, workers=None) -> dict:
     """One design's PSF-level and delivered-quality yields, means and variance components."""
     from doefab.tolerance.delivered import delivered_summary
     from doefab.tolerance.errors import PartErrors, load_budget
@@ -51,7 +53,8 @@ def judge_design(design: str, parts: int, networks: dict, grid, seed: int, work:
     t = time.perf_counter()
     nominal = evaluate_part(str(ddir), 1, PartErrors().to_json(), networks)
     folder = work / f"{design}-{networks['images']}x{networks['size']}px-grid{grid}-seed{seed}"
-    rows = monte_carlo(ddir, budget, parts, folder, seed=seed, supersample=int(grid), networks=networks)
+    rows = monte_carlo(ddir, budget, parts, folder, seed=seed, supersample=int(grid), networks=networks,
+                       workers=workers)
     s = summarize(rows, spec, task, {"psf": {"psf_metric": nominal["metric"]}, "network": nominal["network"]})
     return {"design": design, "task": task, "grid": int(grid), "parts": parts, "judge": networks,
             "seconds": round(time.perf_counter() - t, 1), "nominal": {k: nominal[k] for k in ("metric", "network")},
@@ -97,15 +100,19 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     p.add_argument("--name", default="delivered_yield")
+    p.add_argument("--workers", default="auto", help="worker processes (auto: one per core; the grating's parts need "
+                   "about 11 GB each, so on a 23 GB machine: 1)")
     p.add_argument("--work", type=Path, default=ROOT / "out" / "delivered", help="the parts' samples (resumed)")
     a = p.parse_args()
     from doefab.tolerance.netjudge import judge_settings
 
     networks = judge_settings({"images": a.scenes, "size": a.size, "split": "test"})  # refuses a bad value first
     grid = a.grid if a.grid == "auto" else int(a.grid)
-    results = [judge_design(d, a.parts, networks, grid, a.seed, a.work) for d in a.designs]
+    workers = None if a.workers == "auto" else int(a.workers)  # None: monte_carlo's own choice
+    results = [judge_design(d, a.parts, networks, grid, a.seed, a.work, workers) for d in a.designs]
     command = (f".venv/bin/python benchmarks/delivered_yield.py --parts {a.parts} --scenes {a.scenes} --size {a.size}"
-               + ("" if a.grid == "auto" else f" --grid {a.grid}"))
+               + ("" if a.grid == "auto" else f" --grid {a.grid}")
+               + ("" if a.workers == "auto" else f" --workers {a.workers}"))
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / f"{a.name}.json").write_text(json.dumps(results, indent=1, default=str))
     (a.out / f"{a.name}.md").write_text("\n".join(markdown(results, command)) + "\n")
