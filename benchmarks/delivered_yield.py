@@ -11,8 +11,8 @@ per part that put the scene noise below the spread (what ``netjudge.SCENES`` is 
 The published numbers (hours on 2 cores: each part is 8 scenes of 256² px through the network, depth parts also
 their PSFs at 65 planes; nothing else on the machine):
     .venv/bin/python benchmarks/delivered_yield.py --parts 24 --scenes 8 --size 256
-(the grating's parts take about 11 GB each: on a 23 GB machine judge it alone with ``--workers 1``; the numbers
-do not depend on the worker count)
+(the grating's parts take about 11 GB each: on a 23 GB machine judge it alone with ``--workers 1``; each part is
+seeded, so the worker count changes its numbers only by the float rounding of its PSFs' thread count)
 The scene-noise measurement behind ``netjudge.SCENES`` takes more scenes per part (the components do not
 depend on the count; more scenes measure them better):
     .venv/bin/python benchmarks/delivered_yield.py --parts 12 --scenes 16 --size 256 --name delivered_scene_noise

@@ -98,4 +98,4 @@ def design_is(design_task: str, what: str) -> bool:
 
     Example: ``design_is("half-ring", "depth")`` → True."""
     app = of_design(design_task)
-    return app is not None and has(app.name, what)
+    return has(app.name if app is not None else "", what)  # an unknown ``what`` is an error either way

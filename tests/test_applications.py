@@ -85,3 +85,5 @@ def test_a_property_of_an_unknown_application_is_false_and_an_unknown_property_o
     assert not has("polarization", "spectral") and not design_is("no-such-design", "depth")
     with pytest.raises(DoefabError, match="spectral, depth, highlights"):
         has("hdr", "colour")
+    with pytest.raises(DoefabError, match="spectral, depth, highlights"):
+        design_is("no-such-design", "colour")

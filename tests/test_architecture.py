@@ -1,6 +1,7 @@
 """Import rules (prybm-style): a light top-level import, one-way layering, heavy packages only on use."""
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -29,14 +30,25 @@ BASE = {"errors", "io", "plotting", "applications", "validate", "_devices"}
 HOLDER_CLI = {"cli.py", "__main__.py"}
 
 
-def _imports(path: Path):
-    tree = ast.parse(path.read_text())
+def _imports(path: Path, text: str | None = None):
+    """(module, node) of every import in ``path`` (or in ``text`` as if it were that file), at any level:
+    ``from doefab import optics`` names doefab.optics, and a relative import is resolved against the file's
+    package."""
+    tree = ast.parse(path.read_text() if text is None else text)
+    rel = path.resolve().relative_to(PKG.parent).with_suffix("").parts
+    package = rel[:-1]  # the package a module (or an __init__) sits in
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for a in node.names:
                 yield a.name, node
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            yield node.module, node
+        elif isinstance(node, ast.ImportFrom):
+            base = ".".join(package[:len(package) - node.level + 1]) if node.level else ""
+            module = ".".join(p for p in (base, node.module or "") if p)
+            yield module, node
+            for a in node.names:  # from doefab import optics / from .. import pipeline: the submodules named
+                where = PKG.parent.joinpath(*module.split("."), a.name)
+                if where.is_dir() or where.with_suffix(".py").is_file():
+                    yield f"{module}.{a.name}", node
 
 
 def test_import_doefab_is_light():
@@ -61,9 +73,9 @@ def test_heavy_packages_only_inside_functions():
                 assert n.split(".")[0] not in HEAVY, f"{path}: module-level import of {n}"
 
 
-def _doefab_imports(path: Path):
+def _doefab_imports(path: Path, text: str | None = None):
     """The doefab modules ``path`` imports (anywhere in its body), as their first component below doefab."""
-    for name, _ in _imports(path):
+    for name, _ in _imports(path, text):
         parts = name.split(".")
         if parts[0] == "doefab" and len(parts) > 1:
             yield parts[1]
@@ -73,6 +85,12 @@ def test_layering():
     """Every module of every stage imports only the stages listed for it and the base modules; the base modules
     (underscore ones included) import only one another; holder_cad imports only the base; the top-level
     ``doefab/__init__`` and ``__main__`` are the package's doors (lazy re-exports, the command line)."""
+    optics = PKG / "optics" / "psf.py"  # planted: every form of import names the stage it reaches
+    for text in ("import doefab.pipeline.stages", "from doefab import pipeline", "from ..pipeline import stages",
+                 "from .. import pipeline", "def f():\n    from doefab.pipeline.stages import x"):
+        assert "pipeline" in set(_doefab_imports(optics, text)), text
+    assert set(_doefab_imports(optics, "from doefab import validate as v\nfrom . import camera")) == {"validate",
+                                                                                                    "optics"}
     stages = {p.name for p in PKG.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
     assert stages - {"designs", "measured", "weights"} <= set(ALLOWED) | {"cli"}, "a package the test does not know"
     for path in PKG.rglob("*.py"):
@@ -235,26 +253,34 @@ def test_no_application_name_compared_as_a_string():
     assert not found, f"application or design-task names compared as strings (ask doefab.applications): {found}"
 
 
-def _section(name: str) -> str:
-    page = (PKG.parent / "docs" / "guide" / "architecture.md").read_text()
+PAGE = PKG.parent / "docs" / "guide" / "architecture.md"
+
+
+def _section(name: str, page: str | None = None) -> str:
+    page = PAGE.read_text() if page is None else page
     return page.split(f"<!-- {name}-start -->")[1].split(f"<!-- {name}-end -->")[0]
 
 
-def test_the_architecture_page_states_the_rules_the_test_enforces():
-    """docs/guide/architecture.md's layer table is ``ALLOWED`` (every stage, what it may import), its base
-    modules are ``BASE``, and its list of per-application tables names every module that keys a table by an
-    application's or design task's name (at least two of them); each check fails on a planted difference."""
+def _page_layers(page: str) -> dict:
+    """{package: what it may import (None: everything)} as the page's layer table states it."""
     rows = {}
-    for line in _section("layers").strip().splitlines()[2:]:
+    for line in _section("layers", page).strip().splitlines()[2:]:
         cells = [c.strip() for c in line.strip("|").split("|")]
         rows[cells[0].strip("`")] = None if cells[2] == "everything" else {c.strip() for c in cells[2].split(",")}
-    assert rows == ALLOWED
-    page = (PKG.parent / "docs" / "guide" / "architecture.md").read_text()
-    assert all(f"`doefab.{b}`" in page for b in BASE)
+    return rows
+
+
+def _page_base(page: str) -> set:
+    """The base modules the page's paragraph names (``doefab.X``)."""
+    para = page.split("Every stage may also import the base modules", 1)[1].split("\n\n", 1)[0]
+    return set(re.findall(r"`doefab\.(\w+)`", para))
+
+
+def _table_modules() -> set:
+    """The modules that key a table by two or more application or design-task names."""
     from doefab.applications import DESIGN_TASKS, NAMES
 
     names = set(NAMES) | set(DESIGN_TASKS)
-    listed = _section("application-tables")
     keyed = set()
     for path in PKG.rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
@@ -262,5 +288,19 @@ def test_the_architecture_page_states_the_rules_the_test_enforces():
             if isinstance(node, ast.Dict) and sum(isinstance(k, ast.Constant) and k.value in names
                                                   for k in node.keys) >= 2:
                 keyed.add(str(path.relative_to(PKG.parent)))
-    missing = sorted(f for f in keyed if f"`{f}`" not in listed and f != "doefab/applications.py")
+    return keyed - {"doefab/applications.py"}
+
+
+def test_the_architecture_page_states_the_rules_the_test_enforces():
+    """docs/guide/architecture.md's layer table is ``ALLOWED`` (a planted change is told apart), its base
+    modules are ``BASE`` exactly, every module its list of per-application tables names exists, and that list
+    names every module that keys a table by two or more application or design-task names."""
+    page = PAGE.read_text()
+    assert _page_layers(page) == ALLOWED
+    assert _page_layers(page.replace("| optics, imaging |", "| optics, imaging, design |")) != ALLOWED
+    assert _page_base(page) == BASE
+    listed = _section("application-tables", page)
+    paths = set(re.findall(r"`(doefab/[\w/]+\.py)`", listed))
+    assert paths and all((PKG.parent / f).is_file() for f in paths), sorted(paths)
+    missing = sorted(_table_modules() - paths)
     assert not missing, f"modules keying a table by application name, not listed on the architecture page: {missing}"

@@ -7,29 +7,35 @@ import pytest
 CORE = ("Camera", "split_aperture_psf", "PSFPair", "optimize", "simulate_captures", "load_reconstructor")
 
 
+def _run_examples(obj, name: str) -> tuple[int, int]:
+    """(examples, failures) of ``obj``'s own docstring examples, run as this test runs them."""
+    tests = doctest.DocTestFinder(recurse=False).find(obj, name, globs={})
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    for t in tests:
+        runner.run(t, out=lambda text: None)
+    return sum(len(t.examples) for t in tests), runner.failures
+
+
 @pytest.mark.parametrize("name", CORE)
 def test_each_core_public_name_has_an_example_that_runs_as_written(name):
     import doefab
 
-    obj = getattr(doefab, name)
-    tests = doctest.DocTestFinder(recurse=False).find(obj, name, globs={})
-    examples = sum(len(t.examples) for t in tests)
+    examples, failures = _run_examples(getattr(doefab, name), name)
     assert examples >= 2, f"doefab.{name}'s docstring has no Example section with >>> lines"
-    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
-    for t in tests:
-        runner.run(t)
-    assert runner.failures == 0, f"doefab.{name}'s example printed something else than it shows"
+    assert failures == 0, f"doefab.{name}'s example printed something else than it shows"
 
 
-def test_a_wrong_example_is_caught():
-    """The runner above fails an example whose shown output differs (so the test can fail)."""
-    def f():
+def test_a_wrong_example_is_caught_and_a_missing_one_counted():
+    """The helper above counts an example whose shown output differs as a failure, and a docstring without
+    examples as none (so the test above can fail either way)."""
+    def wrong():
         """
         >>> 1 + 1
         3
         """
-    tests = doctest.DocTestFinder().find(f, "f", globs={})
-    runner = doctest.DocTestRunner()
-    for t in tests:
-        runner.run(t, out=lambda s: None)
-    assert runner.failures == 1
+
+    def bare():
+        """No example."""
+
+    assert _run_examples(wrong, "wrong") == (1, 1)
+    assert _run_examples(bare, "bare") == (0, 0)
