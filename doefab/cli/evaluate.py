@@ -51,6 +51,9 @@ def register(sub) -> None:
                         "captured through it")
     p.add_argument("--capture-psf", default=None, metavar="FILE",
                    help="capture the scenes through this psf_pair.npz instead (e.g. a fitted model)")
+    p.add_argument("--crosstalk", default=None, metavar="FILE",
+                   help="with --psf or --capture-psf: the camera's measured crosstalk.json (doefab calibrate) mixes "
+                        "and unmixes the views instead of the budget's sensor")
     add_sensor_args(p)
     add_device_arg(p)
     p.add_argument("--force", action="store_true", help="replace an earlier evaluation in OUT")
@@ -74,6 +77,7 @@ def run(args) -> int:
     sensor = sensor_arg(args, design)
     told, told_rec = read_psf_arg(args.psf, "--psf")
     capture, capture_rec = read_psf_arg(args.capture_psf, "--capture-psf")
+    camera = read_crosstalk_arg(args, told is not None or capture is not None)
     out = claim_output(args, "evaluate", replace=args.force)  # --out checked before the networks' PSFs
     for v in variants:  # a bad weights file, or one for another sensor, or a pair they cannot take: refused first
         rec = load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
@@ -83,7 +87,7 @@ def run(args) -> int:
 
         check_side(args.task, args.size, rec.pair.coded.shape[-1] // 2)
     out.create()
-    cond = _conditions(args, design, capture if capture is not None else told)
+    cond = _conditions(args, design, capture if capture is not None else told, camera)
     records = {"told": told_rec or "the design's nominal pair", "captured_through": capture_rec or told_rec}
     res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants,
                    conditions=cond, split=args.split, sensor=sensor, psf=told, capture_psf=capture,
@@ -95,19 +99,36 @@ def run(args) -> int:
     return 0
 
 
-def _conditions(args, design, part):
-    """The split's capture conditions: through ``part`` (a given pair) with the camera's crosstalk, or the honest
-    ones (fabricated parts from the budget); None with --clean (through ``part`` or the nominal pair, no
-    crosstalk)."""
+def _conditions(args, design, part, camera=None):
+    """The split's capture conditions: through ``part`` (a given pair) with the camera's crosstalk (``camera``: the
+    measured one of --crosstalk, else the budget's), or the honest ones (fabricated parts from the budget); None
+    with --clean (through ``part`` or the nominal pair, no crosstalk)."""
     from doefab.reconstruction.evaluate import one_thread
     from doefab.tolerance.conditions import for_splits, measured
 
     if args.clean:
         return None
     if part is not None:
-        return measured(part, args.split)
+        return measured(part, args.split, camera=camera)
     with one_thread():  # the fabricated parts computed (and cached) here: on one thread, as the evaluation runs
         return for_splits(args.task, design, "honest", (args.split,), progress=True)[args.split]
+
+
+def read_crosstalk_arg(args, with_part: bool):
+    """The measured camera (``DualPixelCrosstalk``) of ``--crosstalk``, read and checked before any work; None
+    when the flag is not given. It goes with a measured part (``with_part``) and with the camera's crosstalk (not
+    --clean)."""
+    from doefab.errors import DoefabError
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    if args.crosstalk is None:
+        return None
+    if getattr(args, "clean", False):
+        raise DoefabError("--crosstalk gives the camera's crosstalk and --clean leaves it out: give one of them")
+    if not with_part:
+        raise DoefabError("--crosstalk is the measured camera's: give its part too (--psf psf_pair.npz from the "
+                          "same camera's doefab calibrate)")
+    return DualPixelCrosstalk.load(args.crosstalk)
 
 
 def read_psf_arg(path, flag: str):

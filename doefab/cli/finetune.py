@@ -38,6 +38,9 @@ def register(sub) -> None:
                    help="fine-tune the network alone on this psf_pair.npz (doefab calibrate / diagnose)")
     p.add_argument("--task", default=None, choices=list(APPLICATIONS),
                    help="with --psf: the task whose proposed network is fine-tuned")
+    p.add_argument("--crosstalk", default=None, metavar="FILE",
+                   help="with --psf: the camera's measured crosstalk.json (doefab calibrate) mixes and unmixes the "
+                        "training views instead of the budget's sensor")
     p.add_argument("--weights-dir", default=None,
                    help="start from the network in this folder (end to end: the depth network trained for "
                         "--design, default a fresh one; with --psf: default the shipped one)")
@@ -73,9 +76,10 @@ def run(args) -> int:
 
     if args.psf is not None:
         return _run_on_pair(args)
-    if args.task is not None or args.clean:
-        raise DoefabError(f"{'--task' if args.task else '--clean'} is for a network-only fine-tune on a PSF pair "
-                          f"(--psf FILE); end-to-end fine-tuning takes a depth design (--design): drop it")
+    if args.task is not None or args.clean or args.crosstalk is not None:
+        flag = "--task" if args.task else "--clean" if args.clean else "--crosstalk"
+        raise DoefabError(f"{flag} is for a network-only fine-tune on a PSF pair (--psf FILE); end-to-end "
+                          f"fine-tuning takes a depth design (--design): drop it")
     if args.design is None:
         raise DoefabError("give --design (a half-ring design folder or mask set) to fine-tune a DOE and its network "
                           "end to end, or --psf FILE --task T to fine-tune a network on a measured part's PSF pair")
@@ -107,7 +111,7 @@ def _run_on_pair(args) -> int:
     """``--psf``: the task's proposed network fine-tuned alone on the pair (``partfinetune.finetune_on_pair``)."""
     from doefab.cli._args import sensor_arg, task_design_arg
     from doefab.cli._output import check_resume, claim_output
-    from doefab.cli.evaluate import check_psf_args, read_psf_arg
+    from doefab.cli.evaluate import check_psf_args, read_crosstalk_arg, read_psf_arg
     from doefab.errors import DoefabError
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.partfinetune import finetune_on_pair
@@ -124,6 +128,7 @@ def _run_on_pair(args) -> int:
     design = task_design_arg(args, need_weights_dir=True)
     sensor = sensor_arg(args, design)
     pair, record = read_psf_arg(args.psf, "--psf")
+    camera = read_crosstalk_arg(args, True)
     out = claim_output(args, "finetune", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
@@ -134,7 +139,7 @@ def _run_on_pair(args) -> int:
     out.create()
     from doefab.tolerance.conditions import measured
 
-    cond = None if args.clean else {s: measured(pair, s) for s in ("train", "val")}
+    cond = None if args.clean else {s: measured(pair, s, camera=camera) for s in ("train", "val")}
     res = finetune_on_pair(args.task, pair, out.path, args.minutes, conditions=cond, weights_dir=args.weights_dir,
                            design=design, lr=args.lr_net, seed=args.seed, resume=args.resume, max_steps=args.steps,
                            sensor=sensor, records={"told": record, "captured_through": record},

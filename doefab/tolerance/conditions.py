@@ -37,7 +37,7 @@ from doefab.applications import has
 from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
 
 __all__ = ["Conditions", "honest", "measured", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits",
-           "CONDITIONS", "model_sources_sha256", "crop_columns", "crop_rows", "crosstalk_residual"]
+           "CONDITIONS", "model_sources_sha256", "crop_columns", "crop_rows", "crosstalk_residual", "measured_crop"]
 
 CONDITIONS = ("honest", "clean")
 
@@ -51,6 +51,7 @@ class Conditions:
     crosstalk: object = None  # PartErrors carrying the budget's sensor, or None
     split: str = "test"
     budget_sha256: str | None = None  # the budget the parts and crosstalk were drawn from (None: clean)
+    camera: object = None  # a measured camera's DualPixelCrosstalk (crosstalk.json): used instead of ``crosstalk``
 
     def pair_for(self, index: int, nominal):
         return self.parts[index % len(self.parts)] if self.parts else nominal
@@ -59,7 +60,10 @@ class Conditions:
         """The DualPixelCrosstalk of scene ``index``: the true crosstalk of a sensor of its own (``SensorCrosstalk``,
         over its crop's rows and columns, the crops spread across the calibrated region by :func:`crop_rows`), in a
         capture session of its own, unmixed with the per-column estimate of a calibration with the sensor's
-        ``noise`` (the captures' own); or None."""
+        ``noise`` (the captures' own); or None. With a measured ``camera``: :func:`measured_crop` of it."""
+        if self.camera is not None:
+            seed = np.random.SeedSequence([PART_SEEDS[self.split], index])
+            return measured_crop(self.camera, index, images, size, np.random.default_rng(seed))
         if self.crosstalk is None:
             return None
         from dataclasses import replace
@@ -78,6 +82,12 @@ class Conditions:
         ratio over the calibrated region that a noise-free calibration leaves (``SensorCrosstalk.residual``;
         None without crosstalk or calibration)."""
         xt = self.crosstalk
+        if self.camera is not None:  # a measured camera: the file's ratios (their digest) and their errors
+            ratios = np.concatenate([np.ravel(self.camera.alpha_lr), np.ravel(self.camera.alpha_rl)])
+            return {"name": self.name, "parts": len(self.parts), "crosstalk": True, "crosstalk_source": "measured",
+                    "crosstalk_sha256": hashlib.sha256(ratios.astype(np.float64).tobytes()).hexdigest()[:16],
+                    "crosstalk_residual_rms": None, "depth_planes": len(self.parts[0].depths) if self.parts else None,
+                    "budget_sha256": None}
         return {"name": self.name, "parts": len(self.parts), "crosstalk": xt is not None,
                 "crosstalk_residual_rms": crosstalk_residual(xt) if xt is not None and xt.calibrated else None,
                 "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
@@ -88,6 +98,26 @@ def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarra
     80 % of the calibrated width, so the crosstalk they see ranges over its profile."""
     centre = 0.0 if images < 2 else (index / (images - 1) - 0.5) * 0.8 * width_px
     return centre + np.arange(size) - (size - 1) / 2
+
+
+def measured_crop(camera, index: int, images: int, size: int, rng: np.random.Generator):
+    """The ``DualPixelCrosstalk`` scene ``index`` sees through a measured camera (``crosstalk.json``: per-column
+    ratios and their standard errors over the sensor's W columns): its crop's columns (``crop_columns``, spread
+    across the sensor), unmixed with the file's ratios there; the true ratios the file's plus one draw of their
+    standard errors (what its calibration could not pin down), within [0, 0.5)."""
+    from doefab.errors import DoefabError
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    est = [np.asarray(camera.alpha_lr, np.float64), np.asarray(camera.alpha_rl, np.float64)]
+    width = est[0].size
+    if est[0].ndim != 1 or width < size:
+        raise DoefabError(f"the measured crosstalk holds {width} columns: a {size}-px scene needs at least {size}; "
+                          f"calibrate over the sensor's width or evaluate at a smaller --size")
+    cols = np.clip(np.round(crop_columns(index, images, size, width) + (width - 1) / 2).astype(int), 0, width - 1)
+    se = camera.standard_error or (np.zeros(width), np.zeros(width))
+    true = [np.clip(e[cols] + np.asarray(s, np.float64)[cols] * rng.standard_normal(size), 0.0, 0.499)
+            for e, s in zip(est, se)]
+    return DualPixelCrosstalk(true[0], true[1], (est[0][cols], est[1][cols]))
 
 
 def crop_rows(index: int, images: int, size: int, width_px: int) -> np.ndarray:
@@ -126,13 +156,16 @@ def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | Non
     return Conditions(name="honest", parts=pairs, split=split, **_budget_crosstalk(budget))
 
 
-def measured(pair, split: str, budget: dict | None = None, crosstalk: bool = True) -> Conditions:
+def measured(pair, split: str, budget: dict | None = None, crosstalk: bool = True, camera=None) -> Conditions:
     """Captures through one given part: every scene of ``split`` rendered through ``pair`` (a ``PSFPair`` with both
     halves: a measured part's ``psf_pair.npz``, or a model fitted to it), with the budget's crosstalk unmixed by
-    a noisy calibration as in :func:`honest` (``crosstalk``; default budget: the shipped one). Depth scenes fall
-    on ``pair``'s planes."""
+    a noisy calibration as in :func:`honest` (``crosstalk``; default budget: the shipped one), or the measured
+    camera's (``camera``: ``DualPixelCrosstalk.load("crosstalk.json")``; :func:`measured_crop`). Depth scenes
+    fall on ``pair``'s planes."""
     from doefab.tolerance.errors import load_budget
 
+    if camera is not None and crosstalk:
+        return Conditions(name="measured", parts=[pair], split=split, camera=camera)
     xt = _budget_crosstalk(budget or load_budget())
     return Conditions(name="measured", parts=[pair], split=split, **(xt if crosstalk else {}))
 

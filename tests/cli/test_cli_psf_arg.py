@@ -74,7 +74,9 @@ def test_a_pair_of_other_bands_is_refused_with_the_fix(cmd, lab, one_clear_error
     (["finetune", "--psf", "p.npz", "--task", "hdr", "--doe-every", "2"], "--doe-every moves the DOE"),
     (["finetune", "--task", "hdr"], "--task is for a network-only fine-tune on a PSF pair"),
     (["finetune"], "give --design"),
-    (["evaluate", "--task", "hdr", "--psf", "missing.npz"], "--psf: ")])
+    (["evaluate", "--task", "hdr", "--psf", "missing.npz"], "--psf: "),
+    (["evaluate", "--task", "hdr", "--crosstalk", "c.json"], "--crosstalk is the measured camera's: give its part"),
+    (["finetune", "--design", "d", "--crosstalk", "c.json"], "--crosstalk is for a network-only fine-tune")])
 def test_what_the_flags_cannot_do_is_refused_before_any_output(args, needle, one_clear_error):
     one_clear_error(lambda f, t: [*args, "--out", t / "o"], 2, needle)
 
@@ -100,3 +102,23 @@ def test_finetune_psf_writes_weights_that_evaluate_reads_and_resumes(lab, tmp_pa
     got = _evaluate(out / "weights", tmp_path / "e", "--psf", psf)  # with the camera's crosstalk
     assert got["conditions"]["name"] == "measured" and got["psf"]["told"]["sha256"] == _sha(lab / "nominal.npz")
     assert got["weights"]["proposed"]["sha256"] == again.meta["weights_sha256"] != _sha(lab / "w" / "hdr_proposed.pt")
+
+
+def test_evaluate_with_the_cameras_measured_crosstalk_mixes_the_views_by_the_file(lab, tmp_path):
+    """--crosstalk: the views are mixed and unmixed by the file's ratios (recorded as measured, with the file's
+    digest), which is not what the budget's sensor does; a file that is not a calibration is one clear error."""
+    import numpy as np
+
+    from doefab.imaging.crosstalkfile import save_crosstalk
+
+    w = 400
+    save_crosstalk(tmp_path / "xt.json", np.full(w, 0.2), np.full(w, 0.15), np.full(w, 1e-4), np.full(w, 1e-4))
+    nominal = str(lab / "nominal.npz")
+    budget = _evaluate(lab / "w", tmp_path / "a", "--psf", nominal)
+    mine = _evaluate(lab / "w", tmp_path / "b", "--psf", nominal, "--crosstalk", str(tmp_path / "xt.json"))
+    assert mine["conditions"]["crosstalk_source"] == "measured" and "crosstalk_source" not in budget["conditions"]
+    assert mine["rows"]["proposed"]["psnr"] != budget["rows"]["proposed"]["psnr"]
+    (tmp_path / "bad.json").write_text("{}")
+    assert main([*EVAL, "--weights-dir", str(lab / "w"), "--psf", nominal, "--crosstalk", str(tmp_path / "bad.json"),
+                 "--out", str(tmp_path / "c")]) == 2
+    assert not (tmp_path / "c").exists()

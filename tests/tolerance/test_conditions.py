@@ -318,3 +318,45 @@ def test_the_psf_level_judge_calibrates_with_the_parts_own_sensor(monkeypatch):
         a_hat = crosstalk_ratios(part, cols)[2]
         scatter.append(np.std(a_hat - sensor_crosstalk(part).calibrate(cols, 256, "none")[0]))
     assert scatter[1] / scatter[0] == pytest.approx(np.sqrt(25_000 / 200), rel=0.15)
+
+
+def test_a_measured_cameras_crop_is_the_files_ratios_at_its_columns_jittered_by_their_errors():
+    """measured_crop: scene k of n reads the file's ratios at the columns its crop spans (centred on the crop's
+    place across the sensor: the middle scene on the sensor's middle column); they unmix it, and the true
+    ratios are them plus one draw of their standard errors (zero errors: the file's ratios themselves)."""
+    from doefab.errors import DoefabError
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    w, size = 1000, 64
+    a, b = 0.01 + 1e-5 * np.arange(w), 0.2 - 1e-5 * np.arange(w)
+    exact = DualPixelCrosstalk(a, b, (a, b))
+    exact.standard_error = (np.zeros(w), np.zeros(w))
+    got = C.measured_crop(exact, 1, 3, size, np.random.default_rng(0))  # the middle of three scenes
+    first = int(np.argmin(np.abs(got.estimate[0][0] - a)))
+    assert first == w // 2 - size // 2 and np.array_equal(got.estimate[0], a[first:first + size])
+    assert np.array_equal(got.estimate[1], b[first:first + size])
+    assert np.array_equal(got.alpha_lr, got.estimate[0]) and np.array_equal(got.alpha_rl, got.estimate[1])
+    left = C.measured_crop(exact, 0, 3, size, np.random.default_rng(0))  # the first scene: 40 % of w to the left
+    assert int(np.argmin(np.abs(left.estimate[0][0] - a))) == pytest.approx(first - 0.4 * w, abs=1)
+    noisy = DualPixelCrosstalk(a, b, (a, b))
+    noisy.standard_error = (np.full(w, 1e-3), np.full(w, 2e-3))
+    got = C.measured_crop(noisy, 1, 3, 512, np.random.default_rng(1))
+    assert np.std(got.alpha_lr - got.estimate[0]) == pytest.approx(1e-3, rel=0.15)
+    assert np.std(got.alpha_rl - got.estimate[1]) == pytest.approx(2e-3, rel=0.15)
+    with pytest.raises(DoefabError, match="1000 columns: a 1024-px scene"):
+        C.measured_crop(exact, 0, 1, 1024, np.random.default_rng(0))
+
+
+def test_measured_conditions_with_a_camera_use_it_for_every_scene_and_say_so():
+    from doefab.imaging.crosstalk import DualPixelCrosstalk
+
+    w = 300
+    cam = DualPixelCrosstalk(np.full(w, 0.1), np.full(w, 0.05), (np.full(w, 0.1), np.full(w, 0.05)))
+    pair = doefab.split_aperture_psf(None, doefab.Camera(doe_pixels=64, doe_pitch=135e-6), [550e-9],
+                                     [float("inf")], kernel_size=7)
+    cond = C.measured(pair, "val", camera=cam)
+    xt = cond.crosstalk_for(0, 2, 64)
+    assert np.allclose(xt.estimate[0], 0.1) and np.allclose(xt.alpha_rl, 0.05)
+    d = cond.describe()
+    assert d["crosstalk_source"] == "measured" and d["budget_sha256"] is None and len(d["crosstalk_sha256"]) == 16
+    assert C.measured(pair, "val").describe().get("crosstalk_source") is None  # the budget's sensor otherwise
