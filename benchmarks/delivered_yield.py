@@ -110,9 +110,12 @@ def main() -> None:
     grid = a.grid if a.grid == "auto" else int(a.grid)
     workers = None if a.workers == "auto" else int(a.workers)  # None: monte_carlo's own choice
     results = [judge_design(d, a.parts, networks, grid, a.seed, a.work, workers) for d in a.designs]
-    command = (f".venv/bin/python benchmarks/delivered_yield.py --parts {a.parts} --scenes {a.scenes} --size {a.size}"
+    named = "" if list(a.designs) == list(DESIGNS) else " ".join(a.designs) + " "
+    command = (f".venv/bin/python benchmarks/delivered_yield.py {named}--parts {a.parts} --scenes {a.scenes} "
+               f"--size {a.size}"
                + ("" if a.grid == "auto" else f" --grid {a.grid}")
-               + ("" if a.workers == "auto" else f" --workers {a.workers}"))
+               + ("" if a.workers == "auto" else f" --workers {a.workers}")
+               + ("" if a.name == "delivered_yield" else f" --name {a.name}"))
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / f"{a.name}.json").write_text(json.dumps(results, indent=1, default=str))
     (a.out / f"{a.name}.md").write_text("\n".join(markdown(results, command)) + "\n")
