@@ -73,6 +73,9 @@ MEASUREMENTS = (
     Measurement("delivered_yield_halfring", None, (R + "delivered_yield_halfring.md",),
                 command=".venv/bin/python benchmarks/delivered_yield.py half-ring --parts 24 --scenes 8 --size 256 "
                         "--name delivered_yield_halfring"),
+    Measurement("delivered_yield_grating", None, (R + "delivered_yield_grating.md",),
+                command=".venv/bin/python benchmarks/delivered_yield.py grating --parts 24 --scenes 8 --size 256 "
+                        "--workers 1 --name delivered_yield_grating"),
     *(Measurement(f"tolerance_{d}", "benchmarks/tolerance_studies.py", (R + f"tolerance_{d}/report.md",),
                   note=f"the report.md of `doefab tolerance --design masks/{d} …` and its figures, kept in "
                        f"`benchmarks/results/tolerance_{d}/`") for d in ("streak", "grating", "halfring")),
