@@ -7,9 +7,8 @@ import torch
 from doefab.applications import application
 from doefab.reconstruction.networks import views_of
 from doefab.reconstruction.specs import get_spec
-from doefab.reconstruction.spectralnet import arch_response, spectral_baseline  # re-exported: their callers' name
 
-__all__ = ["default_arch", "build_model", "loss_fn", "network_module", "arch_response", "spectral_baseline"]
+__all__ = ["default_arch", "build_model", "loss_fn", "network_module"]
 
 
 def network_module(task: str):

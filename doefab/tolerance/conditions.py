@@ -82,15 +82,14 @@ class Conditions:
         ratio over the calibrated region that a noise-free calibration leaves (``SensorCrosstalk.residual``;
         None without crosstalk or calibration)."""
         xt = self.crosstalk
-        if self.camera is not None:  # a measured camera: the file's ratios (their digest) and their errors
+        out = {"name": self.name, "parts": len(self.parts), "crosstalk": xt is not None,
+               "crosstalk_residual_rms": crosstalk_residual(xt) if xt is not None and xt.calibrated else None,
+               "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
+        if self.camera is not None:  # a measured camera (crosstalk.json): its ratios' digest instead of a budget's
             ratios = np.concatenate([np.ravel(self.camera.alpha_lr), np.ravel(self.camera.alpha_rl)])
-            return {"name": self.name, "parts": len(self.parts), "crosstalk": True, "crosstalk_source": "measured",
-                    "crosstalk_sha256": hashlib.sha256(ratios.astype(np.float64).tobytes()).hexdigest()[:16],
-                    "crosstalk_residual_rms": None, "depth_planes": len(self.parts[0].depths) if self.parts else None,
-                    "budget_sha256": None}
-        return {"name": self.name, "parts": len(self.parts), "crosstalk": xt is not None,
-                "crosstalk_residual_rms": crosstalk_residual(xt) if xt is not None and xt.calibrated else None,
-                "depth_planes": len(self.parts[0].depths) if self.parts else None, "budget_sha256": self.budget_sha256}
+            out.update(crosstalk=True, crosstalk_source="measured",
+                       crosstalk_sha256=hashlib.sha256(ratios.astype(np.float64).tobytes()).hexdigest()[:16])
+        return out
 
 
 def crop_columns(index: int, images: int, size: int, width_px: int) -> np.ndarray:

@@ -125,7 +125,7 @@ class NetworkJudge:
         pipeline judges through a network only when it was trained for the scene's sensor, so this is the
         scene's."""
         from doefab.imaging.sensor import sensor_from_record
-        from doefab.reconstruction.models import arch_response
+        from doefab.reconstruction.spectralnet import arch_response
 
         spectral = has(self.task, "spectral")
         response = arch_response(self.rec.meta["arch"], self.rec.pair.wavelengths) if spectral else None
