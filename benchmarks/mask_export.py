@@ -32,11 +32,11 @@ def level_map(n: int, pitch: float, seed: int = 0) -> tuple[np.ndarray, object]:
 
 
 def export_once(levels, cam, klayout: bool) -> tuple[float, dict]:
-    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
 
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        rep = export_masks(levels, cam, Path(tmp) / "m", MaskOptions(use_klayout=klayout))
+        rep = export_masks(LevelMap(levels, cam), Path(tmp) / "m", MaskOptions(use_klayout=klayout))
         return time.perf_counter() - t, rep
 
 

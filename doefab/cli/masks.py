@@ -79,8 +79,7 @@ def run(args) -> int:
                        align_chain=args.align_chain, resist=args.resist,
                        etch_order=None if args.etch_order is None else tuple(args.etch_order),
                        use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)
-    report = export_masks(design.levels, design.camera, Path(args.out), opts, design_dir=args.design,
-                          force=args.force, n_levels=design.n_levels)
+    report = export_masks(design, Path(args.out), opts, design_dir=args.design, force=args.force)
     for lay, st in report["layers"].items():
         print(f"layer {lay}: {st['polygons']} polygons, {st['vertices']} vertices (max {st['max_vertices']}), "
               f"{st['mismatched_pixels_gdstk']} mismatched pixels")

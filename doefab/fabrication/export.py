@@ -29,7 +29,7 @@ from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
 from doefab.optics.camera import Camera
 
-__all__ = ["MaskOptions", "export_masks", "layout_levels"]
+__all__ = ["MaskOptions", "LevelMap", "export_masks", "layout_levels"]
 
 
 @dataclass
@@ -75,21 +75,48 @@ def _nm(value_m: float, what: str) -> int:
     return int(round(v))
 
 
-def export_masks(levels, camera: Camera, out_dir: str | Path, options: MaskOptions | None = None,
-                 design_dir: str | Path | None = None, force: bool = False, progress: bool = True,
-                 n_levels: int | None = None) -> dict:
-    """Write and verify a mask set for a (N, N) level map on ``camera``'s DOE grid.
+@dataclass(frozen=True)
+class LevelMap:
+    """A level map to make masks of, with what ``export_masks`` reads from a design: a ``doefab.Design`` carries
+    the same three fields, so either may be exported.
 
-    Args:
+    Attributes:
         levels: (N, N) integer levels 0..L−1 (row 0 = top, column 0 = left, x < 0 the coded half).
         camera: gives the DOE pitch and grid, the design wavelength and the material.
+        n_levels: L, the levels the fab makes (2, 4, 8, 16 or 32: log2 L etch layers).
+
+    Example:
+        >>> import numpy as np
+        >>> from doefab.optics.camera import Camera
+        >>> cam = Camera.preset("hdr")
+        >>> LevelMap(np.zeros((cam.doe_pixels,) * 2, np.uint8), cam, n_levels=4).n_levels
+        4
+    """
+
+    levels: np.ndarray
+    camera: Camera
+    n_levels: int = DEFAULT_LEVELS
+
+
+def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None, *,
+                 design_dir: str | Path | None = None, force: bool = False, progress: bool = True) -> dict:
+    """Write and verify a mask set for a design's level map on its camera's DOE grid.
+
+    Args:
+        design: a ``doefab.Design`` or a ``LevelMap``: its ``levels`` (N, N), ``camera`` and ``n_levels`` (L).
         out_dir: the mask-set folder (must not exist unless ``force``).
+        options: the mask-set options (``MaskOptions``; default ``MaskOptions()``).
         design_dir: the design folder it came from; its design.json and levels.npy are copied into
-            ``out_dir/design`` so the set can be re-verified and traced.
-        n_levels: L (2, 4, 8, 16 or 32; log2 L etch layers); default: the design folder's ``n_levels``, else 16.
+            ``out_dir/design`` so the set can be re-verified and traced (its recorded ``n_levels`` must be
+            the design's).
     Returns:
         The verification report (also in ``out_dir/report.json``).
     """
+    try:
+        levels, camera, n_levels = design.levels, design.camera, design.n_levels
+    except AttributeError:
+        raise DoefabError(f"export_masks takes a design (a doefab.Design, or LevelMap(levels, camera, n_levels) "
+                          f"for a level map of your own), got {type(design).__name__}") from None
     opts = options or MaskOptions()
     t0 = time.perf_counter()
     n_levels = _levels_of(n_levels, design_dir)
@@ -206,22 +233,20 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
 
 
 def _levels_of(n_levels, design_dir) -> int:
-    """L of the export: the argument, else the design folder's design.json ``n_levels`` (16 when absent)."""
-    recorded = None
-    meta = Path(design_dir) / "design.json" if design_dir is not None else None
-    if meta is not None and meta.is_file():
-        try:
-            recorded = json.loads(meta.read_text()).get("n_levels", DEFAULT_LEVELS)
-        except (OSError, ValueError, AttributeError):
-            raise DoefabError(f"{meta} is not a readable design record: load the design with doefab.Design.load "
-                              f"to see why") from None
-        recorded = check_levels(recorded, f"{meta}: n_levels")
-    if n_levels is None:
-        return recorded or DEFAULT_LEVELS
+    """L of the export: the design's ``n_levels``, checked against the design folder's design.json (when given)."""
     n_levels = check_levels(n_levels, "n_levels")
-    if recorded is not None and recorded != n_levels:
-        raise DoefabError(f"n_levels = {n_levels} but the design in {design_dir} has {recorded} levels: export it with "
-                          f"its own")
+    meta = Path(design_dir) / "design.json" if design_dir is not None else None
+    if meta is None or not meta.is_file():
+        return n_levels
+    try:
+        recorded = json.loads(meta.read_text()).get("n_levels", DEFAULT_LEVELS)
+    except (OSError, ValueError, AttributeError):
+        raise DoefabError(f"{meta} is not a readable design record: load the design with doefab.Design.load "
+                          f"to see why") from None
+    recorded = check_levels(recorded, f"{meta}: n_levels")
+    if recorded != n_levels:
+        raise DoefabError(f"the design has {n_levels} levels but the one in {design_dir} has {recorded} levels: "
+                          f"export the design that folder holds (doefab.Design.load)")
     return n_levels
 
 

@@ -129,7 +129,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
     tmp = out.parent / f".{out.name}.export"
     if tmp.exists():
         shutil.rmtree(tmp)
-    export_masks(d.levels, d.camera, tmp, opts, design_dir=design_dir, n_levels=d.n_levels)
+    export_masks(d, tmp, opts, design_dir=design_dir)
     for f in tmp.iterdir():
         os.replace(f, out / f.name)
     tmp.rmdir()

@@ -26,8 +26,7 @@ def fixtures(tmp_path_factory):
                metrics={"name": "m", "continuous": 0.5, "quantized": 0.5, "continuous_worst": 0.4,
                         "quantized_worst": 0.4})
     d.save(root / "design")
-    export_masks(lv, cam, root / "maskset", MaskOptions(use_klayout=False), design_dir=root / "design",
-                 progress=False)
+    export_masks(d, root / "maskset", MaskOptions(use_klayout=False), design_dir=root / "design", progress=False)
     return root
 
 

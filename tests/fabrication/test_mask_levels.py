@@ -14,7 +14,7 @@ from doefab.cli import main
 from doefab.design.design import Design
 from doefab.errors import CheckFailed, DoefabError
 from doefab.fabrication.bitplanes import bit_planes, levels_from_planes
-from doefab.fabrication.export import MaskOptions, export_masks
+from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
 from doefab.fabrication.process import check_levels, check_min_feature, mask_count
 from doefab.fabrication.verify import verify_mask_set
 from doefab.optics.materials import N_BK7
@@ -78,7 +78,7 @@ def test_level_counts_a_fab_cannot_make_are_refused(bad):
 
 def test_eight_level_design_makes_three_layers_that_rebuild_the_map(cam, tmp_path):
     d = design_folder(cam, 8, tmp_path / "design")
-    rep = export_masks(d.levels, cam, tmp_path / "m", MaskOptions(use_klayout=False), design_dir=tmp_path / "design")
+    rep = export_masks(d, tmp_path / "m", MaskOptions(use_klayout=False), design_dir=tmp_path / "design")
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     etch = [L for L in man["layers"] if L["purpose"] == "etch"]
     assert man["n_levels"] == 8 and man["n_masks"] == 3 and [L["layer"] for L in etch] == [1, 2, 3]
@@ -99,7 +99,7 @@ def test_eight_level_design_makes_three_layers_that_rebuild_the_map(cam, tmp_pat
 
 def test_thirty_two_level_design_makes_five_layers_and_marks_for_six_plates(cam, tmp_path):
     d = design_folder(cam, 32, tmp_path / "design", seed=1)
-    export_masks(d.levels, cam, tmp_path / "m", MaskOptions(use_klayout=False, align_chain="sequential"),
+    export_masks(d, tmp_path / "m", MaskOptions(use_klayout=False, align_chain="sequential"),
                  design_dir=tmp_path / "design")
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     etch = {L["bit"]: L for L in man["layers"] if L["purpose"] == "etch"}
@@ -144,13 +144,13 @@ def test_a_corrupted_depth_in_an_eight_level_manifest_fails_verification(cam, tm
 def test_the_export_follows_the_design_and_refuses_another_level_count(cam, tmp_path):
     d = design_folder(cam, 4, tmp_path / "design")
     with pytest.raises(DoefabError, match="has 4 levels"):
-        export_masks(d.levels, cam, tmp_path / "m", MaskOptions(use_klayout=False), design_dir=tmp_path / "design",
-                     n_levels=16)
+        export_masks(LevelMap(d.levels, cam, n_levels=16), tmp_path / "m", MaskOptions(use_klayout=False),
+                     design_dir=tmp_path / "design")
     with pytest.raises(DoefabError, match="etch layer"):
-        export_masks(d.levels, cam, tmp_path / "m", MaskOptions(use_klayout=False, etch_order=(4, 3, 2, 1)),
+        export_masks(d, tmp_path / "m", MaskOptions(use_klayout=False, etch_order=(4, 3, 2, 1)),
                      design_dir=tmp_path / "design")
     with pytest.raises(DoefabError, match="0..1"):  # levels 0..3 do not fit two levels
-        export_masks(d.levels, cam, tmp_path / "m", MaskOptions(use_klayout=False), n_levels=2)
+        export_masks(LevelMap(d.levels, cam, n_levels=2), tmp_path / "m", MaskOptions(use_klayout=False))
     assert not (tmp_path / "m").exists()
 
 
@@ -160,13 +160,14 @@ def test_marks_of_more_plates_need_a_larger_die(tmp_path):
     small = doefab.Camera(aperture_diameter=2.16e-3, doe_pitch=10.8e-6, doe_pixels=200, sensor_pitch=5.4e-6,
                           sensor_distance=50e-3, focus_distance=5.0)
     lv = np.full((200, 200), 15, np.uint8)
-    export_masks(lv, small, tmp_path / "a", MaskOptions(use_klayout=False, die_m=5e-3), n_levels=16)
+    export_masks(LevelMap(lv, small, n_levels=16), tmp_path / "a", MaskOptions(use_klayout=False, die_m=5e-3))
     with pytest.raises(DoefabError, match=r"6 plates do not fit a 5 mm die") as exc:
-        export_masks(lv, small, tmp_path / "b", MaskOptions(use_klayout=False, die_m=5e-3), n_levels=32)
+        export_masks(LevelMap(lv, small, n_levels=32), tmp_path / "b", MaskOptions(use_klayout=False, die_m=5e-3))
     assert not (tmp_path / "b").exists()
     need_mm = float(re.search(r"enlarge die_m to at least ([0-9.]+) mm", str(exc.value)).group(1))
     assert 5 < need_mm <= 5.6  # the sixth plate's keys sit 0.3 mm further in: about 0.3·√2 mm more die
-    rep = export_masks(lv, small, tmp_path / "b", MaskOptions(use_klayout=False, die_m=need_mm * 1e-3), n_levels=32)
+    rep = export_masks(LevelMap(lv, small, n_levels=32), tmp_path / "b",
+                       MaskOptions(use_klayout=False, die_m=need_mm * 1e-3))
     assert rep["marks_present"]
 
 

@@ -8,7 +8,7 @@ import doefab
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import (bit_planes, levels_from_planes, plane_rectangles, rasterize_manhattan,
                                           rasterize_rectangles)
-from doefab.fabrication.export import MaskOptions, export_masks
+from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
 from doefab.fabrication.gdsii import gds_real8
 from doefab.fabrication.verify import verify_mask_set
 
@@ -33,7 +33,7 @@ def test_hand_made_4x4_polygons_exact(cam, tmp_path):
     assert plane_rectangles(planes[3]).tolist() == [[0, 0, 4, 2]]
     # bit 0 set for even levels: columns 0 and 2 of the 4x4 block, all four rows
     assert sorted(plane_rectangles(planes[0]).tolist()) == [[0, 0, 1, 4], [2, 0, 3, 4]]
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False, pattern_faces="scene"))
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, pattern_faces="scene"))
     lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     pitch, (x0, y0) = 5400, man["origin_m"]
@@ -49,7 +49,7 @@ def test_hand_made_4x4_polygons_exact(cam, tmp_path):
 def test_random_round_trip_zero_mismatches(cam, tmp_path, seed):
     rng = np.random.default_rng(seed)
     lv = rng.integers(0, 16, (100, 100)).astype(np.uint8)
-    rep = export_masks(lv, cam, tmp_path / "m", MaskOptions(oasis=True))
+    rep = export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(oasis=True))
     for st in rep["layers"].values():
         assert st["mismatched_pixels_gdstk"] == 0 and st["max_vertices"] <= 4000
     assert rep["levels_reproduced"] and rep["marks_present"]
@@ -84,7 +84,7 @@ def test_levels_sum_reproduces_map():
 
 def test_vertex_cap_on_checkerboard(cam, tmp_path):
     lv = np.where((np.indices((100, 100)).sum(0) % 2) == 0, 0, 15).astype(np.uint8)
-    rep = export_masks(lv, cam, tmp_path / "m", MaskOptions(vertex_cap=8, use_klayout=False))
+    rep = export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(vertex_cap=8, use_klayout=False))
     assert all(st["max_vertices"] <= 8 for st in rep["layers"].values())
     lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
     assert max(len(p.points) for p in lib.top_level()[0].polygons) <= 8  # the chrome circle was fractured too
@@ -93,7 +93,7 @@ def test_vertex_cap_on_checkerboard(cam, tmp_path):
 
 def test_manifest_fields(cam, tmp_path):
     lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False, align_chain="sequential"))
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, align_chain="sequential"))
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     etch = [L for L in man["layers"] if L["purpose"] == "etch"]
     assert [L["layer"] for L in etch] == [1, 2, 3, 4] and [L["bit"] for L in etch] == [0, 1, 2, 3]
@@ -116,23 +116,23 @@ def test_manifest_fields(cam, tmp_path):
 ])
 def test_bad_levels(cam, tmp_path, bad, msg):
     with pytest.raises(DoefabError, match=msg):
-        export_masks(bad, cam, tmp_path / "m")
+        export_masks(LevelMap(bad, cam), tmp_path / "m")
     assert not (tmp_path / "m").exists()
 
 
 def test_bad_pitch_existing_output_and_no_half_written_set(cam, tmp_path, monkeypatch):
     lv = np.zeros((100, 100), np.uint8)
     with pytest.raises(DoefabError, match="not an integer number of nanometres"):
-        export_masks(lv, cam.replace(doe_pitch=5.4003e-6), tmp_path / "m")
+        export_masks(LevelMap(lv, cam.replace(doe_pitch=5.4003e-6)), tmp_path / "m")
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "x").write_text("keep")
     for force in (False, True):  # a folder that is not a mask set is never replaced, even with force
         with pytest.raises(DoefabError, match="not a doefab masks output"):
-            export_masks(lv, cam, tmp_path / "other", force=force)
+            export_masks(LevelMap(lv, cam), tmp_path / "other", force=force)
     assert (tmp_path / "other" / "x").read_text() == "keep"
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False))
     with pytest.raises(DoefabError, match="already holds a doefab masks output"):
-        export_masks(lv, cam, tmp_path / "m")
+        export_masks(LevelMap(lv, cam), tmp_path / "m")
     before = (tmp_path / "m" / "manifest.json").read_bytes()
     # a failure during verification leaves the old set untouched and no staging debris
     import doefab.fabrication.export as ex
@@ -142,14 +142,14 @@ def test_bad_pitch_existing_output_and_no_half_written_set(cam, tmp_path, monkey
 
     monkeypatch.setattr(ex, "verify_mask_set", boom)
     with pytest.raises(DoefabError, match="injected"):
-        export_masks(lv, cam, tmp_path / "m", force=True)
+        export_masks(LevelMap(lv, cam), tmp_path / "m", force=True)
     assert (tmp_path / "m" / "manifest.json").read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "other"]
 
 
 def test_tampered_gds_fails_verification(cam, tmp_path):
     lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False))
     lib = gdstk.read_gds(str(tmp_path / "m" / "doe.gds"))
     cell = lib.top_level()[0]
     cell.add(gdstk.rectangle((0, 0), (5.4, 5.4), layer=2))  # one extra pixel on layer 2 (µm)
@@ -161,10 +161,24 @@ def test_tampered_gds_fails_verification(cam, tmp_path):
 def test_pattern_toward_the_lens_mirrors_the_layout(cam, tmp_path):
     lv = np.full((100, 100), 15, np.uint8)
     lv[10:20, 0:5] = 0  # a block at the design's far left (coded half, x < 0)
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False))  # default: pattern faces the lens
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False))  # default: pattern faces the lens
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     assert man["mirrored_x"] and man["pattern_faces"] == "lens"
     polys = gdstk.read_gds(str(tmp_path / "m" / "doe.gds")).top_level()[0].get_polygons(layer=4, datatype=0)
     xs = np.concatenate([p.points[:, 0] for p in polys])
     assert xs.min() == pytest.approx(270 - 5 * 5.4) and xs.max() == pytest.approx(270)  # µm: at the layout's right
     assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
+
+
+def test_export_takes_a_design_not_its_parts(tmp_path):
+    """A level map and its camera given apart are refused with the fix (a Design, or LevelMap)."""
+    cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=50e-3, focus_distance=5.0)
+    lv = np.zeros((100, 100), np.uint8)
+    with pytest.raises(DoefabError, match=r"takes a design .*LevelMap\(levels, camera, n_levels\)"):
+        export_masks(lv, tmp_path / "m")
+    with pytest.raises(TypeError):  # the old call, parts apart
+        export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False), None)
+    export_masks(LevelMap(lv, cam, n_levels=4), tmp_path / "ok", MaskOptions(use_klayout=False), progress=False)
+    assert json.loads((tmp_path / "ok" / "manifest.json").read_text())["n_levels"] == 4
+    assert not (tmp_path / "m").exists()

@@ -13,7 +13,7 @@ import pytest
 import doefab
 from doefab.cli import main
 from doefab.errors import CheckFailed
-from doefab.fabrication.export import MaskOptions, export_masks
+from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
 from doefab.fabrication.klayout_check import klayout_check
 from doefab.fabrication.layout_check import expected_layout
 from doefab.fabrication.marks import MarkSpec, key_site
@@ -26,7 +26,7 @@ def mask_set(tmp_path_factory):
     cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100)
     lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
     folder = tmp_path_factory.mktemp("set") / "m"
-    export_masks(lv, cam, folder, MaskOptions(use_klayout=False), progress=False)
+    export_masks(LevelMap(lv, cam), folder, MaskOptions(use_klayout=False), progress=False)
     return folder
 
 
@@ -197,7 +197,7 @@ def oasis_set(tmp_path_factory):
     cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100)
     lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
     folder = tmp_path_factory.mktemp("oas") / "m"
-    export_masks(lv, cam, folder, MaskOptions(use_klayout=False, oasis=True), progress=False)
+    export_masks(LevelMap(lv, cam), folder, MaskOptions(use_klayout=False, oasis=True), progress=False)
     return folder
 
 

@@ -112,7 +112,7 @@ def test_wavelengths_outside_a_published_fit_are_named():
 def test_a_mask_set_on_each_substrate_states_and_verifies_its_depths(name, tmp_path):
     """The manifest records the substrate; verification looks it up by name and re-derives every depth from it."""
     from doefab.errors import CheckFailed
-    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
     from doefab.fabrication.verify import verify_mask_set
 
     lam, n = PRINTED[name][0]
@@ -120,7 +120,7 @@ def test_a_mask_set_on_each_substrate_states_and_verifies_its_depths(name, tmp_p
                         sensor_distance=50e-3, focus_distance=5.0, material=material_by_name(name),
                         design_wavelength=lam * 1e-6)
     lv = np.random.default_rng(1).integers(0, 4, (100, 100)).astype(np.uint8)
-    export_masks(lv, cam, tmp_path / "m", MaskOptions(use_klayout=False), n_levels=4)
+    export_masks(LevelMap(lv, cam, n_levels=4), tmp_path / "m", MaskOptions(use_klayout=False))
     path = tmp_path / "m" / "manifest.json"
     man = json.loads(path.read_text())
     assert man["material"]["name"] == name and man["n_levels"] == 4

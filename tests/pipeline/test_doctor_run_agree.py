@@ -83,16 +83,17 @@ def test_the_die_holds_the_pattern_and_marks_and_no_smaller_one_does(tmp_path, t
     one a millimetre smaller (the 12 mm floor lifted, so the bound is the pattern's and the marks')."""
     import numpy as np
 
-    from doefab.fabrication.export import MaskOptions, export_masks
+    from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
     from doefab.fabrication.marks import smallest_die_m
 
     cam = tiny_camera
     die = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, 2, floor_m=0.0)
     levels = np.full((cam.doe_pixels, cam.doe_pixels), 3, np.uint8)
     levels[:, : cam.doe_pixels // 2] = np.arange(cam.doe_pixels // 2) % 4
-    export_masks(levels, cam, tmp_path / "ok", MaskOptions(die_m=die, use_klayout=False), n_levels=4)
+    export_masks(LevelMap(levels, cam, n_levels=4), tmp_path / "ok", MaskOptions(die_m=die, use_klayout=False))
     with pytest.raises(DoefabError, match="die"):
-        export_masks(levels, cam, tmp_path / "small", MaskOptions(die_m=die - 1e-3, use_klayout=False), n_levels=4)
+        export_masks(LevelMap(levels, cam, n_levels=4), tmp_path / "small",
+                     MaskOptions(die_m=die - 1e-3, use_klayout=False))
 
 
 def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
