@@ -28,8 +28,9 @@ def register(sub) -> None:
                    help="design on a DOE grid coarser by this factor (1 = the preset's full grid; must divide it)")
     p.add_argument("--batch", type=number(int, -1, 100_000), default=None,
                    help="(depth, band) pairs per Adam step; 0 = all; -1 = every depth, one random band each")
-    p.add_argument("--levels", type=int, choices=[2, 4, 8, 16, 32], default=16, metavar="L",
-                   help="height levels the fab makes: 2, 4, 8, 16 or 32 (log2 L binary masks)")
+    p.add_argument("--n-levels", "--levels", dest="n_levels", type=int, choices=[2, 4, 8, 16, 32], default=16,
+                   metavar="L", help="the number of height levels the fab makes: 2, 4, 8, 16 or 32 (log2 L binary "
+                                     "masks; --levels is its earlier spelling)")
     p.add_argument("--qat-fraction", type=number(float, 0, 1, unit="fraction of the steps"), default=0.2,
                    help="last fraction of steps run quantization-aware")
     p.add_argument("--fab-weight", type=number(float, 0, 1000), default=0.0,
@@ -72,7 +73,7 @@ def run(args) -> int:
         check_resume(out)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
-                "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.levels}
+                "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.n_levels}
     if args.lr is not None:
         settings["lr"] = args.lr
     if args.batch is not None:

@@ -112,14 +112,9 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     Returns:
         The verification report (also in ``out_dir/report.json``).
     """
-    try:
-        levels, camera, n_levels = design.levels, design.camera, design.n_levels
-    except AttributeError:
-        raise DoefabError(f"export_masks takes a design (a doefab.Design, or LevelMap(levels, camera, n_levels) "
-                          f"for a level map of your own), got {type(design).__name__}") from None
+    levels, camera, n_levels = _parts_of(design, design_dir)
     opts = options or MaskOptions()
     t0 = time.perf_counter()
-    n_levels = _levels_of(n_levels, design_dir)
     n_masks = mask_count(n_levels)
     lv = validate_levels(levels, n_levels)
     n = camera.doe_pixels
@@ -230,6 +225,16 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
     if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
         raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
     return order
+
+
+def _parts_of(design, design_dir) -> tuple:
+    """(levels, camera, n_levels) of the design to export (its level count checked against ``design_dir``)."""
+    try:
+        levels, camera, n_levels = design.levels, design.camera, design.n_levels
+    except AttributeError:
+        raise DoefabError(f"export_masks takes a design (a doefab.Design, or LevelMap(levels, camera, n_levels) "
+                          f"for a level map of your own), got {type(design).__name__}") from None
+    return levels, camera, _levels_of(n_levels, design_dir)
 
 
 def _levels_of(n_levels, design_dir) -> int:

@@ -130,7 +130,7 @@ def explain(res: dict) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
-    rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["levels"])
+    rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["n_levels"])
              + _sensor_rows(res.get("sensor"), res["settings"]["design_task"]))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
 

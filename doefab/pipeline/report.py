@@ -224,7 +224,7 @@ def system_table(res: dict) -> list[list[str]]:
             ["camera", f"f = {cam.focal_length * 1e3:.4g} mm, DOE aperture {cam.aperture_diameter * 1e3:.4g} mm, "
                        f"sensor pitch {cam.sensor_pitch * 1e6:.4g} µm, DOE pitch {cam.doe_pitch * 1e6:.4g} µm",
              "custom camera" if res.get("custom_camera") else "the preset prototype"],
-            ["fabrication", f"{res['settings']['levels']} levels on {cam.material.name}",
+            ["fabrication", f"{res['settings']['n_levels']} levels on {cam.material.name}",
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
     if res.get("sensor") is not None:
         spectral = design_is(res["settings"].get("design_task"), "spectral")

@@ -18,7 +18,7 @@ from doefab.validate import metres_hint, unit_hint
 from doefab.applications import APPLICATIONS
 from doefab.errors import DoefabError
 from doefab.io import read_toml
-from doefab.pipeline.scenekeys import STAGES, item_text, keys_of, toml_value, values_text
+from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_value, values_text
 
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
@@ -139,7 +139,10 @@ def _schema_problems(raw: dict) -> list[str]:
             elif key != "holder":
                 known = keys_of(key)
                 for k, v in val.items():
-                    if k not in known:
+                    if (key, k) in RENAMED:
+                        problems.append(f"{key}.{k} is now {key}.{RENAMED[key, k]}: write {RENAMED[key, k]} = "
+                                        f"{v!r} in [{key}]")
+                    elif k not in known:
                         problems.append(f"unknown key {key}.{k}")
                     else:
                         problems.append(_value_problem(f"{key}.{k}", v, known[k]))

@@ -17,7 +17,7 @@ from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FUL
 from doefab.optics.camera import PRESETS
 from doefab.optics.materials import SUBSTRATES, substrate_name
 
-__all__ = ["Key", "KEYS", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
+__all__ = ["Key", "KEYS", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
            "toml_value"]
 
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
@@ -113,8 +113,8 @@ KEYS = (
         help="spectra: grating period"),
     Key("design", "grating_box_px", "int", "px", 0, 64, default="1",
         help="spectra: half-width of each band's metric box at its first order"),
-    Key("fabrication", "levels", "choice", choices=(2, 4, 8, 16, 32), default="16",
-        help="etch levels: log2(levels) binary masks"),
+    Key("fabrication", "n_levels", "choice", choices=(2, 4, 8, 16, 32), default="16",
+        help="the number of etch levels L: log2 L binary masks"),
     Key("fabrication", "material", "choice", choices=tuple(SUBSTRATES), resolve=substrate_name,
         default="fused silica", help="DOE substrate (the name in any case)"),
     Key("fabrication", "design_wavelength_nm", "float", "nm", 200.0, 2000.0, default="550",
@@ -136,6 +136,10 @@ KEYS = (
     Key("tolerance", "supersample", "int", "", 1, 8, default="the grid study's choice",
         help="fix the simulation grid (cells per DOE pixel)"),
 )
+
+
+# keys a scene file may still hold under an earlier name: (section, old name) -> the name to write instead
+RENAMED = {("fabrication", "levels"): "n_levels"}
 
 
 def keys_of(section: str) -> dict:
@@ -193,7 +197,7 @@ def template(task: str) -> str:
     ex = _EXAMPLES[task]
     values = {("camera", "focal_length_mm"): 35.0, ("camera", "f_number"): 4.0, ("camera", "lens_f_number"): 2.0,
               ("camera", "focus_distance_m"): 3.5 if has(task, "depth") else 5.0, ("camera", "sensor_pitch_um"): 3.76,
-              ("camera", "doe_pitch_um"): 4.0, ("fabrication", "levels"): 16,
+              ("camera", "doe_pitch_um"): 4.0, ("fabrication", "n_levels"): 16,
               ("fabrication", "material"): "fused silica", ("fabrication", "min_feature_um"): 2.0,
               ("reconstruction", "weights"): "train", ("reconstruction", "minutes"): 6.0,
               ("tolerance", "samples"): 12, ("tolerance", "budget"): "default"}

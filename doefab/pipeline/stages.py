@@ -89,7 +89,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
                             camera=res["camera"], out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
-                            n_levels=int(s["levels"]), progress=True,
+                            n_levels=int(s["n_levels"]), progress=True,
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"

@@ -98,7 +98,7 @@ def scene_die_m(scene: Scene, cam) -> float:
     from holder_cad.derive import widest_aperture_mm
     from holder_cad.params import HolderParams
 
-    n_masks = mask_count(int(scene.fabrication.get("levels", DEFAULT_LEVELS)))
+    n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
     h = {k: scene.holder.get(k, getattr(HolderParams, k)) for k in ("wall_mm", "aperture_margin_mm")}
     aperture_mm = cam.aperture_diameter * 1e3
     holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, **h)) + 1  # the least whole mm whose pocket holds it
@@ -273,7 +273,7 @@ def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -
          "sampling": design.get("sampling", cfg.get("sampling", 1)), "seed": design.get("seed", cfg.get("seed", 0)),
          "parameterization": design.get("parameterization", cfg.get("parameterization", "pixel")),
          "knots": design.get("knots", cfg.get("knots", 0)),
-         "levels": int(fab.get("levels", committed.n_levels))}
+         "n_levels": int(fab.get("n_levels", committed.n_levels))}
     if design_is(dname, "depth"):
         s["ring_law"] = task.ring_law
     if design_is(dname, "spectral"):  # the period in metres (task_params hold it only as the preset's pixel count)

@@ -1,5 +1,5 @@
 """The number of levels is a property of a design: the optimiser's quantization-aware stage and the finished level map
-follow it, design.json records it (an old record without it means 16), and ``doefab design --levels`` sets it."""
+follow it, design.json records it (an old record without it means 16), and ``doefab design --n-levels`` (or its earlier spelling ``--levels``) sets it."""
 
 import json
 import math
@@ -90,12 +90,15 @@ def test_design_command_passes_levels_to_the_optimiser(eight, tmp_path, monkeypa
         return eight
 
     monkeypatch.setattr(doefab, "optimize", fake_optimize)
-    assert main(["design", "--task", "streak", "--levels", "8", "--iterations", "1", "--out", str(tmp_path / "d")]) == 0
+    assert main(["design", "--task", "streak", "--n-levels", "8", "--iterations", "1", "--out", str(tmp_path / "d")]) == 0
     assert seen["n_levels"] == 8 and "8-level" in capsys.readouterr().out
     assert json.loads((tmp_path / "d" / "design.json").read_text())["n_levels"] == 8
     with pytest.raises(SystemExit) as exc:
-        main(["design", "--task", "streak", "--levels", "12", "--out", str(tmp_path / "e")])
-    assert exc.value.code == 2 and "--levels" in capsys.readouterr().err
+        main(["design", "--task", "streak", "--n-levels", "12", "--out", str(tmp_path / "e")])
+    assert exc.value.code == 2 and "--n-levels" in capsys.readouterr().err
+    seen.clear()  # the earlier spelling sets the same count
+    assert main(["design", "--task", "streak", "--levels", "8", "--iterations", "1", "--out", str(tmp_path / "f")]) == 0
+    assert seen["n_levels"] == 8
 
 
 @pytest.mark.parametrize("n_levels", [2, 4, 8, 32])

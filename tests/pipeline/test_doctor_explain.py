@@ -34,7 +34,7 @@ def test_my_camera_scene_is_explained_by_hand_computed_optics():
     n = _nbk7(0.55)
     assert rows["substrate index"] == pytest.approx(n, abs=2e-5)
     assert rows["etch depth of 2π"] == pytest.approx(550 / (n - 1), rel=1e-4)
-    assert res["settings"]["levels"] == 8 and len(res["settings"]["wavelengths_m"]) == 21
+    assert res["settings"]["n_levels"] == 8 and len(res["settings"]["wavelengths_m"]) == 21
 
 
 def test_bands_outside_the_substrates_published_dispersion_are_named(tmp_path):

@@ -21,7 +21,7 @@ kernel_px = 31
 [design]
 streak_arm_px = 8
 [fabrication]
-levels = 4
+n_levels = 4
 [reconstruction]
 weights = "{weights}"
 """

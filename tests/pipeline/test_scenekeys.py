@@ -95,3 +95,15 @@ def test_every_key_prints_its_unit_and_range(k):
     if k.name not in ("preset", "sensor_distance_m"):
         assert any(line.startswith(f"# {k.help} ({cell}; default {k.default})") for line in notes), k.name
     assert not any("(;" in line for line in notes)
+
+
+def test_a_key_under_its_earlier_name_is_refused_with_the_new_one(tmp_path):
+    """``fabrication.levels`` (the level count) is now ``fabrication.n_levels``: one error says what to write."""
+    from doefab.errors import DoefabError
+
+    p = tmp_path / "s.toml"
+    p.write_text('task = "hdr"\n[fabrication]\nlevels = 8\n')
+    with pytest.raises(DoefabError, match=r"fabrication.levels is now fabrication.n_levels: write n_levels = 8"):
+        load_scene(p)
+    p.write_text('task = "hdr"\n[fabrication]\nn_levels = 8\n')
+    assert load_scene(p).fabrication["n_levels"] == 8

@@ -67,7 +67,7 @@ def test_changed_inputs_or_force_start_afresh(tmp_path, monkeypatch, name):
     monkeypatch.setitem(stages.STAGE_FUNCS, name, lambda scene, res, out, quick: seen.update(
         kept=[f for f in files if (out / f).exists()]) or {"status": "ran", "why": "fake"})
     _interrupted(tmp_path / "a", name, scene, files)
-    changed = SimpleNamespace(raw={"design": {"iterations": 61}, name: {"x": 1}, "fabrication": {"levels": 8}},
+    changed = SimpleNamespace(raw={"design": {"iterations": 61}, name: {"x": 1}, "fabrication": {"n_levels": 8}},
                               task="hdr")
     stages.run_stage(changed, {}, name, tmp_path / "a", {}, False, force=False)
     assert seen["kept"] == []
@@ -91,7 +91,7 @@ def test_the_design_stage_resumes_the_optimiser_from_its_checkpoint(tmp_path, mo
     monkeypatch.setattr(doefab, "optimize", fake_optimize)
     monkeypatch.setattr(stages, "redesign_note", lambda res, quick: "a new design")
     settings = {"iterations": 5, "sampling": 1, "optimizer": "adam", "seed": 0, "design_task": "streak",
-                "parameterization": "pixel", "knots": 0, "levels": 16}
+                "parameterization": "pixel", "knots": 0, "n_levels": 16}
     res = {"reuse": False, "settings": settings, "task": SimpleNamespace(params=lambda: {}), "camera": None}
     for saved in (False, True):
         out = tmp_path / str(saved)
@@ -105,8 +105,8 @@ def test_the_design_stage_resumes_the_optimiser_from_its_checkpoint(tmp_path, mo
 
 def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_networks():
     """Levels or substrate change the design; retrained networks change what the tolerance study judges."""
-    a = SimpleNamespace(raw={"fabrication": {"levels": 16}}, task="hdr")
-    b = SimpleNamespace(raw={"fabrication": {"levels": 8}}, task="hdr")
+    a = SimpleNamespace(raw={"fabrication": {"n_levels": 16}}, task="hdr")
+    b = SimpleNamespace(raw={"fabrication": {"n_levels": 8}}, task="hdr")
     assert stages.stage_hash(a, "design", {}, False) != stages.stage_hash(b, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
     assert stages.stage_hash(a, "tolerance", one, False) != stages.stage_hash(a, "tolerance", two, False)
