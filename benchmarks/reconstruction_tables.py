@@ -13,6 +13,13 @@ benchmarks/results/reconstruction_tables.md from those files alone (a task no RO
 files), so the tables are the JSON's numbers to their printed digits (tests/docs/test_results_consistency.py).
 Split used: test. Every evaluation of it is a read of the test split: add its row to
 benchmarks/results/test_split_reads.md.
+
+The final test set: `.venv/bin/python benchmarks/reconstruction_tables.py --final ROOT` takes ROOT/<task> and
+ROOT/<task>_clean made by `doefab evaluate ... --split final` (each evaluation logs its read in its folder's
+final_split_reads.md), copies them to evaluate_final_<task>.json and evaluate_final_<task>_clean.json, writes
+reconstruction_tables_final.md from those, and appends the evaluations' logged reads to
+benchmarks/results/final_split_reads.md (the set is read once: tests/docs/test_results_consistency.py checks
+that the ledger holds one honest and one clean read per task and that the published files are those reads).
 """
 
 from __future__ import annotations
@@ -113,24 +120,27 @@ def light_table(honest: dict, clean: dict | None) -> list[str]:
     return lines + [""]
 
 
-def tables_markdown(folder: Path = OUT) -> str:
-    """The tables from ``folder``'s evaluate_<task>.json and evaluate_<task>_clean.json."""
+def tables_markdown(folder: Path = OUT, prefix: str = "evaluate_") -> str:
+    """The tables from ``folder``'s <prefix><task>.json and <prefix><task>_clean.json (``prefix``
+    "evaluate_final_": the final test set's)."""
     lines = []
     for task in KEYS:
-        honest, clean = (folder / f"evaluate_{task}.json", folder / f"evaluate_{task}_clean.json")
+        honest, clean = (folder / f"{prefix}{task}.json", folder / f"{prefix}{task}_clean.json")
         if honest.is_file():
             lines += task_table(task, json.loads(honest.read_text()),
                                 json.loads(clean.read_text()) if clean.is_file() else None)
     return "\n".join(lines) + "\n"
 
 
-def _checked(f: Path, honest: Path | None = None) -> Path:
+def _checked(f: Path, honest: Path | None = None, split: str = "test") -> Path:
     """``f``, an evaluation by the current `doefab evaluate` (thread count and weights' SHA-256 recorded; a clean
     one of the same weights and split as ``honest``); else the run stops, naming the fix."""
     ev = json.loads(f.read_text())
     if "threads" not in ev or any("sha256" not in w for w in ev["weights"].values()):
         sys.exit(f"{f}: made before evaluations recorded their thread count and weights' SHA-256: run doefab "
                  f"evaluate again")
+    if honest is None and ev["split"] != split:
+        sys.exit(f"{f} evaluates the {ev['split']} split, not the {split} split")
     if honest is not None:
         other = json.loads(honest.read_text())
         if ev["split"] != other["split"] or any(w["sha256"] != other["weights"][v]["sha256"]
@@ -139,21 +149,47 @@ def _checked(f: Path, honest: Path | None = None) -> Path:
     return f
 
 
-def main(roots: list[Path]) -> None:
+FINAL_LEDGER = "final_split_reads.md"
+
+
+def main(roots: list[Path], final: bool = False) -> None:
+    prefix = "evaluate_final_" if final else "evaluate_"
     copies = {}  # every evaluation checked before any file is replaced
     for task in KEYS:
         root = next((r for r in roots if _load(r, task) is not None), None)
         if root is None:
             continue
-        honest = copies[f"evaluate_{task}.json"] = _checked(root / task / "metrics.json")
+        honest = copies[f"{prefix}{task}.json"] = _checked(root / task / "metrics.json", split="final" if final
+                                                           else "test")
         if (root / f"{task}_clean" / "metrics.json").is_file():
-            copies[f"evaluate_{task}_clean.json"] = _checked(root / f"{task}_clean" / "metrics.json", honest)
+            copies[f"{prefix}{task}_clean.json"] = _checked(root / f"{task}_clean" / "metrics.json", honest)
+    reads = _logged_reads(copies.values()) if final else []
     for name, f in copies.items():
         shutil.copyfile(f, OUT / name)
-    text = tables_markdown(OUT)
-    (OUT / "reconstruction_tables.md").write_text(text)
+    if reads:
+        ledger = OUT / FINAL_LEDGER
+        ledger.write_text(ledger.read_text() + "".join(r + "\n" for r in reads))
+    text = tables_markdown(OUT, prefix)
+    (OUT / ("reconstruction_tables_final.md" if final else "reconstruction_tables.md")).write_text(text)
     print(text)
 
 
+def _logged_reads(files) -> list[str]:
+    """The rows each final-set evaluation logged of its read (its folder's final_split_reads.md), not yet in the
+    committed ledger; the run stops when an evaluation logged none."""
+    have = (OUT / FINAL_LEDGER).read_text()
+    rows = []
+    for f in files:
+        log = f.parent / FINAL_LEDGER
+        mine = [r for r in (log.read_text().splitlines() if log.is_file() else []) if r.startswith("| 20")]
+        if not mine:
+            sys.exit(f"{f.parent}: no logged read of the final test set ({FINAL_LEDGER}): evaluate it with "
+                     f"doefab evaluate --split final")
+        rows += [r for r in mine if r not in have and r not in rows]
+    return rows
+
+
 if __name__ == "__main__":
-    main([Path(a) for a in sys.argv[1:]] or [Path("out/tables/eval")])
+    args = sys.argv[1:]
+    final = "--final" in args
+    main([Path(a) for a in args if a != "--final"] or [Path("out/tables/eval")], final=final)

@@ -54,6 +54,16 @@ MEASUREMENTS = (
                 before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
                         "bash scripts/train_shipped.sh 500 out/s16 depth",
                         "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
+    Measurement("reconstruction_tables_final", None, (R + "reconstruction_tables_final.md", R + "final_split_reads.md"),
+                before=("for t in hdr hyperspectral depth; do",
+                        "  .venv/bin/python -m doefab evaluate --task $t --split final --images 12 --size 256 "
+                        "--out out/final/$t",
+                        "  .venv/bin/python -m doefab evaluate --task $t --split final --images 12 --size 256 "
+                        "--clean --out out/final/${t}_clean",
+                        "done"),
+                command=".venv/bin/python benchmarks/reconstruction_tables.py --final out/final",
+                note="the final test set's tables and the ledger of its reads, each row as its evaluation logged "
+                     "it"),
     Measurement("test_split_reads", None, (R + "test_split_reads.md",),
                 command="git log -p -- 'benchmarks/results/evaluate_*.json'",
                 note="the ledger of the test split's reads, a row for each commit that changes "

@@ -1,7 +1,8 @@
 """The published Tables 1–3 are the shipped networks' evaluation, to every printed digit: the tables file
 (shown on the results pages) is rebuilt from the evaluate_<task>.json it is made from, the README's table rounds
 those numbers as printed, each evaluation names the shipped weights it scored by their SHA-256 and the one torch
-thread it ran on, and every change to the evaluations is a read of the test split with its row in the ledger."""
+thread it ran on, and every change to the evaluations is a read of the test split with its row in the ledger.
+The README's table is the final test set's: read once per task and capture condition, each read in its ledger."""
 
 import hashlib
 import importlib.util
@@ -17,7 +18,9 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "benchmarks" / "results"
 TASKS = ("hdr", "hyperspectral", "depth")
 EVALUATIONS = "benchmarks/results/evaluate_*.json"
+NOT_FINAL = ":(exclude)benchmarks/results/evaluate_final_*.json"  # the final set's reads: their own ledger
 LEDGER = "benchmarks/results/test_split_reads.md"
+FINAL_LEDGER = RESULTS / "final_split_reads.md"
 # the README's reconstruction table: (task cell, metric cell) -> (task, light group or None, metric keys)
 README_ROWS = {("HDR", "highlight PSNR (dB)"): ("hdr", None, ("psnr_highlight",)),
                ("HDR", "PSNR (dB)"): ("hdr", None, ("psnr",)),
@@ -32,25 +35,35 @@ README_ROWS = {("HDR", "highlight PSNR (dB)"): ("hdr", None, ("psnr_highlight",)
 README_COLUMNS = (("proposed", ""), ("coded_only", ""), ("uncoded_only", ""), ("proposed", "_clean"))
 
 
-def _evaluation(task: str, kind: str = "") -> dict:
-    return json.loads((RESULTS / f"evaluate_{task}{kind}.json").read_text())
+def _evaluation(task: str, kind: str = "", split: str = "test") -> dict:
+    prefix = "evaluate_final_" if split == "final" else "evaluate_"
+    return json.loads((RESULTS / f"{prefix}{task}{kind}.json").read_text())
 
 
-def test_the_tables_file_is_the_evaluations_to_every_printed_digit():
+def _tables_module():
     spec = importlib.util.spec_from_file_location("reconstruction_tables",
                                                   ROOT / "benchmarks" / "reconstruction_tables.py")
     tables = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tables)
+    return tables
+
+
+def test_the_tables_file_is_the_evaluations_to_every_printed_digit():
+    tables = _tables_module()
     assert tables.tables_markdown(RESULTS) == (RESULTS / "reconstruction_tables.md").read_text()
+    final = tables.tables_markdown(RESULTS, "evaluate_final_")
+    assert final == (RESULTS / "reconstruction_tables_final.md").read_text()
+    assert final.count("of the final split") == len(TASKS)
 
 
+@pytest.mark.parametrize("split", ["test", "final"])
 @pytest.mark.parametrize("kind", ["", "_clean"])
 @pytest.mark.parametrize("task", TASKS)
-def test_each_evaluation_scored_the_shipped_weights_on_one_thread(task, kind):
-    ev = _evaluation(task, kind)
+def test_each_evaluation_scored_the_shipped_weights_on_one_thread(task, kind, split):
+    ev = _evaluation(task, kind, split)
     assert "threads" in ev, (f"evaluate_{task}{kind}.json records no thread count: evaluate again as "
                              f"benchmarks/reconstruction_tables.py says")
-    assert ev["split"] == "test" and ev["conditions"]["name"] == ("clean" if kind else "honest")
+    assert ev["split"] == split and ev["conditions"]["name"] == ("clean" if kind else "honest")
     assert ev["threads"] == 1 and {"torch", "numpy", "scipy", "scikit-image"} <= set(ev["versions"])
     assert set(ev["weights"]) == {"proposed", "coded_only", "uncoded_only"}
     for variant, w in ev["weights"].items():
@@ -77,7 +90,7 @@ def test_the_readme_table_is_the_evaluations_to_every_printed_digit():
     for (label, metric), cells in rows.items():
         task, light, keys = README_ROWS[(label, metric)]
         for (variant, kind), cell in zip(README_COLUMNS, cells):
-            ev = _evaluation(task, kind)
+            ev = _evaluation(task, kind, "final")
             means = ev["by_light"][light][variant] if light else ev["rows"][variant]
             printed = [p.strip().strip("*") for p in cell.split("/")]
             assert len(printed) == len(keys), (label, metric, cell)
@@ -101,20 +114,47 @@ def test_every_change_to_the_evaluations_has_its_row_in_the_test_split_ledger():
         pytest.skip("not a git checkout: the history the ledger follows is not here")
     listed = [c.strip() for c in _ledger_rows((ROOT / LEDGER).read_text())]
     missing = []
-    for commit in _git("log", "--format=%H", "--", EVALUATIONS).split():
+    for commit in _git("log", "--format=%H", "--", EVALUATIONS, NOT_FINAL).split():
         if any(c and commit.startswith(c) for c in listed if re.fullmatch(r"[0-9a-f]{7,40}", c)):
             continue
         added = _git("show", "--format=", commit, "--", LEDGER)
         if not re.search(r"^\+\| ", added, flags=re.M):
             missing.append(commit[:7])
     assert not missing, f"reads of the test split with no row in {LEDGER}: {missing}"
-    if _git("status", "--porcelain", "--", EVALUATIONS).strip():
+    if _git("status", "--porcelain", "--", EVALUATIONS, NOT_FINAL).strip():
         try:
             before = _git("show", f"HEAD:{LEDGER}")
         except subprocess.CalledProcessError:  # the ledger is new
             before = ""
         assert len(_ledger_rows((ROOT / LEDGER).read_text())) > len(_ledger_rows(before)), \
             f"evaluate_*.json changed: add the read's row to {LEDGER}"
+
+
+def _final_reads() -> list[list[str]]:
+    """The cells of every row of the final test set's ledger."""
+    return [[c.strip() for c in line.strip().strip("|").split("|")]
+            for line in FINAL_LEDGER.read_text().splitlines() if line.startswith("| 20")]
+
+
+def test_the_final_test_set_was_read_once_per_task_and_condition_and_published_as_read():
+    """One logged read of the final set per task and capture condition, and the published evaluation is that
+    read: its task, condition, code, scene count and every network's weights (SHA-256 prefix) as logged."""
+    reads = _final_reads()
+    seen = [(task, "clean" if "clean captures" in what else "honest") for _, _, task, what in reads]
+    assert sorted(seen) == sorted((t, c) for t in TASKS for c in ("honest", "clean")), seen
+    for when, code, task, what in reads:
+        kind = "_clean" if "clean captures" in what else ""
+        ev = _evaluation(task, kind, "final")
+        assert code == ev["code"] and what.startswith(f"{ev['images']} scenes of {ev['size_px']}² px"), (task, kind)
+        for variant, w in ev["weights"].items():
+            assert f"{variant} (weights {w['sha256'][:12]})" in what, (task, kind, variant)
+
+
+def test_the_final_evaluations_came_after_every_test_split_read():
+    """The final set is read after every decision: its reads are dated no earlier than the last row of the test
+    split's ledger."""
+    last = max(re.findall(r"^\| (\d{4}-\d{2}-\d{2}) \|", (ROOT / LEDGER).read_text(), flags=re.M))
+    assert all(when[:10] >= last for when, *_ in _final_reads())
 
 
 def test_the_readme_measured_data_line_is_real_validation_json():
