@@ -13,6 +13,7 @@ from typing import Callable
 
 from doefab.applications import APPLICATIONS, has
 from doefab._devices import DEVICE_WORDS, check_device
+from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.camera import PRESETS
 from doefab.optics.materials import SUBSTRATES, substrate_name
@@ -113,7 +114,7 @@ KEYS = (
         help="spectra: grating period"),
     Key("design", "grating_box_px", "int", "px", 0, 64, default="1",
         help="spectra: half-width of each band's metric box at its first order"),
-    Key("fabrication", "n_levels", "choice", choices=(2, 4, 8, 16, 32), default="16",
+    Key("fabrication", "n_levels", "choice", choices=LEVEL_CHOICES, default=str(DEFAULT_LEVELS),
         help="the number of etch levels L: log2 L binary masks"),
     Key("fabrication", "material", "choice", choices=tuple(SUBSTRATES), resolve=substrate_name,
         default="fused silica", help="DOE substrate (the name in any case)"),
