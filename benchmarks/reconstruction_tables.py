@@ -140,7 +140,9 @@ def _checked(f: Path, honest: Path | None = None, split: str = "test") -> Path:
         sys.exit(f"{f}: made before evaluations recorded their thread count and weights' SHA-256: run doefab "
                  f"evaluate again")
     if honest is None and ev["split"] != split:
-        sys.exit(f"{f} evaluates the {ev['split']} split, not the {split} split")
+        sys.exit(f"{f} evaluates the {ev['split']} split, not the {split} split: "
+                 + ("pass --final for the final test set" if ev["split"] == "final" else
+                    f"evaluate it again with doefab evaluate --split {split}"))
     if honest is not None:
         other = json.loads(honest.read_text())
         if ev["split"] != other["split"] or any(w["sha256"] != other["weights"][v]["sha256"]
@@ -163,6 +165,11 @@ def main(roots: list[Path], final: bool = False) -> None:
                                                            else "test")
         if (root / f"{task}_clean" / "metrics.json").is_file():
             copies[f"{prefix}{task}_clean.json"] = _checked(root / f"{task}_clean" / "metrics.json", honest)
+        elif final:  # a table pairs a read's honest and clean scores: never a new one with an older one
+            sys.exit(f"{root / task}: no {task}_clean evaluation beside it: evaluate it with doefab evaluate --task "
+                     f"{task} --split final --clean --out {root / (task + '_clean')}")
+    if not copies:
+        sys.exit(f"no <task>/metrics.json in {', '.join(map(str, roots))}: give the folder doefab evaluate wrote to")
     reads = _logged_reads(copies.values()) if final else []
     for name, f in copies.items():
         shutil.copyfile(f, OUT / name)
@@ -192,4 +199,4 @@ def _logged_reads(files) -> list[str]:
 if __name__ == "__main__":
     args = sys.argv[1:]
     final = "--final" in args
-    main([Path(a) for a in args if a != "--final"] or [Path("out/tables/eval")], final=final)
+    main([Path(a) for a in args if a != "--final"] or [Path("out/final" if final else "out/tables/eval")], final=final)

@@ -11,6 +11,7 @@ import argparse
 from doefab.applications import DESIGN_TASKS, design_is
 from doefab.cli._args import add_device_arg, number
 from doefab.errors import DoefabError
+from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 
 
 def register(sub) -> None:
@@ -28,7 +29,7 @@ def register(sub) -> None:
                    help="design on a DOE grid coarser by this factor (1 = the preset's full grid; must divide it)")
     p.add_argument("--batch", type=number(int, -1, 100_000), default=None,
                    help="(depth, band) pairs per Adam step; 0 = all; -1 = every depth, one random band each")
-    p.add_argument("--n-levels", "--levels", dest="n_levels", type=int, choices=[2, 4, 8, 16, 32], default=16,
+    p.add_argument("--n-levels", "--levels", dest="n_levels", type=int, choices=LEVEL_CHOICES, default=DEFAULT_LEVELS,
                    metavar="L", help="the number of height levels the fab makes: 2, 4, 8, 16 or 32 (log2 L binary "
                                      "masks; --levels is its earlier spelling)")
     p.add_argument("--qat-fraction", type=number(float, 0, 1, unit="fraction of the steps"), default=0.2,

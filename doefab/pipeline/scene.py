@@ -127,6 +127,18 @@ def _list_problem(where: str, v, key) -> str | None:
     return "; ".join(problems) or None
 
 
+def _renamed(section: str, old: str, value, table: dict) -> str:
+    """The problem of a key under its earlier name (``scenekeys.RENAMED``): the line to write instead, or to delete
+    when the table holds the new name too; a value the new key refuses is named with it."""
+    new = RENAMED[section, old]
+    if new in table:
+        return f"{section}.{old} is now {section}.{new}, which this file sets too: delete {old}"
+    why = _value_problem(f"{section}.{new}", value, keys_of(section)[new])
+    if why:
+        return f"{section}.{old} is now {section}.{new}, and {why}"
+    return f"{section}.{old} is now {section}.{new}: write {new} = {value!r} in [{section}]"
+
+
 def _schema_problems(raw: dict) -> list[str]:
     """Unknown sections and keys, values of the wrong type, choice or range (``scenekeys.KEYS``), keys that set
     the same quantity twice."""
@@ -140,8 +152,7 @@ def _schema_problems(raw: dict) -> list[str]:
                 known = keys_of(key)
                 for k, v in val.items():
                     if (key, k) in RENAMED:
-                        problems.append(f"{key}.{k} is now {key}.{RENAMED[key, k]}: write {RENAMED[key, k]} = "
-                                        f"{v!r} in [{key}]")
+                        problems.append(_renamed(key, k, v, val))
                     elif k not in known:
                         problems.append(f"unknown key {key}.{k}")
                     else:

@@ -105,5 +105,12 @@ def test_a_key_under_its_earlier_name_is_refused_with_the_new_one(tmp_path):
     p.write_text('task = "hdr"\n[fabrication]\nlevels = 8\n')
     with pytest.raises(DoefabError, match=r"fabrication.levels is now fabrication.n_levels: write n_levels = 8"):
         load_scene(p)
+    p.write_text('task = "hdr"\n[fabrication]\nlevels = 7\n')  # a value the new key refuses: named, not copied
+    with pytest.raises(DoefabError, match=r"is now fabrication.n_levels, and fabrication.n_levels 7 is not one of "
+                                          r"2, 4, 8, 16, 32"):
+        load_scene(p)
+    p.write_text('task = "hdr"\n[fabrication]\nlevels = 8\nn_levels = 16\n')  # both: the old one goes
+    with pytest.raises(DoefabError, match=r"which this file sets too: delete levels"):
+        load_scene(p)
     p.write_text('task = "hdr"\n[fabrication]\nn_levels = 8\n')
     assert load_scene(p).fabrication["n_levels"] == 8
