@@ -32,6 +32,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from doefab.applications import APPLICATIONS  # noqa: E402
+from doefab.reconstruction.evaluate import FINAL_LEDGER  # noqa: E402  (the file each final read is logged in)
 
 OUT = Path(__file__).parent / "results"
 KEYS = {"hdr": ("psnr", "psnr_highlight", "rmse_highlight"), "hyperspectral": ("psnr", "ssim", "sam"),
@@ -149,9 +150,6 @@ def _checked(f: Path, honest: Path | None = None, split: str = "test") -> Path:
                                                 for v, w in ev["weights"].items()):
             sys.exit(f"{f} evaluates other weights or another split than {honest}: evaluate both again")
     return f
-
-
-FINAL_LEDGER = "final_split_reads.md"
 
 
 def main(roots: list[Path], final: bool = False) -> None:
