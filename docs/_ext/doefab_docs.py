@@ -7,7 +7,7 @@
   table that also validates scenes and writes ``doefab scene new``'s template), ``docstring`` (a module's
   docstring), ``doefab-help`` (a subcommand's ``--help``), ``doefab-command`` (runs commands and shows what
   they printed), ``holder-params`` (the holder's parameters, defaults and ranges), ``substrates`` (the built-in
-  substrates with their sources).
+  substrates with their sources), ``budget-keys`` (every tolerance budget key by source of error).
 - Results pages (``doefab_results``) and the mask-set page (``doefab_fab``) have their own modules.
 """
 
@@ -314,6 +314,32 @@ class SubstratesTable(MarkdownDirective):
         return self.parse_markdown(rows)
 
 
+class BudgetKeysTable(MarkdownDirective):
+    """Every budget key, by source of error (``doefab.tolerance.sources.SOURCES``, the table that validates budget
+    files and draws the parts): its range, the shipped budget's value, and the kinds the report judges it as."""
+
+    def run(self):
+        import tomllib
+
+        from doefab.tolerance import kinds, sources
+        from doefab.tolerance.errors import DEFAULT_BUDGET
+
+        shipped = tomllib.loads(DEFAULT_BUDGET.read_text())
+        rows = ["| source of error | budget key | range | shipped value | judged as |",
+                "| --- | --- | --- | --- | --- |"]
+        for src in sources.SOURCES:
+            judged = ", ".join(k.name for k in kinds.KINDS if k.source == src.name) or "—"
+            for k in src.keys:
+                rng = "true or false" if k.lo is None else f"{k.lo:g}–{k.hi:g}" + (" (whole)" if k.whole else "")
+                value = shipped.get(k.section, {}).get(k.key, "—")
+                shown = str(value).lower() if isinstance(value, bool) else value
+                rows.append(f"| {src.name} | `{k.section}.{k.key}` | {rng} | {shown} | {judged} |")
+        for mod in (sources, kinds):
+            self.env.note_dependency(inspect.getsourcefile(mod))
+        self.env.note_dependency(str(DEFAULT_BUDGET))
+        return self.parse_markdown(rows)
+
+
 class HolderParamsTable(MarkdownDirective):
     """Every holder parameter: its default, its allowed range (millimetres) and why."""
 
@@ -370,5 +396,6 @@ def setup(app):
     app.add_directive("doefab-command", DoefabCommand)
     app.add_directive("holder-params", HolderParamsTable)
     app.add_directive("substrates", SubstratesTable)
+    app.add_directive("budget-keys", BudgetKeysTable)
     doefab_fab.setup(app)
     return {"version": "1", "parallel_read_safe": False, "parallel_write_safe": True}

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,8 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, PoissonGaussian
 from doefab.io import read_toml
+from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, nominal_gap, sensor_errors,
+                                      whole_keys)
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
            "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios",
@@ -23,21 +24,10 @@ __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "bud
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
-# section -> key -> (min, max) plausible range in the key's unit
-BUDGET_KEYS = {
-    "etch": {"systematic_sigma_percent": (0, 50), "random_sigma_percent": (0, 50)},
-    "overlay": {"shift_sigma_um": (0, 20), "rotation_sigma_urad": (0, 5000)},
-    "lithography": {"edge_bias_sigma_um": (0, 5), "corner_rounding_um": (0, 5)},
-    "surface": {"roughness_rms_nm": (0, 200), "correlation_length_um": (0.1, 1000)},
-    "mounting": {"decenter_max_mm": (0, 5), "rotation_sigma_deg": (0, 30), "axial_gap_mm": (0, 50),
-                 "axial_gap_sigma_mm": (0, 10), "pupil_behind_glass_mm": (0, 45)},
-    "sensor": {"crosstalk_lr_percent": (0, 49.9), "crosstalk_rl_percent": (0, 49.9), "crosstalk_slope_percent": (0, 20),
-               "calibrated": None, "calibration_rows": (1, 100000), "calibration_level": (0.01, 1),
-               "calibrated_width_px": (16, 100000)},
-    "spec": None,  # per-task tables, checked by doefab.tolerance.spec
-}
+# section -> key -> (min, max) plausible range in the key's unit, from the sources of error (``sources.SOURCES``)
+BUDGET_KEYS = budget_keys()
 # keys that count something: whole numbers only (3072 or 3072.0, not 1.5)
-WHOLE_KEYS = {("sensor", "calibration_rows"), ("sensor", "calibrated_width_px")}
+WHOLE_KEYS = whole_keys()
 
 
 @dataclass
@@ -112,76 +102,44 @@ def budget_problems(path: str | Path) -> list[str]:
 def _problems(data: dict) -> list[str]:
     from doefab.tolerance.spec import check_spec
 
-    problems = []
+    problems, keys, whole = [], budget_keys(), whole_keys()  # the table as it is now
     for sec, val in data.items():
-        if sec not in BUDGET_KEYS:
+        if sec not in keys:
             problems.append(f"unknown section [{sec}]")
             continue
         if not isinstance(val, dict):
             problems.append(f"{sec} must be a table [{sec}]")
             continue
-        if BUDGET_KEYS[sec] is None:
+        if keys[sec] is None:
             problems += check_spec(val)
             continue
         for key, v in val.items():
-            if key not in BUDGET_KEYS[sec]:
+            if key not in keys[sec]:
                 problems.append(f"unknown key {sec}.{key}")
-            elif BUDGET_KEYS[sec][key] is None:
+            elif keys[sec][key] is None:
                 if not isinstance(v, bool):
                     problems.append(f"{sec}.{key} must be true or false")
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                lo, hi = BUDGET_KEYS[sec][key]
+                lo, hi = keys[sec][key]
                 problems.append(f"{sec}.{key} must be a number within {lo}–{hi}, got {v!r}")
-            elif not BUDGET_KEYS[sec][key][0] <= v <= BUDGET_KEYS[sec][key][1]:
-                lo, hi = BUDGET_KEYS[sec][key]
+            elif not keys[sec][key][0] <= v <= keys[sec][key][1]:
+                lo, hi = keys[sec][key]
                 problems.append(f"{sec}.{key} = {v} is outside {lo}–{hi} (check the unit in the key's name)")
-            elif (sec, key) in WHOLE_KEYS and v != int(v):
-                lo, hi = BUDGET_KEYS[sec][key]
+            elif (sec, key) in whole and v != int(v):
+                lo, hi = keys[sec][key]
                 problems.append(f"{sec}.{key} = {v} counts something: give a whole number, e.g. "
                                 f"{min(max(round(v), lo), hi)}")
     return problems
 
 
-def budget_value(budget: dict, sec: str, key: str, default: float = 0.0) -> float:
-    """``budget[sec][key]`` as a float (``default`` when absent)."""
-    return float(budget.get(sec, {}).get(key, default))
-
-
 def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0, *, n_masks: int) -> PartErrors:
     """One part's errors drawn from ``budget`` with ``rng``, for a design of ``n_masks`` masks (log2 of its levels;
-    with 4 masks the draws are those of every 16-level study)."""
-    m = n_masks
-    sys_ = rng.normal(0, budget_value(budget, "etch", "systematic_sigma_percent") / 100)
-    rnd = rng.normal(0, budget_value(budget, "etch", "random_sigma_percent") / 100, m)
-    depth = tuple(float(np.clip(1 + sys_ + r, 0.5, 1.5)) for r in rnd)
-    sig = budget_value(budget, "overlay", "shift_sigma_um") * 1e-6
-    overlay = tuple((float(a), float(b)) for a, b in rng.normal(0, sig, (m, 2))) if sig > 0 else ((0.0, 0.0),) * m
-    rot = tuple(float(v) for v in rng.normal(0, budget_value(budget, "overlay", "rotation_sigma_urad") * 1e-6, m))
-    bias = float(rng.normal(0, budget_value(budget, "lithography", "edge_bias_sigma_um") * 1e-6))
-    dmax = budget_value(budget, "mounting", "decenter_max_mm") * 1e-3
-    shift = tuple(float(v) for v in rng.uniform(-dmax, dmax, 2))
-    mrot = float(rng.normal(0, math.radians(budget_value(budget, "mounting", "rotation_sigma_deg"))))
-    gap = max(0.0, nominal_gap(budget) + float(rng.normal(0, budget_value(budget, "mounting", "axial_gap_sigma_mm")
-                                                            * 1e-3)))
-    return PartErrors(depth_scale=depth, overlay=overlay, rotation=rot, edge_bias=bias,
-                      corner_rounding=budget_value(budget, "lithography", "corner_rounding_um") * 1e-6,
-                      roughness=budget_value(budget, "surface", "roughness_rms_nm") * 1e-9,
-                      roughness_corr=budget_value(budget, "surface", "correlation_length_um", 2.0) * 1e-6,
-                      mount_shift=shift, mount_rotation=mrot, axial_gap=gap,
-                      **sensor_errors(budget), seed=int(seed))
+    with 4 masks the draws are those of every 16-level study): each source of error's draw, in the order of
+    ``sources.SOURCES``.
 
-
-def sensor_errors(budget: dict) -> dict:
-    """The ``PartErrors`` fields of the budget's ``[sensor]`` section (dual-pixel crosstalk and its calibration; the
-    sensor's noise where a scene's ``[sensor]`` put it there, the default sensor's otherwise)."""
-    g = partial(budget_value, budget, "sensor")
-    return {"crosstalk": (g("crosstalk_lr_percent") / 100, g("crosstalk_rl_percent") / 100),
-            "crosstalk_slope": g("crosstalk_slope_percent") / 100,
-            "calibrated": bool(budget.get("sensor", {}).get("calibrated", True)),
-            "calibration_rows": int(g("calibration_rows", 3072)), "calibration_level": g("calibration_level", 0.5),
-            "calibrated_width_px": int(g("calibrated_width_px", 3072)),
-            "full_well_e": g("full_well_e", DEFAULT_FULL_WELL_E),
-            "read_noise_e": g("read_noise_e", DEFAULT_READ_NOISE_E)}
+    Example: ``sample_errors(load_budget(), np.random.default_rng(0), n_masks=4).depth_scale`` → four etch-depth
+    scale factors near 1."""
+    return PartErrors(**drawn_fields(budget, rng, n_masks), seed=int(seed))
 
 
 def sensor_crosstalk(err: PartErrors):
@@ -206,13 +164,6 @@ def crosstalk_ratios(err: PartErrors, columns, noise=None, rows=None) -> tuple:
     rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
     a_hat, b_hat = sensor.calibrate(columns, err.calibration_rows, noise, rng, err.calibration_level)
     return a, b, a_hat, b_hat
-
-
-def nominal_gap(budget: dict) -> float:
-    """Nominal DOE-to-aperture-plane distance (metres): the holder's DOE-to-glass distance plus the depth of the
-    lens's entrance pupil behind its front glass."""
-    return (budget_value(budget, "mounting", "axial_gap_mm")
-            + budget_value(budget, "mounting", "pupil_behind_glass_mm")) * 1e-3
 
 
 def holder_mounting(holder_json: str | Path) -> dict:

@@ -34,6 +34,7 @@ from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
+from doefab.tolerance.sources import apply_psf_effects
 
 __all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "DEFAULT_MARGIN"]
 
@@ -261,7 +262,8 @@ class PSFJudge:
             plan = self.plan(halves, err.mount_shift[0], big)
             got = plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
             return to_device(got, "cpu")
-        return self.reuse(source, halves, k, compute) if shared else compute(halves)
+        out = self.reuse(source, halves, k, compute) if shared else compute(halves)
+        return apply_psf_effects(out, err)  # the sources of error that act after the pupil (none shipped)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""

@@ -13,7 +13,8 @@ import math
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from doefab.tolerance.errors import PartErrors, budget_value, nominal_gap, sensor_errors
+from doefab.tolerance.errors import PartErrors
+from doefab.tolerance.sources import budget_value, nominal_gap, sensor_errors
 
 __all__ = ["Kind", "KINDS", "kind", "budget_part"]
 
@@ -43,6 +44,7 @@ class Kind:
     error-free part (the axial gap's spread about its nominal value); None: the error-free part."""
 
     name: str
+    source: str  # the source of error (``sources.SOURCES``) whose budget keys and draws it judges
     unit: str
     si: float  # SI units per ``unit``
     sweep: tuple
@@ -105,37 +107,39 @@ def _crosstalk_value(calibrated: bool):
 
 
 KINDS = (
-    Kind("etch depth (systematic)", "%", 0.01, (-10, -5, -2, 2, 5, 10),
+    Kind("etch depth (systematic)", "etch depth", "%", 0.01, (-10, -5, -2, 2, 5, 10),
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
          lambda b: math.hypot(_g(b, "etch", "systematic_sigma_percent"), _g(b, "etch", "random_sigma_percent")) / 100,
          False),
-    Kind("mask overlay", "µm rms length", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
+    Kind("mask overlay", "mask overlay", "µm rms length", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
          lambda b: math.sqrt(2) * _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
-    Kind("mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
+    Kind("mask rotation", "mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
          lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True),
-    Kind("edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
+    Kind("edge bias", "edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
          lambda v, n: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
          True),
-    Kind("corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0), lambda v, n: replace(PartErrors(), corner_rounding=v),
+    Kind("corner rounding", "corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0),
+         lambda v, n: replace(PartErrors(), corner_rounding=v),
          lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True),
-    Kind("surface roughness", "nm rms", 1e-9, (5, 10, 20),
+    Kind("surface roughness", "surface roughness", "nm rms", 1e-9, (5, 10, 20),
          lambda v, n: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
          lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True),
-    Kind("decenter across split", "mm", 1e-3, (0.05, 0.1, 0.25),
+    Kind("decenter across split", "decenter", "mm", 1e-3, (0.05, 0.1, 0.25),
          lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), _decenter_sigma, False),
-    Kind("decenter along split", "mm", 1e-3, (0.05, 0.1, 0.25),
+    Kind("decenter along split", "decenter", "mm", 1e-3, (0.05, 0.1, 0.25),
          lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), _decenter_sigma, False),
-    Kind("mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
+    Kind("mount rotation", "mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
          lambda v, n: replace(PartErrors(), mount_rotation=v),
          lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
-    Kind("axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
+    Kind("axial gap", "axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
          nominal_gap, False),
-    Kind("axial gap spread", "mm about the nominal gap", 1e-3, (), lambda v, n: replace(PartErrors(), axial_gap=v),
-         _gap_sigma, False, _gap_part(_gap_sigma), _gap_part(lambda b: 0.0)),
-    Kind("crosstalk, uncalibrated", "%", 0.01, (2, 5, 10), _crosstalk(False), _crosstalk_value(False), False,
-         _crosstalk_part(False)),
-    Kind("crosstalk, calibrated", "%", 0.01, (2, 5, 10), _crosstalk(True), _crosstalk_value(True), False,
-         _crosstalk_part(True)),
+    Kind("axial gap spread", "axial gap", "mm about the nominal gap", 1e-3, (),
+         lambda v, n: replace(PartErrors(), axial_gap=v), _gap_sigma, False, _gap_part(_gap_sigma),
+         _gap_part(lambda b: 0.0)),
+    Kind("crosstalk, uncalibrated", "sensor crosstalk", "%", 0.01, (2, 5, 10), _crosstalk(False),
+         _crosstalk_value(False), False, _crosstalk_part(False)),
+    Kind("crosstalk, calibrated", "sensor crosstalk", "%", 0.01, (2, 5, 10), _crosstalk(True),
+         _crosstalk_value(True), False, _crosstalk_part(True)),
 )
 
 

@@ -31,89 +31,23 @@ from dataclasses import replace
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.tolerance.errors import PartErrors, budget_value, nominal_gap, sample_errors
+from doefab.tolerance.errors import PartErrors, sample_errors
+from doefab.tolerance.sources import Param, fixed_fields, surrogate_params
 
 __all__ = ["parameters", "fit_surrogate", "calibrate", "surrogate_yield", "validate", "predict"]
 
 
-def _chain_depth(chain: dict, m: int) -> int:
-    """How many plates' overlay errors add up on mask m (its path to the chrome plate in the alignment chain)."""
-    plate, depth, seen = m + 1, 0, set()
-    while plate != 0 and plate not in seen:
-        seen.add(plate)
-        depth += 1
-        plate = chain.get(plate, 0)
-    return max(depth, 1)
-
-
-def parameters(budget: dict, chain: dict, n_masks: int, gap: bool = False) -> list[tuple[str, float, object]]:
-    """[(name, step h, setter(part, x) → part)] of the budget's random errors (zero-σ ones left out); overlay
-    steps are 2 σ of the composed shift of each mask (√(plates on its alignment path) · σ). ``gap``: the axial
-    gap's random part is a parameter too (only where the lens, not the DOE, is the aperture stop: otherwise the
-    gap moves nothing)."""
-    g = lambda s, k: budget_value(budget, s, k)  # noqa: E731
-    out = []
-    depth = math.hypot(g("etch", "systematic_sigma_percent"), g("etch", "random_sigma_percent")) / 100
-    for m in range(n_masks if depth > 0 else 0):
-        out.append((f"etch depth, mask {m + 1}", 2 * depth, _setter("depth_scale", m, 1.0)))
-    shift = g("overlay", "shift_sigma_um") * 1e-6
-    for m in range(n_masks if shift > 0 else 0):
-        h = 2 * shift * math.sqrt(_chain_depth(chain, m))
-        out.append((f"overlay x, mask {m + 1}", h, _setter("overlay", m, None, 0)))
-        out.append((f"overlay y, mask {m + 1}", h, _setter("overlay", m, None, 1)))
-    rot = g("overlay", "rotation_sigma_urad") * 1e-6
-    for m in range(n_masks if rot > 0 else 0):
-        out.append((f"mask rotation, mask {m + 1}", 2 * rot * math.sqrt(_chain_depth(chain, m)),
-                    _setter("rotation", m, None)))
-    if g("lithography", "edge_bias_sigma_um") > 0:
-        out.append(("edge bias", 2e-6 * g("lithography", "edge_bias_sigma_um"), _field("edge_bias")))
-    dmax = g("mounting", "decenter_max_mm") * 1e-3
-    if dmax > 0:
-        out.append(("decenter across split", dmax, _pair("mount_shift", 0)))
-        out.append(("decenter along split", dmax, _pair("mount_shift", 1)))
-    if g("mounting", "rotation_sigma_deg") > 0:
-        out.append(("mount rotation", 2 * math.radians(g("mounting", "rotation_sigma_deg")), _field("mount_rotation")))
-    if gap and g("mounting", "axial_gap_sigma_mm") > 0:
-        g0 = nominal_gap(budget)
-        out.append(("axial gap", 2e-3 * g("mounting", "axial_gap_sigma_mm"),
-                    lambda part, x: replace(part, axial_gap=max(0.0, g0 + x))))
-    return out
-
-
-def _setter(name, m, base, axis=None):
-    def set_(part, x):
-        v = list(getattr(part, name))
-        if axis is None:
-            v[m] = (base if base is not None else 0.0) + x
-        else:
-            xy = list(v[m])
-            xy[axis] = x
-            v[m] = tuple(xy)
-        return replace(part, **{name: tuple(v)})
-    return set_
-
-
-def _field(name):
-    return lambda part, x: replace(part, **{name: x})
-
-
-def _pair(name, axis):
-    def set_(part, x):
-        v = list(getattr(part, name))
-        v[axis] = x
-        return replace(part, **{name: tuple(v)})
-    return set_
+def parameters(budget: dict, chain: dict, n_masks: int, gap: bool = False) -> list[Param]:
+    """[Param(name, step h, set, get, uniform)] of the budget's random errors (zero-σ ones left out), from its
+    sources of error (``sources.SOURCES``); overlay steps are 2 σ of the composed shift of each mask (√(plates on
+    its alignment path) · σ). ``gap``: the axial gap's random part is a parameter too (only where the lens, not
+    the DOE, is the aperture stop: otherwise the gap moves nothing)."""
+    return surrogate_params(budget, chain, n_masks, gap)
 
 
 def base_part(budget: dict) -> PartErrors:
     """The part with the budget's fixed errors only (no random draw)."""
-    from doefab.tolerance.errors import sensor_errors
-
-    g = lambda s, k, d=0.0: budget_value(budget, s, k, d)  # noqa: E731
-    return replace(PartErrors(), corner_rounding=g("lithography", "corner_rounding_um") * 1e-6,
-                   roughness=g("surface", "roughness_rms_nm") * 1e-9,
-                   roughness_corr=g("surface", "correlation_length_um", 2.0) * 1e-6, axial_gap=nominal_gap(budget),
-                   **sensor_errors(budget))
+    return PartErrors(**fixed_fields(budget))
 
 
 def features(part: PartErrors, budget: dict, chain: dict, n_masks: int, gap: bool = False) -> np.ndarray:
@@ -123,23 +57,7 @@ def features(part: PartErrors, budget: dict, chain: dict, n_masks: int, gap: boo
 
     shifts, rots = compose_overlay(part, chain, n_masks)
     composed = replace(part.for_masks(n_masks), overlay=tuple(shifts), rotation=tuple(rots))
-    vals = []
-    for name, _, _ in parameters(budget, chain, n_masks, gap):
-        if name.startswith("etch depth"):
-            vals.append(composed.depth_scale[int(name[-1]) - 1] - 1.0)
-        elif name.startswith("overlay"):
-            vals.append(composed.overlay[int(name[-1]) - 1][0 if name[8] == "x" else 1])
-        elif name.startswith("mask rotation"):
-            vals.append(composed.rotation[int(name[-1]) - 1])
-        elif name == "edge bias":
-            vals.append(composed.edge_bias)
-        elif name.startswith("decenter"):
-            vals.append(composed.mount_shift[0 if "across" in name else 1])
-        elif name == "axial gap":
-            vals.append(composed.axial_gap - nominal_gap(budget))
-        else:
-            vals.append(composed.mount_rotation)
-    return np.array(vals)
+    return np.array([p.get(composed) for p in parameters(budget, chain, n_masks, gap)], float)
 
 
 def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *, n_masks: int,
@@ -154,14 +72,14 @@ def fit_surrogate(evaluate, budget: dict, chain: dict, progress: bool = True, *,
     t = time.perf_counter()
     bar = _Bar(2 * len(params) + 1, progress)
     m0 = bar.judge(evaluate, base)
-    ends = [(bar.judge(evaluate, set_(base, -h)), bar.judge(evaluate, set_(base, h))) for _, h, set_ in params]
-    a = [(plus - minus) / (2 * h) for (minus, plus), (_, h, _) in zip(ends, params)]
-    b = [(plus + minus - 2 * m0) / (2 * h * h) for (minus, plus), (_, h, _) in zip(ends, params)]
+    ends = [(bar.judge(evaluate, set_(base, -h)), bar.judge(evaluate, set_(base, h))) for _, h, set_, *_ in params]
+    a = [(plus - minus) / (2 * h) for (minus, plus), (_, h, *_) in zip(ends, params)]
+    b = [(plus + minus - 2 * m0) / (2 * h * h) for (minus, plus), (_, h, *_) in zip(ends, params)]
     loss = [max(m0 - minus, m0 - plus, 0.0) for minus, plus in ends]
     curves = {}
-    for (name, h, set_), (minus, plus), lost in zip(params, ends, loss):
+    for (name, h, set_, _, uniform), (minus, plus), lost in zip(params, ends, loss):
         if lost > 0 and lost >= refine * max(loss):
-            more = (-0.5, 0.5) if name.startswith("decenter") else (-1.5, -0.5, 0.5, 1.5)  # decenter: uniform, ±h
+            more = (-0.5, 0.5) if uniform else (-1.5, -0.5, 0.5, 1.5)  # a uniform error lies within ±h
             bar.more(len(more))
             pts = {-1.0: minus, 0.0: m0, 1.0: plus, **{u: bar.judge(evaluate, set_(base, u * h)) for u in more}}
             curves[name] = {"u": sorted(pts), "metric": [pts[u] for u in sorted(pts)]}

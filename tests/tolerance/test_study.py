@@ -117,7 +117,7 @@ def test_command_writes_json_report_and_plots(design_dir, tmp_path, capsys):
     assert model["base"] == pytest.approx(judge.evaluate(base)["metric"], rel=1e-9)
     params = parameters(budget, judge.chain, judge.n_masks, model["gap"])
     j = int(np.argmax(np.abs(model["a"]) * model["h"] + np.abs(model["b"]) * np.square(model["h"])))
-    name, h, set_ = params[j]
+    name, h, set_ = params[j].name, params[j].h, params[j].set
     assert name == model["names"][j] and abs(model["a"][j]) + abs(model["b"][j]) > 0
     for x in (h, -h):
         part = set_(base, x)
@@ -348,7 +348,7 @@ def test_the_surrogate_recovers_a_known_expansion_and_its_yield():
     from doefab.tolerance.surrogate import calibrate, fit_surrogate, parameters, predict, surrogate_yield
 
     budget, chain = load_budget(), {1: 0, 2: 0, 3: 0, 4: 0}
-    hs = {name: h for name, h, _ in parameters(budget, chain, 4)}
+    hs = {p.name: p.h for p in parameters(budget, chain, 4)}
     quad = _known_surrogate_metric(hs, cubic=0.0)
     model = fit_surrogate(quad, budget, chain, False, n_masks=4)
     want = {name: (0.0, 0.0) for name in hs}
