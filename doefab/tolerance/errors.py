@@ -46,6 +46,7 @@ class PartErrors:
     roughness_corr: float = 2e-6
     mount_shift: tuple = (0.0, 0.0)  # metres: across (x) and along (y) the split line
     mount_rotation: float = 0.0
+    mount_tilt: float = 0.0  # radians: the die's normal off the optical axis (the light meets it at this angle)
     axial_gap: float = 0.0  # metres: DOE in front of the aperture plane (doefab.optics.gap)
     crosstalk: tuple = (0.0, 0.0)  # (α_l→r, α_r→l) at the sensor's centre column
     crosstalk_slope: float = 0.0  # change of α_l→r (up) and α_r→l (down) from the centre to the calibrated edge

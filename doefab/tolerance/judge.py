@@ -34,7 +34,7 @@ from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
-from doefab.tolerance.sources import apply_psf_effects
+from doefab.tolerance.sources import apply_psf_effects, tilt_phase_factor
 
 __all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "DEFAULT_MARGIN"]
 
@@ -227,7 +227,11 @@ class PSFJudge:
         cells = self.relief.n
         full = (1 << self.n_masks) - 1
         heights = pattern_heights(self.n_masks, self.step, err.for_masks(self.n_masks).depth_scale) - full * self.step
-        phases = [plan.phase_per_metre(i) for i in range(len(self.design.wavelengths))]
+        # a tilted die: the light crosses each step at the tilt's angle (a longer optical path, sources.py)
+        n_of = self.design.camera.material.index
+        phases = [plan.phase_per_metre(i) * (1.0 if not err.mount_tilt else
+                                             tilt_phase_factor(float(err.mount_tilt), float(n_of(wl))))
+                  for i, wl in enumerate(self.design.wavelengths)]
         if th == 0.0:
             fields = transmittance(self.relief.die_histogram(me, (r0, r1), (c0, c_end)), heights, phases)
         else:

@@ -29,7 +29,8 @@ from doefab.errors import DoefabError
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
 
 __all__ = ["BudgetKey", "Param", "Source", "SOURCES", "source", "budget_keys", "whole_keys", "fixed_fields",
-           "drawn_fields", "surrogate_params", "apply_psf_effects", "chain_depth", "budget_value", "nominal_gap", "sensor_errors"]
+           "drawn_fields", "surrogate_params", "apply_psf_effects", "chain_depth", "budget_value", "nominal_gap",
+           "sensor_errors", "tilt_phase_factor"]
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,22 @@ def _gap_params(b, chain, n, gap):
                   lambda part: part.axial_gap - g0)]
 
 
+# ---- mount tilt: the die's normal off the optical axis ---------------------------------------------------------
+def tilt_phase_factor(theta: float, n: float) -> float:
+    """The relief's optical path difference at incidence ``theta`` (radians) over the one at normal incidence, for
+    a relief of index ``n`` in air: (√(n² − sin²θ) − cos θ) / (n − 1), 1 + θ²/(2n) to second order (a step
+    of height h delays a ray that crosses it at θ by h·(n·cos θ_t − cos θ), θ_t its angle inside the glass).
+
+    Example: ``tilt_phase_factor(math.radians(1), 1.46)`` → 1.000104 (a 1° tilt deepens the relief by 0.01 %)."""
+    s = math.sin(theta)
+    return (math.sqrt(n * n - s * s) - math.cos(theta)) / (n - 1)
+
+
+def _tilt_params(b, chain, n, gap):
+    s = _v(b, "mounting", "tilt_sigma_deg")
+    return [Param("mount tilt", 2 * math.radians(s), *_scalar("mount_tilt"))] if s > 0 else []
+
+
 def sensor_errors(budget: dict) -> dict:
     """The ``PartErrors`` fields of the budget's ``[sensor]`` section (dual-pixel crosstalk and its calibration; the
     sensor's noise where a scene's ``[sensor]`` put it there, the default sensor's otherwise)."""
@@ -242,6 +259,9 @@ SOURCES = (
     Source("axial gap", _keys("mounting", ("axial_gap_mm", 0, 50), ("axial_gap_sigma_mm", 0, 10),
                               ("pupil_behind_glass_mm", 0, 45)),
            fixed=lambda b: {"axial_gap": nominal_gap(b)}, draw=_gap_draw, params=_gap_params),
+    Source("mount tilt", _keys("mounting", ("tilt_sigma_deg", 0, 10)),
+           draw=lambda b, rng, m: {"mount_tilt": float(rng.normal(0, math.radians(
+               _v(b, "mounting", "tilt_sigma_deg"))))}, params=_tilt_params),
     Source("sensor crosstalk", _keys("sensor", ("crosstalk_lr_percent", 0, 49.9), ("crosstalk_rl_percent", 0, 49.9),
                                      ("crosstalk_slope_percent", 0, 20), ("calibrated",),
                                      ("calibration_rows", 1, 100000, True), ("calibration_level", 0.01, 1),
