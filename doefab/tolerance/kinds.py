@@ -41,7 +41,8 @@ class Kind:
     same probability point and the ranking compares like with like; an error every part carries alike (corner
     rounding, roughness, crosstalk, the holder's nominal axial gap) at that value; 0 when the budget has none of
     it. ``base_from_budget``: the part a deviation is measured from where the draws do not centre on the
-    error-free part (the axial gap's spread about its nominal value); None: the error-free part."""
+    error-free part (the axial gap's spread about its nominal value); None: the error-free part. ``remedy``: what
+    would remove it (the report's "would buy the most")."""
 
     name: str
     source: str  # the source of error (``sources.SOURCES``) whose budget keys and draws it judges
@@ -53,6 +54,7 @@ class Kind:
     grid: bool
     part_from_budget: Callable[[dict], PartErrors] | None = None
     base_from_budget: Callable[[dict], PartErrors] | None = None
+    remedy: str = ""  # what would remove it, for the report's "would buy the most"
 
     def budget_part(self, budget: dict, n_masks: int) -> PartErrors:
         """The part with one standard deviation of this error alone, for a design of ``n_masks`` masks."""
@@ -110,39 +112,54 @@ KINDS = (
     Kind("etch depth (systematic)", "etch depth", "%", 0.01, (-10, -5, -2, 2, 5, 10),
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
          lambda b: math.hypot(_g(b, "etch", "systematic_sigma_percent"), _g(b, "etch", "random_sigma_percent")) / 100,
-         False),
+         False,
+         remedy="tighter etch-depth control (monitor wafers, an etch-stop layer)"),
     Kind("mask overlay", "mask overlay", "µm rms length", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
-         lambda b: math.sqrt(2) * _g(b, "overlay", "shift_sigma_um") * 1e-6, True),
+         lambda b: math.sqrt(2) * _g(b, "overlay", "shift_sigma_um") * 1e-6, True,
+         remedy="a better aligner (a stepper holds ≤ 0.2 µm; contact aligners 0.5–2 µm)"),
     Kind("mask rotation", "mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
-         lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True),
+         lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True,
+         remedy="a better aligner"),
     Kind("edge bias", "edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
          lambda v, n: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
-         True),
+         True,
+         remedy="CD control (exposure dose and etch calibrated on the CD ladder)"),
     Kind("corner rounding", "corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0),
          lambda v, n: replace(PartErrors(), corner_rounding=v),
-         lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True),
+         lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True,
+         remedy="a finer mask writer"),
     Kind("surface roughness", "surface roughness", "nm rms", 1e-9, (5, 10, 20),
          lambda v, n: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
-         lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True),
+         lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True,
+         remedy="a smoother etch"),
     Kind("decenter across split", "decenter", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), _decenter_sigma, False),
+         lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), _decenter_sigma, False,
+         remedy="a tighter die pocket in the holder (holder clearance_mm) or an alignment pin"),
     Kind("decenter along split", "decenter", "mm", 1e-3, (0.05, 0.1, 0.25),
-         lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), _decenter_sigma, False),
+         lambda v, n: replace(PartErrors(), mount_shift=(0.0, v)), _decenter_sigma, False,
+         remedy="a tighter die pocket in the holder (clearance_mm)"),
     Kind("mount rotation", "mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
          lambda v, n: replace(PartErrors(), mount_rotation=v),
-         lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True),
+         lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True,
+         remedy="index pins or a tighter pocket (holder clearance_mm), or turning the die to the split"),
     Kind("mount tilt", "mount tilt", "°", math.pi / 180, (0.5, 1, 2, 5),
          lambda v, n: replace(PartErrors(), mount_tilt=v),
-         lambda b: math.radians(_g(b, "mounting", "tilt_sigma_deg")), False),
+         lambda b: math.radians(_g(b, "mounting", "tilt_sigma_deg")), False,
+         remedy="a flatter die seat (the holder's pocket floor) or a shim under the die"),
     Kind("axial gap", "axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
-         nominal_gap, False),
+         nominal_gap, False,
+         remedy="mounting the DOE at the lens's stop"),
     Kind("axial gap spread", "axial gap", "mm about the nominal gap", 1e-3, (),
          lambda v, n: replace(PartErrors(), axial_gap=v), _gap_sigma, False, _gap_part(_gap_sigma),
-         _gap_part(lambda b: 0.0)),
+         _gap_part(lambda b: 0.0),
+         remedy="a tighter thread stop or print tolerance of the holder (axial_gap_sigma_mm)"),
     Kind("crosstalk, uncalibrated", "sensor crosstalk", "%", 0.01, (2, 5, 10), _crosstalk(False),
-         _crosstalk_value(False), False, _crosstalk_part(False)),
+         _crosstalk_value(False), False, _crosstalk_part(False),
+         remedy="calibrating the dual-pixel crosstalk (white-wall captures, the paper's Eq. 30–31)"),
     Kind("crosstalk, calibrated", "sensor crosstalk", "%", 0.01, (2, 5, 10), _crosstalk(True),
-         _crosstalk_value(True), False, _crosstalk_part(True)),
+         _crosstalk_value(True), False, _crosstalk_part(True),
+         remedy="a per-pixel crosstalk calibration repeated before each capture session (a per-column one "
+                "leaves the rows' variation, the field's along the columns and the drift)"),
 )
 
 

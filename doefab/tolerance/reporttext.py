@@ -6,27 +6,13 @@ from __future__ import annotations
 import math
 
 from doefab.reconstruction.metrics import DISPLAY, metric_text
+from doefab.tolerance.kinds import KINDS
 from doefab.tolerance.montecarlo import interval_text
 
 __all__ = ["body_lines", "lead_text", "summary_lines", "spec_words", "delta_text", "REMEDY"]
 
-# what would remove each error, for the summary
-REMEDY = {
-    "etch depth (systematic)": "tighter etch-depth control (monitor wafers, an etch-stop layer)",
-    "mask overlay": "a better aligner (a stepper holds ≤ 0.2 µm; contact aligners 0.5–2 µm)",
-    "mask rotation": "a better aligner",
-    "edge bias": "CD control (exposure dose and etch calibrated on the CD ladder)",
-    "corner rounding": "a finer mask writer",
-    "surface roughness": "a smoother etch",
-    "decenter across split": "a tighter die pocket in the holder (holder clearance_mm) or an alignment pin",
-    "decenter along split": "a tighter die pocket in the holder (clearance_mm)",
-    "mount rotation": "index pins or a tighter pocket (holder clearance_mm), or turning the die to the split",
-    "axial gap": "mounting the DOE at the lens's stop",
-    "axial gap spread": "a tighter thread stop or print tolerance of the holder (axial_gap_sigma_mm)",
-    "crosstalk, uncalibrated": "calibrating the dual-pixel crosstalk (white-wall captures, the paper's Eq. 30–31)",
-    "crosstalk, calibrated": "a per-pixel crosstalk calibration repeated before each capture session (a per-column "
-                             "one leaves the rows' variation, the field's along the columns and the drift)",
-}
+# what would remove each error, for the summary: each kind's own (``kinds.KINDS``)
+REMEDY = {k.name: k.remedy for k in KINDS}
 PSF_WORDS = "of its coded light where the task wants it (the PSF metric)"
 
 

@@ -18,9 +18,11 @@ from doefab.tolerance.surrogate import features, parameters
 
 def test_every_judged_kind_names_a_source_and_every_source_is_judged():
     """The report judges each source of error at least once (a source no kind names would be drawn but never
-    ranked), and a kind's source is a row of the table."""
+    ranked), a kind's source is a row of the table, and each kind says what would remove it ("would buy the
+    most")."""
     names = {s.name for s in sources.SOURCES}
     assert {k.source for k in KINDS} == names
+    assert all(k.remedy.strip() for k in KINDS), [k.name for k in KINDS if not k.remedy.strip()]  # the report's
 
 
 def test_the_shipped_budget_sets_every_key_of_the_table_and_no_other():
