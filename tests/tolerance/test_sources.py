@@ -41,19 +41,22 @@ def test_whole_number_keys_refuse_fractions(tmp_path):
         load_budget(f)
 
 
-@pytest.fixture(scope="module")
-def design_dir(tmp_path_factory):
+def _staircase(root, wavelengths):
     """A 4-level staircase of 10-pixel steps on an 80-pixel grid, the PSF inside its window: judged in a second."""
-    root = tmp_path_factory.mktemp("toysource")
     cam = doefab.Camera(aperture_diameter=0.4e-3, doe_pitch=5.4e-6, doe_pixels=80, sensor_pitch=5.4e-6,
                         sensor_distance=20e-3, focus_distance=5.0)
     lv = np.tile((np.arange(80) // 10 % 4).astype(np.uint8), (80, 1))
     lv[:, 40:] = 3
-    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam, wavelengths=(550e-9,),
+    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam, wavelengths=wavelengths,
                depths=(5.0,), height=doefab.levels_to_height(lv, cam, 4), levels=lv, n_levels=4,
                metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
     d.save(root / "design")
     return root / "design"
+
+
+@pytest.fixture(scope="module")
+def design_dir(tmp_path_factory):
+    return _staircase(tmp_path_factory.mktemp("toysource"), (550e-9,))
 
 
 def _scatter(psf, loss):
@@ -145,17 +148,8 @@ def test_the_tilt_factor_is_the_ray_traced_path_through_a_step(deg, n):
 
 @pytest.fixture(scope="module")
 def two_band_dir(tmp_path_factory):
-    """The staircase of ``design_dir`` designed for two wavelengths (blue and red: two substrate indices)."""
-    root = tmp_path_factory.mktemp("tilt2")
-    cam = doefab.Camera(aperture_diameter=0.4e-3, doe_pitch=5.4e-6, doe_pixels=80, sensor_pitch=5.4e-6,
-                        sensor_distance=20e-3, focus_distance=5.0)
-    lv = np.tile((np.arange(80) // 10 % 4).astype(np.uint8), (80, 1))
-    lv[:, 40:] = 3
-    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam,
-               wavelengths=(450e-9, 650e-9), depths=(5.0,), height=doefab.levels_to_height(lv, cam, 4), levels=lv,
-               n_levels=4, metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
-    d.save(root / "design")
-    return root / "design"
+    """The staircase designed for two wavelengths (blue and red: two substrate indices)."""
+    return _staircase(tmp_path_factory.mktemp("tilt2"), (450e-9, 650e-9))
 
 
 def test_a_tilted_part_is_its_relief_deepened_by_the_traced_path(design_dir, two_band_dir):
