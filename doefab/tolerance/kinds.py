@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 from doefab.tolerance.errors import PartErrors
-from doefab.tolerance.sources import budget_value, nominal_gap, sensor_errors
+from doefab.tolerance.sources import budget_value, etch_sigma, nominal_gap, sensor_errors
 
 __all__ = ["Kind", "KINDS", "kind", "budget_part"]
 
@@ -67,10 +67,6 @@ class Kind:
         return PartErrors() if self.base_from_budget is None else self.base_from_budget(budget)
 
 
-def _g(budget, sec, key, default=0.0):
-    return budget_value(budget, sec, key, default)
-
-
 def _crosstalk(calibrated: bool):
     def build(v, n_masks):
         return replace(PartErrors(), crosstalk=(v, v), calibrated=calibrated)
@@ -79,7 +75,7 @@ def _crosstalk(calibrated: bool):
 
 def _gap_sigma(budget) -> float:
     """One standard deviation (m) of the axial gap about the holder's nominal gap."""
-    return _g(budget, "mounting", "axial_gap_sigma_mm") * 1e-3
+    return budget_value(budget, "mounting", "axial_gap_sigma_mm") * 1e-3
 
 
 def _gap_part(offset):
@@ -89,7 +85,7 @@ def _gap_part(offset):
 
 def _decenter_sigma(budget) -> float:
     """One standard deviation (m) of the decenter, uniform in ±decenter_max_mm on each axis."""
-    return _g(budget, "mounting", "decenter_max_mm") * 1e-3 / math.sqrt(3)
+    return budget_value(budget, "mounting", "decenter_max_mm") * 1e-3 / math.sqrt(3)
 
 
 def _crosstalk_part(calibrated: bool):
@@ -111,26 +107,27 @@ def _crosstalk_value(calibrated: bool):
 KINDS = (
     Kind("etch depth (systematic)", "etch depth", "%", 0.01, (-10, -5, -2, 2, 5, 10),
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
-         lambda b: math.hypot(_g(b, "etch", "systematic_sigma_percent"), _g(b, "etch", "random_sigma_percent")) / 100,
+         etch_sigma,
          False,
          remedy="tighter etch-depth control (monitor wafers, an etch-stop layer)"),
     Kind("mask overlay", "mask overlay", "µm rms length", 1e-6, (0.1, 0.25, 0.5, 1, 2), _overlay,
-         lambda b: math.sqrt(2) * _g(b, "overlay", "shift_sigma_um") * 1e-6, True,
+         lambda b: math.sqrt(2) * budget_value(b, "overlay", "shift_sigma_um") * 1e-6, True,
          remedy="a better aligner (a stepper holds ≤ 0.2 µm; contact aligners 0.5–2 µm)"),
     Kind("mask rotation", "mask rotation", "µrad", 1e-6, (10, 30, 100, 300), _mask_rotation,
-         lambda b: _g(b, "overlay", "rotation_sigma_urad") * 1e-6, True,
+         lambda b: budget_value(b, "overlay", "rotation_sigma_urad") * 1e-6, True,
          remedy="a better aligner"),
     Kind("edge bias", "edge bias", "µm", 1e-6, (-0.5, -0.2, -0.1, 0.1, 0.2, 0.5),
-         lambda v, n: replace(PartErrors(), edge_bias=v), lambda b: _g(b, "lithography", "edge_bias_sigma_um") * 1e-6,
+         lambda v, n: replace(PartErrors(), edge_bias=v),
+         lambda b: budget_value(b, "lithography", "edge_bias_sigma_um") * 1e-6,
          True,
          remedy="CD control (exposure dose and etch calibrated on the CD ladder)"),
     Kind("corner rounding", "corner rounding", "µm", 1e-6, (0.1, 0.3, 1.0),
          lambda v, n: replace(PartErrors(), corner_rounding=v),
-         lambda b: _g(b, "lithography", "corner_rounding_um") * 1e-6, True,
+         lambda b: budget_value(b, "lithography", "corner_rounding_um") * 1e-6, True,
          remedy="a finer mask writer"),
     Kind("surface roughness", "surface roughness", "nm rms", 1e-9, (5, 10, 20),
          lambda v, n: replace(PartErrors(), roughness=v, roughness_corr=2e-6),
-         lambda b: _g(b, "surface", "roughness_rms_nm") * 1e-9, True,
+         lambda b: budget_value(b, "surface", "roughness_rms_nm") * 1e-9, True,
          remedy="a smoother etch"),
     Kind("decenter across split", "decenter", "mm", 1e-3, (0.05, 0.1, 0.25),
          lambda v, n: replace(PartErrors(), mount_shift=(v, 0.0)), _decenter_sigma, False,
@@ -140,11 +137,11 @@ KINDS = (
          remedy="a tighter die pocket in the holder (clearance_mm)"),
     Kind("mount rotation", "mount rotation", "°", math.pi / 180, (0.25, 0.5, 1.0, 2.4),
          lambda v, n: replace(PartErrors(), mount_rotation=v),
-         lambda b: math.radians(_g(b, "mounting", "rotation_sigma_deg")), True,
+         lambda b: math.radians(budget_value(b, "mounting", "rotation_sigma_deg")), True,
          remedy="index pins or a tighter pocket (holder clearance_mm), or turning the die to the split"),
     Kind("mount tilt", "mount tilt", "°", math.pi / 180, (0.5, 1, 2, 5),
          lambda v, n: replace(PartErrors(), mount_tilt=v),
-         lambda b: math.radians(_g(b, "mounting", "tilt_sigma_deg")), False,
+         lambda b: math.radians(budget_value(b, "mounting", "tilt_sigma_deg")), False,
          remedy="a flatter die seat (the holder's pocket floor) or a shim under the die"),
     Kind("axial gap", "axial gap", "mm", 1e-3, (0.5, 1, 2, 5, 10), lambda v, n: replace(PartErrors(), axial_gap=v),
          nominal_gap, False,

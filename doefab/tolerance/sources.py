@@ -30,7 +30,7 @@ from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E
 
 __all__ = ["BudgetKey", "Param", "Source", "SOURCES", "source", "budget_keys", "whole_keys", "fixed_fields",
            "drawn_fields", "surrogate_params", "apply_psf_effects", "chain_depth", "budget_value", "nominal_gap",
-           "sensor_errors", "tilt_phase_factor"]
+           "sensor_errors", "tilt_phase_factor", "etch_sigma"]
 
 
 @dataclass(frozen=True)
@@ -121,7 +121,8 @@ def _scalar(name: str, axis: int | None = None):
 
 
 # ---- etch depth: a systematic part shared by a die's plates and a random part per plate ----------------------
-def _etch_sigma(b: dict) -> float:
+def etch_sigma(b: dict) -> float:
+    """One standard deviation of a plate's etch depth (fraction): the systematic and random parts in quadrature."""
     return math.hypot(_v(b, "etch", "systematic_sigma_percent"), _v(b, "etch", "random_sigma_percent")) / 100
 
 
@@ -132,7 +133,7 @@ def _etch_draw(b, rng, m):
 
 
 def _etch_params(b, chain, n, gap):
-    s = _etch_sigma(b)
+    s = etch_sigma(b)
     return [Param(f"etch depth, mask {m + 1}", 2 * s, *_per_mask("depth_scale", m, 1.0)) for m in range(n if s else 0)]
 
 
