@@ -95,9 +95,12 @@ def main(argv=None) -> int:
     ap.add_argument("--only", nargs="*", default=["psf", "design", "train", "judge"])
     ap.add_argument("--devices", nargs="*", default=["cuda", "cpu"])
     ap.add_argument("--tasks", nargs="*", default=["hdr", "hyperspectral", "depth"], help="networks trained")
+    ap.add_argument("--steps", type=int, help="training steps per network (default 100; --quick 2)")
+    ap.add_argument("--parts", type=int, help="parts judged through the network (default 30; --quick 1)")
     args = ap.parse_args(argv)
     q = args.quick
     bands, kernel, iters, steps, parts = (5, 64, 2, 2, 1) if q else (31, 512, 10, 100, 30)
+    steps, parts = args.steps or steps, args.parts or parts
     rows, data = [], {"torch": torch.__version__, "threads": torch.get_num_threads(), "cores": os.cpu_count(),
                       "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None, "rows": {}}
     cases = []
@@ -127,14 +130,18 @@ def main(argv=None) -> int:
             ratio = f"{c / g:.1f}×" if c and g else "—"
             rows.append(f"| {label} | {c:.2f} |" if c else f"| {label} | — |")
             rows[-1] += f" {g:.2f} | {ratio} |" if g else " — | — |"
+            _write(args.out, data, rows)  # after every row: a time limit that stops the script keeps the rows so far
+    print((args.out / "gpu_table.md").read_text())
+    return 0
+
+
+def _write(out: Path, data: dict, rows: list) -> None:
     head = [f"CPU against GPU on one machine ({data['gpu']}; {data['cores']} CPU cores, torch {data['torch']}, "
             f"{data['threads']} intra-op threads on the CPU rows): `python benchmarks/gpu_table.py`.", "",
             "| workload | CPU (s) | GPU (s) | speed-up |", "| --- | --- | --- | --- |"]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "gpu_table.md").write_text("\n".join(head + rows) + "\n")
-    (args.out / "gpu_table.json").write_text(json.dumps(data, indent=1))
-    print("\n".join(head + rows))
-    return 0
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gpu_table.md").write_text("\n".join(head + rows) + "\n")
+    (out / "gpu_table.json").write_text(json.dumps(data, indent=1))
 
 
 if __name__ == "__main__":
