@@ -17,12 +17,29 @@ Example::
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from doefab.errors import DoefabError
 
-__all__ = ["Application", "APPLICATIONS", "application", "of_design", "has", "design_is", "NAMES", "DESIGN_TASKS",
-           "PROPERTIES"]
+__all__ = ["Application", "Metric", "APPLICATIONS", "application", "of_design", "has", "design_is", "NAMES",
+           "DESIGN_TASKS", "PROPERTIES", "HDR_PEAK"]
+
+HDR_PEAK = 256.0  # the paper's Table 1: HDR PSNR with a maximum value of 2^8 (radiance; 1 is the plain capture's clip)
+
+
+class Metric(NamedTuple):
+    """A metric an application's reconstructions are scored by. name: the key its metric function returns.
+    label: how reports name it.  unit: as printed ("dB", "m", "rad"; "" for a ratio or for HDR radiance, which is
+    relative).  higher_is_better: its direction.  span: (lo, hi) the values it can take, in ``unit`` (the range
+    of a tolerance budget's absolute limit on it)."""
+
+    name: str
+    label: str
+    unit: str
+    higher_is_better: bool
+    span: tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -35,7 +52,14 @@ class Application:
     design's planes (a PSF per plane); ``highlights`` — the scenes clip and the network's solve reads both halves'
     PSFs.  camera_preset: the ``doefab.optics.camera.PRESETS`` row its scenes start from (the authors' camera
     for it).  network: the module of its reconstruction network, which has ``default_arch(variant)``,
-    ``build(variant, arch)`` and ``loss(pred, target)`` (imported only when a network is built)."""
+    ``build(variant, arch)`` and ``loss(pred, target)`` (imported only when a network is built).
+
+    Reconstruction: ``metrics`` the ``Metric`` rows its scenes are scored by, in the order budgets and reports
+    list them, computed by ``metric_function`` ("module:function" of (pred, target) → {name: value}, imported
+    when called); ``kernel`` the smallest PSF window (sensor pixels) its captures are simulated with;
+    ``out_channels`` the network's outputs; ``train_metric`` the validation metric logged while training;
+    ``crop`` the training crops' side (pixels); ``image_unit`` and ``error_unit`` what an evaluation figure's
+    result and error panels show."""
 
     name: str
     design_task: str
@@ -48,18 +72,54 @@ class Application:
     spectral: bool = False
     depth: bool = False
     highlights: bool = False
+    metrics: tuple[Metric, ...] = ()
+    metric_function: str = ""
+    kernel: int = 95
+    out_channels: int = 3
+    train_metric: str = "psnr"
+    crop: int = 96
+    image_unit: str = ""
+    error_unit: str = ""
+
+    def metric(self, name: str) -> Metric:
+        """The ``Metric`` row called ``name``; a DoefabError naming this application's metrics for any other."""
+        got = next((m for m in self.metrics if m.name == name), None)
+        if got is None:
+            raise DoefabError(f"{self.name} has no metric {name!r}: choose one of "
+                              f"{', '.join(m.name for m in self.metrics)}")
+        return got
 
 
+_PSNR = (0.0, 100.0)  # dB
 APPLICATIONS = {a.name: a for a in (
     Application("hdr", "streak", "psnr_highlight", "dB", True,
                 "high dynamic range from one exposure: a streak PSF spreads clipped highlights", camera_preset="hdr",
-                network="doefab.reconstruction.hdrnet", highlights=True),
+                network="doefab.reconstruction.hdrnet", highlights=True,
+                metrics=(Metric("psnr_highlight", "highlight PSNR", "dB", True, _PSNR),
+                         Metric("psnr", "PSNR", "dB", True, _PSNR),
+                         Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK)),
+                         Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK))),
+                metric_function="doefab.reconstruction.metrics:hdr_metrics", kernel=95, out_channels=3,
+                image_unit="log(1 + radiance) / log(257)", error_unit="radiance"),
     Application("hyperspectral", "grating", "psnr", "dB", True,
                 "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half",
-                camera_preset="hyperspectral", network="doefab.reconstruction.spectralnet", spectral=True),
+                camera_preset="hyperspectral", network="doefab.reconstruction.spectralnet", spectral=True,
+                metrics=(Metric("psnr", "PSNR", "dB", True, _PSNR),
+                         Metric("sam", "spectral angle (SAM)", "rad", False, (0.0, math.pi)),
+                         Metric("ssim", "SSIM", "", True, (-1.0, 1.0))),
+                metric_function="doefab.reconstruction.metrics:spectral_metrics", kernel=191, out_channels=31,
+                image_unit="band-mean radiance", error_unit="radiance"),
     Application("depth", "half-ring", "mae", "m", False,
                 "depth from one exposure: a half-ring PSF that changes with distance",
-                camera_preset="depth", network="doefab.reconstruction.depthnet", depth=True),
+                camera_preset="depth", network="doefab.reconstruction.depthnet", depth=True,
+                metrics=(Metric("mae", "depth MAE", "m", False, (0.0, 1000.0)),
+                         Metric("rmse", "depth RMSE", "m", False, (0.0, 1000.0)),
+                         Metric("delta125", "pixels within 25 % of the depth (δ<1.25)", "", True, (0.0, 1.0)),
+                         Metric("log10", "mean |log10| depth error", "", False, (0.0, 10.0))),
+                metric_function="doefab.reconstruction.metrics:depth_metrics", kernel=95, out_channels=1,
+                # crop 128: better than 96 on validation scenes, 160 no better (benchmarks/results/
+                # depth_training_crop.md); a cost volume with a 95-pixel PSF needs room
+                train_metric="mae", crop=128, image_unit="depth (m)", error_unit="m"),
 )}
 NAMES = tuple(APPLICATIONS)
 DESIGN_TASKS = tuple(a.design_task for a in APPLICATIONS.values())

@@ -40,6 +40,12 @@ def test_each_application_is_served_by_a_design_task_and_judged_by_a_metric_it_r
     m = app.primary_metric
     assert m in good and (DELIVERED[name][m][1] == "+") == app.higher_is_better
     assert (good[m] > bad[m]) == app.higher_is_better
+    # every registry row is a metric the function returns, and each one's direction is what it measures: the
+    # near reconstruction scores better than the far one by it, and lies within the metric's span
+    assert sorted(good) == sorted(r.name for r in app.metrics)
+    for r in app.metrics:
+        assert (good[r.name] > bad[r.name]) == r.higher_is_better, r.name
+        assert r.span[0] <= good[r.name] <= r.span[1], r.name
 
 
 def test_the_tables_that_were_copies_are_the_registry():
@@ -58,6 +64,34 @@ def test_the_tables_that_were_copies_are_the_registry():
     assert TASK_DESIGN == rows == {n: s.design for n, s in SPECS.items()}
     assert TASK_OF_DESIGN == RECON_TASK == {d: n for n, d in rows.items()}
     assert PRIMARY == {n: a.primary_metric for n, a in APPLICATIONS.items()}
+
+
+def test_the_metric_and_reconstruction_tables_are_views_of_the_registry():
+    """The reports' metric names and units, the tolerance spec's directions and spans, and the reconstruction
+    specs are read from the registry's rows: a row changed there changes each of them."""
+    import dataclasses
+    import importlib
+
+    import doefab.applications as apps
+    import doefab.reconstruction.metrics as metrics
+    import doefab.reconstruction.specs as specs
+    import doefab.tolerance.spec as spec
+
+    assert metrics.DISPLAY["depth"]["mae"] == ("depth MAE", "m") and spec.DELIVERED["hdr"]["psnr"] == ("db", "+")
+    assert spec.SPAN["hyperspectral"]["sam"] == (0.0, np.pi) and specs.SPECS["depth"].crop == 128
+    row = apps.APPLICATIONS["depth"]
+    changed = dataclasses.replace(row, crop=160, metrics=(apps.Metric("mae", "MAE", "m", False, (0.0, 9.0)),))
+    try:
+        apps.APPLICATIONS["depth"] = changed
+        for module in (metrics, spec, specs):
+            importlib.reload(module)
+        assert metrics.DISPLAY["depth"] == {"mae": ("MAE", "m")} and spec.DELIVERED["depth"] == {"mae": ("m", "-")}
+        assert spec.SPAN["depth"] == {"mae": (0.0, 9.0)} and specs.SPECS["depth"].crop == 160
+    finally:
+        apps.APPLICATIONS["depth"] = row
+        for module in (metrics, spec, specs):
+            importlib.reload(module)
+    assert specs.SPECS["depth"].crop == 128
 
 
 @pytest.mark.parametrize("name", list(APPLICATIONS))

@@ -274,9 +274,11 @@ def write_depth_preview(path, depth_m, near_m: float | None = None, far_m: float
 def result_names(task: str, stem: str) -> list[str]:
     """The files :func:`write_result` writes for ``task`` and a capture named ``stem``; ``stem.png`` is always
     the picture to look at."""
-    return {"hdr": [f"{stem}.exr", f"{stem}.png"],
-            "hyperspectral": [f"{stem}.hdr", f"{stem}.img", f"{stem}.png"],
-            "depth": [f"{stem}.depth_m.tiff", f"{stem}.depth_mm.png", f"{stem}.png"]}[task]
+    if has(task, "highlights"):  # radiance
+        return [f"{stem}.exr", f"{stem}.png"]
+    if has(task, "spectral"):
+        return [f"{stem}.hdr", f"{stem}.img", f"{stem}.png"]
+    return [f"{stem}.depth_m.tiff", f"{stem}.depth_mm.png", f"{stem}.png"]
 
 
 def write_result(task: str, result, folder, stem: str, wavelengths_m=None, depth_range_m=None) -> list[Path]:

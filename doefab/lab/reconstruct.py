@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.applications import has
+from doefab.applications import application, has
 from doefab.errors import DoefabError
 
 __all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
@@ -109,7 +109,7 @@ def blend_window(tile: int, overlap: int, first: bool, last: bool) -> np.ndarray
 
 def output_channels(rec) -> int:
     """Channels of the network's result: 3 (HDR radiance), one per band (spectra), 1 (depth in metres)."""
-    return {"hdr": 3, "depth": 1}.get(rec.task, len(rec.pair.wavelengths))
+    return len(rec.pair.wavelengths) if has(rec.task, "spectral") else application(rec.task).out_channels
 
 
 def _check_captures(coded, uncoded) -> tuple[int, int]:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from doefab.applications import has
+from doefab.applications import application, has
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_json, atomic_write_text
 from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_components, split_digest, split_digest_v1
@@ -267,14 +267,14 @@ def _figure(path: Path, task: str, split: str, coded, uncoded, target, preds) ->
 
     panels = [("coded capture", np.moveaxis(coded, 0, -1) ** (1 / 2.2), None),
               ("uncoded capture", np.moveaxis(uncoded, 0, -1) ** (1 / 2.2), None)]
-    unit = {"hdr": "log(1 + radiance) / log(257)", "hyperspectral": "band-mean radiance", "depth": "depth (m)"}[task]
+    unit = application(task).image_unit
     for v, p in preds.items():
         panels.append((f"{v.replace('_', '-')} output", _show(task, p), unit))
     panels.append(("ground truth", _show(task, target), unit))
     ref = "proposed" if "proposed" in preds else next(iter(preds))
     err = np.abs(preds[ref] - target)
     err = err.mean(axis=0) if err.ndim == 3 else err
-    panels.append((f"|{ref.replace('_', '-')} − truth|", err, {"hdr": "radiance", "hyperspectral": "radiance", "depth": "m"}[task]))
+    panels.append((f"|{ref.replace('_', '-')} − truth|", err, application(task).error_unit))
     fig, axes = plt.subplots(2, 4, figsize=(13, 6.6), layout="constrained")
     for ax, (title, img, cb) in zip(axes.flat, panels):
         kw = {"cmap": "viridis"} if img.ndim == 2 else {}

@@ -3,22 +3,19 @@ SAM (radians), depth MAE/RMSE/log10/δ<1.25."""
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
+
+from doefab.applications import APPLICATIONS, HDR_PEAK, application
 
 __all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "metrics_for", "mean_metrics", "HDR_PEAK",
            "HIGHLIGHT_ABOVE", "DISPLAY", "metric_label", "metric_text"]
 
-HDR_PEAK = 256.0  # Table 1: PSNR with a maximum value of 2^8
 HIGHLIGHT_ABOVE = 2.0  # highlight pixels: radiance that saturates the plain half-exposure capture
 #: each task's metrics as reports name them: name → (display name, unit as printed; "" for a ratio or for HDR
-#: radiance, which is relative: 1 is the plain capture's clip)
-DISPLAY = {
-    "hdr": {"psnr_highlight": ("highlight PSNR", "dB"), "psnr": ("PSNR", "dB"),
-            "rmse_highlight": ("highlight RMSE", ""), "rmse": ("RMSE", "")},
-    "hyperspectral": {"psnr": ("PSNR", "dB"), "ssim": ("SSIM", ""), "sam": ("spectral angle (SAM)", "rad")},
-    "depth": {"mae": ("depth MAE", "m"), "rmse": ("depth RMSE", "m"), "log10": ("mean |log10| depth error", ""),
-              "delta125": ("pixels within 25 % of the depth (δ<1.25)", "")},
-}
+#: radiance, which is relative: 1 is the plain capture's clip) — a view of ``doefab.applications``' Metric rows
+DISPLAY = {a.name: {m.name: (m.label, m.unit) for m in a.metrics} for a in APPLICATIONS.values()}
 DIGITS = {"dB": 2}  # decimals a report prints per unit (3 for every other)
 
 
@@ -84,7 +81,12 @@ def metric_text(task: str, name: str, value: float, unit: bool = True) -> str:
 
 
 def metrics_for(task: str, pred: np.ndarray, target: np.ndarray) -> dict:
-    return {"hdr": hdr_metrics, "hyperspectral": spectral_metrics, "depth": depth_metrics}[task](pred, target)
+    """{metric: value} of a reconstruction ``pred`` against ``target`` by the application's ``metric_function``
+    (``doefab.applications``; units as its ``Metric`` rows print them).
+
+    Example: ``metrics_for("depth", np.full((8, 8), 2.2), np.full((8, 8), 2.0))["mae"]`` → 0.2 (m)."""
+    module, name = application(task).metric_function.split(":")
+    return getattr(importlib.import_module(module), name)(pred, target)
 
 
 def mean_metrics(rows: list[dict]) -> dict:

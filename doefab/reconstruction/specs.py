@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from doefab.applications import application, has
+from doefab.applications import APPLICATIONS, has
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
@@ -23,25 +23,22 @@ __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batc
 
 @dataclass(frozen=True)
 class TaskSpec:
-    """name: hdr / hyperspectral / depth.  design: the design task (streak / grating / half-ring).
-    kernel: the smallest PSF window (sensor pixels) used to simulate captures (``network_kernel``: a design
-    optimised in a larger window keeps it).  out_channels: network outputs.  crop: the side (pixels) of the
-    training crops (depth: 128, better than 96 on validation scenes, 160 no better —
-    ``benchmarks/results/depth_training_crop.md``; a cost volume with a 95-pixel PSF needs room)."""
+    """A view of an application's reconstruction row (``doefab.applications.Application``).  name: hdr /
+    hyperspectral / depth.  design: the design task (streak / grating / half-ring).  kernel: the smallest PSF
+    window (sensor pixels) used to simulate captures (``network_kernel``: a design optimised in a larger window
+    keeps it).  out_channels: network outputs.  metric: the validation metric logged while training.  crop: the
+    side (pixels) of the training crops."""
 
     name: str
     design: str
     kernel: int
     out_channels: int
-    metric: str  # the validation metric logged while training (higher is better unless it is MAE)
+    metric: str
     crop: int = 96
 
 
-SPECS = {
-    "hdr": TaskSpec("hdr", application("hdr").design_task, 95, 3, "psnr"),
-    "hyperspectral": TaskSpec("hyperspectral", application("hyperspectral").design_task, 191, 31, "psnr"),
-    "depth": TaskSpec("depth", application("depth").design_task, 95, 1, "mae", crop=128),
-}
+SPECS = {a.name: TaskSpec(a.name, a.design_task, a.kernel, a.out_channels, a.train_metric, a.crop)
+         for a in APPLICATIONS.values()}
 
 
 def get_spec(task: str) -> TaskSpec:

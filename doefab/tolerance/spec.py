@@ -21,26 +21,16 @@ import math
 
 from doefab.applications import APPLICATIONS
 from doefab.errors import DoefabError
-from doefab.reconstruction.metrics import HDR_PEAK
 
 __all__ = ["DELIVERED", "SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "limit_range",
            "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
 
-# delivered metrics per task: name → (unit, better): "+" higher is better, "-" lower is better
-DELIVERED = {
-    "hdr": {"psnr_highlight": ("db", "+"), "psnr": ("db", "+"), "rmse_highlight": ("", "-"), "rmse": ("", "-")},
-    "hyperspectral": {"psnr": ("db", "+"), "sam": ("rad", "-"), "ssim": ("", "+")},
-    "depth": {"mae": ("m", "-"), "rmse": ("m", "-"), "delta125": ("", "+"), "log10": ("", "-")},
-}
-# the values each metric can take (in its unit): the range of an absolute limit; a margin lies in 0 – the width.
-# HDR RMSE is in radiance, ≤ the PSNR's peak (2^8) where the PSNR is ≥ 0 dB; SAM is an angle; SSIM −1–1.
-SPAN = {
-    "psf_metric": (0.0, 1.0),
-    "hdr": {"psnr_highlight": (0.0, 100.0), "psnr": (0.0, 100.0), "rmse_highlight": (0.0, HDR_PEAK),
-            "rmse": (0.0, HDR_PEAK)},
-    "hyperspectral": {"psnr": (0.0, 100.0), "sam": (0.0, math.pi), "ssim": (-1.0, 1.0)},
-    "depth": {"mae": (0.0, 1000.0), "rmse": (0.0, 1000.0), "delta125": (0.0, 1.0), "log10": (0.0, 10.0)},
-}
+# views of the application registry's Metric rows (``doefab.applications``): the delivered metrics per task,
+# name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and the values each can
+# take (in its unit): the range of an absolute limit; a margin lies in 0 – the width
+DELIVERED = {a.name: {m.name: (m.unit.lower(), "+" if m.higher_is_better else "-") for m in a.metrics}
+             for a in APPLICATIONS.values()}
+SPAN = {"psf_metric": (0.0, 1.0), **{a.name: {m.name: m.span for m in a.metrics} for a in APPLICATIONS.values()}}
 # views of the application registry (``doefab.applications``): design task → application, and the delivered
 # metric a task's summary, histogram and "what limits it" are ranked by
 TASK_OF_DESIGN = {a.design_task: a.name for a in APPLICATIONS.values()}
