@@ -18,13 +18,14 @@ Example::
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 from doefab.errors import DoefabError
 
 __all__ = ["Application", "Metric", "APPLICATIONS", "application", "of_design", "has", "design_is", "NAMES",
-           "DESIGN_TASKS", "PROPERTIES", "HDR_PEAK"]
+           "DESIGN_TASKS", "PROPERTIES", "HDR_PEAK", "View"]
 
 HDR_PEAK = 256.0  # the paper's Table 1: HDR PSNR with a maximum value of 2^8 (radiance; 1 is the plain capture's clip)
 
@@ -59,7 +60,9 @@ class Application:
     when called); ``kernel`` the smallest PSF window (sensor pixels) its captures are simulated with;
     ``out_channels`` the network's outputs; ``train_metric`` the validation metric logged while training;
     ``crop`` the training crops' side (pixels); ``image_unit`` and ``error_unit`` what an evaluation figure's
-    result and error panels show."""
+    result and error panels show; ``scene_function`` ("module:function" of (split, index, rng, side px, PSF
+    pair) → (scene [C, side, side], depth target in metres or None, per-plane masks or None, where the target
+    was measured or None)) makes its scenes (``reconstruction.specs.render_scene`` renders them)."""
 
     name: str
     design_task: str
@@ -80,6 +83,7 @@ class Application:
     crop: int = 96
     image_unit: str = ""
     error_unit: str = ""
+    scene_function: str = ""
 
     def metric(self, name: str) -> Metric:
         """The ``Metric`` row called ``name``; a DoefabError naming this application's metrics for any other."""
@@ -100,7 +104,8 @@ APPLICATIONS = {a.name: a for a in (
                          Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK)),
                          Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK))),
                 metric_function="doefab.reconstruction.metrics:hdr_metrics", kernel=95, out_channels=3,
-                image_unit="log(1 + radiance) / log(257)", error_unit="radiance"),
+                image_unit="log(1 + radiance) / log(257)", error_unit="radiance",
+                scene_function="doefab.reconstruction.specs:hdr_scene"),
     Application("hyperspectral", "grating", "psnr", "dB", True,
                 "31 spectral bands from an RGB sensor: a grating PSF disperses the coded half",
                 camera_preset="hyperspectral", network="doefab.reconstruction.spectralnet", spectral=True,
@@ -108,7 +113,8 @@ APPLICATIONS = {a.name: a for a in (
                          Metric("sam", "spectral angle (SAM)", "rad", False, (0.0, math.pi)),
                          Metric("ssim", "SSIM", "", True, (-1.0, 1.0))),
                 metric_function="doefab.reconstruction.metrics:spectral_metrics", kernel=191, out_channels=31,
-                image_unit="band-mean radiance", error_unit="radiance"),
+                image_unit="band-mean radiance", error_unit="radiance",
+                scene_function="doefab.reconstruction.specs:spectral_scene"),
     Application("depth", "half-ring", "mae", "m", False,
                 "depth from one exposure: a half-ring PSF that changes with distance",
                 camera_preset="depth", network="doefab.reconstruction.depthnet", depth=True,
@@ -119,7 +125,8 @@ APPLICATIONS = {a.name: a for a in (
                 metric_function="doefab.reconstruction.metrics:depth_metrics", kernel=95, out_channels=1,
                 # crop 128: better than 96 on validation scenes, 160 no better (benchmarks/results/
                 # depth_training_crop.md); a cost volume with a 95-pixel PSF needs room
-                train_metric="mae", crop=128, image_unit="depth (m)", error_unit="m"),
+                train_metric="mae", crop=128, image_unit="depth (m)", error_unit="m",
+                scene_function="doefab.reconstruction.specs:depth_scene"),
 )}
 NAMES = tuple(APPLICATIONS)
 DESIGN_TASKS = tuple(a.design_task for a in APPLICATIONS.values())
@@ -159,3 +166,30 @@ def design_is(design_task: str, what: str) -> bool:
     Example: ``design_is("half-ring", "depth")`` → True."""
     app = of_design(design_task)
     return has(app.name if app is not None else "", what)  # an unknown ``what`` is an error either way
+
+
+class View(Mapping):
+    """A read-only table {key: ``value(row)``} over the registry, read on every lookup (a row added to or changed
+    in ``APPLICATIONS`` shows at once): keyed by the application's name, or by ``key(row)`` (e.g. its design
+    task). The other layers' per-application tables are such views, never copies.
+
+    Example: ``View(lambda a: a.primary_metric)["depth"]`` → ``"mae"``;
+    ``dict(View(lambda a: a.name, key=lambda a: a.design_task))["grating"]`` → ``"hyperspectral"``."""
+
+    def __init__(self, value: Callable[[Application], object], key: Callable[[Application], str] | None = None):
+        self._value, self._key = value, key or (lambda a: a.name)
+
+    def _rows(self) -> dict:
+        return {self._key(a): a for a in APPLICATIONS.values()}
+
+    def __getitem__(self, key):
+        return self._value(self._rows()[key])
+
+    def __iter__(self):
+        return iter(self._rows())
+
+    def __len__(self) -> int:
+        return len(APPLICATIONS)
+
+    def __repr__(self) -> str:
+        return f"View({dict(self)!r})"

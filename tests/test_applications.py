@@ -66,32 +66,31 @@ def test_the_tables_that_were_copies_are_the_registry():
     assert PRIMARY == {n: a.primary_metric for n, a in APPLICATIONS.items()}
 
 
-def test_the_metric_and_reconstruction_tables_are_views_of_the_registry():
-    """The reports' metric names and units, the tolerance spec's directions and spans, and the reconstruction
-    specs are read from the registry's rows: a row changed there changes each of them."""
+def test_the_metric_and_reconstruction_tables_are_views_of_the_registry(monkeypatch):
+    """The reports' metric names and units, the tolerance spec's directions and spans, the reconstruction specs
+    and the design ↔ application tables are read from the registry's rows on every lookup: a row changed or
+    added there shows in each of them at once."""
     import dataclasses
-    import importlib
 
     import doefab.applications as apps
-    import doefab.reconstruction.metrics as metrics
-    import doefab.reconstruction.specs as specs
-    import doefab.tolerance.spec as spec
+    from doefab.pipeline.scene import TASK_DESIGN
+    from doefab.reconstruction.metrics import DISPLAY, metric_text
+    from doefab.reconstruction.specs import SPECS, get_spec
+    from doefab.tolerance.netjudge import RECON_TASK
+    from doefab.tolerance.spec import DELIVERED, PRIMARY, SPAN, TASK_OF_DESIGN, limit_range
 
-    assert metrics.DISPLAY["depth"]["mae"] == ("depth MAE", "m") and spec.DELIVERED["hdr"]["psnr"] == ("db", "+")
-    assert spec.SPAN["hyperspectral"]["sam"] == (0.0, np.pi) and specs.SPECS["depth"].crop == 128
+    assert DISPLAY["depth"]["mae"] == ("depth MAE", "m") and DELIVERED["hdr"]["psnr"] == ("db", "+")
+    assert SPAN["hyperspectral"]["sam"] == (0.0, np.pi) and SPECS["depth"].crop == 128
     row = apps.APPLICATIONS["depth"]
-    changed = dataclasses.replace(row, crop=160, metrics=(apps.Metric("mae", "MAE", "m", False, (0.0, 9.0)),))
-    try:
-        apps.APPLICATIONS["depth"] = changed
-        for module in (metrics, spec, specs):
-            importlib.reload(module)
-        assert metrics.DISPLAY["depth"] == {"mae": ("MAE", "m")} and spec.DELIVERED["depth"] == {"mae": ("m", "-")}
-        assert spec.SPAN["depth"] == {"mae": (0.0, 9.0)} and specs.SPECS["depth"].crop == 160
-    finally:
-        apps.APPLICATIONS["depth"] = row
-        for module in (metrics, spec, specs):
-            importlib.reload(module)
-    assert specs.SPECS["depth"].crop == 128
+    monkeypatch.setitem(apps.APPLICATIONS, "depth", dataclasses.replace(
+        row, crop=160, metrics=(apps.Metric("mae", "MAE", "mm", False, (0.0, 9.0)),)))
+    assert DISPLAY["depth"] == {"mae": ("MAE", "mm")} and DELIVERED["depth"] == {"mae": ("mm", "-")}
+    assert SPAN["depth"] == {"mae": (0.0, 9.0)} and SPECS["depth"].crop == 160 == get_spec("depth").crop
+    assert limit_range("depth", "mae_mm_max") == (0.0, 9.0, "mm") and metric_text("depth", "mae", 1.5) == "1.500 mm"
+    monkeypatch.setitem(apps.APPLICATIONS, "toy", dataclasses.replace(row, name="toy", design_task="toy-task",
+                                                                      primary_metric="mae"))
+    assert TASK_DESIGN["toy"] == "toy-task" and TASK_OF_DESIGN["toy-task"] == RECON_TASK["toy-task"] == "toy"
+    assert PRIMARY["toy"] == "mae" and "toy" in SPECS and len(SPECS) == len(apps.APPLICATIONS) == 4
 
 
 @pytest.mark.parametrize("name", list(APPLICATIONS))

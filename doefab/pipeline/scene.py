@@ -15,14 +15,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from doefab.validate import metres_hint, unit_hint
-from doefab.applications import APPLICATIONS
+from doefab.applications import APPLICATIONS, View
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_value, values_text
 
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
-TASK_DESIGN = {a.name: a.design_task for a in APPLICATIONS.values()}  # a view of the registry, for callers
+TASK_DESIGN = View(lambda a: a.design_task)  # a view of the registry (read on every lookup), for callers
 # keys that set the same quantity: a scene gives at most one of each group
 SAME_QUANTITY = ((("focal_length_mm", "sensor_distance_mm", "sensor_distance_m"), "the lens-to-sensor distance"),
                  (("aperture_diameter_mm", "f_number"), "the DOE's aperture"))

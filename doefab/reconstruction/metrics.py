@@ -7,7 +7,7 @@ import importlib
 
 import numpy as np
 
-from doefab.applications import APPLICATIONS, HDR_PEAK, application
+from doefab.applications import HDR_PEAK, View, application
 
 __all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "metrics_for", "mean_metrics", "HDR_PEAK",
            "HIGHLIGHT_ABOVE", "DISPLAY", "metric_label", "metric_text"]
@@ -15,7 +15,7 @@ __all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "
 HIGHLIGHT_ABOVE = 2.0  # highlight pixels: radiance that saturates the plain half-exposure capture
 #: each task's metrics as reports name them: name → (display name, unit as printed; "" for a ratio or for HDR
 #: radiance, which is relative: 1 is the plain capture's clip) — a view of ``doefab.applications``' Metric rows
-DISPLAY = {a.name: {m.name: (m.label, m.unit) for m in a.metrics} for a in APPLICATIONS.values()}
+DISPLAY = View(lambda a: {m.name: (m.label, m.unit) for m in a.metrics})
 DIGITS = {"dB": 2}  # decimals a report prints per unit (3 for every other)
 
 

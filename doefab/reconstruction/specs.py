@@ -8,13 +8,14 @@ one the design was optimised in (``network_kernel``).
 from __future__ import annotations
 
 import functools
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from doefab.applications import APPLICATIONS, has
+from doefab.applications import View, application, has
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
@@ -37,8 +38,7 @@ class TaskSpec:
     crop: int = 96
 
 
-SPECS = {a.name: TaskSpec(a.name, a.design_task, a.kernel, a.out_channels, a.train_metric, a.crop)
-         for a in APPLICATIONS.values()}
+SPECS = View(lambda a: TaskSpec(a.name, a.design_task, a.kernel, a.out_channels, a.train_metric, a.crop))
 
 
 def get_spec(task: str) -> TaskSpec:
@@ -152,26 +152,15 @@ def make_batch(task: str, split: str, indices, size: int, pair, response=None, n
 
 
 def render_scene(task: str, split: str, index: int, rng, big: int, pair, response):
-    """(scene, target, (coded, uncoded) clean views before noise) of one scene of side ``big``: generated, or for
-    split ``real`` made of measured data (``realdata``; depth: NaN where the target was not measured)."""
-    from doefab.imaging.captures import plane_masks, render_layers
-    from doefab.reconstruction.data import depth_sample, hdr_sample, resample_bands, spectral_sample
-    from doefab.reconstruction.realdata import depth_real_sample, hdr_real_sample
-    from doefab.reconstruction.spectra import light_kind
+    """(scene, target, (coded, uncoded) clean views before noise) of one scene of side ``big``: made by the
+    application's ``scene_function`` (``doefab.applications``; generated, or for split ``real`` made of measured
+    data, ``realdata``), rendered through both halves of ``pair`` (at each pixel's plane where the scene has
+    depth) and, with a sensor ``response``, seen in its colours; a depth target is NaN where it was not
+    measured."""
+    from doefab.imaging.captures import render_layers
 
-    masks, target, known = None, None, None
-    if has(task, "highlights"):
-        scene = hdr_real_sample(rng, big) if split == "real" else hdr_sample(rng, big, split)
-    elif has(task, "spectral"):  # on the design's bands
-        scene = np.ascontiguousarray(resample_bands(spectral_sample(rng, big, split, light_kind(split, index)),
-                                                    pair.wavelengths))
-    else:  # between the design's nearest and farthest planes
-        finite = [z for z in pair.depths if np.isfinite(z)]
-        if split == "real":  # measured depth; where it was not measured, rendered at a neighbour's, not scored
-            scene, target, known = depth_real_sample(rng, big, near=min(finite), far=max(finite))
-        else:
-            scene, target = depth_sample(rng, big, split, near=min(finite), far=max(finite))
-        masks = plane_masks(torch.from_numpy(target), pair.depths)
+    module, name = application(task).scene_function.split(":")
+    scene, target, masks, known = getattr(importlib.import_module(module), name)(split, index, rng, big, pair)
     s = torch.from_numpy(scene)
     views = []
     for psf in (pair.coded.to(torch.float32), pair.uncoded.to(torch.float32)):
@@ -180,3 +169,38 @@ def render_scene(task: str, split: str, index: int, rng, big: int, pair, respons
     if known is not None:
         target = np.where(known, target, np.float32(np.nan))
     return scene, target, views
+
+
+def hdr_scene(split: str, index: int, rng, big: int, pair):
+    """(radiance [3, big, big], None, None, None): an HDR scene with highlights (``scene_function`` of hdr)."""
+    from doefab.reconstruction.data import hdr_sample
+    from doefab.reconstruction.realdata import hdr_real_sample
+
+    return (hdr_real_sample(rng, big) if split == "real" else hdr_sample(rng, big, split)), None, None, None
+
+
+def spectral_scene(split: str, index: int, rng, big: int, pair):
+    """(spectra [C, big, big] on ``pair``'s bands, None, None, None): a reflectance scene under the light
+    ``spectra.light_kind`` gives scene ``index`` of ``split`` (``scene_function`` of hyperspectral)."""
+    from doefab.reconstruction.data import resample_bands, spectral_sample
+    from doefab.reconstruction.spectra import light_kind
+
+    cube = spectral_sample(rng, big, split, light_kind(split, index))
+    return np.ascontiguousarray(resample_bands(cube, pair.wavelengths)), None, None, None
+
+
+def depth_scene(split: str, index: int, rng, big: int, pair):
+    """(scene [3, big, big], depth [big, big] in metres between ``pair``'s nearest and farthest planes, each
+    plane's mask, where the depth was measured or None) (``scene_function`` of depth); for split ``real``
+    measured depth, rendered at a neighbour's where it was not measured and not scored there."""
+    from doefab.imaging.captures import plane_masks
+    from doefab.reconstruction.data import depth_sample
+    from doefab.reconstruction.realdata import depth_real_sample
+
+    finite = [z for z in pair.depths if np.isfinite(z)]
+    known = None
+    if split == "real":
+        scene, target, known = depth_real_sample(rng, big, near=min(finite), far=max(finite))
+    else:
+        scene, target = depth_sample(rng, big, split, near=min(finite), far=max(finite))
+    return scene, target, plane_masks(torch.from_numpy(target), pair.depths), known

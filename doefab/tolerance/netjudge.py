@@ -23,13 +23,13 @@ import copy
 import numpy as np
 import torch
 
-from doefab.applications import APPLICATIONS, has, of_design
+from doefab.applications import View, has, of_design
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["NetworkJudge", "RECON_TASK", "judge_settings", "SCENES", "SIZE", "SPLIT", "LABELS"]
 
-RECON_TASK = {a.design_task: a.name for a in APPLICATIONS.values()}  # a view of ``doefab.applications``
+RECON_TASK = View(lambda a: a.name, key=lambda a: a.design_task)  # a view of ``doefab.applications``
 SCENES = 8  # scenes per part (benchmarks/delivered_scene_noise.py measures the scene noise against the spread)
 SIZE = 256  # scene side (px), as ``doefab evaluate``'s
 SPLIT = "test"  # the reconstruction tables' scenes

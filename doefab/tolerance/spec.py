@@ -19,22 +19,22 @@ from __future__ import annotations
 
 import math
 
-from doefab.applications import APPLICATIONS
+from doefab.applications import View
 from doefab.errors import DoefabError
 
-__all__ = ["DELIVERED", "SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "limit_range",
+__all__ = ["DELIVERED", "SPAN", "PSF_METRIC_SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "limit_range",
            "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
 
-# views of the application registry's Metric rows (``doefab.applications``): the delivered metrics per task,
-# name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and the values each can
-# take (in its unit): the range of an absolute limit; a margin lies in 0 – the width
-DELIVERED = {a.name: {m.name: (m.unit.lower(), "+" if m.higher_is_better else "-") for m in a.metrics}
-             for a in APPLICATIONS.values()}
-SPAN = {"psf_metric": (0.0, 1.0), **{a.name: {m.name: m.span for m in a.metrics} for a in APPLICATIONS.values()}}
-# views of the application registry (``doefab.applications``): design task → application, and the delivered
-# metric a task's summary, histogram and "what limits it" are ranked by
-TASK_OF_DESIGN = {a.design_task: a.name for a in APPLICATIONS.values()}
-PRIMARY = {a.name: a.primary_metric for a in APPLICATIONS.values()}
+# views of the application registry's Metric rows (``doefab.applications``, read on every lookup): the delivered
+# metrics per task, name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and
+# the values each can take (in its unit): the range of an absolute limit; a margin lies in 0 – the width
+DELIVERED = View(lambda a: {m.name: (m.unit.lower(), "+" if m.higher_is_better else "-") for m in a.metrics})
+SPAN = View(lambda a: {m.name: m.span for m in a.metrics})
+PSF_METRIC_SPAN = (0.0, 1.0)  # the PSF metric: a fraction of the coded light
+# design task → application, and the delivered metric a task's summary, histogram and "what limits it" are
+# ranked by
+TASK_OF_DESIGN = View(lambda a: a.name, key=lambda a: a.design_task)
+PRIMARY = View(lambda a: a.primary_metric)
 
 
 def delivered_loss(task: str, delta: dict) -> float:
@@ -68,7 +68,7 @@ def limit_range(task: str, key: str) -> tuple[float, float, str]:
     """(lo, hi, unit) a spec key of ``task`` may take: its metric's span for an absolute limit, 0 to the span's
     width for a margin (``*_loss_max``, ``*_increase_max``)."""
     metric, kind = _key_parts(task)[key]
-    lo, hi = SPAN["psf_metric"] if metric == "psf_metric" else SPAN[task][metric]
+    lo, hi = PSF_METRIC_SPAN if metric == "psf_metric" else SPAN[task][metric]
     unit = "" if metric == "psf_metric" else {"db": "dB"}.get(DELIVERED[task][metric][0], DELIVERED[task][metric][0])
     return (0.0, hi - lo, unit) if kind in ("loss", "increase") else (lo, hi, unit)
 
