@@ -94,6 +94,7 @@ MEASUREMENTS = (
     Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
     Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
+    Measurement("judge_profile", "benchmarks/judge_profile.py", (R + "judge_profile.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
     Measurement("measured_pair", "benchmarks/measured_pair.py", (R + "measured_pair.md",)),
     Measurement("reconstruct_memory", "benchmarks/reconstruct_memory.py", (R + "reconstruct_memory.md",)),
