@@ -92,7 +92,7 @@ def test_a_toy_application_and_a_toy_error_source_run_through_resolve_train_and_
         resolve(load_scene(scene))
     scene.write_text('task = "toy"\nstages = ["design"]\n[camera]\npreset = "hdr"\n[optics]\nkernel_px = 311\n')
     got = resolve(load_scene(scene))
-    assert got["settings"]["design_task"] == "toy-grating" and got["settings"]["kernel_px"] == 311
+    assert got.settings["design_task"] == "toy-grating" and got.settings["kernel_px"] == 311
 
     # train one step: the toy network, its loss, its scenes and its metrics, from the registry
     rec = train("toy", "proposed", minutes=1, out_dir=tmp_path / "t", weights_dir=tmp_path / "w", design=toy,

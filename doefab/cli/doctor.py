@@ -42,7 +42,7 @@ def _diagnose(args, scene) -> int:
     print(f"{args.scene}: the system")
     for f in facts:
         print(f"  {f['quantity']:<{width}}  {f['value']:>8.4g} {f['unit']:<10} {f['meaning']}")
-    for note in res["warnings"]:
+    for note in res.warnings:
         print(f"warning: {note}")
     print(f"device: {describe_device()}")
     print("checks")
@@ -53,7 +53,7 @@ def _diagnose(args, scene) -> int:
               f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
     if args.out:
         atomic_write_json(args.out, {"written_by": WRITTEN_BY, "scene": str(args.scene), "system": facts,
-                                     "warnings": res["warnings"], "checks": rows})
+                                     "warnings": res.warnings, "checks": rows})
     bad = [r["check"] for r in rows if not r["ok"]]
     if bad:
         raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")

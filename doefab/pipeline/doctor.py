@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from doefab.applications import has
+from doefab.pipeline.resolved import ResolvedScene
 
 __all__ = ["diagnose", "explain"]
 
@@ -38,8 +39,8 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
     from doefab.pipeline.sampling import phase_step_fix, pitch_fix, source_phase_step
 
     res = resolve(scene)
-    cam = res["camera"]
-    s = res["settings"]
+    cam = res.camera
+    s = res.settings
     lams = s["wavelengths_m"]
     depths = [math.inf if z == "inf" else z for z in s["depths_m"]]
     k = s["kernel_px"]
@@ -63,10 +64,10 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
         from doefab.fabrication.levels import levels_to_height
 
         height = None
-        if res["reuse"]:
+        if res.reuse:
             from doefab.design.design import Design
 
-            d = Design.load(res["committed_dir"])
+            d = Design.load(res.committed_dir)
             height = levels_to_height(d.levels, d.camera)
         psf = {}
         for prec in ("float32", "float64"):
@@ -107,11 +108,11 @@ def diagnose(scene, precision_check: bool = True) -> list[dict]:
     return rows
 
 
-def explain(res: dict) -> list[dict]:
+def explain(res: ResolvedScene) -> list[dict]:
     """What a resolved scene's numbers imply: [{quantity, value, unit, meaning}] (thin lens; the DOE at the
     aperture; λ the middle of the task's bands)."""
-    cam, task = res["camera"], res["task"]
-    lams = sorted(res["settings"]["wavelengths_m"])
+    cam, task = res.camera, res.task
+    lams = sorted(res.settings["wavelengths_m"])
     lam = lams[len(lams) // 2]
     f, d, s, p = cam.focal_length, cam.aperture_diameter, cam.sensor_distance, cam.sensor_pitch
     airy = 1.22 * lam * s / d / p
@@ -130,8 +131,8 @@ def explain(res: dict) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
-    rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res["settings"]["n_levels"])
-             + _sensor_rows(res.get("sensor"), res["settings"]["design_task"]))
+    rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res.settings["n_levels"])
+             + _sensor_rows(res.sensor, res.settings["design_task"]))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from doefab.applications import design_is
 from doefab.io import atomic_write_text
 from doefab.pipeline.knobs import BENCHMARK, REPO, knob_plots
+from doefab.pipeline.resolved import ResolvedScene
 
 __all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview", "system_table", "REPO"]
 
@@ -29,7 +30,7 @@ def html_text(text: str) -> str:
     return re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", text)
 
 
-def write_report(out: Path, scene, done: dict, res: dict) -> dict:
+def write_report(out: Path, scene, done: dict, res: ResolvedScene) -> dict:
     """Write report.md and report.html; returns the list of images referenced."""
     from doefab.pipeline.summary import summary_items
 
@@ -57,7 +58,7 @@ def _seen(shown: set, path: str) -> bool:
     return False
 
 
-def _stage_items(scene, done: dict, res: dict) -> list[tuple]:
+def _stage_items(scene, done: dict, res: ResolvedScene) -> list[tuple]:
     """The Stages section: what ran, was reused or skipped and why, and the system it was designed for."""
     stages = [["stage", "status", "why", "seconds"]]
     for name, info in done.items():
@@ -67,7 +68,7 @@ def _stage_items(scene, done: dict, res: dict) -> list[tuple]:
     for name in ("design", "masks", "holder", "reconstruction", "tolerance"):
         if name not in done:
             stages.append([name, "skipped", "not in the scene's stages", "0"])
-    s = res["settings"]
+    s = res.settings
     return [("p", f"Scene `{scene.path}` — task {scene.task}; design {s['design_task']}; "
                   f"{len(s['wavelengths_m'])} wavelength(s), {len(s['depths_m'])} depth plane(s), "
                   f"PSF window {s['kernel_px']} px. Only these samples were computed."),
@@ -213,27 +214,27 @@ def _page(name: str, body: list[str]) -> str:
             "</body></html>\n")
 
 
-def system_table(res: dict) -> list[list[str]]:
+def system_table(res: ResolvedScene) -> list[list[str]]:
     """The resolved scene's camera, bands and fab as rows (quantity, value, what it means)."""
     from doefab.pipeline.doctor import explain
 
-    if "camera" not in res:  # a report of stages without a resolved scene
+    if getattr(res, "camera", None) is None:  # a report of stages without a resolved scene
         return [["quantity", "value", "what it means"], ["scene", "not resolved", "run doefab doctor on it"]]
-    cam = res["camera"]
+    cam = res.camera
     rows = [["quantity", "value", "what it means"],
             ["camera", f"f = {cam.focal_length * 1e3:.4g} mm, DOE aperture {cam.aperture_diameter * 1e3:.4g} mm, "
                        f"sensor pitch {cam.sensor_pitch * 1e6:.4g} µm, DOE pitch {cam.doe_pitch * 1e6:.4g} µm",
-             "custom camera" if res.get("custom_camera") else "the preset prototype"],
-            ["fabrication", f"{res['settings']['n_levels']} levels on {cam.material.name}",
+             "custom camera" if res.custom_camera else "the preset prototype"],
+            ["fabrication", f"{res.settings['n_levels']} levels on {cam.material.name}",
              f"etch depths for {cam.design_wavelength * 1e9:.0f} nm"]]
-    if res.get("sensor") is not None:
-        spectral = design_is(res["settings"].get("design_task"), "spectral")
-        own = res["sensor"].differs_from(None, spectral)
-        rows.append(["sensor", res["sensor"].describe(with_response=spectral),
+    if res.sensor is not None:
+        spectral = design_is(res.settings.get("design_task"), "spectral")
+        own = res.sensor.differs_from(None, spectral)
+        rows.append(["sensor", res.sensor.describe(with_response=spectral),
                      "this camera's sensor" if own else "the default (prototype) sensor"])
     for r in explain(res):
         rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
-    rows += [["warning", "", note] for note in res.get("warnings", [])]
+    rows += [["warning", "", note] for note in res.warnings]
     return rows
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from doefab._devices import describe_device, using_device
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, folder_lock, owned_by_doefab
+from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import STAGES, Scene
 from doefab.pipeline.stages import STAGE_FUNCS, STAGE_KIND, resolve, run_stage
 
@@ -25,7 +26,7 @@ def foreign_stage_folders(scene: Scene, out: str | Path) -> list[Path]:
     return [out / s for s in scene.stages if s in STAGE_FUNCS and not owned_by_doefab(out / s, STAGE_KIND, stage=s)]
 
 
-def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> dict:
+def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> ResolvedScene:
     """Every check of a run of ``scene`` into ``out`` (no file is touched); returns ``resolve(scene)``."""
     bad = [f for f in force if f not in STAGES]
     if bad:
@@ -39,7 +40,7 @@ def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> dict:
 
 
 def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = False, progress: bool = True,
-              res: dict | None = None, device=None) -> dict:
+              res: ResolvedScene | None = None, device=None) -> dict:
     """Run ``scene`` into ``out`` (``res``: ``prepare_scene``'s result, computed here when not given) on ``device``
     (None: the scene's ``device`` key, else the default device)."""
     out = Path(out)
@@ -51,9 +52,9 @@ def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = Fa
             return _run_locked(scene, out, res, force, quick, progress, t0)
 
 
-def _run_locked(scene: Scene, out: Path, res: dict, force: tuple, quick: bool, progress: bool, t0: float) -> dict:
+def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick: bool, progress: bool, t0: float) -> dict:
     if progress:
-        for note in res.get("warnings", []):
+        for note in res.warnings:
             print(f"[doefab run] warning: {note}", flush=True)
     done: dict = {}
     for name in STAGES[:-1]:
@@ -75,7 +76,7 @@ def _run_locked(scene: Scene, out: Path, res: dict, force: tuple, quick: bool, p
     summary = {"scene": str(scene.path), "task": scene.task, "quick": quick,
                "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash",
                                                         "reused_from_previous_run")} for k, v in done.items()},
-               "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.get("warnings", []),
+               "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.warnings,
                "device": describe_device()}
     atomic_write_json(out / "run.json", summary)
     return summary

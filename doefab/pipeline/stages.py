@@ -18,6 +18,7 @@ from pathlib import Path
 from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
+from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
@@ -45,19 +46,19 @@ def _design_run(settings: dict, quick: bool, quick_factor: int | None = None) ->
     return iters, sampling
 
 
-def redesign_note(res: dict, quick: bool) -> str:
+def redesign_note(res: ResolvedScene, quick: bool) -> str:
     """One line: why the committed design is not reused, and roughly how long the new one takes (scaled from the
     committed design's own wall time by iterations and grid pixels) and how large its checkpoint grows."""
-    s, c = res["settings"], res["committed_settings"]
-    why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c[k]})" for k in res["differ"])
-    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick, res.get("quick_sampling")), _design_run(c, False)
+    s, c = res.settings, res.committed_settings
+    why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c[k]})" for k in res.differ)
+    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick, res.quick_sampling), _design_run(c, False)
     grid, c_grid = s["camera"]["doe_pixels"] // sampling, c["camera"]["doe_pixels"] // c_sampling
-    took = float(res["committed"].extra.get("wall_time_s") or 0.0)
+    took = float(res.committed.extra.get("wall_time_s") or 0.0)
     minutes = took * iters / max(c_iters, 1) * (grid / max(c_grid, 1)) ** 2 / 60
     ckpt = ""
     if s["parameterization"] == "pixel":  # the phase map and Adam's two moments, float32
         ckpt = f", checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
-    return (f"the committed {res['settings']['design_task']} design is not reused: the scene sets {why}; "
+    return (f"the committed {res.settings['design_task']} design is not reused: the scene sets {why}; "
             f"a new design is optimised ({iters} {s['optimizer']} iterations on a {grid}² grid: roughly "
             f"{max(minutes, 0.1):.1f} min at the pace of the committed design's run ({took:.0f} s), longer on a "
             f"loaded machine{ckpt})")
@@ -77,25 +78,25 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
     from doefab.design.design import Design
     from doefab.plotting import design_psf_figure, plot_height
 
-    if res["reuse"]:
-        _copy_design(res["committed_dir"], out)
+    if res.reuse:
+        _copy_design(res.committed_dir, out)
         info = {"status": "reused", "why": f"the scene's design settings equal the committed design "
-                                          f"{res['settings']['design_task']} (shipped with doefab)"}
+                                          f"{res.settings['design_task']} (shipped with doefab)"}
     else:
-        s = res["settings"]
+        s = res.settings
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
-        iters, sampling = _design_run(s, quick, res.get("quick_sampling"))
-        params = res["task"].params()  # the scene's bands, planes and geometry, bound to its camera
+        iters, sampling = _design_run(s, quick, res.quick_sampling)
+        params = res.task.params()  # the scene's bands, planes and geometry, bound to its camera
         d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
-                            camera=res["camera"], out_dir=out, sampling=sampling,
+                            camera=res.camera, out_dir=out, sampling=sampling,
                             task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
                             n_levels=int(s["n_levels"]), progress=True,
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
-        info = {"status": "ran", "why": f"settings differ from the committed design in {res['differ']}"
+        info = {"status": "ran", "why": f"settings differ from the committed design in {res.differ}"
                 + (f" (quick: {iters} iterations on a {sampling}× coarser grid)" if quick else "")}
     d = Design.load(out)
-    task = res["task"]
+    task = res.task
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
         psf = plan(doefab.levels_to_height(d.levels, d.camera, d.n_levels)).coded.numpy()
@@ -123,7 +124,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                                            f"whole and re-verified in {time.perf_counter() - t:.1f} s",
                 "mask_set": str(out)}
     d = Design.load(design_dir)
-    opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)), die_m=res["die_m"],
+    opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)), die_m=res.die_m,
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
     # the export writes a fresh folder of its own beside the stage folder, then moves in (run_stage marks it again)
     tmp = out.parent / f".{out.name}.export"
@@ -133,7 +134,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
     for f in tmp.iterdir():
         os.replace(f, out / f.name)
     tmp.rmdir()
-    why = ("the design is new (or its pattern side differs)" if not res["reuse"] else
+    why = ("the design is new (or its pattern side differs)" if not res.reuse else
            "the committed mask set is not in this installation (it lives in the repository): exported afresh")
     return {"status": "ran", "why": why, "mask_set": str(out)}
 
@@ -152,16 +153,16 @@ def copy_mask_set(src: Path, out: Path) -> None:
         os.replace(tmp, dst)
 
 
-def repo_mask_set(res: dict) -> Path | None:
+def repo_mask_set(res: ResolvedScene) -> Path | None:
     """The repository's committed mask set of a reused design (``masks/<design>``), when this is a checkout that
     has it and its level map is the design's; None otherwise (an installed package exports the masks itself)."""
-    if not res["reuse"]:
+    if not res.reuse:
         return None
-    folder = REPO / "masks" / res["settings"]["design_task"]
+    folder = REPO / "masks" / res.settings["design_task"]
     from doefab.design.design import Design, levels_sha256
 
     try:
-        same = levels_sha256(Design.load(folder / "design").levels) == levels_sha256(res["committed"].levels)
+        same = levels_sha256(Design.load(folder / "design").levels) == levels_sha256(res.committed.levels)
     except DoefabError:  # no mask set here (an installed package), or a damaged one
         return None
     return folder if same else None
@@ -172,7 +173,7 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.params import HolderParams
 
     rep = write_holder(HolderParams(**scene_holder(scene)), out, step=False if quick else None, renders=True)
-    horizontal = (res or {}).get("split") == "horizontal"
+    horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
             "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
     return {"status": "ran", "why": "parametric part (0.5 s mesh path)" + ("; STEP skipped (quick)" if quick else "")
@@ -189,11 +190,11 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
 
     rec, task = scene.reconstruction, scene.task
     mode = rec.get("weights", "shipped")
-    design = None if res["reuse"] else out.parent / "design"
-    sensor = res.get("sensor")  # None: the default sensor
+    design = None if res.reuse else out.parent / "design"
+    sensor = res.sensor  # None: the default sensor
     if design is not None and mode == "shipped":
         return {"status": "skipped", "why": f"the shipped networks are trained for the committed "
-                                            f"{res['settings']['design_task']} design, not this scene's: set "
+                                            f"{res.settings['design_task']} design, not this scene's: set "
                                             f"reconstruction.weights = \"train\" to train networks for it, or "
                                             f"\"shipped-anyway\" to evaluate the shipped ones on its captures"}
     other_sensor = shipped_sensor_differs(task, sensor)
@@ -296,7 +297,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
     samples = 3 if quick else int(tol.get("samples", 20))
     weights = out.parent / "reconstruction" / "weights"
-    shipped_fits = res["reuse"] and not shipped_sensor_differs(scene.task, res.get("sensor"))
+    shipped_fits = res.reuse and not shipped_sensor_differs(scene.task, res.sensor)
     networks = shipped_fits or weights.is_dir()
     # the parts' captures: the reconstruction table's split and scene size (``netjudge``), SCENES per part
     judge = {"images": 2 if quick else SCENES, "size": 128 if quick else int(scene.reconstruction.get("size_px", 256)),
@@ -311,7 +312,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
                                                                       "at PSF level (no network for this system)")
             + ("" if quick else " and the quantization study")
             + ("; mounting errors from this scene's holder" if holder.is_file() else "")
-            + ("" if networks or not res["reuse"] else "; the shipped networks are for another sensor")
+            + ("" if networks or not res.reuse else "; the shipped networks are for another sensor")
             + ("" if not networks else f"; each part judged on {judge['images']} test scenes of {judge['size']}² px "
                                         f"(the reconstruction table's split and size) captured by the sensor its "
                                         f"network was trained for"),
@@ -346,15 +347,20 @@ STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_hol
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
             "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
-SECTION = {"design": ("camera", "optics", "design", "fabrication"), "masks": ("fabrication",), "holder": ("holder",),
+SECTION = {"design": (), "masks": ("fabrication",), "holder": ("holder",),
            "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 
 
-def stage_hash(scene, name: str, done: dict, quick: bool) -> str:
-    """The stage's inputs: its scene sections, the task, --quick, its upstream stages' hashes, for the holder the
-    source of ``holder_cad`` that builds it and, for the stages that draw fabricated parts from it, the tolerance
-    budget's content (not only its file name)."""
-    parts = {s: scene.raw.get(s) for s in SECTION[name]}
+def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None) -> str:
+    """The stage's inputs: for the design the resolved scene's ``design_key`` (its design settings, however the
+    scene file spelled them; ``res``: the scene resolved, resolved here when None), for the others their scene
+    sections; the task, --quick, its upstream stages' hashes, for the holder the source of ``holder_cad`` that
+    builds it and, for the stages that draw fabricated parts from it, the tolerance budget's content (not only
+    its file name)."""
+    if name == "design":
+        parts = {"design": (res if res is not None else resolve(scene)).design_key()}
+    else:
+        parts = {s: scene.raw.get(s) for s in SECTION[name]}
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
@@ -381,7 +387,7 @@ def budget_digest(scene) -> str | None:
 def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, force: bool) -> dict:
     """Run (or reuse) one stage; its record (status, why, seconds, hash) is kept in ``<stage>/stage.json``."""
     out = out_root / name
-    h = stage_hash(scene, name, done, quick)
+    h = stage_hash(scene, name, done, quick, res)
     rec_path = out / "stage.json"
     old = {}
     if rec_path.is_file():

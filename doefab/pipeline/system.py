@@ -19,20 +19,23 @@ from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
                                       quick_sampling, sampling_checks)
 from doefab.applications import application, design_is, has
+from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
 
-__all__ = ["resolve", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
+__all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
            "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
            "MAX_DOE_PIXELS"]
 
 
 
-def is_custom_camera(scene: Scene) -> bool:
-    """Whether the scene's camera differs from its preset (a key equal to the preset's value changes nothing)."""
+def is_custom_camera(scene: Scene, cam=None) -> bool:
+    """Whether the scene's camera (``cam``: it, already built) differs from its preset (a key equal to the
+    preset's value changes nothing)."""
     from doefab.optics.camera import Camera
 
     base = Camera.preset(scene.camera.get("preset", application(scene.task).camera_preset))
-    return scene_camera(scene, []).to_dict() != base.to_dict()  # its problems are resolve's to report
+    cam = cam if cam is not None else scene_camera(scene, [])  # its problems are resolve's to report
+    return cam.to_dict() != base.to_dict()
 
 
 def scene_camera(scene: Scene, problems: list | None = None):
@@ -281,12 +284,12 @@ def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -
     return s
 
 
-def resolve(scene: Scene) -> dict:
-    """The design settings the scene asks for, whether they equal the committed design's, and every physics
-    problem of the system (one DoefabError listing them all, before any work)."""
+def resolve(scene: Scene) -> ResolvedScene:
+    """The scene's system (``ResolvedScene``: its camera, built once, its task, the design settings it asks for
+    and whether they equal the committed design's), after every physics problem of it is checked (one DoefabError
+    listing them all, before any work)."""
     from doefab.design.committed import committed_dir
     from doefab.design.design import Design
-    from doefab.optics.camera import Camera
 
     dname = application(scene.task).design_task
     cdir = committed_dir(dname)
@@ -311,13 +314,14 @@ def resolve(scene: Scene) -> dict:
     ctask = scene_task(Scene(path=scene.path, task=scene.task, stages=()), committed, committed.camera)
     committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})
     differ = sorted(k for k in settings if settings[k] != committed_settings.get(k))
-    return {"settings": settings, "camera": cam, "task": task, "committed_dir": cdir, "reuse": not differ,
-            "differ": differ, "committed": committed, "committed_settings": committed_settings,
-            "custom_camera": is_custom_camera(scene), "split": scene.camera.get("split", "vertical"),
-            "stop": _stop(cam), "sensor": sensor, "die_m": scene_die_m(scene, cam),
-            "quick_sampling": quick_sampling(cam.doe_pixels, int(settings["sampling"]),
-                                             lambda d: not design_grid_problems(cam, task, d)),
-            "warnings": system_warnings(cam, task) + _sensor_warnings(scene, sensor)}
+    return ResolvedScene(
+        settings=settings, camera=cam, task=task, committed_dir=cdir, committed=committed,
+        committed_settings=committed_settings, reuse=not differ, differ=tuple(differ),
+        custom_camera=is_custom_camera(scene, cam), split=scene.camera.get("split", "vertical"), stop=_stop(cam),
+        sensor=sensor, die_m=scene_die_m(scene, cam),
+        quick_sampling=quick_sampling(cam.doe_pixels, int(settings["sampling"]),
+                                      lambda d: not design_grid_problems(cam, task, d)),
+        warnings=tuple(system_warnings(cam, task) + _sensor_warnings(scene, sensor)))
 
 
 def _sensor_warnings(scene: Scene, sensor) -> list[str]:

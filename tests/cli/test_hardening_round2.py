@@ -376,7 +376,10 @@ def test_row20_report_text_renders_and_says_what_is_a_benchmark(tmp_path):
     from doefab.pipeline.scene import load_scene
 
     scene = load_scene(REPO / "scenes" / "hyperspectral.toml")
-    res = {"settings": {"design_task": "grating", "wavelengths_m": [5e-7] * 31, "depths_m": [5.0], "kernel_px": 191}}
+    from types import SimpleNamespace
+
+    res = SimpleNamespace(settings={"design_task": "grating", "wavelengths_m": [5e-7] * 31, "depths_m": [5.0],
+                                    "kernel_px": 191})  # a report of stages without a resolved scene
     write_report(tmp_path, scene, {"reconstruction": {"status": "reused", "weights": "shipped", "rows": {}}}, res)
     page = (tmp_path / "report.html").read_text()
     assert "`" not in page and f"<code>{scene.path}</code>" in page

@@ -34,7 +34,7 @@ def test_my_camera_scene_is_explained_by_hand_computed_optics():
     n = _nbk7(0.55)
     assert rows["substrate index"] == pytest.approx(n, abs=2e-5)
     assert rows["etch depth of 2π"] == pytest.approx(550 / (n - 1), rel=1e-4)
-    assert res["settings"]["n_levels"] == 8 and len(res["settings"]["wavelengths_m"]) == 21
+    assert res.settings["n_levels"] == 8 and len(res.settings["wavelengths_m"]) == 21
 
 
 def test_bands_outside_the_substrates_published_dispersion_are_named(tmp_path):
@@ -43,16 +43,16 @@ def test_bands_outside_the_substrates_published_dispersion_are_named(tmp_path):
     text = (REPO / "scenes" / "my_camera.toml").read_text()
     assert 'material = "N-BK7"' in text
     inside = resolve(load_scene(REPO / "scenes" / "my_camera.toml"))
-    assert inside["warnings"] == []
+    assert inside.warnings == ()
     pmma = tmp_path / "pmma.toml"
     pmma.write_text(text.replace('material = "N-BK7"', 'material = "PMMA"'))
-    assert resolve(load_scene(pmma))["warnings"] == []
+    assert resolve(load_scene(pmma)).warnings == ()
     import re
 
     low = tmp_path / "pmma_low.toml"
     low.write_text(re.sub(r"wavelengths_nm = \[[^\]]*\]", "wavelengths_nm = [420, 500, 600]",
                           text.replace('material = "N-BK7"', 'material = "PMMA"')))
-    notes = resolve(load_scene(low))["warnings"]
+    notes = resolve(load_scene(low)).warnings
     assert len(notes) == 1 and "420 nm" in notes[0] and "500 nm" not in notes[0] and "PMMA" in notes[0]
 
 

@@ -46,10 +46,10 @@ def test_doctor_refuses_what_the_design_stage_would(tmp_path, focal_mm, f_number
             assert f"({grid} px)" in str(exc) and "design.sampling" in str(exc)
         return
     assert divides, f"doctor passed sampling {sampling} on a {grid}-px grid"
-    assert res["camera"].doe_pixels == grid
+    assert res.camera.doe_pixels == grid
     for quick in (False, True):  # what the design stage hands the optimiser, run and run --quick
-        iters, used = _design_run(res["settings"], quick, res["quick_sampling"])
-        cam = optimiser_camera(res["camera"], used)  # the optimiser's own check: raises if it does not divide
+        iters, used = _design_run(res.settings, quick, res.quick_sampling)
+        cam = optimiser_camera(res.camera, used)  # the optimiser's own check: raises if it does not divide
         assert cam.doe_pixels * used == grid
 
 
@@ -75,7 +75,7 @@ def test_issue_camera_doctor_and_quick_run_agree(tmp_path):
     with pytest.raises(DoefabError, match=r"design.sampling 4 must divide the DOE grid \(2234 px\): use 1 or 2"):
         resolve(_scene(tmp_path, 25.0, 2.8, 4.0, 4))
     res = resolve(_scene(tmp_path, 25.0, 2.8, 4.0))
-    assert _design_run(res["settings"], True, res["quick_sampling"])[1] == 2
+    assert _design_run(res.settings, True, res.quick_sampling)[1] == 2
 
 
 def test_the_die_holds_the_pattern_and_marks_and_no_smaller_one_does(tmp_path, tiny_camera):
@@ -108,8 +108,8 @@ def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
     p.write_text('task = "hdr"\nstages = ["design", "masks", "holder"]\n[camera]\nfocal_length_mm = 50.0\n'
                  'f_number = 2.8\ndoe_pitch_um = 8.0\n[holder]\nthread_diameter_mm = 62\n')
     res = resolve(load_scene(p))
-    aperture = res["camera"].aperture_diameter
-    assert 17.5e-3 < aperture < 18e-3 and res["die_m"] == pytest.approx(21e-3)
+    aperture = res.camera.aperture_diameter
+    assert 17.5e-3 < aperture < 18e-3 and res.die_m == pytest.approx(21e-3)
     params = scene_holder(load_scene(p))
     assert params["die_width_mm"] == 21.0 and params["clear_aperture_mm"] == pytest.approx(aperture * 1e3)
     HolderParams(**params)
@@ -136,7 +136,7 @@ def test_a_holder_that_disagrees_with_the_doe_is_refused_with_a_value_that_works
     p.write_text(base + works + "\n")
     res = resolve(load_scene(p))
     if "die_width_mm = 14" in works:
-        assert res["die_m"] == pytest.approx(14e-3)
+        assert res.die_m == pytest.approx(14e-3)
 
 
 def _design_grids_accept(res) -> list[str]:
@@ -145,10 +145,10 @@ def _design_grids_accept(res) -> list[str]:
     import doefab
     from doefab.errors import SamplingError
 
-    task, cam = res["task"], res["camera"]
+    task, cam = res.task, res.camera
     refused = []
-    for name, factor in (("full", 1), ("run", _design_run(res["settings"], False)[1]),
-                         ("quick", _design_run(res["settings"], True, res["quick_sampling"])[1])):
+    for name, factor in (("full", 1), ("run", _design_run(res.settings, False)[1]),
+                         ("quick", _design_run(res.settings, True, res.quick_sampling)[1])):
         try:
             doefab.PSFPlan(design_camera(cam, factor), task.wavelengths(cam), task.depths(cam), task.kernel_size)
         except SamplingError as exc:

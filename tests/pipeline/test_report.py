@@ -6,6 +6,7 @@ import csv
 import json
 import re
 import shutil
+from types import SimpleNamespace
 
 import pytest
 from matplotlib.figure import Figure
@@ -32,7 +33,9 @@ TOLERANCE = {
                     "yield": {"value": 0.75, "ci95": [0.468, 0.911], "n": 12}}}},
     "tornado": [ROW], "grid": {"fixed": True, "monte_carlo_grid": 1, "kinds": {}},
 }
-SETTINGS = {"settings": {"design_task": "streak", "wavelengths_m": [656e-9], "depths_m": [5.0], "kernel_px": 95}}
+# a report of stages without a resolved scene: its design settings alone
+SETTINGS = SimpleNamespace(settings={"design_task": "streak", "wavelengths_m": [656e-9], "depths_m": [5.0],
+                                     "kernel_px": 95})
 
 
 def _png(path):

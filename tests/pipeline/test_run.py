@@ -55,8 +55,8 @@ def test_shipped_scenes_validate_and_resolve_to_the_committed_designs(scene):
     from doefab.pipeline.stages import resolve
 
     res = resolve(load_scene(REPO / "scenes" / f"{scene}.toml"))
-    assert res["reuse"], res["differ"]
-    n_l, n_z = len(res["settings"]["wavelengths_m"]), len(res["settings"]["depths_m"])
+    assert res.reuse, res.differ
+    n_l, n_z = len(res.settings["wavelengths_m"]), len(res.settings["depths_m"])
     assert (n_l, n_z) == {"hdr": (3, 1), "hyperspectral": (31, 1), "depth": (3, 17)}[scene]
 
 

@@ -37,22 +37,22 @@ def test_a_csv_response_is_found_beside_the_scene_and_named_by_its_file(tmp_path
     rows = np.column_stack([lam] + [np.exp(-0.5 * ((lam - mu) / 30) ** 2) for mu in (600, 540, 460)])
     np.savetxt(tmp_path / "cam.csv", rows, delimiter=",", header="wavelength_nm,R,G,B", comments="")
     res = resolve(load_scene(_scene(tmp_path, "hyperspectral", 'response = "cam.csv"')))
-    assert res["sensor"].record()["response"] == "cam.csv (CSV)"
-    assert res["reuse"]  # the design does not depend on the sensor
+    assert res.sensor.record()["response"] == "cam.csv (CSV)"
+    assert res.reuse  # the design does not depend on the sensor
 
 
 def test_the_doctor_states_the_noise_the_sensor_implies(tmp_path):
     """The SNR at full scale against the sensor's own noise drawn at a capture value of 1 (200 000 pixels)."""
     res = resolve(load_scene(_scene(tmp_path, "hdr", "full_well_e = 12000.0\nread_noise_e = 1.5")))
     rows = {r["quantity"]: r["value"] for r in explain(res)}
-    full = res["sensor"].noise().apply(np.ones(200_000), np.random.default_rng(0))
+    full = res.sensor.noise().apply(np.ones(200_000), np.random.default_rng(0))
     assert rows["shot-noise SNR at full scale"] == pytest.approx(full.mean() / full.std(), rel=0.01)
     assert rows["capture dynamic range"] == pytest.approx(math.log2(12000 / 1.5))
 
 
 def test_an_rgb_task_warns_that_the_response_is_not_used(tmp_path):
     res = resolve(load_scene(_scene(tmp_path, "depth", 'response = "Nikon D5100"')))
-    assert any("not used by the depth task" in w for w in res["warnings"])
+    assert any("not used by the depth task" in w for w in res.warnings)
 
 
 def test_the_reconstruction_stage_hash_follows_the_csv_content(tmp_path):

@@ -17,12 +17,12 @@ def test_template_is_a_valid_scene_for_another_camera(task, tmp_path):
     p = tmp_path / f"{task}.toml"
     p.write_text(template(task))
     res = resolve(load_scene(p))
-    cam = res["camera"]
+    cam = res.camera
     # the template's camera: 35 mm f/4, 3.76 µm pixels, a 4 µm DOE pitch
     assert cam.sensor_pitch == pytest.approx(3.76e-6)
     assert cam.doe_pitch == pytest.approx(4e-6)
     assert cam.aperture_diameter == pytest.approx(35e-3 / 4, rel=1e-9)
-    assert res["custom_camera"] and not res["reuse"]
+    assert res.custom_camera and not res.reuse
 
 
 def test_template_names_every_key_with_its_unit():
@@ -67,9 +67,9 @@ def test_each_geometry_key_reaches_the_task(tmp_path, task, key, value, param, w
     p = tmp_path / "s.toml"
     p.write_text(f'task = "{task}"\n[design]\n{key} = {value}\n')
     res = resolve(load_scene(p))
-    got = getattr(res["task"], param)
+    got = getattr(res.task, param)
     assert got == (pytest.approx(want) if isinstance(want, float) else want)
-    assert not res["reuse"]
+    assert not res.reuse
 
 
 def _cell(k) -> str:

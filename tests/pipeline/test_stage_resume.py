@@ -8,6 +8,7 @@ import pytest
 
 from doefab.io import mark_folder
 from doefab.pipeline import stages
+from doefab.pipeline.knobs import REPO
 
 
 SAVED = {"design": ("checkpoint.pt", "history.csv"),
@@ -15,12 +16,17 @@ SAVED = {"design": ("checkpoint.pt", "history.csv"),
          "tolerance": ("samples.jsonl", "steps/grid.json", "steps/tornado.json")}
 
 
+def _res(scene):
+    """A resolved scene as the stage cache reads it: the design settings the scene asks for."""
+    return SimpleNamespace(design_key=lambda: {"settings": scene.raw.get("design")})
+
+
 def _interrupted(root, name, scene, files):
     """A stage folder as an interrupted run leaves it: marked, its record incomplete, its saved work present."""
     out = root / name
     out.mkdir(parents=True)
     mark_folder(out, stages.STAGE_KIND, stage=name)
-    h = stages.stage_hash(scene, name, {}, False)
+    h = stages.stage_hash(scene, name, {}, False, _res(scene))
     (out / "stage.json").write_text(f'{{"stage": "{name}", "hash": "{h}", "complete": false}}')
     for f in files:
         (out / f).parent.mkdir(parents=True, exist_ok=True)
@@ -43,7 +49,7 @@ def test_a_rerun_with_the_same_inputs_continues_from_the_saved_work(tmp_path, mo
         return {"status": "ran", "why": "fake"}
 
     monkeypatch.setitem(stages.STAGE_FUNCS, name, fake)
-    info = stages.run_stage(scene, {}, name, tmp_path, {}, False, force=False)
+    info = stages.run_stage(scene, _res(scene), name, tmp_path, {}, False, force=False)
     assert {f: seen[f] for f in files} == {f: f"saved {f}".encode() for f in files}
     assert seen["figure"] is False  # what is not resumable is recomputed
     assert "continued from the interrupted run" in info["why"] and info["complete"]
@@ -69,10 +75,10 @@ def test_changed_inputs_or_force_start_afresh(tmp_path, monkeypatch, name):
     _interrupted(tmp_path / "a", name, scene, files)
     changed = SimpleNamespace(raw={"design": {"iterations": 61}, name: {"x": 1}, "fabrication": {"n_levels": 8}},
                               task="hdr")
-    stages.run_stage(changed, {}, name, tmp_path / "a", {}, False, force=False)
+    stages.run_stage(changed, _res(changed), name, tmp_path / "a", {}, False, force=False)
     assert seen["kept"] == []
     _interrupted(tmp_path / "b", name, scene, files)
-    stages.run_stage(scene, {}, name, tmp_path / "b", {}, False, force=True)
+    stages.run_stage(scene, _res(scene), name, tmp_path / "b", {}, False, force=True)
     assert seen["kept"] == []
 
 
@@ -92,7 +98,8 @@ def test_the_design_stage_resumes_the_optimiser_from_its_checkpoint(tmp_path, mo
     monkeypatch.setattr(stages, "redesign_note", lambda res, quick: "a new design")
     settings = {"iterations": 5, "sampling": 1, "optimizer": "adam", "seed": 0, "design_task": "streak",
                 "parameterization": "pixel", "knots": 0, "n_levels": 16}
-    res = {"reuse": False, "settings": settings, "task": SimpleNamespace(params=lambda: {}), "camera": None}
+    res = SimpleNamespace(reuse=False, settings=settings, task=SimpleNamespace(params=lambda: {}), camera=None,
+                          quick_sampling=None)
     for saved in (False, True):
         out = tmp_path / str(saved)
         out.mkdir()
@@ -103,11 +110,21 @@ def test_the_design_stage_resumes_the_optimiser_from_its_checkpoint(tmp_path, mo
         assert got["resume"] is saved and got["out_dir"] == out
 
 
-def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_networks():
-    """Levels or substrate change the design; retrained networks change what the tolerance study judges."""
-    a = SimpleNamespace(raw={"fabrication": {"n_levels": 16}}, task="hdr")
-    b = SimpleNamespace(raw={"fabrication": {"n_levels": 8}}, task="hdr")
+def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_networks(tmp_path):
+    """Levels change the design, a default written out does not (one definition of the same scene: the resolved
+    design settings); retrained networks change what the tolerance study judges."""
+    from doefab.pipeline.scene import load_scene
+
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    assert "n_levels = 16" in text and "seed = 0" in text
+    files = {"a": text, "b": text.replace("n_levels = 16", "n_levels = 8"),
+             "same": text.replace("seed = 0\n", "")}  # the seed's default, left out
+    for name, t in files.items():
+        (tmp_path / f"{name}.toml").write_text(t)
+    a, b, same = (load_scene(tmp_path / f"{n}.toml") for n in files)
+    assert "seed" not in same.raw["design"]
     assert stages.stage_hash(a, "design", {}, False) != stages.stage_hash(b, "design", {}, False)
+    assert stages.stage_hash(a, "design", {}, False) == stages.stage_hash(same, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
     assert stages.stage_hash(a, "tolerance", one, False) != stages.stage_hash(a, "tolerance", two, False)
 
@@ -151,5 +168,6 @@ def test_the_reconstruction_stage_resumes_each_networks_training(tmp_path, monke
     (out / "run_coded_only" / "checkpoint.pt").write_bytes(b"x")
     scene = SimpleNamespace(reconstruction={"weights": "train", "minutes": 1}, task="hdr", tolerance=None)
     with pytest.raises(Stop):
-        stages.stage_reconstruction(scene, {"reuse": False, "settings": {"design_task": "streak"}}, out, False)
+        stages.stage_reconstruction(scene, SimpleNamespace(reuse=False, sensor=None, settings={"design_task": "streak"}),
+                                    out, False)
     assert got == [("proposed", False), ("coded_only", True), ("uncoded_only", False)]

@@ -2,6 +2,7 @@
 calibration draws it (the network-level judge uses its network's sensor); the default sensor changes nothing."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -30,7 +31,7 @@ def _budget_the_study_gets(tmp_path, monkeypatch, sensor: str) -> dict:
 
     monkeypatch.setattr(report, "run_study", spy)
     with pytest.raises(_Stop):
-        stages.stage_tolerance(load_scene(p), {"reuse": True, "sensor": None}, tmp_path / "run" / "tolerance", True)
+        stages.stage_tolerance(load_scene(p), SimpleNamespace(reuse=True, sensor=None), tmp_path / "run" / "tolerance", True)
     return seen["budget"]
 
 

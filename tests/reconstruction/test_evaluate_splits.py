@@ -144,7 +144,8 @@ def test_the_main_job_scores_the_test_split_and_says_so(monkeypatch, tmp_path):
     monkeypatch.setattr(conditions, "for_splits", lambda *a, **k: {"test": None})
     monkeypatch.setattr(stages, "_design_sha", lambda folder: "0" * 64)
     scene = SimpleNamespace(reconstruction={"weights": "shipped"}, task="hdr", tolerance=None)
-    r = stages.stage_reconstruction(scene, {"reuse": True, "settings": {"design_task": "streak"}}, tmp_path / "rec",
+    res = SimpleNamespace(reuse=True, sensor=None, settings={"design_task": "streak"})
+    r = stages.stage_reconstruction(scene, res, tmp_path / "rec",
                                     True)
     assert [c["split"] for c in calls] == ["test"] and r["split"] == "test"
     assert "from the test split (not the final test set" in r["why"]
