@@ -104,3 +104,11 @@ def test_a_boolean_is_not_taken_for_a_number(cam, call, name):
     with pytest.raises(DoefabError, match=rf"{name} must be .*got True"):
         call(cam)
     assert doefab.split_aperture_psf(None, cam, [550e-9], [1.0], kernel_size=np.int64(5)).coded.shape[-1] == 5
+
+
+def test_fabricated_height_gives_the_unit_error(tiny_camera):
+    levels = np.zeros((tiny_camera.doe_pixels,) * 2, np.uint8)
+    with pytest.raises(DoefabError, match="550 nm is 5.5e-07 m"):
+        doefab.fabricated_height(levels, tiny_camera, design_wavelength=550)
+    with pytest.raises(DoefabError, match="550 nm is 5.5e-07 m"):
+        doefab.Camera(design_wavelength=550)

@@ -234,3 +234,19 @@ def test_the_reconstruction_table_is_shown_beside_the_tolerance_judges_error_fre
     (text,) = [t for _, t in beside_tolerance(out, "hdr", done["reconstruction"]["rows"])]
     assert "(clean captures)" in text and "the scenes differ" not in text and "fabricated parts drawn" not in text
     assert text.endswith("the table's captures are clean (the nominal model's own: depth on the network's own planes).")
+
+
+def test_report_text_renders_and_says_what_is_a_benchmark(tmp_path):
+    from doefab.pipeline.report import BENCHMARK, write_report
+    from doefab.pipeline.scene import load_scene
+
+    scene = load_scene(REPO / "scenes" / "hyperspectral.toml")
+    from types import SimpleNamespace
+
+    res = SimpleNamespace(settings={"design_task": "grating", "wavelengths_m": [5e-7] * 31, "depths_m": [5.0],
+                                    "kernel_px": 191})  # a report of stages without a resolved scene
+    write_report(tmp_path, scene, {"reconstruction": {"status": "reused", "weights": "shipped", "rows": {}}}, res)
+    page = (tmp_path / "report.html").read_text()
+    assert "`" not in page and f"<code>{scene.path}</code>" in page
+    assert page.count(BENCHMARK) >= 3  # the PSF and design benchmark captions, and the section's note
+    assert "not in this run" in page  # the shipped weights' training curves

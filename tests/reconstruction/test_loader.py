@@ -179,3 +179,23 @@ def test_captures_of_other_bands_or_another_camera_are_refused_without_psf(weigh
     coded, uncoded = doefab.simulate_captures(scene[:1], one, response=np.full((3, 1), 0.3), noise="none")
     with pytest.raises(DoefabError, match=r"1 band 550 nm \(the network: 3 bands 656, 589, 486 nm\)"):
         rec(coded, uncoded)
+
+
+def test_the_loader_never_suggests_overwriting_the_shipped_weights(tmp_path):
+    from doefab.reconstruction.loader import _retrain
+
+    hint = _retrain("depth", "proposed", None, tmp_path / "cand")
+    assert "--weights-dir NEW_FOLDER" in hint and "--replace-shipped" not in hint
+    assert _retrain("depth", "proposed", tmp_path / "w", None).endswith(f"--weights-dir {tmp_path / 'w'}")
+
+
+def test_reconstructor_refuses_captures_outside_0_1():
+    rec = doefab.load_reconstructor("hdr")
+    rng = np.random.default_rng(0)
+    coded, uncoded = rng.random((3, 64, 64)).astype(np.float32), rng.random((3, 64, 64)).astype(np.float32)
+    with pytest.raises(DoefabError, match=r"captures are in \[0, 1\].*divide by the white level"):
+        rec(coded * 255, uncoded * 255)
+    with pytest.raises(DoefabError, match="integer .uint8. image.*255 for 8 bits"):
+        rec((coded * 255).astype(np.uint8), (uncoded * 255).astype(np.uint8))
+    with pytest.raises(DoefabError, match="subtract the black level"):
+        rec(coded - 0.5, uncoded)

@@ -1,0 +1,23 @@
+"""``doefab doctor``: a folder is named as a folder; --out replaces only its own report."""
+
+import json
+
+from cli_helpers import REPO, run_cli
+
+
+def test_a_folder_is_named_as_a_folder(tmp_path, capsys):
+    (tmp_path / "somedir.toml").mkdir()
+    rc, _, err = run_cli(["doctor", tmp_path / "somedir.toml"], capsys)
+    assert rc == 2 and "is a folder" in err and "not found" not in err
+
+
+def test_doctor_out_replaces_only_its_own_report(tmp_path, capsys):
+    """``doctor --out F`` writes F; a rerun replaces its own report; a file of the user's is never replaced."""
+    f = tmp_path / "d.json"
+    for _ in range(2):
+        rc, _, _ = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", f], capsys)
+        assert rc == 0 and json.loads(f.read_text())["written_by"] == "doefab doctor"
+    mine = tmp_path / "notes.txt"
+    mine.write_text("my notes")
+    rc, _, err = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", mine], capsys)
+    assert rc == 2 and "never replaces" in err and mine.read_text() == "my notes"
