@@ -101,8 +101,8 @@ def main(argv=None) -> int:
     q = args.quick
     bands, kernel, iters, steps, parts = (5, 64, 2, 2, 1) if q else (31, 512, 10, 100, 30)
     steps, parts = args.steps or steps, args.parts or parts
-    rows, data = [], {"torch": torch.__version__, "threads": torch.get_num_threads(), "cores": os.cpu_count(),
-                      "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None, "rows": {}}
+    data = {"torch": torch.__version__, "threads": torch.get_num_threads(), "cores": os.cpu_count(),
+            "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None, "rows": {}}
     cases = []
     if "psf" in args.only:
         cases.append((f"{bands}-band coded PSF, K = {kernel} (median of 3)", lambda d, t: psf_case(d, bands, kernel)))
@@ -117,7 +117,7 @@ def main(argv=None) -> int:
                        lambda d, t: judge_case(d, "grating", parts, t)))
     with tempfile.TemporaryDirectory() as tmp:
         for label, fn in cases:
-            got = {}
+            got = data["rows"].setdefault(label, {})
             for dev in args.devices:
                 try:
                     got[dev] = fn(dev, Path(tmp))
@@ -125,20 +125,20 @@ def main(argv=None) -> int:
                     got[dev] = None
                     print(f"{label} on {dev}: FAILED {type(exc).__name__}: {exc}", flush=True)
                 print(f"{label} on {dev}: {got[dev]}", flush=True)
-            data["rows"][label] = got
-            c, g = got.get("cpu"), got.get("cuda")
-            ratio = f"{c / g:.1f}×" if c and g else "—"
-            rows.append(f"| {label} | {c:.2f} |" if c else f"| {label} | — |")
-            rows[-1] += f" {g:.2f} | {ratio} |" if g else " — | — |"
-            _write(args.out, data, rows)  # after every row: a time limit that stops the script keeps the rows so far
+                _write(args.out, data)  # after every device: a time limit that stops the script keeps what it had
     print((args.out / "gpu_table.md").read_text())
     return 0
 
 
-def _write(out: Path, data: dict, rows: list) -> None:
+def _write(out: Path, data: dict) -> None:
     head = [f"CPU against GPU on one machine ({data['gpu']}; {data['cores']} CPU cores, torch {data['torch']}, "
             f"{data['threads']} intra-op threads on the CPU rows): `python benchmarks/gpu_table.py`.", "",
             "| workload | CPU (s) | GPU (s) | speed-up |", "| --- | --- | --- | --- |"]
+    rows = []
+    for label, got in data["rows"].items():
+        c, g = got.get("cpu"), got.get("cuda")
+        cells = [f"{c:.2f}" if c else "—", f"{g:.2f}" if g else "—", f"{c / g:.1f}×" if c and g else "—"]
+        rows.append(f"| {label} | " + " | ".join(cells) + " |")
     out.mkdir(parents=True, exist_ok=True)
     (out / "gpu_table.md").write_text("\n".join(head + rows) + "\n")
     (out / "gpu_table.json").write_text(json.dumps(data, indent=1))

@@ -189,7 +189,7 @@ class View(Mapping):
         return iter(self._rows())
 
     def __len__(self) -> int:
-        return len(APPLICATIONS)
+        return len(self._rows())
 
     def __repr__(self) -> str:
         return f"View({dict(self)!r})"

@@ -46,7 +46,7 @@ def _diagnose(args, scene) -> int:
         print(f"warning: {note}")
     print(f"device: {describe_device()}")
     print("checks")
-    rows = diagnose(scene, precision_check=not args.no_precision)
+    rows = diagnose(scene, precision_check=not args.no_precision, res=res)
     for r in rows:
         val = f"{r['value']:.4g}" if isinstance(r["value"], float) else str(r["value"])
         print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "

@@ -31,14 +31,14 @@ def _row(check, value, limit, unit, ok, fix="", at_least: bool = False):
             "margin": margin, "ok": bool(ok), "fix": "" if ok else fix}
 
 
-def diagnose(scene, precision_check: bool = True) -> list[dict]:
+def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = None) -> list[dict]:
     import torch
 
     from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
     from doefab.pipeline.stages import resolve
     from doefab.pipeline.sampling import phase_step_fix, pitch_fix, source_phase_step
 
-    res = resolve(scene)
+    res = res if res is not None else resolve(scene)  # the caller's, when it resolved the scene already
     cam = res.camera
     s = res.settings
     lams = s["wavelengths_m"]

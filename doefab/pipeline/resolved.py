@@ -11,8 +11,6 @@ design's level map where it is reused).
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -64,7 +62,3 @@ class ResolvedScene:
         if self.reuse:
             key["committed_levels_sha256"] = levels_sha256(self.committed.levels)
         return key
-
-    def digest(self) -> str:
-        """A short SHA-256 of ``design_key`` (16 hex digits)."""
-        return hashlib.sha256(json.dumps(self.design_key(), sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -93,7 +93,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
                             n_levels=int(s["n_levels"]), progress=True,
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
-        info = {"status": "ran", "why": f"settings differ from the committed design in {res.differ}"
+        info = {"status": "ran", "why": f"settings differ from the committed design in {', '.join(res.differ)}"
                 + (f" (quick: {iters} iterations on a {sampling}× coarser grid)" if quick else "")}
     d = Design.load(out)
     task = res.task
@@ -172,7 +172,7 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.build import write_holder
     from holder_cad.params import HolderParams
 
-    rep = write_holder(HolderParams(**scene_holder(scene)), out, step=False if quick else None, renders=True)
+    rep = write_holder(HolderParams(**scene_holder(scene, getattr(res, "camera", None))), out, step=False if quick else None, renders=True)
     horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
             "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
@@ -353,14 +353,18 @@ SECTION = {"design": (), "masks": ("fabrication",), "holder": ("holder",),
 
 def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None) -> str:
     """The stage's inputs: for the design the resolved scene's ``design_key`` (its design settings, however the
-    scene file spelled them; ``res``: the scene resolved, resolved here when None), for the others their scene
-    sections; the task, --quick, its upstream stages' hashes, for the holder the source of ``holder_cad`` that
+    scene file spelled them; ``res``: the scene resolved, resolved here when None and needed), for the others
+    their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its upstream stages' hashes, for the holder the source of ``holder_cad`` that
     builds it and, for the stages that draw fabricated parts from it, the tolerance budget's content (not only
     its file name)."""
+    if name in ("design", "masks", "holder") and res is None:
+        res = resolve(scene)
     if name == "design":
-        parts = {"design": (res if res is not None else resolve(scene)).design_key()}
+        parts = {"design": res.design_key()}
     else:
         parts = {s: scene.raw.get(s) for s in SECTION[name]}
+    if name == "masks":  # the die the masks are laid out on follows the holder's keys too
+        parts["die_m"] = res.die_m
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
@@ -369,7 +373,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
 
         from doefab.io import sources_sha256
 
-        parts["holder"] = scene_holder(scene)
+        parts["holder"] = scene_holder(scene, res.camera)
         parts["code"] = sources_sha256(Path(holder_cad.__file__).resolve().parent.parent, ("holder_cad",))
     if name in ("reconstruction", "tolerance"):
         parts["budget"] = budget_digest(scene)

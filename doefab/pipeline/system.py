@@ -202,7 +202,7 @@ def scene_task(scene: Scene, committed, cam):
             params[name] = d[key] if scale is None else d[key] * scale
     if "grating_period_um" in d:
         params["period_m"] = d["grating_period_um"] * 1e-6
-    if design_is(dname, "depth") and is_custom_camera(scene) and "ring_max_px" not in d:
+    if design_is(dname, "depth") and is_custom_camera(scene, cam) and "ring_max_px" not in d:
         params["ring_max_px"] = defocus_ring_px(cam, params)
     try:
         task = get_task(dname, **params)

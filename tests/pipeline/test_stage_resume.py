@@ -127,6 +127,11 @@ def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_netw
     assert stages.stage_hash(a, "design", {}, False) == stages.stage_hash(same, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
     assert stages.stage_hash(a, "tolerance", one, False) != stages.stage_hash(a, "tolerance", two, False)
+    # a wider aperture margin in the holder's pocket needs a larger die: the masks change, the design does not
+    (tmp_path / "margin.toml").write_text(text.replace("[holder]\n", "[holder]\naperture_margin_mm = 3.0\n"))
+    margin = load_scene(tmp_path / "margin.toml")
+    assert stages.stage_hash(a, "masks", {}, False) != stages.stage_hash(margin, "masks", {}, False)
+    assert stages.stage_hash(a, "design", {}, False) == stages.stage_hash(margin, "design", {}, False)
 
 
 def test_editing_the_budget_file_changes_the_stages_that_draw_parts_from_it(tmp_path):
