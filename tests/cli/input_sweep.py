@@ -8,10 +8,15 @@ with one it does not take, a value of the wrong type and an empty one, and each 
 a file, a folder of the user's and a path under a file. At the command line every case must give exit status 2
 (3 for a mask set that fails verification) and one line naming the argument, with nothing created or changed
 and no job started (the work guard ``no_work``); from the API a ``doefab.DoefabError`` naming the argument.
+
+This module holds the tables and the checks; the tests are collected per subcommand, each file
+``test_inputs_<subcommand>.py`` taking that subcommand's cases (``sweep``; a case's subcommand is the first word of
+its id; ``scene`` is the scene file's keys and ``doefab scene``), and ``test_inputs_api.py`` the public API's.
 """
 
 from __future__ import annotations
 
+import functools
 import shutil
 from pathlib import Path
 
@@ -891,3 +896,47 @@ def test_the_sweep_covers_the_whole_public_api():
     swept = {row[0].split("(")[0] for row in API} | {r[0].split(" ")[0].split(".")[0] for r in API_FILES}
     assert set(doefab.__all__) <= swept | set(NOTHING_TO_SWEEP), set(doefab.__all__) - swept - set(NOTHING_TO_SWEEP)
     assert len(API_CASES) + len(FLAG_CASES) + len(HOLDER_CASES) + len(SCENE_CASES) >= 300
+
+
+# ---------------------------------------------------------------- the sweep, one subcommand at a time
+
+SUBCOMMANDS = ("demo", "design", "doctor", "evaluate", "finetune", "holder", "masks", "psf", "run", "scene",
+               "tolerance", "train")
+COMMAND_LINE = (test_numeric_flag, test_holder_parameter, test_scene_key, test_scene_check, test_file_argument,
+                test_word_flag, test_out_flag, test_refused_before_any_work)
+
+
+def _subcommand(case) -> str:
+    return case.id.split(" ")[0]
+
+
+def _only(test, cmd: str):
+    """``test`` parametrized with the cases of subcommand ``cmd`` alone (None: it has none)."""
+    (mark,) = [m for m in test.pytestmark if m.name == "parametrize"]
+    mine = [c for c in mark.args[1] if _subcommand(c) == cmd]
+    if not mine:
+        return None
+
+    @functools.wraps(test)
+    def one(*args, **kwargs):
+        return test(*args, **kwargs)
+
+    one.pytestmark = []
+    return pytest.mark.parametrize(mark.args[0], mine)(one)
+
+
+def sweep(cmd: str) -> dict:
+    """The command-line sweep's tests of subcommand ``cmd``, each parametrized with that subcommand's cases, and
+    the work guard they use: a test module's globals (``globals().update(sweep("design"))``)."""
+    assert cmd in SUBCOMMANDS, cmd
+    tests = {t.__name__: _only(t, cmd) for t in COMMAND_LINE}
+    return {"no_work": no_work, **{name: t for name, t in tests.items() if t is not None}}
+
+
+def test_every_command_line_case_has_its_subcommands_file():
+    """Every case of the sweep belongs to a subcommand that has a ``test_inputs_<subcommand>.py`` file: a case of
+    a new subcommand is never left uncollected."""
+    here = Path(__file__).parent
+    seen = {_subcommand(c) for t in COMMAND_LINE for m in t.pytestmark if m.name == "parametrize" for c in m.args[1]}
+    assert seen == set(SUBCOMMANDS)
+    assert all((here / f"test_inputs_{cmd}.py").is_file() for cmd in SUBCOMMANDS)
