@@ -93,6 +93,14 @@ class Application:
                               f"{', '.join(m.name for m in self.metrics)}")
         return got
 
+    def function(self, field: str):
+        """The function a "module:function" row of this application names (``metric_function``,
+        ``scene_function``), its module imported now (heavy ones stay out of ``import doefab``)."""
+        import importlib
+
+        module, name = getattr(self, field).split(":")
+        return getattr(importlib.import_module(module), name)
+
 
 _PSNR = (0.0, 100.0)  # dB
 APPLICATIONS = {a.name: a for a in (

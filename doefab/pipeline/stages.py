@@ -172,7 +172,8 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.build import write_holder
     from holder_cad.params import HolderParams
 
-    rep = write_holder(HolderParams(**scene_holder(scene, getattr(res, "camera", None))), out, step=False if quick else None, renders=True)
+    params = HolderParams(**scene_holder(scene, getattr(res, "camera", None)))
+    rep = write_holder(params, out, step=False if quick else None, renders=True)
     horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
             "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
@@ -347,16 +348,16 @@ STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_hol
                "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
 UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
             "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
-SECTION = {"design": (), "masks": ("fabrication",), "holder": ("holder",),
+SECTION = {"masks": ("fabrication",), "holder": ("holder",),  # the design's: ResolvedScene.design_key
            "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 
 
 def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None) -> str:
     """The stage's inputs: for the design the resolved scene's ``design_key`` (its design settings, however the
     scene file spelled them; ``res``: the scene resolved, resolved here when None and needed), for the others
-    their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its upstream stages' hashes, for the holder the source of ``holder_cad`` that
-    builds it and, for the stages that draw fabricated parts from it, the tolerance budget's content (not only
-    its file name)."""
+    their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its
+    upstream stages' hashes, for the holder the source of ``holder_cad`` that builds it and, for the stages that
+    draw fabricated parts from it, the tolerance budget's content (not only its file name)."""
     if name in ("design", "masks", "holder") and res is None:
         res = resolve(scene)
     if name == "design":

@@ -3,8 +3,6 @@ SAM (radians), depth MAE/RMSE/log10/δ<1.25."""
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 
 from doefab.applications import HDR_PEAK, View, application
@@ -85,8 +83,7 @@ def metrics_for(task: str, pred: np.ndarray, target: np.ndarray) -> dict:
     (``doefab.applications``; units as its ``Metric`` rows print them).
 
     Example: ``metrics_for("depth", np.full((8, 8), 2.2), np.full((8, 8), 2.0))["mae"]`` → 0.2 (m)."""
-    module, name = application(task).metric_function.split(":")
-    return getattr(importlib.import_module(module), name)(pred, target)
+    return application(task).function("metric_function")(pred, target)
 
 
 def mean_metrics(rows: list[dict]) -> dict:

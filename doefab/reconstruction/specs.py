@@ -8,7 +8,6 @@ one the design was optimised in (``network_kernel``).
 from __future__ import annotations
 
 import functools
-import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -159,8 +158,7 @@ def render_scene(task: str, split: str, index: int, rng, big: int, pair, respons
     measured."""
     from doefab.imaging.captures import render_layers
 
-    module, name = application(task).scene_function.split(":")
-    scene, target, masks, known = getattr(importlib.import_module(module), name)(split, index, rng, big, pair)
+    scene, target, masks, known = application(task).function("scene_function")(split, index, rng, big, pair)
     s = torch.from_numpy(scene)
     views = []
     for psf in (pair.coded.to(torch.float32), pair.uncoded.to(torch.float32)):

@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import math
 
-from doefab.applications import View
+from doefab.applications import View, application
 from doefab.errors import DoefabError
 
-__all__ = ["DELIVERED", "SPAN", "PSF_METRIC_SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys", "limit_range",
-           "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
+__all__ = ["DELIVERED", "SPAN", "PSF_METRIC_SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys",
+           "limit_range", "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
 
 # views of the application registry's Metric rows (``doefab.applications``, read on every lookup): the delivered
 # metrics per task, name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and
@@ -69,7 +69,7 @@ def limit_range(task: str, key: str) -> tuple[float, float, str]:
     width for a margin (``*_loss_max``, ``*_increase_max``)."""
     metric, kind = _key_parts(task)[key]
     lo, hi = PSF_METRIC_SPAN if metric == "psf_metric" else SPAN[task][metric]
-    unit = "" if metric == "psf_metric" else {"db": "dB"}.get(DELIVERED[task][metric][0], DELIVERED[task][metric][0])
+    unit = "" if metric == "psf_metric" else application(task).metric(metric).unit
     return (0.0, hi - lo, unit) if kind in ("loss", "increase") else (lo, hi, unit)
 
 

@@ -364,11 +364,15 @@ def _empty_folder(t, name="emptydir"):
     return t / name
 
 
+def _corrupt_copy(src, dst, damaged: str):
+    """A copy of the folder ``src`` at ``dst`` with its file ``damaged`` overwritten by garbage."""
+    shutil.copytree(src, dst)
+    (dst / damaged).write_bytes(b"\x00\xff garbage")
+    return dst
+
+
 def _corrupt_design(f, t):
-    d = t / "design"
-    shutil.copytree(f / "design", d)
-    (d / "design.json").write_bytes(b"\x00\xff garbage")
-    return d
+    return _corrupt_copy(f / "design", t / "design", "design.json")
 
 
 def _corrupt_weights(t):
@@ -382,10 +386,7 @@ def _corrupt_weights(t):
 
 
 def _corrupt_set(f, t):
-    m = t / "set"
-    shutil.copytree(f / "maskset", m)
-    (m / "manifest.json").write_bytes(b"\x00\xff garbage")
-    return m
+    return _corrupt_copy(f / "maskset", t / "set", "manifest.json")
 
 
 def _users_weights(t):
