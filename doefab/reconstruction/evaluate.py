@@ -111,10 +111,11 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
 
 
 def _score(task, split, images, size, recs, design, sensor, cond, progress, told=None,
-           render=None) -> tuple[dict, list, tuple]:
-    """Every variant's metrics on each of the split's ``images`` scenes (rendered through ``render``, default the
-    design's pair, where ``cond`` gives no part; the networks told ``told``, default their own pair), the scenes'
-    kinds of light and the first scene's (coded, uncoded, target, {variant: output}) for the figure."""
+           render=None, indices=None) -> tuple[dict, list, tuple]:
+    """Every variant's metrics on each of the split's ``images`` scenes (``indices``: only those of them; rendered
+    through ``render``, default the design's pair, where ``cond`` gives no part; the networks told ``told``,
+    default their own pair), the scenes' kinds of light and the first scene's (coded, uncoded, target,
+    {variant: output}) for the figure."""
     from doefab.reconstruction.spectra import light_kind
     from doefab.reconstruction.train import sensor_response_for
 
@@ -123,7 +124,7 @@ def _score(task, split, images, size, recs, design, sensor, cond, progress, told
     pair = render if render is not None else pair
     rows = {v: [] for v in recs}
     kinds, example = [], None
-    it = range(images)
+    it = range(images) if indices is None else indices
     if progress:
         from tqdm import tqdm
 
