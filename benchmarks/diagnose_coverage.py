@@ -6,8 +6,10 @@ computed on a grid ``--supersample``× finer than the fit's design grid and reco
 
     .venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20
 
-Options: ``--design DIR`` (default masks/streak/design), ``--block N``, ``--parts``, ``--starts`` (4),
-``--photons`` (1e6), ``--supersample`` (2), ``--seed`` (41), ``--results DIR`` (benchmarks/results).
+Options: ``--design DIR`` (default masks/streak/design), ``--block N``, ``--parts``, ``--starts`` (diagnose's),
+``--photons`` (1e6), ``--supersample`` (2), ``--seed`` (41), ``--results DIR`` (benchmarks/results),
+``--roughness-nm R`` (the parts' surface roughness, RMS; default the budget's: ``0`` shows how much of the
+shortfall the roughness that the fit holds makes).
 
 ``--block N``: instead of the whole design, an N-pixel block of it where all its masks have edges (its coded
 half's outer part), the right half plain, on a 20 mm sensor distance and a kernel of N − 1 pixels (the test's
@@ -25,7 +27,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
 import tempfile
@@ -120,7 +121,7 @@ def table(result: dict) -> str:
     design = Path(a["design"]).resolve()
     shown = design.relative_to(ROOT).as_posix() if design.is_relative_to(ROOT) else design.name
     where = f"a {a['block']}-pixel block of {shown}" if a["block"] else shown
-    lines = [f"# Diagnosis coverage on parts of known errors\n",
+    lines = ["# Diagnosis coverage on parts of known errors\n",
              f"`.venv/bin/python benchmarks/diagnose_coverage.py {a['argv']}`: {a['parts']} parts of {where} drawn "
              f"from the shipped budget, recorded at {a['supersample']}× the fit's grid with {a['photons']:.3g} "
              f"photons per PSF, {a['starts']} starts per fit, torch on one thread ({a['cpus']} CPU cores).\n",
@@ -150,12 +151,17 @@ def main(argv=None) -> int:
     ap.add_argument("--design", default=str(ROOT / "masks" / "streak" / "design"))
     ap.add_argument("--block", type=int, default=0, help="an N-pixel block of the design (0: the whole design)")
     ap.add_argument("--parts", type=int, default=20)
-    ap.add_argument("--starts", type=int, default=4)
+    ap.add_argument("--starts", type=int, default=None, help="default: doefab.lab.diagnose.STARTS")
     ap.add_argument("--photons", type=float, default=1e6)
     ap.add_argument("--supersample", type=int, default=2)
     ap.add_argument("--seed", type=int, default=41)
     ap.add_argument("--results", default=str(RESULTS))
+    ap.add_argument("--roughness-nm", type=float, default=None, help="the parts' RMS roughness (default: budget's)")
     args = ap.parse_args(argv)
+    if args.starts is None:
+        from doefab.lab.diagnose import STARTS
+
+        args.starts = STARTS
     import torch
 
     torch.set_num_threads(1)  # the fits' times comparable from machine to machine (the published run: one thread)
@@ -178,6 +184,8 @@ def main(argv=None) -> int:
         for i, child in enumerate(np.random.SeedSequence(args.seed).spawn(args.parts)):
             err = sample_errors(budget, np.random.default_rng(child), seed=i, n_masks=n_masks)
             err = dataclasses.replace(err, crosstalk=(0.0, 0.0))  # each half is recorded with the other blocked
+            if args.roughness_nm is not None:
+                err = dataclasses.replace(err, roughness=args.roughness_nm * 1e-9)
             parts.append(one_part(design, budget, err, args, seed=args.seed + i))
             print(f"part {i + 1}/{args.parts}: {parts[-1]['seconds']:.0f} s", flush=True)
     settings = {**vars(args), "argv": " ".join(argv if argv is not None else sys.argv[1:]), "cpus": os.cpu_count()}

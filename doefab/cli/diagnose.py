@@ -28,8 +28,9 @@ def register(sub) -> None:
                         "calibration names")
     p.add_argument("--budget", default=None, help="the tolerance budget (TOML) the errors are judged against; "
                                                   "default: the shipped one")
-    p.add_argument("--starts", type=number(int, 1, 100, unit="fits"), default=4,
-                   help="fits from the error-free part and from parts drawn from the budget; the best is kept")
+    p.add_argument("--starts", type=number(int, 1, 100, unit="fits"), default=None,
+                   help="fits from the error-free part and from parts drawn from the budget; the best is kept "
+                        "(default 8: doefab.lab.diagnose.STARTS)")
     p.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0,
                    help="seed of the starts' draws and of the held errors' draws")
     p.add_argument("--delivered", action="store_true",
@@ -77,7 +78,8 @@ def run(args) -> int:
     check_pair(pair, design)
     budget = load_budget(args.budget)
     out = claim_output(args, "diagnose", replace=args.force)  # --out, before any work
-    diag = diagnose(pair, folder, budget, starts=args.starts, seed=args.seed, progress=True, delivered=args.delivered,
+    starts = {} if args.starts is None else {"starts": args.starts}  # None: diagnose's STARTS
+    diag = diagnose(pair, folder, budget, **starts, seed=args.seed, progress=True, delivered=args.delivered,
                     device=args.device)
     fitted = fitted_pair(folder, diag, device=args.device)
     out.create()

@@ -41,7 +41,7 @@ from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, s
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "held_errors",
-           "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS"]
+           "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS", "STARTS"]
 
 MAX_CORRELATION = 0.95  # at or above it two errors are not told apart
 MAX_SIGMA = 0.5  # an identifiable error's σ is below this many budget σ
@@ -52,6 +52,7 @@ RIVAL = 0.2  # starts whose unweighted misfit is within this fraction of the bes
 NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
 MIRROR_CHI2 = 4.0  # an overlay's sign is identified when its mirror fits worse by this much (2σ), in units of s²
 HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
+STARTS = 8  # fits from the error-free part and parts drawn from the budget (benchmarks/diagnose_coverage.py)
 
 
 def _starts(model: PartModel, starts: int, seed: int) -> list[np.ndarray]:
@@ -78,7 +79,7 @@ def _solve(model: PartModel, x0: np.ndarray) -> tuple[np.ndarray, float]:
     return got.x, 2.0 * float(got.cost)
 
 
-def fit(model: PartModel, starts: int = 4, seed: int = 0) -> dict:
+def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     """{"x": the optimum (budget σ), "r", "jac": the weighted residual (on the finer grid) and the Jacobian there,
     "mirror": each fitted overlay's mirror test (``mirror``), "others": [(point, rise of the weighted misfit in
     s²)] of the other fits found (rival starts, mirrors), "grid": each error's grid uncertainty (budget σ),
@@ -262,7 +263,7 @@ def psf_metric(model: PartModel, x: np.ndarray) -> dict:
             "as_fitted_with_losses": value(model.psfs(fitted, fine=True, scale=False)[c])}
 
 
-def diagnose(measured, design_dir, budget=None, starts: int = 4, seed: int = 0, progress: bool = False,
+def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int = 0, progress: bool = False,
              delivered: bool = False, device=None) -> dict:
     """The diagnosis of the part whose PSF pair is ``measured`` (a ``PSFPair``, e.g. ``PSFPair.load(psf_pair.npz)``)
     made from ``design_dir`` (a design folder, a mask set or a ``Design``): the ``diagnosis.json`` record

@@ -82,3 +82,24 @@ def test_a_pair_of_another_design_is_refused(measured, one_clear_error):
 def test_a_pair_that_names_no_design_needs_one(measured, one_clear_error):
     one_clear_error(lambda fx, work: ["diagnose", "--psf", measured / "unnamed.npz", "--out", "diag"], 2,
                     "--design is needed")
+
+
+def test_the_starts_default_is_the_diagnosis_default(monkeypatch, measured, tmp_path):
+    """Without --starts the CLI leaves the count to ``diagnose`` (its ``STARTS``), and its help names that count."""
+    import argparse
+
+    import doefab.lab.diagnose as dg
+    from doefab.cli import diagnose as cli
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    cli.register(sub)
+    assert f"default {dg.STARTS}:" in sub.choices["diagnose"].format_help().replace("\n", " ").replace("  ", " ")
+    seen = {}
+
+    def fake(pair, folder, budget, **kw):
+        seen.update(kw)
+        raise SystemExit(0)
+    monkeypatch.setattr(dg, "diagnose", fake)
+    with pytest.raises(SystemExit):
+        doefab.cli.main(["diagnose", "--psf", str(measured / "psf_pair.npz"), "--out", str(tmp_path / "o")])
+    assert "starts" not in seen and "seed" in seen
