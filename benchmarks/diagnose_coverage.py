@@ -121,9 +121,10 @@ def table(result: dict) -> str:
     design = Path(a["design"]).resolve()
     shown = design.relative_to(ROOT).as_posix() if design.is_relative_to(ROOT) else design.name
     where = f"a {a['block']}-pixel block of {shown}" if a["block"] else shown
+    rough = "" if a.get("roughness_nm") is None else f" (their surface roughness {a['roughness_nm']:g} nm RMS)"
     lines = ["# Diagnosis coverage on parts of known errors\n",
              f"`.venv/bin/python benchmarks/diagnose_coverage.py {a['argv']}`: {a['parts']} parts of {where} drawn "
-             f"from the shipped budget, recorded at {a['supersample']}× the fit's grid with {a['photons']:.3g} "
+             f"from the shipped budget{rough}, recorded at {a['supersample']}× the fit's grid with {a['photons']:.3g} "
              f"photons per PSF, {a['starts']} starts per fit, torch on one thread ({a['cpus']} CPU cores).\n",
              f"- identified errors whose truth lies within the stated 2σ: **{_pct(s['coverage_2sigma_all'])}** of "
              f"{s['identified_rows']}",
@@ -158,6 +159,8 @@ def main(argv=None) -> int:
     ap.add_argument("--results", default=str(RESULTS))
     ap.add_argument("--roughness-nm", type=float, default=None, help="the parts' RMS roughness (default: budget's)")
     args = ap.parse_args(argv)
+    if args.roughness_nm is not None and not args.roughness_nm >= 0:
+        ap.error(f"--roughness-nm must be 0 or more (nm RMS), got {args.roughness_nm}")
     if args.starts is None:
         from doefab.lab.diagnose import STARTS
 

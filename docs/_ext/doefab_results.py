@@ -96,6 +96,12 @@ MEASUREMENTS = (
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
     Measurement("judge_profile", "benchmarks/judge_profile.py", (R + "judge_profile.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
+    Measurement("diagnose_coverage_starts4", None, (R + "diagnose_coverage_starts4/diagnose_coverage.md",),
+                command=".venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20 --starts 4 "
+                        "--results benchmarks/results/diagnose_coverage_starts4"),
+    Measurement("diagnose_coverage_no_roughness", None, (R + "diagnose_coverage_no_roughness/diagnose_coverage.md",),
+                command=".venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20 --roughness-nm 0 "
+                        "--results benchmarks/results/diagnose_coverage_no_roughness"),
     Measurement("measured_pair", "benchmarks/measured_pair.py", (R + "measured_pair.md",)),
     Measurement("reconstruct_memory", "benchmarks/reconstruct_memory.py", (R + "reconstruct_memory.md",)),
     Measurement("real_validation", "benchmarks/real_validation.py", (R + "real_validation.md",)),

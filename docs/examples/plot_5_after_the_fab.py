@@ -84,7 +84,7 @@ print(f"exit status {status}; measured at {', '.join(f'{w * 1e9:g}' for w in mea
 # and an overlay, the edge bias, the mount's decenter, rotation and axial gap, each within six σ of a budget.
 # This budget is for a contact aligner (1 µm overlay); it trusts the lithography's edges and the holder (no
 # spread: the fit holds those errors at their nominal values and fits the masks' six). ``--starts 1`` fits from
-# the error-free part alone (the default, 4, also starts from parts drawn from the budget).
+# the error-free part alone (the default, 8, also starts from parts drawn from the budget).
 budget = work / "budget.toml"
 budget.write_text("[overlay]\nshift_sigma_um = 1.0\n\n[lithography]\nedge_bias_sigma_um = 0\n\n"
                   "[mounting]\ndecenter_max_mm = 0\nrotation_sigma_deg = 0\n")

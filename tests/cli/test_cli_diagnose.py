@@ -85,7 +85,8 @@ def test_a_pair_that_names_no_design_needs_one(measured, one_clear_error):
 
 
 def test_the_starts_default_is_the_diagnosis_default(monkeypatch, measured, tmp_path):
-    """Without --starts the CLI leaves the count to ``diagnose`` (its ``STARTS``), and its help names that count."""
+    """Without --starts the CLI leaves the count to ``diagnose`` (its ``STARTS``), and its help names that count;
+    with it, the count reaches ``diagnose``."""
     import argparse
 
     import doefab.lab.diagnose as dg
@@ -103,3 +104,7 @@ def test_the_starts_default_is_the_diagnosis_default(monkeypatch, measured, tmp_
     with pytest.raises(SystemExit):
         doefab.cli.main(["diagnose", "--psf", str(measured / "psf_pair.npz"), "--out", str(tmp_path / "o")])
     assert "starts" not in seen and "seed" in seen
+    with pytest.raises(SystemExit):
+        doefab.cli.main(["diagnose", "--psf", str(measured / "psf_pair.npz"), "--starts", "3", "--out",
+                         str(tmp_path / "o2")])
+    assert seen["starts"] == 3
