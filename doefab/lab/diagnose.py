@@ -13,8 +13,10 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
    budget (``tolerance.errors.sample_errors``); a PSF responds to an overlay's size more than to its sign, with
    a kink where a mask crosses another, so the misfit has many local minima.
 2. The pixels weighed by a noise model fitted to the best start's residuals (``PartModel.reweight``: shot noise
-   makes the PSF's core far noisier than its tails) and the fit resumed, ``REWEIGHT`` times; the starts whose
-   misfit came within ``RIVAL`` of the best are resumed weighted too, and the best kept.
+   makes the PSF's core far noisier than its tails) and the fit resumed, ``REWEIGHT`` times; the other starts'
+   ends whose misfit came within ``RIVAL`` of the best (and lie apart from it and each other) are resumed weighted
+   too; each is polished by ``POLISH`` Gauss–Newton steps on the finer grid of step 4 and the best there kept
+   (the design grid's flat cells shift the misfits of far-apart fits by more than the noise does).
 3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); a better mirror is taken.
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
@@ -23,10 +25,13 @@ residual vector in budget σ, s² = weighted misfit / (n − p); plus the spread
 the fitted ones (``held_errors``: ``HELD_DRAWS`` parts with the masks' rotations, the roughness and each held error
 drawn from the budget, their PSF changes taken through −J⁺); a third of step 4's shift added in quadrature (what a
 finer grid still would move); each σ widened to half the distance to any other fit found (step 2's rivals, step
-3's mirrors) within ``MIRROR_CHI2`` s² of the best. **Identifiable**: the model responds to the error at all
-(``partmodel.Param.reason`` lists the ones it cannot), its σ is below ``MAX_SIGMA`` budget σ (the recordings tell
-clearly more than the budget), its |correlation| with every other fitted error is below ``MAX_CORRELATION`` (the
-recordings tell them apart) and, for an overlay, its mirror fits worse by ``MIRROR_CHI2`` s² (its sign is told).
+3's mirrors) that the recordings do not tell apart from the best: its misfit within ``MIRROR_CHI2`` s² of the
+best's plus twice the rms swing that the held errors' PSF changes give that difference (``tolerance``: a surface
+roughness of a few nm can move the misfits of two far-apart fits further apart than the photon noise does).
+**Identifiable**: the model responds to the error at all (``partmodel.Param.reason`` lists the ones it cannot),
+its σ is below ``MAX_SIGMA`` budget σ (the recordings tell clearly more than the budget), its |correlation|
+with every other fitted error is below ``MAX_CORRELATION`` (the recordings tell them apart) and, for an overlay,
+its mirror fits worse by that ``tolerance`` (its sign is told).
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, s
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "held_errors",
+           "tolerance",
            "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS", "STARTS"]
 
 MAX_CORRELATION = 0.95  # at or above it two errors are not told apart
@@ -48,9 +54,12 @@ MAX_SIGMA = 0.5  # an identifiable error's σ is below this many budget σ
 REWEIGHT = 2  # noise-model fits, each followed by a resumed fit
 MAX_STEPS = 40  # Levenberg–Marquardt iterations per fit
 REFINE = 8  # Gauss–Newton steps at most on the finer grid
-RIVAL = 0.2  # starts whose unweighted misfit is within this fraction of the best's are fitted weighted too
+RIVAL = 1.0  # starts whose unweighted misfit is within this fraction of the best's are fitted weighted too
 NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
-MIRROR_CHI2 = 4.0  # an overlay's sign is identified when its mirror fits worse by this much (2σ), in units of s²
+MIRROR_CHI2 = 4.0  # an overlay's sign is identified when its mirror fits worse by this much (2σ), in units of s²,
+# plus twice the spread that the errors the fit holds give that rise (``curvature``)
+SAME = 0.1  # budget σ: two fits closer than this in every error are the same fit
+POLISH = 3  # Gauss–Newton steps on the finer grid before fits are compared
 HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
 STARTS = 8  # fits from the error-free part and parts drawn from the budget (benchmarks/diagnose_coverage.py)
 
@@ -81,10 +90,11 @@ def _solve(model: PartModel, x0: np.ndarray) -> tuple[np.ndarray, float]:
 
 def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     """{"x": the optimum (budget σ), "r", "jac": the weighted residual (on the finer grid) and the Jacobian there,
-    "mirror": each fitted overlay's mirror test (``mirror``), "others": [(point, rise of the weighted misfit in
-    s²)] of the other fits found (rival starts, mirrors), "grid": each error's grid uncertainty (budget σ),
-    "starts": [{"misfit", "parts"}] per start (unweighted), "noise": [{"a", "b"}] per half, plane and band (the
-    pixels' variance a·PSF + b)}: see the module docstring."""
+    "mirror": each fitted overlay's mirror test (``mirror``: rise of the misfit in s², and the residual's change),
+    "others": [(point, rise of the weighted misfit, change of the weighted residual)] of the other fits found
+    (rival starts on the finer grid, mirrors on the design grid), "grid": each error's grid uncertainty (budget
+    σ), "starts": [{"misfit", "parts"}] per start (unweighted), "noise": [{"a", "b"}] per half, plane and band
+    (the pixels' variance a·PSF + b)}: see the module docstring."""
     runs, ends = [], []
     for x0 in _starts(model, starts, seed):
         before = model.evaluations
@@ -96,22 +106,44 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     for _ in range(REWEIGHT):
         noise = model.reweight(x)
         x, f = _solve(model, x)
-    found = [(x, f)] + [_solve(model, e[1]) for e in ends[1:] if e[0] <= ends[0][0] * (1 + RIVAL)]
-    found.sort(key=lambda e: e[1])
-    x = found[0][0]
+    rivals = _distinct([e[1] for e in ends[1:] if e[0] <= ends[0][0] * (1 + RIVAL)], x)
+    found = sorted([_polish(model, xc) for xc in [x] + [_solve(model, xr)[0] for xr in rivals]], key=lambda e: e[0])
+    x = found[0][1]
     r, jac = jacobian(model, x)
+    mirrors = []
     for turn in range(3):  # a mirrored overlay that fits better is taken and the fit resumed from it, twice at most
-        flipped, dchi, mirrors = mirror(model, x, r, jac)
+        flipped, dchi, tried = mirror(model, x, r, jac)
+        mirrors = [(xm, float(rm @ rm) - float(r @ r), rm - r) for xm, rm in tried]
         if flipped is None or turn == 2:
             break
-        found.append((x, float(r @ r)))
         x = _solve(model, flipped)[0]
         r, jac = jacobian(model, x)
-    s2 = float(r @ r) / max(r.size - len(x), 1)
-    others = [(xo, (fo - float(r @ r)) / s2) for xo, fo in found[1:] + mirrors if not np.array_equal(xo, x)]
+        found.append(_polish(model, x))
+        found.sort(key=lambda e: e[0])
     fine, r_fine = refine(model, x, jac)
+    others = [(xo, float(ro @ ro) - float(r_fine @ r_fine), ro - r_fine) for _, _, xo, ro in found
+              if np.max(np.abs(xo - fine), initial=0.0) > SAME] + mirrors
     return {"x": fine, "r": r_fine, "jac": jac, "mirror": dchi, "others": others, "grid": np.abs(fine - x) / 3,
             "starts": runs, "noise": noise}
+
+
+def _distinct(points: list, first: np.ndarray) -> list:
+    """The ``points`` that lie more than ``SAME`` budget σ (in every error at once) from ``first`` and each other."""
+    out, seen = [], [first]
+    for xp in points:
+        if all(np.max(np.abs(xp - q), initial=0.0) > SAME for q in seen):
+            out.append(xp)
+            seen.append(xp)
+    return out
+
+
+def _polish(model: PartModel, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """(weighted misfit on the finer grid, the design-grid point ``x``, the point and its weighted residual on the
+    finer grid) after ``POLISH`` Gauss–Newton steps there: fits are compared on the finer grid, where the design
+    grid's flat cells no longer favour one basin over another by more than the noise does."""
+    _, jac = jacobian(model, x)
+    xf, rf = refine(model, x, jac, steps=POLISH)
+    return float(rf @ rf), x, xf, rf
 
 
 def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -133,32 +165,34 @@ def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int | None =
     return x, r
 
 
-def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray | None, np.ndarray,
+def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray | None, dict,
                                                                                    list]:
     """The overlays' signs tested: a PSF responds to how far a mask moved against the others and against the
     chrome almost alike either way, so the part with one overlay negated, and the part with every overlay along
     one axis negated, may fit as well. Each is tried with the other errors moved by one Gauss–Newton step
-    (``jac``: the Jacobian at ``x``). Returns (the best of them where it fits better than ``x``, else None; per
-    fitted error the weighted misfit's rise from ``x`` to its own mirror, in units of s², inf for errors not
-    tested; [(mirrored point, its weighted misfit)] of every one tried)."""
+    (``jac``: the Jacobian at ``x``). Returns (the best of them where it fits better than ``x``, else None;
+    {"rise": per fitted error the weighted misfit's rise from ``x`` to its own mirror, in units of s², inf for
+    errors not tested, "change": per fitted error its mirror's weighted residual less ``r``, None where not
+    tested}; [(mirrored point, its weighted residual)] of every one tried)."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     free = model.free
     singles = [[i] for i, prm in enumerate(free) if prm.key == "overlay"]
     axes = [[i for i, prm in enumerate(free) if prm.key == "overlay" and prm.axis == a] for a in "xy"]
-    dchi, best, tried = np.full(p, np.inf), (float(r @ r), None), []
+    dchi, change, best, tried = np.full(p, np.inf), [None] * p, (float(r @ r), None), []
     for flip in singles + [a for a in axes if len(a) > 1]:
         xm = x.copy()
         xm[flip] = -x[flip]
         rest = [j for j in range(p) if j not in flip]
         xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -model.residual(xm), rcond=None)[0], -BOUND, BOUND)
         rm = model.residual(xm)
-        tried.append((xm, float(rm @ rm)))
+        tried.append((xm, rm))
         if len(flip) == 1:
             dchi[flip[0]] = (float(rm @ rm) - float(r @ r)) / s2
+            change[flip[0]] = rm - r
         if rm @ rm < best[0]:
             best = (float(rm @ rm), xm)
-    return best[1], dchi, tried
+    return best[1], {"rise": dchi, "change": change}, tried
 
 
 def jacobian(model: PartModel, x: np.ndarray, step: float = STEP) -> tuple[np.ndarray, np.ndarray]:
@@ -200,13 +234,15 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
               others=(), held=None) -> dict:
     """{"sigma": [budget σ; inf where the PSFs do not respond], "correlation": [p, p], "identifiable": [bool],
     "reason": [str], "s2"} of the fitted errors from the residual ``r`` and Jacobian ``jac`` at the optimum, the
-    overlays' mirror tests (``mirror``'s rise of the misfit, in s²; None: none made), the grid's share of the
-    uncertainty (budget σ, added in quadrature; None: none) and the ``others`` fits found [(point, rise of the
-    misfit in s²)]: one within ``MIRROR_CHI2`` of the optimum ``x`` lies inside every error's 2σ interval, so
-    each σ is widened to half its distance from ``x`` where smaller. ``held``: [k, n] weighted changes of the
-    PSFs that the errors the fit holds make (``held_errors``); the fitted errors' linear response to each,
-    −J⁺·δ, adds its covariance (the unfitted errors' share: they move the fit alike in every pixel, which no
-    per-pixel noise model holds)."""
+    overlays' mirror tests (``mirror``'s {"rise": in s², "change"}, or the rises alone; None: none made), the
+    grid's share of the uncertainty (budget σ, added in quadrature; None: none) and the ``others`` fits found
+    [(point, rise of the weighted misfit, change of the weighted residual or None)]: one that fits within
+    ``tolerance`` of the optimum ``x`` lies inside every error's 2σ interval, so each σ is widened to half its
+    distance from ``x`` where smaller. ``held``: [k, n] weighted changes of the PSFs that the errors the fit holds
+    make (``held_errors``); the fitted errors' linear response to each, −J⁺·δ, adds its covariance (the unfitted
+    errors' share: they move the fit alike in every pixel, which no per-pixel noise model holds), and they widen
+    each ``tolerance``: a rival fit or a mirror is told apart only when it fits worse by more than they could
+    swing the two misfits."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     response = np.linalg.norm(jac, axis=0)
@@ -222,9 +258,14 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
         sl = np.sqrt(np.maximum(np.diag(cov), 0.0))
         sigma[live] = np.hypot(sl, 0.0 if grid is None else np.asarray(grid)[live])
         corr[np.ix_(live, live)] = np.clip(cov / np.maximum(np.outer(sl, sl), 1e-300), -1.0, 1.0)
-    for xo, rise in others:
-        if rise < MIRROR_CHI2:
+    for xo, rise, change in others:
+        if rise / s2 < tolerance(change, held, s2):
             sigma = np.maximum(sigma, np.abs(np.asarray(xo) - x) / 2)
+    if isinstance(mirrored, dict):
+        told = [tolerance(c, held, s2) for c in mirrored["change"]]
+        mirrored = mirrored["rise"]
+    elif mirrored is not None:
+        told = [MIRROR_CHI2] * p
     ok, why = [], []
     for i in range(p):
         partner = max(((abs(corr[i, j]), params[j].label) for j in range(p) if j != i and live[j]), default=(0.0, ""))
@@ -236,14 +277,24 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
         elif partner[0] >= MAX_CORRELATION:
             reason = (f"it is correlated (|r| = {partner[0]:.2f}) with {partner[1]}: the recordings cannot tell the "
                       f"two apart")
-        elif mirrored is not None and mirrored[i] < MIRROR_CHI2:
+        elif mirrored is not None and mirrored[i] < told[i]:
             reason = (f"its sign is not identified: the opposite overlay fits within 2σ (the misfit rises by "
-                      f"{max(float(mirrored[i]), 0.0):.2g} s²); its size is")
+                      f"{max(float(mirrored[i]), 0.0):.2g} s², under {told[i]:.2g}); its size is")
         else:
             reason = ""
         ok.append(not reason)
         why.append(reason)
     return {"sigma": sigma, "correlation": corr, "identifiable": ok, "reason": why, "s2": s2}
+
+
+def tolerance(change, held, s2: float) -> float:
+    """The rise of the weighted misfit (in s²) within which another fit is not told apart from the optimum:
+    ``MIRROR_CHI2`` (2σ of the noise) plus twice the rms swing of that rise under the ``held`` errors' PSF changes
+    (a change δ of the measured PSFs changes the rise by −2δ·``change``, the other fit's residual less the
+    optimum's). Example: ``tolerance(None, None, 1.0)`` → 4.0."""
+    if change is None or held is None or not len(held):
+        return MIRROR_CHI2
+    return MIRROR_CHI2 + 2.0 * float(np.sqrt(np.mean((2.0 * (np.asarray(held) @ change) / s2) ** 2)))
 
 
 def psf_metric(model: PartModel, x: np.ndarray) -> dict:

@@ -42,6 +42,7 @@ def test_the_page_states_the_thresholds_the_code_applies():
         "plane": f"within {recordings.DEPTH_TOL * 100:g} % of one of the design's",
         "bound": f"±{partmodel.BOUND:g} budget σ",
         "correlation": f"|r| ≥ {diagnose.MAX_CORRELATION:g}",
+        "rival fits": f"misfit lies within {diagnose.MIRROR_CHI2:g} s² of the best's (2σ of the noise) plus twice the rms",
     }
     missing = {name: phrase for name, phrase in stated.items() if phrase not in text}
     assert not missing, f"the page does not state: {missing}"

@@ -171,7 +171,7 @@ def test_the_curvature_gives_the_least_squares_covariance():
     mirrored = np.array([np.inf, 1.0, np.inf, np.inf])
     assert "sign is not identified" in curvature(params, r, jac, mirrored)["reason"][1]
     x = np.zeros(4)
-    wide = curvature(params, r, jac, x=x, others=[(np.array([0.0, 0.0, 0.3, 0.0]), 2.0)])
+    wide = curvature(params, r, jac, x=x, others=[(np.array([0.0, 0.0, 0.3, 0.0]), 2.0 * s2, None)])
     assert wide["sigma"][2] == pytest.approx(max(want[2], 0.15))
     # PSF changes that the fitted errors would make by v_k (δ_k = J v_k) move the fit by −v_k: their spread adds
     v = rng.normal(size=(64, 4)) * np.array([0.1, 0.0, 0.2, 0.0])
@@ -179,6 +179,38 @@ def test_the_curvature_gives_the_least_squares_covariance():
     np.testing.assert_allclose(held["sigma"], np.sqrt(want ** 2 + np.mean(v ** 2, axis=0)), rtol=1e-6)
     full = s2 * np.linalg.inv(jac.T @ jac) + v.T @ v / len(v)
     np.testing.assert_allclose(held["correlation"], full / np.sqrt(np.outer(np.diag(full), np.diag(full))), atol=1e-6)
+
+
+def test_a_rival_fit_the_held_errors_could_swap_is_not_told_apart():
+    """A rival fit (or a mirror) whose misfit is 10 s² above the optimum's is told apart by the photon noise alone
+    (4 s²), but not when the held errors' PSF changes swing that rise by 5 s² rms (2 · 5 + 4 = 14 > 10): then the
+    σ widens to half the distance to the rival and the mirrored overlay's sign is not identified."""
+    from doefab.lab.diagnose import curvature
+    from doefab.lab.partmodel import Param
+
+    rng = np.random.default_rng(4)
+    n = 400
+    jac = rng.normal(size=(n, 4)) * np.array([50.0, 40.0, 30.0, 40.0])
+    r = rng.normal(size=n)
+    s2 = float(r @ r) / (n - 4)
+    params = [Param("overlay", 0, a, "µm", 1e-6, 1e-7, 0.0) for a in "xyxy"]
+    change = np.zeros(n)
+    change[7] = 1.0  # the rival's residual less the optimum's: one pixel
+    # held PSF changes δ_i with 2·δ_i·change / s² = ±5 (rms 5), orthogonal to J's columns elsewhere
+    held = np.zeros((2, n))
+    held[:, 7] = np.array([2.5, -2.5]) * s2
+    rival = [(np.array([0.0, 0.0, 0.3, 0.0]), 10.0 * s2, change)]
+    x = np.zeros(4)
+    alone = curvature(params, r, jac, held=held)
+    told = curvature(params, r, jac, x=x, others=rival)
+    assert told["sigma"][2] == pytest.approx(np.sqrt(s2 * np.linalg.inv(jac.T @ jac)[2, 2]), rel=1e-9)
+    swung = curvature(params, r, jac, x=x, others=rival, held=held)
+    assert swung["sigma"][2] == pytest.approx(max(alone["sigma"][2], 0.15), rel=1e-9)
+    assert alone["sigma"][2] < 0.15
+    mirrored = {"rise": np.array([np.inf, 10.0, np.inf, np.inf]), "change": [None, change, None, None]}
+    assert curvature(params, r, jac, mirrored)["identifiable"][1]
+    got = curvature(params, r, jac, mirrored, held=held)
+    assert not got["identifiable"][1] and "sign is not identified" in got["reason"][1]
 
 
 def test_the_noise_model_is_fitted_to_the_residuals():

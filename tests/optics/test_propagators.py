@@ -137,3 +137,34 @@ def test_spectral_batches_of_planes_equal_each_plane_alone(small_camera, random_
         assert np.asarray(got).shape == alone.shape
         assert np.abs(np.asarray(got) - alone).max() <= 1e-6 * alone.max()
     assert np.abs(alone[0] - alone[-1]).max() > 1e-2 * alone.max()
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_pixel_matrix_integrates_the_intensity_over_each_pixel(reverse):
+    """W · |FFT(p)|² equals the intensity |Σ_n p_n e^{−2πi n b u/(λs)}|² of a 1-D pupil integrated over each sensor
+    pixel by 64-node Gauss–Legendre quadrature (a trigonometric polynomial: the quadrature is exact to rounding);
+    with ``reverse`` the matrix reads the FFT at −j, which is the flipped pupil's intensity."""
+    from doefab.optics.propagators.spectral import band_limited_pixel_matrix
+
+    rng = np.random.default_rng(11)
+    n, big, b, lam, s, pix = 6, 16, 10e-6, 550e-9, 0.05, 1.3e-6
+    p = rng.normal(size=n) + 1j * rng.normal(size=n)
+    centres = (np.arange(9) - 4) * pix + 0.37 * pix
+    w = band_limited_pixel_matrix(centres, n, big, b, lam, s, pix, reverse=reverse)
+    got = w @ (np.abs(np.fft.fft(p, big)) ** 2)
+    q = p[::-1] if reverse else p
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    want = []
+    for c in centres:
+        u = c + nodes * pix / 2
+        field = np.exp(-2j * np.pi * np.outer(u, np.arange(n)) * b / (lam * s)) @ q
+        want.append(np.sum(weights * np.abs(field) ** 2) * pix / 2)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12 * max(want))
+
+
+def test_pixel_matrix_refuses_an_fft_too_short_for_the_intensity():
+    from doefab.errors import DoefabError
+    from doefab.optics.propagators.spectral import band_limited_pixel_matrix
+
+    with pytest.raises(DoefabError, match="at least twice"):
+        band_limited_pixel_matrix(np.array([0.0, 1e-6]), 8, 15, 1e-5, 5e-7, 0.02, 1e-6)

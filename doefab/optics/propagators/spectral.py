@@ -19,13 +19,14 @@ import numpy as np
 import scipy.fft
 import torch
 
+from doefab.errors import DoefabError
 from doefab.optics.propagators.base import FocalSetup, check_window, plane_batches
 
 __all__ = ["SpectralRoute", "band_limited_pixel_matrix"]
 
 
 def band_limited_pixel_matrix(centres: np.ndarray, n_pupil: int, n_fft: int, pitch: float, wavelength: float,
-                              distance: float, pixel: float) -> np.ndarray:
+                              distance: float, pixel: float, reverse: bool = False) -> np.ndarray:
     """(K, L) real matrix integrating the FFT-sampled intensity over K pixels (see module docstring).
 
     Args:
@@ -33,12 +34,21 @@ def band_limited_pixel_matrix(centres: np.ndarray, n_pupil: int, n_fft: int, pit
         n_pupil: N, pupil samples along this axis.  n_fft: L ≥ 2N, padded FFT size.
         pitch: pupil sample pitch b, metres.  wavelength, distance: λ and s, metres.
         pixel: sensor pixel pitch p, metres.
+        reverse: column j multiplies FFT output index −j (mod L) instead (the FFT of a pupil stored flipped).
     Returns:
         float64 array (K, L); column j multiplies FFT output index j (natural FFT order).
+
+    The sum over m is Hermitian (sinc is even, so the term at −m is the conjugate of the one at m): it is taken
+    over m ≥ 0 by a half-length transform (``torch.fft.hfft``), its real result exactly the full sum's.
+
+    Example: ``band_limited_pixel_matrix(np.array([0.0]), 4, 8, 1e-5, 5e-7, 0.02, 1e-6).shape`` → (1, 8).
     """
-    m = torch.from_numpy(np.fft.fftfreq(n_fft, 1.0 / n_fft))  # integer frequencies in FFT order
+    if n_fft < 2 * n_pupil:
+        raise DoefabError(f"n_fft ({n_fft}) must be at least twice n_pupil ({n_pupil}): the intensity's "
+                          f"frequencies would alias")
+    m = torch.arange(n_fft // 2 + 1, dtype=torch.float64)  # the non-negative frequencies (the rest: conjugates)
     scale = pitch / (wavelength * distance)
-    spec = torch.where(m.abs() < n_pupil, torch.sinc(m * (scale * pixel)), torch.zeros(()).double())
+    spec = torch.where(m < n_pupil, torch.sinc(m * (scale * pixel)), torch.zeros(()).double())
     theta0 = float(centres[0]) * scale
     dtheta = (float(centres[1]) - float(centres[0])) * scale if len(centres) > 1 else 0.0
     # exp(2πi m θ_k) for uniformly spaced θ_k by a running product (exact to ~K·1e-16)
@@ -46,7 +56,8 @@ def band_limited_pixel_matrix(centres: np.ndarray, n_pupil: int, n_fft: int, pit
     step = torch.polar(torch.ones_like(m), 2 * np.pi * torch.remainder(m * dtheta, 1.0))
     rows = torch.cat([first[None, :], step.expand(len(centres) - 1, -1)], dim=0)
     a = torch.cumprod(rows, dim=0)
-    return ((pixel / n_fft) * torch.fft.fft(a, dim=1).real).numpy()
+    # Σ_m a_m e^{−2πi m j/L} over all m, a Hermitian in m; reversed (index −j) it is the sum of the conjugates
+    return ((pixel / n_fft) * torch.fft.hfft(a.conj() if reverse else a, n=n_fft, dim=1)).numpy()
 
 
 class SpectralRoute:
@@ -68,16 +79,15 @@ class SpectralRoute:
         for lam in setup.wavelengths:
             s = setup.sensor_distance
             wx = band_limited_pixel_matrix(uc, len(setup.x), lx, setup.pitch, lam, s, setup.sensor_pitch)
-            wy = band_limited_pixel_matrix(vc, len(setup.y), ly, setup.pitch, lam, s, setup.sensor_pitch)
+            # pupil rows are stored top (largest y) first; rather than flipping every pupil, read the FFT of the
+            # unflipped one at −j: flipping the input flips the intensity's index (up to a phase)
+            wy = band_limited_pixel_matrix(vc, len(setup.y), ly, setup.pitch, lam, s, setup.sensor_pitch, reverse=True)
             env = None
             if setup.envelope:
                 sc = setup.pitch / (lam * s)
                 env = torch.from_numpy(np.outer(np.sinc(vc * sc) ** 2, np.sinc(uc * sc) ** 2)).to(setup.real_dtype)
             rd = setup.real_dtype
-            # pupil rows are stored top (largest y) first; rather than flipping every pupil, read the FFT of the
-            # unflipped one at −j: flipping the input flips the intensity's index (up to a phase)
-            wy = wy[:, (-np.arange(ly)) % ly]
-            out.append((torch.from_numpy(np.ascontiguousarray(wy)).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
+            out.append((torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
         return (ly, lx), out
 
     def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared) -> torch.Tensor:
