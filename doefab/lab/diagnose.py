@@ -16,7 +16,7 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
    makes the PSF's core far noisier than its tails) and the fit resumed, ``REWEIGHT`` times; the other starts'
    ends whose misfit came within ``RIVAL`` of the best (and lie apart from it and each other) are resumed weighted
    too; each is polished by ``POLISH`` Gauss–Newton steps on the finer grid of step 4 and the best there kept
-   (the design grid's flat cells shift the misfits of far-apart fits by more than the noise does).
+   (the design grid's flat cells misplace the slivers an overlay cuts, differently in each fit).
 3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); a better mirror is taken.
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
@@ -121,8 +121,9 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
         found.append(_polish(model, x))
         found.sort(key=lambda e: e[0])
     fine, r_fine = refine(model, x, jac)
-    others = [(xo, float(ro @ ro) - float(r_fine @ r_fine), ro - r_fine) for _, _, xo, ro in found
-              if np.max(np.abs(xo - fine), initial=0.0) > SAME] + mirrors
+    # the rivals against the best's own polished entry (as many finer-grid steps as theirs)
+    best = next(e for e in found if np.array_equal(e[1], x))
+    others = [(xo, fo - best[0], ro - best[3]) for fo, xd, xo, ro in found if not np.array_equal(xd, x)] + mirrors
     return {"x": fine, "r": r_fine, "jac": jac, "mirror": dchi, "others": others, "grid": np.abs(fine - x) / 3,
             "starts": runs, "noise": noise}
 
@@ -139,8 +140,8 @@ def _distinct(points: list, first: np.ndarray) -> list:
 
 def _polish(model: PartModel, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """(weighted misfit on the finer grid, the design-grid point ``x``, the point and its weighted residual on the
-    finer grid) after ``POLISH`` Gauss–Newton steps there: fits are compared on the finer grid, where the design
-    grid's flat cells no longer favour one basin over another by more than the noise does."""
+    finer grid) after ``POLISH`` Gauss–Newton steps there: fits are compared on the finer grid, closer to the part
+    than the design grid's flat cells."""
     _, jac = jacobian(model, x)
     xf, rf = refine(model, x, jac, steps=POLISH)
     return float(rf @ rf), x, xf, rf

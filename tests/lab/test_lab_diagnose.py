@@ -184,14 +184,15 @@ def test_the_curvature_gives_the_least_squares_covariance():
 def test_a_rival_fit_the_held_errors_could_swap_is_not_told_apart():
     """A rival fit (or a mirror) whose misfit is 10 s² above the optimum's is told apart by the photon noise alone
     (4 s²), but not when the held errors' PSF changes swing that rise by 5 s² rms (2 · 5 + 4 = 14 > 10): then the
-    σ widens to half the distance to the rival and the mirrored overlay's sign is not identified."""
+    σ widens to half the distance to the rival and the mirrored overlay's sign is not identified; one 16 s² above
+    is told apart all the same."""
     from doefab.lab.diagnose import curvature
     from doefab.lab.partmodel import Param
 
     rng = np.random.default_rng(4)
     n = 400
     jac = rng.normal(size=(n, 4)) * np.array([50.0, 40.0, 30.0, 40.0])
-    r = rng.normal(size=n)
+    r = 3.0 * rng.normal(size=n)  # s² ≈ 9: a rise in raw misfit and one in s² differ
     s2 = float(r @ r) / (n - 4)
     params = [Param("overlay", 0, a, "µm", 1e-6, 1e-7, 0.0) for a in "xyxy"]
     change = np.zeros(n)
@@ -207,6 +208,9 @@ def test_a_rival_fit_the_held_errors_could_swap_is_not_told_apart():
     swung = curvature(params, r, jac, x=x, others=rival, held=held)
     assert swung["sigma"][2] == pytest.approx(max(alone["sigma"][2], 0.15), rel=1e-9)
     assert alone["sigma"][2] < 0.15
+    # 16 s² is beyond 4 + 2 · 5: that rival is told apart even with the swing, and widens nothing
+    far = [(np.array([0.0, 0.0, 0.3, 0.0]), 16.0 * s2, change)]
+    np.testing.assert_allclose(curvature(params, r, jac, x=x, others=far, held=held)["sigma"], alone["sigma"])
     mirrored = {"rise": np.array([np.inf, 10.0, np.inf, np.inf]), "change": [None, change, None, None]}
     assert curvature(params, r, jac, mirrored)["identifiable"][1]
     got = curvature(params, r, jac, mirrored, held=held)

@@ -139,15 +139,18 @@ def test_spectral_batches_of_planes_equal_each_plane_alone(small_camera, random_
     assert np.abs(alone[0] - alone[-1]).max() > 1e-2 * alone.max()
 
 
+@pytest.mark.parametrize("big", [16, 15])
 @pytest.mark.parametrize("reverse", [False, True])
-def test_pixel_matrix_integrates_the_intensity_over_each_pixel(reverse):
+def test_pixel_matrix_integrates_the_intensity_over_each_pixel(reverse, big):
     """W · |FFT(p)|² equals the intensity |Σ_n p_n e^{−2πi n b u/(λs)}|² of a 1-D pupil integrated over each sensor
-    pixel by 64-node Gauss–Legendre quadrature (a trigonometric polynomial: the quadrature is exact to rounding);
-    with ``reverse`` the matrix reads the FFT at −j, which is the flipped pupil's intensity."""
+    pixel by 64-node Gauss–Legendre quadrature (a trigonometric polynomial: the quadrature is exact to rounding),
+    for an even and an odd FFT length; with ``reverse`` the matrix reads the FFT at −j, which is the flipped
+    pupil's intensity."""
     from doefab.optics.propagators.spectral import band_limited_pixel_matrix
 
     rng = np.random.default_rng(11)
-    n, big, b, lam, s, pix = 6, 16, 10e-6, 550e-9, 0.05, 1.3e-6
+    # pixels 0.2 mm wide: a third of the intensity's shortest period (λs/(5b) = 0.55 mm), so the pixel's sinc matters
+    n, b, lam, s, pix = 6, 10e-6, 550e-9, 0.05, 2e-4
     p = rng.normal(size=n) + 1j * rng.normal(size=n)
     centres = (np.arange(9) - 4) * pix + 0.37 * pix
     w = band_limited_pixel_matrix(centres, n, big, b, lam, s, pix, reverse=reverse)
