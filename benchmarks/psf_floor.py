@@ -119,9 +119,9 @@ def main(argv=None) -> int:
 
 def table(r: dict) -> str:
     a, z = r["settings"], r["sizes"]
-    rev = r["baseline"]["revision"] if r.get("baseline") else "none"  # the revision measured, not the name given
-    runs = ([(f"previous code ({r['baseline']['revision']})", r["baseline"]["seconds"])] if r.get("baseline") else [])
-    runs.append(("this code", r["seconds"]))
+    before = r.get("baseline")
+    rev = before["revision"] if before else "none"  # the revision measured, not the name given
+    runs = ([(f"previous code ({rev})", before["seconds"])] if before else []) + [("this code", r["seconds"])]
     lines = [
         f"`.venv/bin/python benchmarks/psf_floor.py --baseline {rev}`: the {a['bands']}-band coded PSF of "
         f"the hyperspectral preset (pupil {z['pupil'][0]} × {z['pupil'][1]} samples, FFT {z['fft'][0]} × "

@@ -110,7 +110,6 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     found = sorted([_polish(model, xc) for xc in [x] + [_solve(model, xr)[0] for xr in rivals]], key=lambda e: e[0])
     x = found[0][1]
     r, jac = jacobian(model, x)
-    mirrors = []
     for turn in range(3):  # a mirrored overlay that fits better is taken and the fit resumed from it, twice at most
         flipped, dchi, tried = mirror(model, x, r, jac)
         mirrors = [(xm, float(rm @ rm) - float(r @ r), rm - r) for xm, rm in tried]
