@@ -20,18 +20,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import torch
+from revisions import code_root, measure_at, median_time  # this folder is on the path of a script run
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, os.environ.get("DOEFAB_BENCH_CODE", str(ROOT)))  # the package measured (a baseline's worktree)
+sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 import doefab  # noqa: E402
-from reconstruction_speed import median_time  # noqa: E402  (this folder is on the path of a script run)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -75,19 +72,8 @@ def measure(args) -> dict:
 
 def baseline(rev: str, args) -> dict:
     """``measure`` in a subprocess with the package as of git revision ``rev`` (a temporary worktree)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        tree = Path(tmp) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), rev], check=True,
-                       capture_output=True)
-        try:
-            sha = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], check=True,
-                                 capture_output=True, text=True).stdout.strip()
-            env = {**os.environ, "DOEFAB_BENCH_CODE": str(tree)}
-            cmd = [sys.executable, __file__, "--measure-only", "--bands", str(args.bands), "--kernel",
-                   str(args.kernel), "--repeats", str(args.repeats), "--threads", str(args.threads)]
-            got = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True, env=env).stdout)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+    sha, got = measure_at(rev, __file__, ["--bands", str(args.bands), "--kernel", str(args.kernel), "--repeats",
+                                          str(args.repeats), "--threads", str(args.threads)])
     return {"revision": sha, **got}
 
 

@@ -1,61 +1,142 @@
-"""Speed of the reconstruction stage on this machine: capture simulation of a 512 × 512 scene per task,
-reconstruction of a 512 × 512 capture pair per task with the shipped proposed network (target ≤ 2 s each),
-and training steps per second (from the shipped weights' records). Medians of 3 runs. Split used: one
-validation scene per task (only its size matters: no choice is made on it).
-Writes benchmarks/results/reconstruction_speed.md. Run: .venv/bin/python benchmarks/reconstruction_speed.py
+"""Speed of the reconstruction stage on this machine, per task: capture simulation of a 512 × 512 scene,
+reconstruction of a 512 × 512 capture pair with the shipped proposed network (target ≤ 1 s each), the first
+call of a freshly loaded network beside the median of later calls (a per-call setup cost shows as both being
+high), and training steps per second (from the shipped weights' records). Medians of ``--repeats`` runs on
+``--threads`` torch threads. Split used: one validation scene per task (only its size matters: no choice is made
+on it).
+
+``--baseline REV`` (default HEAD) times the same in the same run with the package as of git revision REV (a
+temporary worktree), for a before-and-after table; ``--baseline none`` skips it. The two codes take turns,
+``--rounds`` times each (the machine's load drifts), and each figure is the median over the rounds.
+
+Writes benchmarks/results/reconstruction_speed.{md,json}.
+Run: .venv/bin/python benchmarks/reconstruction_speed.py --baseline REV
 """
 
 from __future__ import annotations
 
-import statistics
+import argparse
+import json
+import os
+import sys
 import time
 from pathlib import Path
 
+from revisions import code_root, measure_at, median_time  # this folder is on the path of a script run
+
+sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 
 OUT = Path(__file__).parent / "results"
+TASKS = ("hdr", "hyperspectral", "depth")
 
 
-def median_time(fn, repeats=3):
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
-
-
-def main():
-    import torch
-
+def _captures(task: str):
     import doefab
     from doefab.reconstruction.data import depth_sample, hdr_sample, sample_rng, spectral_sample
     from doefab.reconstruction.specs import psf_pair
 
-    torch.set_num_threads(2)
-    rows = ["| task | capture simulation, 512² (s) | reconstruction, 512² (s) | training steps / s (batch 4) | "
-            "training crop (px) |", "| --- | --- | --- | --- | --- |"]
-    for task in ("hdr", "hyperspectral", "depth"):
-        pair, _ = psf_pair(task)
-        rng = sample_rng("val", 0)
-        depth = None
-        response = None
-        if task == "hdr":
-            scene = hdr_sample(rng, 512, "val")
-        elif task == "hyperspectral":
-            scene = spectral_sample(rng, 512, "val")
-            response = doefab.sensor_response(pair.wavelengths)
-        else:
-            scene, depth = depth_sample(rng, 512, "val")
-        sim = median_time(lambda: doefab.simulate_captures(scene, pair, depth_map=depth, response=response))
-        coded, uncoded = doefab.simulate_captures(scene, pair, depth_map=depth, response=response)
+    pair, _ = psf_pair(task)
+    rng = sample_rng("val", 0)
+    depth = response = None
+    if task == "hdr":
+        scene = hdr_sample(rng, 512, "val")
+    elif task == "hyperspectral":
+        scene = spectral_sample(rng, 512, "val")
+        response = doefab.sensor_response(pair.wavelengths)
+    else:
+        scene, depth = depth_sample(rng, 512, "val")
+    return lambda: doefab.simulate_captures(scene, pair, depth_map=depth, response=response)
+
+
+def measure(args) -> dict:
+    """{task: {simulate_s, first_call_s, reconstruct_s, steps_per_s, crop_px}} with the package on the path."""
+    import torch
+
+    import doefab
+
+    torch.set_num_threads(args.threads)
+    out = {}
+    for task in args.task or TASKS:
+        simulate = _captures(task)
+        sim = median_time(simulate, args.repeats)
+        coded, uncoded = simulate()
         rec = doefab.load_reconstructor(task)
-        recon = median_time(lambda: rec(coded, uncoded))
+        t = time.perf_counter()
+        rec(coded, uncoded)
+        first = time.perf_counter() - t
+        recon = median_time(lambda: rec(coded, uncoded), args.repeats)
         tr = rec.meta["training"]
-        rows.append(f"| {task} | {sim:.2f} | {recon:.2f} | {tr['steps'] / tr['wall_time_s']:.2f} | {tr['crop_px']} |")
-        print(rows[-1], flush=True)
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "reconstruction_speed.md").write_text("\n".join(rows) + "\n")
+        out[task] = {"simulate_s": sim, "first_call_s": first, "reconstruct_s": recon,
+                     "steps_per_s": tr["steps"] / tr["wall_time_s"], "crop_px": tr["crop_px"]}
+        print(task, out[task], file=sys.stderr, flush=True)
+    return out
+
+
+def _median_rounds(rounds: list[dict]) -> dict:
+    """Each task's figures, the median over the rounds."""
+    import statistics
+
+    return {task: {k: statistics.median(r[task][k] for r in rounds) for k in rounds[0][task]} for task in TASKS}
+
+
+def table(r: dict) -> str:
+    a = r["settings"]
+    before = r.get("baseline")
+    rev = before["revision"] if before else "none"
+    runs = ([(f"previous code ({rev})", before["tasks"])] if before else []) + [("this code", r["tasks"])]
+    lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}`: torch {a['torch']} on "
+             f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds (the codes taking "
+             "turns) and the median over the rounds; the shipped "
+             "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
+             "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
+             "network (s) | training steps / s (batch 4) | training crop (px) |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for task in TASKS:
+        for name, tasks in runs:
+            t = tasks[task]
+            lines.append(f"| {task} | {name} | {t['simulate_s']:.2f} | {t['reconstruct_s']:.2f} | "
+                         f"{t['first_call_s']:.2f} | {t['steps_per_s']:.2f} | {t['crop_px']:.0f} |")
+    return "\n".join(lines + [""])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--task", action="append", choices=TASKS, help=argparse.SUPPRESS)
+    ap.add_argument("--baseline", default="HEAD", help="git revision measured beside this code ('none': skip)")
+    ap.add_argument("--results", default=str(OUT))
+    ap.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.measure_only:
+        print(json.dumps(measure(args)))
+        return 0
+    import torch
+
+    from doefab.io import atomic_write_json, atomic_write_text
+
+    sha, old, new = None, [], []
+    for _ in range(args.rounds):  # the codes take turns, each task in a fresh process (no memory carried over)
+        for code, runs in ((args.baseline, old), (None, new)):
+            if code == "none":
+                continue
+            got = {}
+            for task in TASKS:
+                rev, one = measure_at(code, __file__, ["--task", task, "--repeats", str(args.repeats),
+                                                       "--threads", str(args.threads)])
+                got.update(one)
+            sha = rev if code is not None else sha
+            runs.append(got)
+    result = {"settings": {**vars(args), "torch": torch.__version__, "cpus": os.cpu_count()},
+              "tasks": _median_rounds(new), "rounds": {"this_code": new, "baseline": old},
+              "baseline": {"revision": sha, "tasks": _median_rounds(old)} if old else None}
+    out = Path(args.results)
+    atomic_write_json(out / "reconstruction_speed.json", result)
+    atomic_write_text(out / "reconstruction_speed.md", table(result))
+    print(table(result))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

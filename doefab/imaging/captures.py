@@ -33,7 +33,7 @@ from doefab.errors import DoefabError
 from doefab.imaging.crosstalk import DualPixelCrosstalk, check_pair
 from doefab.imaging.sensor import noise_model
 
-__all__ = ["simulate_captures", "convolve", "render_layers", "plane_masks", "fft_length", "Capture", "MAX_RADIANCE"]
+__all__ = ["simulate_captures", "convolve", "convolve_valid", "render_layers", "plane_masks", "fft_length", "Capture", "MAX_RADIANCE"]
 
 #: The brightest scene radiance ``simulate_captures`` takes, in units of the clipping level of a full exposure:
 #: a million times it (20 stops above; the HDR scenes here peak at 60×, the sun's disc against a sunlit scene is
@@ -79,6 +79,21 @@ def convolve(images: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
     full = torch.fft.irfft2(spec, s=(fh, fw))
     c = k // 2
     return full[..., c:c + h, c:c + w]
+
+
+def convolve_valid(images: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
+    """Linear 'valid' convolution of [..., C, H, W] images with [C, K, K] PSFs: [..., C, H − K + 1, W − K + 1],
+    the pixels whose every contributing image pixel lies in the frame (a frame padded by K // 2 comes back at
+    its own size). The FFT canvas needs only the frame's length: the wrapped light lands outside the output.
+
+    Example: ``convolve_valid(F.pad(img, (7, 7, 7, 7), mode="replicate"), psf)`` with [3, 15, 15] ``psf``."""
+    h, w = images.shape[-2:]
+    k_h, k_w = psf.shape[-2:]
+    if k_h > h or k_w > w:
+        raise DoefabError(f"a valid convolution needs a frame at least as large as the PSF: {h}×{w} < {k_h}×{k_w}")
+    fh, fw = fft_length(h), fft_length(w)
+    spec = torch.fft.rfft2(images, s=(fh, fw)) * torch.fft.rfft2(psf.to(images.dtype), s=(fh, fw))
+    return torch.fft.irfft2(spec, s=(fh, fw))[..., k_h - 1:h, k_w - 1:w]
 
 
 def render_layers(scene: torch.Tensor, psf: torch.Tensor, masks: torch.Tensor | None = None,

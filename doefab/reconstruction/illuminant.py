@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
-from doefab.imaging.captures import convolve
+from doefab.imaging.captures import convolve_valid
 
 __all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "write_illuminant_library",
            "LIBRARY_PATH", "candidate_predictions", "mix_illuminants"]
@@ -124,8 +124,8 @@ def candidate_predictions(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded:
             b, _, h, w = coded.shape
         pad = psf_coded.shape[-1] // 2
         u = F.pad(uncoded.float(), (pad, pad, pad, pad), mode="replicate")  # light from just outside the frame
-        y = convolve(u[:, None], psf_coded.float()[:, None])  # [B, C, 3, H + 2 pad, W + 2 pad]: Y_{λk} = p_λ ∗ u_k
-        y = y[..., pad:pad + h, pad:pad + w].reshape(b, c_bands * 3, h * w)
+        y = convolve_valid(u[:, None], psf_coded.float()[:, None])  # [B, C, 3, H, W]: Y_{λk} = p_λ ∗ u_k
+        y = y.reshape(b, c_bands * 3, h * w)
         # candidate j predicts coded channel r as Σ_{λ,k} T[r,λ] N_j[λ,k] Y_{λk}
         wts = torch.einsum("rl,jlk->jrlk", response.float(), inverses.float()).reshape(-1, c_bands * 3)
         pred = torch.einsum("mq,bqp->bmp", wts, y).reshape(b, -1, 3, h * w)  # [B, J, 3, HW]

@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.wiener import WienerDeconvolution
+from doefab.reconstruction.wiener import WienerDeconvolution, wiener_deconvolve
 
 __all__ = ["VARIANTS", "VIEWS", "views_of", "check_input", "check_psf", "UNet", "CodedFeatures"]
 
@@ -85,13 +85,12 @@ class CodedFeatures(nn.Module):
 
     def forward(self, coded: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
         f = self.feat_coded(coded)
-        if self.raw:  # raw colour channel c with PSF c, learned features with every colour's PSF
-            stack = torch.cat([coded, f.repeat(1, 3, 1, 1)], dim=1)
-            kern = torch.cat([psf, psf.repeat_interleave(self.features, dim=1)], dim=1)
-        else:
-            stack = f.repeat(1, self.n_psf, 1, 1)
-            kern = psf.repeat_interleave(self.features, dim=1)
-        return self.wiener(stack, kern)  # one OTF per PSF, broadcast over the batch
+        lam = self.wiener.lam
+        # learned feature f with PSF c is channel c·F + f: each feature transformed once, not once per PSF
+        out = wiener_deconvolve(f, psf, lam[-psf.shape[1] * self.features:], each=True)
+        if self.raw:  # raw colour channel c with PSF c first
+            out = torch.cat([wiener_deconvolve(coded, psf, lam[:3]), out], dim=1)
+        return out
 
 
 def check_psf(psf, n: int, what: str) -> torch.Tensor:

@@ -29,11 +29,15 @@ def psf_to_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
     return torch.fft.rfft2(pad)
 
 
-def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam) -> torch.Tensor:
+def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam, each: bool = False) -> torch.Tensor:
     """Wiener-deconvolve [B, C, H, W] ``y`` with [B or 1, C or 1, K, K] ``psf``; ``lam`` > 0 scalar or [C].
 
     The PSF is normalised to unit sum per channel (so the result keeps the image's scale whatever fraction of
-    the light the PSF carries).
+    the light the PSF carries). ``each``: every one of ``y``'s F channels with every one of the C PSFs, output
+    channel ``c·F + f`` (``lam`` scalar or [C·F]) — the same numbers as ``y.repeat(1, C, 1, 1)`` deconvolved with
+    ``psf.repeat_interleave(F, dim=1)``, with F transforms of the image instead of C·F.
+
+    Example: ``wiener_deconvolve(torch.rand(1, 3, 64, 64), psf[None], 1e-2)`` with ``psf`` [3, 15, 15].
     """
     if y.ndim != 4 or psf.ndim != 4:
         raise DoefabError(f"wiener_deconvolve takes y [B, C, H, W] and psf [B, C, K, K], got {tuple(y.shape)} and "
@@ -48,8 +52,13 @@ def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam) -> torch.Tensor:
     p = psf.to(y.dtype)
     p = p / p.sum(dim=(-2, -1), keepdim=True).clamp_min(1e-12)
     otf = psf_to_otf(p, (h, w))
-    lam_b = lam.reshape(1, -1, 1, 1) if lam.ndim == 1 else lam
-    x = torch.fft.irfft2(torch.conj(otf) * torch.fft.rfft2(yp) / (otf.abs() ** 2 + lam_b), s=(h, w))
+    spec = torch.fft.rfft2(yp)
+    if each:  # [B, C, F, h, w']: PSF c on image f, flattened to channel c·F + f
+        otf, spec = otf[:, :, None], spec[:, None]
+    if lam.ndim == 1:
+        lam = lam.reshape((1, psf.shape[1], y.shape[1], 1, 1) if each else (1, -1, 1, 1))
+    x = torch.fft.irfft2(torch.conj(otf) * spec / (otf.abs() ** 2 + lam), s=(h, w))
+    x = x.flatten(1, 2) if each else x
     return x[..., ph:ph + y.shape[-2], pw:pw + y.shape[-1]]
 
 
@@ -67,5 +76,5 @@ class WienerDeconvolution(torch.nn.Module):
     def lam(self) -> torch.Tensor:
         return F.softplus(self.theta) + 1e-6
 
-    def forward(self, y: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
-        return wiener_deconvolve(y, psf, self.lam)
+    def forward(self, y: torch.Tensor, psf: torch.Tensor, each: bool = False) -> torch.Tensor:
+        return wiener_deconvolve(y, psf, self.lam, each)

@@ -7,7 +7,7 @@ import torch
 
 import doefab
 from doefab.errors import DoefabError
-from doefab.imaging.captures import convolve, fft_length
+from doefab.imaging.captures import convolve, convolve_valid, fft_length
 
 
 def _pair(psf_coded, psf_uncoded, wavelengths, depths):
@@ -60,6 +60,22 @@ def test_convolution_on_a_grown_canvas_matches_scipy():
     got = convolve(torch.from_numpy(img), torch.from_numpy(psf)).numpy()
     for c in range(2):
         np.testing.assert_allclose(got[c], convolve2d(img[c], psf[c], mode="same"), atol=1e-10)
+
+
+def test_valid_convolution_matches_scipy_on_the_frames_own_canvas():
+    from scipy.signal import convolve2d
+
+    rng = np.random.default_rng(2)
+    # rectangular frames, odd and even kernels, non-square kernels; 41 and 38 are not fast lengths
+    for (h, w), (kh, kw) in [((41, 38), (7, 7)), ((40, 33), (6, 9)), ((12, 12), (12, 12))]:
+        img = rng.random((2, h, w))
+        psf = rng.random((2, kh, kw))
+        got = convolve_valid(torch.from_numpy(img), torch.from_numpy(psf)).numpy()
+        assert got.shape == (2, h - kh + 1, w - kw + 1)
+        for c in range(2):
+            np.testing.assert_allclose(got[c], convolve2d(img[c], psf[c], mode="valid"), atol=1e-10)
+    with pytest.raises(DoefabError, match="at least as large as the PSF"):
+        convolve_valid(torch.rand(1, 8, 8), torch.rand(1, 9, 9))
 
 
 def test_energy_is_conserved_before_clipping():

@@ -63,3 +63,38 @@ def test_bad_inputs():
         wiener_deconvolve(torch.rand(1, 1, 8, 8), _gauss(3, 1)[None, None], 0.0)
     with pytest.raises(DoefabError, match="B, C, H, W"):
         wiener_deconvolve(torch.rand(8, 8), _gauss(3, 1)[None, None], 0.1)
+
+
+def test_each_feature_with_each_psf_matches_pair_by_pair_deconvolution():
+    # two batch items with their own PSFs, three features, two PSFs of different widths and offsets, a λ per
+    # output channel: output channel c·F + f is feature f deconvolved with PSF c under λ[c·F + f]
+    torch.manual_seed(0)
+    y = torch.rand(2, 3, 24, 20, dtype=torch.float64)
+    psf = torch.stack([torch.stack([_gauss(7, s), torch.roll(_gauss(7, s + 0.5), 1, -1)]) for s in (0.8, 1.4)])
+    psf = psf.double()
+    lam = torch.tensor([1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2], dtype=torch.float64)
+    got = wiener_deconvolve(y, psf, lam, each=True)
+    assert got.shape == (2, 6, 24, 20)
+    for c in range(2):
+        for f in range(3):
+            want = wiener_deconvolve(y[:, f:f + 1], psf[:, c:c + 1], lam[c * 3 + f])
+            torch.testing.assert_close(got[:, c * 3 + f:c * 3 + f + 1], want, rtol=0, atol=1e-12)
+
+
+def test_coded_features_deconvolve_raw_channels_with_their_colour_and_features_with_every_psf():
+    from doefab.reconstruction.networks import CodedFeatures
+
+    torch.manual_seed(1)
+    for raw, n_psf in ((True, 3), (False, 4)):
+        layer = CodedFeatures(n_psf, 2, raw=raw).double()
+        with torch.no_grad():
+            layer.wiener.theta.copy_(torch.linspace(-6.0, -2.0, layer.channels))
+        coded = torch.rand(1, 3, 20, 20, dtype=torch.float64)
+        psf = torch.stack([_gauss(5, 0.6 + 0.3 * c) for c in range(n_psf)])[None].double()
+        got = layer(coded, psf)
+        f, lam = layer.feat_coded(coded), layer.wiener.lam
+        want = [wiener_deconvolve(coded[:, c:c + 1], psf[:, c:c + 1], lam[c]) for c in range(3 if raw else 0)]
+        off = 3 if raw else 0
+        want += [wiener_deconvolve(f[:, j:j + 1], psf[:, c:c + 1], lam[off + 2 * c + j])
+                 for c in range(n_psf) for j in range(2)]
+        torch.testing.assert_close(got, torch.cat(want, dim=1), rtol=0, atol=1e-12)

@@ -1,0 +1,62 @@
+"""Before-and-after timings in one run: a benchmark measured again with the package as of another git revision.
+
+``measure_at(rev, script, argv)`` checks ``rev`` out into a temporary worktree, runs ``script argv
+--measure-only`` in a subprocess with ``DOEFAB_BENCH_CODE`` pointing at it (the script puts that folder first on
+``sys.path``) and returns ``(short revision, the JSON the script printed)``. The worktree is removed afterwards.
+``measure_at(None, ...)`` runs the same in a fresh process on this checkout, so both codes start alike.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def code_root() -> str:
+    """The package folder a benchmark measures: a baseline's worktree, or this checkout."""
+    return os.environ.get("DOEFAB_BENCH_CODE", str(ROOT))
+
+
+def median_time(fn, repeats=3):
+    """Median wall time of ``repeats`` calls of ``fn`` (seconds)."""
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def measure_at(rev: str | None, script: str, argv: list[str]) -> tuple[str, dict]:
+    """(short revision, result) of ``script argv --measure-only`` run in a fresh process with the package as of
+    git ``rev`` (None: this checkout as it is, uncommitted changes included; its revision is HEAD's)."""
+    if rev is None:
+        return _revision(ROOT), _run(script, argv, ROOT)
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "tree"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), rev], check=True,
+                       capture_output=True)
+        try:
+            return _revision(tree), _run(script, argv, tree)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
+
+
+def _revision(tree: Path) -> str:
+    return subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def _run(script: str, argv: list[str], tree: Path) -> dict:
+    env = {**os.environ, "DOEFAB_BENCH_CODE": str(tree)}
+    out = subprocess.run([sys.executable, script, *argv, "--measure-only"], check=True, capture_output=True,
+                         text=True, env=env).stdout
+    return json.loads(out.strip().splitlines()[-1])
