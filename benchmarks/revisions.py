@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,19 +39,28 @@ def median_time(fn, repeats=3):
 def measure_at(rev: str | None, script: str, argv: list[str]) -> tuple[str, dict]:
     """(short revision, result) of ``script argv --measure-only`` run in a fresh process with the package as of
     git ``rev`` (None: this checkout as it is, uncommitted changes included; its revision is HEAD's)."""
+    with worktree(rev) as tree:
+        return revision(tree), _run(script, argv, tree)
+
+
+@contextmanager
+def worktree(rev: str | None):
+    """The package folder as of git ``rev``, checked out for the ``with`` block (None: this checkout)."""
     if rev is None:
-        return _revision(ROOT), _run(script, argv, ROOT)
+        yield ROOT
+        return
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "tree"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), rev], check=True,
                        capture_output=True)
         try:
-            return _revision(tree), _run(script, argv, tree)
+            yield tree
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=False)
 
 
-def _revision(tree: Path) -> str:
+def revision(tree: Path) -> str:
+    """The short git revision of the checkout at ``tree``."""
     return subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], check=True, capture_output=True,
                           text=True).stdout.strip()
 

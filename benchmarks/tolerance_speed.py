@@ -5,9 +5,11 @@ study, default workers: one process per core); then the same study resumed with 
 surrogate, calibrated on parts of its own): its yield, and its difference from the direct judgement on the direct
 run's 300 parts, part by part, with a 95 % interval.
 ``network``: parts per minute through each task's network (``--networks``, 6 parts each; the network judge
-renders the reconstruction tables' test scenes, ``doefab.tolerance.netjudge.SPLIT``).
+renders the reconstruction tables' test scenes, ``doefab.tolerance.netjudge.SPLIT``), with the package as of
+git revision ``--baseline REV`` (default HEAD; a temporary worktree) timed in the same run, the two codes taking
+turns design by design (``--baseline none``: this code only).
 Writes benchmarks/results/tolerance_speed.{md,json}. Run with nothing else on the machine:
-    .venv/bin/python benchmarks/tolerance_speed.py psf network
+    .venv/bin/python benchmarks/tolerance_speed.py psf network --baseline REV
 """
 
 from __future__ import annotations
@@ -19,13 +21,16 @@ import tempfile
 import time
 from pathlib import Path
 
+from revisions import ROOT, revision, worktree  # this folder is on the path of a script run
+
 OUT = Path(__file__).parent / "results"
 DOEFAB = [sys.executable, "-m", "doefab"]
 
 
-def run(args: list[str], out: Path) -> tuple[dict, float]:
+def run(args: list[str], out: Path, code: Path = ROOT) -> tuple[dict, float]:
+    """``doefab tolerance args --out out`` with the package at ``code`` (run from there: ``-m`` finds it first)."""
     t = time.perf_counter()
-    subprocess.run(DOEFAB + ["tolerance", *args, "--out", str(out)], check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(DOEFAB + ["tolerance", *args, "--out", str(out)], check=True, stdout=subprocess.DEVNULL, cwd=code)
     return json.loads((out / "tolerance.json").read_text()), time.perf_counter() - t
 
 
@@ -63,24 +68,32 @@ def psf_rows(tmp: Path) -> tuple[list[str], dict]:
     return rows, data
 
 
-def network_rows(tmp: Path) -> tuple[list[str], dict]:
-    rows = ["| design | parts through the network | Monte Carlo (s) | parts / minute |", "| --- | --- | --- | --- |"]
+def network_rows(tmp: Path, baseline: str) -> tuple[list[str], dict]:
+    rows = ["| design | code | parts through the network | Monte Carlo (s) | parts / minute |",
+            "| --- | --- | --- | --- | --- |"]
     data = {}
+    codes = ([baseline] if baseline != "none" else []) + [None]
     for name in ("streak", "grating", "half-ring"):
-        res, _ = run(["--design", f"masks/{name}", "--samples", "6", "--networks", "--grid", "1"], tmp / name)
-        data[name] = {"mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"]}
-        rows.append(f"| {name} | 6 | {res['monte_carlo_seconds']:.0f} | {res['parts_per_minute']:.2f} |")
-        print(rows[-1], flush=True)
+        for code in codes:  # the codes take turns, design by design
+            with worktree(code) as tree:
+                sha = revision(tree)
+                label = "this code" if code is None else f"previous code ({sha})"
+                res, _ = run(["--design", str(ROOT / "masks" / name), "--samples", "6", "--networks", "--grid",
+                              "1"], tmp / f"{name}_{sha}_{code is None}", tree)
+            data.setdefault(name, {})["this_code" if code is None else "baseline"] = {
+                "revision": sha, "mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"]}
+            rows.append(f"| {name} | {label} | 6 | {res['monte_carlo_seconds']:.0f} | {res['parts_per_minute']:.2f} |")
+            print(rows[-1], flush=True)
     return rows, data
 
 
-def main(parts: list[str]):
+def main(parts: list[str], baseline: str = "HEAD"):
     OUT.mkdir(parents=True, exist_ok=True)
     old = OUT / "tolerance_speed.json"
     data = json.loads(old.read_text()) if old.is_file() else {}
     text = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for part, fn in (("psf", psf_rows), ("network", network_rows)):
+        for part, fn in (("psf", psf_rows), ("network", lambda t: network_rows(t, baseline))):
             if part in parts:
                 rows, data[part] = fn(Path(tmp))
                 if "cores" in data[part]:
@@ -91,10 +104,17 @@ def main(parts: list[str]):
     old.write_text(json.dumps(data, indent=1) + "\n")
     md = ["PSF level, committed grating design, default budget, on a machine with "
           f"{data.get('cores', '?')} cores (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
-          "", *text["psf"], "", "Through the networks (`... tolerance_speed.py network`):", "", *text["network"]]
+          "", *text["psf"], "", "Through the networks (`... tolerance_speed.py network --baseline REV`; the previous "
+          "code timed in the same run, the two taking turns):", "", *text["network"]]
     (OUT / "tolerance_speed.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or ["psf", "network"])
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("parts", nargs="*", choices=["psf", "network"], default=["psf", "network"])
+    ap.add_argument("--baseline", default="HEAD", help="git revision timed beside this code ('none': skip)")
+    a = ap.parse_args()
+    main(a.parts, a.baseline)
