@@ -7,7 +7,8 @@ on it).
 
 ``--baseline REV`` (default HEAD) times the same in the same run with the package as of git revision REV (a
 temporary worktree), for a before-and-after table; ``--baseline none`` skips it. The two codes take turns,
-``--rounds`` times each (the machine's load drifts), and each figure is the median over the rounds.
+``--rounds`` times each in alternating order (the machine's load drifts), and each figure is the median over
+the rounds.
 
 Writes benchmarks/results/reconstruction_speed.{md,json}.
 Run: .venv/bin/python benchmarks/reconstruction_speed.py --baseline REV
@@ -22,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from revisions import code_root, measure_at, median_time  # this folder is on the path of a script run
+from revisions import code_root, measure_at, median_time, same_code_warning  # this folder is on the path of a script run
 
 sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 
@@ -83,10 +84,11 @@ def table(r: dict) -> str:
     a = r["settings"]
     before = r.get("baseline")
     rev = before["revision"] if before else "none"
-    runs = ([(f"previous code ({rev})", before["tasks"])] if before else []) + [("this code", r["tasks"])]
+    runs = (([(f"previous code ({rev})", before["tasks"])] if before else [])
+            + [(f"this code ({r.get('revision', '?')})", r["tasks"])])
     lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}`: torch {a['torch']} on "
              f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds (the codes taking "
-             "turns) and the median over the rounds; the shipped "
+             "turns in alternating order, each task in a fresh process) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
              "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
              "network (s) | training steps / s (batch 4) | training crop (px) |",
@@ -116,20 +118,21 @@ def main(argv=None) -> int:
 
     from doefab.io import atomic_write_json, atomic_write_text
 
-    sha, old, new = None, [], []
-    for _ in range(args.rounds):  # the codes take turns, each task in a fresh process (no memory carried over)
-        for code, runs in ((args.baseline, old), (None, new)):
-            if code == "none":
-                continue
+    revs, old, new = {}, [], []
+    codes = [(args.baseline, old), (None, new)] if args.baseline != "none" else [(None, new)]
+    for r in range(args.rounds):  # the codes take turns, in alternating order, each task in a fresh process
+        for code, runs in codes[::-1] if r % 2 else codes:
             got = {}
             for task in TASKS:
-                rev, one = measure_at(code, __file__, ["--task", task, "--repeats", str(args.repeats),
-                                                       "--threads", str(args.threads)])
+                revs[code], one = measure_at(code, __file__, ["--task", task, "--repeats", str(args.repeats),
+                                                              "--threads", str(args.threads)])
                 got.update(one)
-            sha = rev if code is not None else sha
             runs.append(got)
+    sha = revs.get(args.baseline)
+    if sha:
+        same_code_warning(sha, revs[None])
     result = {"settings": {**vars(args), "torch": torch.__version__, "cpus": os.cpu_count()},
-              "tasks": _median_rounds(new), "rounds": {"this_code": new, "baseline": old},
+              "revision": revs[None], "tasks": _median_rounds(new), "rounds": {"this_code": new, "baseline": old},
               "baseline": {"revision": sha, "tasks": _median_rounds(old)} if old else None}
     out = Path(args.results)
     atomic_write_json(out / "reconstruction_speed.json", result)

@@ -60,9 +60,19 @@ def worktree(rev: str | None):
 
 
 def revision(tree: Path) -> str:
-    """The short git revision of the checkout at ``tree``."""
-    return subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], check=True, capture_output=True,
-                          text=True).stdout.strip()
+    """The short git revision of the checkout at ``tree``, with "+uncommitted" when tracked files differ from it."""
+    sha = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], check=True, capture_output=True,
+                         text=True).stdout.strip()
+    dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"], check=True,
+                           capture_output=True, text=True).stdout.strip()
+    return sha + ("+uncommitted" if dirty else "")
+
+
+def same_code_warning(baseline: str, this: str) -> None:
+    """Say so on stderr when the baseline is this very code (e.g. ``--baseline HEAD`` on a clean checkout)."""
+    if baseline == this:
+        print(f"warning: the baseline {baseline} is this code: pass --baseline REV of the code to compare with",
+              file=sys.stderr, flush=True)
 
 
 def _run(script: str, argv: list[str], tree: Path) -> dict:

@@ -69,22 +69,31 @@ def psf_rows(tmp: Path) -> tuple[list[str], dict]:
 
 
 def network_rows(tmp: Path, baseline: str) -> tuple[list[str], dict]:
-    rows = ["| design | code | parts through the network | Monte Carlo (s) | parts / minute |",
-            "| --- | --- | --- | --- | --- |"]
     data = {}
     codes = ([baseline] if baseline != "none" else []) + [None]
-    for name in ("streak", "grating", "half-ring"):
-        for code in codes:  # the codes take turns, design by design
+    for i, name in enumerate(("streak", "grating", "half-ring")):
+        for code in codes[::-1] if i % 2 else codes:  # the codes take turns, in alternating order
             with worktree(code) as tree:
                 sha = revision(tree)
-                label = "this code" if code is None else f"previous code ({sha})"
                 res, _ = run(["--design", str(ROOT / "masks" / name), "--samples", "6", "--networks", "--grid",
-                              "1"], tmp / f"{name}_{sha}_{code is None}", tree)
+                              "1"], tmp / f"{name}_{code is None}", tree)
             data.setdefault(name, {})["this_code" if code is None else "baseline"] = {
                 "revision": sha, "mc_s": res["monte_carlo_seconds"], "parts_per_minute": res["parts_per_minute"]}
-            rows.append(f"| {name} | {label} | 6 | {res['monte_carlo_seconds']:.0f} | {res['parts_per_minute']:.2f} |")
-            print(rows[-1], flush=True)
-    return rows, data
+            print(name, sha, res["parts_per_minute"], flush=True)
+    return network_table(data), data
+
+
+def network_table(data: dict) -> list[str]:
+    """Rows of the network part, the previous code above this code, design by design."""
+    rows = ["| design | code | parts through the network | Monte Carlo (s) | parts / minute |",
+            "| --- | --- | --- | --- | --- |"]
+    for name, runs in data.items():
+        for key, label in (("baseline", "previous code"), ("this_code", "this code")):
+            if key in runs:
+                r = runs[key]
+                rows.append(f"| {name} | {label} ({r['revision']}) | 6 | {r['mc_s']:.0f} | "
+                            f"{r['parts_per_minute']:.2f} |")
+    return rows
 
 
 def main(parts: list[str], baseline: str = "HEAD"):
@@ -96,6 +105,7 @@ def main(parts: list[str], baseline: str = "HEAD"):
         for part, fn in (("psf", psf_rows), ("network", lambda t: network_rows(t, baseline))):
             if part in parts:
                 rows, data[part] = fn(Path(tmp))
+                data.pop(part + "_note", None)  # a note on older rows no longer applies
                 if "cores" in data[part]:
                     data["cores"] = data[part]["cores"]
                 data[part + "_rows"] = rows
@@ -104,7 +114,7 @@ def main(parts: list[str], baseline: str = "HEAD"):
     old.write_text(json.dumps(data, indent=1) + "\n")
     md = ["PSF level, committed grating design, default budget, on a machine with "
           f"{data.get('cores', '?')} cores (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
-          "", *text["psf"], "", "Through the networks (`... tolerance_speed.py network --baseline REV`; the previous "
+          "", *text["psf"], *(["", data["psf_note"]] if data.get("psf_note") else []), "", "Through the networks (`... tolerance_speed.py network --baseline REV`; the previous "
           "code timed in the same run, the two taking turns):", "", *text["network"]]
     (OUT / "tolerance_speed.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))

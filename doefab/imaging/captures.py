@@ -83,8 +83,9 @@ def convolve(images: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
 
 def convolve_valid(images: torch.Tensor, psf: torch.Tensor) -> torch.Tensor:
     """Linear 'valid' convolution of [..., C, H, W] images with [C, K, K] PSFs: [..., C, H − K + 1, W − K + 1],
-    the pixels whose every contributing image pixel lies in the frame (a frame padded by K // 2 comes back at
-    its own size). The FFT canvas needs only the frame's length: the wrapped light lands outside the output.
+    the pixels whose every contributing image pixel lies in the frame. A frame padded by (K − 1) // 2 before and
+    K // 2 after comes back at its own size, as :func:`convolve` gives it (PSF pixel K // 2 at the centre). The
+    FFT canvas needs only the frame's length: the wrapped light lands outside the output.
 
     Example: ``convolve_valid(F.pad(img, (7, 7, 7, 7), mode="replicate"), psf)`` with [3, 15, 15] ``psf``."""
     h, w = images.shape[-2:]

@@ -122,8 +122,8 @@ def candidate_predictions(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded:
             coded = coded[..., y0:y0 + max_side, x0:x0 + max_side]
             uncoded = uncoded[..., y0:y0 + max_side, x0:x0 + max_side]
             b, _, h, w = coded.shape
-        pad = psf_coded.shape[-1] // 2
-        u = F.pad(uncoded.float(), (pad, pad, pad, pad), mode="replicate")  # light from just outside the frame
+        k = psf_coded.shape[-1]  # (k - 1) // 2 before, k // 2 after: the frame centred as convolve's 'same'
+        u = F.pad(uncoded.float(), ((k - 1) // 2, k // 2) * 2, mode="replicate")  # light from just outside
         y = convolve_valid(u[:, None], psf_coded.float()[:, None])  # [B, C, 3, H, W]: Y_{λk} = p_λ ∗ u_k
         y = y.reshape(b, c_bands * 3, h * w)
         # candidate j predicts coded channel r as Σ_{λ,k} T[r,λ] N_j[λ,k] Y_{λk}

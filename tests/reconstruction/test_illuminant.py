@@ -190,3 +190,30 @@ def test_the_mixture_is_well_posed_for_the_shipped_library():
     b = (target[0] * valid[0]).reshape(-1).double().numpy()
     ref, _ = nnls(a.T, b)
     assert np.linalg.norm(a.T @ w - b) <= np.linalg.norm(a.T @ ref - b) * (1 + 1e-4) + 1e-9
+
+
+@pytest.mark.parametrize("k", [5, 6])
+def test_candidate_predictions_follow_their_definition_for_odd_and_even_psfs(k):
+    """pred[j, r] = Σ_{λ,c} T[r,λ] N_j[λ,c] (p_λ ∗ u_c), each band's PSF centred on its pixel k // 2 and the frame's
+    edges replicated — computed here pixel by pixel."""
+    from doefab.reconstruction.illuminant import candidate_predictions
+
+    rng = np.random.default_rng(3)
+    n_bands, n_cand, h, w = 2, 3, 11, 9
+    uncoded = rng.random((1, 3, h, w))
+    coded = rng.random((1, 3, h, w))
+    psf = rng.random((n_bands, k, k))
+    resp = rng.random((3, n_bands))
+    inv = rng.random((n_cand, n_bands, 3))
+    pred, target, _ = candidate_predictions(*(torch.from_numpy(a) for a in (coded, uncoded, psf, resp, inv)))
+    ys, xs = np.arange(h)[:, None], np.arange(w)[None, :]
+    conv = np.zeros((n_bands, 3, h, w))
+    for lam in range(n_bands):
+        for i in range(k):
+            for j in range(k):
+                rows = np.clip(ys + k // 2 - i, 0, h - 1)
+                cols = np.clip(xs + k // 2 - j, 0, w - 1)
+                conv[lam] += psf[lam, i, j] * uncoded[0][:, rows, cols]
+    want = np.einsum("rl,jlc,lchw->jrhw", resp, inv, conv).reshape(n_cand, 3, h * w)
+    np.testing.assert_allclose(pred[0].numpy(), want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+    np.testing.assert_allclose(target[0].numpy(), coded[0].reshape(3, -1), rtol=1e-6)

@@ -66,19 +66,23 @@ def test_bad_inputs():
 
 
 def test_each_feature_with_each_psf_matches_pair_by_pair_deconvolution():
-    # two batch items with their own PSFs, three features, two PSFs of different widths and offsets, a λ per
-    # output channel: output channel c·F + f is feature f deconvolved with PSF c under λ[c·F + f]
+    # three features, two PSFs of different widths and offsets (one per batch item, or one for the whole batch),
+    # a λ per output channel: output channel c·F + f is feature f deconvolved with PSF c under λ[c·F + f], and the
+    # gradients are those of the pair-by-pair computation
     torch.manual_seed(0)
-    y = torch.rand(2, 3, 24, 20, dtype=torch.float64)
-    psf = torch.stack([torch.stack([_gauss(7, s), torch.roll(_gauss(7, s + 0.5), 1, -1)]) for s in (0.8, 1.4)])
-    psf = psf.double()
-    lam = torch.tensor([1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2], dtype=torch.float64)
-    got = wiener_deconvolve(y, psf, lam, each=True)
-    assert got.shape == (2, 6, 24, 20)
-    for c in range(2):
-        for f in range(3):
-            want = wiener_deconvolve(y[:, f:f + 1], psf[:, c:c + 1], lam[c * 3 + f])
-            torch.testing.assert_close(got[:, c * 3 + f:c * 3 + f + 1], want, rtol=0, atol=1e-12)
+    psf2 = torch.stack([torch.stack([_gauss(7, s), torch.roll(_gauss(7, s + 0.5), 1, -1)]) for s in (0.8, 1.4)])
+    for psf in (psf2.double(), psf2[:1].double()):
+        y = torch.rand(2, 3, 24, 20, dtype=torch.float64, requires_grad=True)
+        lam = torch.tensor([1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2], dtype=torch.float64, requires_grad=True)
+        weight = torch.rand(2, 6, 24, 20, dtype=torch.float64)
+        got = wiener_deconvolve(y, psf, lam, each=True)
+        assert got.shape == (2, 6, 24, 20)
+        grads = torch.autograd.grad((got * weight).sum(), (y, lam))
+        want = torch.cat([wiener_deconvolve(y[:, f:f + 1], psf[:, c:c + 1], lam[c * 3 + f])
+                          for c in range(2) for f in range(3)], dim=1)
+        torch.testing.assert_close(got, want, rtol=0, atol=1e-12)
+        for g, w in zip(grads, torch.autograd.grad((want * weight).sum(), (y, lam))):
+            torch.testing.assert_close(g, w, rtol=1e-10, atol=1e-12)
 
 
 def test_coded_features_deconvolve_raw_channels_with_their_colour_and_features_with_every_psf():
