@@ -44,6 +44,7 @@ MEASUREMENTS = (
     Measurement("start_metrics", "benchmarks/start_metrics.py", (R + "start_metrics.md",)),
     Measurement("design_metric_vs_time", "benchmarks/design_metric_vs_time.py",
                 (R + "design_metric_vs_time.md", R + "design_metric_vs_time.png")),
+    Measurement("design_time_half-ring", "benchmarks/design_time.py", (R + "design_time_half-ring.md",)),
     Measurement("nlopt_optimizers", "benchmarks/nlopt_optimizers.py", (R + "nlopt_optimizers.md",)),
     Measurement("fab_regularizer", "benchmarks/fab_regularizer.py", (R + "fab_regularizer.md",)),
     Measurement("depth_candidates", "benchmarks/depth_candidates_report.py",
