@@ -12,7 +12,6 @@ Writes benchmarks/results/judge_profile.{md,json}. Run with nothing else on the 
 from __future__ import annotations
 
 import cProfile
-import json
 import pstats
 import subprocess
 import time
