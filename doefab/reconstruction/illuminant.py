@@ -160,9 +160,12 @@ def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
         w = None
         scale = float(torch.trace(a @ a.T))
         if scale > 0 and float(b.abs().sum()) > 0:  # a black or wholly clipped capture says nothing: below
-            # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16)
-            q, r = torch.linalg.qr(a.T)  # Aᵀ = QR: min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant
-            w, _ = nnls(r.cpu().numpy(), (q.T @ b).cpu().numpy())  # scipy's solver, on the CPU
+            # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16).
+            # [Aᵀ b] = Q'R' gives Aᵀ's R in R'[:J, :J] and Qᵀb in R'[:J, J], with no Q formed:
+            # min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant
+            j = a.shape[0]
+            r = torch.linalg.qr(torch.cat([a, b[None]]).T, mode="r")[1]  # column-major, as LAPACK takes it
+            w, _ = nnls(r[:j, :j].cpu().numpy(), r[:j, j].cpu().numpy())  # scipy's solver, on the CPU
             w = w if np.isfinite(w).all() and w.sum() > 0 else None
         if w is None:  # the single best member (or the first, when nothing can be told apart)
             cost = (((p - t[None]) ** 2) * v[None]).sum(dim=(-2, -1))
