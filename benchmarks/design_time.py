@@ -22,12 +22,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from revisions import ROOT, code_root, measure_at, same_code_warning  # this folder is on the path of a script run
+from revisions import ROOT, add_arguments, code_root, measure_at, same_code_warning, turns  # this folder is on the path
 
 sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
-
-OUT = Path(__file__).parent / "results"
-
 
 def committed(task: str) -> dict:
     """The committed design's recorded settings, wall time and 16-level metric."""
@@ -81,13 +78,10 @@ def table(r: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--task", default="half-ring", choices=["streak", "grating", "half-ring"])
-    ap.add_argument("--baseline", default=None, help="git revision timed beside this code ('none': skip; default: "
-                    "the revision that last changed the design's committed design.json)")
     ap.add_argument("--rounds", type=int, default=1)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--results", default=str(OUT))
     ap.add_argument("--config", help=argparse.SUPPRESS)
-    ap.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)
+    add_arguments(ap, None, "git revision timed beside this code ('none': skip; default: the revision that last "
+                  "changed the design's committed design.json)")
     args = ap.parse_args(argv)
     if args.measure_only:
         print(json.dumps(measure(args)))
@@ -100,12 +94,11 @@ def main(argv=None) -> int:
         check=True, capture_output=True, text=True).stdout.strip()
     argv_run = ["--config", json.dumps(ref["config"]), "--threads", str(args.threads)]
     runs, revs = {"baseline": [], "this_code": []}, {}
-    codes = [(base, "baseline"), (None, "this_code")] if base != "none" else [(None, "this_code")]
-    for r in range(args.rounds):
-        for code, key in codes[::-1] if r % 2 else codes:
-            revs[key], got = measure_at(code, __file__, argv_run)
-            runs[key].append(got)
-            print(key, revs[key], got, file=sys.stderr, flush=True)
+    for code in turns(base, args.rounds):
+        key = "this_code" if code is None else "baseline"
+        revs[key], got = measure_at(code, __file__, argv_run)
+        runs[key].append(got)
+        print(key, revs[key], got, file=sys.stderr, flush=True)
     if "baseline" in revs:
         same_code_warning(revs["baseline"], revs["this_code"])
     result = {"settings": {**vars(args), "cpus": os.cpu_count()}, "committed": ref, "runs": runs,

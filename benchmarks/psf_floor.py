@@ -25,13 +25,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from revisions import code_root, measure_at, median_time  # this folder is on the path of a script run
+from revisions import add_arguments, code_root, measure_at, median_time  # this folder is on the path of a script run
 
 sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 import doefab  # noqa: E402
-
-RESULTS = Path(__file__).resolve().parent / "results"
-
 
 def floor_work(plan, half: str = "coded"):
     """A function doing, per band, only the spectral route's FFT, |·|² and two matrix products on tensors of
@@ -82,10 +79,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bands", type=int, default=31)
     ap.add_argument("--kernel", type=int, default=512)
     ap.add_argument("--repeats", type=int, default=9)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--baseline", default="HEAD", help="git revision measured beside this code ('none': skip)")
-    ap.add_argument("--results", default=str(RESULTS))
-    ap.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)
+    add_arguments(ap)
     args = ap.parse_args(argv)
     if args.measure_only:
         print(json.dumps(measure(args)))

@@ -23,11 +23,11 @@ import sys
 import time
 from pathlib import Path
 
-from revisions import code_root, measure_at, median_time, same_code_warning  # this folder is on the path of a script run
+from revisions import (add_arguments, code_root, measure_at, median_time, same_code_warning,  # this folder is on
+                       turns)  # the path of a script run
 
 sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 
-OUT = Path(__file__).parent / "results"
 TASKS = ("hdr", "hyperspectral", "depth")
 
 
@@ -104,12 +104,9 @@ def table(r: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--task", action="append", choices=TASKS, help=argparse.SUPPRESS)
-    ap.add_argument("--baseline", default="HEAD", help="git revision measured beside this code ('none': skip)")
-    ap.add_argument("--results", default=str(OUT))
-    ap.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)
+    add_arguments(ap)
     args = ap.parse_args(argv)
     if args.measure_only:
         print(json.dumps(measure(args)))
@@ -119,15 +116,13 @@ def main(argv=None) -> int:
     from doefab.io import atomic_write_json, atomic_write_text
 
     revs, old, new = {}, [], []
-    codes = [(args.baseline, old), (None, new)] if args.baseline != "none" else [(None, new)]
-    for r in range(args.rounds):  # the codes take turns, in alternating order, each task in a fresh process
-        for code, runs in codes[::-1] if r % 2 else codes:
-            got = {}
-            for task in TASKS:
-                revs[code], one = measure_at(code, __file__, ["--task", task, "--repeats", str(args.repeats),
-                                                              "--threads", str(args.threads)])
-                got.update(one)
-            runs.append(got)
+    for code in turns(args.baseline, args.rounds):  # each task in a fresh process
+        got = {}
+        for task in TASKS:
+            revs[code], one = measure_at(code, __file__, ["--task", task, "--repeats", str(args.repeats),
+                                                          "--threads", str(args.threads)])
+            got.update(one)
+        (new if code is None else old).append(got)
     sha = revs.get(args.baseline)
     if sha:
         same_code_warning(sha, revs[None])

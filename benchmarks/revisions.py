@@ -19,11 +19,31 @@ from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
 
 
 def code_root() -> str:
     """The package folder a benchmark measures: a baseline's worktree, or this checkout."""
     return os.environ.get("DOEFAB_BENCH_CODE", str(ROOT))
+
+
+def add_arguments(ap, baseline: str | None = "HEAD", help: str = "git revision timed beside this code ('none': "
+                  "skip)") -> None:
+    """The options every before-and-after benchmark takes: --threads, --baseline, --results, --measure-only."""
+    import argparse
+
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--baseline", default=baseline, help=help)
+    ap.add_argument("--results", default=str(RESULTS))
+    ap.add_argument("--measure-only", action="store_true", help=argparse.SUPPRESS)
+
+
+def turns(baseline: str, rounds: int = 1, start: int = 0):
+    """The codes in the order they take turns: ``baseline`` and this checkout (None), which goes first alternating
+    from round to round (``start``: the first round's number); the baseline left out when it is "none"."""
+    codes = [baseline, None] if baseline != "none" else [None]
+    for r in range(start, start + rounds):
+        yield from codes[::-1] if r % 2 else codes
 
 
 def median_time(fn, repeats=3):

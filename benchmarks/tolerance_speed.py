@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from revisions import ROOT, revision, worktree  # this folder is on the path of a script run
+from revisions import ROOT, revision, turns, worktree  # this folder is on the path of a script run
 
 OUT = Path(__file__).parent / "results"
 DOEFAB = [sys.executable, "-m", "doefab"]
@@ -70,9 +70,8 @@ def psf_rows(tmp: Path) -> tuple[list[str], dict]:
 
 def network_rows(tmp: Path, baseline: str) -> tuple[list[str], dict]:
     data = {}
-    codes = ([baseline] if baseline != "none" else []) + [None]
     for i, name in enumerate(("streak", "grating", "half-ring")):
-        for code in codes[::-1] if i % 2 else codes:  # the codes take turns, in alternating order
+        for code in turns(baseline, start=i):  # the codes take turns, in alternating order
             with worktree(code) as tree:
                 sha = revision(tree)
                 res, _ = run(["--design", str(ROOT / "masks" / name), "--samples", "6", "--networks", "--grid",
@@ -114,8 +113,9 @@ def main(parts: list[str], baseline: str = "HEAD"):
     old.write_text(json.dumps(data, indent=1) + "\n")
     md = ["PSF level, committed grating design, default budget, on a machine with "
           f"{data.get('cores', '?')} cores (`.venv/bin/python benchmarks/tolerance_speed.py psf`):",
-          "", *text["psf"], *(["", data["psf_note"]] if data.get("psf_note") else []), "", "Through the networks (`... tolerance_speed.py network --baseline REV`; the previous "
-          "code timed in the same run, the two taking turns):", "", *text["network"]]
+          "", *text["psf"], *(["", data["psf_note"]] if data.get("psf_note") else []), "",
+          "Through the networks (`... tolerance_speed.py network --baseline REV`; the previous code timed in the "
+          "same run, the two taking turns):", "", *text["network"]]
     (OUT / "tolerance_speed.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
 
