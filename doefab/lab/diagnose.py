@@ -13,25 +13,33 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
    budget (``tolerance.errors.sample_errors``); a PSF responds to an overlay's size more than to its sign, with
    a kink where a mask crosses another, so the misfit has many local minima.
 2. The pixels weighed by a noise model fitted to the best start's residuals (``PartModel.reweight``: shot noise
-   makes the PSF's core far noisier than its tails) and the fit resumed, ``REWEIGHT`` times; the other starts'
-   ends whose misfit came within ``RIVAL`` of the best (and lie apart from it and each other) are resumed weighted
-   too; each is polished by ``POLISH`` Gauss–Newton steps on the finer grid of step 4 and the best there kept
-   (the design grid's flat cells misplace the slivers an overlay cuts, differently in each fit).
-3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); a better mirror is taken.
+   makes the PSF's core far noisier than its tails), the errors the fit holds modelled around it
+   (``PartModel.hold``: the mean PSF change of ``HOLD_DRAWS`` parts drawn with the masks' rotations, the roughness
+   and each held error joins the model's PSFs, their spread whitens the residual: generalised least squares, so
+   that a rough surface's scatter does not pull the fitted errors) and the fit resumed, ``REWEIGHT`` times; the
+   other starts' ends whose misfit came within ``RIVAL`` of the best (and lie apart from it and each other) are
+   resumed weighted too; each is polished by ``POLISH`` Gauss–Newton steps on the finer grid of step 4 and the
+   best there kept (the design grid's flat cells misplace the slivers an overlay cuts, differently in each fit).
+3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); each mirror whose misfit
+   after one Gauss–Newton step rose by less than ``SCREEN`` s² is resumed to its own optimum and polished as in
+   step 2, the best of every fit found taken and the test repeated (twice at most). An overlay's sign test takes
+   its resumed mirror where that kept the other sign (one step from a mirror overstates its rise).
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
-**Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹, J the central-difference Jacobian of the weighted
-residual vector in budget σ, s² = weighted misfit / (n − p); plus the spread that the errors the fit holds give
-the fitted ones (``held_errors``: ``HELD_DRAWS`` parts with the masks' rotations, the roughness and each held error
-drawn from the budget, their PSF changes taken through −J⁺); a third of step 4's shift added in quadrature (what a
-finer grid still would move); each σ widened to half the distance to any other fit found (step 2's rivals, step
-3's mirrors) that the recordings do not tell apart from the best: its misfit within ``MIRROR_CHI2`` s² of the
-best's plus twice the rms swing that the held errors' PSF changes give that difference (``tolerance``: a surface
-roughness of a few nm can move the misfits of two far-apart fits further apart than the photon noise does).
-**Identifiable**: the model responds to the error at all (``partmodel.Param.reason`` lists the ones it cannot),
-its σ is below ``MAX_SIGMA`` budget σ (the recordings tell clearly more than the budget), its |correlation|
-with every other fitted error is below ``MAX_CORRELATION`` (the recordings tell them apart) and, for an overlay,
-its mirror fits worse by that ``tolerance`` (its sign is told).
+**Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹, J the central-difference Jacobian of the weighted and
+whitened residual vector in budget σ, s² = its misfit / (n − p) (the noise's share, at most: whitening shrinks the
+noise along k of n directions); plus the spread that the errors the fit holds give the fitted ones (``held_errors``:
+``HELD_DRAWS`` other parts with the masks' rotations, the roughness and each held error drawn from the budget, their
+PSF changes less the modelled mean, ± ``MEAN_SPREAD`` of it in turn, taken through −J⁺); a third of step 4's shift
+added in quadrature (what a finer grid still would move); each σ widened to half the distance to any other fit found
+(step 2's rivals, step 3's mirrors) that the recordings do not tell apart from the best: its misfit within
+``MIRROR_CHI2`` s² of the best's plus twice the rms swing that the held errors' PSF changes give that difference
+(``tolerance``: a surface roughness of a few nm can move the misfits of two far-apart fits further apart than the
+photon noise does).
+**Identifiable**: the model responds to the error at all (``partmodel.Param.reason`` lists the ones it cannot), its
+σ is below ``MAX_SIGMA`` budget σ (the recordings tell clearly more than the budget), its |correlation| with every
+other fitted error is below ``MAX_CORRELATION`` (the recordings tell them apart) and, for an overlay, its mirror
+fits worse by that ``tolerance`` (its sign is told).
 """
 
 from __future__ import annotations
@@ -42,12 +50,14 @@ import time
 import numpy as np
 import torch
 
-from doefab.lab.partmodel import BOUND, STEP, Param, PartModel, design_folder, scaled
+from doefab.lab.partmodel import (BOUND, HELD_DRAWS, HOLD_DRAWS, MEAN_SPREAD, STEP, Param, PartModel, design_folder,
+                                  held_changes, held_errors, scaled)
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["diagnose", "fitted_pair", "part_errors", "fit", "jacobian", "curvature", "held_errors",
            "tolerance",
-           "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS", "STARTS"]
+           "held_changes",
+           "MAX_CORRELATION", "MAX_SIGMA", "REWEIGHT", "HELD_DRAWS", "HOLD_DRAWS", "STARTS"]
 
 MAX_CORRELATION = 0.95  # at or above it two errors are not told apart
 MAX_SIGMA = 0.5  # an identifiable error's σ is below this many budget σ
@@ -58,9 +68,9 @@ RIVAL = 1.0  # starts whose unweighted misfit is within this fraction of the bes
 NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
 MIRROR_CHI2 = 4.0  # an overlay's sign is identified when its mirror fits worse by this much (2σ), in units of s²,
 # plus twice the spread that the errors the fit holds give that rise (``curvature``)
+SCREEN = 200.0  # a mirror whose one-step misfit rise (in s²) is below this is resumed to its own optimum
 SAME = 0.1  # budget σ: two fits closer than this in every error are the same fit
 POLISH = 3  # Gauss–Newton steps on the finer grid before fits are compared
-HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
 STARTS = 8  # fits from the error-free part and parts drawn from the budget (benchmarks/diagnose_coverage.py)
 
 
@@ -105,23 +115,30 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     x, noise = ends[0][1], None
     for _ in range(REWEIGHT):
         noise = model.reweight(x)
+        model.hold(held_changes(model, x, HOLD_DRAWS, seed, stream=41))
         x, f = _solve(model, x)
     rivals = _distinct([e[1] for e in ends[1:] if e[0] <= ends[0][0] * (1 + RIVAL)], x)
     found = sorted([_polish(model, xc) for xc in [x] + [_solve(model, xr)[0] for xr in rivals]], key=lambda e: e[0])
     x = found[0][1]
     r, jac = jacobian(model, x)
-    for turn in range(3):  # a mirrored overlay that fits better is taken and the fit resumed from it, twice at most
-        flipped, dchi, tried = mirror(model, x, r, jac)
-        mirrors = [(xm, float(rm @ rm) - float(r @ r), rm - r) for xm, rm in tried]
-        if flipped is None or turn == 2:
+    for turn in range(3):  # the mirrors resumed; a better one is taken and the test repeated, twice at most
+        _, dchi, tried = mirror(model, x, r, jac)
+        mirrors = [(xm, float(rm @ rm) - float(r @ r), rm - r) for xm, rm, _ in tried]
+        s2 = float(r @ r) / max(r.size - len(x), 1)
+        resumed = [(flip, _polish(model, _solve(model, xm)[0])) for (xm, rise, _), (_, _, flip) in zip(mirrors, tried)
+                   if rise / s2 <= SCREEN]
+        found = sorted(found + [e for _, e in resumed], key=lambda e: e[0])
+        if np.array_equal(found[0][1], x) or turn == 2:
             break
-        x = _solve(model, flipped)[0]
+        x = found[0][1]
         r, jac = jacobian(model, x)
-        found.append(_polish(model, x))
-        found.sort(key=lambda e: e[0])
+    best = next(e for e in found if np.array_equal(e[1], x))
+    for flip, e in resumed:  # an overlay's sign: its resumed mirror, where it kept the other sign, against the best
+        i = flip[0]
+        if len(flip) == 1 and e[2][i] * best[2][i] < 0 and (e[0] - best[0]) / s2 < dchi["rise"][i]:
+            dchi["rise"][i], dchi["change"][i] = (e[0] - best[0]) / s2, e[3] - best[3]
     fine, r_fine = refine(model, x, jac)
     # the rivals against the best's own polished entry (as many finer-grid steps as theirs)
-    best = next(e for e in found if np.array_equal(e[1], x))
     others = [(xo, fo - best[0], ro - best[3]) for fo, xd, xo, ro in found if not np.array_equal(xd, x)] + mirrors
     return {"x": fine, "r": r_fine, "jac": jac, "mirror": dchi, "others": others, "grid": np.abs(fine - x) / 3,
             "starts": runs, "noise": noise}
@@ -173,7 +190,7 @@ def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> t
     (``jac``: the Jacobian at ``x``). Returns (the best of them where it fits better than ``x``, else None;
     {"rise": per fitted error the weighted misfit's rise from ``x`` to its own mirror, in units of s², inf for
     errors not tested, "change": per fitted error its mirror's weighted residual less ``r``, None where not
-    tested}; [(mirrored point, its weighted residual)] of every one tried)."""
+    tested}; [(mirrored point, its weighted residual, the overlays negated)] of every one tried)."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     free = model.free
@@ -186,7 +203,7 @@ def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> t
         rest = [j for j in range(p) if j not in flip]
         xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -model.residual(xm), rcond=None)[0], -BOUND, BOUND)
         rm = model.residual(xm)
-        tried.append((xm, rm))
+        tried.append((xm, rm, flip))
         if len(flip) == 1:
             dchi[flip[0]] = (float(rm @ rm) - float(r @ r)) / s2
             change[flip[0]] = rm - r
@@ -204,30 +221,6 @@ def jacobian(model: PartModel, x: np.ndarray, step: float = STEP) -> tuple[np.nd
         e[i] = step
         cols.append((model.residual(x + e) - model.residual(x - e)) / (2 * step))
     return r0, np.stack(cols, axis=1)
-
-
-def held_errors(model: PartModel, x: np.ndarray, draws: int = HELD_DRAWS, seed: int = 0) -> np.ndarray:
-    """[draws, n] the weighted change of the fitted part's PSFs (on the finer grid) when the errors the fit holds
-    take values drawn from the budget (``tolerance.errors.sample_errors``): the masks' rotations and the surface
-    roughness, and each error held for a reason (a decenter along the split at focus, an axial gap at the stop).
-    A real part carries them; ``curvature`` turns them into the fitted errors' spread."""
-    from dataclasses import replace
-
-    from doefab.tolerance.errors import sample_errors
-
-    fitted = model.errors(x)
-    held = {(p.key, p.axis) for p in model.params if p.reason and p.sigma > 0}
-    rng = np.random.default_rng([seed, 40])
-    base = model.psfs(fitted, fine=True)
-    out = []
-    for i in range(draws):
-        d = sample_errors(model.budget, rng, seed=10**6 + 1000 * seed + i, n_masks=model.n_masks)
-        y = d.mount_shift[1] if ("mount_decenter", "y") in held else fitted.mount_shift[1]
-        part = replace(fitted, rotation=d.rotation, roughness=d.roughness, roughness_corr=d.roughness_corr,
-                       seed=d.seed, mount_shift=(fitted.mount_shift[0], y),
-                       axial_gap=d.axial_gap if ("axial_gap", None) in held else fitted.axial_gap)
-        out.append(((model.psfs(part, fine=True) - base) * model.weight).ravel())
-    return np.stack(out)
 
 
 def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None, grid=None, x=None,
@@ -342,7 +335,8 @@ def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int 
     held = held_errors(model, got["x"], seed=seed)
     cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"], held)
     cur["held"] = {"draws": len(held), "errors": ["mask rotations", "surface roughness"]
-                   + [p.label for p in model.params if p.reason and p.sigma > 0]}
+                   + [p.label for p in model.params if p.reason and p.sigma > 0],
+                   "modelled": {"draws": HOLD_DRAWS if model.basis is not None else 0, "mean_spread": MEAN_SPREAD}}
     seconds = time.perf_counter() - t0
     err = model.errors(got["x"])
     misfit = {"nominal": _plain_misfit(model, PartErrors(), fine=True), "fitted": _plain_misfit(model, err, fine=True)}
@@ -364,7 +358,8 @@ def _bar(progress: bool, model: PartModel, starts: int):
     from tqdm import tqdm
 
     p = len(model.free)
-    bar = tqdm(total=(starts + REWEIGHT) * 8 * (p + 1) + 2 * p + 1, desc="diagnose", unit="part")
+    bar = tqdm(total=(starts + REWEIGHT) * 8 * (p + 1) + 2 * p + 1 + REWEIGHT * (HOLD_DRAWS + 1) + HELD_DRAWS,
+               desc="diagnose", unit="part")
     model.tick = lambda: bar.update(1)
     return bar
 

@@ -28,12 +28,16 @@ import torch
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
-__all__ = ["Param", "parameters", "to_errors", "scaled", "check_pair", "PartModel", "BOUND", "STEP", "design_folder"]
+__all__ = ["Param", "parameters", "to_errors", "scaled", "check_pair", "PartModel", "held_changes", "held_errors",
+           "BOUND", "STEP", "HELD_DRAWS", "HOLD_DRAWS", "MEAN_SPREAD", "design_folder"]
 
 BOUND = 6.0  # the fit's bounds, budget σ either side of nominal
 FINE = 2  # the grid of the fit's last steps, times the design grid
 STEP = 0.05  # the Jacobian's central-difference step, budget σ
 RECENT = 4  # parts whose PSFs a model keeps
+HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
+HOLD_DRAWS = 32  # parts drawn likewise for the fit's model of them (``PartModel.hold``)
+MEAN_SPREAD = 1.0  # the held errors' mean PSF change is known to this fraction (a part's roughness is not the budget's)
 
 
 @dataclass(frozen=True)
@@ -186,6 +190,8 @@ class PartModel:
         self.light = np.stack([nominal[h].double().numpy().sum(axis=(-1, -2), keepdims=True) for h in self.halves])
         self.measured = self._scaled(np.stack([np.asarray(getattr(measured, h), np.float64) for h in self.halves]))
         self.weight = np.ones_like(self.measured)  # 1 / the pixels' noise σ (``reweight``)
+        self.offset = 0.0  # the mean PSF change that the errors the fit holds make (``hold``)
+        self.basis = None  # (Q [n, k], f [k]): the whitening of their spread (``hold``)
         self.evaluations = 0
         self.tick = None  # called after each part computed (a progress bar)
 
@@ -231,8 +237,37 @@ class PartModel:
         return np.stack([got[h].double().numpy() for h in self.halves])
 
     def residual(self, x, fine: bool = False) -> np.ndarray:
-        """The weighted residual vector of the part ``x`` (budget σ) against the measured pair."""
-        return ((self.psfs(self.errors(x), fine) - self.measured) * self.weight).ravel()
+        """The weighted residual vector of the part ``x`` (budget σ) against the measured pair: the model's PSFs
+        with the held errors' mean change (``hold``), less the measured ones, weighted per pixel and whitened
+        against the held errors' spread."""
+        return self.whiten(((self.psfs(self.errors(x), fine) + self.offset - self.measured) * self.weight).ravel())
+
+    def hold(self, changes: np.ndarray) -> None:
+        """Model the errors the fit holds from ``changes`` [k, n]: PSF changes they make in k drawn parts
+        (unweighted, ``held_changes``). Their mean joins the model's PSFs (``offset``: a rough surface scatters
+        light from every part alike) and their spread, in the current weights, joins the noise: the residual is
+        whitened by (I + UUᵀ)^(−1/2), U's columns the weighted deviations from the mean over √(k − 1) and the
+        weighted mean times ``MEAN_SPREAD`` (a part's roughness is not the budget's: the mean's size is uncertain
+        too), so the fit gives less weight to what the held errors could have made (generalised least squares).
+        ``hold(None)`` undoes it.
+        Example: ``model.hold(held_changes(model, x, HOLD_DRAWS))``."""
+        if changes is None or len(changes) < 2:
+            self.offset, self.basis = 0.0, None
+            return
+        c = np.asarray(changes, np.float64)
+        mean = c.mean(axis=0)
+        w = self.weight.ravel()
+        u = np.concatenate([(c - mean) / math.sqrt(len(c) - 1), MEAN_SPREAD * mean[None]]) * w
+        q, s, _ = np.linalg.svd(u.T, full_matrices=False)
+        self.offset = mean.reshape(self.measured.shape)
+        self.basis = (q, 1.0 / np.sqrt(1.0 + s * s) - 1.0)
+
+    def whiten(self, v: np.ndarray) -> np.ndarray:
+        """(I + UUᵀ)^(−1/2)·v for a weighted residual (or its change) ``v`` of length n (``hold``)."""
+        if self.basis is None:
+            return v
+        q, f = self.basis
+        return v + q @ (f * (q.T @ v))
 
     def misfit(self, x) -> float:
         r = self.residual(x)
@@ -245,7 +280,7 @@ class PartModel:
         make the weights follow the noise). Returns [{"a", "b"}] per entry, in the pair's order."""
         from scipy.optimize import nnls
 
-        m = np.clip(self.psfs(self.errors(x)), 0.0, None)
+        m = np.clip(self.psfs(self.errors(x)) + self.offset, 0.0, None)
         r2 = (m - self.measured) ** 2
         k2 = m.shape[-2] * m.shape[-1]
         flat_m, flat_r = m.reshape(-1, k2), r2.reshape(-1, k2)
@@ -258,6 +293,41 @@ class PartModel:
             out.append({"a": float(a), "b": float(b)})
         self.weight = 1.0 / np.sqrt(var.reshape(m.shape))
         return out
+
+
+def held_changes(model: "PartModel", x: np.ndarray, draws: int, seed: int = 0, stream: int = 40) -> np.ndarray:
+    """[draws, n] the change of the fitted part's PSFs (on the finer grid, unweighted) when the errors the fit holds
+    take values drawn from the budget (``tolerance.errors.sample_errors``, draws of ``stream``): the masks' rotations
+    and the surface roughness, and each error held for a reason (a decenter along the split at focus, an axial gap
+    at the stop). A real part carries them."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import sample_errors
+
+    fitted = model.errors(x)
+    held = {(p.key, p.axis) for p in model.params if p.reason and p.sigma > 0}
+    rng = np.random.default_rng([seed, stream])
+    base = model.psfs(fitted, fine=True)
+    out = []
+    for i in range(draws):
+        d = sample_errors(model.budget, rng, seed=10**6 * (stream - 39) + 1000 * seed + i, n_masks=model.n_masks)
+        y = d.mount_shift[1] if ("mount_decenter", "y") in held else fitted.mount_shift[1]
+        part = replace(fitted, rotation=d.rotation, roughness=d.roughness, roughness_corr=d.roughness_corr,
+                       seed=d.seed, mount_shift=(fitted.mount_shift[0], y),
+                       axial_gap=d.axial_gap if ("axial_gap", None) in held else fitted.axial_gap)
+        out.append((model.psfs(part, fine=True) - base).ravel())
+    return np.stack(out)
+
+
+def held_errors(model: "PartModel", x: np.ndarray, draws: int = HELD_DRAWS, seed: int = 0) -> np.ndarray:
+    """[draws, n] ``held_changes`` of draws independent of the ones the fit holds (``PartModel.hold``), less the
+    mean change that the model carries, that mean's own uncertainty added (± ``partmodel.MEAN_SPREAD`` of it in
+    turn: a part's roughness is not the budget's), weighted and whitened as the residuals are: ``curvature``
+    turns them into the fitted errors' spread."""
+    mean = np.ravel(model.offset) * np.ones(model.measured.size)
+    d = held_changes(model, x, draws, seed) - mean
+    d = d + MEAN_SPREAD * np.where(np.arange(draws) % 2 == 0, 1.0, -1.0)[:, None] * mean
+    return np.stack([model.whiten(row * model.weight.ravel()) for row in d])
 
 
 def design_folder(path) -> Path:

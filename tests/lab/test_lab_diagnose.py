@@ -229,7 +229,7 @@ def test_the_noise_model_is_fitted_to_the_residuals():
     a, b = np.array([2e-7, 5e-7]), np.array([1e-11, 3e-11])
     var = a[:, None, None, None, None] * model + b[:, None, None, None, None]
     fake = SimpleNamespace(psfs=lambda err: model, errors=lambda x: None, measured=model + rng.normal(size=model.shape)
-                           * np.sqrt(var))
+                           * np.sqrt(var), offset=0.0)
     got = PartModel.reweight(fake, None)
     for g, ai, bi in zip(got, a, b):
         assert g["a"] == pytest.approx(ai, rel=0.2) and g["b"] == pytest.approx(bi, rel=0.2)
@@ -329,3 +329,32 @@ def test_a_part_asked_again_is_not_computed_again(small_design, budget):
     np.testing.assert_array_equal(model.psfs(TRUTH), model._scaled(again))
     model.psfs(dataclasses.replace(TRUTH, edge_bias=0.0))
     assert model.evaluations == 2
+
+
+def test_the_held_errors_whiten_the_residual_as_generalised_least_squares():
+    """``PartModel.hold`` from k drawn PSF changes: ``whiten`` is (I + UUᵀ)^(−1/2) (U's columns the weighted
+    deviations from their mean over √(k − 1) and the weighted mean itself, whose size is uncertain; checked against
+    an eigendecomposition of the dense matrix), the mean joins the model,
+    and a least-squares fit of the whitened residual is the generalised least-squares estimate
+    (JᵀC⁻¹J)⁻¹JᵀC⁻¹y with C = I + UUᵀ, solved directly."""
+    from doefab.lab.partmodel import MEAN_SPREAD, PartModel
+
+    rng = np.random.default_rng(8)
+    n, k = 60, 7
+    fake = SimpleNamespace(weight=rng.uniform(0.5, 2.0, size=(2, n // 2)), measured=np.zeros((2, n // 2)))
+    changes = rng.normal(size=(k, n)) * 3.0 + rng.normal(size=n)
+    PartModel.hold(fake, changes)
+    np.testing.assert_allclose(fake.offset, changes.mean(axis=0).reshape(2, n // 2), rtol=1e-12)
+    u = np.concatenate([(changes - changes.mean(axis=0)) / np.sqrt(k - 1), MEAN_SPREAD * changes.mean(axis=0)[None]])
+    u = u * fake.weight.ravel()
+    val, vec = np.linalg.eigh(np.eye(n) + u.T @ u)
+    inv_sqrt = vec @ np.diag(val ** -0.5) @ vec.T
+    v = rng.normal(size=n)
+    np.testing.assert_allclose(PartModel.whiten(fake, v), inv_sqrt @ v, rtol=1e-10, atol=1e-12)
+    jac, y = rng.normal(size=(n, 3)), rng.normal(size=n)
+    white = np.stack([PartModel.whiten(fake, c) for c in jac.T], axis=1)
+    got = np.linalg.lstsq(white, PartModel.whiten(fake, y), rcond=None)[0]
+    c_inv = np.linalg.inv(np.eye(n) + u.T @ u)
+    np.testing.assert_allclose(got, np.linalg.solve(jac.T @ c_inv @ jac, jac.T @ c_inv @ y), rtol=1e-9)
+    PartModel.hold(fake, None)
+    assert fake.basis is None and fake.offset == 0.0 and np.array_equal(PartModel.whiten(fake, v), v)
