@@ -251,10 +251,10 @@ class PartModel:
         too), so the fit gives less weight to what the held errors could have made (generalised least squares).
         ``hold(None)`` undoes it.
         Example: ``model.hold(held_changes(model, x, HOLD_DRAWS))``."""
-        if changes is None or len(changes) < 2:
+        c = None if changes is None else np.asarray(changes, np.float64)
+        if c is None or len(c) < 2 or not np.any(c):  # nothing held, or nothing it changes
             self.offset, self.basis = 0.0, None
             return
-        c = np.asarray(changes, np.float64)
         mean = c.mean(axis=0)
         w = self.weight.ravel()
         u = np.concatenate([(c - mean) / math.sqrt(len(c) - 1), MEAN_SPREAD * mean[None]]) * w

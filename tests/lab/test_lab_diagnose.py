@@ -358,3 +358,6 @@ def test_the_held_errors_whiten_the_residual_as_generalised_least_squares():
     np.testing.assert_allclose(got, np.linalg.solve(jac.T @ c_inv @ jac, jac.T @ c_inv @ y), rtol=1e-9)
     PartModel.hold(fake, None)
     assert fake.basis is None and fake.offset == 0.0 and np.array_equal(PartModel.whiten(fake, v), v)
+    PartModel.hold(fake, changes)
+    PartModel.hold(fake, np.zeros((k, n)))  # a budget whose held errors change nothing: no model of them
+    assert fake.basis is None and fake.offset == 0.0
