@@ -26,16 +26,15 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
    its resumed mirror where that kept the other sign (one step from a mirror overstates its rise).
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
-**Uncertainty** (``"curvature"``): covariance s²·(JᵀJ)⁻¹, J the central-difference Jacobian of the weighted and
-whitened residual vector in budget σ, s² = its misfit / (n − p) (the noise's share, at most: whitening shrinks the
-noise along k of n directions); plus the spread that the errors the fit holds give the fitted ones (``held_errors``:
-``HELD_DRAWS`` other parts with the masks' rotations, the roughness and each held error drawn from the budget, their
-PSF changes less the modelled mean, ± ``MEAN_SPREAD`` of it in turn, taken through −J⁺); a third of step 4's shift
-added in quadrature (what a finer grid still would move); each σ widened to half the distance to any other fit found
-(step 2's rivals, step 3's mirrors) that the recordings do not tell apart from the best: its misfit within
-``MIRROR_CHI2`` s² of the best's plus twice the rms swing that the held errors' PSF changes give that difference
-(``tolerance``: a surface roughness of a few nm can move the misfits of two far-apart fits further apart than the
-photon noise does).
+**Uncertainty** (``"curvature"``): the noise's covariance s²·J⁺W²J⁺ᵀ, J the central-difference Jacobian of the
+weighted and whitened (W) residual vector in budget σ, s² = its misfit / (n − p); plus the spread that the errors
+the fit holds give the fitted ones (``held_errors``: ``HELD_DRAWS`` other parts with the masks' rotations, the
+roughness and each held error drawn from the budget, their PSF changes less the modelled mean, ± ``MEAN_SPREAD`` of
+it in turn, taken through −J⁺); a third of step 4's shift added in quadrature (what a finer grid still would move);
+each σ widened to half the distance to any other fit found (step 2's rivals, step 3's mirrors) that the recordings
+do not tell apart from the best: its misfit within ``MIRROR_CHI2`` s² of the best's plus twice the rms swing that
+the held errors' PSF changes give that difference (``tolerance``: a surface roughness of a few nm can move the
+misfits of two far-apart fits further apart than the photon noise does).
 **Identifiable**: the model responds to the error at all (``partmodel.Param.reason`` lists the ones it cannot), its
 σ is below ``MAX_SIGMA`` budget σ (the recordings tell clearly more than the budget), its |correlation| with every
 other fitted error is below ``MAX_CORRELATION`` (the recordings tell them apart) and, for an overlay, its mirror
@@ -102,9 +101,9 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     """{"x": the optimum (budget σ), "r", "jac": the weighted residual (on the finer grid) and the Jacobian there,
     "mirror": each fitted overlay's mirror test (``mirror``: rise of the misfit in s², and the residual's change),
     "others": [(point, rise of the weighted misfit, change of the weighted residual)] of the other fits found
-    (rival starts on the finer grid, mirrors on the design grid), "grid": each error's grid uncertainty (budget
-    σ), "starts": [{"misfit", "parts"}] per start (unweighted), "noise": [{"a", "b"}] per half, plane and band
-    (the pixels' variance a·PSF + b)}: see the module docstring."""
+    (rival starts and resumed mirrors on the finer grid, one-step mirrors on the design grid), "grid": each
+    error's grid uncertainty (budget σ), "starts": [{"misfit", "parts"}] per start (unweighted), "noise":
+    [{"a", "b"}] per half, plane and band (the pixels' variance a·PSF + b)}: see the module docstring."""
     runs, ends = [], []
     for x0 in _starts(model, starts, seed):
         before = model.evaluations
@@ -122,17 +121,20 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     x = found[0][1]
     r, jac = jacobian(model, x)
     for turn in range(3):  # the mirrors resumed; a better one is taken and the test repeated, twice at most
-        _, dchi, tried = mirror(model, x, r, jac)
+        dchi, tried = mirror(model, x, r, jac)
         mirrors = [(xm, float(rm @ rm) - float(r @ r), rm - r) for xm, rm, _ in tried]
         s2 = float(r @ r) / max(r.size - len(x), 1)
         resumed = [(flip, _polish(model, _solve(model, xm)[0])) for (xm, rise, _), (_, _, flip) in zip(mirrors, tried)
                    if rise / s2 <= SCREEN]
         found = sorted(found + [e for _, e in resumed], key=lambda e: e[0])
-        if np.array_equal(found[0][1], x) or turn == 2:
+        if np.max(np.abs(found[0][1] - x), initial=0.0) <= SAME or turn == 2:  # the same fit: done
             break
         x = found[0][1]
         r, jac = jacobian(model, x)
-    best = next(e for e in found if np.array_equal(e[1], x))
+    if not np.array_equal(found[0][1], x):  # the best fit found: within ``SAME`` of the last, or the third turn's
+        x = found[0][1]
+        r, jac = jacobian(model, x)
+    best = found[0]
     for flip, e in resumed:  # an overlay's sign: its resumed mirror, where it kept the other sign, against the best
         i = flip[0]
         if len(flip) == 1 and e[2][i] * best[2][i] < 0 and (e[0] - best[0]) / s2 < dchi["rise"][i]:
@@ -182,21 +184,20 @@ def refine(model: PartModel, x: np.ndarray, jac: np.ndarray, steps: int | None =
     return x, r
 
 
-def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray | None, dict,
-                                                                                   list]:
+def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> tuple[dict, list]:
     """The overlays' signs tested: a PSF responds to how far a mask moved against the others and against the
     chrome almost alike either way, so the part with one overlay negated, and the part with every overlay along
     one axis negated, may fit as well. Each is tried with the other errors moved by one Gauss–Newton step
-    (``jac``: the Jacobian at ``x``). Returns (the best of them where it fits better than ``x``, else None;
-    {"rise": per fitted error the weighted misfit's rise from ``x`` to its own mirror, in units of s², inf for
-    errors not tested, "change": per fitted error its mirror's weighted residual less ``r``, None where not
-    tested}; [(mirrored point, its weighted residual, the overlays negated)] of every one tried)."""
+    (``jac``: the Jacobian at ``x``). Returns ({"rise": per fitted error the weighted misfit's rise from ``x`` to
+    its own mirror, in units of s², inf for errors not tested, "change": per fitted error its mirror's weighted
+    residual less ``r``, None where not tested}; [(mirrored point, its weighted residual, the overlays negated)]
+    of every one tried)."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     free = model.free
     singles = [[i] for i, prm in enumerate(free) if prm.key == "overlay"]
     axes = [[i for i, prm in enumerate(free) if prm.key == "overlay" and prm.axis == a] for a in "xy"]
-    dchi, change, best, tried = np.full(p, np.inf), [None] * p, (float(r @ r), None), []
+    dchi, change, tried = np.full(p, np.inf), [None] * p, []
     for flip in singles + [a for a in axes if len(a) > 1]:
         xm = x.copy()
         xm[flip] = -x[flip]
@@ -207,9 +208,7 @@ def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> t
         if len(flip) == 1:
             dchi[flip[0]] = (float(rm @ rm) - float(r @ r)) / s2
             change[flip[0]] = rm - r
-        if rm @ rm < best[0]:
-            best = (float(rm @ rm), xm)
-    return best[1], {"rise": dchi, "change": change}, tried
+    return {"rise": dchi, "change": change}, tried
 
 
 def jacobian(model: PartModel, x: np.ndarray, step: float = STEP) -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +223,7 @@ def jacobian(model: PartModel, x: np.ndarray, step: float = STEP) -> tuple[np.nd
 
 
 def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None, grid=None, x=None,
-              others=(), held=None) -> dict:
+              others=(), held=None, whiten=None) -> dict:
     """{"sigma": [budget σ; inf where the PSFs do not respond], "correlation": [p, p], "identifiable": [bool],
     "reason": [str], "s2"} of the fitted errors from the residual ``r`` and Jacobian ``jac`` at the optimum, the
     overlays' mirror tests (``mirror``'s {"rise": in s², "change"}, or the rises alone; None: none made), the
@@ -235,7 +234,9 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
     make (``held_errors``); the fitted errors' linear response to each, −J⁺·δ, adds its covariance (the unfitted
     errors' share: they move the fit alike in every pixel, which no per-pixel noise model holds), and they widen
     each ``tolerance``: a rival fit or a mirror is told apart only when it fits worse by more than they could
-    swing the two misfits."""
+    swing the two misfits. ``whiten``: the whitening W of ``r`` and ``jac`` (``PartModel.whiten``; None: none),
+    whose held errors' share ``held`` already holds: the noise's own share is then s²·J⁺W²J⁺ᵀ, not
+    s²·(JᵀJ)⁻¹."""
     n, p = jac.shape
     s2 = float(r @ r) / max(n - p, 1)
     response = np.linalg.norm(jac, axis=0)
@@ -244,7 +245,12 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
     if live.any():
         u, sv, vt = np.linalg.svd(jac[:, live], full_matrices=False)
         keep = sv > 1e-6 * sv.max()  # the directions the PSFs tell (JᵀJ's eigenvalues above 1e-12 of its largest)
-        cov = s2 * (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+        m = vt[keep].T / sv[keep]  # J⁺ = m·uᵀ
+        if whiten is None:
+            cov = s2 * m @ m.T
+        else:  # W·u's columns: the noise (unit variance before whitening) seen through the whitened fit
+            wu = np.stack([whiten(c) for c in u[:, keep].T], axis=1)
+            cov = s2 * m @ (wu.T @ wu) @ m.T
         if held is not None and len(held):
             moved = -(np.asarray(held) @ u[:, keep] / sv[keep]) @ vt[keep]  # −J⁺δ per draw, [k, live]
             cov = cov + moved.T @ moved / len(moved)
@@ -333,7 +339,8 @@ def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int 
         if bar is not None:
             bar.close()
     held = held_errors(model, got["x"], seed=seed)
-    cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"], held)
+    cur = curvature(model.free, got["r"], got["jac"], got["mirror"], got["grid"], got["x"], got["others"], held,
+                    model.whiten if model.basis is not None else None)
     cur["held"] = {"draws": len(held), "errors": ["mask rotations", "surface roughness"]
                    + [p.label for p in model.params if p.reason and p.sigma > 0],
                    "modelled": {"draws": HOLD_DRAWS if model.basis is not None else 0, "mean_spread": MEAN_SPREAD}}
@@ -347,8 +354,7 @@ def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int 
 
 def _plain_misfit(model: PartModel, err: PartErrors, fine: bool = False) -> float:
     """The unweighted misfit of the part ``err`` (``fine``: on the finer grid)."""
-    d = model.psfs(err, fine) - model.measured
-    return float(np.sum(d * d))
+    return float(np.sum((model.psfs(err, fine) - model.measured) ** 2))
 
 
 def _bar(progress: bool, model: PartModel, starts: int):

@@ -361,3 +361,35 @@ def test_the_held_errors_whiten_the_residual_as_generalised_least_squares():
     PartModel.hold(fake, changes)
     PartModel.hold(fake, np.zeros((k, n)))  # a budget whose held errors change nothing: no model of them
     assert fake.basis is None and fake.offset == 0.0
+
+
+def test_held_errors_and_the_noise_share_follow_the_whitening(monkeypatch):
+    """With the held errors modelled: ``held_errors`` gives each other draw's change less the modelled mean, ±
+    ``MEAN_SPREAD`` of that mean in turn, weighted and whitened (a dense (I + UUᵀ)^(−1/2)); ``curvature`` with the
+    whitening W takes the noise's share as s²·J⁺W²J⁺ᵀ (dense pseudo-inverse), smaller than s²·(JᵀJ)⁻¹."""
+    from doefab.lab import partmodel
+    from doefab.lab.diagnose import curvature
+    from doefab.lab.partmodel import MEAN_SPREAD, Param, PartModel
+
+    rng = np.random.default_rng(9)
+    n, k = 40, 5
+    fake = SimpleNamespace(weight=rng.uniform(0.5, 2.0, size=(1, n)), measured=np.zeros((1, n)))
+    fake.whiten = lambda v: PartModel.whiten(fake, v)
+    modelled = rng.normal(size=(k, n)) + 2.0
+    PartModel.hold(fake, modelled)
+    mean, w = modelled.mean(axis=0), fake.weight.ravel()
+    u = np.concatenate([(modelled - mean) / np.sqrt(k - 1), MEAN_SPREAD * mean[None]]) * w
+    val, vec = np.linalg.eigh(np.eye(n) + u.T @ u)
+    white = vec @ np.diag(val ** -0.5) @ vec.T
+    others = rng.normal(size=(4, n))
+    monkeypatch.setattr(partmodel, "held_changes", lambda model, x, draws, seed=0: others[:draws])
+    got = partmodel.held_errors(fake, np.zeros(2), draws=4)
+    sign = np.array([1.0, -1.0, 1.0, -1.0])[:, None]
+    np.testing.assert_allclose(got, ((others - mean + MEAN_SPREAD * sign * mean) * w) @ white.T, rtol=1e-9, atol=1e-12)
+    jac, r = rng.normal(size=(n, 3)), rng.normal(size=n)
+    params = [Param("edge_bias", None, None, "µm", 1e-6, 1e-7, 0.0)] * 3
+    s2 = float(r @ r) / (n - 3)
+    pinv = np.linalg.pinv(jac)
+    want = np.sqrt(np.diag(s2 * pinv @ white @ white @ pinv.T))
+    np.testing.assert_allclose(curvature(params, r, jac, whiten=fake.whiten)["sigma"], want, rtol=1e-9)
+    assert np.all(want < curvature(params, r, jac)["sigma"])
