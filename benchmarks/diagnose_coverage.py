@@ -2,7 +2,7 @@
 (``tolerance.errors.sample_errors``: every error it draws, mask rotations and roughness included), their PSF pairs
 computed on a grid ``--supersample``× finer than the fit's design grid and recorded with photon noise
 (``--photons`` detected photons per half, band and plane, Poisson), each diagnosed (``doefab.lab.diagnose``) as
-``doefab diagnose`` does, torch on one thread. The published numbers (about 25 minutes on 2 cores):
+``doefab diagnose`` does, torch on one thread. The published numbers (about 20 minutes on 2 cores):
 
     .venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20
 
