@@ -29,7 +29,7 @@ from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["Param", "parameters", "to_errors", "scaled", "check_pair", "PartModel", "held_changes", "held_errors",
-           "BOUND", "STEP", "HELD_DRAWS", "HOLD_DRAWS", "MEAN_SPREAD", "design_folder"]
+           "BOUND", "STEP", "ETCH_PRECISION", "HELD_DRAWS", "HOLD_DRAWS", "MEAN_SPREAD", "design_folder"]
 
 BOUND = 6.0  # the fit's bounds, budget σ either side of nominal
 FINE = 2  # the grid of the fit's last steps, times the design grid
@@ -37,6 +37,7 @@ STEP = 0.05  # the Jacobian's central-difference step, budget σ
 RECENT = 4  # parts whose PSFs a model keeps
 HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
 HOLD_DRAWS = 32  # parts drawn likewise for the fit's model of them (``PartModel.hold``)
+ETCH_PRECISION = 0.01  # an etch depth scale is identified with σ at most 1 %: 2σ within ±2 % (a re-make's decision)
 MEAN_SPREAD = 1.0  # the held errors' mean PSF change is known to this fraction (a part's roughness is not the budget's)
 
 
@@ -44,7 +45,8 @@ MEAN_SPREAD = 1.0  # the held errors' mean PSF change is known to this fraction 
 class Param:
     """One error of the part model: ``key`` (a diagnosis.json ``errors`` key without its unit), ``mask`` (0-based,
     per-mask errors), ``axis`` ("x"/"y" or None), its ``unit`` for people and ``si`` SI units per unit, the budget's
-    one ``sigma`` (SI), its ``nominal`` value (SI) and the ``reason`` it is held there (empty: fitted)."""
+    one ``sigma`` (SI), its ``nominal`` value (SI), the ``reason`` it is held there (empty: fitted) and the
+    ``precision`` (SI, a σ) a decision on it needs: above it the error is not identified (``lab.uncertainty``)."""
 
     key: str
     mask: int | None
@@ -54,6 +56,7 @@ class Param:
     sigma: float
     nominal: float
     reason: str = ""
+    precision: float = math.inf
 
     @property
     def label(self) -> str:
@@ -77,7 +80,7 @@ def parameters(budget: dict, n_masks: int, camera, depths) -> list[Param]:
     in_focus = all(z == camera.focus_distance for z in depths)
     out = []
     for m in range(n_masks):
-        out.append(Param("etch_depth_scale", m, None, "", 1.0, etch, 1.0))
+        out.append(Param("etch_depth_scale", m, None, "", 1.0, etch, 1.0, precision=ETCH_PRECISION))
     for m in range(n_masks):
         out += [Param("overlay", m, a, "µm", 1e-6, ov, 0.0) for a in "xy"]
     out.append(Param("edge_bias", None, None, "µm", 1e-6, bias, 0.0))
