@@ -33,7 +33,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+# numpy's BLAS on one thread too: a multi-threaded OpenBLAS sums in another order from run to run, and a fit's path
+# (its local minimum, the parts it computes) follows the last bits; set before numpy loads it
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -125,7 +130,7 @@ def table(result: dict) -> str:
     lines = ["# Diagnosis coverage on parts of known errors\n",
              f"`.venv/bin/python benchmarks/diagnose_coverage.py {a['argv']}`: {a['parts']} parts of {where} drawn "
              f"from the shipped budget{rough}, recorded at {a['supersample']}× the fit's grid with {a['photons']:.3g} "
-             f"photons per PSF, {a['starts']} starts per fit, torch on one thread ({a['cpus']} CPU cores).\n",
+             f"photons per PSF, {a['starts']} starts per fit, {_threads(a)} ({a['cpus']} CPU cores).\n",
              f"- identified errors whose truth lies within the stated 2σ: **{_pct(s['coverage_2sigma_all'])}** of "
              f"{s['identified_rows']}",
              f"- identified etch depth scales: largest error {_num(s['etch_scale_max_error_percent'])} %",
@@ -135,6 +140,12 @@ def table(result: dict) -> str:
         lines.append(f"| {name} | {v['identified']} / {a['parts']} | {_pct(v['coverage_2sigma'])} | "
                      f"{_num(v['median_abs_z'])} |")
     return "\n".join(lines) + "\n"
+
+
+def _threads(settings: dict) -> str:
+    """How many threads the published run's fits used (runs before numpy's BLAS was pinned: torch only)."""
+    blas = settings.get("blas_threads")
+    return "torch on one thread" if blas is None else f"torch and numpy's BLAS on {blas} thread{'s' * (blas != 1)}"
 
 
 def _pct(v) -> str:
@@ -191,7 +202,8 @@ def main(argv=None) -> int:
                 err = dataclasses.replace(err, roughness=args.roughness_nm * 1e-9)
             parts.append(one_part(design, budget, err, args, seed=args.seed + i))
             print(f"part {i + 1}/{args.parts}: {parts[-1]['seconds']:.0f} s", flush=True)
-    settings = {**vars(args), "argv": " ".join(argv if argv is not None else sys.argv[1:]), "cpus": os.cpu_count()}
+    settings = {**vars(args), "argv": " ".join(argv if argv is not None else sys.argv[1:]), "cpus": os.cpu_count(),
+                "blas_threads": int(os.environ["OPENBLAS_NUM_THREADS"])}
     result = {"settings": settings, "summary": summary(parts), "parts": parts}
     out = Path(args.results)
     atomic_write_json(out / "diagnose_coverage.json", json.loads(json.dumps(result, default=str)))
