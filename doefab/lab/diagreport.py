@@ -115,7 +115,7 @@ def deviations(err, n_masks: int) -> dict:
 
 
 def assemble(model, got: dict, cur: dict, misfit: dict, psf_metric: dict, delivered: dict, run: dict) -> dict:
-    """The ``diagnosis.json`` record of a fit (``diagnose.fit``'s ``got``, ``diagnose.curvature``'s ``cur``)."""
+    """The ``diagnosis.json`` record of a fit (``diagnose.fit``'s ``got``, ``uncertainty.estimate``'s ``cur``)."""
     from doefab.fabrication.levels import levels_sha256
 
     rows = _rows(model, got["x"], cur)

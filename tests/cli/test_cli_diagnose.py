@@ -51,10 +51,11 @@ def test_diagnose_writes_the_three_files(measured, tmp_path, capsys, monkeypatch
     recorded one; a second run into the same folder needs --force and is refused before any work. (The fit is cut
     short: its quality is tests/lab/test_lab_diagnose.py's business.)"""
     from doefab.cli import main
-    from doefab.lab import diagnose
+    from doefab.lab import diagnose, uncertainty
 
-    for name, value in (("MAX_STEPS", 3), ("REWEIGHT", 1), ("REFINE", 1)):
+    for name, value in (("MAX_STEPS", 3), ("REWEIGHT", 1)):
         monkeypatch.setattr(diagnose, name, value)
+    monkeypatch.setattr(uncertainty, "REFINE", 1)
 
     out = tmp_path / "diag"
     argv = ["diagnose", "--psf", str(measured / "psf_pair.npz"), "--budget", str(measured / "budget.toml"),

@@ -42,6 +42,8 @@ def test_the_page_states_the_thresholds_the_code_applies():
         "plane": f"within {recordings.DEPTH_TOL * 100:g} % of one of the design's",
         "bound": f"±{partmodel.BOUND:g} budget σ",
         "correlation": f"|r| ≥ {diagnose.MAX_CORRELATION:g}",
+        "etch precision": f"etch depth scale when its σ is above {partmodel.ETCH_PRECISION * 100:g} % (its 2σ "
+                          f"interval wider than ±{2 * partmodel.ETCH_PRECISION * 100:g} %",
         "rival fits": f"misfit lies within {diagnose.MIRROR_CHI2:g} s² of the best's (2σ of the noise) plus twice the rms",
     }
     missing = {name: phrase for name, phrase in stated.items() if phrase not in text}

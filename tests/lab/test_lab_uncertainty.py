@@ -29,6 +29,11 @@ def test_an_etch_depth_is_identified_only_to_its_precision():
     np.testing.assert_allclose(got["sigma"], [0.4, 0.3, 0.45], rtol=1e-9)
     assert got["identifiable"] == [False, True, True]
     assert "(1.2 %) is above the 1 %" in got["reason"][0]
+    r, jac = _orthogonal([0.33, 0.34])  # σ 0.99 % is told to the precision; 1.02 % is not
+    assert curvature([etch, etch], r, jac)["identifiable"] == [True, False]
+    from doefab.lab import diagnose, uncertainty
+
+    assert diagnose.curvature is uncertainty.curvature and diagnose.estimate is uncertainty.estimate
     from doefab.design.design import Design
     from doefab.lab.partmodel import ETCH_PRECISION, parameters
 
