@@ -119,7 +119,8 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
                       f"recordings do not pin it down")
         elif sigma[i] * params[i].sigma > params[i].precision:
             reason = (f"its uncertainty ({_shown(sigma[i] * params[i].sigma, params[i])}) is above the "
-                      f"{_shown(params[i].precision, params[i])} a decision on it needs")
+                      f"{_shown(params[i].precision, params[i])} a decision on it needs (more frames, more light or "
+                      f"more bands shrink the noise's share)")
         elif partner[0] >= MAX_CORRELATION:
             reason = (f"it is correlated (|r| = {partner[0]:.2f}) with {partner[1]}: the recordings cannot tell the "
                       f"two apart")
