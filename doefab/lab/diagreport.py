@@ -91,7 +91,7 @@ def _against(rows: list[dict]) -> list[dict]:
     out = []
     for r in rows:
         p = r["p"]
-        unit, per = ("%", 100.0) if p.key == "etch_depth_scale" else (p.unit, 1.0)
+        unit, per = p.shown
         dev = (r["value"] - p.nominal / p.si) * per
         name = p.label + (" (from the holder's nominal gap)" if p.key == "axial_gap" else "")
         group = "mask" if p.mask is not None else "lithography" if p.key == "edge_bias" else "mount"

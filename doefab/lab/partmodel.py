@@ -59,6 +59,11 @@ class Param:
     precision: float = math.inf
 
     @property
+    def shown(self) -> tuple[str, float]:
+        """(the unit people read it in, the factor from ``unit`` to it): an etch depth scale in %, others as is."""
+        return ("%", 100.0) if self.key == "etch_depth_scale" else (self.unit, 1.0)
+
+    @property
     def label(self) -> str:
         names = {"etch_depth_scale": "etch depth", "overlay": "overlay", "edge_bias": "edge bias",
                  "mount_decenter": "decenter", "mount_rotation": "mount rotation", "axial_gap": "axial gap"}

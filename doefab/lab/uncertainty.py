@@ -135,8 +135,9 @@ def curvature(params: list[Param], r: np.ndarray, jac: np.ndarray, mirrored=None
 
 
 def _shown(value: float, prm: Param) -> str:
-    """A σ of ``prm`` (SI) for people: in its unit, a scale (no unit) in %."""
-    return f"{value / prm.si:.2g} {prm.unit}" if prm.unit else f"{value * 100:.2g} %"
+    """A σ of ``prm`` (SI) for people, in the unit ``Param.shown`` names."""
+    unit, per = prm.shown
+    return f"{value / prm.si * per:.2g} {unit}"
 
 
 def tolerance(change, held, s2: float) -> float:
