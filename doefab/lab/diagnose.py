@@ -20,10 +20,12 @@ on a 160-pixel grating to stop at 4.6 times the true part's misfit, where this r
    other starts' ends whose misfit came within ``RIVAL`` of the best (and lie apart from it and each other) are
    resumed weighted too; each is polished by ``POLISH`` Gauss–Newton steps on the finer grid of step 4 and the
    best there kept (the design grid's flat cells misplace the slivers an overlay cuts, differently in each fit).
-3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``); each mirror whose misfit
-   after one Gauss–Newton step rose by less than ``SCREEN`` s² is resumed to its own optimum and polished as in
-   step 2, the best of every fit found taken and the test repeated (twice at most). An overlay's sign test takes
-   its resumed mirror where that kept the other sign (one step from a mirror overstates its rise).
+3. Each overlay, and every overlay along one axis at once, tried mirrored (``mirror``), and each overlay scanned
+   for other basins (``scan``: the local minima of its misfit profile with the other errors held); each such
+   point whose misfit after one Gauss–Newton step rose by less than ``SCREEN`` s² is resumed to its own optimum
+   and polished as in step 2, the best of every fit found taken and the test repeated (twice at most). An
+   overlay's sign test takes its resumed mirror where that kept the other sign (one step from a mirror overstates
+   its rise).
 4. Gauss–Newton steps on a grid ``partmodel.FINE``× finer (``refine``), with the design grid's Jacobian.
 
 **Uncertainty** and **identifiable**: ``lab.uncertainty`` (the curvature's σ with the held errors' share, widened to
@@ -55,6 +57,7 @@ NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
 SCREEN = 200.0  # a mirror whose one-step misfit rise (in s²) is below this is resumed to its own optimum
 SAME = 0.1  # budget σ: two fits closer than this in every error are the same fit
 POLISH = 3  # Gauss–Newton steps on the finer grid before fits are compared
+SCAN = np.linspace(-3.5, 3.5, 15)  # budget σ: each overlay's values tried with the others held (``scan``)
 STARTS = 8  # fits from the error-free part and parts drawn from the budget (benchmarks/diagnose_coverage.py)
 
 
@@ -111,6 +114,8 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
         s2 = float(r @ r) / max(r.size - len(x), 1)
         resumed = [(flip, _polish(model, _solve(model, xm)[0])) for (xm, rise, _), (_, _, flip) in zip(mirrors, tried)
                    if rise / s2 <= SCREEN]
+        resumed += [((), _polish(model, _solve(model, xm)[0])) for xm, rm in scan(model, x, jac)
+                    if (float(rm @ rm) - float(r @ r)) / s2 <= SCREEN]
         found = sorted(found + [e for _, e in resumed], key=lambda e: e[0])
         if np.max(np.abs(found[0][1] - x), initial=0.0) <= SAME or turn == 2:  # the same fit: done
             break
@@ -121,8 +126,8 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
         r, jac = jacobian(model, x)
     best = found[0]
     for flip, e in resumed:  # an overlay's sign: its resumed mirror, where it kept the other sign, against the best
-        i = flip[0]
-        if len(flip) == 1 and e[2][i] * best[2][i] < 0 and (e[0] - best[0]) / s2 < dchi["rise"][i]:
+        i = flip[0] if len(flip) == 1 else None
+        if i is not None and e[2][i] * best[2][i] < 0 and (e[0] - best[0]) / s2 < dchi["rise"][i]:
             dchi["rise"][i], dchi["change"][i] = (e[0] - best[0]) / s2, e[3] - best[3]
     fine, r_fine = refine(model, x, jac)
     # the rivals against the best's own polished entry (as many finer-grid steps as theirs)
@@ -175,6 +180,27 @@ def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> t
             dchi[flip[0]] = (float(rm @ rm) - float(r @ r)) / s2
             change[flip[0]] = rm - r
     return {"rise": dchi, "change": change}, tried
+
+
+def scan(model: PartModel, x: np.ndarray, jac: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Other basins along each overlay: the misfit at its values ``SCAN`` with the other errors held, and each
+    local minimum of that profile more than a step from ``x`` moved by one Gauss–Newton step of the others
+    (``jac``: the Jacobian at ``x``). Returns [(point, its weighted residual)]. A mask's overlay against the
+    others has a minimum wherever its edges land on theirs, and a fit rarely crosses from one to the next."""
+    step, out = SCAN[1] - SCAN[0], []
+    for i, prm in enumerate(model.free):
+        if prm.key != "overlay":
+            continue
+        points = [np.where(np.arange(len(x)) == i, value, x) for value in SCAN]
+        res = [model.residual(xm) for xm in points]
+        f = np.array([float(rm @ rm) for rm in res])
+        low = np.r_[True, f[1:] <= f[:-1]] & np.r_[f[:-1] <= f[1:], True]  # local minima, the ends included
+        rest = [j for j in range(len(x)) if j != i]
+        for k in np.flatnonzero(low & (np.abs(SCAN - x[i]) > step)):
+            xm = points[k]
+            xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -res[k], rcond=None)[0], -BOUND, BOUND)
+            out.append((xm, model.residual(xm)))
+    return out
 
 
 def psf_metric(model: PartModel, x: np.ndarray) -> dict:
@@ -240,7 +266,8 @@ def _bar(progress: bool, model: PartModel, starts: int):
     from tqdm import tqdm
 
     p = len(model.free)
-    bar = tqdm(total=(starts + REWEIGHT) * 8 * (p + 1) + 2 * p + 1 + REWEIGHT * (HOLD_DRAWS + 1) + HELD_DRAWS,
+    bar = tqdm(total=(starts + REWEIGHT) * 8 * (p + 1) + 2 * p + 1 + REWEIGHT * (HOLD_DRAWS + 1) + HELD_DRAWS
+               + len(SCAN) * sum(prm.key == "overlay" for prm in model.free),
                desc="diagnose", unit="part")
     model.tick = lambda: bar.update(1)
     return bar
