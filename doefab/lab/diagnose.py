@@ -89,7 +89,8 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     """{"x": the optimum (budget σ), "r", "jac": the weighted residual (on the finer grid) and the Jacobian there,
     "mirror": each fitted overlay's mirror test (``mirror``: rise of the misfit in s², and the residual's change),
     "others": [(point, rise of the weighted misfit, change of the weighted residual)] of the other fits found
-    (rival starts and resumed mirrors on the finer grid, one-step mirrors on the design grid), "grid": each
+    (rival starts, resumed mirrors and resumed scanned basins on the finer grid, one-step mirrors on the design
+    grid), "grid": each
     error's grid uncertainty (budget σ), "starts": [{"misfit", "parts"}] per start (unweighted), "noise":
     [{"a", "b"}] per half, plane and band (the pixels' variance a·PSF + b)}: see the module docstring."""
     runs, ends = [], []
