@@ -398,18 +398,20 @@ def test_held_errors_and_the_noise_share_follow_the_whitening(monkeypatch):
 def test_the_scan_finds_an_overlays_other_basins():
     """A misfit with three minima along an overlay (at −1, +2 and +3.5 budget σ, the scan's end; the other error
     following it as 0.1 × the overlay): from the first, the scan returns the other two's grid points, each with the
-    other error moved to it by one Gauss–Newton step (exact here: it enters linearly), and nothing in the first's
-    own basin."""
+    other error moved to it by one Gauss–Newton step (exact here: it enters linearly near the fit), and nothing in
+    the first's own basin; the other error, an etch depth, is not scanned though its own profile has a far minimum
+    (a bump at +3 leaves one at the scan's end)."""
     from doefab.lab.diagnose import SCAN, scan
     from doefab.lab.partmodel import Param
 
     def residual(x):
-        return np.array([0.5 * (x[0] + 1.0) * (x[0] - 2.0) * (x[0] - 3.5), x[1] - 0.1 * x[0], 0.1 * (x[0] - 2.0)])
+        return np.array([0.5 * (x[0] + 1.0) * (x[0] - 2.0) * (x[0] - 3.5), x[1] - 0.1 * x[0], 0.1 * (x[0] - 2.0),
+                         2.0 * np.exp(-((x[1] - 3.0) / 0.3) ** 2)])
 
     model = SimpleNamespace(free=[Param("overlay", 0, "x", "µm", 1e-6, 1e-7, 0.0),
                                   Param("etch_depth_scale", 0, None, "", 1.0, 0.03, 1.0)], residual=residual)
     x = np.array([-1.0, -0.1])
-    jac = np.array([[6.75, 0.0], [-0.1, 1.0], [0.1, 0.0]])  # ∂r/∂x at x
+    jac = np.array([[6.75, 0.0], [-0.1, 1.0], [0.1, 0.0], [0.0, 0.0]])  # ∂r/∂x at x
     got = sorted(scan(model, x, jac), key=lambda t: t[0][0])
     assert SCAN[-1] == 3.5 and all(abs(xm[0] - x[0]) > SCAN[1] - SCAN[0] for xm, _ in got)
     np.testing.assert_allclose([xm for xm, _ in got], [[2.0, 0.2], [3.5, 0.35]], atol=1e-12)
