@@ -54,7 +54,7 @@ REWEIGHT = 2  # noise-model fits, each followed by a resumed fit
 MAX_STEPS = 40  # Levenberg–Marquardt iterations per fit
 RIVAL = 1.0  # starts whose unweighted misfit is within this fraction of the best's are fitted weighted too
 NUDGE = 0.25  # budget σ: the error-free start's overlays, off the kink at zero
-SCREEN = 200.0  # a mirror whose one-step misfit rise (in s²) is below this is resumed to its own optimum
+SCREEN = 200.0  # a mirror or scanned basin whose one-step misfit rise (s²) is below this is resumed to its optimum
 SAME = 0.1  # budget σ: two fits closer than this in every error are the same fit
 POLISH = 3  # Gauss–Newton steps on the finer grid before fits are compared
 SCAN = np.linspace(-3.5, 3.5, 15)  # budget σ: each overlay's values tried with the others held (``scan``)
@@ -90,9 +90,9 @@ def fit(model: PartModel, starts: int = STARTS, seed: int = 0) -> dict:
     "mirror": each fitted overlay's mirror test (``mirror``: rise of the misfit in s², and the residual's change),
     "others": [(point, rise of the weighted misfit, change of the weighted residual)] of the other fits found
     (rival starts, resumed mirrors and resumed scanned basins on the finer grid, one-step mirrors on the design
-    grid), "grid": each
-    error's grid uncertainty (budget σ), "starts": [{"misfit", "parts"}] per start (unweighted), "noise":
-    [{"a", "b"}] per half, plane and band (the pixels' variance a·PSF + b)}: see the module docstring."""
+    grid), "grid": each error's grid uncertainty (budget σ), "starts": [{"misfit", "parts"}] per start
+    (unweighted), "noise": [{"a", "b"}] per half, plane and band (the pixels' variance a·PSF + b)}: see the module
+    docstring."""
     runs, ends = [], []
     for x0 in _starts(model, starts, seed):
         before = model.evaluations
