@@ -173,9 +173,7 @@ def mirror(model: PartModel, x: np.ndarray, r: np.ndarray, jac: np.ndarray) -> t
     for flip in singles + [a for a in axes if len(a) > 1]:
         xm = x.copy()
         xm[flip] = -x[flip]
-        rest = [j for j in range(p) if j not in flip]
-        xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -model.residual(xm), rcond=None)[0], -BOUND, BOUND)
-        rm = model.residual(xm)
+        rm = _step_others(model, xm, model.residual(xm), jac, flip)
         tried.append((xm, rm, flip))
         if len(flip) == 1:
             dchi[flip[0]] = (float(rm @ rm) - float(r @ r)) / s2
@@ -196,12 +194,17 @@ def scan(model: PartModel, x: np.ndarray, jac: np.ndarray) -> list[tuple[np.ndar
         res = [model.residual(xm) for xm in points]
         f = np.array([float(rm @ rm) for rm in res])
         low = np.r_[True, f[1:] <= f[:-1]] & np.r_[f[:-1] <= f[1:], True]  # local minima, the ends included
-        rest = [j for j in range(len(x)) if j != i]
         for k in np.flatnonzero(low & (np.abs(SCAN - x[i]) > step)):
-            xm = points[k]
-            xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -res[k], rcond=None)[0], -BOUND, BOUND)
-            out.append((xm, model.residual(xm)))
+            out.append((points[k], _step_others(model, points[k], res[k], jac, [i])))
     return out
+
+
+def _step_others(model: PartModel, xm: np.ndarray, rm: np.ndarray, jac: np.ndarray, held: list) -> np.ndarray:
+    """Move the errors of ``xm`` (in place) other than ``held`` by one Gauss–Newton step from its weighted residual
+    ``rm`` with ``jac`` (a nearby point's Jacobian), inside the bounds; returns the moved point's weighted residual."""
+    rest = [j for j in range(len(xm)) if j not in held]
+    xm[rest] = np.clip(xm[rest] + np.linalg.lstsq(jac[:, rest], -rm, rcond=None)[0], -BOUND, BOUND)
+    return model.residual(xm)
 
 
 def psf_metric(model: PartModel, x: np.ndarray) -> dict:
