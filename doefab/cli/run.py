@@ -31,7 +31,7 @@ def run(args) -> int:
     from doefab.errors import DoefabError
     from doefab.io import OutputDir
     from doefab.pipeline.run import prepare_scene, run_scene
-    from doefab.pipeline.stages import has_progress
+    from doefab.pipeline.stagerun import has_progress
     from doefab.pipeline.scene import load_scene
 
     scenes = [load_scene(s) for s in args.scene]  # every scene validated before any work

@@ -91,10 +91,8 @@ class DesignConfig:
         check_levels(self.n_levels, "n_levels")
 
     def key(self) -> dict:
-        d = asdict(self)
-        d.pop("eval_every")
-        d.pop("checkpoint_every")
-        return d
+        """The settings a checkpoint must match (all but how often it is written and the metric evaluated)."""
+        return {k: v for k, v in asdict(self).items() if k not in ("eval_every", "checkpoint_every")}
 
 
 def sampling_problem(doe_pixels: int, sampling: int, key: str = "sampling") -> str | None:
@@ -142,9 +140,9 @@ def finalize_levels(height: np.ndarray, camera: Camera, n_levels: int = DEFAULT_
     return lv
 
 
-def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0, camera: Camera | None = None,
-             out_dir: str | Path | None = None, resume: bool = False, progress: bool = True, device=None,
-             **settings) -> Design:
+def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0,
+             camera: Camera | None = None, out_dir: str | Path | None = None, resume: bool = False,
+             progress: bool = True, device=None, **settings) -> Design:
     """Optimise a task's coded height map and return the quantized design.
 
     Args:
@@ -370,14 +368,11 @@ def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths, devic
         psf_c = plan(height).coded
         psf_q = plan(levels.astype(np.float64) * step).coded
     mc, mq = task_obj.metric(psf_c, cam), task_obj.metric(psf_q, cam)
-    metrics = {
-        "name": task_obj.metric_name,
-        "continuous": mc["value"], "quantized": mq["value"],
-        "continuous_worst": mc["worst"], "quantized_worst": mq["worst"],
-        "per_entry_axes": ["depth", "wavelength"],
-        "per_entry": {"continuous": mc["per_entry"], "quantized": mq["per_entry"]},
-        "loss_kind": task_obj.loss_kind,
-    }
+    metrics = {"name": task_obj.metric_name, "continuous": mc["value"], "quantized": mq["value"],
+               "continuous_worst": mc["worst"], "quantized_worst": mq["worst"],
+               "per_entry_axes": ["depth", "wavelength"],
+               "per_entry": {"continuous": mc["per_entry"], "quantized": mq["per_entry"]},
+               "loss_kind": task_obj.loss_kind}
     return Design(task=task_obj.name, task_params=task_obj.params(), camera=cam, wavelengths=tuple(lams),
                   depths=tuple(depths), height=height, levels=levels, metrics=metrics, seed=cfg.seed,
                   optimizer=cfg.optimizer, iterations=cfg.iterations, history=history,

@@ -14,7 +14,8 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, folder_lock, owned_by_doefab
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import STAGES, Scene
-from doefab.pipeline.stages import STAGE_FUNCS, STAGE_KIND, resolve, run_stage
+from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, run_stage
+from doefab.pipeline.stages import resolve
 
 __all__ = ["run_scene", "prepare_scene", "foreign_stage_folders"]
 

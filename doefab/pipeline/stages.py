@@ -7,9 +7,7 @@ verified mask set and its shipped networks instead of recomputing them.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import math
 import os
 import shutil
 import time
@@ -17,21 +15,14 @@ from pathlib import Path
 
 from doefab.applications import has
 from doefab.errors import DoefabError
-from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
+from doefab.io import MARKER, atomic_write_json
 from doefab.pipeline.resolved import ResolvedScene
-from doefab.pipeline.scene import Scene
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
-__all__ = ["resolve", "STAGE_FUNCS", "STAGE_KIND", "run_stage", "REPO", "redesign_note", "has_progress",
-           "quick_sampling"]
-
-STAGE_KIND = "run stage"  # the ownership marker's kind of a stage folder (its ``stage`` field names the stage)
+__all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
+           "stage_reconstruction", "stage_tolerance"]
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def _h(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def _design_run(settings: dict, quick: bool, quick_factor: int | None = None) -> tuple[int, int]:
@@ -318,141 +309,3 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
                                         f"(the reconstruction table's split and size) captured by the sensor its "
                                         f"network was trained for"),
             "summary": r.get("summary"), "level": r["level"]}
-
-
-#: what a stage keeps from an interrupted run of the same inputs: the design's optimiser checkpoint, the networks'
-#: training runs and finished weights, the tolerance study's finished Monte Carlo parts and steps (each checks
-#: that it belongs to its run); PROGRESS: the files among them that are work worth keeping after a failure
-RESUMABLE = {"design": ("checkpoint.pt", "history.csv"),
-             "reconstruction": ("run_proposed", "run_coded_only", "run_uncoded_only", "weights"),
-             "tolerance": ("samples.jsonl", "steps")}
-PROGRESS = {"design": ("checkpoint.pt",), "reconstruction": ("run_*/checkpoint.pt", "weights/*.pt"),
-            "tolerance": ("samples.jsonl", "steps/*.json")}
-
-
-def has_progress(folder: Path, stages) -> bool:
-    """Whether a run folder holds work worth keeping after a failure: a finished stage, or a stage's saved
-    checkpoint, parts or steps (``PROGRESS``)."""
-    for s in stages:
-        try:
-            if json.loads((Path(folder) / s / "stage.json").read_text()).get("complete"):
-                return True
-        except (OSError, ValueError):
-            pass
-        if any(next((Path(folder) / s).glob(g), None) is not None for g in PROGRESS.get(s, ())):
-            return True
-    return False
-
-
-STAGE_FUNCS = {"design": stage_design, "masks": stage_masks, "holder": stage_holder,
-               "reconstruction": stage_reconstruction, "tolerance": stage_tolerance}
-UPSTREAM = {"design": (), "masks": ("design",), "holder": (), "reconstruction": ("design",),
-            "tolerance": ("design", "masks", "holder", "reconstruction"), "report": ("design", "masks", "holder", "reconstruction", "tolerance")}
-SECTION = {"masks": ("fabrication",), "holder": ("holder",),  # the design's: ResolvedScene.design_key
-           "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
-
-
-def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None) -> str:
-    """The stage's inputs: for the design the resolved scene's ``design_key`` (its design settings, however the
-    scene file spelled them; ``res``: the scene resolved, resolved here when None and needed), for the others
-    their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its
-    upstream stages' hashes, for the holder the source of ``holder_cad`` that builds it and, for the stages that
-    draw fabricated parts from it, the tolerance budget's content (not only its file name)."""
-    if name in ("design", "masks", "holder") and res is None:
-        res = resolve(scene)
-    if name == "design":
-        parts = {"design": res.design_key()}
-    else:
-        parts = {s: scene.raw.get(s) for s in SECTION[name]}
-    if name == "masks":  # the die the masks are laid out on follows the holder's keys too
-        parts["die_m"] = res.die_m
-    parts["task"] = scene.task
-    parts["quick"] = quick
-    parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}
-    if name == "holder":  # the DOE's die and aperture, and holder_cad's code: another version builds another part
-        import holder_cad
-
-        from doefab.io import sources_sha256
-
-        parts["holder"] = scene_holder(scene, res.camera)
-        parts["code"] = sources_sha256(Path(holder_cad.__file__).resolve().parent.parent, ("holder_cad",))
-    if name in ("reconstruction", "tolerance"):
-        parts["budget"] = budget_digest(scene)
-        if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
-            parts.update(scene_sensor(scene).entry(has(scene.task, "spectral")))
-    return _h(parts)
-
-
-def budget_digest(scene) -> str | None:
-    """A digest of the scene's tolerance budget as loaded (None without a [tolerance] section)."""
-    b = _scene_budget(scene)
-    return None if b is None else _h({k: v for k, v in b.items() if k != "defaults_used"})
-
-
-def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, force: bool) -> dict:
-    """Run (or reuse) one stage; its record (status, why, seconds, hash) is kept in ``<stage>/stage.json``."""
-    out = out_root / name
-    h = stage_hash(scene, name, done, quick, res)
-    rec_path = out / "stage.json"
-    old = {}
-    if rec_path.is_file():
-        try:
-            old = json.loads(rec_path.read_text())
-        except ValueError:
-            old = {}
-    if not force and old.get("hash") == h and old.get("complete"):
-        old["reused_from_previous_run"] = True
-        return old
-    if not owned_by_doefab(out, STAGE_KIND, stage=name):  # prepare_scene refuses this before any work
-        raise DoefabError(f"{out} is not a doefab {name} stage folder (no ownership marker): move it away")
-    # an interrupted run of the same inputs keeps what it had saved (RESUMABLE); everything else is removed in
-    # place (nothing is moved, so an interruption here loses nothing)
-    same = not force and old.get("hash") == h
-    keep = [f for f in RESUMABLE.get(name, ()) if same and (out / f).exists()]
-    out.mkdir(parents=True, exist_ok=True)
-    theirs = foreign_entries(out, old)
-    clear_stage(out, set(keep) | {MARKER}, theirs)
-    if theirs:
-        print(f"[doefab run] {name}: kept what doefab did not write in {out}: {', '.join(sorted(theirs))}",
-              flush=True)
-    mark_folder(out, STAGE_KIND, stage=name)
-    info_resumed = bool(keep)
-    atomic_write_json(rec_path, {"stage": name, "hash": h, "complete": False, "foreign": sorted(theirs)})
-    t = time.perf_counter()
-    info = STAGE_FUNCS[name](scene, res, out, quick)
-    if info_resumed:
-        info["why"] = info.get("why", "") + f"; continued from the interrupted run's {', '.join(keep)}"
-    mark_folder(out, STAGE_KIND, stage=name)
-    info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True,
-                files=sorted(set(stage_files(out)) - theirs - {"stage.json", MARKER}))
-    atomic_write_json(rec_path, info)
-    return info
-
-
-def stage_files(out: Path) -> list[str]:
-    """Every file under stage folder ``out``, as a path relative to it ('/'-separated)."""
-    return sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() or p.is_symlink())
-
-
-def foreign_entries(out: Path, record: dict) -> set[str]:
-    """The files under stage folder ``out`` (relative paths, subfolders included) that doefab did not write:
-    those missing from the last finished run's ``files`` list, and those an interrupted run recorded as not its
-    own (``foreign``). A record without a list (a run made before stages listed their files) names none."""
-    if not out.is_dir():
-        return set()
-    theirs = set(record.get("foreign") or ())
-    if isinstance(record.get("files"), list):
-        ours = set(record["files"]) | {"stage.json", MARKER}
-        theirs |= {f for f in stage_files(out) if f not in ours}
-    return {f for f in theirs if (out / f).exists()}
-
-
-def clear_stage(out: Path, keep_top: set, theirs: set) -> None:
-    """Remove what doefab wrote under ``out`` in place (nothing is moved, so an interruption loses nothing): every
-    file but those under a top-level name in ``keep_top`` and the user's ``theirs``; then the folders left empty."""
-    for f in stage_files(out):
-        if f.split("/")[0] not in keep_top and f not in theirs:
-            (out / f).unlink()
-    for d in sorted((p for p in out.rglob("*") if p.is_dir() and not p.is_symlink()), key=lambda p: -len(p.parts)):
-        if d.relative_to(out).parts[0] not in keep_top and not any(d.iterdir()):
-            d.rmdir()

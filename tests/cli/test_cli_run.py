@@ -43,7 +43,7 @@ def test_a_stage_folder_is_replaced_only_if_doefab_made_it(tmp_path, capsys):
 
 def test_doefab_stage_folders_carry_their_marker_and_are_replaced(tmp_path, monkeypatch):
     from doefab.io import MARKER, read_marker
-    from doefab.pipeline import stages
+    from doefab.pipeline import stagerun as stages
     from doefab.pipeline.run import foreign_stage_folders
     from doefab.pipeline.scene import load_scene
 

@@ -97,7 +97,7 @@ def test_the_holder_stage_is_rebuilt_when_the_holder_code_changes(tmp_path, monk
     import shutil
 
     import holder_cad
-    from doefab.pipeline.stages import stage_hash
+    from doefab.pipeline.stagerun import stage_hash
 
     scene = load_scene(_holder_scene(tmp_path))
     before = stage_hash(scene, "holder", {}, True)
@@ -114,7 +114,7 @@ def test_the_holder_stage_is_rebuilt_when_the_holder_code_changes(tmp_path, monk
 def test_a_users_file_inside_a_subfolder_doefab_writes_is_kept(tmp_path, monkeypatch):
     """A stage that writes a subfolder (the masks stage's design/, say): on a rerun its own files there are
     replaced, a file of the user's beside them is kept, and a subfolder left empty is removed."""
-    import doefab.pipeline.stages as stages
+    import doefab.pipeline.stagerun as stages
 
     def fake_masks(scene, res, out, quick):
         (out / "design").mkdir(exist_ok=True)

@@ -56,7 +56,7 @@ def test_an_rgb_task_warns_that_the_response_is_not_used(tmp_path):
 
 
 def test_the_reconstruction_stage_hash_follows_the_csv_content(tmp_path):
-    from doefab.pipeline.stages import stage_hash
+    from doefab.pipeline.stagerun import stage_hash
 
     lam = np.arange(380, 781, 5.0)
     hashes = []
@@ -73,8 +73,8 @@ def test_the_default_sensor_written_out_changes_no_stage(tmp_path, monkeypatch):
     """A [sensor] section that states the default values leaves every stage's hash as without it, and no stage
     hashes a sensor then (runs made before sensors existed are kept); another noise changes the reconstruction
     and tolerance stages only."""
-    import doefab.pipeline.stages as stages
-    from doefab.pipeline.stages import stage_hash
+    import doefab.pipeline.stagerun as stages
+    from doefab.pipeline.stagerun import stage_hash
 
     hashed = []
     real = stages._h

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import pytest
 
 from doefab.io import mark_folder
-from doefab.pipeline import stages
+from doefab.pipeline import stagerun, stages
 from doefab.pipeline.knobs import REPO
 
 
@@ -25,8 +25,8 @@ def _interrupted(root, name, scene, files):
     """A stage folder as an interrupted run leaves it: marked, its record incomplete, its saved work present."""
     out = root / name
     out.mkdir(parents=True)
-    mark_folder(out, stages.STAGE_KIND, stage=name)
-    h = stages.stage_hash(scene, name, {}, False, _res(scene))
+    mark_folder(out, stagerun.STAGE_KIND, stage=name)
+    h = stagerun.stage_hash(scene, name, {}, False, _res(scene))
     (out / "stage.json").write_text(f'{{"stage": "{name}", "hash": "{h}", "complete": false}}')
     for f in files:
         (out / f).parent.mkdir(parents=True, exist_ok=True)
@@ -35,12 +35,12 @@ def _interrupted(root, name, scene, files):
     return out
 
 
-@pytest.mark.parametrize("name", sorted(stages.RESUMABLE))
+@pytest.mark.parametrize("name", sorted(stagerun.RESUMABLE))
 def test_a_rerun_with_the_same_inputs_continues_from_the_saved_work(tmp_path, monkeypatch, name):
     scene = SimpleNamespace(raw={"design": {"iterations": 60}}, task="hdr")
     files = SAVED[name]
     _interrupted(tmp_path, name, scene, files)
-    assert stages.has_progress(tmp_path, [name])
+    assert stagerun.has_progress(tmp_path, [name])
     seen = {}
 
     def fake(scene, res, out, quick):
@@ -48,8 +48,8 @@ def test_a_rerun_with_the_same_inputs_continues_from_the_saved_work(tmp_path, mo
         seen["figure"] = (out / "partial_figure.png").exists()
         return {"status": "ran", "why": "fake"}
 
-    monkeypatch.setitem(stages.STAGE_FUNCS, name, fake)
-    info = stages.run_stage(scene, _res(scene), name, tmp_path, {}, False, force=False)
+    monkeypatch.setitem(stagerun.STAGE_FUNCS, name, fake)
+    info = stagerun.run_stage(scene, _res(scene), name, tmp_path, {}, False, force=False)
     assert {f: seen[f] for f in files} == {f: f"saved {f}".encode() for f in files}
     assert seen["figure"] is False  # what is not resumable is recomputed
     assert "continued from the interrupted run" in info["why"] and info["complete"]
@@ -60,25 +60,25 @@ def test_a_failed_run_with_nothing_resumable_is_not_kept(tmp_path):
     (tmp_path / "design").mkdir()
     (tmp_path / "design" / "history.csv").write_text("copied from the committed design")
     (tmp_path / "reconstruction" / "run_proposed").mkdir(parents=True)
-    assert not stages.has_progress(tmp_path, ["design", "reconstruction"])
+    assert not stagerun.has_progress(tmp_path, ["design", "reconstruction"])
     (tmp_path / "reconstruction" / "run_proposed" / "checkpoint.pt").write_bytes(b"x")
-    assert stages.has_progress(tmp_path, ["design", "reconstruction"])
+    assert stagerun.has_progress(tmp_path, ["design", "reconstruction"])
 
 
-@pytest.mark.parametrize("name", sorted(stages.RESUMABLE))
+@pytest.mark.parametrize("name", sorted(stagerun.RESUMABLE))
 def test_changed_inputs_or_force_start_afresh(tmp_path, monkeypatch, name):
     scene = SimpleNamespace(raw={"design": {"iterations": 60}}, task="hdr")
     files = SAVED[name]
     seen = {}
-    monkeypatch.setitem(stages.STAGE_FUNCS, name, lambda scene, res, out, quick: seen.update(
+    monkeypatch.setitem(stagerun.STAGE_FUNCS, name, lambda scene, res, out, quick: seen.update(
         kept=[f for f in files if (out / f).exists()]) or {"status": "ran", "why": "fake"})
     _interrupted(tmp_path / "a", name, scene, files)
     changed = SimpleNamespace(raw={"design": {"iterations": 61}, name: {"x": 1}, "fabrication": {"n_levels": 8}},
                               task="hdr")
-    stages.run_stage(changed, _res(changed), name, tmp_path / "a", {}, False, force=False)
+    stagerun.run_stage(changed, _res(changed), name, tmp_path / "a", {}, False, force=False)
     assert seen["kept"] == []
     _interrupted(tmp_path / "b", name, scene, files)
-    stages.run_stage(scene, _res(scene), name, tmp_path / "b", {}, False, force=True)
+    stagerun.run_stage(scene, _res(scene), name, tmp_path / "b", {}, False, force=True)
     assert seen["kept"] == []
 
 
@@ -123,15 +123,15 @@ def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_netw
         (tmp_path / f"{name}.toml").write_text(t)
     a, b, same = (load_scene(tmp_path / f"{n}.toml") for n in files)
     assert "seed" not in same.raw["design"]
-    assert stages.stage_hash(a, "design", {}, False) != stages.stage_hash(b, "design", {}, False)
-    assert stages.stage_hash(a, "design", {}, False) == stages.stage_hash(same, "design", {}, False)
+    assert stagerun.stage_hash(a, "design", {}, False) != stagerun.stage_hash(b, "design", {}, False)
+    assert stagerun.stage_hash(a, "design", {}, False) == stagerun.stage_hash(same, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
-    assert stages.stage_hash(a, "tolerance", one, False) != stages.stage_hash(a, "tolerance", two, False)
+    assert stagerun.stage_hash(a, "tolerance", one, False) != stagerun.stage_hash(a, "tolerance", two, False)
     # a wider aperture margin in the holder's pocket needs a larger die: the masks change, the design does not
     (tmp_path / "margin.toml").write_text(text.replace("[holder]\n", "[holder]\naperture_margin_mm = 3.0\n"))
     margin = load_scene(tmp_path / "margin.toml")
-    assert stages.stage_hash(a, "masks", {}, False) != stages.stage_hash(margin, "masks", {}, False)
-    assert stages.stage_hash(a, "design", {}, False) == stages.stage_hash(margin, "design", {}, False)
+    assert stagerun.stage_hash(a, "masks", {}, False) != stagerun.stage_hash(margin, "masks", {}, False)
+    assert stagerun.stage_hash(a, "design", {}, False) == stagerun.stage_hash(margin, "design", {}, False)
 
 
 def test_editing_the_budget_file_changes_the_stages_that_draw_parts_from_it(tmp_path):
@@ -142,9 +142,9 @@ def test_editing_the_budget_file_changes_the_stages_that_draw_parts_from_it(tmp_
     scene = tmp_path / "s.toml"
     scene.write_text('task = "hdr"\n[tolerance]\nbudget = "b.toml"\n')
     (tmp_path / "b.toml").write_text("[overlay]\nshift_sigma_um = 0.5\n")
-    first = {n: stages.stage_hash(load_scene(scene), n, {}, False) for n in ("reconstruction", "tolerance", "holder")}
+    first = {n: stagerun.stage_hash(load_scene(scene), n, {}, False) for n in ("reconstruction", "tolerance", "holder")}
     (tmp_path / "b.toml").write_text("[overlay]\nshift_sigma_um = 1.5\n")
-    second = {n: stages.stage_hash(load_scene(scene), n, {}, False) for n in first}
+    second = {n: stagerun.stage_hash(load_scene(scene), n, {}, False) for n in first}
     assert first["reconstruction"] != second["reconstruction"] and first["tolerance"] != second["tolerance"]
     assert first["holder"] == second["holder"]
 
