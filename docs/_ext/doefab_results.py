@@ -98,6 +98,9 @@ MEASUREMENTS = (
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
     Measurement("judge_profile", "benchmarks/judge_profile.py", (R + "judge_profile.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
+    Measurement("diagnose_coverage_seed43", None, (R + "diagnose_coverage_seed43/diagnose_coverage.md",),
+                command=".venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20 --seed 43 "
+                        "--results benchmarks/results/diagnose_coverage_seed43"),
     Measurement("diagnose_coverage_starts4", None, (R + "diagnose_coverage_starts4/diagnose_coverage.md",),
                 command=".venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20 --starts 4 "
                         "--results benchmarks/results/diagnose_coverage_starts4"),

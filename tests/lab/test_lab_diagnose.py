@@ -418,3 +418,6 @@ def test_the_scan_finds_an_overlays_other_basins():
     for xm, rm in got:
         np.testing.assert_allclose(rm, residual(xm))
     assert float(got[0][1] @ got[0][1]) < float(residual(x) @ residual(x))
+    # a fit one grid step from the first minimum (−1.5 against −1.0): that minimum is its own basin, not another
+    near = scan(model, np.array([-1.5, -0.15]), jac)
+    assert sorted(float(xm[0]) for xm, _ in near) == [2.0, 3.5]
