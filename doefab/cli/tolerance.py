@@ -100,6 +100,20 @@ def check_scheduler_reachable(text: str | None, timeout_s: float = 5.0) -> None:
                           f"(dask scheduler --port {port}, then dask worker {text}) or use local:N") from None
 
 
+def _check_network(design_task: str, ddir, weights_dir) -> None:
+    """The proposed network the network-level study judges through: one for the design's application, trained for
+    this design (``loader.weights_record``; its PSFs are computed only once the study runs)."""
+    from doefab.applications import of_design
+    from doefab.errors import DoefabError
+    from doefab.reconstruction.loader import weights_record
+
+    app = of_design(design_task)
+    if app is None:
+        raise DoefabError(f"--networks: no reconstruction network judges a {design_task} design; drop --networks "
+                          f"for the PSF-level study")
+    weights_record(app.name, "proposed", weights_dir, ddir)
+
+
 def run(args) -> int:
     import shutil
 
@@ -109,10 +123,12 @@ def run(args) -> int:
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import STEPS, run_study
 
-    ddir, _ = design_folder(args.design)  # validated before any output exists
+    ddir, design = design_folder(args.design)  # validated before any output exists
     if args.weights_dir is not None and not args.networks:
         raise DoefabError("--weights-dir is read only by the network-level study: add --networks, or drop "
                           "--weights-dir")
+    if args.networks:  # the judge's network, checked before any output exists or any part is judged
+        _check_network(design.task, ddir, args.weights_dir)
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))

@@ -26,7 +26,7 @@ from doefab.reconstruction.specs import get_spec, psf_pair
 from doefab.reconstruction.train import model_inputs
 from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, renamed_state, weights_paths
 
-__all__ = ["load_reconstructor", "Reconstructor"]
+__all__ = ["load_reconstructor", "Reconstructor", "weights_record"]
 
 
 class Reconstructor:
@@ -180,26 +180,8 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     """
     get_spec(task)
     device = resolve_device(device)
-    if variant not in VARIANTS:
-        raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
-    if weights_dir is not None and Path(weights_dir).is_file():
-        raise DoefabError(f"weights_dir {weights_dir} is a file: give the folder holding {task}_{variant}.pt")
-    pt, meta_path = weights_paths(task, variant, weights_dir)
+    pt, meta, data = _read_weights(task, variant, weights_dir, design)
     who = (task, variant, weights_dir, design)
-    if not pt.is_file() or not meta_path.is_file():
-        _refuse(pt, "no weights (or no metadata record beside them)", *who)
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (ValueError, UnicodeDecodeError):
-        _refuse(meta_path, "the metadata record is not valid JSON", *who)
-    need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
-    if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != WEIGHTS_FORMAT:
-        _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
-    if (meta["task"], meta["variant"]) != (task, variant):
-        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
-    data = pt.read_bytes()
-    if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
-        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)
     pair, sha = psf_pair(task, design)
     foreign = meta["design_levels_sha256"] != sha
     if foreign and not other_design:
@@ -225,6 +207,56 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta, device)
+
+
+def weights_record(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
+                   design: str | Path | None = None) -> dict:
+    """The metadata record of the shipped (or ``weights_dir``'s) ``task``/``variant`` network, checked as
+    ``load_reconstructor`` checks it, but before any PSF is computed (a command calls it before it claims its output
+    folder): the folder is a folder, the weights file and its record exist, the record is valid JSON of this format,
+    task and variant, the file's SHA-256 is the record's and, when ``design`` (a design folder) is given, the weights
+    were trained for that design's level map. One DoefabError names the file and the command that makes it.
+
+    Example:
+        >>> from doefab.reconstruction.loader import weights_record
+        >>> weights_record("depth")["variant"]
+        'proposed'
+    """
+    pt, meta, _ = _read_weights(task, variant, weights_dir, design)
+    if design is not None:
+        from doefab.design.design import Design
+        from doefab.fabrication.levels import levels_sha256
+
+        if meta["design_levels_sha256"] != levels_sha256(Design.load(design).levels):
+            _refuse(pt, f"the weights were trained for another design than {design}", task, variant, weights_dir,
+                    design)
+    return meta
+
+
+def _read_weights(task: str, variant: str, weights_dir, design) -> tuple[Path, dict, bytes]:
+    """(weights file, its record, its bytes), refused unless they are as ``weights_record`` states."""
+    get_spec(task)
+    if variant not in VARIANTS:
+        raise DoefabError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if weights_dir is not None and Path(weights_dir).is_file():
+        raise DoefabError(f"weights_dir {weights_dir} is a file: give the folder holding {task}_{variant}.pt")
+    pt, meta_path = weights_paths(task, variant, weights_dir)
+    who = (task, variant, weights_dir, design)
+    if not pt.is_file() or not meta_path.is_file():
+        _refuse(pt, "no weights (or no metadata record beside them)", *who)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (ValueError, UnicodeDecodeError):
+        _refuse(meta_path, "the metadata record is not valid JSON", *who)
+    need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
+    if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != WEIGHTS_FORMAT:
+        _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
+    if (meta["task"], meta["variant"]) != (task, variant):
+        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
+    data = pt.read_bytes()
+    if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
+        _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)
+    return pt, meta, data
 
 
 def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dict:

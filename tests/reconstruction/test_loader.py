@@ -199,3 +199,25 @@ def test_reconstructor_refuses_captures_outside_0_1():
         rec((coded * 255).astype(np.uint8), (uncoded * 255).astype(np.uint8))
     with pytest.raises(DoefabError, match="subtract the black level"):
         rec(coded - 0.5, uncoded)
+
+
+def test_the_weights_record_is_checked_against_a_design_before_any_psf(tmp_path, monkeypatch):
+    """``weights_record`` refuses weights trained for another level map than the design folder's, and accepts the
+    committed design's own shipped ones, without computing a PSF (``psf_pair`` is never called)."""
+    import doefab.reconstruction.loader as loader
+    from doefab.design.design import Design
+    from doefab.reconstruction.specs import design_dir
+
+    def no_psfs(*args, **kwargs):
+        raise AssertionError("weights_record computed PSFs")
+
+    monkeypatch.setattr(loader, "psf_pair", no_psfs)
+    committed = design_dir("hdr")
+    assert loader.weights_record("hdr", design=committed)["design_levels_sha256"] == \
+        json.loads((committed / "design.json").read_text())["levels_sha256"]
+    other = tmp_path / "other"
+    d = Design.load(committed)
+    d.levels[0, 0] = (int(d.levels[0, 0]) + 1) % d.n_levels  # another level map: the same camera and task
+    d.save(other)
+    with pytest.raises(DoefabError, match=f"another design than {other}"):
+        loader.weights_record("hdr", design=other)
