@@ -88,11 +88,11 @@ def run(args) -> int:
     d, design = design_folder(args.design)
     if not design_is(design.task, "depth"):
         raise DoefabError(f"{d}: end-to-end fine-tuning is for depth (half-ring) designs")
+    sensor = sensor_arg(args)
     if args.weights_dir is not None:  # the starting network, checked before any PSF is computed
         from doefab.reconstruction.loader import weights_record
 
-        weights_record("depth", "proposed", args.weights_dir, d)
-    sensor = sensor_arg(args)
+        weights_record("depth", "proposed", args.weights_dir, d, sensor=sensor)
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     out = claim_output(args, "finetune", replace=args.force or args.resume, replace_flag="--force (or --resume)",

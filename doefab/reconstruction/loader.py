@@ -22,7 +22,7 @@ from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
-from doefab.reconstruction.specs import get_spec, psf_pair
+from doefab.reconstruction.specs import design_dir, get_spec, psf_pair
 from doefab.reconstruction.train import model_inputs
 from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, renamed_state, weights_paths
 
@@ -210,27 +210,28 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
 
 
 def weights_record(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
-                   design: str | Path | None = None) -> dict:
+                   design: str | Path | None = None, sensor=None) -> dict:
     """The metadata record of the shipped (or ``weights_dir``'s) ``task``/``variant`` network, checked as
-    ``load_reconstructor`` checks it, but before any PSF is computed (a command calls it before it claims its output
-    folder): the folder is a folder, the weights file and its record exist, the record is valid JSON of this format,
-    task and variant, the file's SHA-256 is the record's and, when ``design`` (a design folder) is given, the weights
-    were trained for that design's level map. One DoefabError names the file and the command that makes it.
+    ``load_reconstructor`` checks it (``other_design`` off), but before any PSF is computed (a command calls it
+    before it claims its output folder): the folder is a folder, the weights file and its record exist, the record
+    is valid JSON of this format, task and variant, the file's SHA-256 is the record's, the weights were trained for
+    the level map of ``design`` (a design folder; None: the committed design) and, with ``sensor``, for that
+    sensor's noise (hyperspectral: and response; whether the response covers the design's bands is left to
+    ``load_reconstructor``, which computes the bands' PSFs). One DoefabError names the file and the fix.
 
     Example:
         >>> from doefab.reconstruction.loader import weights_record
         >>> weights_record("depth")["variant"]
         'proposed'
     """
-    pt, meta, _ = _read_weights(task, variant, weights_dir, design)
-    if design is not None:
-        from doefab.design.design import Design
-        from doefab.fabrication.levels import levels_sha256
+    from doefab.design.design import Design
+    from doefab.fabrication.levels import levels_sha256
 
-        if meta["design_levels_sha256"] != levels_sha256(Design.load(design).levels):
-            _refuse(pt, f"the weights were trained for another design than {design}", task, variant, weights_dir,
-                    design)
-    return meta
+    pt, meta, _ = _read_weights(task, variant, weights_dir, design)
+    if meta["design_levels_sha256"] != levels_sha256(Design.load(design or design_dir(task)).levels):
+        _refuse(pt, "the weights were trained for another design than " +
+                ("the committed one" if design is None else str(design)), task, variant, weights_dir, design)
+    return _check_sensor(meta, sensor, False, pt, (task, variant, weights_dir, design), bands=False)
 
 
 def _read_weights(task: str, variant: str, weights_dir, design) -> tuple[Path, dict, bytes]:
@@ -259,13 +260,14 @@ def _read_weights(task: str, variant: str, weights_dir, design) -> tuple[Path, d
     return pt, meta, data
 
 
-def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple) -> dict:
+def _check_sensor(meta: dict, sensor, anyway: bool, pt: Path, who: tuple, bands: bool = True) -> dict:
     """``meta``, marked ``other_sensor`` when the weights were trained for another sensor and ``anyway``; refused
-    when they were and not ``anyway``."""
+    when they were and not ``anyway``. ``bands``: also refuse a response that misses the design's bands (it
+    computes the design's PSF pair)."""
     if sensor is None:
         return meta
     task, variant, weights_dir, design = who
-    if has(task, "spectral"):  # a response that misses the bands: no network can be trained for it either
+    if bands and has(task, "spectral"):  # a response that misses the bands: no network can be trained for it either
         sensor.rgb(psf_pair(task, design)[0].wavelengths)
     diff = sensor.differs_from(meta.get("sensor"), spectral=has(task, "spectral"))
     if not diff:

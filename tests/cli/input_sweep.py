@@ -597,6 +597,9 @@ EARLY = [  # refused before any work (each was refused late, or not at all, befo
       for kind, (make, needle) in WEIGHTS.items()],
     *[(f"finetune --weights-dir-{kind}", ["finetune", "--design", HALF_RING, "--weights-dir", make, *OUT], needle)
       for kind, (make, needle) in WEIGHTS.items()],
+    ("finetune --weights-dir-another sensor's", ["finetune", "--design", HALF_RING, "--weights-dir",
+                                                 REPO / "doefab" / "weights", "--read-noise-e", "20", *OUT],
+     "another sensor"),
     ("finetune --weights-dir-empty", ["finetune", "--design", HALF_RING, "--weights-dir", "", *OUT], "--weights-dir"),
     ("tolerance --weights-dir-without --networks", [*TOLERANCE, "--weights-dir", _missing, *OUT], "--weights-dir"),
     ("train --design-empty", [*HDR_TRAIN, "--design", "", *OUT], "--design"),

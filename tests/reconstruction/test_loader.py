@@ -1,6 +1,7 @@
 """Training writes weights + metadata; load_reconstructor verifies them (tiny network, seconds)."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -208,10 +209,13 @@ def test_the_weights_record_is_checked_against_a_design_before_any_psf(tmp_path,
     from doefab.design.design import Design
     from doefab.reconstruction.specs import design_dir
 
+    from doefab.optics.psf import PSFPlan
+
     def no_psfs(*args, **kwargs):
         raise AssertionError("weights_record computed PSFs")
 
     monkeypatch.setattr(loader, "psf_pair", no_psfs)
+    monkeypatch.setattr(PSFPlan, "__call__", no_psfs)
     committed = design_dir("hdr")
     assert loader.weights_record("hdr", design=committed)["design_levels_sha256"] == \
         json.loads((committed / "design.json").read_text())["levels_sha256"]
@@ -219,5 +223,10 @@ def test_the_weights_record_is_checked_against_a_design_before_any_psf(tmp_path,
     d = Design.load(committed)
     d.levels[0, 0] = (int(d.levels[0, 0]) + 1) % d.n_levels  # another level map: the same camera and task
     d.save(other)
-    with pytest.raises(DoefabError, match=f"another design than {other}"):
+    with pytest.raises(DoefabError, match=re.escape(f"another design than {other}")):
         loader.weights_record("hdr", design=other)
+    from doefab.imaging.sensor import Sensor
+
+    with pytest.raises(DoefabError, match="another sensor"):  # the shipped network is the default sensor's
+        loader.weights_record("hdr", design=committed, sensor=Sensor(read_noise_e=20.0))
+    assert loader.weights_record("hdr", sensor=Sensor())["task"] == "hdr"  # None: the committed design
