@@ -14,9 +14,9 @@ from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.resolved import ResolvedScene
-from doefab.pipeline.stages import (_scene_budget, resolve, stage_design, stage_holder, stage_masks,
-                                    stage_reconstruction, stage_tolerance)
-from doefab.pipeline.system import scene_holder, scene_sensor
+from doefab.pipeline.stages import (_scene_budget, stage_design, stage_holder, stage_masks, stage_reconstruction,
+                                    stage_tolerance)
+from doefab.pipeline.system import resolve, scene_holder, scene_sensor
 
 __all__ = ["STAGE_FUNCS", "STAGE_KIND", "run_stage", "stage_hash", "has_progress", "budget_digest"]
 

@@ -158,6 +158,12 @@ def _refuse(path: Path, why: str, task: str, variant: str, weights_dir=None, des
     raise DoefabError(f"{path}: {why}; {_retrain(task, variant, weights_dir, design)}")
 
 
+def _refuse_foreign(path: Path, task: str, variant: str, weights_dir=None, design=None):
+    """Refuse weights trained for another level map than ``design``'s (None: the committed design's)."""
+    _refuse(path, "the weights were trained for another design than " +
+            ("the committed one" if design is None else str(design)), task, variant, weights_dir, design)
+
+
 def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
                        design: str | Path | None = None, other_design: bool = False, sensor=None,
                        device=None) -> Reconstructor:
@@ -185,8 +191,7 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     pair, sha = psf_pair(task, design)
     foreign = meta["design_levels_sha256"] != sha
     if foreign and not other_design:
-        _refuse(pt, "the weights were trained for another design than " +
-                ("the committed one" if design is None else str(design)), *who)
+        _refuse_foreign(pt, *who)
     if foreign:
         from doefab.reconstruction.train import arch_for_design
 
@@ -229,8 +234,7 @@ def weights_record(task: str, variant: str = "proposed", weights_dir: str | Path
 
     pt, meta, _ = _read_weights(task, variant, weights_dir, design)
     if meta["design_levels_sha256"] != levels_sha256(Design.load(design or design_dir(task)).levels):
-        _refuse(pt, "the weights were trained for another design than " +
-                ("the committed one" if design is None else str(design)), task, variant, weights_dir, design)
+        _refuse_foreign(pt, task, variant, weights_dir, design)
     return _check_sensor(meta, sensor, False, pt, (task, variant, weights_dir, design), bands=False)
 
 
