@@ -62,7 +62,7 @@ def _untoleranced_lead(done: dict, task: str, studied: bool) -> str:
 
 def tolerance_items(out: Path) -> list[tuple]:
     """The Tolerance section's tables and figures from tolerance/tolerance.json."""
-    from doefab.tolerance.reporttext import delta_text
+    from doefab.tolerance.reporttext import NOISE_NOTE, delta_text
 
     tol = _tolerance(out)
     if tol is None:
@@ -79,10 +79,13 @@ def tolerance_items(out: Path) -> list[tuple]:
              "delivered change, network told the nominal PSF", "told the part's measured PSF"]]
     for r in tol.get("tornado", []):
         d = r.get("network_delta", {})
-        cells = [delta_text(tol["task"], d[lab]) if lab in d else "not judged through the network"
+        ci = r.get("network_delta_ci95", {})
+        cells = [delta_text(tol["task"], d[lab], ci.get(lab)) if lab in d else "not judged through the network"
                  for lab in ("nominal_psf", "measured_psf")]
         rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}", *cells])
     items.append(("table", rows))
+    if any("network_delta_ci95" in r for r in tol.get("tornado", [])):
+        items.append(("p", NOISE_NOTE))
     for f, cap in (("tolerance/delivered.png", "what the parts deliver through the network (histogram over parts)"),
                    ("tolerance/tornado.png", "each error alone at one standard deviation of the budget (PSF metric)"),
                    ("tolerance/quantization.png", "quantization study")):  # the yield against N: a knob's figure

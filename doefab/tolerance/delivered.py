@@ -6,7 +6,9 @@ common to every part (and to the error-free part a relative spec is measured fro
 interaction, each part's own. ``variance_components`` separates the three (a two-way analysis of variance without
 replication); ``bootstrap`` resamples the parts and then the scenes — one draw of scenes for all the parts of a
 replicate, since they share them — so an interval of the mean or of the yield holds both sources of noise.
-``delivered_summary`` gives both for each PSF the network was told.
+``delivered_summary`` gives both for each PSF the network was told. One error alone against the error-free part
+(the tornado) is judged on the same scenes too: ``change_noise`` gives the half-width of its change's 95 % interval
+from the paired per-scene changes, the scene noise a single part's change carries.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["variance_components", "bootstrap", "delivered_summary", "scene_table", "BOOT_DRAWS"]
+__all__ = ["variance_components", "bootstrap", "delivered_summary", "scene_table", "change_noise", "BOOT_DRAWS"]
 
 BOOT_DRAWS = 2000  # bootstrap replicates: the 2.5 % and 97.5 % quantiles move by well under their width's 1 %
 
@@ -135,4 +137,27 @@ def delivered_summary(samples: list[dict], nominal_scenes: dict, spec: dict, tas
                       "yield_ci95": [min(w[0], b["yield_ci95"][0]), max(w[1], b["yield_ci95"][1])],
                       "bootstrap_yield_ci95": b["yield_ci95"], "wilson_ci95": list(w), "draws": b["draws"],
                       "components": variance_components(x[:, :, primary])}
+    return out
+
+
+def change_noise(changes: dict) -> dict:
+    """{label: {metric: half-width of the 95 % interval of the change}} of one part against the error-free one
+    judged on the same scenes, from the paired per-scene changes ``changes`` ({label: {metric: [part − base on
+    each scene]}}, as ``study.tornado_rows`` records them): Student's t with n − 1 degrees of freedom times the
+    standard error of the n changes (a scene where either value is nan is left out; None with fewer than two).
+    The change of the means is resolved by these scenes only where it exceeds this: the rest is the part × scene
+    noise, and for HDR also the highlight solve's sensitivity to rounding where both captures clip.
+
+    Example: ``change_noise({"nominal_psf": {"mae": [0.1, 0.2, 0.1]}})`` → ``{"nominal_psf": {"mae": 0.143...}}``
+    (metres)."""
+    from scipy.stats import t
+
+    out = {}
+    for label, metrics in changes.items():
+        out[label] = {}
+        for m, vals in metrics.items():
+            d = np.asarray(vals, np.float64)
+            d = d[np.isfinite(d)]
+            n = d.size
+            out[label][m] = (float(t.ppf(0.975, n - 1) * d.std(ddof=1) / math.sqrt(n)) if n >= 2 else None)
     return out

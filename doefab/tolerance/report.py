@@ -15,6 +15,7 @@ import numpy as np
 
 from doefab.io import atomic_write_json, atomic_write_text
 from doefab.tolerance import plots, study
+from doefab.tolerance.delivered import change_noise
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS
 from doefab.tolerance.reporttext import REMEDY, body_lines, lead_text, spec_words, summary_lines
@@ -77,6 +78,9 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
                                                                             weights_dir, progress, network_top), reused)
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
+    for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
+        if "network_delta_scenes" in r:
+            r["network_delta_ci95"] = change_noise(r["network_delta_scenes"])
     if do_sweep:
         t = time.perf_counter()
         res["sweeps"] = study.sweep(design_dir, grids, progress=progress)["sweeps"]

@@ -9,7 +9,7 @@ from doefab.reconstruction.metrics import DISPLAY, metric_text
 from doefab.tolerance.kinds import KINDS
 from doefab.tolerance.montecarlo import interval_text
 
-__all__ = ["body_lines", "lead_text", "summary_lines", "spec_words", "delta_text", "REMEDY"]
+__all__ = ["body_lines", "lead_text", "summary_lines", "spec_words", "delta_text", "noise_of", "NOISE_NOTE", "REMEDY"]
 
 # what would remove each error, for the summary: each kind's own (``kinds.KINDS``)
 REMEDY = {k.name: k.remedy for k in KINDS}
@@ -28,9 +28,23 @@ def _interval(task: str, metric: str, ci) -> str:
     return f"{metric_text(task, metric, lo, unit=False)}–{metric_text(task, metric, hi)}"
 
 
-def delta_text(task: str, deltas: dict) -> str:
-    """Changes of delivered metrics in words with units, e.g. "highlight PSNR -1.2 dB, PSNR -0.3 dB"."""
-    return ", ".join(f"{_name(task, k)} {v:+.3g} {_unit(task, k)}".rstrip() for k, v in deltas.items())
+def delta_text(task: str, deltas: dict, ci: dict | None = None) -> str:
+    """Changes of delivered metrics in words with units, e.g. "highlight PSNR -1.2 dB, PSNR -0.3 dB"; with ``ci``
+    ({metric: half-width of the change's 95 % interval}, ``delivered.change_noise``) "PSNR -0.3 ± 0.41 dB"."""
+    ci = ci or {}
+    return ", ".join(f"{_name(task, k)} {v:+.3g}{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}"
+                     .rstrip() for k, v in deltas.items())
+
+
+def noise_of(row: dict, metric: str, label: str = "nominal_psf") -> float:
+    """Half-width of the 95 % interval of a tornado row's delivered change over the judge's scenes
+    (``delivered.change_noise``); 0 where the row holds none."""
+    v = row.get("network_delta_ci95", {}).get(label, {}).get(metric)
+    return 0.0 if v is None else float(v)
+
+
+NOISE_NOTE = ("± : the 95 % interval of a delivered change over the judge's scenes (each scene's change paired, "
+              "Student's t); a change inside it is not resolved by these scenes and ranks nothing.")
 
 
 def _unit(task: str, metric: str) -> str:
@@ -88,8 +102,11 @@ def _limit_sentence(res: dict) -> list[str]:
     if not top:
         return []
     loss, r = top[0]
-    what = (f"{metric_text(res['task'], metric, loss)} of {_name(res['task'], metric)}" if metric else
-            f"{loss:.3f} of the PSF metric")
+    task, noise = res["task"], noise_of(r, metric) if metric else 0.0
+    what = (f"{metric_text(task, metric, loss)} of {_name(task, metric)}"
+            + (f", ± {metric_text(task, metric, noise)} over the judge's scenes" if noise else "") if metric else
+            f"{loss:.3f} of the PSF metric" + ("; no error judged through the network changed what the part delivers "
+                                               "by more than the judge's scene noise" if _unresolved(res) else ""))
     return [f"It is limited most by {r['error']} ({r['value']:.3g} {r['unit']} at the budget's 1σ costs {what}); "
             f"{REMEDY.get(r['error'], r['error'])} would buy the most."]
 
@@ -161,17 +178,31 @@ def _delivered_lines(res: dict) -> list[str]:
 def _limits(res: dict) -> tuple[str | None, list[tuple[float, dict]]]:
     """(metric, [(loss, tornado row)]) of the three errors that cost the most: the delivered primary metric's loss
     where the tornado judged errors through the network (network told the nominal PSF) and one of them costs
-    some, else (None, the PSF metric's)."""
+    more than its scene noise (``noise_of``), else (None, the PSF metric's)."""
     from doefab.tolerance.spec import PRIMARY, delivered_loss
 
     rows = res["tornado"]
     judged = [r for r in rows if "network_delta" in r and "nominal_psf" in r["network_delta"]]
     if judged and res["task"] in PRIMARY:
+        m = PRIMARY[res["task"]]
         losses = [(delivered_loss(res["task"], r["network_delta"]["nominal_psf"]), r) for r in judged]
-        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > 0), key=lambda t: -t[0])[:3]
+        # a loss counts where the judge's scenes resolve it (beyond its 95 % scene noise; rows without one: > 0)
+        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > max(noise_of(r, m), 0.0)),
+                     key=lambda t: -t[0])[:3]
         if top:
-            return PRIMARY[res["task"]], top
+            return m, top
     return None, [(-r["delta"], r) for r in rows if r["delta"] < 0][:3]
+
+
+def _unresolved(res: dict) -> bool:
+    """Whether the tornado judged errors through the network, and some lowered the delivered primary metric but none
+    by more than its scene noise (so the PSF metric ranks them)."""
+    from doefab.tolerance.spec import PRIMARY, delivered_loss
+
+    m = PRIMARY.get(res["task"])
+    losses = [delivered_loss(res["task"], r["network_delta"]["nominal_psf"]) for r in res["tornado"]
+              if "nominal_psf" in r.get("network_delta", {})] if m else []
+    return any(math.isfinite(x) and x > 0 for x in losses) and _limits(res)[0] is None
 
 
 def _limits_lines(res: dict) -> list[str]:
@@ -185,7 +216,9 @@ def _limits_lines(res: dict) -> list[str]:
     judged = sum("network_delta" in r and "nominal_psf" in r["network_delta"] for r in rows)
     if metric is None:
         none = (f"; no error of the {judged} judged through the network lowered the delivered "
-                f"{_name(task, PRIMARY.get(task, ''))} on the judge's scenes" if judged and task in PRIMARY else "")
+                f"{_name(task, PRIMARY.get(task, ''))} "
+                + ("by more than the scene noise of the judge's scenes (95 %)" if _unresolved(res) else
+                   "on the judge's scenes") if judged and task in PRIMARY else "")
         return [f"- **Limited by** (PSF metric{none}) " + "; ".join(
                     f"{r['error']} at {r['value']:.3g} {r['unit']} ({-loss:+.3f})" for loss, r in top) + ".",
                 f"- **Would buy the most:** {REMEDY.get(top[0][1]['error'], top[0][1]['error'])} "
@@ -194,7 +227,9 @@ def _limits_lines(res: dict) -> list[str]:
     scope = ("" if judged == len(rows) else
              f"; the {judged} errors that cost the most PSF metric were judged through the network")
     return ["- **Limited by** (delivered " + _name(task, metric) + ", network told the nominal PSF" + scope + ") "
-            + "; ".join(f"{r['error']} at {r['value']:.3g} {r['unit']} ({loss:.3g} {unit} worse)" for loss, r in top)
+            + "; ".join(f"{r['error']} at {r['value']:.3g} {r['unit']} ({loss:.3g}"
+                        + (f" ± {noise_of(r, metric):.2g}" if noise_of(r, metric) else "") + f" {unit} worse)"
+                        for loss, r in top)
             + ".",
             f"- **Would buy the most:** {REMEDY.get(top[0][1]['error'], top[0][1]['error'])} (recovers up to "
             f"{top[0][0]:.3g} {unit} of {_name(task, metric)}; PSF metric {-top[0][1]['delta']:.3f})."]
@@ -249,11 +284,13 @@ def _tornado(res: dict) -> list[str]:
         row = f"| {r['error']} | {r['value']:.3g} {r['unit']} | {r['grid']}× | {r['metric']:.4f} | {r['delta']:+.4f} |"
         if net:
             d = r.get("network_delta")
-            row += (" " + " | ".join(delta_text(res["task"], d[lab])
+            ci = r.get("network_delta_ci95", {})
+            row += (" " + " | ".join(delta_text(res["task"], d[lab], ci.get(lab))
                                      for lab in ("nominal_psf", "measured_psf")) + " |" if d
                     else " not judged through the network | |")
         lines.append(row)
-    return lines + ["", "![tornado](tornado.png)", ""]
+    noted = net and any("network_delta_ci95" in r for r in res["tornado"])
+    return lines + ([""] + [NOISE_NOTE] if noted else []) + ["", "![tornado](tornado.png)", ""]
 
 
 def _monte_carlo(res: dict) -> list[str]:

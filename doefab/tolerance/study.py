@@ -137,6 +137,8 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
             row["network"] = r["network"]
             row["network_delta"] = {lab: {m: v - b["network"][lab][m] for m, v in vals.items()}
                                     for lab, vals in r["network"].items()}
+            row["network_delta_scenes"] = {lab: {m: [p - q for p, q in zip(v, b["network_scenes"][lab][m])]
+                                                 for m, v in vals.items()} for lab, vals in r["network_scenes"].items()}
         rows.append(row)
         if bar is not None:
             bar.update(1)

@@ -250,3 +250,22 @@ def test_report_text_renders_and_says_what_is_a_benchmark(tmp_path):
     assert "`" not in page and f"<code>{scene.path}</code>" in page
     assert page.count(BENCHMARK) >= 3  # the PSF and design benchmark captions, and the section's note
     assert "not in this run" in page  # the shipped weights' training curves
+
+
+def test_the_tornado_table_gives_each_delivered_change_its_scene_noise(tmp_path):
+    """A tornado row judged through the network carries its change's 95 % interval over the judge's scenes: the
+    report's table prints it beside the change and says what it means; a loss inside it ranks nothing (the
+    opening names the PSF metric's largest loss instead)."""
+    from doefab.tolerance.reporttext import NOISE_NOTE
+
+    out, done = _run_folder(tmp_path)
+    noisy = {**ROW, "network_delta_ci95": {"nominal_psf": {"psnr_highlight": 1.5, "psnr": 0.4},
+                                           "measured_psf": {"psnr_highlight": 0.7, "psnr": None}}}
+    (out / "tolerance" / "tolerance.json").write_text(json.dumps({**TOLERANCE, "tornado": [noisy]}))
+    write_report(out, load_scene(REPO / "scenes" / "hdr.toml"), done, SETTINGS)
+    md = (out / "report.md").read_text()
+    assert "highlight PSNR -1.2 ± 1.5 dB, PSNR -0.3 ± 0.4 dB" in md and "PSNR -0.1 dB" in md
+    assert NOISE_NOTE in md
+    lead = _summary(md)[0]
+    assert "mask overlay (0.5 µm at the budget's 1σ costs 0.049 of the PSF metric; no error judged through the " \
+           "network changed what the part delivers by more than the judge's scene noise)" in lead

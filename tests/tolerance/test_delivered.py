@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from doefab.tolerance.delivered import bootstrap, delivered_summary, variance_components
+from doefab.tolerance.delivered import bootstrap, change_noise, delivered_summary, variance_components
 
 
 def _table(parts=12, scenes=8, part_sd=0.5, scene_sd=0.0, noise_sd=0.0, seed=1):
@@ -165,3 +165,59 @@ def test_when_no_error_judged_through_the_network_costs_delivered_quality_the_ps
                             "that cost the most PSF metric were judged through the network) decenter across split")
                for x in lines)
     assert lead_text(res) is None  # no Monte Carlo: no opening paragraph
+
+
+def test_a_single_parts_change_carries_the_95_percent_interval_of_its_paired_scene_changes():
+    """``change_noise``: the half-width of a paired t interval of part − base over the scenes, as scipy's paired
+    t-test gives it; a scene undefined for either is left out; under two scenes, None."""
+    from scipy.stats import ttest_rel
+
+    rng = np.random.default_rng(3)
+    base = rng.normal(29.0, 3.0, 8)
+    part = base + rng.normal(-0.2, 0.4, 8)
+    lo, hi = ttest_rel(part, base).confidence_interval(0.95)
+    got = change_noise({"nominal_psf": {"psnr": list(part - base)}})
+    assert got["nominal_psf"]["psnr"] == pytest.approx((hi - lo) / 2, rel=1e-9)
+    holed = part.copy()
+    holed[2] = np.nan  # a scene without highlights: no value for this part
+    lo, hi = ttest_rel(np.delete(part, 2), np.delete(base, 2)).confidence_interval(0.95)
+    got = change_noise({"a": {"m": list(holed - base)}})["a"]["m"]
+    assert got == pytest.approx((hi - lo) / 2, rel=1e-9)
+    assert change_noise({"a": {"m": [0.5, np.nan]}})["a"]["m"] is None
+
+
+def test_a_delivered_change_inside_its_scene_noise_ranks_nothing():
+    """A tornado row's delivered loss names what limits the part only where the judge's scenes resolve it (beyond
+    its 95 % interval): inside it, the PSF metric ranks and the report says why; beyond it, the loss is named with
+    its ±. The tornado table gives each change's ± and says what it means."""
+    from doefab.tolerance.reporttext import NOISE_NOTE, body_lines, lead_text, summary_lines
+
+    def row(name, delta, loss, noise):
+        return {"error": name, "value": 1.0, "unit": "µm", "grid": 1, "metric": 0.8 + delta, "delta": delta,
+                "network_delta": {"nominal_psf": {"psnr_highlight": -loss, "psnr": 0.0},
+                                  "measured_psf": {"psnr_highlight": 0.0, "psnr": 0.0}},
+                "network_delta_ci95": {"nominal_psf": {"psnr_highlight": noise, "psnr": 0.1},
+                                       "measured_psf": {"psnr_highlight": noise, "psnr": 0.1}}}
+
+    samples = [{"metric": 0.85, "worst": 0.8, "l1_to_nominal": 0.1}] * 3
+    from doefab.tolerance.montecarlo import summarize
+
+    nominal = {"psf": {"psf_metric": 0.869}}
+    res = {"task": "hdr", "stop": "the DOE", "warnings": [], "budget": {"spec": {}}, "nominal": nominal,
+           "level": "network", "grid": {"fixed": True, "monte_carlo_grid": 1},
+           "summary": summarize(samples, {}, "hdr", nominal),
+           "tornado": [row("mask overlay", -0.06, 0.1, 1.0), row("mount rotation", -0.01, 0.36, 1.0)]}
+    text = "\n".join(summary_lines(res))
+    limited = text.split("Limited by")[1].split("\n")[0]
+    assert limited.startswith("** (PSF metric; no error of the 2 judged through the network lowered the delivered "
+                              "highlight PSNR by more than the scene noise")
+    assert limited.index("mask overlay") < limited.index("mount rotation")  # the PSF metric's order
+    assert "no error judged through the network changed what the part delivers by more than the judge's scene " \
+           "noise" in lead_text(res)
+    body = "\n".join(body_lines(res))
+    assert "highlight PSNR -0.36 ± 1 dB" in body and NOISE_NOTE in body
+    res["tornado"][1]["network_delta_ci95"]["nominal_psf"]["psnr_highlight"] = 0.2  # now resolved
+    limited = "\n".join(summary_lines(res)).split("Limited by")[1].split("\n")[0]
+    assert limited.startswith("** (delivered highlight PSNR") and "mount rotation at 1 µm (0.36 ± 0.2 dB worse)" in limited
+    assert "mask overlay" not in limited  # its 0.1 dB is inside its ±1 dB
+    assert "costs 0.36 dB of highlight PSNR, ± 0.20 dB over the judge's scenes" in lead_text(res)

@@ -585,3 +585,41 @@ def test_the_quantization_study_shows_its_progress(design_dir, monkeypatch):
     bars.clear()
     study.quantization_study(design_dir, levels=(16, 4), progress=False)
     assert bars == []
+
+
+def test_a_tornado_row_judged_through_the_network_carries_its_scene_noise(design_dir, monkeypatch, tmp_path):
+    """Each network-judged tornado row holds its per-scene delivered changes against the error-free part on the same
+    scenes, and the study the half-width of the change's 95 % interval from them: the paired t interval (scipy's
+    paired t-test), per PSF the network was told and per metric; the report gives it beside the change."""
+    from scipy.stats import ttest_rel
+
+    from doefab.tolerance import report
+
+    rng = np.random.default_rng(11)
+    base = {"nominal_psf": {"psnr": list(rng.normal(30, 3, 6))}, "measured_psf": {"psnr": list(rng.normal(30, 3, 6))}}
+    parts = {}
+
+    def fake(design, s, errors, networks=False, weights_dir=None):
+        if errors == PartErrors().to_json():
+            scenes = base
+        else:  # each error its own per-scene changes
+            scenes = parts.setdefault(json.dumps(errors, sort_keys=True), {
+                lab: {"psnr": list(np.asarray(v["psnr"]) + rng.normal(-0.3, 0.5, 6))} for lab, v in base.items()})
+        return {"metric": 0.8, "network": {lab: {"psnr": float(np.mean(v["psnr"]))} for lab, v in scenes.items()},
+                "network_scenes": scenes}
+
+    monkeypatch.setattr(study, "evaluate_part", fake)
+    budget = load_budget()
+    names = ("mask overlay", "edge bias")
+    monkeypatch.setattr(study, "KINDS", [k for k in study.KINDS if k.name in names])
+    res = report.run_study(design_dir, budget, tmp_path / "t", samples=0, grid=1, networks=True, progress=False)
+    rows = {r["error"]: r for r in res["tornado"]}
+    assert set(rows) == set(names) and len(parts) == 2
+    for scenes in parts.values():
+        (r,) = [r for r in rows.values() if r["network"]["nominal_psf"]["psnr"] == np.mean(scenes["nominal_psf"]["psnr"])]
+        for lab in ("nominal_psf", "measured_psf"):
+            lo, hi = ttest_rel(scenes[lab]["psnr"], base[lab]["psnr"]).confidence_interval(0.95)
+            assert r["network_delta_ci95"][lab]["psnr"] == pytest.approx((hi - lo) / 2, rel=1e-9)
+            assert r["network_delta"][lab]["psnr"] == pytest.approx((hi + lo) / 2, rel=1e-9)
+    text = (tmp_path / "t" / "report.md").read_text()
+    assert f"± {rows['edge bias']['network_delta_ci95']['nominal_psf']['psnr']:.2g} dB" in text
