@@ -1,11 +1,12 @@
 """How much of a network-judged part's score is rounding: one part drawn from the default budget, judged through
 each committed design's proposed network as ``doefab tolerance --networks`` judges it (``study.evaluate_part``:
 the judge's default scenes, each reconstructed with the nominal PSF and with the part's own pair), twice, each
-time in a fresh process: the part's PSFs computed on two torch threads (as the tornado and the quantization
-study compute them in the study's own process) and on one (as a Monte Carlo worker does). The reconstructions
-run on one thread both times, so the two differ only in the rounding of the PSFs' sums. Per metric: the largest
-change on any scene and the change of the mean over the scenes, beside the paired 95 % interval of a tornado
-row's change that the report prints (``delivered.change_noise``, here of the rounding change alone).
+time in a fresh process: everything but the reconstructions on two threads (torch, OpenMP, MKL; as the tornado
+and the quantization study compute in the study's own process on a 2-core machine) and then on one (as a Monte
+Carlo worker does). The reconstructions run on one torch thread both times, so the two differ only in the
+rounding of what is computed before them (the part's PSFs, its captures). Per metric: the largest change on any
+scene and the change of the mean over the scenes, beside the paired 95 % interval of a tornado row's change
+that the report prints (``delivered.change_noise``, here of the rounding change alone).
 
 Writes benchmarks/results/judge_rounding.{md,json}. Run with nothing else on the machine:
     .venv/bin/python benchmarks/judge_rounding.py
@@ -80,8 +81,9 @@ def markdown(runs: list[dict], code: str) -> str:
     lines = ["# The network judge's rounding", "",
              f"Produced by `.venv/bin/python benchmarks/judge_rounding.py` at {code}: one part drawn from the default "
              f"budget (seed {PART_SEED}) judged through each committed design's proposed network on the judge's "
-             "scenes, its PSFs computed on 2 torch threads and then on 1 (each in a fresh process; the "
-             "reconstructions on 1 thread both times). What the second judgement changes:", "",
+             "scenes, everything but the reconstructions on 2 threads and then on 1 (torch, OpenMP and MKL; each in a "
+             "fresh process; the reconstructions on 1 torch thread both times). What the second judgement changes:",
+             "",
              "| design | network told | metric | largest change on a scene | change of the mean over the scenes | "
              "± of a tornado row's change from these changes (95 %) |", "| --- | --- | --- | --- | --- | --- |"]
     for r in runs:

@@ -105,7 +105,7 @@ def _limit_sentence(res: dict) -> list[str]:
     task, noise = res["task"], noise_of(r, metric) if metric else 0.0
     what = (f"{metric_text(task, metric, loss)} of {_name(task, metric)}"
             + (f", ± {metric_text(task, metric, noise)} over the judge's scenes" if noise else "") if metric else
-            f"{loss:.3f} of the PSF metric" + ("; no error judged through the network changed what the part delivers "
+            f"{loss:.3f} of the PSF metric" + ("; no error judged through the network lowered what the part delivers "
                                                "by more than the judge's scene noise" if _unresolved(res) else ""))
     return [f"It is limited most by {r['error']} ({r['value']:.3g} {r['unit']} at the budget's 1σ costs {what}); "
             f"{REMEDY.get(r['error'], r['error'])} would buy the most."]
@@ -187,7 +187,7 @@ def _limits(res: dict) -> tuple[str | None, list[tuple[float, dict]]]:
         m = PRIMARY[res["task"]]
         losses = [(delivered_loss(res["task"], r["network_delta"]["nominal_psf"]), r) for r in judged]
         # a loss counts where the judge's scenes resolve it (beyond its 95 % scene noise; rows without one: > 0)
-        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > max(noise_of(r, m), 0.0)),
+        top = sorted(((loss, r) for loss, r in losses if math.isfinite(loss) and loss > noise_of(r, m)),
                      key=lambda t: -t[0])[:3]
         if top:
             return m, top

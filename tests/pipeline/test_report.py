@@ -268,4 +268,4 @@ def test_the_tornado_table_gives_each_delivered_change_its_scene_noise(tmp_path)
     assert NOISE_NOTE in md
     lead = _summary(md)[0]
     assert "mask overlay (0.5 µm at the budget's 1σ costs 0.049 of the PSF metric; no error judged through the " \
-           "network changed what the part delivers by more than the judge's scene noise)" in lead
+           "network lowered what the part delivers by more than the judge's scene noise)" in lead

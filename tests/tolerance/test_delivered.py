@@ -212,7 +212,7 @@ def test_a_delivered_change_inside_its_scene_noise_ranks_nothing():
     assert limited.startswith("** (PSF metric; no error of the 2 judged through the network lowered the delivered "
                               "highlight PSNR by more than the scene noise")
     assert limited.index("mask overlay") < limited.index("mount rotation")  # the PSF metric's order
-    assert "no error judged through the network changed what the part delivers by more than the judge's scene " \
+    assert "no error judged through the network lowered what the part delivers by more than the judge's scene " \
            "noise" in lead_text(res)
     body = "\n".join(body_lines(res))
     assert "highlight PSNR -0.36 ± 1 dB" in body and NOISE_NOTE in body
@@ -221,3 +221,23 @@ def test_a_delivered_change_inside_its_scene_noise_ranks_nothing():
     assert limited.startswith("** (delivered highlight PSNR") and "mount rotation at 1 µm (0.36 ± 0.2 dB worse)" in limited
     assert "mask overlay" not in limited  # its 0.1 dB is inside its ±1 dB
     assert "costs 0.36 dB of highlight PSNR, ± 0.20 dB over the judge's scenes" in lead_text(res)
+
+
+def test_for_depth_a_resolved_mae_increase_limits_and_a_resolved_gain_does_not():
+    """Lower is better for depth MAE: an increase beyond its ± is a loss that names the limit; a decrease beyond its
+    ± is a gain, never a limit, and leaves the PSF metric to rank when nothing else is resolved."""
+    from doefab.tolerance.reporttext import summary_lines
+
+    def row(name, delta, dmae, noise):
+        return {"error": name, "value": 1.0, "unit": "mm", "grid": 1, "metric": 0.4 + delta, "delta": delta,
+                "network_delta": {"nominal_psf": {"mae": dmae, "delta125": 0.0}},
+                "network_delta_ci95": {"nominal_psf": {"mae": noise, "delta125": None}}}
+
+    res = {"task": "depth", "stop": "the DOE", "warnings": [], "budget": {}, "nominal": {"psf": {"psf_metric": 0.4}},
+           "tornado": [row("mask overlay", -0.05, 0.02, 0.03), row("decenter across split", -0.02, 0.2, 0.05)]}
+    limited = "\n".join(summary_lines(res)).split("Limited by")[1].split("\n")[0]
+    assert "decenter across split at 1 mm (0.2 ± 0.05 m worse)" in limited and "mask overlay" not in limited
+    res["tornado"][1]["network_delta"]["nominal_psf"]["mae"] = -0.2  # a resolved gain: no limit
+    limited = "\n".join(summary_lines(res)).split("Limited by")[1].split("\n")[0]
+    assert limited.startswith("** (PSF metric; no error of the 2 judged through the network lowered the delivered "
+                              "depth MAE by more than the scene noise")
