@@ -93,10 +93,26 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     if do_levels:
         res["quantization"] = study.quantization_study(design_dir, supersample=mc_grid, networks=networks,
                                                        weights_dir=weights_dir, progress=progress)
+        _level_changes(res["quantization"], judge.design.n_levels)
     _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)
     atomic_write_text(out / "report.md", "\n".join(_markdown(res)) + "\n")
     return res
+
+
+def _level_changes(rows: list, n_levels: int) -> None:
+    """Each network-judged quantization row's delivered change from the design's own level count on the same
+    scenes (``network_delta``) and its paired 95 % interval's half-width (``network_delta_ci95``)."""
+    ref = next((r for r in rows if r["levels"] == n_levels and "network_scenes" in r), None)
+    if ref is None:
+        return
+    for r in rows:
+        if "network_scenes" in r and r is not ref:
+            changes = {lab: {m: [a - b for a, b in zip(v, ref["network_scenes"][lab][m])] for m, v in ms.items()}
+                       for lab, ms in r["network_scenes"].items()}
+            r["network_delta"] = {lab: {m: r["network"][lab][m] - ref["network"][lab][m] for m in ms}
+                                  for lab, ms in r["network"].items()}
+            r["network_delta_ci95"] = change_noise(changes)
 
 
 def _flat_nominal(nominal: dict, level: str) -> dict:

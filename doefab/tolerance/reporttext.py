@@ -333,12 +333,30 @@ def _surrogate(res: dict) -> list[str]:
 
 
 def _quantization(res: dict) -> list[str]:
-    lines = ["## Quantization", "",
-             f"| levels | quantized from | PSF metric | worst | L1 to the {res.get('n_levels', 16)}-level PSF |",
-             "| --- | --- | --- | --- | --- |"]
-    lines += [f"| {r['levels']} | {r.get('source', '')} | {r['metric']:.4f} | {r['worst']:.4f} | "
-              f"{r['l1_to_nominal']:.4f} |" for r in res["quantization"]]
-    return lines + ["", "![quantization](quantization.png)", ""]
+    """The quantization table; through the network also what each level count delivers (the task's primary metric)
+    and its change from the design's own level count with the change's ± over the judge's scenes."""
+    from doefab.tolerance.spec import PRIMARY
+
+    rows, task, n = res["quantization"], res["task"], res.get("n_levels", 16)
+    m = PRIMARY.get(task)
+    net = m is not None and any("network" in r for r in rows)
+    head = f"| levels | quantized from | PSF metric | worst | L1 to the {n}-level PSF |"
+    if net:
+        head += "".join(f" {_name(task, m)}, network told the {w} | change from {n} levels |"
+                        for w in ("nominal PSF", "quantized design's PSF"))
+    lines = ["## Quantization", "", head, "| --- " * head.count(" |") + "|"]
+    for r in rows:
+        line = (f"| {r['levels']} | {r.get('source', '')} | {r['metric']:.4f} | {r['worst']:.4f} | "
+                f"{r['l1_to_nominal']:.4f} |")
+        for lab in ("nominal_psf", "measured_psf") if net else ():
+            v = r.get("network", {}).get(lab, {}).get(m)
+            d, ci = r.get("network_delta", {}).get(lab, {}).get(m), r.get("network_delta_ci95", {}).get(lab, {}).get(m)
+            change = "—" if d is None else (f"{d:+.3g}" + ("" if ci is None else f" ± {ci:.2g}") + f" {_unit(task, m)}"
+                                            ).rstrip()
+            line += f" {'—' if v is None else metric_text(task, m, v)} | {change} |"
+        lines.append(line)
+    return lines + ([""] + [NOISE_NOTE] if net and any("network_delta_ci95" in r for r in rows) else []) + [
+        "", "![quantization](quantization.png)", ""]
 
 
 def _sweeps(res: dict) -> list[str]:

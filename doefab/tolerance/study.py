@@ -202,14 +202,15 @@ def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_
         h = lv.astype(np.float64) * h2pi / n
     if supersample > 1:
         h = np.kron(h, np.ones((supersample, supersample)))
-    net = (network_judge_for(design_dir, supersample, weights_dir, networks).evaluate(PartErrors(), height=h)
+    net = (network_judge_for(design_dir, supersample, weights_dir, networks).scenes(PartErrors(), height=h)
            if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
     source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
     row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
            else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
            **judge.score(judge.psf_from_height(h))}
     if networks:
-        row["network"] = net
+        row["network"], row["network_scenes"] = network_judge_for(design_dir, supersample, weights_dir,
+                                                                  networks).means(net), net
     return row
 
 

@@ -623,3 +623,49 @@ def test_a_tornado_row_judged_through_the_network_carries_its_scene_noise(design
             assert r["network_delta"][lab]["psnr"] == pytest.approx((hi + lo) / 2, rel=1e-9)
     text = (tmp_path / "t" / "report.md").read_text()
     assert f"± {rows['edge bias']['network_delta_ci95']['nominal_psf']['psnr']:.2g} dB" in text
+
+
+def test_the_quantization_study_through_the_network_shows_what_each_level_count_delivers(design_dir, monkeypatch,
+                                                                                          tmp_path):
+    """Each level count judged through the network keeps its per-scene values; the report's quantization table gives
+    the delivered primary metric and its change from the design's own level count with the paired 95 % interval
+    over the scenes (scipy's paired t-test)."""
+    from scipy.stats import ttest_rel
+
+    from doefab.tolerance import report
+    from doefab.tolerance.netjudge import NetworkJudge
+
+    rng = np.random.default_rng(5)
+    judged = []
+
+    class Fake:
+        means = staticmethod(NetworkJudge.means)
+
+        def scenes(self, err, height=None):
+            vals = list(rng.normal(29.0 - 0.1 * len(judged), 2.0, 5))
+            judged.append(vals)
+            return {lab: {"psnr_highlight": vals, "psnr": vals} for lab in ("nominal_psf", "measured_psf")}
+
+    monkeypatch.setattr(study, "network_judge_for", lambda *a, **k: Fake())
+    monkeypatch.setattr(study, "tornado", lambda *a, **k: [])
+    monkeypatch.setattr(report, "_step_key", lambda *a, **k: {})
+    monkeypatch.setattr(study, "evaluate_part", lambda *a, **k: {"metric": 0.8, "network": {}, "network_scenes": {}})
+    res = report.run_study(design_dir, load_budget(), tmp_path / "q", samples=0, grid=1, networks=True,
+                           do_levels=True, progress=False)
+    rows = {r["levels"]: r for r in res["quantization"]}
+    assert list(rows) == ["continuous", 16, 8, 4, 2] and len(judged) == 4  # this folder keeps no continuous design
+    assert "network" not in rows["continuous"]
+    ref = rows[16]["network_scenes"]["nominal_psf"]["psnr_highlight"]
+    assert "network_delta" not in rows[16]
+    for n in (8, 4, 2):
+        vals = rows[n]["network_scenes"]["nominal_psf"]["psnr_highlight"]
+        lo, hi = ttest_rel(vals, ref).confidence_interval(0.95)
+        assert rows[n]["network_delta_ci95"]["nominal_psf"]["psnr_highlight"] == pytest.approx((hi - lo) / 2, rel=1e-9)
+        assert rows[n]["network_delta"]["nominal_psf"]["psnr_highlight"] == pytest.approx((hi + lo) / 2, rel=1e-9)
+    text = (tmp_path / "q" / "report.md").read_text()
+    table = text.split("## Quantization")[1].split("![quantization]")[0]
+    assert "| highlight PSNR, network told the nominal PSF | change from 16 levels |" in table
+    assert "| n/a: the folder keeps only the 16-level map | nan | nan | nan | — | — | — | — |" in table
+    d, ci = rows[4]["network_delta"]["nominal_psf"], rows[4]["network_delta_ci95"]["nominal_psf"]
+    assert (f"| {rows[4]['network']['nominal_psf']['psnr_highlight']:.2f} dB | "
+            f"{d['psnr_highlight']:+.3g} ± {ci['psnr_highlight']:.2g} dB |") in table
