@@ -44,7 +44,8 @@ def noise_of(row: dict, metric: str, label: str = "nominal_psf") -> float:
 
 
 NOISE_NOTE = ("± : the 95 % interval of a delivered change over the judge's scenes (each scene's change paired, "
-              "Student's t); a change inside it is not resolved by these scenes and ranks nothing.")
+              "Student's t); a change inside it is not resolved by these scenes, and a tornado loss inside it ranks "
+              "nothing.")
 
 
 def _unit(task: str, metric: str) -> str:

@@ -642,9 +642,10 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
         means = staticmethod(NetworkJudge.means)
 
         def scenes(self, err, height=None):
-            vals = list(rng.normal(29.0 - 0.1 * len(judged), 2.0, 5))
+            vals = rng.normal(29.0 - 0.1 * len(judged), 2.0, 5)
             judged.append(vals)
-            return {lab: {"psnr_highlight": vals, "psnr": vals} for lab in ("nominal_psf", "measured_psf")}
+            told = {"nominal_psf": vals, "measured_psf": vals + rng.normal(0.5, 1.0, 5)}  # each label its own
+            return {lab: {"psnr_highlight": list(v), "psnr": list(v + 15.0)} for lab, v in told.items()}
 
     monkeypatch.setattr(study, "network_judge_for", lambda *a, **k: Fake())
     monkeypatch.setattr(study, "tornado", lambda *a, **k: [])
@@ -666,6 +667,12 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     table = text.split("## Quantization")[1].split("![quantization]")[0]
     assert "| highlight PSNR, network told the nominal PSF | change from 16 levels |" in table
     assert "| n/a: the folder keeps only the 16-level map | nan | nan | nan | — | — | — | — |" in table
-    d, ci = rows[4]["network_delta"]["nominal_psf"], rows[4]["network_delta_ci95"]["nominal_psf"]
-    assert (f"| {rows[4]['network']['nominal_psf']['psnr_highlight']:.2f} dB | "
-            f"{d['psnr_highlight']:+.3g} ± {ci['psnr_highlight']:.2g} dB |") in table
+    cells = []
+    for lab in ("nominal_psf", "measured_psf"):  # the primary metric (highlight PSNR), nominal PSF first
+        d, ci = rows[4]["network_delta"][lab], rows[4]["network_delta_ci95"][lab]
+        cells.append(f" {rows[4]['network'][lab]['psnr_highlight']:.2f} dB | {d['psnr_highlight']:+.3g} ± "
+                     f"{ci['psnr_highlight']:.2g} dB |")
+    (line,) = [x for x in table.splitlines() if x.startswith("| 4 |")]
+    assert line.endswith("".join(cells)) and line.count("|") == 10
+    (sep,) = [x for x in table.splitlines() if x.startswith("| ---")]
+    assert sep.count("|") == 10  # header, separator and rows: 9 columns each
