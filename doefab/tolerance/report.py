@@ -108,10 +108,7 @@ def _level_changes(rows: list, n_levels: int) -> None:
         return
     for r in rows:
         if "network_scenes" in r and r is not ref:
-            changes = {lab: {m: [a - b for a, b in zip(v, ref["network_scenes"][lab][m])] for m, v in ms.items()}
-                       for lab, ms in r["network_scenes"].items()}
-            r["network_delta"] = {lab: {m: r["network"][lab][m] - ref["network"][lab][m] for m in ms}
-                                  for lab, ms in r["network"].items()}
+            r["network_delta"], changes = study.network_changes(r, ref)
             r["network_delta_ci95"] = change_noise(changes)
 
 

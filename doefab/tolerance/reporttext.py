@@ -28,12 +28,14 @@ def _interval(task: str, metric: str, ci) -> str:
     return f"{metric_text(task, metric, lo, unit=False)}–{metric_text(task, metric, hi)}"
 
 
-def delta_text(task: str, deltas: dict, ci: dict | None = None) -> str:
+def delta_text(task: str, deltas: dict, ci: dict | None = None, names: bool = True) -> str:
     """Changes of delivered metrics in words with units, e.g. "highlight PSNR -1.2 dB, PSNR -0.3 dB"; with ``ci``
-    ({metric: half-width of the change's 95 % interval}, ``delivered.change_noise``) "PSNR -0.3 ± 0.41 dB"."""
+    ({metric: half-width of the change's 95 % interval}, ``delivered.change_noise``) "PSNR -0.3 ± 0.41 dB";
+    ``names`` off: without the metrics' names ("-0.3 ± 0.41 dB")."""
     ci = ci or {}
-    return ", ".join(f"{_name(task, k)} {v:+.3g}{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}"
-                     .rstrip() for k, v in deltas.items())
+    return ", ".join(f"{_name(task, k) + ' ' if names else ''}{v:+.3g}"
+                     f"{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}".rstrip()
+                     for k, v in deltas.items())
 
 
 def noise_of(row: dict, metric: str, label: str = "nominal_psf") -> float:
@@ -351,9 +353,8 @@ def _quantization(res: dict) -> list[str]:
                 f"{r['l1_to_nominal']:.4f} |")
         for lab in ("nominal_psf", "measured_psf") if net else ():
             v = r.get("network", {}).get(lab, {}).get(m)
-            d, ci = r.get("network_delta", {}).get(lab, {}).get(m), r.get("network_delta_ci95", {}).get(lab, {}).get(m)
-            change = "—" if d is None else (f"{d:+.3g}" + ("" if ci is None else f" ± {ci:.2g}") + f" {_unit(task, m)}"
-                                            ).rstrip()
+            d = r.get("network_delta", {}).get(lab, {}).get(m)
+            change = "—" if d is None else delta_text(task, {m: d}, r.get("network_delta_ci95", {}).get(lab), False)
             line += f" {'—' if v is None else metric_text(task, m, v)} | {change} |"
         lines.append(line)
     return lines + ([""] + [NOISE_NOTE] if net and any("network_delta_ci95" in r for r in rows) else []) + [

@@ -15,8 +15,8 @@ import numpy as np
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS, kind
 
-__all__ = ["judge_for", "network_judge_for", "evaluate_part", "sweep", "tornado", "quantization_study",
-           "continuous_height", "sweep_names"]
+__all__ = ["judge_for", "network_judge_for", "evaluate_part", "network_changes", "sweep", "tornado",
+           "quantization_study", "continuous_height", "sweep_names"]
 
 _JUDGES: dict = {}
 _NET_JUDGES: dict = {}
@@ -135,10 +135,7 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
                "metric": r["metric"], "delta": r["metric"] - b["metric"]}
         if networks:
             row["network"] = r["network"]
-            row["network_delta"] = {lab: {m: v - b["network"][lab][m] for m, v in vals.items()}
-                                    for lab, vals in r["network"].items()}
-            row["network_delta_scenes"] = {lab: {m: [p - q for p, q in zip(v, b["network_scenes"][lab][m])]
-                                                 for m, v in vals.items()} for lab, vals in r["network_scenes"].items()}
+            row["network_delta"], row["network_delta_scenes"] = network_changes(r, b)
         rows.append(row)
         if bar is not None:
             bar.update(1)
@@ -146,6 +143,20 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
     if bar is not None:
         bar.close()
     return rows
+
+
+def network_changes(part: dict, base: dict) -> tuple[dict, dict]:
+    """(change of the means, change on each scene) of one network-judged part against another judged on the same
+    scenes: {label: {metric: part − base}} and {label: {metric: [part − base per scene]}}, from each one's
+    "network" means and "network_scenes" values (``evaluate_part``, ``quantization_study``), in the metrics' units.
+
+    Example: ``network_changes({"network": {"nominal_psf": {"mae": 0.3}}, "network_scenes": {"nominal_psf": {"mae":
+    [0.2, 0.4]}}}, {"network": {"nominal_psf": {"mae": 0.25}}, "network_scenes": {"nominal_psf": {"mae": [0.2,
+    0.3]}}})`` → ``({"nominal_psf": {"mae": 0.05}}, {"nominal_psf": {"mae": [0.0, 0.1]}})`` (metres, to rounding)."""
+    means = {lab: {m: v - base["network"][lab][m] for m, v in vals.items()} for lab, vals in part["network"].items()}
+    scenes = {lab: {m: [p - q for p, q in zip(v, base["network_scenes"][lab][m])] for m, v in vals.items()}
+              for lab, vals in part["network_scenes"].items()}
+    return means, scenes
 
 
 def _bar(total, desc, progress, unit="part"):
@@ -202,15 +213,14 @@ def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_
         h = lv.astype(np.float64) * h2pi / n
     if supersample > 1:
         h = np.kron(h, np.ones((supersample, supersample)))
-    net = (network_judge_for(design_dir, supersample, weights_dir, networks).scenes(PartErrors(), height=h)
-           if networks else None)  # first: the PSF metric's coded PSF is a crop of its pair
+    nj = network_judge_for(design_dir, supersample, weights_dir, networks) if networks else None
+    net = nj.scenes(PartErrors(), height=h) if nj else None  # first: the PSF metric's coded PSF is a crop of its pair
     source = "the continuous design" if height is not None else f"{mapped}, re-quantized"
     row = {"levels": "continuous" if n is None else n, "source": "the continuous design" if n is None
            else (source if n != d.n_levels or height is not None else f"the committed {d.n_levels}-level map"),
            **judge.score(judge.psf_from_height(h))}
     if networks:
-        row["network"], row["network_scenes"] = network_judge_for(design_dir, supersample, weights_dir,
-                                                                  networks).means(net), net
+        row["network"], row["network_scenes"] = nj.means(net), net
     return row
 
 
