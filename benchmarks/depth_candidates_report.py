@@ -52,9 +52,10 @@ def main() -> None:
              "validation MAE (m) | δ<1.25 | RMSE (m) | network steps | design wall time (s) |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
+        net = (f"{r['mae']:.3f} | {r['delta']:.3f} | {r['rmse']:.3f}" if np.isfinite(r["mae"])
+               else "— (not trained) | — | —")
         lines.append(f"| {r['label']} | {r['metric']:.3f} / {r['worst']:.3f} | {r['score']:.4f} | "
-                     f"{r['min_dprime']:.2f} | {r['mae']:.3f} | {r['delta']:.3f} | {r['rmse']:.3f} | {r['steps']} | "
-                     f"{r['design_s']:.0f} |")
+                     f"{r['min_dprime']:.2f} | {net} | {r['steps']} | {r['design_s']:.0f} |")
     trained = [r for r in rows if np.isfinite(r["mae"])]
     by_score = [r["name"] for r in sorted(trained, key=lambda r: r["score"])]
     by_mae = [r["name"] for r in sorted(trained, key=lambda r: r["mae"])]
@@ -63,8 +64,10 @@ def main() -> None:
     lines += ["", f"Order by predicted confusion error: {' < '.join(by_score)}.",
               f"Order by the network's validation MAE: {' < '.join(by_mae)}.",
               f"Orders agree: {'yes' if by_score == by_mae else 'no'}."]
+    from doefab.io import atomic_write_text
+
     out = ROOT / "benchmarks" / "results" / "depth_candidates.md"
-    out.write_text("\n".join(lines) + "\n")
+    atomic_write_text(out, "\n".join(lines) + "\n")
     print("\n".join(lines))
     best = min(trained, key=lambda r: r["mae"])
     _psf_figure(rows, best["name"])

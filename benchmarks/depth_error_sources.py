@@ -141,8 +141,7 @@ def depth_lines(data: dict) -> list[str]:
     lines = ["| true depth (m) | " + " | ".join(f"{s}: share of pixels | {s}: δ<1.25 | {s}: MAE (m)" for s in data)
              + " |", "| --- |" + " --- | --- | --- |" * len(data)]
     for j, (label, *_r) in enumerate(per[next(iter(data))]):
-        lines.append(f"| {label} | " + " | ".join(f"{per[s][j][1]:.3f} | {per[s][j][2]:.3f} | {per[s][j][3]:.3f}"
-                                                  for s in data) + " |")
+        lines.append(f"| {label} | " + " | ".join(bin_cells(per[s][j]) for s in data) + " |")
     real = data.get("real")
     if real is None:
         return lines + [""]
@@ -166,6 +165,12 @@ def detail_shares(split: str, images: int, size: int = 256) -> np.ndarray:
     d = np.concatenate([local_contrast(eval_scene(split, i, size, m, pair.depths)[0], detail_px=DETAIL_PX).ravel()
                         for i in range(images)])
     return np.histogram(d, bins=np.array(TEXTURE_BINS))[0] / d.size
+
+
+def bin_cells(row: tuple) -> str:
+    """A ``binned`` row's share, δ<1.25 and MAE cells; "—" for a bin that holds no pixel."""
+    _label, share, ok, mae = row
+    return f"{share:.3f} | " + ("— | —" if np.isnan(ok) else f"{ok:.3f} | {mae:.3f}")
 
 
 def bin_label(lo: float, hi: float) -> str:
@@ -201,8 +206,7 @@ def table(data: dict, images: int) -> str:
                   + " |", "| --- |" + " --- | --- | --- |" * len(data)]
         per = per_key[key] = {s: binned(px, key, edges) for s, px in data.items()}
         for j, (label, *_r) in enumerate(next(iter(per.values()))):
-            cells = [f"{per[s][j][1]:.3f} | {per[s][j][2]:.3f} | {per[s][j][3]:.3f}" for s in data]
-            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+            lines.append(f"| {label} | " + " | ".join(bin_cells(per[s][j]) for s in data) + " |")
         lines.append("")
     if set(data) == {"val", "test"}:
         det = per_key["detail"]

@@ -137,13 +137,19 @@ def demote_headings(text: str, top: int = 3) -> str:
 
 # paragraphs of prose in a results file that tell how a number came about rather than what it is
 HISTORY = re.compile(r"\b(replaced|re-measure\w*|swallowed|session|issue)\b", re.I)
+# a table cell that prints a missing number as Python formats it, not as a reader reads it ("—" and why)
+NAN_CELL = re.compile(r"\|\s*[+-]?nan\s*(?=\|)", re.I)
 
 
 def markdown_body(path: Path, problems: list[str]) -> str:
     """A results Markdown file for inclusion: headings demoted, figures that are not kept beside it dropped,
     prose about earlier versions left out."""
     out = []
-    for para in path.read_text().strip().split("\n\n"):
+    text = path.read_text()
+    if NAN_CELL.search(text):
+        problems.append(f"results: {path.name} prints 'nan' in a table cell: write '—' and "
+                        "say why the number is missing")
+    for para in text.strip().split("\n\n"):
         if not para.lstrip().startswith("|") and HISTORY.search(para):
             continue
         images = re.findall(r"!\[([^\]]*)\]\(([^)]+)\)", para)

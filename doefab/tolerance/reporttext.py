@@ -349,16 +349,24 @@ def _quantization(res: dict) -> list[str]:
                         for w in ("nominal PSF", "quantized design's PSF"))
     lines = ["## Quantization", "", head, "| --- " * head.count(" |") + "|"]
     for r in rows:
-        line = (f"| {r['levels']} | {r.get('source', '')} | {r['metric']:.4f} | {r['worst']:.4f} | "
-                f"{r['l1_to_nominal']:.4f} |")
+        line = f"| {r['levels']} | {r.get('source', '')} | " + "".join(
+            f"{_number(r.get(k))} | " for k in ("metric", "worst", "l1_to_nominal")).rstrip()
         for lab in ("nominal_psf", "measured_psf") if net else ():
             v = r.get("network", {}).get(lab, {}).get(m)
             d = r.get("network_delta", {}).get(lab, {}).get(m)
             change = "—" if d is None else delta_text(task, {m: d}, r.get("network_delta_ci95", {}).get(lab), False)
             line += f" {'—' if v is None else metric_text(task, m, v)} | {change} |"
         lines.append(line)
+    if net and not any(r.get("levels") == n and "network_scenes" in r for r in rows):
+        lines += ["", f"No change column: the design's own {n} levels are not among the level counts judged through "
+                      "the network."]
     return lines + ([""] + [NOISE_NOTE] if net and any("network_delta_ci95" in r for r in rows) else []) + [
         "", "![quantization](quantization.png)", ""]
+
+
+def _number(v) -> str:
+    """A PSF figure of the quantization table; "—" where the row has none (its map is not in the folder)."""
+    return "—" if v is None or not math.isfinite(v) else f"{v:.4f}"
 
 
 def _sweeps(res: dict) -> list[str]:

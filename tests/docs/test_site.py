@@ -64,6 +64,19 @@ def test_results_pages_show_every_results_file_and_report_one_that_is_not(tmp_pa
     assert len(problems) == 1 and "new_benchmark.md is on no results page" in problems[0]
 
 
+def test_a_results_table_that_prints_nan_is_reported(tmp_path):
+    import doefab_results
+
+    page = tmp_path / "depth_error_sources.md"
+    committed = (REPO / "benchmarks" / "results" / "depth_error_sources.md").read_text()
+    for text, found in ((committed, 0), (committed.replace("| — | — |", "| NaN | nan |", 1), 1),
+                        (committed.replace("| — | — |", "| 0.5 | nanometre |", 1), 0)):  # a word is not a cell
+        page.write_text(text)
+        problems = []
+        doefab_results.markdown_body(page, problems)
+        assert len(problems) == found and all("depth_error_sources.md prints 'nan'" in p for p in problems)
+
+
 def test_the_fab_page_explains_every_manifest_field():
     from doefab_fab import exporter_field_names, manifest_field_names
 

@@ -666,7 +666,8 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     text = (tmp_path / "q" / "report.md").read_text()
     table = text.split("## Quantization")[1].split("![quantization]")[0]
     assert "| highlight PSNR, network told the nominal PSF | change from 16 levels |" in table
-    assert "| n/a: the folder keeps only the 16-level map | nan | nan | nan | — | — | — | — |" in table
+    assert "| n/a: the folder keeps only the 16-level map | — | — | — | — | — | — | — |" in table
+    assert "No change column" not in table
     cells = []
     for lab in ("nominal_psf", "measured_psf"):  # the primary metric (highlight PSNR), nominal PSF first
         d, ci = rows[4]["network_delta"][lab], rows[4]["network_delta_ci95"][lab]
@@ -676,3 +677,7 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     assert line.endswith("".join(cells)) and line.count("|") == 10
     (sep,) = [x for x in table.splitlines() if x.startswith("| ---")]
     assert sep.count("|") == 10  # header, separator and rows: 9 columns each
+    from doefab.tolerance.reporttext import _quantization
+
+    without = dict(res, quantization=[r for r in res["quantization"] if r["levels"] != 16])  # its own count not judged
+    assert "No change column: the design's own 16 levels are not among" in "\n".join(_quantization(without))
