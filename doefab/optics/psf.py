@@ -20,7 +20,7 @@ from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.propagators import make_route
-from doefab.optics.propagators.base import FocalSetup, check_smooth_phase
+from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
 
 __all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands"]
@@ -232,13 +232,14 @@ class PSFPlan:
         # a flat plate is smooth; only a structured DOE has flat pixels whose far field is an envelope
         envelope = h is not None and bool((h.detach().max() - h.detach().min()) > 0)
         setup, prepared = self._prepared(half, envelope)
+        kw = scratch_kwargs(self.route)  # the route's buffers, reused over the wavelengths (none under a gradient)
         out = []
         for i in wl:
             phase = self._k[i] * opd
             if h is not None:
                 phase = phase + (self._k[i] * self._dn[i]) * h.to(self.real_dtype)
             pupil = torch.polar(cov.expand_as(phase), phase)
-            out.append(self.route.intensity(pupil, i, setup, prepared))
+            out.append(self.route.intensity(pupil, i, setup, prepared, **kw))
         return torch.stack(out, dim=1) / geo.full_area
 
     def gap_psfs(self, doe: torch.Tensor, gap: float, halves=None) -> dict:
@@ -249,6 +250,7 @@ class PSFPlan:
         halves = self.halves if halves is None else tuple(halves)
         didx = range(len(self.depths))
         per_half = {h: [] for h in halves}
+        kw = scratch_kwargs(self.route)
         for i, lam in enumerate(self.wavelengths):
             t_full = [gap_transmittance(doe, self.camera, lam, self.depths[j], gap) for j in didx]
             for half in halves:
@@ -260,7 +262,7 @@ class PSFPlan:
                 # DOE's diffracted light as a smooth field, as its gap-0 PSF does
                 setup, prepared = self._prepared(half, half != "uncoded")
                 pupil = torch.polar(cov.expand_as(t.real), self._k[i] * opd) * t
-                per_half[half].append(self.route.intensity(pupil, i, setup, prepared) / geo.full_area)
+                per_half[half].append(self.route.intensity(pupil, i, setup, prepared, **kw) / geo.full_area)
         return {h: torch.stack(v, dim=1) for h, v in per_half.items()}
 
     def __call__(self, height=None, height_right=None, gap: float = 0.0) -> PSFPair:

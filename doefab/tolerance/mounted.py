@@ -30,7 +30,7 @@ import torch
 
 from doefab.optics.camera import Camera
 from doefab.optics.propagators import make_route
-from doefab.optics.propagators.base import FocalSetup, plane_batches
+from doefab.optics.propagators.base import FocalSetup, plane_batches, scratch_kwargs
 from doefab.optics.pupil import pupil_half, source_path_difference
 
 __all__ = ["MountedPlan", "stop_case"]
@@ -127,6 +127,9 @@ class MountedPlan:
         out = {h: [] for h in halves}
         opd = {h: self._opd(h, dx, dy) for h in halves}
         d = len(self.depths)
+        # the route's working buffers, reused by every wavelength and plane batch of this part (a route of the user's
+        # own that takes no ``scratch`` gets none)
+        kw = scratch_kwargs(self.route)
         for i in range(len(self.wavelengths)):
             t = field(i).reshape(r1 - r0, c1 - c0).to(self.device)
             t = torch.stack([self._through_gap(t, i, j, gap) for j in range(d)]) if propagate else t[None]
@@ -140,7 +143,7 @@ class MountedPlan:
                     pupil = self._coverage(half, dx) * (sub if sub.shape[0] == 1 else sub[b])
                     if opd[half] is not None:
                         pupil = pupil * torch.polar(torch.ones_like(opd[half][b]), self._k[i] * opd[half][b])
-                    got.append(self.route.intensity(pupil, i, setup, prepared))
+                    got.append(self.route.intensity(pupil, i, setup, prepared, **kw))
                 inten = (got[0] if len(got) == 1 else torch.cat(got)) / geo.full_area
                 out[half].append(inten.expand(d, self.kernel, self.kernel))
         return {h: torch.stack(v, dim=1) for h, v in out.items()}

@@ -8,6 +8,7 @@ import torch
 
 import doefab
 from doefab.errors import SamplingError
+from doefab.optics.propagators.base import FocalSetup
 
 
 def _rel(a, b):
@@ -171,3 +172,34 @@ def test_pixel_matrix_refuses_an_fft_too_short_for_the_intensity():
 
     with pytest.raises(DoefabError, match="at least twice"):
         band_limited_pixel_matrix(np.array([0.0, 1e-6]), 8, 15, 1e-5, 5e-7, 0.02, 1e-6)
+
+
+def test_spectral_buffers_kept_over_calls_give_each_pupil_its_own_intensity(monkeypatch):
+    """The spectral route's reused buffers (a ``scratch`` kept over calls, and within one call over its plane
+    batches) give what a fresh zero-padded transform per batch gives, bit for bit: for pupils of two shapes whose
+    padded canvases have one size (a buffer of the larger pupil would leave its last column in the smaller one's
+    canvas), for new pupil values in a buffer used before, and for a batch remainder."""
+    from doefab.optics.propagators import base
+    from doefab.optics.propagators.spectral import SpectralRoute
+
+    route, rng = SpectralRoute(), np.random.default_rng(4)
+
+    def setup(nx):
+        x = (np.arange(nx) - nx / 2) * 5.4e-6
+        return FocalSetup(x, x[:24][::-1].copy(), 5.4e-6, True, (550e-9,), 10e-3, 5.4e-6, 9)
+
+    def pupil(nx, planes=5):
+        return torch.from_numpy(rng.normal(size=(planes, 24, nx)) + 1j * rng.normal(size=(planes, 24, nx))).to(
+            torch.complex64)
+
+    wide, narrow = setup(30), setup(29)
+    assert route.sizes(wide) == route.sizes(narrow)  # one canvas size for both
+    monkeypatch.setattr(base, "BATCH_ELEMENTS", 2 * 48 * 60)  # batches of two planes and a remainder of one
+    scratch, calls = {}, [(wide, pupil(30)), (narrow, pupil(29)), (wide, pupil(30)), (narrow, pupil(29, 1))]
+    for s, p in calls:
+        prepared = route.prepare(s)
+        kept = route.intensity(p, 0, s, prepared, scratch=scratch)
+        fresh = route.intensity(p.clone().requires_grad_(), 0, s, prepared).detach()  # a fresh copy per batch
+        assert torch.equal(kept, fresh)
+        assert torch.equal(route.intensity(p, 0, s, prepared), fresh)  # the buffers of one call
+    assert len(scratch) == 2

@@ -23,7 +23,7 @@ import torch
 from doefab.errors import SamplingError
 
 __all__ = ["FocalSetup", "Route", "gauss_legendre_pixel", "check_window", "pixel_integration_matrix",
-           "plane_batches", "BATCH_ELEMENTS"]
+           "plane_batches", "scratch_kwargs", "BATCH_ELEMENTS"]
 
 #: complex samples (padded transform planes × batch) one batched transform holds at most: a batch of dozens of
 #: depth planes on a 1600² grid is GBs, and runs ~1.6× slower than the same planes a few at a time (measured
@@ -81,11 +81,14 @@ class Route(Protocol):
     def prepare(self, setup: FocalSetup) -> object:
         """Precompute what does not depend on the pupil function (matrices, filters)."""
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared: object) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared: object,
+                  scratch: dict | None = None) -> torch.Tensor:
         """Pixel-integrated intensity for wavelength ``setup.wavelengths[index]``.
 
         Args:
             pupil: (..., Ny, Nx) complex pupil function (amplitude = coverage, no lens sphere).
+            scratch: a dict the caller keeps over many calls on pupils of the same shape, where a route may keep
+                working buffers (the spectral route: its zero-padded FFT canvas); None: none kept.
         Returns:
             (..., K, K) real tensor: energy per sensor pixel, in units of pupil area (m²); divide by
             the clear-aperture area for fractions of the aperture's light.
@@ -155,3 +158,11 @@ def plane_batches(n: int, plane_elements: int) -> list[slice]:
     each) for planes of ``plane_elements`` samples."""
     step = max(1, BATCH_ELEMENTS // max(int(plane_elements), 1))
     return [slice(j, min(j + step, n)) for j in range(0, n, step)]
+
+
+def scratch_kwargs(route) -> dict:
+    """``{"scratch": {}}`` for a route whose ``intensity`` takes working buffers kept over many calls
+    (``Route.intensity``), else ``{}`` (a route of the user's own with the four-argument signature)."""
+    import inspect
+
+    return {"scratch": {}} if "scratch" in inspect.signature(route.intensity).parameters else {}

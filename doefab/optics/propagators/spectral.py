@@ -90,17 +90,53 @@ class SpectralRoute:
             out.append((torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
         return (ly, lx), out
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared, scratch=None) -> torch.Tensor:
         (ly, lx), mats = prepared
         wy, wxt, env = mats[index]
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)
         lead, flat = pupil.shape[:-2], pupil.reshape(-1, *pupil.shape[-2:])
+        batches = plane_batches(flat.shape[0], ly * lx)  # a few planes at a time (``BATCH_ELEMENTS``)
+        bufs = _buffers(flat, batches, (ly, lx), scratch)
         parts = []
-        for b in plane_batches(flat.shape[0], ly * lx):  # a few planes at a time (``BATCH_ELEMENTS``)
-            field = torch.fft.fft2(flat[b], s=(ly, lx))
-            re_im = torch.view_as_real(field)
-            inten = torch.addcmul(re_im[..., 0] * re_im[..., 0], re_im[..., 1], re_im[..., 1])
+        for b in batches:
+            if bufs is None:
+                field = torch.fft.fft2(flat[b], s=(ly, lx))
+            else:  # the same zero-padded transform, without a fresh padded copy per batch
+                c = bufs[0][:b.stop - b.start]
+                c[..., :flat.shape[-2], :flat.shape[-1]] = flat[b]
+                field = torch.fft.fft2(c)
+            re, im = torch.view_as_real(field).unbind(-1)
+            if bufs is None:
+                inten = torch.addcmul(re * re, im, im)
+            else:  # the same sum of squares, in a reused buffer
+                inten = torch.mul(re, re, out=bufs[1][:b.stop - b.start]).addcmul_(im, im)
             parts.append(wy @ inten @ wxt)
         out = (parts[0] if len(parts) == 1 else torch.cat(parts)).reshape(*lead, *parts[0].shape[-2:]) * scale**2
         return out * env if env is not None else out
+
+
+def _buffers(flat: torch.Tensor, batches: list[slice], size: tuple[int, int], scratch=None):
+    """(canvas, power) for the largest plane batch: a zero complex canvas of ``size`` into which each batch's
+    pupils are copied before its FFT (the samples outside the pupil stay zero, as every batch writes the same
+    pupil window) and a real buffer for the squared modulus; or None where fresh tensors per batch are needed:
+    a pupil that carries a gradient (buffers overwritten in place would break it), or one batch and no
+    ``scratch`` (nothing to reuse). ``scratch``: a dict the caller keeps over many calls
+    (``base.Route.intensity``), holding one pair per pupil and canvas shape. The results are those of
+    ``fft2(pupil, s=size)`` and a fresh sum of squares bit for bit; the buffers save two zero-filled allocations
+    of the padded size per batch."""
+    if torch.is_grad_enabled() and flat.requires_grad:
+        return None
+    need = max(b.stop - b.start for b in batches)
+    if scratch is None and len(batches) == 1:
+        return None
+
+    def fresh():
+        return flat.new_zeros((need, *size)), flat.new_empty((need, *size), dtype=flat.real.dtype)
+
+    if scratch is None:
+        return fresh()
+    key = ("spectral buffers", tuple(flat.shape[-2:]), tuple(size), flat.dtype, flat.device)
+    if key not in scratch or scratch[key][0].shape[0] < need:
+        scratch[key] = fresh()
+    return scratch[key]
