@@ -137,8 +137,9 @@ def demote_headings(text: str, top: int = 3) -> str:
 
 # paragraphs of prose in a results file that tell how a number came about rather than what it is
 HISTORY = re.compile(r"\b(replaced|re-measure\w*|swallowed|session|issue)\b", re.I)
-# a table cell that prints a missing number as Python formats it, not as a reader reads it ("—" and why)
-NAN_CELL = re.compile(r"\|\s*[+-]?nan\s*(?=\|)", re.I)
+# a number in a table that Python printed as "nan" ("nan", "+nan", "nan dB", "nan / 0.5"), not as a reader reads a
+# missing number ("—" and why); a word that begins with "nan" is not one
+NAN_CELL = re.compile(r"^\|.*(?<![\w.])[+-]?nan\b", re.I | re.M)
 
 
 def markdown_body(path: Path, problems: list[str]) -> str:
@@ -147,7 +148,7 @@ def markdown_body(path: Path, problems: list[str]) -> str:
     out = []
     text = path.read_text()
     if NAN_CELL.search(text):
-        problems.append(f"results: {path.name} prints 'nan' in a table cell: write '—' and "
+        problems.append(f"results: {path.name} prints 'nan' in a table: write '—' and "
                         "say why the number is missing")
     for para in text.strip().split("\n\n"):
         if not para.lstrip().startswith("|") and HISTORY.search(para):

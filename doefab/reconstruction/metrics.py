@@ -3,6 +3,8 @@ SAM (radians), depth MAE/RMSE/log10/δ<1.25."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from doefab.applications import HDR_PEAK, View, application
@@ -73,7 +75,9 @@ def metric_label(task: str, name: str) -> str:
 
 def metric_text(task: str, name: str, value: float, unit: bool = True) -> str:
     """A metric's value with its unit (``unit=False``: without), to the decimals reports print: "29.89 dB",
-    "0.387 m", "0.352 rad"."""
+    "0.387 m", "0.352 rad"; "—" for a value that is not a number."""
+    if math.isnan(value):
+        return "—"
     u = DISPLAY.get(task, {}).get(name, (name, ""))[1]
     return f"{value:.{DIGITS.get(u, 3)}f}" + (f" {u}" if u and unit else "")
 

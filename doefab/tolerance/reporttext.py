@@ -33,7 +33,8 @@ def delta_text(task: str, deltas: dict, ci: dict | None = None, names: bool = Tr
     ({metric: half-width of the change's 95 % interval}, ``delivered.change_noise``) "PSNR -0.3 ± 0.41 dB";
     ``names`` off: without the metrics' names ("-0.3 ± 0.41 dB")."""
     ci = ci or {}
-    return ", ".join(f"{_name(task, k) + ' ' if names else ''}{v:+.3g}"
+    return ", ".join(f"{_name(task, k) + ' ' if names else ''}—" if math.isnan(v) else
+                     f"{_name(task, k) + ' ' if names else ''}{v:+.3g}"
                      f"{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}".rstrip()
                      for k, v in deltas.items())
 
@@ -358,8 +359,8 @@ def _quantization(res: dict) -> list[str]:
             line += f" {'—' if v is None else metric_text(task, m, v)} | {change} |"
         lines.append(line)
     if net and not any(r.get("levels") == n and "network_scenes" in r for r in rows):
-        lines += ["", f"No change column: the design's own {n} levels are not among the level counts judged through "
-                      "the network."]
+        lines += ["", f"The change columns are empty: the design's own {n} levels are not among the level counts "
+                      "judged through the network."]
     return lines + ([""] + [NOISE_NOTE] if net and any("network_delta_ci95" in r for r in rows) else []) + [
         "", "![quantization](quantization.png)", ""]
 

@@ -69,12 +69,17 @@ def test_a_results_table_that_prints_nan_is_reported(tmp_path):
 
     page = tmp_path / "depth_error_sources.md"
     committed = (REPO / "benchmarks" / "results" / "depth_error_sources.md").read_text()
-    for text, found in ((committed, 0), (committed.replace("| — | — |", "| NaN | nan |", 1), 1),
-                        (committed.replace("| — | — |", "| 0.5 | nanometre |", 1), 0)):  # a word is not a cell
-        page.write_text(text)
+    cases = {"| NaN | — |": 1, "| nan | — |": 1, "| +nan ± 0.4 dB | — |": 1, "| nan dB / 0.5 | — |": 1,
+             "| 0.5 | nanometre |": 0}  # a word that begins with "nan" is no number
+    for cell, found in cases.items():
+        page.write_text(committed.replace("| — | — |", cell, 1))
         problems = []
         doefab_results.markdown_body(page, problems)
-        assert len(problems) == found and all("depth_error_sources.md prints 'nan'" in p for p in problems)
+        assert len(problems) == found and all("depth_error_sources.md prints 'nan'" in p for p in problems), cell
+    page.write_text(committed + "\nA paragraph that says nan | once.\n")  # prose is not a table
+    problems = []
+    doefab_results.markdown_body(page, problems)
+    assert problems == []
 
 
 def test_the_fab_page_explains_every_manifest_field():

@@ -196,10 +196,41 @@ def test_spectral_buffers_kept_over_calls_give_each_pupil_its_own_intensity(monk
     assert route.sizes(wide) == route.sizes(narrow)  # one canvas size for both
     monkeypatch.setattr(base, "BATCH_ELEMENTS", 2 * 48 * 60)  # batches of two planes and a remainder of one
     scratch, calls = {}, [(wide, pupil(30)), (narrow, pupil(29)), (wide, pupil(30)), (narrow, pupil(29, 1))]
+    double = FocalSetup(wide.x, wide.y, 5.4e-6, True, (550e-9,), 10e-3, 5.4e-6, 9, real_dtype=torch.float64)
+    calls.append((double, pupil(30).to(torch.complex128)))  # a double-precision pupil of a shape used before
     for s, p in calls:
         prepared = route.prepare(s)
         kept = route.intensity(p, 0, s, prepared, scratch=scratch)
         fresh = route.intensity(p.clone().requires_grad_(), 0, s, prepared).detach()  # a fresh copy per batch
         assert torch.equal(kept, fresh)
         assert torch.equal(route.intensity(p, 0, s, prepared), fresh)  # the buffers of one call
-    assert len(scratch) == 2
+    assert len(scratch) == 3
+
+
+def test_a_route_of_the_users_own_without_scratch_still_computes_psfs(small_camera, random_doe):
+    """A Route object whose ``intensity`` takes the four arguments only (no ``scratch``) computes the PSFs the
+    built-in route computes; a route whose signature cannot be read gets no scratch either."""
+    from doefab.optics.propagators.base import scratch_kwargs
+    from doefab.optics.propagators.spectral import SpectralRoute
+
+    class Own:
+        name = "own"
+
+        def __init__(self):
+            self.inner = SpectralRoute()
+
+        def check(self, setup):
+            self.inner.check(setup)
+
+        def prepare(self, setup):
+            return self.inner.prepare(setup)
+
+        def intensity(self, pupil, index, setup, prepared):
+            return self.inner.intensity(pupil, index, setup, prepared)
+
+    zs, kw = [0.5, 2.0, math.inf], dict(kernel_size=31)
+    own = doefab.split_aperture_psf(random_doe, small_camera, [450e-9, 650e-9], zs, route=Own(), **kw)
+    ref = doefab.split_aperture_psf(random_doe, small_camera, [450e-9, 650e-9], zs, **kw)
+    assert torch.equal(torch.as_tensor(own.coded), torch.as_tensor(ref.coded))
+    assert scratch_kwargs(Own()) == {} and scratch_kwargs(SpectralRoute()) == {"scratch": {}}
+    assert scratch_kwargs(type("Builtin", (), {"intensity": max})()) == {}  # max has no readable signature

@@ -667,7 +667,7 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     table = text.split("## Quantization")[1].split("![quantization]")[0]
     assert "| highlight PSNR, network told the nominal PSF | change from 16 levels |" in table
     assert "| n/a: the folder keeps only the 16-level map | — | — | — | — | — | — | — |" in table
-    assert "No change column" not in table
+    assert "The change columns are empty" not in table
     cells = []
     for lab in ("nominal_psf", "measured_psf"):  # the primary metric (highlight PSNR), nominal PSF first
         d, ci = rows[4]["network_delta"][lab], rows[4]["network_delta_ci95"][lab]
@@ -680,4 +680,16 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     from doefab.tolerance.reporttext import _quantization
 
     without = dict(res, quantization=[r for r in res["quantization"] if r["levels"] != 16])  # its own count not judged
-    assert "No change column: the design's own 16 levels are not among" in "\n".join(_quantization(without))
+    assert "The change columns are empty: the design's own 16 levels are not among" in "\n".join(_quantization(without))
+
+
+def test_a_metric_or_change_that_is_not_a_number_prints_a_dash():
+    """A delivered value or change that is NaN (a network's output on a scene went bad) prints "—", never "nan";
+    finite ones print as before."""
+    from doefab.reconstruction.metrics import metric_text
+    from doefab.tolerance.reporttext import delta_text
+
+    assert metric_text("hdr", "psnr", float("nan")) == "—" and metric_text("hdr", "psnr", 29.891) == "29.89 dB"
+    got = delta_text("hdr", {"psnr": float("nan"), "psnr_highlight": -1.234}, {"psnr": 0.4, "psnr_highlight": 0.5})
+    assert got == "PSNR —, highlight PSNR -1.23 ± 0.5 dB"
+    assert delta_text("hdr", {"psnr": float("nan")}, names=False) == "—"

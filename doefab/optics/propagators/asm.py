@@ -118,7 +118,8 @@ class ASMRoute:
         rd = setup.real_dtype
         return lenses, torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), (n, i0, j0)
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared, scratch=None) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared,
+                  scratch: dict | None = None) -> torch.Tensor:
         lenses, wy, wxt, (n, i0, j0) = prepared
         lam = setup.wavelengths[index]
         field = pupil * lenses[index]

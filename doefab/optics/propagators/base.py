@@ -13,6 +13,7 @@ fine pupil sampling, and the right tool for short plane-to-plane gaps, see ``ang
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -162,7 +163,10 @@ def plane_batches(n: int, plane_elements: int) -> list[slice]:
 
 def scratch_kwargs(route) -> dict:
     """``{"scratch": {}}`` for a route whose ``intensity`` takes working buffers kept over many calls
-    (``Route.intensity``), else ``{}`` (a route of the user's own with the four-argument signature)."""
-    import inspect
-
-    return {"scratch": {}} if "scratch" in inspect.signature(route.intensity).parameters else {}
+    (``Route.intensity``), else ``{}`` (a route of the user's own with the four-argument signature, or one whose
+    signature cannot be read)."""
+    try:
+        takes = "scratch" in inspect.signature(route.intensity).parameters
+    except (TypeError, ValueError):
+        takes = False
+    return {"scratch": {}} if takes else {}

@@ -71,7 +71,8 @@ class FFTRoute:
                         torch.from_numpy(wx.T.copy()).to(rd)))
         return out
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared, scratch=None) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared,
+                  scratch: dict | None = None) -> torch.Tensor:
         n, iv, iu, wy, wxt = prepared[index]
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)

@@ -67,7 +67,8 @@ class MFTRoute:
         weights = torch.from_numpy(np.outer(w, w) * setup.sensor_pitch**2).to(setup.real_dtype)
         return mats, weights
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared, scratch=None) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared,
+                  scratch: dict | None = None) -> torch.Tensor:
         mats, weights = prepared
         ey, ext = mats[index]
         lam = setup.wavelengths[index]

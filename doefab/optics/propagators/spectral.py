@@ -90,7 +90,8 @@ class SpectralRoute:
             out.append((torch.from_numpy(wy).to(rd), torch.from_numpy(wx.T.copy()).to(rd), env))
         return (ly, lx), out
 
-    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared, scratch=None) -> torch.Tensor:
+    def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared,
+                  scratch: dict | None = None) -> torch.Tensor:
         (ly, lx), mats = prepared
         wy, wxt, env = mats[index]
         lam = setup.wavelengths[index]
@@ -116,15 +117,16 @@ class SpectralRoute:
         return out * env if env is not None else out
 
 
-def _buffers(flat: torch.Tensor, batches: list[slice], size: tuple[int, int], scratch=None):
+def _buffers(flat: torch.Tensor, batches: list[slice], size: tuple[int, int], scratch: dict | None = None):
     """(canvas, power) for the largest plane batch: a zero complex canvas of ``size`` into which each batch's
     pupils are copied before its FFT (the samples outside the pupil stay zero, as every batch writes the same
     pupil window) and a real buffer for the squared modulus; or None where fresh tensors per batch are needed:
     a pupil that carries a gradient (buffers overwritten in place would break it), or one batch and no
     ``scratch`` (nothing to reuse). ``scratch``: a dict the caller keeps over many calls
-    (``base.Route.intensity``), holding one pair per pupil and canvas shape. The results are those of
-    ``fft2(pupil, s=size)`` and a fresh sum of squares bit for bit; the buffers save two zero-filled allocations
-    of the padded size per batch."""
+    (``base.Route.intensity``), holding one pair per pupil shape, canvas shape, dtype, device and inference mode
+    for as long as the caller keeps it: each pair holds at most ``BATCH_ELEMENTS`` samples (or one plane), 12 bytes
+    each in single precision (384 MiB), 24 in double. The results are those of ``fft2(pupil, s=size)`` and a fresh
+    sum of squares bit for bit; the buffers save two zero-filled allocations of the padded size per batch."""
     if torch.is_grad_enabled() and flat.requires_grad:
         return None
     need = max(b.stop - b.start for b in batches)
@@ -136,7 +138,8 @@ def _buffers(flat: torch.Tensor, batches: list[slice], size: tuple[int, int], sc
 
     if scratch is None:
         return fresh()
-    key = ("spectral buffers", tuple(flat.shape[-2:]), tuple(size), flat.dtype, flat.device)
+    key = ("spectral buffers", tuple(flat.shape[-2:]), tuple(size), flat.dtype, flat.device,
+           torch.is_inference_mode_enabled())  # an inference tensor cannot be written to outside inference mode
     if key not in scratch or scratch[key][0].shape[0] < need:
         scratch[key] = fresh()
     return scratch[key]
