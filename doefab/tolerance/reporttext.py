@@ -33,10 +33,13 @@ def delta_text(task: str, deltas: dict, ci: dict | None = None, names: bool = Tr
     ({metric: half-width of the change's 95 % interval}, ``delivered.change_noise``) "PSNR -0.3 ± 0.41 dB";
     ``names`` off: without the metrics' names ("-0.3 ± 0.41 dB")."""
     ci = ci or {}
-    return ", ".join(f"{_name(task, k) + ' ' if names else ''}—" if math.isnan(v) else
-                     f"{_name(task, k) + ' ' if names else ''}{v:+.3g}"
-                     f"{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}".rstrip()
-                     for k, v in deltas.items())
+
+    def one(k, v):
+        if math.isnan(v):
+            return "—"
+        return f"{v:+.3g}{'' if ci.get(k) is None else f' ± {ci[k]:.2g}'} {_unit(task, k)}".rstrip()
+
+    return ", ".join(f"{_name(task, k)} {one(k, v)}" if names else one(k, v) for k, v in deltas.items())
 
 
 def noise_of(row: dict, metric: str, label: str = "nominal_psf") -> float:

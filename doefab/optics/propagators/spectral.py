@@ -108,10 +108,7 @@ class SpectralRoute:
                 c[..., :flat.shape[-2], :flat.shape[-1]] = flat[b]
                 field = torch.fft.fft2(c)
             re, im = torch.view_as_real(field).unbind(-1)
-            if bufs is None:
-                inten = torch.addcmul(re * re, im, im)
-            else:  # the same sum of squares, in a reused buffer
-                inten = torch.mul(re, re, out=bufs[1][:b.stop - b.start]).addcmul_(im, im)
+            inten = torch.mul(re, re, out=None if bufs is None else bufs[1][:b.stop - b.start]).addcmul_(im, im)
             parts.append(wy @ inten @ wxt)
         out = (parts[0] if len(parts) == 1 else torch.cat(parts)).reshape(*lead, *parts[0].shape[-2:]) * scale**2
         return out * env if env is not None else out
@@ -130,14 +127,12 @@ def _buffers(flat: torch.Tensor, batches: list[slice], size: tuple[int, int], sc
     if torch.is_grad_enabled() and flat.requires_grad:
         return None
     need = max(b.stop - b.start for b in batches)
-    if scratch is None and len(batches) == 1:
-        return None
 
     def fresh():
         return flat.new_zeros((need, *size)), flat.new_empty((need, *size), dtype=flat.real.dtype)
 
     if scratch is None:
-        return fresh()
+        return fresh() if len(batches) > 1 else None
     key = ("spectral buffers", tuple(flat.shape[-2:]), tuple(size), flat.dtype, flat.device,
            torch.is_inference_mode_enabled())  # an inference tensor cannot be written to outside inference mode
     if key not in scratch or scratch[key][0].shape[0] < need:
