@@ -134,12 +134,14 @@ def _cgls(x0, mask, data, cols, otf, big, iters, dtype, pred=None):
     seen = norm2 > 1e-6 * norm2.amax(dim=(-2, -1), keepdim=True)
     scale = seen / norm2.clamp_min(1e-30).sqrt()
 
+    otf_conj = {k: otf[k].conj().resolve_conj() for k in views}  # materialised once, not in every adjoint
+
     def fwd(z):
         fx = torch.fft.rfft2(z * scale)
         return {k: torch.fft.irfft2(fx * otf[k], s=big) * mask[k] for k in views}
 
     def adj(r):
-        acc = sum(torch.fft.rfft2(r[k]) * otf[k].conj() for k in views)  # r is zero where a view is not kept
+        acc = sum(torch.fft.rfft2(r[k]) * otf_conj[k] for k in views)  # r is zero where a view is not kept
         return torch.fft.irfft2(acc, s=big) * scale
 
     def dot(a, c):
@@ -154,11 +156,14 @@ def _cgls(x0, mask, data, cols, otf, big, iters, dtype, pred=None):
     p, gamma = s, dot(s, s)
     # an image whose normal-equation residual has fallen to rounding level stops (CGLS breaks down there)
     floor = gamma * (100.0 * torch.finfo(dtype).eps) ** 2
-    for _ in range(iters):
+    for i in range(iters):
         q = fwd(p)
         alpha = torch.where(gamma > floor, gamma / sum(dot(q[k], q[k]) for k in views).clamp_min(1e-30), 0.0)
-        z = z + alpha * p
-        r = {k: r[k] - alpha * q[k] for k in views}
+        z.add_(alpha * p)
+        if i == iters - 1:
+            break  # the last step's residual and direction would go unused: their adjoint (FFTs) is not computed
+        for k in views:
+            r[k].sub_(alpha * q[k])
         s = adj(r)
         g_new = dot(s, s)
         p, gamma = s + g_new / gamma.clamp_min(1e-30) * p, g_new

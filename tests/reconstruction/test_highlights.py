@@ -13,13 +13,15 @@ K = 9
 M = K // 2
 
 
-def _psfs():
-    """A plain half (compact, 0.5 of the light) and a streak half (a weak cross, 0.5 of the light)."""
+def _psfs(one_sided=False):
+    """A plain half (compact, 0.5 of the light) and a streak half (a weak cross, 0.5 of the light; ``one_sided``:
+    its right and lower arms only, a PSF whose OTF is not real)."""
     plain = np.zeros((K, K))
     plain[M, M], plain[M, M - 1], plain[M, M + 1], plain[M - 1, M], plain[M + 1, M] = 0.4, 0.025, 0.025, 0.025, 0.025
     streak = np.zeros((K, K))
-    streak[M, :] = 0.005
-    streak[:, M] = 0.005
+    arm = slice(M, None) if one_sided else slice(None)
+    streak[M, arm] = 0.005 * (2 if one_sided else 1)
+    streak[arm, M] = 0.005 * (2 if one_sided else 1)
     streak[M, M] = 0.5 - 16 * 0.005
     return (torch.from_numpy(np.repeat(streak[None], 3, 0)).float(),
             torch.from_numpy(np.repeat(plain[None], 3, 0)).float())
@@ -43,26 +45,23 @@ def _scene(size=32):
     return s
 
 
-def _captures(scene):
-    pc, pu = _psfs()
+def _captures(scene, one_sided=False):
+    pc, pu = _psfs(one_sided)
     coded, uncoded = (np.clip(_render(scene, p), 0, 1) for p in (pc, pu))
     return pc, pu, coded, uncoded
 
 
-def test_cgls_converges_to_the_dense_least_squares_solution():
-    scene = _scene()
-    pc, pu, coded, uncoded = _captures(scene)
-    c_t, u_t = (torch.from_numpy(x)[None] for x in (coded, uncoded))
-    got = solve_highlights(c_t, u_t, pc.double(), pu.double(), iters=400, dtype=torch.float64)[0].numpy()
-    # independent: every pixel of the frame and of an M-px margin is an unknown; rows are the unclipped
-    # pixels of both captures; columns built by convolving unit impulses; Jacobi scaling from the dense
-    # columns; numpy's minimum-norm least squares from the same start
+def _dense_problems(scene, uncoded, coded, pc, pu):
+    """Per channel, built independently of the solve: the start ``x0`` (frame and M-px margin, flattened), the
+    matrix of the unclipped pixels of both captures (columns by convolving unit impulses), the residual at the
+    start and the Jacobi scaling from the dense columns."""
     size = scene.shape[-1]
     big = size + 2 * M
-    support = highlight_support(u_t)[0, 0].numpy() > 0
-    share = pu.sum(dim=(-2, -1)).numpy()
+    support = highlight_support(torch.from_numpy(uncoded)[None])[0, 0].numpy() > 0
+    share = pu.double().sum(dim=(-2, -1)).numpy()
+    out = []
     for c in range(3):
-        x0 = np.pad(np.where(support, 1.0 / share[c], uncoded[c] / share[c]), M, mode="edge")
+        x0 = np.pad(np.where(support, 1.0 / share[c], uncoded[c] / share[c]), M, mode="edge").ravel()
         cols, rhs = [], []
         for psf, y in ((pc, coded), (pu, uncoded)):
             keep = (y[c] < 0.98).ravel()
@@ -72,13 +71,49 @@ def test_cgls_converges_to_the_dense_least_squares_solution():
                 e[j] = 1.0
                 a[:, j] = convolve2d(e.reshape(big, big), psf[c].numpy(), mode="same")[M:-M, M:-M].ravel()
             cols.append(a[keep])
-            rhs.append((y[c].ravel() - a @ x0.ravel())[keep])
+            rhs.append((y[c].ravel() - a @ x0)[keep])
         a, r = np.concatenate(cols), np.concatenate(rhs)
         norm = np.linalg.norm(a, axis=0)
         scale = np.where(norm ** 2 > 1e-6 * (norm ** 2).max(), 1.0 / np.maximum(norm, 1e-300), 0.0)
-        z = np.linalg.lstsq(a * scale, r, rcond=None)[0]
-        want = np.clip(x0.ravel() + scale * z, 0, 256).reshape(big, big)[M:-M, M:-M]
-        np.testing.assert_allclose(got[c], want, rtol=1e-3, atol=1e-3)
+        out.append((x0, a * scale, r, scale))
+    return out
+
+
+def _frame(x, size):
+    return np.clip(x, 0, 256).reshape(size + 2 * M, size + 2 * M)[M:-M, M:-M]
+
+
+def test_cgls_converges_to_the_dense_least_squares_solution():
+    scene = _scene()
+    pc, pu, coded, uncoded = _captures(scene)
+    c_t, u_t = (torch.from_numpy(x)[None] for x in (coded, uncoded))
+    got = solve_highlights(c_t, u_t, pc.double(), pu.double(), iters=400, dtype=torch.float64)[0].numpy()
+    # independent: numpy's minimum-norm least squares of the scaled dense problem from the same start
+    for c, (x0, b, r, scale) in enumerate(_dense_problems(scene, uncoded, coded, pc, pu)):
+        z = np.linalg.lstsq(b, r, rcond=None)[0]
+        np.testing.assert_allclose(got[c], _frame(x0 + scale * z, scene.shape[-1]), rtol=1e-3, atol=1e-3)
+
+
+@pytest.mark.parametrize("iters", [1, 2, 3])
+def test_each_cgls_iterate_is_the_least_squares_minimiser_over_its_krylov_subspace(iters):
+    # k steps of CG on the normal equations minimise the residual over the k-dimensional Krylov subspace
+    # span{g, (BᵀB) g, …} with g = Bᵀr: built here by QR, without the recurrence; one step more or fewer differs.
+    # The solve takes its steps for the three colours together: one block-diagonal system
+    from scipy.linalg import block_diag
+
+    scene = _scene(16)
+    pc, pu, coded, uncoded = _captures(scene, one_sided=True)
+    c_t, u_t = (torch.from_numpy(x)[None] for x in (coded, uncoded))
+    got = solve_highlights(c_t, u_t, pc.double(), pu.double(), iters=iters, dtype=torch.float64)[0].numpy()
+    x0, b, r, scale = (list(z) for z in zip(*_dense_problems(scene, uncoded, coded, pc, pu)))
+    b, r = block_diag(*b), np.concatenate(r)
+    basis = [b.T @ r]
+    for _ in range(iters - 1):
+        basis.append(b.T @ (b @ basis[-1]))
+    v = np.linalg.qr(np.stack(basis, 1))[0]
+    z = np.split(v @ np.linalg.lstsq(b @ v, r, rcond=None)[0], 3)
+    for c in range(3):
+        np.testing.assert_allclose(got[c], _frame(x0[c] + scale[c] * z[c], scene.shape[-1]), rtol=1e-9, atol=1e-9)
 
 
 def test_the_streak_recovers_what_the_plain_capture_clips():
