@@ -80,6 +80,18 @@ def _median_rounds(rounds: list[dict]) -> dict:
     return {task: {k: statistics.median(r[task][k] for r in rounds) for k in rounds[0][task]} for task in TASKS}
 
 
+def _ratio(r: dict, task: str) -> str:
+    """Median over the rounds of this code's reconstruction time over the previous code's in the same round (the
+    two timed back to back, so the machine's drift from round to round cancels)."""
+    import statistics
+
+    rounds = r["rounds"]
+    if not rounds["baseline"]:
+        return "—"
+    pairs = zip(rounds["this_code"], rounds["baseline"])
+    return f"{statistics.median(n[task]['reconstruct_s'] / o[task]['reconstruct_s'] for n, o in pairs):.2f}"
+
+
 def table(r: dict) -> str:
     a = r["settings"]
     before = r.get("baseline")
@@ -91,13 +103,15 @@ def table(r: dict) -> str:
              "turns in alternating order, each task in a fresh process) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
              "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
-             "network (s) | training steps / s (batch 4) | training crop (px) |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
+             "network (s) | reconstruction, this code / previous (median of the rounds' ratios) | training steps / s "
+             "(batch 4) | training crop (px) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for task in TASKS:
         for name, tasks in runs:
             t = tasks[task]
+            ratio = _ratio(r, task) if tasks is r["tasks"] else ""
             lines.append(f"| {task} | {name} | {t['simulate_s']:.2f} | {t['reconstruct_s']:.2f} | "
-                         f"{t['first_call_s']:.2f} | {t['steps_per_s']:.2f} | {t['crop_px']:.0f} |")
+                         f"{t['first_call_s']:.2f} | {ratio} | {t['steps_per_s']:.2f} | {t['crop_px']:.0f} |")
     return "\n".join(lines + [""])
 
 
