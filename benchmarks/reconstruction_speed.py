@@ -81,8 +81,9 @@ def _median_rounds(rounds: list[dict]) -> dict:
 
 
 def _ratio(r: dict, task: str) -> str:
-    """Median over the rounds of this code's reconstruction time over the previous code's in the same round (the
-    two timed back to back, so the machine's drift from round to round cancels)."""
+    """Median over the rounds of this code's reconstruction time over the previous code's in the same round (each
+    code's three tasks in turn, the order alternating from round to round), so the machine's drift from round to
+    round cancels."""
     import statistics
 
     rounds = r["rounds"]
@@ -98,7 +99,8 @@ def table(r: dict) -> str:
     rev = before["revision"] if before else "none"
     runs = (([(f"previous code ({rev})", before["tasks"])] if before else [])
             + [(f"this code ({r.get('revision', '?')})", r["tasks"])])
-    lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}`: torch {a['torch']} on "
+    rounds = f" --rounds {a['rounds']}" if a["rounds"] != 3 else ""
+    lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}{rounds}`: torch {a['torch']} on "
              f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds (the codes taking "
              "turns in alternating order, each task in a fresh process) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",

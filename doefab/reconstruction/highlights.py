@@ -92,6 +92,7 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
         first = views if not bound_iters else (("coded",) if "coded" in views else views)
         ref = "uncoded" if "uncoded" in first else "coded"
         otf = {k: psf_to_otf(psfs[k], big) for k in views}
+        otf_conj = {k: o.conj().resolve_conj() for k, o in otf.items()}  # the adjoint's, materialised once
         otf_sq = {k: psf_to_otf(torch.flip(psfs[k] ** 2, (-2, -1)), big) for k in views}
         share = psfs[ref].sum(dim=(-2, -1)).clamp_min(1e-6).view(1, 3, 1, 1)
         support = highlight_support(caps[ref], clipped)
@@ -102,8 +103,8 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
         ys = {k: F.pad(caps[k], pad) * keep[k] for k in views}
         # each view's column norms² over its unclipped pixels (Jacobi preconditioner), reused by every restart
         cols = {k: torch.fft.irfft2(torch.fft.rfft2(keep[k]) * otf_sq[k], s=big) for k in views}
-        x = _cgls(x, {k: keep[k] for k in first}, {k: ys[k] for k in first}, {k: cols[k] for k in first}, otf,
-                  big, iters, dtype)
+        x = _cgls(x, {k: keep[k] for k in first}, {k: ys[k] for k in first}, {k: cols[k] for k in first},
+                  (otf, otf_conj), big, iters, dtype)
         if bound_iters:
             # bounds from the coded capture only (module docstring: the plain one's bound nothing the start does not)
             over = {"coded": F.pad((caps["coded"] >= clipped).to(dtype), pad)} if "coded" in views else {}
@@ -117,15 +118,17 @@ def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torc
                     low = o * (pred[k] < clipped).to(dtype)
                     mask[k], data[k] = keep[k] + low, ys[k] + clipped * low
                     col[k] = cols[k] + torch.fft.irfft2(torch.fft.rfft2(low) * otf_sq[k], s=big)
-                x = _cgls(x, mask, data, col, otf, big, n, dtype, pred)
+                x = _cgls(x, mask, data, col, (otf, otf_conj), big, n, dtype, pred)
         return x[..., m:m + h, m:m + w].clamp(0.0, 256.0).to(coded.dtype)
 
 
-def _cgls(x0, mask, data, cols, otf, big, iters, dtype, pred=None):
+def _cgls(x0, mask, data, cols, otfs, big, iters, dtype, pred=None):
     """``iters`` Jacobi-preconditioned CGLS iterations of min Σ_v ‖mask_v (p_v ∗ x − data_v)‖² from ``x0``.
     ``cols``: per view, each unknown's squared column norm over the masked pixels, ``(mask_v ⋆ p_v²)``;
-    ``pred``: per view, ``p_v ∗ x0`` if already computed."""
+    ``otfs``: (OTFs, their complex conjugates), each a dict per view; ``pred``: per view, ``p_v ∗ x0`` if already
+    computed."""
     views = tuple(mask)
+    otf, otf_conj = otfs
     # Jacobi preconditioning: each unknown scaled by 1 / its column norm ‖A e_j‖ (the light of pixel j that
     # lands on the pixels the views keep) — pixels deep inside a large clipped blob reach few of them and would
     # otherwise converge last.
@@ -133,8 +136,6 @@ def _cgls(x0, mask, data, cols, otf, big, iters, dtype, pred=None):
     # unknowns whose light reaches (almost) no kept pixel stay at the start: nothing measures them
     seen = norm2 > 1e-6 * norm2.amax(dim=(-2, -1), keepdim=True)
     scale = seen / norm2.clamp_min(1e-30).sqrt()
-
-    otf_conj = {k: otf[k].conj().resolve_conj() for k in views}  # materialised once, not in every adjoint
 
     def fwd(z):
         fx = torch.fft.rfft2(z * scale)
