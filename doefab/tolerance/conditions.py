@@ -139,9 +139,18 @@ def clean() -> Conditions:
 
 
 def fine_planes(depths, refine: int = DEPTH_REFINE) -> tuple:
-    """Planes ``refine`` times finer than ``depths`` (uniform in inverse depth between the nearest and farthest)."""
-    inv = np.linspace(1 / min(depths), 1 / max(depths), (len(depths) - 1) * refine + 1)
-    return tuple(float(1 / v) for v in inv)
+    """Planes ``refine`` times finer than ``depths`` everywhere, nearest first: each of ``depths`` (metres > 0,
+    ``inf`` allowed) and ``refine − 1`` planes between each two neighbours, evenly spaced in inverse depth (as the
+    blur grows). A scene's depth is thus rendered at most a ``2·refine``-th of the network's plane spacing from its
+    own, wherever it lies, and the network's planes are among them (their PSFs are the rendering planes' own).
+
+    Example: ``fine_planes([1.0, 2.0], 2)`` → ``(1.0, 1.3333…, 2.0)`` (1/z = 1, 0.75, 0.5 per metre)."""
+    zs = sorted({float(z) for z in depths})
+    out = zs[:1]
+    for near, far in zip(zs, zs[1:]):
+        inv = np.linspace(1 / near, 1 / far, refine + 1)[1:-1]
+        out += [float(1 / v) for v in inv] + [far]
+    return tuple(out)
 
 
 def honest(task: str, design_dir, split: str, parts: int = 6, budget: dict | None = None,
@@ -194,7 +203,8 @@ def _key(task, design, split, n, budget, kernel, chain) -> str:
     from doefab.fabrication.levels import levels_sha256
 
     b = {k: v for k, v in budget.items() if k != "defaults_used"}
-    text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, DEPTH_REFINE,
+    planes = list(fine_planes(design.depths)) if has(task, "depth") else None  # the rendering planes themselves
+    text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, planes,
                        PART_SEEDS[split], list(design.depths), list(design.wavelengths), kernel,
                        design.camera.to_dict(), sorted(chain.items()), model_sources_sha256()], sort_keys=True,
                       default=str)

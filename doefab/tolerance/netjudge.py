@@ -110,6 +110,20 @@ class NetworkJudge:
         return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float(),
                                    depths=tuple(judge.design.depths))
 
+    def at_network_planes(self, rendered):
+        """The pair ``rendered`` (on the rendering planes) at the network's planes when those are among them
+        (``conditions.fine_planes`` keeps them: a PSF at a plane is the same whichever other planes are
+        computed), else None."""
+        import dataclasses
+
+        planes = np.asarray(rendered.depths, np.float64)
+        idx = [np.flatnonzero(np.isclose(planes, z, rtol=1e-12, atol=0.0)) for z in self.rec.pair.depths]
+        if any(len(i) != 1 for i in idx):
+            return None
+        take = [int(i[0]) for i in idx]
+        return dataclasses.replace(rendered, coded=rendered.coded[take], uncoded=rendered.uncoded[take],
+                                   depths=tuple(self.rec.pair.depths))
+
     def conditions(self, err: PartErrors, rendered):
         """The ``Conditions`` of one part (``tolerance.conditions``): its captures made through ``rendered`` (its
         PSF pair on the rendering planes), its camera's crosstalk unmixed with a calibration drawn with the
@@ -144,8 +158,11 @@ class NetworkJudge:
         nominal = height is None and err == PartErrors()
         if nominal and self._nominal is not None:  # the error-free part: judged once (the tornado's base)
             return copy.deepcopy(self._nominal)
-        measured = self.pair(err, height)
-        rendered = measured if self.render_judge is self.base else self.pair(err, height, self.render_judge)
+        if self.render_judge is self.base:
+            rendered = measured = self.pair(err, height)
+        else:
+            rendered = self.pair(err, height, self.render_judge)
+            measured = self.at_network_planes(rendered) or self.pair(err, height)
         cond = self.conditions(err, rendered)
         response, noise = self.sensor()
         rows = {label: [] for label in LABELS}

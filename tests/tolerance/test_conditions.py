@@ -47,11 +47,35 @@ def test_every_split_has_its_own_fabricated_parts(honest):
 
 def test_depth_is_rendered_between_the_networks_planes(honest, depth_design):
     planes = honest["test"].parts[0].depths
-    net = Design.load(depth_design).depths
+    net = sorted(Design.load(depth_design).depths)
     assert len(planes) == (len(net) - 1) * C.DEPTH_REFINE + 1
-    inv = np.array([1 / z for z in planes])
-    assert np.allclose(np.diff(inv), np.diff(inv)[0])  # uniform in inverse depth
-    assert sum(any(abs(z - w) < 1e-9 for w in net) for z in planes) == len(net)  # the rest lie between them
+    assert all(any(z == w for z in planes) for w in net)  # the network's planes are among them
+    inv = 1 / np.array(planes)
+    for near, far in zip(net, net[1:]):  # the rest lie between them, evenly in inverse depth within each interval
+        inside = inv[(inv <= 1 / near) & (inv >= 1 / far)]
+        assert len(inside) == C.DEPTH_REFINE + 1
+        assert np.allclose(np.diff(inside), (1 / far - 1 / near) / C.DEPTH_REFINE, rtol=1e-12)
+
+
+@pytest.mark.parametrize("net", [np.arange(1.0, 5.01, 0.25), 1 / np.linspace(1.0, 0.2, 17), np.array([0.5, 0.7, 3.0])])
+def test_a_rendered_depth_is_never_farther_from_its_plane_than_a_fraction_of_the_networks_spacing(net):
+    """Wherever a depth lies, the plane it is rendered at (the nearest in inverse depth, ``plane_masks``) is within
+    half a rendering step, a ``2·refine``-th of the network's local plane spacing in inverse depth: checked by brute
+    force on a dense grid of depths, for planes even in depth (the shipped depth design's), even in inverse depth
+    and uneven."""
+    fine = 1 / np.array(C.fine_planes(net))
+    nets = np.sort(1 / net)
+    q = np.linspace(nets[0], nets[-1], 200_001)  # inverse depths
+    err = np.abs(q[:, None] - fine[None, :]).min(axis=1)
+    j = np.clip(np.searchsorted(nets, q), 1, len(nets) - 1)
+    spacing = nets[j] - nets[j - 1]  # the network's plane spacing where q lies
+    assert np.all(err <= spacing / (2 * C.DEPTH_REFINE) * (1 + 1e-9))
+
+
+def test_fine_planes_keep_a_plane_at_infinity_and_a_single_plane():
+    assert C.fine_planes([2.0, 1.0], 2) == pytest.approx((1.0, 4 / 3, 2.0), rel=1e-15)
+    assert C.fine_planes([2.0, float("inf")], 2) == (2.0, 4.0, float("inf"))
+    assert C.fine_planes([3.0]) == (3.0,)
 
 
 def test_honest_captures_differ_from_clean_ones_of_the_same_scene(honest, depth_design):

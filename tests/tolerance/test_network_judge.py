@@ -30,7 +30,7 @@ def test_perfect_part_reads_the_same_with_either_psf(judge):
 
 def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_it_back(judge, monkeypatch):
     """The DOE off centre across the split line: told the nominal PSF, the depth network reads the part's
-    captures worse the larger the decenter (MAE 0.42 m perfect, 0.57 m at 0.2 mm, 0.88 m at 0.4 mm), at 0.4 mm
+    captures worse the larger the decenter (MAE 0.42 m perfect, 0.59 m at 0.2 mm, 0.92 m at 0.4 mm), at 0.4 mm
     worse than a depth-blind guess (the scene's median depth everywhere, 0.84 m) that the perfect part's reading
     halves; told the part's own PSF pair, it reads them about as well as the perfect part's (within 15 %). The
     judge's 0.4 mm numbers are those of the captures it rendered, each reconstruction repeated here and its MAE
@@ -41,9 +41,10 @@ def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_i
     perfect = judge.evaluate(PartErrors())["nominal_psf"]["mae"]
     small = judge.evaluate(PartErrors(mount_shift=(200e-6, 0.0)))
     seen = {}
-    real_batch, real_pair = specs.make_batch, judge.pair
+    real_batch, real_measured = specs.make_batch, judge.at_network_planes
     monkeypatch.setattr(specs, "make_batch", lambda *a, **k: seen.setdefault("batch", real_batch(*a, **k)))
-    monkeypatch.setattr(judge, "pair", lambda *a, **k: seen.setdefault("pair", real_pair(*a, **k)))
+    # the pair the network is told: the part's own, at the network's planes (taken from the rendering planes')
+    monkeypatch.setattr(judge, "at_network_planes", lambda *a, **k: seen.setdefault("pair", real_measured(*a, **k)))
     r = judge.evaluate(PartErrors(mount_shift=(400e-6, 0.0)))
     coded, uncoded, target = seen["batch"]
     t = target[0].numpy()
@@ -159,9 +160,9 @@ def test_the_error_free_part_scores_what_the_evaluation_scores_on_the_same_scene
 
 def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_part_at_its_own(monkeypatch):
     """Depth scenes are rendered through the part's PSFs at the evaluation's fine planes (``fine_planes``: 65
-    between 1 and 5 m, uniform in inverse depth, all but 6 of them between two of the network's planes, which are
-    uniform in depth), while the network, told the part's measured pair, gets it at its own 17 planes; both pairs
-    are computed for the part's errors."""
+    between 1 and 5 m, the network's 17 and three between each two of them), while the network, told the part's
+    measured pair, gets it at its own 17 planes: taken from the rendering planes' PSFs, computed once for the
+    part's errors."""
     import torch
 
     import doefab.reconstruction.evaluate  # noqa: F401 - imported before make_batch is replaced, as in use
@@ -202,11 +203,11 @@ def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_pa
     rendered = np.array(seen["rendered"].depths)
     assert rendered == pytest.approx(fine) and len(rendered) == 65
     on_a_network_plane = np.isclose(rendered[:, None], network_planes[None, :], rtol=0, atol=1e-9).any(axis=1)
-    assert int(on_a_network_plane.sum()) == 6  # 1, 1.25, 2, 2.5, 4 and 5 m
+    assert int(on_a_network_plane.sum()) == 17  # every network plane, and three between each two
     assert float(seen["rendered"].coded[0, 0, 0, 0]) == 65.0  # computed on the fine planes
     measured = told[1]
     assert told[0] is None and np.array(measured.depths) == pytest.approx(network_planes)
-    assert float(measured.coded[0, 0, 0, 0]) == 17.0 and sorted(n for n, _ in asked) == [17, 65]
+    assert float(measured.coded[0, 0, 0, 0]) == 65.0 and [n for n, _ in asked] == [65]  # the fine planes' own PSFs
     assert all(e == err for _, e in asked)
 
 
