@@ -76,6 +76,7 @@ MEASUREMENTS = (
     Measurement("hdr_loss_pilot", "benchmarks/hdr_loss_pilot.py", (R + "hdr_loss_pilot.md",)),
     Measurement("depth_training_crop", "benchmarks/depth_training_pilot.py", (R + "depth_training_crop.md",)),
     Measurement("depth_error_sources", "benchmarks/depth_error_sources.py", (R + "depth_error_sources.md",)),
+    Measurement("render_planes", "benchmarks/render_planes.py", (R + "render_planes.md",)),
     Measurement("hdr_real_images", "benchmarks/hdr_real_images.py", (R + "hdr_real_images.json",),
                 json_table="hdr_real_images"),
     Measurement("tolerance_studies", "benchmarks/tolerance_studies.py", (R + "tolerance_studies.md",)),
