@@ -145,7 +145,12 @@ def fine_planes(depths, refine: int = DEPTH_REFINE) -> tuple:
     own, wherever it lies, and the network's planes are among them (their PSFs are the rendering planes' own).
 
     Example: ``fine_planes([1.0, 2.0], 2)`` → ``(1.0, 1.3333…, 2.0)`` (1/z = 1, 0.75, 0.5 per metre)."""
+    from doefab.errors import DoefabError
+
     zs = sorted({float(z) for z in depths})
+    if int(refine) != refine or refine < 1 or not zs or not zs[0] > 0:
+        raise DoefabError(f"fine planes need depths > 0 m and a whole refinement ≥ 1, got {list(depths)} and "
+                          f"{refine}: e.g. fine_planes([1.0, 2.0], 4)")
     out = zs[:1]
     for near, far in zip(zs, zs[1:]):
         inv = np.linspace(1 / near, 1 / far, refine + 1)[1:-1]

@@ -162,7 +162,8 @@ class NetworkJudge:
             rendered = measured = self.pair(err, height)
         else:
             rendered = self.pair(err, height, self.render_judge)
-            measured = self.at_network_planes(rendered) or self.pair(err, height)
+            measured = self.at_network_planes(rendered)
+            measured = self.pair(err, height) if measured is None else measured
         cond = self.conditions(err, rendered)
         response, noise = self.sensor()
         rows = {label: [] for label in LABELS}

@@ -384,3 +384,33 @@ def test_measured_conditions_with_a_camera_use_it_for_every_scene_and_say_so():
     d = cond.describe()
     assert d["crosstalk_source"] == "measured" and d["budget_sha256"] is None and len(d["crosstalk_sha256"]) == 16
     assert C.measured(pair, "val").describe().get("crosstalk_source") is None  # the budget's sensor otherwise
+
+
+def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(depth_design):
+    """The network judge takes a part's pair at the network's planes from the PSFs of its rendering planes: a PSF at
+    a plane does not depend on which other planes are computed with it (plane batches of different sizes), so the
+    rendering planes' PSFs at the network's planes are, bit for bit, those computed on the network's planes alone."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge
+
+    net = PSFJudge(depth_design, 1)
+    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
+                    chain=net.chain)
+    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
+    halves = ("coded", "uncoded")
+    alone, rendered = net.psfs(err, halves, 31), fine.psfs(err, halves, 31)
+    take = [fine.design.depths.index(z) for z in net.design.depths]
+    assert len(take) == 3 and len(fine.design.depths) == 9
+    for h in halves:
+        assert torch.equal(rendered[h][take], alone[h])
+        assert not torch.equal(rendered[h][take], rendered[h][[t + 1 if t + 1 < 9 else t - 1 for t in take]])
+
+
+@pytest.mark.parametrize("depths, refine", [([0.0, 1.0], 4), ([1.0, 2.0], 0), ([], 4), ([1.0, 2.0], 1.5)])
+def test_fine_planes_refuse_what_has_no_planes_naming_a_call_that_works(depths, refine):
+    from doefab.errors import DoefabError
+
+    with pytest.raises(DoefabError, match=r"depths > 0 m and a whole refinement ≥ 1.*fine_planes\(\[1.0, 2.0\], 4\)"):
+        C.fine_planes(depths, refine)

@@ -1,6 +1,7 @@
 """Network-level judge: a perfect part scores as the nominal design, and the depth network reads the measured
 PSF pair it is given (its cross-blur cost volume) — a mounting error then changes what the judge reports."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -174,14 +175,15 @@ def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_pa
     network_planes = np.array(judge.rec.pair.depths)
     asked = []
 
-    class FakeJudge:  # PSFs whose value names the planes they were computed on; records what it was asked
+    class FakeJudge:  # PSFs whose value at each plane is that plane's depth; records what it was asked
         def __init__(self, design, supersample=1, margin=None, chain=None, device=None):
             self.design, self.supersample, self.margin, self.chain, self.device = design, supersample, margin, chain, device
 
         def psfs(self, err, halves, kernel):
             asked.append((len(self.design.depths), err))
             shape = (len(self.design.depths), len(self.design.wavelengths), kernel, kernel)
-            return {h: torch.full(shape, float(len(self.design.depths))) for h in halves}
+            z = torch.tensor(self.design.depths, dtype=torch.float64)[:, None, None, None]
+            return {h: z.expand(shape).clone() for h in halves}
 
     from doefab.design.design import Design
 
@@ -204,11 +206,15 @@ def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_pa
     assert rendered == pytest.approx(fine) and len(rendered) == 65
     on_a_network_plane = np.isclose(rendered[:, None], network_planes[None, :], rtol=0, atol=1e-9).any(axis=1)
     assert int(on_a_network_plane.sum()) == 17  # every network plane, and three between each two
-    assert float(seen["rendered"].coded[0, 0, 0, 0]) == 65.0  # computed on the fine planes
+    assert seen["rendered"].coded[:, 0, 0, 0].numpy() == pytest.approx(fine, rel=1e-6)  # computed on the fine planes
     measured = told[1]
     assert told[0] is None and np.array(measured.depths) == pytest.approx(network_planes)
-    assert float(measured.coded[0, 0, 0, 0]) == 65.0 and [n for n, _ in asked] == [65]  # the fine planes' own PSFs
-    assert all(e == err for _, e in asked)
+    # the fine planes' own PSFs at the network's planes, each at its plane, and no second computation
+    for half in (measured.coded, measured.uncoded):
+        assert half[:, 0, 0, 0].numpy() == pytest.approx(network_planes, rel=1e-6)
+    assert [n for n, _ in asked] == [65] and all(e == err for _, e in asked)
+    shifted = replace(seen["rendered"], depths=tuple(z * (1 + 1e-6) for z in seen["rendered"].depths))
+    assert judge.at_network_planes(shifted) is None  # planes not among them: the pair is computed on its own
 
 
 def test_the_judges_scenes_are_checked_before_any_work_and_name_the_studys_run():
