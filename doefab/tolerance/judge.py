@@ -36,7 +36,7 @@ from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
 from doefab.tolerance.sources import apply_psf_effects, tilt_phase_factor
 
-__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "DEFAULT_MARGIN"]
+__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "DEFAULT_MARGIN"]
 
 DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
@@ -75,6 +75,20 @@ def compose_overlay(err: PartErrors, chain: dict, n_masks: int) -> tuple[list, l
         shifts.append((dx, dy))
         rots.append(th)
     return shifts, rots
+
+
+def psf_source(err: PartErrors | None = None, height=None) -> str:
+    """What a part's PSFs are computed from, as ``PSFJudge.reuse`` keys them: the part's errors, or an explicit
+    height map's digest (metres, on the judge's grid).
+
+    Example:
+        >>> psf_source(PartErrors()) == psf_source(PartErrors())
+        True
+    """
+    if height is not None:
+        h = np.ascontiguousarray(np.asarray(height, np.float64))
+        return "height " + hashlib.sha256(h.tobytes()).hexdigest() + str(tuple(h.shape))
+    return "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
 
 
 class PSFJudge:
@@ -152,12 +166,28 @@ class PSFJudge:
         todo = tuple(h for h in halves if h not in got)
         if todo:
             out = compute(todo)
+            self.keep(source, {h: out[h] for h in todo})
             for h in todo:
-                self._kept[(source, h)] = out[h].detach().clone()
                 got[h] = crop(out[h])
-            while len(self._kept) > len(todo) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
-                self._kept.popitem(last=False)  # the oldest first; this call's PSFs stay
         return {h: got[h] for h in halves}
+
+    def keep(self, source: str, psfs: dict) -> None:
+        """Keep ``psfs`` ({half: PSF before any PSF-level effect}) of ``source`` (``psf_source``) for ``reuse``,
+        the oldest others dropped beyond ``KEEP_BYTES`` (these stay)."""
+        for h, v in psfs.items():
+            self._kept[(source, h)] = v.detach().clone()
+            self._kept.move_to_end((source, h))
+        while len(self._kept) > len(psfs) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
+            self._kept.popitem(last=False)
+
+    def take_planes(self, other: PSFJudge, source: str, take) -> None:
+        """Keep, for ``reuse``, the PSFs ``other`` (a judge of the same grid on more planes) keeps for ``source``
+        at its planes ``take`` (this judge's planes, in order): a PSF at a plane is the same whichever other planes
+        are computed with it, so the network judge's rendering PSFs serve the PSF metric's on the network's planes.
+        """
+        got = {h: v[list(take)] for (s, h), v in other._kept.items() if s == source}
+        if got:
+            self.keep(source, got)
 
     @contextmanager
     def computing_at(self, kernel: int | None):
@@ -257,7 +287,7 @@ class PSFJudge:
         """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""
         if any(not 0 <= v < 0.5 for v in err.crosstalk):
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
-        source = "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
+        source = psf_source(err)
         k = int(kernel or self.task.kernel_size)
         shared = err.axial_gap == 0 or self.fine.doe_is_stop  # a gap in front of a lens stop mixes the window
         big = max(k, self._min_kernel) if shared else k
@@ -278,7 +308,7 @@ class PSFJudge:
     def height_psfs(self, height, halves=("coded",), kernel: int | None = None) -> dict:
         """{half: PSF} of an explicit height map (metres, on the judge's grid; the quantization study)."""
         h = torch.as_tensor(np.asarray(height, np.float64))
-        source = "height " + hashlib.sha256(h.numpy().tobytes()).hexdigest() + str(tuple(h.shape))
+        source = psf_source(height=h)
 
         def compute(todo):
             plan = self.plan(halves, 0.0, kernel)

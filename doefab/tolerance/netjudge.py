@@ -110,19 +110,40 @@ class NetworkJudge:
         return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float(),
                                    depths=tuple(judge.design.depths))
 
+    def network_planes_in(self, depths) -> list[int] | None:
+        """The index of each of the network's planes among ``depths`` (metres) when all are there, else None."""
+        planes = np.asarray(depths, np.float64)
+        idx = [np.flatnonzero(np.isclose(planes, z, rtol=1e-12, atol=0.0)) for z in self.rec.pair.depths]
+        return None if any(len(i) != 1 for i in idx) else [int(i[0]) for i in idx]
+
     def at_network_planes(self, rendered):
         """The pair ``rendered`` (on the rendering planes) at the network's planes when those are among them
         (``conditions.fine_planes`` keeps them: a PSF at a plane is the same whichever other planes are
         computed), else None."""
         import dataclasses
 
-        planes = np.asarray(rendered.depths, np.float64)
-        idx = [np.flatnonzero(np.isclose(planes, z, rtol=1e-12, atol=0.0)) for z in self.rec.pair.depths]
-        if any(len(i) != 1 for i in idx):
+        take = self.network_planes_in(rendered.depths)
+        if take is None:
             return None
-        take = [int(i[0]) for i in idx]
         return dataclasses.replace(rendered, coded=rendered.coded[take], uncoded=rendered.uncoded[take],
                                    depths=tuple(self.rec.pair.depths))
+
+    def rendered_pair(self, err: PartErrors, height=None):
+        """(rendering pair, the pair the network is told): the part's PSFs on the rendering planes and at the
+        network's. For depth the second is taken from the first, and the base judge keeps it for the part's PSF
+        metric (``PSFJudge.take_planes``), so no plane is computed twice."""
+        from doefab.tolerance.judge import psf_source
+
+        if self.render_judge is self.base:
+            pair = self.pair(err, height)
+            return pair, pair
+        rendered = self.pair(err, height, self.render_judge)
+        measured = self.at_network_planes(rendered)
+        if measured is None:
+            return rendered, self.pair(err, height)
+        take = self.network_planes_in(rendered.depths)
+        self.base.take_planes(self.render_judge, psf_source(err, height), take)
+        return rendered, measured
 
     def conditions(self, err: PartErrors, rendered):
         """The ``Conditions`` of one part (``tolerance.conditions``): its captures made through ``rendered`` (its
@@ -158,12 +179,7 @@ class NetworkJudge:
         nominal = height is None and err == PartErrors()
         if nominal and self._nominal is not None:  # the error-free part: judged once (the tornado's base)
             return copy.deepcopy(self._nominal)
-        if self.render_judge is self.base:
-            rendered = measured = self.pair(err, height)
-        else:
-            rendered = self.pair(err, height, self.render_judge)
-            measured = self.at_network_planes(rendered)
-            measured = self.pair(err, height) if measured is None else measured
+        rendered, measured = self.rendered_pair(err, height)
         cond = self.conditions(err, rendered)
         response, noise = self.sensor()
         rows = {label: [] for label in LABELS}

@@ -55,7 +55,8 @@ def evaluate_part(design_dir: str, supersample: int, errors: dict, networks: boo
     """PSF metrics of a part given as ``PartErrors`` fields (and, with ``networks``, its delivered quality: the
     means over the scenes under "network", each scene's values under "network_scenes")."""
     err = PartErrors(**errors)
-    # the network's PSF pair first: the PSF metric's coded PSF is its crop (``PSFJudge.reuse``)
+    # the network's PSF pair first: the PSF metric's coded PSF is its crop (``PSFJudge.reuse``; for depth, of the
+    # rendering PSFs at the network's planes: ``NetworkJudge.rendered_pair``)
     net = network_judge_for(design_dir, supersample, weights_dir, networks).scenes(err) if networks else None
     res = judge_for(design_dir, supersample).evaluate(err)
     if networks:
@@ -103,9 +104,11 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
-        kernel = network_judge_for(design_dir, 1, weights_dir, networks).rec.pair.coded.shape[-1]  # the network's
-        with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up
-            for s in {int(grids.get(k.name, 1)) for k in present}:
+        nj = network_judge_for(design_dir, 1, weights_dir, networks)
+        kernel = nj.rec.pair.coded.shape[-1]  # the network's
+        with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up, where it
+            # takes them from the design's planes (depth renders on finer planes: nothing to take up there)
+            for s in {int(grids.get(k.name, 1)) for k in present} if nj.render_judge is nj.base else ():
                 stack.enter_context(judge_for(design_dir, s).computing_at(kernel))
             psf = tornado(design_dir, budget, grids, False, progress=progress)
         top = {r["error"] for r in psf[:network_top]}

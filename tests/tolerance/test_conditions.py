@@ -409,6 +409,34 @@ def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(d
         assert not torch.equal(rendered[h][take], rendered[h][[t + 1 if t + 1 < 9 else t - 1 for t in take]])
 
 
+def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(depth_design, monkeypatch):
+    """After the network judge took a part's pair from its rendering planes (``take_planes``), the design's judge
+    serves that part's PSF metric from them, at its own kernel or the network's, without computing a PSF: the same,
+    bit for bit, as a judge with nothing kept computes; another part is computed."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge, psf_source
+
+    net = PSFJudge(depth_design, 1)
+    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
+                    chain=net.chain)
+    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
+    fine.psfs(err, ("coded", "uncoded"), 31)
+    net.take_planes(fine, psf_source(err), [fine.design.depths.index(z) for z in net.design.depths])
+    fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 31)
+
+    def no_plan(*a, **k):
+        raise AssertionError("computed a PSF the rendering planes hold")
+    monkeypatch.setattr(net, "plan", no_plan)
+    served = net.psfs(err, ("coded", "uncoded"), 31)
+    assert all(torch.equal(served[h], fresh[h]) for h in served)
+    c = 31 // 2 - 21 // 2
+    assert torch.equal(net.psfs(err, ("coded",), 21)["coded"], fresh["coded"][..., c:c + 21, c:c + 21])
+    with pytest.raises(AssertionError, match="rendering planes hold"):
+        net.psfs(PartErrors(mount_shift=(3e-6, 2e-6)), ("coded",), 21)
+
+
 @pytest.mark.parametrize("depths, refine", [([0.0, 1.0], 4), ([1.0, 2.0], 0), ([], 4), ([1.0, 2.0], 1.5)])
 def test_fine_planes_refuse_what_has_no_planes_naming_a_call_that_works(depths, refine):
     from doefab.errors import DoefabError
