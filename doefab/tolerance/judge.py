@@ -36,7 +36,7 @@ from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
 from doefab.tolerance.sources import apply_psf_effects, tilt_phase_factor
 
-__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "DEFAULT_MARGIN"]
+__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "plane_index", "DEFAULT_MARGIN"]
 
 DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
@@ -82,13 +82,27 @@ def psf_source(err: PartErrors | None = None, height=None) -> str:
     height map's digest (metres, on the judge's grid).
 
     Example:
-        >>> psf_source(PartErrors()) == psf_source(PartErrors())
-        True
+        >>> psf_source(PartErrors())[:5], psf_source(height=np.zeros((2, 2)))[:7]
+        ('part ', 'height ')
     """
     if height is not None:
         h = np.ascontiguousarray(np.asarray(height, np.float64))
         return "height " + hashlib.sha256(h.tobytes()).hexdigest() + str(tuple(h.shape))
+    if err is None:
+        raise DoefabError("psf_source needs a part's errors or a height map: psf_source(PartErrors())")
     return "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
+
+
+def plane_index(planes, among) -> list[int] | None:
+    """The index of each of ``planes`` (metres) in ``among`` when all are there (equal to 1e-12), else None.
+
+    Example:
+        >>> plane_index([1.0, 2.0], [1.0, 1.5, 2.0]), plane_index([1.0, 1.2], [1.0, 2.0])
+        ([0, 2], None)
+    """
+    among = np.asarray(among, np.float64)
+    idx = [np.flatnonzero(np.isclose(among, z, rtol=1e-12, atol=0.0)) for z in planes]
+    return None if any(len(i) != 1 for i in idx) else [int(i[0]) for i in idx]
 
 
 class PSFJudge:
@@ -180,12 +194,13 @@ class PSFJudge:
         while len(self._kept) > len(psfs) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
             self._kept.popitem(last=False)
 
-    def take_planes(self, other: PSFJudge, source: str, take) -> None:
-        """Keep, for ``reuse``, the PSFs ``other`` (a judge of the same grid on more planes) keeps for ``source``
-        at its planes ``take`` (this judge's planes, in order): a PSF at a plane is the same whichever other planes
-        are computed with it, so the network judge's rendering PSFs serve the PSF metric's on the network's planes.
-        """
-        got = {h: v[list(take)] for (s, h), v in other._kept.items() if s == source}
+    def take_planes(self, other: PSFJudge, source: str) -> None:
+        """Keep, for ``reuse``, the PSFs ``other`` keeps for ``source`` (``psf_source``) at this judge's planes, when
+        ``other`` (a judge of the same grid, margin and chain) is on planes that hold them all (the network judge's
+        rendering planes: a PSF at a plane is the same whichever other planes are computed with it, so they serve
+        the part's PSF metric on the network's planes); else nothing."""
+        take = plane_index(self.design.depths, other.design.depths)
+        got = {h: v[take] for (s, h), v in other._kept.items() if s == source} if take is not None else {}
         if got:
             self.keep(source, got)
 

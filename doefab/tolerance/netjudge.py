@@ -80,11 +80,16 @@ class NetworkJudge:
         self._nominal = None
 
     @property
+    def renders_elsewhere(self) -> bool:
+        """Whether the captures are rendered on other planes than the network's (depth: ``render_judge``)."""
+        return has(self.task, "depth")
+
+    @property
     def render_judge(self):
         """The ``PSFJudge`` whose PSFs make the captures: for depth one on ``conditions.fine_planes`` of the
         design's planes (the scenes' depths fall between the network's planes, as in ``doefab evaluate``), else
         the design's own."""
-        if not has(self.task, "depth"):
+        if not self.renders_elsewhere:
             return self.base
         if self._fine is None:
             from dataclasses import replace
@@ -110,19 +115,15 @@ class NetworkJudge:
         return dataclasses.replace(self.rec.pair, coded=got["coded"].float(), uncoded=got["uncoded"].float(),
                                    depths=tuple(judge.design.depths))
 
-    def network_planes_in(self, depths) -> list[int] | None:
-        """The index of each of the network's planes among ``depths`` (metres) when all are there, else None."""
-        planes = np.asarray(depths, np.float64)
-        idx = [np.flatnonzero(np.isclose(planes, z, rtol=1e-12, atol=0.0)) for z in self.rec.pair.depths]
-        return None if any(len(i) != 1 for i in idx) else [int(i[0]) for i in idx]
-
     def at_network_planes(self, rendered):
         """The pair ``rendered`` (on the rendering planes) at the network's planes when those are among them
         (``conditions.fine_planes`` keeps them: a PSF at a plane is the same whichever other planes are
         computed), else None."""
         import dataclasses
 
-        take = self.network_planes_in(rendered.depths)
+        from doefab.tolerance.judge import plane_index
+
+        take = plane_index(self.rec.pair.depths, rendered.depths)
         if take is None:
             return None
         return dataclasses.replace(rendered, coded=rendered.coded[take], uncoded=rendered.uncoded[take],
@@ -141,8 +142,7 @@ class NetworkJudge:
         measured = self.at_network_planes(rendered)
         if measured is None:
             return rendered, self.pair(err, height)
-        take = self.network_planes_in(rendered.depths)
-        self.base.take_planes(self.render_judge, psf_source(err, height), take)
+        self.base.take_planes(self.render_judge, psf_source(err, height))
         return rendered, measured
 
     def conditions(self, err: PartErrors, rendered):

@@ -108,7 +108,7 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
         kernel = nj.rec.pair.coded.shape[-1]  # the network's
         with ExitStack() as stack:  # the PSF pass computes the coded halves the network pass takes up, where it
             # takes them from the design's planes (depth renders on finer planes: nothing to take up there)
-            for s in {int(grids.get(k.name, 1)) for k in present} if nj.render_judge is nj.base else ():
+            for s in {int(grids.get(k.name, 1)) for k in present} if not nj.renders_elsewhere else ():
                 stack.enter_context(judge_for(design_dir, s).computing_at(kernel))
             psf = tornado(design_dir, budget, grids, False, progress=progress)
         top = {r["error"] for r in psf[:network_top]}

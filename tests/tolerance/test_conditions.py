@@ -12,20 +12,6 @@ from doefab.reconstruction.specs import make_batch
 
 
 @pytest.fixture(scope="module")
-def depth_design(tmp_path_factory):
-    cam = doefab.Camera(aperture_diameter=0.54e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
-                        sensor_distance=20e-3, focus_distance=3.5)
-    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
-    lv[:, 50:] = 15
-    d = Design(task="half-ring", task_params={"kernel_size": 63, "ring_law": "defocus"}, camera=cam,
-               wavelengths=(656e-9, 589e-9, 486e-9), depths=(1.0, 2.0, 5.0), height=doefab.levels_to_height(lv, cam),
-               levels=lv, metrics={"name": "m", "continuous": 0.1, "quantized": 0.1})
-    root = tmp_path_factory.mktemp("cond")
-    d.save(root / "design")
-    return root / "design"
-
-
-@pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     root = tmp_path_factory.mktemp("cache")
     with pytest.MonkeyPatch.context() as mp:
@@ -55,28 +41,6 @@ def test_depth_is_rendered_between_the_networks_planes(honest, depth_design):
         inside = inv[(inv <= 1 / near) & (inv >= 1 / far)]
         assert len(inside) == C.DEPTH_REFINE + 1
         assert np.allclose(np.diff(inside), (1 / far - 1 / near) / C.DEPTH_REFINE, rtol=1e-12)
-
-
-@pytest.mark.parametrize("net", [np.arange(1.0, 5.01, 0.25), 1 / np.linspace(1.0, 0.2, 17),
-                                 np.array([0.5, 0.7, 3.0])])
-def test_a_rendered_depth_is_never_farther_from_its_plane_than_a_fraction_of_the_networks_spacing(net):
-    """Wherever a depth lies, the plane it is rendered at (the nearest in inverse depth, ``plane_masks``) is within
-    half a rendering step, a ``2·refine``-th of the network's local plane spacing in inverse depth: checked by brute
-    force on a dense grid of depths, for planes even in depth (the shipped depth design's), even in inverse depth
-    and uneven."""
-    fine = 1 / np.array(C.fine_planes(net))
-    nets = np.sort(1 / net)
-    q = np.linspace(nets[0], nets[-1], 200_001)  # inverse depths
-    err = np.abs(q[:, None] - fine[None, :]).min(axis=1)
-    j = np.clip(np.searchsorted(nets, q), 1, len(nets) - 1)
-    spacing = nets[j] - nets[j - 1]  # the network's plane spacing where q lies
-    assert np.all(err <= spacing / (2 * C.DEPTH_REFINE) * (1 + 1e-9))
-
-
-def test_fine_planes_keep_a_plane_at_infinity_and_a_single_plane():
-    assert C.fine_planes([2.0, 1.0], 2) == pytest.approx((1.0, 4 / 3, 2.0), rel=1e-15)
-    assert C.fine_planes([2.0, float("inf")], 2) == (2.0, 4.0, float("inf"))
-    assert C.fine_planes([3.0]) == (3.0,)
 
 
 def test_honest_captures_differ_from_clean_ones_of_the_same_scene(honest, depth_design):
@@ -385,62 +349,3 @@ def test_measured_conditions_with_a_camera_use_it_for_every_scene_and_say_so():
     d = cond.describe()
     assert d["crosstalk_source"] == "measured" and d["budget_sha256"] is None and len(d["crosstalk_sha256"]) == 16
     assert C.measured(pair, "val").describe().get("crosstalk_source") is None  # the budget's sensor otherwise
-
-
-def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(depth_design):
-    """The network judge takes a part's pair at the network's planes from the PSFs of its rendering planes: a PSF at
-    a plane does not depend on which other planes are computed with it (plane batches of different sizes), so the
-    rendering planes' PSFs at the network's planes are, bit for bit, those computed on the network's planes alone."""
-    from dataclasses import replace
-
-    from doefab.tolerance.errors import PartErrors
-    from doefab.tolerance.judge import PSFJudge
-
-    net = PSFJudge(depth_design, 1)
-    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
-                    chain=net.chain)
-    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
-    halves = ("coded", "uncoded")
-    alone, rendered = net.psfs(err, halves, 31), fine.psfs(err, halves, 31)
-    take = [fine.design.depths.index(z) for z in net.design.depths]
-    assert len(take) == 3 and len(fine.design.depths) == 9
-    for h in halves:
-        assert torch.equal(rendered[h][take], alone[h])
-        assert not torch.equal(rendered[h][take], rendered[h][[t + 1 if t + 1 < 9 else t - 1 for t in take]])
-
-
-def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(depth_design, monkeypatch):
-    """After the network judge took a part's pair from its rendering planes (``take_planes``), the design's judge
-    serves that part's PSF metric from them, at its own kernel or the network's, without computing a PSF: the same,
-    bit for bit, as a judge with nothing kept computes; another part is computed."""
-    from dataclasses import replace
-
-    from doefab.tolerance.errors import PartErrors
-    from doefab.tolerance.judge import PSFJudge, psf_source
-
-    net = PSFJudge(depth_design, 1)
-    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
-                    chain=net.chain)
-    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
-    fine.psfs(err, ("coded", "uncoded"), 31)
-    net.take_planes(fine, psf_source(err), [fine.design.depths.index(z) for z in net.design.depths])
-    fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 31)
-
-    def no_plan(*a, **k):
-        raise AssertionError("computed a PSF the rendering planes hold")
-    monkeypatch.setattr(net, "plan", no_plan)
-    served = net.psfs(err, ("coded", "uncoded"), 31)
-    assert all(torch.equal(served[h], fresh[h]) for h in served)
-    c = 31 // 2 - 21 // 2
-    assert torch.equal(net.psfs(err, ("coded",), 21)["coded"], fresh["coded"][..., c:c + 21, c:c + 21])
-    with pytest.raises(AssertionError, match="rendering planes hold"):
-        net.psfs(PartErrors(mount_shift=(3e-6, 2e-6)), ("coded",), 21)
-
-
-@pytest.mark.parametrize("depths, refine", [([0.0, 1.0], 4), ([1.0, 2.0], 0), ([], 4), ([1.0, 2.0], 1.5)])
-def test_fine_planes_refuse_what_has_no_planes_naming_a_call_that_works(depths, refine):
-    from doefab.errors import DoefabError
-
-    works = r"fine_planes\(\[1.0, 2.0\], 4\)"
-    with pytest.raises(DoefabError, match=r"depths > 0 m and a whole refinement ≥ 1.*" + works):
-        C.fine_planes(depths, refine)

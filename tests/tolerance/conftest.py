@@ -1,0 +1,22 @@
+"""Fixtures of the tolerance tests."""
+
+import numpy as np
+import pytest
+
+import doefab
+from doefab.design.design import Design
+
+
+@pytest.fixture(scope="session")
+def depth_design(tmp_path_factory):
+    """A 100-pixel half-ring part of random levels on 3 planes (1, 2, 5 m): a depth design that judges fast."""
+    cam = doefab.Camera(aperture_diameter=0.54e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=20e-3, focus_distance=3.5)
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    lv[:, 50:] = 15
+    d = Design(task="half-ring", task_params={"kernel_size": 63, "ring_law": "defocus"}, camera=cam,
+               wavelengths=(656e-9, 589e-9, 486e-9), depths=(1.0, 2.0, 5.0), height=doefab.levels_to_height(lv, cam),
+               levels=lv, metrics={"name": "m", "continuous": 0.1, "quantized": 0.1})
+    root = tmp_path_factory.mktemp("cond")
+    d.save(root / "design")
+    return root / "design"

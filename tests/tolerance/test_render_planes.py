@@ -1,0 +1,109 @@
+"""Where depth scenes are rendered (``conditions.fine_planes``) and how a part's PSFs at the network's planes are
+taken from its rendering planes' (``PSFJudge.take_planes``)."""
+
+import numpy as np
+import pytest
+import torch
+
+from doefab.tolerance import conditions as C
+
+
+@pytest.mark.parametrize("net", [np.arange(1.0, 5.01, 0.25), 1 / np.linspace(1.0, 0.2, 17),
+                                 np.array([0.5, 0.7, 3.0])])
+def test_a_rendered_depth_is_never_farther_from_its_plane_than_a_fraction_of_the_networks_spacing(net):
+    """Wherever a depth lies, the plane it is rendered at (the nearest in inverse depth, ``plane_masks``) is within
+    half a rendering step, a ``2·refine``-th of the network's local plane spacing in inverse depth: checked by brute
+    force on a dense grid of depths, for planes even in depth (the shipped depth design's), even in inverse depth
+    and uneven."""
+    fine = 1 / np.array(C.fine_planes(net))
+    nets = np.sort(1 / net)
+    q = np.linspace(nets[0], nets[-1], 200_001)  # inverse depths
+    err = np.abs(q[:, None] - fine[None, :]).min(axis=1)
+    j = np.clip(np.searchsorted(nets, q), 1, len(nets) - 1)
+    spacing = nets[j] - nets[j - 1]  # the network's plane spacing where q lies
+    assert np.all(err <= spacing / (2 * C.DEPTH_REFINE) * (1 + 1e-9))
+
+
+def test_fine_planes_keep_a_plane_at_infinity_and_a_single_plane():
+    assert C.fine_planes([2.0, 1.0], 2) == pytest.approx((1.0, 4 / 3, 2.0), rel=1e-15)
+    assert C.fine_planes([2.0, float("inf")], 2) == (2.0, 4.0, float("inf"))
+    assert C.fine_planes([3.0]) == (3.0,)
+
+
+def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(depth_design):
+    """The network judge takes a part's pair at the network's planes from the PSFs of its rendering planes: a PSF at
+    a plane does not depend on which other planes are computed with it (plane batches of different sizes), so the
+    rendering planes' PSFs at the network's planes are, bit for bit, those computed on the network's planes alone."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge
+
+    net = PSFJudge(depth_design, 1)
+    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
+                    chain=net.chain)
+    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
+    halves = ("coded", "uncoded")
+    alone, rendered = net.psfs(err, halves, 31), fine.psfs(err, halves, 31)
+    take = [fine.design.depths.index(z) for z in net.design.depths]
+    assert len(take) == 3 and len(fine.design.depths) == 9
+    for h in halves:
+        assert torch.equal(rendered[h][take], alone[h])
+        assert not torch.equal(rendered[h][take], rendered[h][[t + 1 if t + 1 < 9 else t - 1 for t in take]])
+
+
+def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(depth_design, monkeypatch):
+    """After the network judge took a part's pair from its rendering planes (``take_planes``), the design's judge
+    serves that part's PSF metric from them, at its own kernel or the network's, without computing a PSF: the same,
+    bit for bit, as a judge with nothing kept computes; another part (one the rendering judge also computed, later)
+    is computed, and what was taken stays when the store is over its size."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge, psf_source
+
+    net = PSFJudge(depth_design, 1)
+    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
+                    chain=net.chain)
+    err, other = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01), PartErrors(mount_shift=(3e-6, 2e-6))
+    net.psfs(other, ("coded",), 21)  # kept before: the store is over its size with what is taken
+    net.KEEP_BYTES = 1
+    fine.psfs(err, ("coded", "uncoded"), 31)
+    fine.psfs(other, ("coded", "uncoded"), 31)
+    net.take_planes(fine, psf_source(err))
+    fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 31)
+
+    def no_plan(*a, **k):
+        raise AssertionError("computed a PSF the rendering planes hold")
+    monkeypatch.setattr(net, "plan", no_plan)
+    served = net.psfs(err, ("coded", "uncoded"), 31)
+    assert all(torch.equal(served[h], fresh[h]) for h in served)
+    c = 31 // 2 - 21 // 2
+    assert torch.equal(net.psfs(err, ("coded",), 21)["coded"], fresh["coded"][..., c:c + 21, c:c + 21])
+    with pytest.raises(AssertionError, match="rendering planes hold"):  # dropped from the store, not taken
+        net.psfs(other, ("coded",), 21)
+
+
+def test_planes_are_taken_only_from_a_judge_that_holds_them_all(depth_design):
+    """``take_planes`` takes nothing from a judge on planes that lack one of this judge's: its PSFs are computed."""
+    from dataclasses import replace
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge, psf_source
+
+    net = PSFJudge(depth_design, 1)
+    lacking = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths[:2])), 1, margin=net.margin,
+                       chain=net.chain)
+    err = PartErrors(mount_shift=(3e-6, -2e-6))
+    lacking.psfs(err, ("coded",), 31)
+    net.take_planes(lacking, psf_source(err))
+    assert not net._kept
+
+
+@pytest.mark.parametrize("depths, refine", [([0.0, 1.0], 4), ([1.0, 2.0], 0), ([], 4), ([1.0, 2.0], 1.5)])
+def test_fine_planes_refuse_what_has_no_planes_naming_a_call_that_works(depths, refine):
+    from doefab.errors import DoefabError
+
+    works = r"fine_planes\(\[1.0, 2.0\], 4\)"
+    with pytest.raises(DoefabError, match=r"depths > 0 m and a whole refinement ≥ 1.*" + works):
+        C.fine_planes(depths, refine)
