@@ -107,3 +107,36 @@ def test_fine_planes_refuse_what_has_no_planes_naming_a_call_that_works(depths, 
     works = r"fine_planes\(\[1.0, 2.0\], 4\)"
     with pytest.raises(DoefabError, match=r"depths > 0 m and a whole refinement ≥ 1.*" + works):
         C.fine_planes(depths, refine)
+
+
+def test_a_network_judged_depth_parts_psf_metric_computes_no_plane_again(depth_design, monkeypatch):
+    """The wiring end to end, with real PSF judges: after the network judge made a depth part's rendering pair and
+    the pair the network is told, the part's coded PSF at the task's kernel (what its PSF metric scores) computes
+    no PSF, and is bit for bit what a judge with nothing kept computes; the network is told the same planes' PSFs."""
+    from dataclasses import dataclass
+
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge
+    from doefab.tolerance.netjudge import NetworkJudge
+
+    @dataclass
+    class Pair:  # the network's pair as the judge reads it: its kernel (the task's, 63 px) and its planes
+        coded: torch.Tensor
+        uncoded: torch.Tensor
+        depths: tuple
+
+    base = PSFJudge(depth_design, 1)
+    judge = NetworkJudge.__new__(NetworkJudge)
+    judge.task, judge.base, judge._fine = "depth", base, None
+    judge.rec = type("Rec", (), {"pair": Pair(torch.zeros(3, 3, 63, 63), torch.zeros(3, 3, 63, 63),
+                                              tuple(base.design.depths))})()
+    err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
+    fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 63)
+    rendered, told = judge.rendered_pair(err)
+    assert len(rendered.depths) == 9 and told.depths == tuple(base.design.depths)
+    assert torch.equal(told.coded, fresh["coded"].float()) and torch.equal(told.uncoded, fresh["uncoded"].float())
+
+    def no_plan(*a, **k):
+        raise AssertionError("computed a PSF the rendering planes hold")
+    monkeypatch.setattr(base, "plan", no_plan)
+    assert torch.equal(base.psfs(err)["coded"], fresh["coded"])
