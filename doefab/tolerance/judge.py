@@ -36,7 +36,7 @@ from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.fabricate import refined_camera, roughness_field
 from doefab.tolerance.sources import apply_psf_effects, tilt_phase_factor
 
-__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "plane_index", "DEFAULT_MARGIN"]
+__all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "planes_among", "DEFAULT_MARGIN"]
 
 DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
@@ -93,11 +93,11 @@ def psf_source(err: PartErrors | None = None, height=None) -> str:
     return "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
 
 
-def plane_index(planes, among) -> list[int] | None:
+def planes_among(planes, among) -> list[int] | None:
     """The index of each of ``planes`` (metres) in ``among`` when all are there (equal to 1e-12), else None.
 
     Example:
-        >>> plane_index([1.0, 2.0], [1.0, 1.5, 2.0]), plane_index([1.0, 1.2], [1.0, 2.0])
+        >>> planes_among([1.0, 2.0], [1.0, 1.5, 2.0]), planes_among([1.0, 1.2], [1.0, 2.0])
         ([0, 2], None)
     """
     among = np.asarray(among, np.float64)
@@ -199,7 +199,7 @@ class PSFJudge:
         ``other`` (a judge of the same grid, margin and chain) is on planes that hold them all (the network judge's
         rendering planes: a PSF at a plane is the same whichever other planes are computed with it, so they serve
         the part's PSF metric on the network's planes); else nothing."""
-        take = plane_index(self.design.depths, other.design.depths)
+        take = planes_among(self.design.depths, other.design.depths)
         got = {h: v[take] for (s, h), v in other._kept.items() if s == source} if take is not None else {}
         if got:
             self.keep(source, got)

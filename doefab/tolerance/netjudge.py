@@ -121,9 +121,9 @@ class NetworkJudge:
         computed), else None."""
         import dataclasses
 
-        from doefab.tolerance.judge import plane_index
+        from doefab.tolerance.judge import planes_among
 
-        take = plane_index(self.rec.pair.depths, rendered.depths)
+        take = planes_among(self.rec.pair.depths, rendered.depths)
         if take is None:
             return None
         return dataclasses.replace(rendered, coded=rendered.coded[take], uncoded=rendered.uncoded[take],

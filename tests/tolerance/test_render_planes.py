@@ -30,25 +30,31 @@ def test_fine_planes_keep_a_plane_at_infinity_and_a_single_plane():
     assert C.fine_planes([3.0]) == (3.0,)
 
 
-def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(depth_design):
+@pytest.mark.parametrize("device", [pytest.param(None, id="auto"), pytest.param("cuda", id="cuda", marks=[
+    pytest.mark.cuda, pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")])])
+def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(depth_design, device):
     """The network judge takes a part's pair at the network's planes from the PSFs of its rendering planes: a PSF at
     a plane does not depend on which other planes are computed with it (plane batches of different sizes), so the
-    rendering planes' PSFs at the network's planes are, bit for bit, those computed on the network's planes alone."""
+    rendering planes' PSFs at the network's planes are, bit for bit on the CPU (to float32 rounding on a GPU, whose
+    kernels may differ with the batch), those computed on the network's planes alone."""
     from dataclasses import replace
 
     from doefab.tolerance.errors import PartErrors
     from doefab.tolerance.judge import PSFJudge
 
-    net = PSFJudge(depth_design, 1)
+    net = PSFJudge(depth_design, 1, device=device)
     fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
-                    chain=net.chain)
+                    chain=net.chain, device=device)
     err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
     halves = ("coded", "uncoded")
     alone, rendered = net.psfs(err, halves, 31), fine.psfs(err, halves, 31)
     take = [fine.design.depths.index(z) for z in net.design.depths]
     assert len(take) == 3 and len(fine.design.depths) == 9
     for h in halves:
-        assert torch.equal(rendered[h][take], alone[h])
+        if net.device.type == "cpu":
+            assert torch.equal(rendered[h][take], alone[h])
+        else:
+            torch.testing.assert_close(rendered[h][take], alone[h], rtol=1e-4, atol=1e-6 * float(alone[h].max()))
         assert not torch.equal(rendered[h][take], rendered[h][[t + 1 if t + 1 < 9 else t - 1 for t in take]])
 
 
@@ -66,7 +72,8 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
     fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
                     chain=net.chain)
     err, other = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01), PartErrors(mount_shift=(3e-6, 2e-6))
-    net.psfs(other, ("coded",), 21)  # kept before: the store is over its size with what is taken
+    net.psfs(err, ("coded",), 21)  # kept first, then another part: the part's coded half is the oldest entry,
+    net.psfs(other, ("coded",), 21)  # taking it again makes it the newest, so the full store drops the other part
     net.KEEP_BYTES = 1
     fine.psfs(err, ("coded", "uncoded"), 31)
     fine.psfs(other, ("coded", "uncoded"), 31)
@@ -113,23 +120,11 @@ def test_a_network_judged_depth_parts_psf_metric_computes_no_plane_again(depth_d
     """The wiring end to end, with real PSF judges: after the network judge made a depth part's rendering pair and
     the pair the network is told, the part's coded PSF at the task's kernel (what its PSF metric scores) computes
     no PSF, and is bit for bit what a judge with nothing kept computes; the network is told the same planes' PSFs."""
-    from dataclasses import dataclass
-
     from doefab.tolerance.errors import PartErrors
     from doefab.tolerance.judge import PSFJudge
-    from doefab.tolerance.netjudge import NetworkJudge
-
-    @dataclass
-    class Pair:  # the network's pair as the judge reads it: its kernel (the task's, 63 px) and its planes
-        coded: torch.Tensor
-        uncoded: torch.Tensor
-        depths: tuple
 
     base = PSFJudge(depth_design, 1)
-    judge = NetworkJudge.__new__(NetworkJudge)
-    judge.task, judge.base, judge._fine = "depth", base, None
-    judge.rec = type("Rec", (), {"pair": Pair(torch.zeros(3, 3, 63, 63), torch.zeros(3, 3, 63, 63),
-                                              tuple(base.design.depths))})()
+    judge = _depth_network_judge(base)
     err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
     fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 63)
     rendered, told = judge.rendered_pair(err)
@@ -140,3 +135,63 @@ def test_a_network_judged_depth_parts_psf_metric_computes_no_plane_again(depth_d
         raise AssertionError("computed a PSF the rendering planes hold")
     monkeypatch.setattr(base, "plan", no_plan)
     assert torch.equal(base.psfs(err)["coded"], fresh["coded"])
+
+
+def _depth_network_judge(base):
+    """A network judge of ``base``'s design whose network's pair is on the design's planes at the task's kernel."""
+    from dataclasses import dataclass
+
+    from doefab.tolerance.netjudge import NetworkJudge
+
+    @dataclass
+    class Pair:  # the network's pair as the judge reads it: its kernel (the task's, 63 px) and its planes
+        coded: torch.Tensor
+        uncoded: torch.Tensor
+        depths: tuple
+
+    judge = NetworkJudge.__new__(NetworkJudge)
+    judge.task, judge.base, judge._fine = "depth", base, None
+    judge.rec = type("Rec", (), {"pair": Pair(torch.zeros(3, 3, 63, 63), torch.zeros(3, 3, 63, 63),
+                                              tuple(base.design.depths))})()
+    return judge
+
+
+def test_a_height_maps_psf_metric_is_served_from_its_rendering_planes(depth_design, monkeypatch):
+    """The quantization study's path: an explicit height map's rendering pair hands its planes to the design's
+    judge under the height map's own source, so its PSF metric computes no PSF, bit for bit a fresh judge's."""
+    from doefab.tolerance.errors import PartErrors
+    from doefab.tolerance.judge import PSFJudge
+
+    base = PSFJudge(depth_design, 1)
+    h = base.design.height * 0.9
+    fresh = PSFJudge(depth_design, 1).height_psfs(h, ("coded",), 63)["coded"]
+    _depth_network_judge(base).rendered_pair(PartErrors(), height=h)
+
+    def no_plan(*a, **k):
+        raise AssertionError("computed a PSF the rendering planes hold")
+    monkeypatch.setattr(base, "plan", no_plan)
+    assert torch.equal(base.height_psfs(h, ("coded",), 63)["coded"], fresh)
+
+
+@pytest.mark.parametrize("task, elsewhere", [("depth", True), ("hdr", False)])
+def test_the_tornados_psf_pass_computes_at_the_networks_kernel_only_where_the_network_pass_takes_it_up(
+        monkeypatch, task, elsewhere):
+    """With ``network_top``, the PSF pass runs ``computing_at`` the network's kernel so that the network pass takes
+    its coded halves up: not for depth, whose network pass renders on other planes and never reads them."""
+    from contextlib import nullcontext
+    from types import SimpleNamespace
+
+    from doefab.tolerance import study
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.netjudge import NetworkJudge
+
+    nj = NetworkJudge.__new__(NetworkJudge)
+    nj.task, nj.rec = task, SimpleNamespace(pair=SimpleNamespace(coded=torch.zeros(1, 1, 95, 95)))
+    entered = []
+    monkeypatch.setattr(study, "network_judge_for", lambda *a, **k: nj)
+    monkeypatch.setattr(study, "judge_for", lambda d, s=1: SimpleNamespace(
+        computing_at=lambda k: entered.append(k) or nullcontext()))
+    monkeypatch.setattr(study, "tornado_rows", lambda d, b, present, *a: [
+        {"error": k.name, "delta": float(i)} for i, k in enumerate(present)])
+    rows = study.tornado("design", load_budget(None), networks=True, network_top=2, progress=False)
+    assert rows and entered == ([] if elsewhere else [95])
