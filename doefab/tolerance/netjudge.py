@@ -132,7 +132,8 @@ class NetworkJudge:
     def rendered_pair(self, err: PartErrors, height=None):
         """(rendering pair, the pair the network is told): the part's PSFs on the rendering planes and at the
         network's. For depth the second is taken from the first, and the base judge keeps it for the part's PSF
-        metric (``PSFJudge.take_planes``), so no plane is computed twice."""
+        metric (``PSFJudge.take_planes``), which then computes none of them again (where a part's PSFs are shared at
+        all: not across an axial gap in front of a lens stop, ``PSFJudge.psfs``)."""
         from doefab.tolerance.judge import psf_source
 
         if self.render_judge is self.base:
