@@ -8,6 +8,24 @@ import torch
 from doefab.tolerance import conditions as C
 
 
+def _rendering_judge(net, depths):
+    """A judge of ``net``'s grid, margin, chain and device on ``conditions.fine_planes(depths)`` (as the network
+    judge's ``render_judge`` is made)."""
+    from dataclasses import replace
+
+    from doefab.tolerance.judge import PSFJudge
+
+    return PSFJudge(replace(net.design, depths=C.fine_planes(depths)), net.supersample, margin=net.margin,
+                    chain=net.chain, device=net.device)
+
+
+def _computing_fails(monkeypatch, judge):
+    """From here on ``judge`` computing a PSF fails the test."""
+    def no_plan(*a, **k):
+        raise AssertionError("computed a PSF the rendering planes hold")
+    monkeypatch.setattr(judge, "plan", no_plan)
+
+
 @pytest.mark.parametrize("net", [np.arange(1.0, 5.01, 0.25), 1 / np.linspace(1.0, 0.2, 17),
                                  np.array([0.5, 0.7, 3.0])])
 def test_a_rendered_depth_is_never_farther_from_its_plane_than_a_fraction_of_the_networks_spacing(net):
@@ -37,14 +55,11 @@ def test_a_parts_psfs_at_the_networks_planes_are_those_of_its_rendering_planes(d
     a plane does not depend on which other planes are computed with it (plane batches of different sizes), so the
     rendering planes' PSFs at the network's planes are, bit for bit on the CPU (to float32 rounding on a GPU, whose
     kernels may differ with the batch), those computed on the network's planes alone."""
-    from dataclasses import replace
-
     from doefab.tolerance.errors import PartErrors
     from doefab.tolerance.judge import PSFJudge
 
     net = PSFJudge(depth_design, 1, device=device)
-    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
-                    chain=net.chain, device=device)
+    fine = _rendering_judge(net, net.design.depths)
     err = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01)
     halves = ("coded", "uncoded")
     alone, rendered = net.psfs(err, halves, 31), fine.psfs(err, halves, 31)
@@ -63,14 +78,11 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
     serves that part's PSF metric from them, at its own kernel or the network's, without computing a PSF: the same,
     bit for bit, as a judge with nothing kept computes; another part (one the rendering judge also computed, later)
     is computed, and what was taken stays when the store is over its size."""
-    from dataclasses import replace
-
     from doefab.tolerance.errors import PartErrors
     from doefab.tolerance.judge import PSFJudge, psf_source
 
     net = PSFJudge(depth_design, 1)
-    fine = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths)), 1, margin=net.margin,
-                    chain=net.chain)
+    fine = _rendering_judge(net, net.design.depths)
     err, other = PartErrors(mount_shift=(3e-6, -2e-6), mount_rotation=0.01), PartErrors(mount_shift=(3e-6, 2e-6))
     net.psfs(err, ("coded",), 21)  # kept first, then another part: the part's coded half is the oldest entry,
     net.psfs(other, ("coded",), 21)  # taking it again makes it the newest, so the full store drops the other part
@@ -79,10 +91,7 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
     fine.psfs(other, ("coded", "uncoded"), 31)
     net.take_planes(fine, psf_source(err))
     fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 31)
-
-    def no_plan(*a, **k):
-        raise AssertionError("computed a PSF the rendering planes hold")
-    monkeypatch.setattr(net, "plan", no_plan)
+    _computing_fails(monkeypatch, net)
     served = net.psfs(err, ("coded", "uncoded"), 31)
     assert all(torch.equal(served[h], fresh[h]) for h in served)
     c = 31 // 2 - 21 // 2
@@ -93,14 +102,11 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
 
 def test_planes_are_taken_only_from_a_judge_that_holds_them_all(depth_design):
     """``take_planes`` takes nothing from a judge on planes that lack one of this judge's: its PSFs are computed."""
-    from dataclasses import replace
-
     from doefab.tolerance.errors import PartErrors
     from doefab.tolerance.judge import PSFJudge, psf_source
 
     net = PSFJudge(depth_design, 1)
-    lacking = PSFJudge(replace(net.design, depths=C.fine_planes(net.design.depths[:2])), 1, margin=net.margin,
-                       chain=net.chain)
+    lacking = _rendering_judge(net, net.design.depths[:2])
     err = PartErrors(mount_shift=(3e-6, -2e-6))
     lacking.psfs(err, ("coded",), 31)
     net.take_planes(lacking, psf_source(err))
@@ -130,10 +136,7 @@ def test_a_network_judged_depth_parts_psf_metric_computes_no_plane_again(depth_d
     rendered, told = judge.rendered_pair(err)
     assert len(rendered.depths) == 9 and told.depths == tuple(base.design.depths)
     assert torch.equal(told.coded, fresh["coded"].float()) and torch.equal(told.uncoded, fresh["uncoded"].float())
-
-    def no_plan(*a, **k):
-        raise AssertionError("computed a PSF the rendering planes hold")
-    monkeypatch.setattr(base, "plan", no_plan)
+    _computing_fails(monkeypatch, base)
     assert torch.equal(base.psfs(err)["coded"], fresh["coded"])
 
 
@@ -166,10 +169,7 @@ def test_a_height_maps_psf_metric_is_served_from_its_rendering_planes(depth_desi
     h = base.design.height * 0.9
     fresh = PSFJudge(depth_design, 1).height_psfs(h, ("coded",), 63)["coded"]
     _depth_network_judge(base).rendered_pair(PartErrors(), height=h)
-
-    def no_plan(*a, **k):
-        raise AssertionError("computed a PSF the rendering planes hold")
-    monkeypatch.setattr(base, "plan", no_plan)
+    _computing_fails(monkeypatch, base)
     assert torch.equal(base.height_psfs(h, ("coded",), 63)["coded"], fresh)
 
 
