@@ -12,8 +12,8 @@ depth edge is a jump of more than 2 % between neighbouring pixels of the true de
 fine detail of 48 scenes per split (train, val, test) generated as the evaluation generates them, from their
 content alone. A counterfactual row reweights one split's per-bin δ by the other's shares of pixels: how much
 of the gap between the splits their mix of detail accounts for. A last table bins the errors by the true depth,
-beside the measured depth set's (split ``real``, ``doefab evaluate --split real``: the Middlebury Motorcycle,
-measured at 2.1–5.0 m only, under the same honest captures): each split restricted to the measured set's depths,
+beside the measured depth set's (split ``real``, ``doefab evaluate --split real``: nine Middlebury 2014 scenes,
+``realdata.depth_scenes``, under the same honest captures): each split restricted to the measured set's depths,
 and reweighted to its shares of pixels per depth bin, compares like with like. This analysis chooses nothing.
 Writes benchmarks/results/depth_error_sources.md.
 """
@@ -222,8 +222,8 @@ def table(data: dict, images: int) -> str:
     lines.append("")
     lines.append("All pixels: " + "; ".join(f"{s} δ<1.25 {px['ok'].mean():.3f}, MAE {px['abs_err'].mean():.3f} m"
                                             for s, px in data.items()) + ".")
-    lines += ["", "By the true depth, beside the measured depth set's measured pixels (split real; the Motorcycle's "
-              "disparity was measured at 2.1–5.0 m only).", ""] + by_depth
+    lines += ["", "By the true depth, beside the measured depth set's measured pixels (split real: the measured "
+              "scenes' depths, `realdata.depth_scenes`).", ""] + by_depth
     return "\n".join(lines)
 
 

@@ -335,12 +335,12 @@ def _sha(*chunks: bytes) -> str:
 
 def real_components() -> dict[str, str]:
     """SHA-256 of what makes the measured set's scenes (split ``real``, ``realdata``): its seeds and content pool,
-    ``realdata``'s source, its HDR file, the Motorcycle's image and depth as scikit-image reads them, and the
-    displays' primaries (to 1e-6); ``metrics.json`` of a ``real`` evaluation records them."""
+    ``realdata``'s source, its HDR file, the depth scenes' names, images and depths (the Motorcycle as scikit-image
+    reads it), and the displays' primaries (to 1e-6); ``metrics.json`` of a ``real`` evaluation records them."""
     from doefab.reconstruction import realdata
 
-    img, depth, known = realdata._motorcycle()
     names = json.dumps({"seed": SPLIT_SEEDS["real"], "part_seed": PART_SEEDS["real"], "content": CONTENT["real"]})
     return {"definition": _sha(names.encode(), Path(realdata.__file__).read_bytes()), "hdr": realdata.HDR_SHA256,
-            "depth": _sha(img.tobytes(), depth.tobytes(), known.tobytes()),
+            "depth": _sha(*(b for name, img, depth, known in realdata.depth_scenes()
+                            for b in (name.encode(), img.tobytes(), depth.tobytes(), known.tobytes()))),
             "light": _sha(*(np.round(v, 6).tobytes() for v in realdata.real_lights().values()))}

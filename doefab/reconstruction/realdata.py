@@ -8,11 +8,14 @@ measured, where it comes from, its license and what it is used for. Per task:
   ``scripts/measured_hdr.py``): a crop at a drawn place, exposed so that a drawn 1–5 % of its pixels lie above the
   half-exposure capture's clip (2.0, as the synthetic scenes; the exposure is the camera's choice, the highlights'
   shapes, sizes and contrasts are the photograph's), capped at 2^8.
-- **depth** — the Middlebury 2014 *Motorcycle* as scikit-image ships it: the left image (sRGB decoded to linear,
-  the synthetic scenes' exposure range) and its ground-truth disparity turned into metres with the published
-  calibration, Z = f·B / (d + doffs): 2.11–5.02 m, inside the shipped design's 1–5 m, so used as measured (clipped
-  to the design's planes). The 7 % of pixels without ground truth take their nearest measured neighbour's depth to
-  be rendered and are left out of the scores (the target holds NaN there).
+- **depth** — nine scenes of the Middlebury 2014 datasets: the *Motorcycle* as scikit-image ships it, and eight
+  more from the Middlebury Stereo Evaluation v3's quarter-resolution training set (``doefab/measured/
+  middlebury_depth.npz``, written by ``scripts/measured_depth.py``; the scenes it leaves out and why are in its
+  docstring). Each sample draws a scene, then a crop: the left image (sRGB decoded to linear, the synthetic scenes'
+  exposure range) and its ground-truth disparity turned into metres with the scene's published calibration,
+  Z = f·B / (d + doffs): 0.98–5.02 m over the nine, the shipped design's 1–5 m, so used as measured (clipped to the
+  design's planes). The 0–10 % of a scene's pixels without ground truth take their nearest measured neighbour's
+  depth to be rendered and are left out of the scores (the target holds NaN there).
 - **hyperspectral** — measured light of a family that no split, no synthetic draw and no illuminant library holds:
   two displays' measured RGB primaries (``colour.MSDS_DISPLAY_PRIMARIES``) mixed at drawn weights, an RGB emitter
   (colour-science's measured incandescent lamps are not used: both lie within 0.02 of the library's illuminant A,
@@ -32,10 +35,13 @@ import numpy as np
 from doefab.applications import has
 
 __all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_light", "real_lights",
-           "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "check_side"]
+           "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "DEPTH_FILE", "DEPTH_SHA256", "check_side", "depth_scenes",
+           "measured_depth"]
 
 HDR_FILE = Path(__file__).resolve().parents[1] / "measured" / "hdr_radiance.npz"
 HDR_SHA256 = "159a5e0a1118c1c891dc5e0700d39f341430fa9070f26feddeb91a3272da50da"  # as scripts/measured_hdr.py wrote it
+DEPTH_FILE = Path(__file__).resolve().parents[1] / "measured" / "middlebury_depth.npz"
+DEPTH_SHA256 = "5e30d0ce2838ea127b683b53667d4b51f3a0bcc66ef04e0b5e11cf9eabd499cb"  # as scripts/measured_depth.py wrote it
 # Middlebury 2014 Motorcycle at scikit-image's quarter resolution (skimage.data.stereo_motorcycle's docstring)
 MOTORCYCLE = {"focal_px": 994.978, "baseline_m": 0.193001, "doffs_px": 31.086}
 DISPLAYS = ("Typical CRT Brainard 1997", "Apple Studio Display")
@@ -63,8 +69,16 @@ SOURCES = (
            "ground-truth disparity (structured light) and the left image",
            "skimage.data.stereo_motorcycle (scikit-image's data files)",
            "Middlebury stereo data: free for research use with citation of Scharstein et al. 2014",
-           "depth in metres from the published calibration; the image as the scene's radiance (it is also one of "
-           "the synthetic validation split's photographs, never a training one)"),
+           "one of the nine depth scenes: depth in metres from the published calibration; the image as the scene's "
+           "radiance (it is also one of the synthetic validation split's photographs, never a training one)"),
+    Source("depth", "Middlebury 2014 Adirondack, Jadeplant, Piano, Playroom, Playtable, Recycle, Shelves, Vintage "
+           "(Scharstein et al., GCPR 2014), the Middlebury Stereo Evaluation v3's quarter-resolution training set",
+           "ground-truth disparity (structured light) and the left image",
+           "vision.middlebury.edu/stereo/submit3 (MiddEval3 trainingQ), read from the copy in "
+           "github.com/Homay0118/DDL_demo (69cc478); doefab/measured/middlebury_depth.npz names each file's SHA-256",
+           "Middlebury: permission to use and publish the images and disparity maps, citing Scharstein et al. 2014",
+           "eight of the nine depth scenes: depth in metres from each scene's published calibration; the image as "
+           "the scene's radiance (in no split)"),
     Source("hyperspectral", "measured display primaries: Typical CRT (Brainard 1997), Apple Studio Display",
            "emission spectra of each display's R, G, B primaries", "colour-science: colour.MSDS_DISPLAY_PRIMARIES",
            "BSD-3-Clause (colour-science)", "scene light: the three primaries at drawn weights"),
@@ -93,7 +107,7 @@ def check_side(task: str, size: int, margin: int = 0) -> None:
     if has(task, "highlights"):
         small = min(min(m.shape[:2]) for m in _hdr_maps())
     elif has(task, "depth"):
-        small = min(_motorcycle()[1].shape)
+        small = min(min(depth.shape) for _, _, depth, _ in depth_scenes())
     else:
         return  # hyperspectral: the validation photographs' layout, any size
     if size + 2 * margin > small:
@@ -122,27 +136,66 @@ def hdr_real_sample(rng: np.random.Generator, size: int) -> np.ndarray:
     return np.minimum(crop * gain, PEAK).astype(np.float32)
 
 
+def measured_depth(srgb: np.ndarray, disparity: np.ndarray, focal_px: float, baseline_m: float,
+                   doffs_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(linear image [H, W, 3] float32, depth [H, W] metres with every pixel filled, whether measured [H, W]) of an
+    8-bit sRGB image and its disparity in pixels (NaN where unmeasured): Z = f·B / (d + doffs) at each measured
+    pixel, each other pixel the depth of a nearest measured one.
+
+    Example: ``measured_depth(img, disp, 994.978, 0.193001, 31.086)`` for the quarter-resolution Motorcycle."""
+    from scipy.ndimage import distance_transform_edt
+
+    known = np.isfinite(disparity)
+    z = np.where(known, focal_px * baseline_m / (np.where(known, disparity, 0.0) + doffs_px), np.nan)
+    idx = distance_transform_edt(~known, return_distances=False, return_indices=True)
+    img = (np.asarray(srgb, np.float32) / 255.0) ** 2.2
+    return img, z[idx[0], idx[1]].astype(np.float32), known
+
+
 @functools.lru_cache(maxsize=1)
 def _motorcycle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(linear image [H, W, 3], depth [H, W] metres with every pixel filled, whether measured [H, W])."""
-    from scipy.ndimage import distance_transform_edt
     from skimage.data import stereo_motorcycle
 
     left, _, disp = stereo_motorcycle()
-    c = MOTORCYCLE
-    known = np.isfinite(disp)
-    z = np.where(known, c["focal_px"] * c["baseline_m"] / (np.where(known, disp, 0.0) + c["doffs_px"]), np.nan)
-    idx = distance_transform_edt(~known, return_distances=False, return_indices=True)
-    filled = z[idx[0], idx[1]]
-    img = (np.asarray(left, np.float32) / 255.0) ** 2.2
-    return img, filled.astype(np.float32), known
+    return measured_depth(left, disp, **MOTORCYCLE)
+
+
+@functools.lru_cache(maxsize=1)
+def _middlebury() -> tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray], ...]:
+    """(name, linear image, depth, measured) of each scene ``DEPTH_FILE`` holds, in its order."""
+    import hashlib
+
+    import imageio.v3 as iio
+
+    from doefab.errors import DoefabError
+
+    if hashlib.sha256(DEPTH_FILE.read_bytes()).hexdigest() != DEPTH_SHA256:
+        raise DoefabError(f"{DEPTH_FILE} is not the file scripts/measured_depth.py wrote (SHA-256 differs): restore "
+                          f"it from the package (git checkout, or reinstall doefab)")
+    out = []
+    with np.load(DEPTH_FILE) as z:
+        scale = float(z["disparity_scale"])
+        for name, src in json.loads(str(z["sources"])).items():
+            steps = np.asarray(iio.imread(z[f"{name}_disparity_png"].tobytes()), np.float64)
+            disp = np.where(steps > 0, steps / scale, np.nan)
+            out.append((name, *measured_depth(iio.imread(z[f"{name}_image_png"].tobytes()), disp,
+                                              **src["calibration"])))
+    return tuple(out)
+
+
+def depth_scenes() -> tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray], ...]:
+    """The measured depth scenes, each (name, linear image [H, W, 3], depth [H, W] metres with every pixel filled,
+    whether measured [H, W]): the Motorcycle, then ``DEPTH_FILE``'s."""
+    return (("Motorcycle", *_motorcycle()), *_middlebury())
 
 
 def depth_real_sample(rng: np.random.Generator, size: int, near: float, far: float):
-    """(scene [3, S, S] radiance, depth to render [S, S] metres, measured [S, S] bool): a drawn crop of the
-    measured Motorcycle, its depth clipped to [``near``, ``far``]."""
+    """(scene [3, S, S] radiance, depth to render [S, S] metres, measured [S, S] bool): a crop of a drawn measured
+    scene (``depth_scenes``), its depth clipped to [``near``, ``far``]."""
     check_side("depth", size)
-    img, depth, known = _motorcycle()
+    scenes = depth_scenes()
+    _, img, depth, known = scenes[int(rng.integers(len(scenes)))]
     ys, xs = _crop(rng, depth.shape, size)
     gain = rng.uniform(0.8, 1.8)  # the synthetic depth scenes' exposure range
     scene = img[ys, xs].transpose(2, 0, 1) * gain

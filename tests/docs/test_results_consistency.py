@@ -179,7 +179,7 @@ def test_the_readme_measured_data_line_is_real_validation_json():
         got = re.search(re.escape(label) + r" ([\d.]+) / ([\d.]+) / ([\d.]+)", line).groups()
         want = [f"{runs[task]['real']['rows'][v][key]:.{digits}f}" for v in variants]
         assert list(got) == want, (label, got, want)
-    d = re.search(r"δ<1.25 ([\d.]+) \(one scene", line).group(1)
+    d = re.search(r"δ<1.25 ([\d.]+) \(final set", line).group(1)
     assert d == f"{runs['depth']['real']['rows']['proposed']['delta125']:.2f}"
 
 

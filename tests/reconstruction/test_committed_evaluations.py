@@ -19,8 +19,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = json.loads((ROOT / "benchmarks" / "results" / "real_validation.json").read_text())
-# the measured set's components each task's scenes are made of (``data.real_components``)
-COMPONENTS = {"hdr": ("definition", "hdr"), "hyperspectral": ("definition", "light")}
+# the measured set's components each task's scenes are made of (``data.real_components``); not its "definition",
+# which digests the whole of ``realdata``'s source: that changed where the depth scenes were added, the HDR and
+# spectral samplers did not, and scene 0 scoring as committed is the check that their scenes are the same
+COMPONENTS = {"hdr": ("hdr",), "hyperspectral": ("light",)}
 
 
 @pytest.fixture

@@ -35,33 +35,61 @@ def _find(picture: np.ndarray, patch: np.ndarray) -> tuple[int, int]:
     return tuple(int(v) for v in np.unravel_index(np.argmax(r), r.shape))
 
 
-def test_a_depth_sample_is_one_crop_of_image_depth_and_mask_clipped_to_the_planes():
-    """Image, depth and mask are cut at the same place (found by matching the crop in the image), the image
-    scaled by one gain in the synthetic scenes' range and the depth clipped to the planes."""
+def _scenes_read_here() -> dict:
+    """name → (linear image, disparity in px with NaN where unmeasured, (f px, B m, doffs px)) of every measured
+    depth scene, read without ``realdata``: the Motorcycle from scikit-image with its docstring's calibration, the
+    others from the PNGs and calibrations ``DEPTH_FILE`` stores."""
+    import json
+
+    import imageio.v3 as iio
     from skimage.data import stereo_motorcycle
 
     left, _, disp = stereo_motorcycle()
-    scene, depth, known = realdata.depth_real_sample(np.random.default_rng(3), 120, 2.8, 3.2)
-    assert scene.shape == (3, 120, 120) and depth.shape == known.shape == (120, 120)
-    lin = (left.astype(np.float64) / 255.0) ** 2.2
-    y, x = _find(lin[..., 1], scene[1])
-    crop = lin[y:y + 120, x:x + 120].transpose(2, 0, 1)
-    gain = scene.sum() / crop.sum()
-    assert 0.8 <= gain <= 1.8 and np.allclose(scene, crop * gain, rtol=1e-4, atol=1e-6)
-    assert np.array_equal(known, np.isfinite(disp[y:y + 120, x:x + 120]))
-    z = 994.978 * 0.193001 / (disp[y:y + 120, x:x + 120] + 31.086)
-    assert np.allclose(depth[known], np.clip(z[known], 2.8, 3.2), rtol=1e-6)
-    assert depth.min() == np.float32(2.8) and depth.max() == np.float32(3.2)
+    out = {"Motorcycle": ((left / 255.0) ** 2.2, disp.astype(np.float64), (994.978, 0.193001, 31.086))}
+    with np.load(realdata.DEPTH_FILE) as z:
+        assert int(z["disparity_scale"]) == 256
+        for name, src in json.loads(str(z["sources"])).items():
+            steps = iio.imread(z[f"{name}_disparity_png"].tobytes()).astype(np.float64)
+            c = src["calibration"]
+            out[name] = ((iio.imread(z[f"{name}_image_png"].tobytes()) / 255.0) ** 2.2,
+                         np.where(steps > 0, steps / 256.0, np.nan), (c["focal_px"], c["baseline_m"], c["doffs_px"]))
+    return out
+
+
+def test_a_depth_sample_is_one_crop_of_image_depth_and_mask_clipped_to_the_planes():
+    """Over draws that reach the Motorcycle and the file's scenes: image, depth and mask are cut at the same place
+    of one scene (found by matching the crop in every scene's image), the image scaled by one gain in the synthetic
+    scenes' range and the depth that scene's calibration gives, clipped to the planes."""
+    scenes = _scenes_read_here()
+    seen = set()
+    for seed in (*range(15), 21, 23):  # draws that reach every scene
+        scene, depth, known = realdata.depth_real_sample(np.random.default_rng(seed), 120, 2.2, 3.0)
+        assert scene.shape == (3, 120, 120) and depth.shape == known.shape == (120, 120)
+        found = {n: _find(v[0][..., 1], scene[1]) for n, v in scenes.items()}
+        for name, (y, x) in found.items():
+            crop = scenes[name][0][y:y + 120, x:x + 120].transpose(2, 0, 1)
+            gain = scene.sum() / crop.sum()
+            if np.allclose(scene, crop * gain, rtol=1e-4, atol=1e-6):
+                break
+        else:
+            raise AssertionError(f"draw {seed}: the crop is in no measured scene's image")
+        seen.add(name)
+        _, disp, (f, b, doffs) = scenes[name]
+        d = disp[y:y + 120, x:x + 120]
+        assert 0.8 <= gain <= 1.8 and np.array_equal(known, np.isfinite(d))
+        assert np.allclose(depth[known], np.clip(f * b / (d[known] + doffs), 2.2, 3.0), rtol=1e-6)
+        assert 2.2 <= depth.min() and depth.max() <= 3.0
+    assert seen == set(scenes), seen  # both sources, every scene
 
 
 def test_a_scene_larger_than_the_measured_maps_is_one_error_naming_the_size_that_fits():
     from doefab.errors import DoefabError
 
-    with pytest.raises(DoefabError, match=r"--size 406 or less"):
-        realdata.check_side("depth", 407, 47)  # the Motorcycle is 500 px high: 406 + 2 × 47 = 500
+    with pytest.raises(DoefabError, match=r"--size 369 or less"):
+        realdata.check_side("depth", 370, 47)  # the lowest scene, Playtable, is 463 px high: 369 + 2 × 47 = 463
     with pytest.raises(DoefabError, match="smallest measured hdr map"):
         realdata.hdr_real_sample(np.random.default_rng(0), 401)
-    realdata.check_side("depth", 406, 47)
+    realdata.check_side("depth", 369, 47)
     realdata.check_side("hyperspectral", 4096, 95)  # its layout takes any size
 
 
@@ -131,7 +159,8 @@ def test_training_never_draws_the_measured_set(monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("measured data drawn")
 
-    for name in ("hdr_real_sample", "depth_real_sample", "real_light", "_hdr_maps", "_motorcycle"):
+    for name in ("hdr_real_sample", "depth_real_sample", "real_light", "_hdr_maps", "_motorcycle", "_middlebury",
+                 "depth_scenes"):
         monkeypatch.setattr(realdata, name, refuse)
     for task in ("hdr", "hyperspectral", "depth"):
         pair, _ = psf_pair(task, None)
@@ -191,20 +220,21 @@ def test_the_measured_set_takes_no_training_or_test_content_and_its_digest_sees_
     assert data.real_components()["definition"] != before["definition"]
 
 
-def test_a_changed_measured_file_is_refused(tmp_path, monkeypatch):
+@pytest.mark.parametrize("file, reader", [("HDR_FILE", "_hdr_maps"), ("DEPTH_FILE", "_middlebury")])
+def test_a_changed_measured_file_is_refused(file, reader, tmp_path, monkeypatch):
     from doefab.errors import DoefabError
 
-    bad = tmp_path / "hdr_radiance.npz"
-    data = bytearray(realdata.HDR_FILE.read_bytes())
+    bad = tmp_path / getattr(realdata, file).name
+    data = bytearray(getattr(realdata, file).read_bytes())
     data[len(data) // 2] ^= 0xFF  # one byte changed
     bad.write_bytes(bytes(data))
-    monkeypatch.setattr(realdata, "HDR_FILE", bad)
-    realdata._hdr_maps.cache_clear()
+    monkeypatch.setattr(realdata, file, bad)
+    getattr(realdata, reader).cache_clear()
     try:
         with pytest.raises(DoefabError, match="SHA-256 differs"):
-            realdata._hdr_maps()
+            getattr(realdata, reader)()
     finally:
-        realdata._hdr_maps.cache_clear()
+        getattr(realdata, reader).cache_clear()
 
 
 def test_the_measured_file_is_what_its_script_wrote():
