@@ -1,5 +1,5 @@
-"""Every shipped network on the measured-data validation set (split ``real``: HDR radiance maps, a measured depth
-map, light of a measured family no split holds; ``doefab.reconstruction.realdata``) beside the synthetic
+"""Every shipped network on the measured-data validation set (split ``real``: HDR radiance maps, measured depth
+maps, light of a measured family no split holds; ``doefab.reconstruction.realdata``) beside the synthetic
 validation split, both under honest captures (fabricated parts, crosstalk unmixed by a noisy calibration, depth
 between the network's planes; the networks told the nominal PSF), torch on one thread.
 
@@ -184,12 +184,12 @@ def main() -> None:
     ap.add_argument("--seed-weights", type=Path, nargs="*", default=[],
                     help="weights folders of the proposed networks trained from other seeds")
     args = ap.parse_args()
-    before = json.loads((RESULTS / "real_validation.json").read_text()) if (RESULTS / "real_validation.json").is_file() \
-        else {}
+    committed = RESULTS / "real_validation.json"
+    before = json.loads(committed.read_text()) if committed.is_file() else {}
     runs = {t: {s: evaluate_split(t, s, args.images, args.size, args.work) for s in SPLITS}
             for t in args.tasks.split(",")}
-    seeds = {t: seed_runs(t, args.seed_weights, args.images, args.size, args.work) or carried_seeds(runs[t], before.get(t))
-             for t in runs}
+    seeds = {t: seed_runs(t, args.seed_weights, args.images, args.size, args.work)
+             or carried_seeds(runs[t], before.get(t)) for t in runs}
     for t, others in seeds.items():
         runs[t]["seeds"] = others
     for t in KEYS:  # a task not evaluated keeps its committed evaluations and seeds

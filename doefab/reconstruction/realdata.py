@@ -41,7 +41,8 @@ __all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_li
 HDR_FILE = Path(__file__).resolve().parents[1] / "measured" / "hdr_radiance.npz"
 HDR_SHA256 = "159a5e0a1118c1c891dc5e0700d39f341430fa9070f26feddeb91a3272da50da"  # as scripts/measured_hdr.py wrote it
 DEPTH_FILE = Path(__file__).resolve().parents[1] / "measured" / "middlebury_depth.npz"
-DEPTH_SHA256 = "5e30d0ce2838ea127b683b53667d4b51f3a0bcc66ef04e0b5e11cf9eabd499cb"  # as scripts/measured_depth.py wrote it
+# as scripts/measured_depth.py wrote it
+DEPTH_SHA256 = "5e30d0ce2838ea127b683b53667d4b51f3a0bcc66ef04e0b5e11cf9eabd499cb"
 # Middlebury 2014 Motorcycle at scikit-image's quarter resolution (skimage.data.stereo_motorcycle's docstring)
 MOTORCYCLE = {"focal_px": 994.978, "baseline_m": 0.193001, "doffs_px": 31.086}
 DISPLAYS = ("Typical CRT Brainard 1997", "Apple Studio Display")

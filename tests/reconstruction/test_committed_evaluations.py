@@ -7,9 +7,9 @@ of themselves (most agree exactly; a few differ in their last digits).
 The part is drawn from the budget the evaluations record (their budget digest): the shipped budget, or the shipped
 budget as it was before the mount tilt was modelled (less its ``tilt_sigma_deg`` key), whichever has that digest.
 
-The depth task is not compared: its committed measured-set scores were made on a Motorcycle depth map whose digest
-(``real_sha256["depth"]``) differs from the one scikit-image and SciPy give in this environment, so scene 0 is not
-the same scene. The test split is not read (its evaluations are published once; its reads are logged).
+The depth task is not compared: the digest of its measured scenes (``real_sha256["depth"]``) hashes linear images made
+with float32 powers whose last bits follow numpy's vector paths, so a machine without AVX-512 computes another
+digest for the same scenes. The test split is not read (its evaluations are published once; its reads are logged).
 """
 
 import json

@@ -70,3 +70,32 @@ def test_each_scene_is_its_calibration_of_the_measured_disparity():
                 d2 = (ky - uy[i]) ** 2 + (kx - ux[i]) ** 2
                 assert np.isclose(depth[uy[i], ux[i]], depth[ky[d2 == d2.min()], kx[d2 == d2.min()]], rtol=1e-6).any()
 
+
+
+def test_the_script_stores_the_disparity_top_row_first_in_steps_of_a_256th_and_none_as_zero(tmp_path, monkeypatch):
+    """A made-up scene in MiddEval3's layout: a PFM written here (rows bottom to top, as the format stores them) with
+    one pixel without ground truth; the stored 16-bit PNG is round(256·d) top row first, 0 there; the image PNG is
+    the file byte for byte; the calibration is Piano's text read in SI units."""
+    import imageio.v3 as iio
+
+    rng = np.random.default_rng(1)
+    disp = rng.uniform(5.0, 150.0, (6, 9)).astype(np.float32)
+    disp[1, 2] = np.inf
+    data = tmp_path / "MiddEval3" / "trainingQ" / "Made"
+    gt = tmp_path / "MiddEval3GT" / "trainingQ" / "Made"
+    data.mkdir(parents=True)
+    gt.mkdir(parents=True)
+    iio.imwrite(data / "im0.png", rng.integers(0, 256, (6, 9, 3), dtype=np.uint8))
+    (data / "calib.txt").write_text(PIANO_CALIB)
+    (gt / "disp0GT.pfm").write_bytes(b"Pf\n9 6\n-1.0\n" + np.ascontiguousarray(disp[::-1]).astype("<f4").tobytes())
+    mod = _script()
+    monkeypatch.setattr(mod, "SCENES", ("Made",))
+    monkeypatch.setattr(mod, "OUT", tmp_path / "out.npz")
+    mod.main(str(tmp_path))
+    with np.load(tmp_path / "out.npz") as z:
+        src = json.loads(str(z["sources"]))["Made"]
+        assert z["Made_image_png"].tobytes() == (data / "im0.png").read_bytes()
+        steps = iio.imread(z["Made_disparity_png"].tobytes())
+    want = np.where(np.isfinite(disp), np.round(disp.astype(np.float64) * 256), 0)
+    assert steps.dtype == np.uint16 and np.array_equal(steps, want) and steps[1, 2] == 0
+    assert src["calibration"]["baseline_m"] == pytest.approx(0.178089)
