@@ -20,12 +20,15 @@ other exposure, lighting or rectification) and ArtL and Teddy (2005 and 2003 sce
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import re
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from doefab.io import atomic_write_bytes
 
 SCENES = ("Adirondack", "Jadeplant", "Piano", "Playroom", "Playtable", "Recycle", "Shelves", "Vintage")
 DISPARITY_SCALE = 256  # stored steps per pixel of disparity
@@ -75,10 +78,9 @@ def main(root: str) -> None:
         z = c["focal_px"] * c["baseline_m"] / (disp[np.isfinite(disp)] + c["doffs_px"])
         print(scene, image.shape, f"depth {z.min():.2f}–{z.max():.2f} m, ground truth on "
               f"{np.isfinite(disp).mean():.0%}")
-    OUT.parent.mkdir(exist_ok=True)
-    tmp = OUT.with_suffix(".tmp.npz")
-    np.savez(tmp, sources=np.array(json.dumps(sources)), disparity_scale=np.array(DISPARITY_SCALE), **arrays)
-    tmp.replace(OUT)
+    buf = io.BytesIO()
+    np.savez(buf, sources=np.array(json.dumps(sources)), disparity_scale=np.array(DISPARITY_SCALE), **arrays)
+    atomic_write_bytes(OUT, buf.getvalue())
     print(f"wrote {OUT} ({OUT.stat().st_size / 2**20:.1f} MiB)")
 
 

@@ -13,11 +13,14 @@ with it (``sources``).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from doefab.io import atomic_write_bytes
 
 PHOTOGRAPHS = ("ScanLines/Cannon.exr", "ScanLines/Desk.exr", "ScanLines/MtTamWest.exr", "ScanLines/StillLife.exr",
                "ScanLines/CandleGlass.exr", "Tiles/GoldenGate.exr")
@@ -59,10 +62,9 @@ def main(root: str) -> None:
         arrays[name] = shrink(read_rgb(path))
         sources[name] = {"file": rel, "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
         print(name, arrays[name].shape, f"max {float(arrays[name].max()):.4g}")
-    OUT.parent.mkdir(exist_ok=True)
-    tmp = OUT.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, sources=np.array(json.dumps(sources)), **arrays)
-    tmp.replace(OUT)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, sources=np.array(json.dumps(sources)), **arrays)
+    atomic_write_bytes(OUT, buf.getvalue())
     print(f"wrote {OUT} ({OUT.stat().st_size / 2**20:.1f} MiB)")
 
 

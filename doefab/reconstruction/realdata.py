@@ -86,15 +86,20 @@ SOURCES = (
 )
 
 
-@functools.lru_cache(maxsize=1)
-def _hdr_maps() -> tuple[np.ndarray, ...]:
+def _check_file(path: Path, sha256: str, script: str) -> None:
+    """A DoefabError unless the measured file ``path`` is the one ``script`` wrote (its SHA-256 is ``sha256``)."""
     import hashlib
 
     from doefab.errors import DoefabError
 
-    if hashlib.sha256(HDR_FILE.read_bytes()).hexdigest() != HDR_SHA256:
-        raise DoefabError(f"{HDR_FILE} is not the file scripts/measured_hdr.py wrote (SHA-256 differs): restore it "
-                          f"from the package (git checkout, or reinstall doefab)")
+    if hashlib.sha256(path.read_bytes()).hexdigest() != sha256:
+        raise DoefabError(f"{path} is not the file {script} wrote (SHA-256 differs): restore it from the package "
+                          f"(git checkout, or reinstall doefab)")
+
+
+@functools.lru_cache(maxsize=1)
+def _hdr_maps() -> tuple[np.ndarray, ...]:
+    _check_file(HDR_FILE, HDR_SHA256, "scripts/measured_hdr.py")
     with np.load(HDR_FILE) as z:
         names = list(json.loads(str(z["sources"])))
         return tuple(np.asarray(z[n], np.float32) for n in names)
@@ -165,15 +170,9 @@ def _motorcycle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 @functools.lru_cache(maxsize=1)
 def _middlebury() -> tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray], ...]:
     """(name, linear image, depth, measured) of each scene ``DEPTH_FILE`` holds, in its order."""
-    import hashlib
-
     import imageio.v3 as iio
 
-    from doefab.errors import DoefabError
-
-    if hashlib.sha256(DEPTH_FILE.read_bytes()).hexdigest() != DEPTH_SHA256:
-        raise DoefabError(f"{DEPTH_FILE} is not the file scripts/measured_depth.py wrote (SHA-256 differs): restore "
-                          f"it from the package (git checkout, or reinstall doefab)")
+    _check_file(DEPTH_FILE, DEPTH_SHA256, "scripts/measured_depth.py")
     out = []
     with np.load(DEPTH_FILE) as z:
         scale = float(z["disparity_scale"])
