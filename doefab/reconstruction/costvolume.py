@@ -17,6 +17,7 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
+from doefab.imaging.captures import irfft2_crop
 
 __all__ = ["cross_blur_cost", "relative_log_cost"]
 
@@ -48,9 +49,8 @@ def cross_blur_cost(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
     otf_c = torch.fft.rfft2(pc, s=(fh, fw))[None]
     otf_u = torch.fft.rfft2(pu, s=(fh, fw))[None]
     # one inverse FFT per plane: the residual is linear, so it is formed in the Fourier domain
-    res = torch.fft.irfft2(otf_u * spec_c - otf_c * spec_u, s=(fh, fw))  # [B, D, 3, fh, fw]
     c0 = pad + k // 2
-    res = res[..., c0:c0 + h, c0:c0 + w]
+    res = irfft2_crop(otf_u * spec_c - otf_c * spec_u, (fh, fw), slice(c0, c0 + h), slice(c0, c0 + w))  # [B,D,3,H,W]
     energy = (res**2).sum(dim=2)  # [B, D, H, W]
     return F.avg_pool2d(energy, window, 1, window // 2, count_include_pad=False)
 

@@ -154,20 +154,22 @@ def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
 
     pred, target, valid = candidate_predictions(coded, uncoded, psf_coded, response, inverses, clipped, max_side)
     out = []
-    for p, t, v in zip(pred.double(), target.double(), valid.double()):
-        a = (p * v).reshape(p.shape[0], -1)  # [J, 3P]
-        b = (t * v).reshape(-1)
+    for p, t, v in zip(pred, target, valid):
+        j = p.shape[0]
+        # [Aᵀ b] column-major as LAPACK takes it: the rows of m, in float64 (a float32 value times a 0/1 mask is exact)
+        m = torch.empty(j + 1, t.numel(), dtype=torch.float64, device=p.device)
+        m[:j] = (p * v).reshape(j, -1)
+        m[j] = (t * v).reshape(-1)
         w = None
-        scale = float(torch.trace(a @ a.T))
-        if scale > 0 and float(b.abs().sum()) > 0:  # a black or wholly clipped capture says nothing: below
+        if bool(m[:j].any()) and bool(m[j].any()):  # a black or wholly clipped capture says nothing: below
             # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16).
             # [Aᵀ b] = Q'R' gives Aᵀ's R in R'[:J, :J] and Qᵀb in R'[:J, J], with no Q formed:
             # min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant
-            j = a.shape[0]
-            r = torch.linalg.qr(torch.cat([a, b[None]]).T, mode="r")[1]  # column-major, as LAPACK takes it
+            r = torch.linalg.qr(m.T, mode="r")[1]
             w, _ = nnls(r[:j, :j].cpu().numpy(), r[:j, j].cpu().numpy())  # scipy's solver, on the CPU
             w = w if np.isfinite(w).all() and w.sum() > 0 else None
         if w is None:  # the single best member (or the first, when nothing can be told apart)
+            p, t, v = p.double(), t.double(), v.double()
             cost = (((p - t[None]) ** 2) * v[None]).sum(dim=(-2, -1))
             w = np.zeros(p.shape[0])
             w[int(cost.argmin())] = 1.0

@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from doefab.errors import DoefabError
-from doefab.reconstruction.wiener import WienerDeconvolution, wiener_deconvolve
+from doefab.reconstruction.wiener import WienerDeconvolution, wiener_deconvolve, wiener_filter
 
 __all__ = ["VARIANTS", "VIEWS", "views_of", "check_input", "check_psf", "UNet", "CodedFeatures"]
 
@@ -87,10 +87,23 @@ class CodedFeatures(nn.Module):
         f = self.feat_coded(coded)
         lam = self.wiener.lam
         # learned feature f with PSF c is channel c·F + f: each feature transformed once, not once per PSF
-        out = wiener_deconvolve(f, psf, lam[-psf.shape[1] * self.features:], each=True)
+        out = self._deconvolve("features", f, psf, lam[-psf.shape[1] * self.features:], True)
         if self.raw:  # raw colour channel c with PSF c first
-            out = torch.cat([wiener_deconvolve(coded, psf, lam[:3]), out], dim=1)
+            out = torch.cat([self._deconvolve("raw", coded, psf, lam[:3], False), out], dim=1)
         return out
+
+    def _deconvolve(self, slot: str, y: torch.Tensor, psf: torch.Tensor, lam: torch.Tensor, each: bool):
+        """``wiener_deconvolve``; without autograd, the filter of the last PSF and λ is kept per ``slot`` and
+        reused while they (compared value for value) and the input's size stay the same: a reconstruction with
+        one PSF pays for its filter once, with the same numbers."""
+        if torch.is_grad_enabled():
+            return wiener_deconvolve(y, psf, lam, each)
+        key = (tuple(y.shape[1:]), y.dtype, y.device, each, tuple(psf.shape), psf.dtype, psf.device, lam.dtype)
+        held = self.__dict__.setdefault("_filters", {}).get(slot)
+        if held is None or held[0] != key or not torch.equal(held[1], psf) or not torch.equal(held[2], lam):
+            held = (key, psf.clone(), lam.clone(), wiener_filter(psf, lam, y.shape[-2:], y.shape[1], each, y.dtype))
+            self._filters[slot] = held
+        return wiener_deconvolve(y, psf, lam, each, filt=held[3])
 
 
 def check_psf(psf, n: int, what: str) -> torch.Tensor:

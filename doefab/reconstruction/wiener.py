@@ -14,8 +14,9 @@ import torch
 import torch.nn.functional as F
 
 from doefab.errors import DoefabError
+from doefab.imaging.captures import irfft2_crop
 
-__all__ = ["wiener_deconvolve", "psf_to_otf", "WienerDeconvolution"]
+__all__ = ["wiener_deconvolve", "wiener_filter", "psf_to_otf", "WienerDeconvolution"]
 
 
 def psf_to_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
@@ -29,37 +30,57 @@ def psf_to_otf(psf: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
     return torch.fft.rfft2(pad)
 
 
-def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam, each: bool = False) -> torch.Tensor:
+def wiener_filter(psf: torch.Tensor, lam, shape: tuple[int, int], images: int = 1, each: bool = False,
+                  dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
+    """(OTF, |OTF|² + λ): the Wiener filter of ``psf`` for [B, ``images``, H, W] inputs of (H, W) ``shape``, on
+    :func:`wiener_deconvolve`'s padded grid (arguments as there). It depends on the PSF and λ only, so a caller
+    that deconvolves many images with one PSF computes it once (``CodedFeatures`` at inference).
+
+    Example: ``otf, den = wiener_filter(psf[None], 1e-2, (64, 64), images=3)`` with ``psf`` [3, 15, 15]."""
+    if psf.ndim != 4:
+        raise DoefabError(f"the PSF must be [B, C, K, K], got {tuple(psf.shape)}")
+    lam = torch.as_tensor(lam, dtype=dtype, device=psf.device)
+    if bool((lam <= 0).any()) or not bool(torch.isfinite(lam).all()):
+        raise DoefabError("the Wiener regularisation λ must be positive and finite")
+    k_h, k_w = psf.shape[-2:]
+    h, w = shape[0] + 2 * (k_h // 2 + 1), shape[1] + 2 * (k_w // 2 + 1)
+    p = psf.to(dtype)
+    p = p / p.sum(dim=(-2, -1), keepdim=True).clamp_min(1e-12)
+    otf = psf_to_otf(p, (h, w))
+    if each:  # [B, C, 1, h, w']: PSF c for every image f
+        otf = otf[:, :, None]
+    if lam.ndim == 1:
+        lam = lam.reshape((1, psf.shape[1], images, 1, 1) if each else (1, -1, 1, 1))
+    return otf, otf.abs() ** 2 + lam
+
+
+def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam, each: bool = False,
+                      filt: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
     """Wiener-deconvolve [B, C, H, W] ``y`` with [B or 1, C or 1, K, K] ``psf``; ``lam`` > 0 scalar or [C].
 
     The PSF is normalised to unit sum per channel (so the result keeps the image's scale whatever fraction of
     the light the PSF carries). ``each``: every one of ``y``'s F channels with every one of the C PSFs, output
     channel ``c·F + f`` (``lam`` scalar or [C·F]) — the same numbers as ``y.repeat(1, C, 1, 1)`` deconvolved with
-    ``psf.repeat_interleave(F, dim=1)``, with F transforms of the image instead of C·F.
+    ``psf.repeat_interleave(F, dim=1)``, with F transforms of the image instead of C·F. ``filt``: the filter
+    :func:`wiener_filter` gives for these arguments, if already computed (``psf`` and ``lam`` are then unused).
 
     Example: ``wiener_deconvolve(torch.rand(1, 3, 64, 64), psf[None], 1e-2)`` with ``psf`` [3, 15, 15].
     """
     if y.ndim != 4 or psf.ndim != 4:
         raise DoefabError(f"wiener_deconvolve takes y [B, C, H, W] and psf [B, C, K, K], got {tuple(y.shape)} and "
                           f"{tuple(psf.shape)}")
-    lam = torch.as_tensor(lam, dtype=y.dtype, device=y.device)
-    if bool((lam <= 0).any()) or not bool(torch.isfinite(lam).all()):
-        raise DoefabError("the Wiener regularisation λ must be positive and finite")
+    otf, den = filt if filt is not None else wiener_filter(psf, lam, y.shape[-2:], y.shape[1], each, y.dtype)
     k_h, k_w = psf.shape[-2:]
     ph, pw = k_h // 2 + 1, k_w // 2 + 1
     yp = F.pad(y, (pw, pw, ph, ph), mode="replicate")
     h, w = yp.shape[-2:]
-    p = psf.to(y.dtype)
-    p = p / p.sum(dim=(-2, -1), keepdim=True).clamp_min(1e-12)
-    otf = psf_to_otf(p, (h, w))
     spec = torch.fft.rfft2(yp)
     if each:  # [B, C, F, h, w']: PSF c on image f, flattened to channel c·F + f
-        otf, spec = otf[:, :, None], spec[:, None]
-    if lam.ndim == 1:
-        lam = lam.reshape((1, psf.shape[1], y.shape[1], 1, 1) if each else (1, -1, 1, 1))
-    x = torch.fft.irfft2(torch.conj(otf) * spec / (otf.abs() ** 2 + lam), s=(h, w))
-    x = x.flatten(1, 2) if each else x
-    return x[..., ph:ph + y.shape[-2], pw:pw + y.shape[-1]]
+        spec = spec[:, None]
+    # in place: one large temporary fewer; the frame cropped between the inverse transform's passes
+    x = irfft2_crop((torch.conj(otf) * spec).div_(den), (h, w), slice(ph, ph + y.shape[-2]),
+                    slice(pw, pw + y.shape[-1]))
+    return x.flatten(1, 2) if each else x
 
 
 class WienerDeconvolution(torch.nn.Module):

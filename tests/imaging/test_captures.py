@@ -7,7 +7,7 @@ import torch
 
 import doefab
 from doefab.errors import DoefabError
-from doefab.imaging.captures import convolve, convolve_valid, fft_length
+from doefab.imaging.captures import convolve, convolve_valid, fft_length, irfft2_crop
 
 
 def _pair(psf_coded, psf_uncoded, wavelengths, depths):
@@ -60,6 +60,18 @@ def test_convolution_on_a_grown_canvas_matches_scipy():
     got = convolve(torch.from_numpy(img), torch.from_numpy(psf)).numpy()
     for c in range(2):
         np.testing.assert_allclose(got[c], convolve2d(img[c], psf[c], mode="same"), atol=1e-10)
+
+
+def test_the_cropped_inverse_transform_is_numpys_inverse_cropped():
+    """``irfft2_crop`` (rows cropped between the two passes) against numpy's two-dimensional real inverse FFT,
+    cropped afterwards: even and odd canvases, frames off centre and of other heights than widths."""
+    rng = np.random.default_rng(5)
+    for (h, w), rows, cols in [((40, 36), slice(3, 30), slice(5, 36)), ((33, 45), slice(0, 33), slice(7, 19)),
+                               ((16, 17), slice(9, 12), slice(0, 4))]:
+        spec = np.fft.rfft2(rng.standard_normal((2, 3, h, w)))
+        spec[..., 1:, 2] += 0.3j  # a spectrum of no real image: the passes must treat it as irfft2 does
+        got = irfft2_crop(torch.from_numpy(spec), (h, w), rows, cols).numpy()
+        np.testing.assert_allclose(got, np.fft.irfft2(spec, s=(h, w))[..., rows, cols], atol=1e-12)
 
 
 def test_valid_convolution_matches_scipy_on_the_frames_own_canvas():

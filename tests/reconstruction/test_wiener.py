@@ -102,3 +102,47 @@ def test_coded_features_deconvolve_raw_channels_with_their_colour_and_features_w
         want += [wiener_deconvolve(f[:, j:j + 1], psf[:, c:c + 1], lam[off + 2 * c + j])
                  for c in range(n_psf) for j in range(2)]
         torch.testing.assert_close(got, torch.cat(want, dim=1), rtol=0, atol=1e-12)
+
+
+def test_coded_features_reuse_a_filter_only_for_the_same_psf_lambda_and_size():
+    """Without autograd the layer keeps the Wiener filter of the last PSF and λ: every call must still give the
+    deconvolution of the PSF and λ it is called with (computed afresh here), when the PSF changes in place, when λ
+    changes, and when the image size changes."""
+    from doefab.reconstruction.networks import CodedFeatures
+
+    torch.manual_seed(2)
+    layer = CodedFeatures(3, 2, raw=True).double().eval()
+    psf = torch.stack([_gauss(5, 0.6 + 0.3 * c) for c in range(3)])[None].double()
+    other = torch.stack([_gauss(5, 1.4 - 0.2 * c) for c in range(3)])[None].double()
+
+    def fresh(coded, p):
+        f, lam = layer.feat_coded(coded), layer.wiener.lam
+        return torch.cat([wiener_deconvolve(coded, p, lam[:3]), wiener_deconvolve(f, p, lam[3:], each=True)], dim=1)
+
+    coded = torch.rand(1, 3, 20, 24, dtype=torch.float64)
+    with torch.no_grad():
+        for _ in range(2):
+            torch.testing.assert_close(layer(coded, psf), fresh(coded, psf), rtol=0, atol=0)
+        held = psf.clone()
+        held.copy_(other)  # another PSF in the same tensor's place
+        torch.testing.assert_close(layer(coded, held), fresh(coded, other), rtol=0, atol=0)
+        layer.wiener.theta.add_(1.5)
+        torch.testing.assert_close(layer(coded, held), fresh(coded, other), rtol=0, atol=0)
+        small = coded[..., :16, :12]
+        torch.testing.assert_close(layer(small, held), fresh(small, other), rtol=0, atol=0)
+
+
+def test_coded_features_train_through_lambda_after_an_inference_call():
+    """A filter kept by an inference call must not stand in for the differentiable one: with autograd on, the
+    loss reaches λ (and the PSF)."""
+    from doefab.reconstruction.networks import CodedFeatures
+
+    layer = CodedFeatures(2, 2, raw=False).double()
+    psf = torch.stack([_gauss(5, 0.7), _gauss(5, 1.1)])[None].double()
+    coded = torch.rand(1, 3, 16, 16, dtype=torch.float64)
+    with torch.no_grad():
+        layer(coded, psf)
+    p = psf.clone().requires_grad_(True)
+    layer(coded, p).square().sum().backward()
+    assert layer.wiener.theta.grad is not None and float(layer.wiener.theta.grad.abs().min()) > 0
+    assert p.grad is not None and float(p.grad.abs().max()) > 0
