@@ -33,8 +33,8 @@ from doefab.errors import DoefabError
 from doefab.imaging.crosstalk import DualPixelCrosstalk, check_pair
 from doefab.imaging.sensor import noise_model
 
-__all__ = ["simulate_captures", "convolve", "convolve_valid", "render_layers", "plane_masks", "fft_length", "irfft2_crop",
-           "Capture", "MAX_RADIANCE"]
+__all__ = ["simulate_captures", "convolve", "convolve_valid", "render_layers", "plane_masks", "fft_length",
+           "irfft2_crop", "Capture", "MAX_RADIANCE"]
 
 #: The brightest scene radiance ``simulate_captures`` takes, in units of the clipping level of a full exposure:
 #: a million times it (20 stops above; the HDR scenes here peak at 60×, the sun's disc against a sunlit scene is
@@ -74,8 +74,9 @@ def fft_length(n: int) -> int:
 def irfft2_crop(spec: torch.Tensor, s: tuple[int, int], rows: slice, cols: slice) -> torch.Tensor:
     """``torch.fft.irfft2(spec, s=s)[..., rows, cols]``, with the rows cropped between the two passes: the column
     pass's inverse FFT (along rows) runs in full, the real inverse FFT along each row only on the rows kept. The
-    same numbers (torch's two-dimensional inverse is these two passes); a frame cropped from a padded FFT canvas
-    costs a row pass less per row cropped away.
+    same numbers to rounding, and bit for bit on the CPU build's FFT (its two-dimensional inverse is these two
+    passes); a frame cropped from a padded FFT canvas costs a row pass less per row cropped away. ``s`` and the
+    slices in pixels.
 
     Example: ``irfft2_crop(torch.fft.rfft2(x), x.shape[-2:], slice(8, 72), slice(8, 72))`` for [..., 80, 80] ``x``."""
     t = torch.fft.ifft(spec, n=s[0], dim=-2)[..., rows, :]

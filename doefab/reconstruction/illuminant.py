@@ -161,7 +161,8 @@ def mix_illuminants(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch
         m[:j] = (p * v).reshape(j, -1)
         m[j] = (t * v).reshape(-1)
         w = None
-        if bool(m[:j].any()) and bool(m[j].any()):  # a black or wholly clipped capture says nothing: below
+        # a black or wholly clipped capture says nothing, nor one with NaN in it: below
+        if not bool(m.isnan().any()) and bool(m[:j].any()) and bool(m[j].any()):
             # NNLS on a QR factor of Aᵀ (not the Gram matrix: candidates are nearly collinear, cond(AᵀA) ~ 1e16).
             # [Aᵀ b] = Q'R' gives Aᵀ's R in R'[:J, :J] and Qᵀb in R'[:J, J], with no Q formed:
             # min ‖Aᵀw − b‖ = min ‖Rw − Qᵀb‖ up to a constant

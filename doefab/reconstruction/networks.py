@@ -92,10 +92,16 @@ class CodedFeatures(nn.Module):
             out = torch.cat([self._deconvolve("raw", coded, psf, lam[:3], False), out], dim=1)
         return out
 
-    def _deconvolve(self, slot: str, y: torch.Tensor, psf: torch.Tensor, lam: torch.Tensor, each: bool):
+    def _apply(self, fn, *args, **kwargs):  # moved or cast (``.to``, ``.cpu``, ``.double``): no filter kept
+        self.__dict__.pop("_filters", None)
+        return super()._apply(fn, *args, **kwargs)
+
+    def _deconvolve(self, slot: str, y: torch.Tensor, psf: torch.Tensor, lam: torch.Tensor,
+                    each: bool) -> torch.Tensor:
         """``wiener_deconvolve``; without autograd, the filter of the last PSF and λ is kept per ``slot`` and
         reused while they (compared value for value) and the input's size stay the same: a reconstruction with
-        one PSF pays for its filter once, with the same numbers."""
+        one PSF pays for its filter once, with the same numbers. (Forward-mode AD is not served: it runs under
+        ``no_grad`` too.)"""
         if torch.is_grad_enabled():
             return wiener_deconvolve(y, psf, lam, each)
         key = (tuple(y.shape[1:]), y.dtype, y.device, each, tuple(psf.shape), psf.dtype, psf.device, lam.dtype)

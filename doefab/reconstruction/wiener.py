@@ -36,6 +36,8 @@ def wiener_filter(psf: torch.Tensor, lam, shape: tuple[int, int], images: int = 
     :func:`wiener_deconvolve`'s padded grid (arguments as there). It depends on the PSF and λ only, so a caller
     that deconvolves many images with one PSF computes it once (``CodedFeatures`` at inference).
 
+    ``shape`` in pixels; λ relative to the unit-sum PSF's OTF (1 at zero frequency).
+
     Example: ``otf, den = wiener_filter(psf[None], 1e-2, (64, 64), images=3)`` with ``psf`` [3, 15, 15]."""
     if psf.ndim != 4:
         raise DoefabError(f"the PSF must be [B, C, K, K], got {tuple(psf.shape)}")
@@ -77,9 +79,11 @@ def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam, each: bool = Fals
     spec = torch.fft.rfft2(yp)
     if each:  # [B, C, F, h, w']: PSF c on image f, flattened to channel c·F + f
         spec = spec[:, None]
-    # in place: one large temporary fewer; the frame cropped between the inverse transform's passes
-    x = irfft2_crop((torch.conj(otf) * spec).div_(den), (h, w), slice(ph, ph + y.shape[-2]),
-                    slice(pw, pw + y.shape[-1]))
+    q = torch.conj(otf) * spec
+    # in place where λ does not widen the product (one large temporary fewer); the frame cropped between the
+    # inverse transform's passes
+    q = q.div_(den) if torch.broadcast_shapes(q.shape, den.shape) == q.shape else q / den
+    x = irfft2_crop(q, (h, w), slice(ph, ph + y.shape[-2]), slice(pw, pw + y.shape[-1]))
     return x.flatten(1, 2) if each else x
 
 

@@ -66,10 +66,15 @@ def test_the_cropped_inverse_transform_is_numpys_inverse_cropped():
     """``irfft2_crop`` (rows cropped between the two passes) against numpy's two-dimensional real inverse FFT,
     cropped afterwards: even and odd canvases, frames off centre and of other heights than widths."""
     rng = np.random.default_rng(5)
-    for (h, w), rows, cols in [((40, 36), slice(3, 30), slice(5, 36)), ((33, 45), slice(0, 33), slice(7, 19)),
-                               ((16, 17), slice(9, 12), slice(0, 4))]:
-        spec = np.fft.rfft2(rng.standard_normal((2, 3, h, w)))
-        spec[..., 1:, 2] += 0.3j  # a spectrum of no real image: the passes must treat it as irfft2 does
+    for (h, w), grown, rows, cols in [((40, 36), (0, 0), slice(3, 30), slice(5, 36)),
+                                      ((33, 45), (0, 0), slice(0, 33), slice(7, 19)),
+                                      ((16, 17), (0, 0), slice(9, 12), slice(0, 4)),
+                                      ((24, 20), (5, 6), slice(2, 22, 3), slice(1, 20))]:
+        spec = np.fft.rfft2(rng.standard_normal((2, 3, h, w)), s=(h + grown[0], w + grown[1]))
+        # imaginary parts no real image has (columns 0 and, for an even canvas, the last): kept or dropped as
+        # irfft2 keeps or drops them
+        spec[..., 1:, 0] += 0.3j
+        spec[..., 2:, -1] -= 0.2j
         got = irfft2_crop(torch.from_numpy(spec), (h, w), rows, cols).numpy()
         np.testing.assert_allclose(got, np.fft.irfft2(spec, s=(h, w))[..., rows, cols], atol=1e-12)
 
