@@ -74,9 +74,10 @@ def fft_length(n: int) -> int:
 def irfft2_crop(spec: torch.Tensor, s: tuple[int, int], rows: slice, cols: slice) -> torch.Tensor:
     """``torch.fft.irfft2(spec, s=s)[..., rows, cols]``, with the rows cropped between the two passes: the column
     pass's inverse FFT (along rows) runs in full, the real inverse FFT along each row only on the rows kept. The
-    same numbers to rounding, and bit for bit on the CPU build's FFT (its two-dimensional inverse is these two
-    passes); a frame cropped from a padded FFT canvas costs a row pass less per row cropped away. ``s`` and the
-    slices in pixels.
+    same numbers to rounding, and bit for bit on x86 CPU builds with MKL (their two-dimensional inverse is these
+    two passes, each scaled by its own length; pocketfft builds and CUDA scale once: rounding-level differences);
+    a frame cropped from a padded FFT canvas costs a row pass less per row cropped away. ``s`` and the slices in
+    pixels.
 
     Example: ``irfft2_crop(torch.fft.rfft2(x), x.shape[-2:], slice(8, 72), slice(8, 72))`` for [..., 80, 80] ``x``."""
     t = torch.fft.ifft(spec, n=s[0], dim=-2)[..., rows, :]

@@ -64,7 +64,7 @@ def wiener_deconvolve(y: torch.Tensor, psf: torch.Tensor, lam, each: bool = Fals
     the light the PSF carries). ``each``: every one of ``y``'s F channels with every one of the C PSFs, output
     channel ``c·F + f`` (``lam`` scalar or [C·F]) — the same numbers as ``y.repeat(1, C, 1, 1)`` deconvolved with
     ``psf.repeat_interleave(F, dim=1)``, with F transforms of the image instead of C·F. ``filt``: the filter
-    :func:`wiener_filter` gives for these arguments, if already computed (``psf`` and ``lam`` are then unused).
+    :func:`wiener_filter` gives for these arguments, if already computed (then only ``psf``'s size is read).
 
     Example: ``wiener_deconvolve(torch.rand(1, 3, 64, 64), psf[None], 1e-2)`` with ``psf`` [3, 15, 15].
     """

@@ -160,16 +160,21 @@ def test_light_between_two_members_is_met_by_their_blend_not_by_one_of_them():
     assert np.abs(mixed - truth).mean() < 0.7 * np.abs(single - truth).mean()
 
 
-@pytest.mark.parametrize("kind", ["black", "clipped"])
+@pytest.mark.parametrize("kind", ["black", "clipped", "nan"])
 def test_a_capture_that_says_nothing_falls_back_to_one_member(kind):
-    """A black or wholly clipped coded capture has no unclipped pixel to fit: the mixture falls back to a single
-    member (weights sum to one), never to an error or to all-zero weights."""
+    """A black or wholly clipped coded capture has no unclipped pixel to fit, and one with a NaN pixel nothing a
+    least-squares fit can use: the mixture falls back to a single member (weights sum to one), never to an error
+    or to all-zero weights."""
     from doefab.reconstruction.illuminant import mix_illuminants
 
     lib = _library()
     inv = torch.from_numpy(illuminant_inverses(T, lib))
     coded, uncoded, psf = _dispersed_scene(lib[1])
-    coded = torch.zeros_like(coded) if kind == "black" else torch.ones_like(coded)
+    if kind == "nan":  # a NaN pixel (a dead pixel's value) reaches every prediction through the convolution
+        uncoded = uncoded.clone()
+        uncoded[..., 5, 7] = float("nan")
+    else:
+        coded = torch.zeros_like(coded) if kind == "black" else torch.ones_like(coded)
     w = mix_illuminants(coded, uncoded, psf, torch.from_numpy(T), inv)[0]
     assert float(w.sum()) == pytest.approx(1.0) and int((w > 0).sum()) == 1
 

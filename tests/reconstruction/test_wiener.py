@@ -165,3 +165,15 @@ def test_deconvolution_is_the_wiener_formula_on_the_edge_replicated_canvas():
         for f in range(2):
             want = np.fft.ifft2(np.fft.fft2(pad[:, f]) * otf.conj() / (np.abs(otf) ** 2 + float(lam[c * 2 + f]))).real
             np.testing.assert_allclose(got[:, c * 2 + f], want[:, 3:16, 3:21], atol=1e-10)
+
+
+def test_a_lambda_per_output_widens_a_single_channel_deconvolution():
+    """One image and one PSF with three λ: three deconvolutions, each the one its λ alone gives."""
+    rng = np.random.default_rng(6)
+    y = torch.from_numpy(rng.random((1, 1, 12, 12)))
+    psf = _gauss(5, 0.9).double()[None, None]
+    lam = torch.tensor([0.01, 0.1, 1.0], dtype=torch.float64)
+    got = wiener_deconvolve(y, psf, lam)
+    want = torch.cat([wiener_deconvolve(y, psf, float(v)) for v in lam], dim=1)
+    assert got.shape == (1, 3, 12, 12)
+    torch.testing.assert_close(got, want, rtol=0, atol=1e-12)
