@@ -23,7 +23,9 @@ is what a cell holding two heights sends into the far field.
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -34,8 +36,9 @@ from doefab.fabrication.bitplanes import bit_planes
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 
-__all__ = ["fabricated_height", "refined_camera", "level_step_for", "roughness_field", "check_errors", "per_mask",
-           "MASK_NOMINAL"]
+
+__all__ = ["fabricated_height", "alignment_chain", "compose_overlay", "refined_camera", "level_step_for",
+           "roughness_field", "check_errors", "per_mask", "MASK_NOMINAL"]
 
 # each per-mask error's value on a mask made without that error
 MASK_NOMINAL = {"depth_scale": 1.0, "overlay": (0.0, 0.0), "rotation": 0.0}
@@ -157,3 +160,39 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     if rough > 0:
         h = h + roughness_field(h.shape, model.cell, rough, corr, seed)[0]
     return h
+
+
+def alignment_chain(design_dir: Path | None, n_masks: int) -> dict:
+    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (a mask set's
+    ``design/``) or in a run's ``masks/`` beside it (chrome = 0); without one, every one of the ``n_masks`` etch
+    plates aligns to the chrome plate."""
+    man = None
+    if design_dir is not None:
+        man = Path(design_dir).parent / "manifest.json"
+        if not man.is_file():
+            man = Path(design_dir).parent / "masks" / "manifest.json"
+    if man is not None and man.is_file():
+        try:
+            return {int(k): int(v) for k, v in json.loads(man.read_text())["alignment_chain"].items()}
+        except (KeyError, ValueError, TypeError):
+            pass
+    return {m + 1: 0 for m in range(n_masks)}
+
+
+def compose_overlay(err, chain: dict, n_masks: int) -> tuple[list, list]:
+    """Where each of the ``n_masks`` masks of a part (``PartErrors``) landed on the die: its own error relative to
+    the plate it aligns to, accumulated along the alignment chain (the chrome layer, plate 0, is the die's frame).
+    Mounting errors are not here: they move the die, not the masks on it."""
+    err = err.for_masks(n_masks)
+    shifts, rots = [], []
+    for m in range(n_masks):
+        plate, dx, dy, th = m + 1, 0.0, 0.0, 0.0
+        seen = set()
+        while plate != 0 and plate not in seen:
+            seen.add(plate)
+            k = plate - 1
+            dx, dy, th = dx + err.overlay[k][0], dy + err.overlay[k][1], th + err.rotation[k]
+            plate = chain.get(plate, 0)
+        shifts.append((dx, dy))
+        rots.append(th)
+    return shifts, rots

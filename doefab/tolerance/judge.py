@@ -33,7 +33,7 @@ import torch
 from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
-from doefab.tolerance.fabricate import refined_camera, roughness_field
+from doefab.tolerance.fabricate import alignment_chain, compose_overlay, refined_camera, roughness_field
 from doefab.tolerance.sources import apply_psf_effects, tilt_phase_factor
 
 __all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "planes_among", "DEFAULT_MARGIN"]
@@ -41,56 +41,28 @@ __all__ = ["PSFJudge", "alignment_chain", "compose_overlay", "psf_source", "plan
 DEFAULT_MARGIN = 0.3e-3  # metres of decenter every part shares one sample grid for (the holder allows 0.25 mm)
 
 
-def alignment_chain(design_dir: Path | None, n_masks: int) -> dict:
-    """``{plate: plate it aligns to}`` from the mask set's manifest beside ``design_dir`` (a mask set's
-    ``design/``) or in a run's ``masks/`` beside it (chrome = 0); without one, every one of the ``n_masks`` etch
-    plates aligns to the chrome plate."""
-    man = None
-    if design_dir is not None:
-        man = Path(design_dir).parent / "manifest.json"
-        if not man.is_file():
-            man = Path(design_dir).parent / "masks" / "manifest.json"
-    if man is not None and man.is_file():
-        try:
-            return {int(k): int(v) for k, v in json.loads(man.read_text())["alignment_chain"].items()}
-        except (KeyError, ValueError, TypeError):
-            pass
-    return {m + 1: 0 for m in range(n_masks)}
-
-
-def compose_overlay(err: PartErrors, chain: dict, n_masks: int) -> tuple[list, list]:
-    """Where each of the ``n_masks`` masks landed on the die: its own error relative to the plate it aligns to,
-    accumulated along the alignment chain (the chrome layer, plate 0, is the die's frame). Mounting errors are not
-    here: they move the die, not the masks on it."""
-    err = err.for_masks(n_masks)
-    shifts, rots = [], []
-    for m in range(n_masks):
-        plate, dx, dy, th = m + 1, 0.0, 0.0, 0.0
-        seen = set()
-        while plate != 0 and plate not in seen:
-            seen.add(plate)
-            k = plate - 1
-            dx, dy, th = dx + err.overlay[k][0], dy + err.overlay[k][1], th + err.rotation[k]
-            plate = chain.get(plate, 0)
-        shifts.append((dx, dy))
-        rots.append(th)
-    return shifts, rots
-
-
-def psf_source(err: PartErrors | None = None, height=None) -> str:
-    """What a part's PSFs are computed from, as ``PSFJudge.reuse`` keys them: the part's errors, or an explicit
-    height map's digest (metres, on the judge's grid).
+def psf_source(err: PartErrors | None = None, height=None, doe_is_stop: bool = False) -> str:
+    """What a part's PSFs are computed from, as ``PSFJudge.reuse`` keys them: the part's errors that reach its
+    pupil (not the sensor's, ``sources.sensor_errors``; not a roughness's parameters when it has none; not an axial
+    gap when ``doe_is_stop``: then it moves nothing, ``mounted``), or an explicit height map's digest (metres, on
+    the judge's grid).
 
     Example:
         >>> psf_source(PartErrors())[:5], psf_source(height=np.zeros((2, 2)))[:7]
         ('part ', 'height ')
+        >>> psf_source(PartErrors(crosstalk=(0.02, 0.01))) == psf_source(PartErrors())
+        True
     """
+    from doefab.tolerance.sources import sensor_errors
+
     if height is not None:
         h = np.ascontiguousarray(np.asarray(height, np.float64))
         return "height " + hashlib.sha256(h.tobytes()).hexdigest() + str(tuple(h.shape))
     if err is None:
         raise DoefabError("psf_source needs a part's errors or a height map: psf_source(PartErrors())")
-    return "part " + json.dumps(err.to_json(), sort_keys=True, default=str)
+    off = set(sensor_errors({})) | ({"roughness_corr", "seed"} if err.roughness == 0 else set())
+    off |= {"axial_gap"} if doe_is_stop else set()
+    return "part " + json.dumps({k: v for k, v in err.to_json().items() if k not in off}, sort_keys=True, default=str)
 
 
 def planes_among(planes, among) -> list[int] | None:
@@ -144,6 +116,7 @@ class PSFJudge:
         self._uncoded = None
         self._relief_cache: tuple = (None, None)
         self._kept: OrderedDict = OrderedDict()  # {(source, half): PSF} of the latest PSFs computed (``reuse``)
+        self._plain_of: OrderedDict = OrderedDict()  # {source: the key its plain half is kept under}
         self._min_kernel = 0  # part PSFs are computed at this kernel at least (``computing_at``)
         self._nominal = None
         self.seconds_per_psf = None
@@ -159,13 +132,16 @@ class PSFJudge:
             self.seconds_per_psf = time.perf_counter() - t
         return self._nominal
 
-    def reuse(self, source: str, halves, kernel: int | None, compute) -> dict:
-        """{half: PSF} of ``source`` (a part's errors or a height map's digest) at ``kernel``: each half served
-        from the PSF kept for the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p
-        for every K, so a smaller kernel is the centre crop of a larger one, to float rounding), the rest from
-        ``compute(todo)``, which computes only the halves ``todo`` (at ``kernel`` or larger). The latest PSFs are
-        kept, up to ``KEEP_BYTES``: a network-level part pays once for the coded PSF its PSF metric and its
-        network both use, and the tornado's network pass for the coded halves its PSF-level pass computed."""
+    def reuse(self, source, halves, kernel: int | None, compute) -> dict:
+        """{half: PSF} of ``source`` (a part's errors or a height map's digest; or {half: key}, where a half is
+        kept under another key: ``MountedPlan.plain_key``) at ``kernel``: each half served from the PSF kept for
+        the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p for every K, so a smaller
+        kernel is the centre crop of a larger one, to float rounding), the rest from ``compute(todo)``, which
+        computes only the halves ``todo`` (at ``kernel`` or larger). The latest PSFs are kept, up to
+        ``KEEP_BYTES``: a network-level part pays once for the coded PSF its PSF metric and its network both use,
+        the tornado's network pass for the coded halves its PSF-level pass computed, and a part whose relief leaves
+        the plain half plain glass for nothing of that half that a part with its decenter computed."""
+        keys = source if isinstance(source, dict) else {h: source for h in halves}
         k = int(kernel or self.task.kernel_size)
 
         def crop(v: torch.Tensor) -> torch.Tensor:
@@ -173,14 +149,14 @@ class PSFJudge:
             return v if v.shape[-1] == k else v[..., c:c + k, c:c + k]
         got = {}
         for h in halves:
-            kept = self._kept.get((source, h))
+            kept = self._kept.get((keys[h], h))
             if kept is not None and k <= kept.shape[-1]:
                 got[h] = crop(kept).clone()
-                self._kept.move_to_end((source, h))
+                self._kept.move_to_end((keys[h], h))
         todo = tuple(h for h in halves if h not in got)
         if todo:
             out = compute(todo)
-            self.keep(source, {h: out[h] for h in todo})
+            self._keep({(keys[h], h): out[h] for h in todo})
             for h in todo:
                 got[h] = crop(out[h])
         return {h: got[h] for h in halves}
@@ -188,10 +164,13 @@ class PSFJudge:
     def keep(self, source: str, psfs: dict) -> None:
         """Keep ``psfs`` ({half: PSF before any PSF-level effect}) of ``source`` (``psf_source``) for ``reuse``,
         the oldest others dropped beyond ``KEEP_BYTES`` (these stay)."""
-        for h, v in psfs.items():
-            self._kept[(source, h)] = v.detach().clone()
-            self._kept.move_to_end((source, h))
-        while len(self._kept) > len(psfs) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
+        self._keep({(source, h): v for h, v in psfs.items()})
+
+    def _keep(self, entries: dict) -> None:
+        for key, v in entries.items():
+            self._kept[key] = v.detach().clone()
+            self._kept.move_to_end(key)
+        while len(self._kept) > len(entries) and sum(v.nbytes for v in self._kept.values()) > self.KEEP_BYTES:
             self._kept.popitem(last=False)
 
     def take_planes(self, other: PSFJudge, source: str) -> None:
@@ -200,9 +179,12 @@ class PSFJudge:
         rendering planes: a PSF at a plane is the same whichever other planes are computed with it, so they serve
         the part's PSF metric on the network's planes); else nothing."""
         take = planes_among(self.design.depths, other.design.depths)
-        got = {h: v[take] for (s, h), v in other._kept.items() if s == source} if take is not None else {}
+        plain = other._plain_of.get(source, source)
+        got = {(s, h): v[take] for (s, h), v in other._kept.items()
+               if s == source or (s, h) == (plain, "uncoded")} if take is not None else {}
         if got:
-            self.keep(source, got)
+            self._keep(got)
+            self._plain_key(source, lambda: plain)
 
     @contextmanager
     def computing_at(self, kernel: int | None):
@@ -302,7 +284,7 @@ class PSFJudge:
         """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""
         if any(not 0 <= v < 0.5 for v in err.crosstalk):
             raise DoefabError("crosstalk ratios must be in [0, 0.5)")
-        source = psf_source(err)
+        source = self.source_of(err)
         k = int(kernel or self.task.kernel_size)
         shared = err.axial_gap == 0 or self.fine.doe_is_stop  # a gap in front of a lens stop mixes the window
         big = max(k, self._min_kernel) if shared else k
@@ -311,8 +293,31 @@ class PSFJudge:
             plan = self.plan(halves, err.mount_shift[0], big)
             got = plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
             return to_device(got, "cpu")
-        out = self.reuse(source, halves, k, compute) if shared else compute(halves)
+        if not shared:
+            out = compute(halves)
+        else:
+            def plain():
+                plan = self.plan(halves, err.mount_shift[0], big)
+                return plan.plain_key(self.field(err, plan), err.mount_shift, err.axial_gap)
+            keys = {h: self._plain_key(source, plain) if h == "uncoded" else source for h in halves}
+            out = self.reuse(keys, halves, k, compute)
         return apply_psf_effects(out, err)  # the sources of error that act after the pupil (none shipped)
+
+    def _plain_key(self, source: str, key_of) -> str:
+        """The key ``source``'s plain half is kept under: the one it was given, ``source`` itself when kept under it,
+        else ``key_of()`` (``MountedPlan.plain_key``; None: ``source``). The latest 256 are remembered."""
+        if source not in self._plain_of:
+            if (source, "uncoded") in self._kept:
+                return source
+            self._plain_of[source] = key_of() or source
+            if len(self._plain_of) > 256:
+                self._plain_of.popitem(last=False)
+        self._plain_of.move_to_end(source)
+        return self._plain_of[source]
+
+    def source_of(self, err: PartErrors | None = None, height=None) -> str:
+        """``psf_source`` of a part (or a height map) as this judge keys its PSFs."""
+        return psf_source(err, height, self.fine.doe_is_stop)
 
     def uncoded(self) -> torch.Tensor:
         """The nominal plain half's PSF (crosstalk at PSF level)."""
@@ -325,17 +330,24 @@ class PSFJudge:
         h = torch.as_tensor(np.asarray(height, np.float64))
         source = psf_source(height=h)
 
-        def compute(todo):
-            plan = self.plan(halves, 0.0, kernel)
+        def field(plan):
             (r0, r1), (c0, c1) = plan.window
-            rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).reshape(-1).to(self.device)
+            rel = (h[r0:r1, c0:c1] - ((1 << self.n_masks) - 1) * self.step).to(self.device)
 
             def at(i: int) -> torch.Tensor:
                 ph = (plan.phase_per_metre(i) * rel).float()
                 return torch.polar(torch.ones_like(ph), ph)
+            return at
+
+        def compute(todo):
+            plan = self.plan(halves, 0.0, kernel)
             with torch.no_grad():
-                return to_device(plan.psfs(at, halves=todo), "cpu")
-        return self.reuse(source, halves, kernel, compute)
+                return to_device(plan.psfs(field(plan), halves=todo), "cpu")
+        def plain():
+            plan = self.plan(halves, 0.0, kernel)
+            return plan.plain_key(field(plan))
+        keys = {hf: self._plain_key(source, plain) if hf == "uncoded" else source for hf in halves}
+        return self.reuse(keys, halves, kernel, compute)
 
     def psf_from_height(self, height) -> torch.Tensor:
         """Coded PSF of an explicit height map (metres) on the judge's grid."""

@@ -23,6 +23,7 @@ diffraction over the gap is then propagated (``doefab.optics.gap``).
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -35,6 +36,10 @@ from doefab.optics.pupil import pupil_half, source_path_difference
 
 __all__ = ["MountedPlan", "stop_case"]
 
+
+#: a sample the plain half covers less than this is off it (``MountedPlan.plain_key``): the exact area formula
+#: leaves about 3e-17 on samples wholly across the split
+PLAIN_COVER = 1e-9
 
 #: a baffle and a pupil whose diameters differ by at most this fraction are "about equal" in reports
 STOP_TOLERANCE = 0.01
@@ -107,6 +112,29 @@ class MountedPlan:
 
     def covers(self, decenter) -> bool:
         return abs(float(decenter[0])) <= self.margin
+
+    def coverage(self, half: str, dx: float) -> torch.Tensor:
+        """[rows, cols] of ``half``'s window (``self.geo[half]``): the fraction of each sample on the half's side
+        of the split line, the die ``dx`` metres across it (on the plan's device)."""
+        return self._coverage(half, dx)
+
+    def plain_key(self, field, decenter=(0.0, 0.0), gap: float = 0.0) -> str | None:
+        """The key a part's plain-half PSF is kept under (``PSFJudge.reuse``) when its transmittance ``field(i)``
+        (as ``psfs`` takes it; this plan holds the plain half) is exactly 1 wherever the half covers more than
+        ``PLAIN_COVER`` of a sample: that PSF is then the same for every part with the same decenter (m) and gap
+        (m; any gap when the DOE is the stop), to float32 rounding (a sample covered less moves it by 1e-9 of one
+        sample's light at most) — the tornado's relief errors and the quantization study's levels share the
+        error-free part's; else None."""
+        dx = float(decenter[0])
+        cover = self.coverage("uncoded", dx) > PLAIN_COVER
+        (r0, r1), (c0, _) = self.window
+        g = self.geo["uncoded"]
+        rows, cols = slice(g.rows.start - r0, g.rows.stop - r0), slice(g.cols.start - c0, g.cols.stop - c0)
+        if not all(bool((field(i).reshape(r1 - r0, -1)[rows, cols].to(cover.device)[cover] == 1).all())
+                   for i in range(len(self.wavelengths))):
+            return None
+        gap = float(gap) if gap > 0 and not self.camera.doe_is_stop else 0.0  # a gap psfs does not propagate
+        return "plain half " + json.dumps([dx, float(decenter[1]), gap, self.margin, self.kernel])
 
     def _coverage(self, half: str, dx: float) -> torch.Tensor:
         key = (half, round(dx, 15))

@@ -134,8 +134,6 @@ class NetworkJudge:
         network's. For depth the second is taken from the first, and the base judge keeps it for the part's PSF
         metric (``PSFJudge.take_planes``), which then computes none of them again (where a part's PSFs are shared at
         all: not across an axial gap in front of a lens stop, ``PSFJudge.psfs``)."""
-        from doefab.tolerance.judge import psf_source
-
         if self.render_judge is self.base:
             pair = self.pair(err, height)
             return pair, pair
@@ -143,7 +141,7 @@ class NetworkJudge:
         measured = self.at_network_planes(rendered)
         if measured is None:
             return rendered, self.pair(err, height)
-        self.base.take_planes(self.render_judge, psf_source(err, height))
+        self.base.take_planes(self.render_judge, self.render_judge.source_of(err, height))
         return rendered, measured
 
     def conditions(self, err: PartErrors, rendered):

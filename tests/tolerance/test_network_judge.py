@@ -188,6 +188,9 @@ def test_the_depth_judge_renders_between_the_networks_planes_and_tells_it_the_pa
         def take_planes(self, other, source):
             taken.append((self, other, source))
 
+        def source_of(self, err, height=None):
+            return judge_mod.psf_source(err, height)
+
     from doefab.design.design import Design
 
     judge.base = FakeJudge(Design.load(REPO / "masks" / "half-ring" / "design"))

@@ -79,7 +79,7 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
     bit for bit, as a judge with nothing kept computes; another part (one the rendering judge also computed, later)
     is computed, and what was taken stays when the store is over its size."""
     from doefab.tolerance.errors import PartErrors
-    from doefab.tolerance.judge import PSFJudge, psf_source
+    from doefab.tolerance.judge import PSFJudge
 
     net = PSFJudge(depth_design, 1)
     fine = _rendering_judge(net, net.design.depths)
@@ -89,7 +89,7 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
     net.KEEP_BYTES = 1
     fine.psfs(err, ("coded", "uncoded"), 31)
     fine.psfs(other, ("coded", "uncoded"), 31)
-    net.take_planes(fine, psf_source(err))
+    net.take_planes(fine, fine.source_of(err))
     fresh = PSFJudge(depth_design, 1).psfs(err, ("coded", "uncoded"), 31)
     _computing_fails(monkeypatch, net)
     served = net.psfs(err, ("coded", "uncoded"), 31)
@@ -103,13 +103,13 @@ def test_the_psf_metric_of_a_depth_part_is_served_from_its_rendering_planes(dept
 def test_planes_are_taken_only_from_a_judge_that_holds_them_all(depth_design):
     """``take_planes`` takes nothing from a judge on planes that lack one of this judge's: its PSFs are computed."""
     from doefab.tolerance.errors import PartErrors
-    from doefab.tolerance.judge import PSFJudge, psf_source
+    from doefab.tolerance.judge import PSFJudge
 
     net = PSFJudge(depth_design, 1)
     lacking = _rendering_judge(net, net.design.depths[:2])
     err = PartErrors(mount_shift=(3e-6, -2e-6))
     lacking.psfs(err, ("coded",), 31)
-    net.take_planes(lacking, psf_source(err))
+    net.take_planes(lacking, lacking.source_of(err))
     assert not net._kept
 
 
