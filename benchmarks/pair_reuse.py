@@ -106,7 +106,8 @@ def main() -> None:
             md[-1] += f" {r['seconds']:.1f} | {same} |"
         tot_new = sum(r["seconds"] for r in new["rows"])
         tot_old = sum(r["seconds"] for r in old["rows"]) if old else float("nan")
-        md.append(f"| {name} | **all {len(new['rows'])} pairs** ({new['planes']} planes; previous code "
+        planes = f"{new['planes']} plane" + ("s" if new["planes"] != 1 else "")
+        md.append(f"| {name} | **all {len(new['rows'])} pairs** ({planes}; previous code "
                   f"{old['revision'] if old else '—'}, this code {new['revision']}) | **{tot_old:.0f}** | "
                   f"**{tot_new:.0f}** | |")
     out = Path(a.results)
