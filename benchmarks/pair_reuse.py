@@ -72,31 +72,80 @@ def measure(design: str, threads: int) -> dict:
     return {"design": design, "planes": len(rendered.depths), "rows": rows}
 
 
+def replay(design: str) -> dict:
+    """The halves each pair of ``measure``'s sequence computes with this code, found without computing a PSF
+    (``MountedPlan.psfs`` returns zeros of its shape and records the halves it was asked for): which pairs share."""
+    sys.path.insert(0, code_root())
+    import torch
+
+    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.mounted import MountedPlan
+    from doefab.tolerance.netjudge import NetworkJudge
+    from doefab.tolerance.study import judge_for
+
+    asked = []
+
+    def psfs(self, field, decenter=(0.0, 0.0), gap=0.0, halves=None):
+        halves = tuple(halves or self.halves)
+        asked.extend(halves)
+        shape = (len(self.depths), len(self.wavelengths), self.kernel, self.kernel)
+        return {h: torch.zeros(shape) for h in halves}
+    MountedPlan.psfs = psfs
+    judge = NetworkJudge(judge_for(str(Path(code_root()) / "masks" / design / "design"), 1))
+    rows = []
+    for label, err, height in parts(judge.base, load_budget()):
+        asked.clear()
+        judge.rendered_pair(err, height)
+        rows.append({"part": label, "computed": list(asked)})
+    return {"design": design, "rows": rows}
+
+
 def main() -> None:
     import argparse
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(ap)
     ap.add_argument("--design", choices=DESIGNS, help=argparse.SUPPRESS)
+    ap.add_argument("--replay", action="store_true", help="only add which halves each pair computes (this code, no "
+                    "PSF computed) to the timings in the results folder's pair_reuse.json")
     a = ap.parse_args()
     if a.measure_only:
-        print(json.dumps(measure(a.design, a.threads)))
+        print(json.dumps(replay(a.design) if a.replay else measure(a.design, a.threads)))
         return
-    data = {"threads": a.threads, "designs": {}}
-    for i, name in enumerate(DESIGNS):
-        for code in turns(a.baseline, start=i):
-            rev, res = measure_at(code, __file__, ["--design", name, "--threads", str(a.threads)])
-            data["designs"].setdefault(name, {})["this_code" if code is None else "baseline"] = {"revision": rev, **res}
-            print(name, rev, round(sum(r["seconds"] for r in res["rows"]), 1), flush=True)
+    out = Path(a.results)
+    if a.replay:
+        data = json.loads((out / "pair_reuse.json").read_text())
+        for name in DESIGNS:
+            rev, res = measure_at(None, __file__, ["--design", name, "--replay"])
+            data["designs"][name]["replay"] = {"revision": rev, **res}
+    else:
+        data = {"threads": a.threads, "baseline_arg": a.baseline, "designs": {}}
+        for i, name in enumerate(DESIGNS):
+            for code in turns(a.baseline, start=i):
+                rev, res = measure_at(code, __file__, ["--design", name, "--threads", str(a.threads)])
+                data["designs"].setdefault(name, {})["this_code" if code is None else "baseline"] = {
+                    "revision": rev, **res}
+                print(name, rev, round(sum(r["seconds"] for r in res["rows"]), 1), flush=True)
+    write(data, out)
+
+
+def write(data: dict, out: Path) -> None:
+    """pair_reuse.{json,md} in ``out``."""
     runs = data["designs"]["streak"]
     same_code_warning(runs.get("baseline", {}).get("revision"), runs["this_code"]["revision"])
+    baseline, threads = data["baseline_arg"], data["threads"]
+    replayed = all("replay" in runs for runs in data["designs"].values())
     md = ["# PSF pairs outside the Monte Carlo", "",
-          f"`.venv/bin/python benchmarks/pair_reuse.py --baseline {a.baseline}` ({a.threads} torch threads): the PSF "
+          f"`.venv/bin/python benchmarks/pair_reuse.py --baseline {baseline}` ({threads} torch threads): the PSF "
           "pairs of a tolerance study's network passes outside its Monte Carlo (the error-free part, each error kind "
           "alone at one standard deviation of the default budget, the quantization study's height maps), in one "
-          "judge, in that order; seconds per pair, the previous code timed in the same run.", "",
-          "| design | part | previous code (s) | this code (s) | the same PSFs bit for bit |",
-          "| --- | --- | --- | --- | --- |"]
+          "judge, in that order; seconds per pair, the previous code timed in the same run."
+          + (" The halves each pair computes with this code, without computing a PSF: `.venv/bin/python "
+             f"benchmarks/pair_reuse.py --replay` (at {data['designs']['streak']['replay']['revision']})."
+             if replayed else ""), "",
+          "| design | part | previous code (s) | this code (s) | the same PSFs bit for bit |"
+          + (" halves this code computes |" if replayed else ""),
+          "| --- | --- | --- | --- | --- |" + (" --- |" if replayed else "")]
     for name, runs in data["designs"].items():
         new, old = runs["this_code"], runs.get("baseline")
         for j, r in enumerate(new["rows"]):
@@ -104,13 +153,14 @@ def main() -> None:
             md.append(f"| {name} | {r['part']} | {o['seconds']:.1f} |" if o else f"| {name} | {r['part']} | — |")
             same = "—" if not o else ("yes" if o["sha256"] == r["sha256"] else "NO")
             md[-1] += f" {r['seconds']:.1f} | {same} |"
+            if replayed:
+                md[-1] += f" {', '.join(runs['replay']['rows'][j]['computed']) or 'none'} |"
         tot_new = sum(r["seconds"] for r in new["rows"])
         tot_old = sum(r["seconds"] for r in old["rows"]) if old else float("nan")
         planes = f"{new['planes']} plane" + ("s" if new["planes"] != 1 else "")
         md.append(f"| {name} | **all {len(new['rows'])} pairs** ({planes}; previous code "
                   f"{old['revision'] if old else '—'}, this code {new['revision']}) | **{tot_old:.0f}** | "
-                  f"**{tot_new:.0f}** | |")
-    out = Path(a.results)
+                  f"**{tot_new:.0f}** | |" + (" |" if replayed else ""))
     out.mkdir(parents=True, exist_ok=True)
     (out / "pair_reuse.json").write_text(json.dumps(data, indent=1) + "\n")
     (out / "pair_reuse.md").write_text("\n".join(md) + "\n")

@@ -162,7 +162,7 @@ class PSFJudge:
         return {h: got[h] for h in halves}
 
     def keep(self, source: str, psfs: dict) -> None:
-        """Keep ``psfs`` ({half: PSF before any PSF-level effect}) of ``source`` (``psf_source``) for ``reuse``,
+        """Keep ``psfs`` ({half: PSF before any PSF-level effect}) of ``source`` (``source_of``) for ``reuse``,
         the oldest others dropped beyond ``KEEP_BYTES`` (these stay)."""
         self._keep({(source, h): v for h, v in psfs.items()})
 
@@ -174,7 +174,7 @@ class PSFJudge:
             self._kept.popitem(last=False)
 
     def take_planes(self, other: PSFJudge, source: str) -> None:
-        """Keep, for ``reuse``, the PSFs ``other`` keeps for ``source`` (``psf_source``) at this judge's planes, when
+        """Keep, for ``reuse``, the PSFs ``other`` keeps for ``source`` (``source_of``) at this judge's planes, when
         ``other`` (a judge of the same grid, margin and chain) is on planes that hold them all (the network judge's
         rendering planes: a PSF at a plane is the same whichever other planes are computed with it, so they serve
         the part's PSF metric on the network's planes); else nothing."""
@@ -296,6 +296,7 @@ class PSFJudge:
         if not shared:
             out = compute(halves)
         else:
+
             def plain():
                 plan = self.plan(halves, err.mount_shift[0], big)
                 return plan.plain_key(self.field(err, plan), err.mount_shift, err.axial_gap)

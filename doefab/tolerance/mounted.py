@@ -121,10 +121,12 @@ class MountedPlan:
     def plain_key(self, field, decenter=(0.0, 0.0), gap: float = 0.0) -> str | None:
         """The key a part's plain-half PSF is kept under (``PSFJudge.reuse``) when its transmittance ``field(i)``
         (as ``psfs`` takes it; this plan holds the plain half) is exactly 1 wherever the half covers more than
-        ``PLAIN_COVER`` of a sample: that PSF is then the same for every part with the same decenter (m) and gap
-        (m; any gap when the DOE is the stop), to float32 rounding (a sample covered less moves it by 1e-9 of one
-        sample's light at most) — the tornado's relief errors and the quantization study's levels share the
-        error-free part's; else None."""
+        ``PLAIN_COVER`` of a sample and no gap is propagated (a gap behind a DOE that is the stop moves nothing):
+        that PSF is then the same for every part with the same decenter (m), to float32 rounding (a sample covered
+        less moves it by 1e-9 of one sample's light at most) — the tornado's relief errors and the quantization
+        study's levels share the error-free part's; else None."""
+        if gap > 0 and not self.camera.doe_is_stop:  # propagated, the gap spreads the coded relief into the half
+            return None
         dx = float(decenter[0])
         cover = self.coverage("uncoded", dx) > PLAIN_COVER
         (r0, r1), (c0, _) = self.window
@@ -133,8 +135,7 @@ class MountedPlan:
         if not all(bool((field(i).reshape(r1 - r0, -1)[rows, cols].to(cover.device)[cover] == 1).all())
                    for i in range(len(self.wavelengths))):
             return None
-        gap = float(gap) if gap > 0 and not self.camera.doe_is_stop else 0.0  # a gap psfs does not propagate
-        return "plain half " + json.dumps([dx, float(decenter[1]), gap, self.margin, self.kernel])
+        return "plain half " + json.dumps([dx, float(decenter[1]), self.margin, self.kernel])  # no gap: none moves
 
     def _coverage(self, half: str, dx: float) -> torch.Tensor:
         key = (half, round(dx, 15))

@@ -70,7 +70,7 @@ def test_a_part_whose_plain_half_differs_computes_its_own(depth_design, monkeypa
 def test_the_plain_key_reads_only_the_samples_the_plain_half_covers(depth_design):
     """The key is given exactly when the transmittance is 1 on every sample the plain half covers: a change on a
     sample it does not cover leaves it, one on a sample it covers (however small) takes it away, and the key
-    tells decenters apart, and gaps where the lens is the stop."""
+    tells decenters apart; a gap the lens's stop propagates gives none."""
     judge = PSFJudge(depth_design)
     plan = judge.plan(HALVES, 0.0)
     (r0, r1), (c0, c1) = plan.window
@@ -78,7 +78,8 @@ def test_the_plain_key_reads_only_the_samples_the_plain_half_covers(depth_design
     cover = plan.coverage("uncoded", 0.0)
     rows, cols = torch.nonzero(cover == 0, as_tuple=True)
     outside = (g.rows.start - r0 + int(rows[0]), g.cols.start - c0 + int(cols[0]))
-    rows, cols = torch.nonzero(cover > 0, as_tuple=True)
+    rows, cols = torch.nonzero((cover > 0) & (cover < 1), as_tuple=True)  # a rim sample, partly covered
+    assert float(cover[rows[-1], cols[-1]]) > 1e-3
     inside = (g.rows.start - r0 + int(rows[-1]), g.cols.start - c0 + int(cols[-1]))
 
     def field_with(at, value):
@@ -90,11 +91,12 @@ def test_the_plain_key_reads_only_the_samples_the_plain_half_covers(depth_design
     key = plan.plain_key(field_with(None, 0))
     assert key is not None and key == plan.plain_key(field_with(outside, 0.3 + 0.2j))
     assert plan.plain_key(field_with(inside, complex(1.0, 1e-7))) is None
-    assert plan.plain_key(field_with(None, 0), decenter=(0.0, 1e-6)) != key
+    assert len({key, plan.plain_key(field_with(None, 0), decenter=(0.0, 1e-6)),
+                plan.plain_key(field_with(None, 0), decenter=(1e-6, 0.0))}) == 3
     # a gap moves nothing when the DOE is the stop (``MountedPlan.psfs`` then does not propagate it)
     assert plan.camera.doe_is_stop and plan.plain_key(field_with(None, 0), gap=1e-3) == key
-    plan.camera = SimpleNamespace(doe_is_stop=False)  # the lens the stop: the gap is propagated
-    assert plan.plain_key(field_with(None, 0), gap=1e-3) != key
+    plan.camera = SimpleNamespace(doe_is_stop=False)  # the lens the stop: the gap carries the relief across
+    assert plan.plain_key(field_with(None, 0), gap=1e-3) is None
 
 
 def test_a_quantized_heights_plain_half_is_the_error_free_parts(depth_design, monkeypatch):
@@ -104,7 +106,8 @@ def test_a_quantized_heights_plain_half_is_the_error_free_parts(depth_design, mo
 
     h = np.asarray(PSFJudge(depth_design).design.height, np.float64)
     coarse = np.where(np.arange(h.shape[1])[None, :] < 50, np.round(h / h.max() * 3) / 3 * h.max(), h)
-    _the_second_computes_its_coded_half_alone(monkeypatch, depth_design, PSFJudge.height_psfs, h, coarse)
+    got, first = _the_second_computes_its_coded_half_alone(monkeypatch, depth_design, PSFJudge.height_psfs, h, coarse)
+    assert not torch.equal(got["coded"], first["coded"])
 
 
 @pytest.mark.parametrize("err", [PartErrors(crosstalk=(0.03, 0.02), crosstalk_slope=0.01, calibrated=False),
@@ -121,12 +124,15 @@ def test_a_part_that_differs_only_beyond_its_pupil_computes_no_psf(depth_design,
 
 
 def test_a_rough_parts_seed_is_its_own(depth_design, monkeypatch):
-    """With roughness, the seed draws the surface: two seeds are two parts, each computing its own PSFs."""
+    """With roughness, the seed and the correlation length draw the surface: each is a part of its own, computing
+    both halves."""
     judge = PSFJudge(depth_design)
     a = judge.psfs(PartErrors(roughness=20e-9, seed=1), HALVES)
     calls = _counting(monkeypatch, judge)
     b = judge.psfs(PartErrors(roughness=20e-9, seed=2), HALVES)
-    assert calls and not torch.equal(a["coded"], b["coded"])
+    c = judge.psfs(PartErrors(roughness=20e-9, seed=2, roughness_corr=4e-6), HALVES)
+    assert calls == [HALVES, HALVES]  # the roughness covers the plain half's samples too
+    assert not torch.equal(a["coded"], b["coded"]) and not torch.equal(b["coded"], c["coded"])
 
 
 def test_planes_taken_from_a_rendering_judge_carry_the_plain_half_it_shared(depth_design, monkeypatch):
