@@ -132,16 +132,17 @@ class PSFJudge:
             self.seconds_per_psf = time.perf_counter() - t
         return self._nominal
 
-    def reuse(self, source, halves, kernel: int | None, compute) -> dict:
-        """{half: PSF} of ``source`` (a part's errors or a height map's digest; or {half: key}, where a half is
-        kept under another key: ``MountedPlan.plain_key``) at ``kernel``: each half served from the PSF kept for
-        the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p for every K, so a smaller
-        kernel is the centre crop of a larger one, to float rounding), the rest from ``compute(todo)``, which
-        computes only the halves ``todo`` (at ``kernel`` or larger). The latest PSFs are kept, up to
-        ``KEEP_BYTES``: a network-level part pays once for the coded PSF its PSF metric and its network both use,
-        the tornado's network pass for the coded halves its PSF-level pass computed, and a part whose relief leaves
-        the plain half plain glass for nothing of that half that a part with its decenter computed."""
-        keys = source if isinstance(source, dict) else {h: source for h in halves}
+    def reuse(self, source: str, halves, kernel: int | None, compute, plain=None) -> dict:
+        """{half: PSF} of ``source`` (a part's errors or a height map's digest) at ``kernel``: each half served
+        from the PSF kept for the same source at a kernel at least as large (pixel centres sit at (k − K//2)·p
+        for every K, so a smaller kernel is the centre crop of a larger one, to float rounding), the rest from
+        ``compute(todo)``, which computes only the halves ``todo`` (at ``kernel`` or larger). ``plain``: where
+        given, the plain half is kept under the key ``plain()`` gives (``MountedPlan.plain_key``; ``_plain_key``).
+        The latest PSFs are kept, up to ``KEEP_BYTES``: a network-level part pays once for the coded PSF its PSF
+        metric and its network both use, the tornado's network pass for the coded halves its PSF-level pass
+        computed, and a part whose relief leaves the plain half plain glass for nothing of that half that a part
+        with its decenter computed."""
+        keys = {h: self._plain_key(source, plain) if h == "uncoded" and plain else source for h in halves}
         k = int(kernel or self.task.kernel_size)
 
         def crop(v: torch.Tensor) -> torch.Tensor:
@@ -293,15 +294,10 @@ class PSFJudge:
             plan = self.plan(halves, err.mount_shift[0], big)
             got = plan.psfs(self.field(err, plan), decenter=err.mount_shift, gap=err.axial_gap, halves=todo)
             return to_device(got, "cpu")
-        if not shared:
-            out = compute(halves)
-        else:
-
-            def plain():
-                plan = self.plan(halves, err.mount_shift[0], big)
-                return plan.plain_key(self.field(err, plan), err.mount_shift, err.axial_gap)
-            keys = {h: self._plain_key(source, plain) if h == "uncoded" else source for h in halves}
-            out = self.reuse(keys, halves, k, compute)
+        def plain():
+            plan = self.plan(halves, err.mount_shift[0], big)
+            return plan.plain_key(self.field(err, plan), err.mount_shift, err.axial_gap)
+        out = self.reuse(source, halves, k, compute, plain) if shared else compute(halves)
         return apply_psf_effects(out, err)  # the sources of error that act after the pupil (none shipped)
 
     def _plain_key(self, source: str, key_of) -> str:
@@ -344,11 +340,11 @@ class PSFJudge:
             plan = self.plan(halves, 0.0, kernel)
             with torch.no_grad():
                 return to_device(plan.psfs(field(plan), halves=todo), "cpu")
+
         def plain():
             plan = self.plan(halves, 0.0, kernel)
             return plan.plain_key(field(plan))
-        keys = {hf: self._plain_key(source, plain) if hf == "uncoded" else source for hf in halves}
-        return self.reuse(keys, halves, kernel, compute)
+        return self.reuse(source, halves, kernel, compute, plain)
 
     def psf_from_height(self, height) -> torch.Tensor:
         """Coded PSF of an explicit height map (metres) on the judge's grid."""

@@ -113,11 +113,6 @@ class MountedPlan:
     def covers(self, decenter) -> bool:
         return abs(float(decenter[0])) <= self.margin
 
-    def coverage(self, half: str, dx: float) -> torch.Tensor:
-        """[rows, cols] of ``half``'s window (``self.geo[half]``): the fraction of each sample on the half's side
-        of the split line, the die ``dx`` metres across it (on the plan's device)."""
-        return self._coverage(half, dx)
-
     def plain_key(self, field, decenter=(0.0, 0.0), gap: float = 0.0) -> str | None:
         """The key a part's plain-half PSF is kept under (``PSFJudge.reuse``) when its transmittance ``field(i)``
         (as ``psfs`` takes it; this plan holds the plain half) is exactly 1 wherever the half covers more than
@@ -125,7 +120,7 @@ class MountedPlan:
         that PSF is then the same for every part with the same decenter (m), to float32 rounding (a sample covered
         less moves it by 1e-9 of one sample's light at most) — the tornado's relief errors and the quantization
         study's levels share the error-free part's; else None."""
-        if gap > 0 and not self.camera.doe_is_stop:  # propagated, the gap spreads the coded relief into the half
+        if self.propagates(gap):  # the gap spreads the coded relief into the half
             return None
         dx = float(decenter[0])
         cover = self.coverage("uncoded", dx) > PLAIN_COVER
@@ -137,7 +132,14 @@ class MountedPlan:
             return None
         return "plain half " + json.dumps([dx, float(decenter[1]), self.margin, self.kernel])  # no gap: none moves
 
-    def _coverage(self, half: str, dx: float) -> torch.Tensor:
+    def propagates(self, gap: float) -> bool:
+        """Whether a gap of ``gap`` metres between the DOE and the lens is propagated: only in front of a lens stop
+        (module docstring)."""
+        return gap > 0 and not self.camera.doe_is_stop
+
+    def coverage(self, half: str, dx: float) -> torch.Tensor:
+        """[rows, cols] of ``half``'s window (``self.geo[half]``): the fraction of each sample on the half's side
+        of the split line, the die ``dx`` metres across it (on the plan's device)."""
         key = (half, round(dx, 15))
         if key not in self._cov:
             geo = pupil_half(self.camera, half, 1, -dx, self.margin)
@@ -152,7 +154,7 @@ class MountedPlan:
         dx, dy = float(decenter[0]), float(decenter[1])
         halves = self.halves if halves is None else tuple(halves)
         (r0, r1), (c0, c1) = self.window
-        propagate = gap > 0 and not self.camera.doe_is_stop
+        propagate = self.propagates(gap)
         out = {h: [] for h in halves}
         opd = {h: self._opd(h, dx, dy) for h in halves}
         d = len(self.depths)
@@ -169,7 +171,7 @@ class MountedPlan:
                 planes = d if (opd[half] is not None or propagate) else 1
                 got = []
                 for b in plane_batches(planes, 4 * sub.shape[-1] * sub.shape[-2]):  # pupils of a few planes
-                    pupil = self._coverage(half, dx) * (sub if sub.shape[0] == 1 else sub[b])
+                    pupil = self.coverage(half, dx) * (sub if sub.shape[0] == 1 else sub[b])
                     if opd[half] is not None:
                         pupil = pupil * torch.polar(torch.ones_like(opd[half][b]), self._k[i] * opd[half][b])
                     got.append(self.route.intensity(pupil, i, setup, prepared, **kw))
