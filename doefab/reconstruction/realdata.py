@@ -35,8 +35,8 @@ import numpy as np
 from doefab.applications import has
 
 __all__ = ["SOURCES", "Source", "hdr_real_sample", "depth_real_sample", "real_light", "real_lights",
-           "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "DEPTH_FILE", "DEPTH_SHA256", "check_side", "depth_scenes",
-           "measured_depth"]
+           "drawn_depth_scene", "MOTORCYCLE", "HDR_FILE", "HDR_SHA256", "DEPTH_FILE", "DEPTH_SHA256", "check_side",
+           "depth_scenes", "measured_depth"]
 
 HDR_FILE = Path(__file__).resolve().parents[1] / "measured" / "hdr_radiance.npz"
 HDR_SHA256 = "159a5e0a1118c1c891dc5e0700d39f341430fa9070f26feddeb91a3272da50da"  # as scripts/measured_hdr.py wrote it
@@ -190,12 +190,19 @@ def depth_scenes() -> tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray], ...]
     return (("Motorcycle", *_motorcycle()), *_middlebury())
 
 
+def drawn_depth_scene(rng: np.random.Generator) -> int:
+    """The index in ``depth_scenes()`` of the measured scene a sample's generator draws (its first draw in
+    :func:`depth_real_sample`): ``drawn_depth_scene(data.sample_rng("real", i))`` names scene ``i``'s source.
+
+    Example: ``depth_scenes()[drawn_depth_scene(sample_rng("real", 0))][0]`` → the scene's name."""
+    return int(rng.integers(len(depth_scenes())))
+
+
 def depth_real_sample(rng: np.random.Generator, size: int, near: float, far: float):
     """(scene [3, S, S] radiance, depth to render [S, S] metres, measured [S, S] bool): a crop of a drawn measured
     scene (``depth_scenes``), its depth clipped to [``near``, ``far``]."""
     check_side("depth", size)
-    scenes = depth_scenes()
-    _, img, depth, known = scenes[int(rng.integers(len(scenes)))]
+    _, img, depth, known = depth_scenes()[drawn_depth_scene(rng)]
     ys, xs = _crop(rng, depth.shape, size)
     gain = rng.uniform(0.8, 1.8)  # the synthetic depth scenes' exposure range
     scene = img[ys, xs].transpose(2, 0, 1) * gain

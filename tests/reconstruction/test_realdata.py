@@ -59,7 +59,8 @@ def _scenes_read_here() -> dict:
 def test_a_depth_sample_is_one_crop_of_image_depth_and_mask_clipped_to_the_planes():
     """Over draws that reach the Motorcycle and the file's scenes: image, depth and mask are cut at the same place
     of one scene (found by matching the crop in every scene's image), the image scaled by one gain in the synthetic
-    scenes' range and the depth that scene's calibration gives, clipped to the planes."""
+    scenes' range and the depth that scene's calibration gives, clipped to the planes; ``drawn_depth_scene`` names
+    that scene."""
     scenes = _scenes_read_here()
     seen = set()
     for seed in (*range(15), 21, 23):  # draws that reach every scene
@@ -74,6 +75,8 @@ def test_a_depth_sample_is_one_crop_of_image_depth_and_mask_clipped_to_the_plane
         else:
             raise AssertionError(f"draw {seed}: the crop is in no measured scene's image")
         seen.add(name)
+        # the scene the sample's generator draws is the one the crop was cut from (what names a scene's source)
+        assert realdata.depth_scenes()[realdata.drawn_depth_scene(np.random.default_rng(seed))][0] == name
         _, disp, (f, b, doffs) = scenes[name]
         d = disp[y:y + 120, x:x + 120]
         assert 0.8 <= gain <= 1.8 and np.array_equal(known, np.isfinite(d))
