@@ -150,10 +150,10 @@ def depth_sources(images: int) -> list[str]:
     return [names[drawn_depth_scene(sample_rng("real", i))] for i in range(images)]
 
 
-def gap_interval(real, test, groups=None, draws: int = 20000, seed: int = 0) -> tuple[float, float]:
-    """95 % percentile interval of mean(``real``) − mean(``test``) over ``draws`` bootstrap draws, each resampling
-    the test values one by one and the measured ones one by one, or (``groups``: the scene each value's crop comes
-    from) by scene, taking every crop of each scene drawn."""
+def gap_draws(real, test, groups=None, draws: int = 20000, seed: int = 0):
+    """``draws`` bootstrap values of mean(``real``) − mean(``test``): each resamples the test values one by one and
+    the measured ones one by one, or (``groups``: the scene each value's crop comes from) by scene, taking every
+    crop of each scene drawn."""
     import numpy as np
 
     real, test = np.asarray(real, float), np.asarray(test, float)
@@ -164,13 +164,29 @@ def gap_interval(real, test, groups=None, draws: int = 20000, seed: int = 0) -> 
     for b in range(draws):
         picked = np.concatenate([members[j] for j in rng.integers(len(members), size=len(members))])
         gaps[b] = real[picked].mean() - test[rng.integers(len(test), size=len(test))].mean()
-    lo, hi = np.percentile(gaps, [2.5, 97.5])
+    return gaps
+
+
+def gap_interval(real, test, groups=None, draws: int = 20000, seed: int = 0) -> tuple[float, float]:
+    """95 % percentile interval (2.5 and 97.5 % points) of ``gap_draws``."""
+    import numpy as np
+
+    lo, hi = np.percentile(gap_draws(real, test, groups, draws, seed), [2.5, 97.5])
     return float(lo), float(hi)
 
 
+GAP_DRAWS = 20000
+
+
+def _signed(x: float) -> str:
+    """``x`` to two decimals with its sign; 0.00 when it rounds to zero either way."""
+    v = round(x, 2)
+    return "0.00" if v == 0 else f"{v:+.2f}"
+
+
 def gap_lines(real: dict, test_depth: dict) -> list[str]:
-    """The gap's 95 % intervals over scenes (the measured crops one by one, and clustered by their scene), and
-    where the crops come from."""
+    """The gap's 95 % intervals over scenes (the measured crops one by one, and by their scene), and where the
+    crops come from."""
     from collections import Counter
 
     per_real = [r["delta125"] for r in real.get("per_image", {}).get("rows", {}).get("proposed", [])]
@@ -179,12 +195,14 @@ def gap_lines(real: dict, test_depth: dict) -> list[str]:
         return []
     sources = depth_sources(len(per_real))
     counts = Counter(sources)
-    each, clustered = gap_interval(per_real, per_test), gap_interval(per_real, per_test, sources)
-    return [f"Its 95 % interval over scenes (bootstrap, 20 000 draws of the {len(per_test)} test scenes and the "
-            f"{len(per_real)} measured crops): {each[0]:+.3f} to {each[1]:+.3f} with the crops drawn one by one, "
-            f"{clustered[0]:+.3f} to {clustered[1]:+.3f} with them drawn by the scene they are cut from (crops of "
-            f"one scene are not independent; {len(counts)} scenes are few for a bootstrap). The crops come from "
-            + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + "."]
+    each = gap_interval(per_real, per_test, draws=GAP_DRAWS)
+    clustered = gap_interval(per_real, per_test, sources, draws=GAP_DRAWS)
+    return [f"Its 95 % interval over scenes (percentile bootstrap, {GAP_DRAWS} draws of the {len(per_test)} test "
+            f"scenes and the {len(per_real)} measured crops one by one): {_signed(each[0])} to {_signed(each[1])}, which "
+            f"holds both no gap and one of three times 0.05. Drawing the crops by the scene they are "
+            f"cut from gives {_signed(clustered[0])} to {_signed(clustered[1])}: narrower here (the crops of one scene "
+            f"differ as much as crops of different scenes do) and only approximate with {len(counts)} scenes. The "
+            f"crops come from " + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + "."]
 
 
 def hdr_peaks(images: int, size: int) -> list[float]:
@@ -263,16 +281,20 @@ def main() -> None:
 
 def render_committed(runs: dict) -> None:
     """real_validation.md from the committed evaluations (their command line kept: they are what it produced)."""
+    from doefab.errors import DoefabError
     from doefab.io import atomic_write_text
 
-    md = (RESULTS / "real_validation.md").read_text()
+    page, depth = RESULTS / "real_validation.md", RESULTS / "evaluate_depth.json"
+    if not runs or not page.is_file() or not depth.is_file():
+        raise DoefabError(f"--render-only rewrites {page} from the committed real_validation.json and "
+                          f"evaluate_depth.json: run without --render-only to evaluate first")
+    md = page.read_text()
     command = md.split("Produced by `", 1)[1].split("`", 1)[0]
     note = md.split("Produced by `", 1)[1].split("\n", 1)[0].split("`.", 1)[1]
-    f = RESULTS / "evaluate_depth.json"
     ran = command.split("--tasks ", 1)[1].split()[0].split(",") if "--tasks " in command else list(KEYS)
     seeds = {t: runs[t].get("seeds", []) for t in [*ran, *(t for t in KEYS if t not in ran)] if t in runs}
-    atomic_write_text(RESULTS / "real_validation.md", markdown(runs, json.loads(f.read_text()), seeds, command, note))
-    print(f"wrote {RESULTS / 'real_validation.md'} from the committed evaluations")
+    atomic_write_text(page, markdown(runs, json.loads(depth.read_text()), seeds, command, note))
+    print(f"wrote {page} from the committed evaluations")
 
 
 if __name__ == "__main__":

@@ -30,3 +30,35 @@ def test_crops_of_one_scene_are_drawn_together(rv):
     each = rv.gap_interval(real, test, draws=4000)
     assert clustered == pytest.approx((0.0, 1.0))
     assert each == pytest.approx((0.25, 1.0))
+
+
+def _exact(real, test, groups):
+    """{gap: probability} of the bootstrap's gap, enumerated: every draw of the scenes (all crops of each) and of
+    the test values, each equally likely."""
+    import itertools
+    from collections import defaultdict
+    from fractions import Fraction
+
+    scenes = sorted(set(groups))
+    crops = {g: [v for v, h in zip(real, groups) if h == g] for g in scenes}
+    out = defaultdict(Fraction)
+    n_r, n_t = len(scenes) ** len(scenes), len(test) ** len(test)
+    for pick in itertools.product(scenes, repeat=len(scenes)):
+        vals = [v for g in pick for v in crops[g]]
+        for t in itertools.product(test, repeat=len(test)):
+            gap = round(sum(vals) / len(vals) - sum(t) / len(t), 9)
+            out[gap] += Fraction(1, n_r * n_t)
+    return out
+
+
+def test_the_draws_follow_the_enumerated_bootstrap(rv):
+    """Unequal scenes (one crop of 0, two crops 0.2 and 1) and varied test values: the share of draws at each gap
+    matches the enumerated distribution (20 000 draws: a share's standard error ≤ 0.0036)."""
+    import numpy as np
+
+    real, groups, test = [0.0, 0.2, 1.0], ["a", "b", "b"], [0.0, 0.3, 0.9]
+    want = _exact(real, test, groups)
+    draws = np.round(rv.gap_draws(real, test, groups, draws=20000, seed=3), 9)
+    assert set(np.unique(draws)) <= set(want)
+    for gap, p in want.items():
+        assert abs(np.mean(draws == gap) - float(p)) < 0.015, (gap, float(p))
