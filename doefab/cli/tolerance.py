@@ -46,9 +46,8 @@ def register(sub) -> None:
                         "Monte Carlo on it, and its yield minus the direct judgement's on parts it never saw (the "
                         "direct Monte Carlo's when there are at least 16), with a 95 %% interval")
     p.add_argument("--workers", type=_workers, default=None,
-                   help="local worker processes, 1–64, or auto (default: for the Monte Carlo one per core when "
-                        "there are at least 4 parts per core, else in process; for the network-judged tornado and "
-                        "quantization parts one per core)")
+                   help="local worker processes, 1–64, or auto (default: one per core when there are at least 4 "
+                        "parts per core, else in process)")
     p.add_argument("--scheduler", type=scheduler_arg, default=None,
                    help="Dask: local:N (a LocalCluster of N = 1..64 workers; one GPU each on a CUDA --device) or "
                         "tcp://HOST:PORT")

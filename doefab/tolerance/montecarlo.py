@@ -27,7 +27,6 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import sample_errors
 from doefab.tolerance.memory import keep_freed_memory
-from doefab.tolerance.pool import run_calls, usable_cores
 
 __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
@@ -156,9 +155,22 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     try:
         if scheduler:
             _run_dask(scheduler, ddir, supersample, todo, errs, record, networks, weights_dir)
+        elif workers > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            ex = ProcessPoolExecutor(workers, initializer=_worker_init,
+                                     mp_context=multiprocessing.get_context("spawn") if cuda else None)
+            try:
+                futs = {ex.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks, wdir): i for i in todo}
+                for f in as_completed(futs):
+                    record(futs[f], f.result())
+            finally:  # an interruption drops the queued parts (the saved ones resume) instead of waiting for all
+                ex.shutdown(wait=True, cancel_futures=True)
         else:
-            run_calls(evaluate_part, {i: (ddir, supersample, errs[i].to_json(), networks, wdir) for i in todo},
-                      record, workers, spawn=cuda)
+            keep_freed_memory()
+            for i in todo:
+                record(i, evaluate_part(ddir, supersample, errs[i].to_json(), networks, wdir))
     finally:
         if bar is not None:
             bar.close()
@@ -176,8 +188,25 @@ def _bar(total, desc, progress):
 def auto_workers(samples: int) -> int:
     """Worker processes for ``samples`` parts: one per usable core, or in process (1) when there are too few
     parts to repay each worker's start-up (it builds its own judge, ~5 s for a grating design)."""
-    cores = usable_cores()
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
     return cores if cores > 1 and samples >= 4 * cores else 1
+
+
+def _worker_init():
+    import signal
+
+    os.environ["DOEFAB_WORKER"] = "1"
+    # the parent handles Ctrl-C and SIGTERM (it keeps the finished parts and drops the queue); a worker just
+    # finishes its part, or dies with the pool
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    keep_freed_memory()
+    import torch
+
+    torch.set_num_threads(1)
 
 
 def parse_scheduler(scheduler: str) -> int | None:

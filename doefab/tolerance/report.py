@@ -34,9 +34,8 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
               network_top: int | None = None) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
-    Monte Carlo (None: one per core when there are enough parts) and for the network-judged tornado and
-    quantization parts (None: one per core, ``pool.network_workers``). ``networks``: False, True (the network
-    judge's default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
+    Monte Carlo (None: one per core when there are enough parts). ``networks``: False, True (the network judge's
+    default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
     from doefab.tolerance.memory import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
 
@@ -76,8 +75,8 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
              {k.name: int(grid) for k in KINDS})
     mc_grid = res["grid"]["monte_carlo_grid"]
     t = time.perf_counter()
-    res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(
-        design_dir, budget, grids, networks, weights_dir, progress, network_top, workers), reused)
+    res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
+                                                                            weights_dir, progress, network_top), reused)
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
         if "network_delta_scenes" in r:
@@ -93,7 +92,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
     if do_levels:
         res["quantization"] = study.quantization_study(design_dir, supersample=mc_grid, networks=networks,
-                                                       weights_dir=weights_dir, progress=progress, workers=workers)
+                                                       weights_dir=weights_dir, progress=progress)
         _level_changes(res["quantization"], judge.design.n_levels)
     _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)

@@ -14,14 +14,12 @@ import numpy as np
 
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS, kind
-from doefab.tolerance.pool import network_workers, run_calls
 
 __all__ = ["judge_for", "network_judge_for", "evaluate_part", "network_changes", "sweep", "tornado",
-           "quantization_study", "quantized_row", "continuous_height", "sweep_names"]
+           "quantization_study", "continuous_height", "sweep_names"]
 
 _JUDGES: dict = {}
 _NET_JUDGES: dict = {}
-_HEIGHTS: dict = {}
 
 
 def judge_for(design_dir, supersample: int = 1):
@@ -99,11 +97,10 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
 
 
 def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool = False, weights_dir=None,
-            progress: bool = True, network_top: int | None = None, workers: int | None = None) -> list[dict]:
+            progress: bool = True, network_top: int | None = None) -> list[dict]:
     """Each error alone at one standard deviation of the budget, largest change first: the PSF metric, and with
     ``networks`` the delivered metrics (reconstructed with the nominal PSF and with the part's own) — for every
-    error, or for the ``network_top`` largest at PSF level. ``workers``: processes for the network-judged parts
-    (None: ``pool.network_workers``; PSF-level parts run in this process)."""
+    error, or for the ``network_top`` largest at PSF level."""
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     if networks and network_top is not None:
@@ -117,61 +114,38 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
         present = [k for k in present if k.name in top]
-        return sorted(tornado_rows(design_dir, budget, present, grids, True, weights_dir, progress, workers) + rest,
+        return sorted(tornado_rows(design_dir, budget, present, grids, True, weights_dir, progress) + rest,
                       key=lambda r: -abs(r["delta"]))
-    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress, workers),
+    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress),
                   key=lambda r: -abs(r["delta"]))
 
 
-def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress, workers=None) -> list[dict]:
-    """The tornado's rows for the error kinds ``present`` (unsorted). Network-judged parts run side by side
-    (``pool``) after the error-free part, which this process judges (once: the study's nominal part)."""
+def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) -> list[dict]:
+    """The tornado's rows for the error kinds ``present`` (unsorted)."""
     bar = _bar(len(present), "tornado" + (" (networks)" if networks else ""), progress)
-    base, calls = {}, {}
+    base = {}
+    rows = []
     for k in present:
         s = int(grids.get(k.name, 1))
         j = judge_for(design_dir, s)
         if s not in base:
             base[s] = evaluate_part(str(design_dir), s, PartErrors().to_json(), networks, weights_dir)
             base[s]["metric"] = j.score(j.nominal)["metric"]
-        calls[(k.name, "part")] = (str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks,
-                                   weights_dir)
-        if k.base_from_budget is not None:  # a spread about a nominal value: from it
-            calls[(k.name, "base")] = (str(design_dir), s, k.base_part(budget).to_json(), networks, weights_dir)
-    got = {}
-
-    def record(key, res):
-        got[key] = res
-        if bar is not None and key[1] == "part":
-            bar.update(1)
-            bar.set_postfix(error=key[0][:18], metric=f"{res['metric']:.3f}")
-
-    try:
-        run_calls(evaluate_part, calls, record, _workers(len(calls), networks, workers))
-    finally:
-        if bar is not None:
-            bar.close()
-    rows = []
-    for k in present:
-        s = int(grids.get(k.name, 1))
-        r, b = got[(k.name, "part")], got.get((k.name, "base"), base[s])
+        r = evaluate_part(str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks, weights_dir)
+        b = base[s] if k.base_from_budget is None else evaluate_part(  # a spread about a nominal value: from it
+            str(design_dir), s, k.base_part(budget).to_json(), networks, weights_dir)
         row = {"error": k.name, "value": k.from_budget(budget) / k.si, "unit": k.unit, "grid": s,
                "metric": r["metric"], "delta": r["metric"] - b["metric"]}
         if networks:
             row["network"] = r["network"]
             row["network_delta"], row["network_delta_scenes"] = network_changes(r, b)
         rows.append(row)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(error=k.name[:18], metric=f"{r['metric']:.3f}")
+    if bar is not None:
+        bar.close()
     return rows
-
-
-def _workers(parts: int, networks, workers: int | None = None) -> int:
-    """Worker processes for ``parts`` parts of a study: ``workers`` when given, else side by side when judged
-    through a network (``pool.network_workers``) and in this process at PSF level (a part takes seconds)."""
-    from doefab._devices import resolve_device
-
-    if workers is not None:
-        return int(workers)
-    return network_workers(parts, resolve_device(None).type == "cuda") if networks else 1
 
 
 def network_changes(part: dict, base: dict) -> tuple[dict, dict]:
@@ -197,8 +171,8 @@ def _bar(total, desc, progress, unit="part"):
     return tqdm(total=total, desc=desc, unit=unit)
 
 
-def quantization_study(design_dir, levels=None, supersample: int = 1, networks: bool = False, weights_dir=None,
-                       progress: bool = True, workers: int | None = None) -> list[dict]:
+def quantization_study(design_dir, levels=None, supersample: int = 1,
+                       networks: bool = False, weights_dir=None, progress: bool = True) -> list[dict]:
     """The same design at continuous (None) and N-level quantization, on the PSF metric (and, with
     ``networks``, through the network given the nominal and the quantized design's PSF). ``levels``: default
     continuous, the design's L and every fab level count below it. Each row says what it was quantized from: the
@@ -207,35 +181,29 @@ def quantization_study(design_dir, levels=None, supersample: int = 1, networks: 
     per level count judged."""
     from doefab.fabrication.process import LEVEL_CHOICES
 
-    d = judge_for(design_dir, supersample).design
+    judge = judge_for(design_dir, supersample)
+    d = judge.design
     if levels is None:
         levels = (None, *sorted((n for n in LEVEL_CHOICES if n <= d.n_levels), reverse=True))
+    height = continuous_height(d)
     bar = _bar(len(levels), "quantization study" + (" (networks)" if networks else ""), progress, unit="level count")
-    _continuous_height_of(design_dir, supersample)  # once, before the workers (forked) start
-    got = {}
-
-    def record(i, row):
-        got[i] = row
+    rows = []
+    for n in levels:
+        if bar is not None:
+            bar.set_postfix(levels="continuous" if n is None else n)
+        rows.append(_quantized_row(design_dir, judge, height, n, supersample, networks, weights_dir))
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(levels=row["levels"])
-
-    try:
-        run_calls(quantized_row, {i: (str(design_dir), n, supersample, networks, weights_dir)
-                                  for i, n in enumerate(levels)}, record, _workers(len(levels), networks, workers))
-    finally:
-        if bar is not None:
-            bar.close()
-    return [got[i] for i in range(len(levels))]
+    if bar is not None:
+        bar.close()
+    return rows
 
 
-def quantized_row(design_dir: str, n, supersample: int = 1, networks=False, weights_dir=None) -> dict:
+def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_dir) -> dict:
     """One row of the quantization study: the design quantized to ``n`` levels (None: continuous)."""
     from doefab.fabrication.levels import quantize_levels
 
-    judge = judge_for(design_dir, supersample)
     d = judge.design
-    height = _continuous_height_of(design_dir, supersample)
     mapped = f"the {d.n_levels}-level map"
     if n is None and height is None:
         return {"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
@@ -257,14 +225,6 @@ def quantized_row(design_dir: str, n, supersample: int = 1, networks=False, weig
     if networks:
         row["network"], row["network_scenes"] = nj.means(net), net
     return row
-
-
-def _continuous_height_of(design_dir, supersample: int):
-    """``continuous_height`` of a judged design, computed once per process."""
-    key = (str(design_dir), int(supersample))
-    if key not in _HEIGHTS:
-        _HEIGHTS[key] = continuous_height(judge_for(design_dir, supersample).design)
-    return _HEIGHTS[key]
 
 
 def continuous_height(design):

@@ -612,8 +612,7 @@ def test_a_tornado_row_judged_through_the_network_carries_its_scene_noise(design
     budget = load_budget()
     names = ("mask overlay", "edge bias")
     monkeypatch.setattr(study, "KINDS", [k for k in study.KINDS if k.name in names])
-    res = report.run_study(design_dir, budget, tmp_path / "t", samples=0, grid=1, networks=True, progress=False,
-                            workers=1)
+    res = report.run_study(design_dir, budget, tmp_path / "t", samples=0, grid=1, networks=True, progress=False)
     rows = {r["error"]: r for r in res["tornado"]}
     assert set(rows) == set(names) and len(parts) == 2
     for scenes in parts.values():
@@ -653,7 +652,7 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     monkeypatch.setattr(report, "_step_key", lambda *a, **k: {})
     monkeypatch.setattr(study, "evaluate_part", lambda *a, **k: {"metric": 0.8, "network": {}, "network_scenes": {}})
     res = report.run_study(design_dir, load_budget(), tmp_path / "q", samples=0, grid=1, networks=True,
-                           do_levels=True, progress=False, workers=1)
+                           do_levels=True, progress=False)
     rows = {r["levels"]: r for r in res["quantization"]}
     assert list(rows) == ["continuous", 16, 8, 4, 2] and len(judged) == 4  # this folder keeps no continuous design
     assert "network" not in rows["continuous"]
@@ -694,49 +693,3 @@ def test_a_metric_or_change_that_is_not_a_number_prints_a_dash():
     got = delta_text("hdr", {"psnr": float("nan"), "psnr_highlight": -1.234}, {"psnr": 0.4, "psnr_highlight": 0.5})
     assert got == "PSNR —, highlight PSNR -1.23 ± 0.5 dB"
     assert delta_text("hdr", {"psnr": float("nan")}, names=False) == "—"
-
-
-@pytest.mark.parametrize("networks, workers, want", [(True, None, 2), (False, None, 1), (True, 1, 1), (False, 3, 3)])
-def test_the_tornado_sends_network_parts_to_the_pool(design_dir, monkeypatch, networks, workers, want):
-    """The error parts go to ``run_calls`` with one worker per core through a network (two cores here), in process
-    at PSF level, or as many as the caller asks; the error-free part is judged here, before."""
-    monkeypatch.setattr(montecarlo.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
-    seen = {}
-    judged_here = []
-
-    def fake_part(design, s, errors, networks=False, weights_dir=None):
-        judged_here.append(errors)
-        return {"metric": 0.8, "network": {"nominal_psf": {"psnr": 30.0}},
-                "network_scenes": {"nominal_psf": {"psnr": [30.0]}}}
-
-    def spy(fn, calls, record, n=1, spawn=False):
-        seen["workers"], seen["keys"] = n, list(calls)
-        for k, args in calls.items():
-            record(k, fake_part(*args))
-
-    monkeypatch.setattr(study, "evaluate_part", fake_part)
-    monkeypatch.setattr(study, "run_calls", spy)
-    names = ("mask overlay", "edge bias")
-    monkeypatch.setattr(study, "KINDS", [k for k in study.KINDS if k.name in names])
-    rows = study.tornado(design_dir, load_budget(), {}, networks, None, False, None, workers)
-    assert seen["workers"] == want and {r["error"] for r in rows} == set(names)
-    assert [k[0] for k in seen["keys"] if k[1] == "part"] == list(names)
-    assert judged_here[0]["overlay"] == ()  # the error-free part first, in this process
-
-
-@pytest.mark.parametrize("networks, want", [(True, 2), (False, 1)])
-def test_the_quantization_study_sends_network_rows_to_the_pool_and_keeps_their_order(design_dir, monkeypatch,
-                                                                                     networks, want):
-    """Through a network the level counts go to ``run_calls`` with one worker per core (two here), at PSF level
-    in process; the rows come back in the order of the level counts whatever order they finish in."""
-    monkeypatch.setattr(montecarlo.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
-    seen = {}
-
-    def spy(fn, calls, record, n=1, spawn=False):
-        seen["workers"] = n
-        for k, args in reversed(list(calls.items())):  # the last level count finishes first
-            record(k, {"levels": args[1], "metric": 0.5})
-
-    monkeypatch.setattr(study, "run_calls", spy)
-    rows = study.quantization_study(design_dir, levels=(16, 8, 4), networks=networks, progress=False)
-    assert seen["workers"] == want and [r["levels"] for r in rows] == [16, 8, 4]
