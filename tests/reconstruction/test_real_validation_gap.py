@@ -62,3 +62,27 @@ def test_the_draws_follow_the_enumerated_bootstrap(rv):
     assert set(np.unique(draws)) <= set(want)
     for gap, p in want.items():
         assert abs(np.mean(draws == gap) - float(p)) < 0.015, (gap, float(p))
+
+
+def test_the_named_sources_are_the_scenes_the_evaluation_draws(rv, monkeypatch):
+    """``depth_sources`` names, for each measured scene index, the scene ``specs.depth_scene`` crops for the
+    evaluation's scene of that index (its generator ``sample_rng("real", i)``), recorded as it draws."""
+    from types import SimpleNamespace
+
+    from doefab.reconstruction import realdata
+    from doefab.reconstruction.data import sample_rng
+    from doefab.reconstruction.specs import depth_scene
+
+    n = 6
+    named = rv.depth_sources(n)
+    drawn, original = [], realdata.drawn_depth_scene
+
+    def spy(rng):
+        drawn.append(original(rng))
+        return drawn[-1]
+
+    monkeypatch.setattr(realdata, "drawn_depth_scene", spy)
+    for i in range(n):
+        depth_scene("real", i, sample_rng("real", i), 96, SimpleNamespace(depths=(1.0, 2.0, 5.0)))
+    names = [s[0] for s in realdata.depth_scenes()]
+    assert [names[k] for k in drawn] == named and len(set(named)) > 1
