@@ -99,6 +99,7 @@ MEASUREMENTS = (
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
     Measurement("judge_profile", "benchmarks/judge_profile.py", (R + "judge_profile.md",)),
     Measurement("pair_reuse", "benchmarks/pair_reuse.py", (R + "pair_reuse.md",)),
+    Measurement("depth_gap", "benchmarks/depth_gap.py", (R + "depth_gap.md",)),
     Measurement("judge_rounding", "benchmarks/judge_rounding.py", (R + "judge_rounding.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
     Measurement("diagnose_coverage_seed43", None, (R + "diagnose_coverage_seed43/diagnose_coverage.md",),
