@@ -198,11 +198,10 @@ def gap_lines(real: dict, test_depth: dict) -> list[str]:
     each = gap_interval(per_real, per_test, draws=GAP_DRAWS)
     clustered = gap_interval(per_real, per_test, sources, draws=GAP_DRAWS)
     return [f"Its 95 % interval over scenes (percentile bootstrap, {GAP_DRAWS} draws of the {len(per_test)} test "
-            f"scenes and the {len(per_real)} measured crops one by one): {_signed(each[0])} to {_signed(each[1])}, which "
-            f"holds both no gap and one of three times 0.05. Drawing the crops by the scene they are "
-            f"cut from gives {_signed(clustered[0])} to {_signed(clustered[1])}: narrower here (the crops of one scene "
-            f"differ as much as crops of different scenes do) and only approximate with {len(counts)} scenes. The "
-            f"crops come from " + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + "."]
+            f"scenes and the {len(per_real)} measured crops one by one): {_signed(each[0])} to {_signed(each[1])}; "
+            f"drawing the crops by the scene they are cut from (approximate with {len(counts)} scenes): "
+            f"{_signed(clustered[0])} to {_signed(clustered[1])}. The crops come from "
+            + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + "."]
 
 
 def hdr_peaks(images: int, size: int) -> list[float]:
