@@ -23,31 +23,28 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from real_validation import depth_sources, evaluate_split, gap_draws, gap_interval  # noqa: E402
+from real_validation import (GAP_DRAWS, depth_sources, evaluate_split, gap_draws,  # noqa: E402
+                             per_scene_delta, percentile_interval)
 
 RESULTS = ROOT / "benchmarks" / "results"
 SPLITS = ("real", "test")
 
 
-def per_scene(run: dict) -> list[float]:
-    """The proposed network's δ<1.25 on each scene of an evaluation."""
-    return [r["delta125"] for r in run["per_image"]["rows"]["proposed"]]
-
-
 def markdown(runs: dict, images: int) -> str:
     import numpy as np
 
-    real, test = per_scene(runs["real"]), per_scene(runs["test"])
+    real, test = per_scene_delta(runs["real"]), per_scene_delta(runs["test"])
     sources = depth_sources(len(real))
-    each, clustered = gap_interval(real, test), gap_interval(real, test, sources)
+    draws = [gap_draws(real, test, g) for g in (None, sources)]  # one by one, by scene
+    each, clustered = (percentile_interval(d) for d in draws)
+    below = [float(np.mean(d <= 0)) for d in draws]
     rows = ["| split | scenes | δ<1.25 (mean) | standard error over scenes | MAE (m) |", "| --- | --- | --- | --- | --- |"]
     for s in SPLITS:
-        v = np.asarray(per_scene(runs[s]))
+        v = np.asarray(per_scene_delta(runs[s]))
         rows.append(f"| {s} | {len(v)} | {v.mean():.3f} | {v.std(ddof=1) / np.sqrt(len(v)):.3f} | "
                     f"{runs[s]['rows']['proposed']['mae']:.3f} |")
     counts = Counter(sources)
     gap = float(np.mean(real) - np.mean(test))
-    below = [float(np.mean(gap_draws(real, test, g) <= 0)) for g in (None, sources)]
     codes = {runs[s]["code"] for s in SPLITS}
     return "\n".join([
         "# The depth gap with more scenes", "",
@@ -56,7 +53,7 @@ def markdown(runs: dict, images: int) -> str:
         f"honest captures ({runs['real']['conditions'].get('parts', 0)} fabricated parts per split) at "
         f"{' and '.join(sorted(codes))}; torch on one thread.", "", *rows, "",
         f"Gap (real − test): {gap:+.3f}; 95 % interval over scenes, for each split's parts (percentile bootstrap, "
-        f"20000 draws): {each[0]:+.3f} to {each[1]:+.3f} with the crops and test scenes drawn one by one "
+        f"{GAP_DRAWS} draws): {each[0]:+.3f} to {each[1]:+.3f} with the crops and test scenes drawn one by one "
         f"({below[0]:.1%} of the draws at or below 0), {clustered[0]:+.3f} to {clustered[1]:+.3f} with the crops "
         f"drawn by the scene they are cut from ({below[1]:.1%} at or below 0; approximate with {len(counts)} scenes: "
         + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + ").", ""])

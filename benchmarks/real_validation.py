@@ -150,7 +150,15 @@ def depth_sources(images: int) -> list[str]:
     return [names[drawn_depth_scene(sample_rng("real", i))] for i in range(images)]
 
 
-def gap_draws(real, test, groups=None, draws: int = 20000, seed: int = 0):
+GAP_DRAWS = 20000  # bootstrap draws of the depth gap
+
+
+def per_scene_delta(run: dict) -> list[float]:
+    """The proposed network's δ<1.25 on each scene of an evaluation (none when it keeps no per-scene values)."""
+    return [r["delta125"] for r in run.get("per_image", {}).get("rows", {}).get("proposed", [])]
+
+
+def gap_draws(real, test, groups=None, draws: int = GAP_DRAWS, seed: int = 0):
     """``draws`` bootstrap values of mean(``real``) − mean(``test``): each resamples the test values one by one and
     the measured ones one by one, or (``groups``: the scene each value's crop comes from) by scene, taking every
     crop of each scene drawn."""
@@ -167,15 +175,17 @@ def gap_draws(real, test, groups=None, draws: int = 20000, seed: int = 0):
     return gaps
 
 
-def gap_interval(real, test, groups=None, draws: int = 20000, seed: int = 0) -> tuple[float, float]:
-    """95 % percentile interval (2.5 and 97.5 % points) of ``gap_draws``."""
+def percentile_interval(gaps) -> tuple[float, float]:
+    """95 % percentile interval (2.5 and 97.5 % points) of bootstrap draws."""
     import numpy as np
 
-    lo, hi = np.percentile(gap_draws(real, test, groups, draws, seed), [2.5, 97.5])
+    lo, hi = np.percentile(gaps, [2.5, 97.5])
     return float(lo), float(hi)
 
 
-GAP_DRAWS = 20000
+def gap_interval(real, test, groups=None, draws: int = GAP_DRAWS, seed: int = 0) -> tuple[float, float]:
+    """95 % percentile interval of ``gap_draws``."""
+    return percentile_interval(gap_draws(real, test, groups, draws, seed))
 
 
 def _signed(x: float) -> str:
@@ -189,14 +199,12 @@ def gap_lines(real: dict, test_depth: dict) -> list[str]:
     crops come from."""
     from collections import Counter
 
-    per_real = [r["delta125"] for r in real.get("per_image", {}).get("rows", {}).get("proposed", [])]
-    per_test = [r["delta125"] for r in test_depth.get("per_image", {}).get("rows", {}).get("proposed", [])]
+    per_real, per_test = per_scene_delta(real), per_scene_delta(test_depth)
     if len(per_real) < 2 or len(per_test) < 2:
         return []
     sources = depth_sources(len(per_real))
     counts = Counter(sources)
-    each = gap_interval(per_real, per_test, draws=GAP_DRAWS)
-    clustered = gap_interval(per_real, per_test, sources, draws=GAP_DRAWS)
+    each, clustered = gap_interval(per_real, per_test), gap_interval(per_real, per_test, sources)
     return [f"Its 95 % interval over scenes (percentile bootstrap, {GAP_DRAWS} draws of the {len(per_test)} test "
             f"scenes and the {len(per_real)} measured crops one by one): {_signed(each[0])} to {_signed(each[1])}; "
             f"drawing the crops by the scene they are cut from (approximate with {len(counts)} scenes): "
@@ -287,9 +295,8 @@ def render_committed(runs: dict) -> None:
     if not runs or not page.is_file() or not depth.is_file():
         raise DoefabError(f"--render-only rewrites {page} from the committed real_validation.json and "
                           f"evaluate_depth.json: run without --render-only to evaluate first")
-    md = page.read_text()
-    command = md.split("Produced by `", 1)[1].split("`", 1)[0]
-    note = md.split("Produced by `", 1)[1].split("\n", 1)[0].split("`.", 1)[1]
+    produced = page.read_text().split("Produced by `", 1)[1].split("\n", 1)[0]  # `command`.note
+    command, note = produced.split("`.", 1)
     ran = command.split("--tasks ", 1)[1].split()[0].split(",") if "--tasks " in command else list(KEYS)
     seeds = {t: runs[t].get("seeds", []) for t in [*ran, *(t for t in KEYS if t not in ran)] if t in runs}
     atomic_write_text(page, markdown(runs, json.loads(depth.read_text()), seeds, command, note))
