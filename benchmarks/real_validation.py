@@ -80,22 +80,33 @@ def seed_runs(task: str, seed_dirs: list[Path], images: int, size: int, work: Pa
     return runs
 
 
-def carried_seeds(now: dict, committed: dict | None) -> list[dict]:
-    """The committed seed runs of a task, kept when its shipped proposed network scores every measured scene as the
-    committed evaluation does (to 1e-6: the same scenes, so the seeds' scores on them stand); else none."""
+def _base(real: dict) -> dict:
+    """What of a measured-set run the seeds' spread is read against: the shipped proposed network's scores, with
+    the code and budget they were made at."""
+    return {"code": real["code"], "budget_sha256": real["conditions"].get("budget_sha256"),
+            "rows": {"proposed": real["rows"]["proposed"]},
+            "per_image": {"rows": {"proposed": real["per_image"]["rows"]["proposed"]}}}
+
+
+def carried_seeds(now: dict, committed: dict | None) -> tuple[list[dict], dict | None]:
+    """The committed seed runs of a task, and the shipped network's scores they were measured beside when those are
+    not the scores of ``now`` (the same scenes scored at another code or budget; None when every measured scene
+    scores as then, to 1e-6): the spread then compares three runs made at one code and budget."""
     import math
 
     if not committed or not committed.get("seeds"):
-        return []
-    a, b = now["real"]["per_image"]["rows"]["proposed"], committed["real"]["per_image"]["rows"]["proposed"]
+        return [], None
+    base = committed.get("seed_base") or _base(committed["real"])
+    a, b = now["real"]["per_image"]["rows"]["proposed"], base["per_image"]["rows"]["proposed"]
     same = len(a) == len(b) and all(set(x) == set(y) and all(math.isclose(x[k], y[k], rel_tol=1e-6) for k in x)
                                     for x, y in zip(a, b))
-    return committed["seeds"] if same else []
+    return committed["seeds"], (None if same else base)
 
 
 def spread_lines(runs: dict, seeds: dict) -> list[str]:
     """Run-to-run spread of each task's primary metric on the measured set: the shipped proposed network and the
-    same training from other seeds."""
+    same training from other seeds, all scored at one code and budget (a task's ``seed_base`` when its seeds were
+    scored before the shipped network's current scores)."""
     import numpy as np
 
     from doefab.applications import APPLICATIONS
@@ -104,17 +115,27 @@ def spread_lines(runs: dict, seeds: dict) -> list[str]:
              "(the shipped network is seed 0; the other seeds were trained with `doefab train --task T --variant "
              "proposed --steps N --seed S` at this code, the shipped ones at the code their weights record):", "",
              "| task | metric | shipped (seed 0) | other seeds | mean | SD over seeds |", "| --- | --- | --- | --- | --- | --- |"]
-    for task, others in seeds.items():
+    notes = []
+    for task in KEYS:
+        others = seeds.get(task)
         if not others:
             continue
         key = APPLICATIONS[task].primary_metric
-        vals = [runs[task]["real"]["rows"]["proposed"][key]] + [r["rows"]["proposed"][key] for r in others]
+        base = runs[task].get("seed_base")
+        vals = [(base or runs[task]["real"])["rows"]["proposed"][key]] + [r["rows"]["proposed"][key] for r in others]
         if len(vals) < 3:
             continue  # the rule's spread needs three seeds at least
         lines.append(f"| {task} | {NAMES[key]} | {vals[0]:.4g} | {', '.join(f'{v:.4g}' for v in vals[1:])} | "
                      f"{np.mean(vals):.4g} | {np.std(vals, ddof=1):.3g} |")
-    return lines + [""] if len(lines) > 4 else ["No task has three seeds of its proposed network on the measured set "
-                                                "yet: the spread, and so the rule, is not measured.", ""]
+        if base:
+            notes.append(f"The {task} seeds were scored at {base['code']} under the budget {base['budget_sha256']}, "
+                         f"beside the shipped network's {vals[0]:.4g} in the same run; at this code and budget "
+                         f"({runs[task]['real']['conditions'].get('budget_sha256')}) the shipped network scores "
+                         f"{runs[task]['real']['rows']['proposed'][key]:.4g} (the table above).")
+    if len(lines) == 4:
+        return ["No task has three seeds of its proposed network on the measured set yet: the spread, and so the "
+                "rule, is not measured.", ""]
+    return lines + [""] + ([" ".join(notes), ""] if notes else [])
 
 
 def task_lines(task: str, runs: dict, test_depth: dict | None) -> list[str]:
@@ -262,10 +283,14 @@ def main() -> None:
         return render_committed(before)
     runs = {t: {s: evaluate_split(t, s, args.images, args.size, args.work) for s in SPLITS}
             for t in args.tasks.split(",")}
-    seeds = {t: seed_runs(t, args.seed_weights, args.images, args.size, args.work)
-             or carried_seeds(runs[t], before.get(t)) for t in runs}
-    for t, others in seeds.items():
-        runs[t]["seeds"] = others
+    seeds = {}
+    for t in runs:
+        seeds[t], base = seed_runs(t, args.seed_weights, args.images, args.size, args.work), None
+        if not seeds[t]:
+            seeds[t], base = carried_seeds(runs[t], before.get(t))
+        runs[t]["seeds"] = seeds[t]
+        if base:
+            runs[t]["seed_base"] = base
     for t in KEYS:  # a task not evaluated keeps its committed evaluations and seeds
         if t not in runs and t in before:
             runs[t], seeds[t] = before[t], before[t].get("seeds", [])
@@ -297,8 +322,7 @@ def render_committed(runs: dict) -> None:
                           f"evaluate_depth.json: run without --render-only to evaluate first")
     produced = page.read_text().split("Produced by `", 1)[1].split("\n", 1)[0]  # `command`.note
     command, note = produced.split("`.", 1)
-    ran = command.split("--tasks ", 1)[1].split()[0].split(",") if "--tasks " in command else list(KEYS)
-    seeds = {t: runs[t].get("seeds", []) for t in [*ran, *(t for t in KEYS if t not in ran)] if t in runs}
+    seeds = {t: runs[t].get("seeds", []) for t in runs}
     atomic_write_text(page, markdown(runs, json.loads(depth.read_text()), seeds, command, note))
     print(f"wrote {page} from the committed evaluations")
 

@@ -1,20 +1,7 @@
 """The depth gap's interval on the measured-data page (``benchmarks/real_validation.py``): a bootstrap whose
 draws can be counted by hand."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module")
-def rv():
-    spec = importlib.util.spec_from_file_location("real_validation", ROOT / "benchmarks" / "real_validation.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_a_constant_shift_is_its_own_interval(rv):

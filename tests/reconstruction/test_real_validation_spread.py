@@ -1,0 +1,43 @@
+"""The shipping rule's run-to-run spread on the measured-data page (``benchmarks/real_validation.py``): the seeds
+are read against the shipped network's score of their own run, whatever the shipped network scores now."""
+
+import numpy as np
+
+
+def _real(scores, code="git a", budget="b1"):
+    """A measured-set run of the HDR proposed network with these per-scene highlight PSNRs (dB)."""
+    rows = [{"psnr_highlight": s} for s in scores]
+    return {"code": code, "conditions": {"budget_sha256": budget},
+            "rows": {"proposed": {"psnr_highlight": float(np.mean(scores))}},
+            "per_image": {"rows": {"proposed": rows}}}
+
+
+def _seed(value):
+    return {"rows": {"proposed": {"psnr_highlight": value}}}
+
+
+def test_seeds_scored_beside_the_same_scores_need_no_base(rv):
+    committed = {"real": _real([40.0, 42.0]), "seeds": [_seed(41.5), _seed(40.5)]}
+    seeds, base = rv.carried_seeds({"real": _real([40.0, 42.0 * (1 + 1e-8)])}, committed)
+    assert seeds == committed["seeds"] and base is None
+
+
+def test_a_rescored_network_keeps_its_seeds_with_the_score_they_were_read_beside(rv):
+    """Re-scored at another budget (41.0 → 43.0 dB), the spread stays that of the three runs made together: seed 0
+    at 41.0, seeds 41.5 and 40.5, SD 0.5; against the new 43.0 it would read 1.32."""
+    committed = {"real": _real([40.0, 42.0]), "seeds": [_seed(41.5), _seed(40.5)]}
+    now = {"real": _real([42.0, 44.0], code="git c", budget="b2")}
+    seeds, base = rv.carried_seeds(now, committed)
+    assert seeds == committed["seeds"] and base["rows"]["proposed"]["psnr_highlight"] == 41.0
+    assert base["budget_sha256"] == "b1" and base["code"] == "git a"
+    now["seed_base"] = base
+    row = next(x for x in rv.spread_lines({"hdr": now}, {"hdr": seeds}) if x.startswith("| hdr"))
+    assert row.split(" | ")[2:] == ["41", "41.5, 40.5", "41", "0.5 |"]
+    # a later run keeps reading the seeds against the same base, not against the re-scored network
+    again = rv.carried_seeds({"real": _real([42.0, 44.0], code="git d", budget="b2")}, {**now, "seeds": seeds})
+    assert again[1] is base
+
+
+def test_fewer_than_three_seeds_measure_no_spread(rv):
+    lines = rv.spread_lines({"hdr": {"real": _real([40.0])}}, {"hdr": [_seed(41.0)]})
+    assert not any(x.startswith("| hdr") for x in lines) and "not measured" in lines[0]
