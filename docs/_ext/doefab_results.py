@@ -114,6 +114,7 @@ MEASUREMENTS = (
     Measurement("measured_pair", "benchmarks/measured_pair.py", (R + "measured_pair.md",)),
     Measurement("reconstruct_memory", "benchmarks/reconstruct_memory.py", (R + "reconstruct_memory.md",)),
     Measurement("real_validation", "benchmarks/real_validation.py", (R + "real_validation.md",)),
+    Measurement("hdr_fewer_iters", "benchmarks/hdr_fewer_iters.py", (R + "hdr_fewer_iters.md",)),
     Measurement("gpu_table", None, (R + "gpu_table.md",), command="bash benchmarks/gpu_run.sh",
                 note="CPU against GPU on one machine with a CUDA GPU: the CUDA tests, then "
                      "`benchmarks/gpu_table.py` one workload at a time"),

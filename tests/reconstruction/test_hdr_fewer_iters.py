@@ -1,0 +1,33 @@
+"""The shipping rule's verdict on the HDR candidate page (``benchmarks/hdr_fewer_iters.py``)."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def page():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("hdr_fewer_iters", ROOT / "benchmarks" / "hdr_fewer_iters.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _res(shipped_db, candidate_db, spread_db):
+    def row(db, s):
+        return {"real": {"psnr_highlight": db, "psnr": 60.0}, "val": {"psnr_highlight": 26.0, "psnr": 42.0},
+                "seconds": s}
+    return {"solve": [20, 20, 4], "code": "git x", "spread_db": spread_db,
+            "shipped": row(shipped_db, 1.2), "candidate": row(candidate_db, 0.6)}
+
+
+@pytest.mark.parametrize("candidate_db, verdict", [(43.81, "passes"), (43.79, "fails"), (44.5, "passes")])
+def test_a_candidate_passes_only_within_the_spread_below_the_shipped_network(page, candidate_db, verdict):
+    text = page.markdown(_res(44.0, candidate_db, 0.2))
+    assert f"so it {verdict}" in text
+    assert "0.50× the shipped network's time" in text
