@@ -18,16 +18,15 @@ def page():
     return mod
 
 
-def _res(shipped_db, candidate_db, spread_db):
-    def row(db, s):
-        return {"real": {"psnr_highlight": db, "psnr": 60.0}, "val": {"psnr_highlight": 26.0, "psnr": 42.0},
-                "seconds": s}
-    return {"solve": [20, 20, 4], "code": "git x", "spread_db": spread_db,
-            "shipped": row(shipped_db, 1.2), "candidate": row(candidate_db, 0.6)}
+def _row(db, **more):
+    return {"real": {"psnr_highlight": db, "psnr": 60.0}, "val": {"psnr_highlight": 26.0, "psnr": 42.0}, **more}
 
 
 @pytest.mark.parametrize("candidate_db, verdict", [(43.81, "passes"), (43.79, "fails"), (44.5, "passes")])
 def test_a_candidate_passes_only_within_the_spread_below_the_shipped_network(page, candidate_db, verdict):
-    text = page.markdown(_res(44.0, candidate_db, 0.2))
-    assert f"so it {verdict}" in text
+    cand = _row(candidate_db, solve=[20, 20, 4], code="git x", seconds=0.6, shipped_seconds=1.2)
+    res = {"shipped": _row(44.0), "spread_db": 0.2, "candidates": {"20_20_4": cand}}
+    assert page.verdict(res, cand) == (pytest.approx(candidate_db - 44.0), verdict)
+    text = page.markdown(res)
+    assert f"20 + 20 in 4: {candidate_db - 44.0:+.2f} dB on the measured set, so it {verdict}" in text
     assert "0.50× the shipped network's time" in text
