@@ -102,8 +102,8 @@ def table(r: dict) -> str:
     rounds = f" --rounds {a['rounds']}" if a["rounds"] != 3 else ""
     order = "the codes taking turns in alternating order, " if before else ""
     lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}{rounds}`: torch {a['torch']} on "
-             f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds ({order}each task "
-             "in a fresh process) and the median over the rounds; the shipped "
+             f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds ({order}each "
+             "task in a fresh process) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
              "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
              "network (s) | reconstruction, this code / previous (median of the rounds' ratios) | training steps / s "

@@ -7,13 +7,16 @@ import numpy as np
 def _real(scores, code="git a", budget="b1"):
     """A measured-set run of the HDR proposed network with these per-scene highlight PSNRs (dB)."""
     rows = [{"psnr_highlight": s} for s in scores]
-    return {"code": code, "conditions": {"budget_sha256": budget},
+    return {"task": "hdr", "images": 12, "size_px": 256, "real_sha256": {"hdr": "a", "definition": "x"},
+            "code": code, "conditions": {"budget_sha256": budget},
             "rows": {"proposed": {"psnr_highlight": float(np.mean(scores))}},
             "per_image": {"rows": {"proposed": rows}}}
 
 
 def _seed(value):
-    return {"rows": {"proposed": {"psnr_highlight": value}}}
+    """A seed's measured-set run, on the same 12 scenes as ``_real``'s."""
+    return {"images": 12, "size_px": 256, "real_sha256": {"hdr": "a", "definition": "x"},
+            "rows": {"proposed": {"psnr_highlight": value}}}
 
 
 def test_seeds_scored_beside_the_same_scores_need_no_base(rv):
@@ -35,9 +38,20 @@ def test_a_rescored_network_keeps_its_seeds_with_the_score_they_were_read_beside
     assert row.split(" | ")[2:] == ["41", "41.5, 40.5", "41", "0.5 |"]
     # a later run keeps reading the seeds against the same base, not against the re-scored network
     again = rv.carried_seeds({"real": _real([42.0, 44.0], code="git d", budget="b2")}, {**now, "seeds": seeds})
-    assert again[1] is base
+    assert again[1] == base
 
 
 def test_fewer_than_three_seeds_measure_no_spread(rv):
     lines = rv.spread_lines({"hdr": {"real": _real([40.0])}}, {"hdr": [_seed(41.0)]})
     assert not any(x.startswith("| hdr") for x in lines) and "not measured" in lines[0]
+
+
+def test_seeds_scored_on_other_scenes_are_not_carried(rv):
+    """Seeds of 12 scenes are not read beside a shipped network scored on 13 (nor on another measured set)."""
+    seeds = [_seed(41.5), _seed(40.5)]
+    committed = {"real": _real([40.0, 42.0]), "seeds": seeds}
+    for images, sha in ((13, "a"), (12, "b")):
+        now = {"real": {**_real([40.0, 42.0]), "images": images, "real_sha256": {"hdr": sha, "definition": "x"}}}
+        assert rv.carried_seeds(now, committed) == ([], None)
+    now["real"].update(images=12, real_sha256={"hdr": "a", "definition": "y"})  # another realdata.py, same scenes
+    assert rv.carried_seeds(now, committed) == (seeds, None)
