@@ -121,15 +121,18 @@ def main() -> None:
     args = ap.parse_args()
     from doefab.io import atomic_write_json, atomic_write_text
 
+    from doefab.tolerance.conditions import _budget_crosstalk
+    from doefab.tolerance.errors import load_budget
+
     solve = tuple(args.solve)
-    out = ROOT / "out" / "hdr_fewer_iters" / "_".join(map(str, solve))
-    weights = train_candidate(solve, out)
     committed = json.loads((RESULTS / "real_validation.json").read_text())[TASK]
-    runs = {s: evaluate_split(TASK, s, 12, 256, out / "eval", weights_dir=weights, variants=(VARIANT,))
-            for s in ("real", "val")}
-    if runs["real"]["conditions"]["budget_sha256"] != committed["real"]["conditions"]["budget_sha256"]:
+    if committed["real"]["conditions"]["budget_sha256"] != _budget_crosstalk(load_budget())["budget_sha256"]:
         raise SystemExit("the shipped network's committed scores were made under another tolerance budget: "
                          "re-score it first (benchmarks/real_validation.py --tasks hdr)")
+    out = ROOT / "out" / "hdr_fewer_iters" / "_".join(map(str, solve))
+    weights = train_candidate(solve, out)
+    runs = {s: evaluate_split(TASK, s, 12, 256, out / "eval", weights_dir=weights, variants=(VARIANT,))
+            for s in ("real", "val")}
     secs = timings(weights)
     f = RESULTS / "hdr_fewer_iters.json"
     res = json.loads(f.read_text()) if f.is_file() else {"candidates": {}}

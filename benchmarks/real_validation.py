@@ -60,8 +60,9 @@ DECISIONS = (
     ("2026-12-02", "depth", "the proposed network retrained as shipped (500 steps, seed 0) at this code: `doefab "
      "train --task depth --variant proposed --steps 500 --minutes 600`, scored as this script scores a network",
      "MAE on the measured set 0.272 m against the shipped 0.285 m (spread 0.023 m), δ<1.25 0.869 against 0.856; on "
-     "validation 0.251 against 0.258 m, δ<1.25 0.912 against 0.897", "not shipped: better on each metric, but by less "
-     "than the seed moves it, and a new network re-opens Table 3 and the half-ring's tolerance pages"),
+     "validation 0.251 against 0.258 m, δ<1.25 0.912 against 0.897", "not shipped: better in MAE and δ<1.25 on both "
+     "sets, but by less than the seed moves it, and a new network re-opens Table 3 and the half-ring's tolerance "
+     "pages"),
 )
 
 
@@ -119,7 +120,7 @@ def carried_seeds(now: dict, committed: dict | None) -> tuple[list[dict], dict |
     """The committed seed runs of a task, and the shipped network's scores they were measured beside when those are
     not the scores of ``now`` (the same scenes scored at another code or budget; None when every measured scene
     scores as then, to 1e-6): the spread then compares three runs made at one code and budget. Seeds scored on
-    other scenes (another count, size or measured set) are not carried: their spread is measured again."""
+    other scenes (another count, size or measured set) are refused: their spread is to be measured again."""
     import math
 
     if not committed or not committed.get("seeds"):
@@ -131,8 +132,8 @@ def carried_seeds(now: dict, committed: dict | None) -> tuple[list[dict], dict |
         return run["images"], run["size_px"], run["real_sha256"][part]
 
     if any(scenes(r) != scenes(now["real"]) for r in committed["seeds"]):
-        print(f"{now['real']['task']}: the committed seeds were scored on other measured scenes: not carried")
-        return [], None
+        raise SystemExit(f"{now['real']['task']}: the committed seeds were scored on other measured scenes than "
+                         "this run's (count, size or data): score the seeds' weights again with --seed-weights")
     a, b = now["real"]["per_image"]["rows"]["proposed"], base["per_image"]["rows"]["proposed"]
     same = len(a) == len(b) and all(set(x) == set(y) and all(math.isclose(x[k], y[k], rel_tol=1e-6) for k in x)
                                     for x, y in zip(a, b))

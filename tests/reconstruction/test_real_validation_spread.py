@@ -2,6 +2,7 @@
 are read against the shipped network's score of their own run, whatever the shipped network scores now."""
 
 import numpy as np
+import pytest
 
 
 def _real(scores, code="git a", budget="b1"):
@@ -38,7 +39,7 @@ def test_a_rescored_network_keeps_its_seeds_with_the_score_they_were_read_beside
     assert row.split(" | ")[2:] == ["41", "41.5, 40.5", "41", "0.5 |"]
     # a later run keeps reading the seeds against the same base, not against the re-scored network
     again = rv.carried_seeds({"real": _real([42.0, 44.0], code="git d", budget="b2")}, {**now, "seeds": seeds})
-    assert again[1] == base
+    assert again[1] is base  # the committed base itself, not one rebuilt from the re-scored run
 
 
 def test_fewer_than_three_seeds_measure_no_spread(rv):
@@ -46,12 +47,13 @@ def test_fewer_than_three_seeds_measure_no_spread(rv):
     assert not any(x.startswith("| hdr") for x in lines) and "not measured" in lines[0]
 
 
-def test_seeds_scored_on_other_scenes_are_not_carried(rv):
+def test_seeds_scored_on_other_scenes_are_refused(rv):
     """Seeds of 12 scenes are not read beside a shipped network scored on 13 (nor on another measured set)."""
     seeds = [_seed(41.5), _seed(40.5)]
     committed = {"real": _real([40.0, 42.0]), "seeds": seeds}
     for images, sha in ((13, "a"), (12, "b")):
         now = {"real": {**_real([40.0, 42.0]), "images": images, "real_sha256": {"hdr": sha, "definition": "x"}}}
-        assert rv.carried_seeds(now, committed) == ([], None)
+        with pytest.raises(SystemExit, match="other measured scenes"):
+            rv.carried_seeds(now, committed)
     now["real"].update(images=12, real_sha256={"hdr": "a", "definition": "y"})  # another realdata.py, same scenes
     assert rv.carried_seeds(now, committed) == (seeds, None)
