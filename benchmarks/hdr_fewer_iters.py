@@ -52,10 +52,10 @@ def timings(weights: Path, rounds: int = 3, repeats: int = 5) -> dict:
     import torch
 
     from doefab.reconstruction.loader import load_reconstructor
-    from reconstruction_speed import _captures
+    from reconstruction_speed import scene_captures
 
     torch.set_num_threads(2)
-    coded, uncoded = _captures(TASK)()
+    coded, uncoded = scene_captures(TASK)()
     recs = {"shipped": load_reconstructor(TASK), "candidate": load_reconstructor(TASK, weights_dir=weights)}
     for rec in recs.values():
         rec(coded, uncoded)  # the one-time set-up

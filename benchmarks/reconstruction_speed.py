@@ -31,7 +31,9 @@ sys.path.insert(0, code_root())  # the package measured (a baseline's worktree)
 TASKS = ("hdr", "hyperspectral", "depth")
 
 
-def _captures(task: str):
+def scene_captures(task: str):
+    """A function that simulates the capture pair of ``task``'s first 512² validation scene through the committed
+    design (what the benchmark times; also the frame other benchmarks reconstruct)."""
     import doefab
     from doefab.reconstruction.data import depth_sample, hdr_sample, sample_rng, spectral_sample
     from doefab.reconstruction.specs import psf_pair
@@ -58,7 +60,7 @@ def measure(args) -> dict:
     torch.set_num_threads(args.threads)
     out = {}
     for task in args.task or TASKS:
-        simulate = _captures(task)
+        simulate = scene_captures(task)
         sim = median_time(simulate, args.repeats)
         coded, uncoded = simulate()
         rec = doefab.load_reconstructor(task)
