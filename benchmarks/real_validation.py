@@ -66,6 +66,14 @@ DECISIONS = (
 )
 
 
+def budget_now() -> str:
+    """The digest of the shipped tolerance budget, as honest captures record it (``conditions.budget_sha256``)."""
+    from doefab.tolerance.conditions import _budget_crosstalk
+    from doefab.tolerance.errors import load_budget
+
+    return _budget_crosstalk(load_budget())["budget_sha256"]
+
+
 def evaluate_split(task: str, split: str, images: int, size: int, work: Path, weights_dir=None,
                    variants=("proposed", "coded_only", "uncoded_only"), name: str | None = None) -> dict:
     """``task``'s networks (``weights_dir``'s, default the shipped ones) on ``split``, honest captures; an
@@ -73,8 +81,7 @@ def evaluate_split(task: str, split: str, images: int, size: int, work: Path, we
     from doefab.reconstruction.evaluate import evaluate, one_thread
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.data import real_components
-    from doefab.tolerance.conditions import _budget_crosstalk, for_splits
-    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.conditions import for_splits
 
     out = work / (name or f"{task}_{split}")
     f = out / "metrics.json"
@@ -82,7 +89,7 @@ def evaluate_split(task: str, split: str, images: int, size: int, work: Path, we
         done = json.loads(f.read_text())
         shas = {v: load_reconstructor(task, v, weights_dir).meta["weights_sha256"] for v in variants}
         same_set = split != "real" or done.get("real_sha256") == real_components()
-        same_set &= done["conditions"].get("budget_sha256") == _budget_crosstalk(load_budget())["budget_sha256"]
+        same_set &= done["conditions"].get("budget_sha256") == budget_now()
         if (done["images"], done["size_px"]) == (images, size) and set(done["weights"]) == set(variants) and all(
                 w["sha256"] == shas[v] for v, w in done["weights"].items()) and same_set:
             print(f"{task} {split}: reusing {f}")
