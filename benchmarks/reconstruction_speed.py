@@ -2,7 +2,8 @@
 reconstruction of a 512 × 512 capture pair with the shipped proposed network (target ≤ 1 s each), the first
 call of a freshly loaded network beside the median of later calls (a per-call setup cost shows as both being
 high), and training steps per second (from the shipped weights' records). Medians of ``--repeats`` runs on
-``--threads`` torch threads. Split used: one validation scene per task (only its size matters: no choice is made
+``--threads`` torch threads, in a process that keeps the memory it frees as every ``doefab`` command does
+(``doefab.keep_freed_memory``). Split used: one validation scene per task (only its size matters: no choice is made
 on it).
 
 ``--baseline REV`` (default HEAD) times the same in the same run with the package as of git revision REV (a
@@ -58,6 +59,12 @@ def measure(args) -> dict:
     import doefab
 
     torch.set_num_threads(args.threads)
+    try:  # as every doefab command runs (a previous code without the setting is timed as it ran)
+        from doefab._memory import keep_freed_memory
+    except ImportError:
+        pass
+    else:
+        keep_freed_memory()
     out = {}
     for task in args.task or TASKS:
         simulate = scene_captures(task)
@@ -105,7 +112,8 @@ def table(r: dict) -> str:
     order = "the codes taking turns in alternating order, " if before else ""
     lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}{rounds}`: torch {a['torch']} on "
              f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds ({order}each "
-             "task in a fresh process) and the median over the rounds; the shipped "
+             "task in a fresh process, which keeps the memory it frees where the code does so: `doefab.keep_freed_memory`, "
+             "as every doefab command) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
              "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
              "network (s) | reconstruction, this code / previous (median of the rounds' ratios) | training steps / s "

@@ -43,6 +43,7 @@ _EXPORTS = {
     "depth_encoding_score": "doefab.imaging.depth_score",
     "finetune_end_to_end": "doefab.reconstruction.endtoend",
     "fabricated_height": "doefab.tolerance.fabricate",
+    "keep_freed_memory": "doefab._memory",
     "DoefabError": "doefab.errors",
     "SamplingError": "doefab.errors",
 }

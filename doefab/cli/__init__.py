@@ -106,6 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         _refuse_empty_values(parser, args)
         from doefab._devices import using_device
+        from doefab._memory import keep_freed_memory
+
+        keep_freed_memory()  # a command's blocks of megabytes are reused, not faulted in afresh (same numbers)
 
         with using_device(getattr(args, "device", None)):  # --device: what device=None means in this command
             return int(args.func(args) or 0)

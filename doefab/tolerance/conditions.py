@@ -227,7 +227,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from doefab.reconstruction.specs import network_kernel
     from doefab.tolerance.errors import sample_errors
     from doefab.tolerance.judge import PSFJudge, alignment_chain
-    from doefab.tolerance.memory import keep_freed_memory
+    from doefab._memory import keep_freed_memory
 
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if has(task, "depth") else design.depths

@@ -24,16 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import sample_errors
-from doefab.tolerance.memory import keep_freed_memory
 
 __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
-
-# glibc: serve every allocation from the heap and never trim it (a part allocates and frees tens of MB per
-# wavelength; fresh mmap pages for each cost a third of a part in page faults)
-_MALLOC_ENV = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(2**31 - 1)}
 
 
 def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, weights_dir=None,
@@ -287,7 +283,7 @@ def worker_envs(n_workers: int, device=None) -> list[dict]:
 def _local_cluster(local_cluster, envs: list[dict]):
     """A Dask ``LocalCluster`` (the class ``local_cluster``) of ``len(envs)`` single-threaded worker processes,
     worker i started with ``envs[i]`` added to its environment."""
-    base = {"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1", **_MALLOC_ENV}
+    base = {"DOEFAB_WORKER": "1", "OMP_NUM_THREADS": "1", **MALLOC_ENV}
     options = dict(threads_per_worker=1, processes=True, dashboard_address=None, env=base)
     if not any(envs):
         return local_cluster(n_workers=len(envs), **options)

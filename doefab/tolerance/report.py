@@ -36,7 +36,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
     Monte Carlo (None: one per core when there are enough parts). ``networks``: False, True (the network judge's
     default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
-    from doefab.tolerance.memory import keep_freed_memory
+    from doefab._memory import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
 
     keep_freed_memory()
