@@ -2,7 +2,7 @@
 design's proposed network as ``doefab tolerance --networks`` judges it (``doefab.tolerance.netjudge``: the
 judge's default scenes, each reconstructed twice — the network told the nominal PSF and the part's own pair),
 profiled with cProfile after one warm-up part (the error-free part's scenes and the networks' set-up are not
-counted). One torch thread, as the judge computes. Cumulative seconds of each stage; the stages nest as listed
+counted). One torch thread and freed memory kept for reuse (``doefab.keep_freed_memory``), as the judge computes. Cumulative seconds of each stage; the stages nest as listed
 (a sub-stage's time is inside its stage's).
 
 Writes benchmarks/results/judge_profile.{md,json}. Run with nothing else on the machine:
@@ -53,11 +53,13 @@ def profile_design(name: str) -> dict:
     import numpy as np
     import torch
 
+    from doefab._memory import keep_freed_memory
     from doefab.tolerance import study
     from doefab.tolerance.errors import load_budget, sample_errors
     from doefab.tolerance.netjudge import NetworkJudge
 
     torch.set_num_threads(1)
+    keep_freed_memory()  # as ``doefab tolerance`` judges (tolerance.report.run_study)
     judge = NetworkJudge(study.judge_for(str(ROOT / "masks" / name / "design"), 1))
     budget = load_budget()
     parts = [sample_errors(budget, np.random.default_rng(s), seed=s, n_masks=judge.base.n_masks) for s in (1, 2)]
@@ -78,9 +80,9 @@ def profile_design(name: str) -> dict:
 def markdown(runs: list[dict], code: str) -> str:
     lines = ["# Where a network-judged part's time goes", "",
              f"Produced by `.venv/bin/python benchmarks/judge_profile.py` at {code}: one part drawn from the default "
-             "budget, after a warm-up part, through each committed design's proposed network (torch on 1 thread, "
-             "cProfile's cumulative seconds; a sub-stage's time is inside its stage's, and the profiler adds its own "
-             "overhead).", ""]
+             "budget, after a warm-up part, through each committed design's proposed network (torch on 1 thread and "
+             "freed memory kept for reuse, as `doefab tolerance` runs; cProfile's cumulative seconds; a sub-stage's "
+             "time is inside its stage's, and the profiler adds its own overhead).", ""]
     for r in runs:
         lines += [f"**{r['design']}** ({r['task']}): {r['part_s']:.1f} s for the part "
                   f"({60 / r['part_s']:.2f} parts / minute on one core), {r['scenes']} scenes of {r['size_px']}² px, "
