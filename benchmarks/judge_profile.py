@@ -2,7 +2,8 @@
 design's proposed network as ``doefab tolerance --networks`` judges it (``doefab.tolerance.netjudge``: the
 judge's default scenes, each reconstructed twice — the network told the nominal PSF and the part's own pair),
 profiled with cProfile after one warm-up part (the error-free part's scenes and the networks' set-up are not
-counted). One torch thread and freed memory kept for reuse (``doefab.keep_freed_memory``), as the judge computes. Cumulative seconds of each stage; the stages nest as listed
+counted). One torch thread and freed memory kept for reuse (``doefab.keep_freed_memory``), as the judge
+computes. Cumulative seconds of each stage; the stages nest as listed
 (a sub-stage's time is inside its stage's).
 
 Writes benchmarks/results/judge_profile.{md,json}. Run with nothing else on the machine:
@@ -86,7 +87,8 @@ def markdown(runs: list[dict], code: str) -> str:
     for r in runs:
         lines += [f"**{r['design']}** ({r['task']}): {r['part_s']:.1f} s for the part "
                   f"({60 / r['part_s']:.2f} parts / minute on one core), {r['scenes']} scenes of {r['size_px']}² px, "
-                  f"{r['reconstructions']} reconstructions", "", "| stage | s | share of the part |", "| --- | --- | --- |"]
+                  f"{r['reconstructions']} reconstructions", "", "| stage | s | share of the part |",
+                  "| --- | --- | --- |"]
         for s in r["stages"]:
             pad = "&nbsp;&nbsp;↳ " if s["depth"] else ""
             lines.append(f"| {pad}{s['stage']} | {s['seconds']:.1f} | {100 * s['seconds'] / r['part_s']:.0f} % |")
