@@ -889,6 +889,7 @@ NOTHING_TO_SWEEP = {
     "FUSED_SILICA": "constant", "PSFPair": "result type (made by PSFPlan)", "__version__": "constant",
     "blank_height": "a camera only", "calibrate_crosstalk": "two captured image pairs (checked by the unmix cases)",
     "material_by_name": "a name (unknown names: tests/optics/test_materials.py)",
+    "keep_freed_memory": "no arguments",
 }
 
 
