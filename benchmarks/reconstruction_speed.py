@@ -112,8 +112,8 @@ def table(r: dict) -> str:
     order = "the codes taking turns in alternating order, " if before else ""
     lines = [f"`.venv/bin/python benchmarks/reconstruction_speed.py --baseline {rev}{rounds}`: torch {a['torch']} on "
              f"{a['threads']} threads, medians of {a['repeats']} runs in each of {a['rounds']} rounds ({order}each "
-             "task in a fresh process, which keeps the memory it frees where the code does so: `doefab.keep_freed_memory`, "
-             "as every doefab command) and the median over the rounds; the shipped "
+             "task in a fresh process, which keeps the memory it frees where the code does so: "
+             "`doefab.keep_freed_memory`, as every doefab command) and the median over the rounds; the shipped "
              "proposed networks; target ≤ 1 s per 512² reconstruction.", "",
              "| task | code | capture simulation, 512² (s) | reconstruction, 512² (s) | first call of a loaded "
              "network (s) | reconstruction, this code / previous (median of the rounds' ratios) | training steps / s "

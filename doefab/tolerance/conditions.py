@@ -220,6 +220,7 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     """PSF pairs of ``n`` parts sampled from the budget (seeded by the split), at the network's kernel; cached."""
     from dataclasses import replace
 
+    from doefab._memory import keep_freed_memory
     from doefab.design.design import Design
     from doefab.fabrication.process import mask_count
     from doefab.io import atomic_write_bytes, cache_root
@@ -227,7 +228,6 @@ def _parts(task, design_dir: Path, split: str, n: int, budget: dict, progress: b
     from doefab.reconstruction.specs import network_kernel
     from doefab.tolerance.errors import sample_errors
     from doefab.tolerance.judge import PSFJudge, alignment_chain
-    from doefab._memory import keep_freed_memory
 
     design = Design.load(design_dir)
     depths = fine_planes(design.depths) if has(task, "depth") else design.depths
