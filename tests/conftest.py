@@ -30,19 +30,20 @@ def tiny_streak():
 
 @pytest.fixture(scope="session")
 def grating_design(tmp_path_factory):
-    """``make(n, kernel, seed) → design folder``: a quantized blazed grating over the coded half of an n-pixel
-    aperture at 5.4 µm (3 bands, the grating task's metric), plain (level 15) over the other half."""
+    """``make(n, kernel, seed, n_bands=3) → design folder``: a quantized blazed grating over the coded half of an
+    n-pixel aperture at 5.4 µm (``n_bands`` bands, the grating task's metric), plain (level 15) over the other
+    half."""
     import numpy as np
 
     import doefab
     from doefab.design.design import Design
     from doefab.tasks.grating import GratingTask
 
-    def make(n: int, kernel: int, seed: int = 0):
+    def make(n: int, kernel: int, seed: int = 0, n_bands: int = 3):
         pitch = 5.4e-6
         cam = doefab.Camera(aperture_diameter=n * pitch, doe_pitch=pitch, doe_pixels=n, sensor_pitch=5.4e-6,
                             sensor_distance=50e-3, focus_distance=5.0)
-        task = GratingTask(kernel_size=kernel, n_bands=3)
+        task = GratingTask(kernel_size=kernel, n_bands=n_bands)
         task.bind(cam)
         lv = doefab.quantize_levels(task.init_height(cam, np.random.default_rng(seed)), cam)
         lv[:, n // 2:] = 15

@@ -93,7 +93,7 @@ def _stage_blocks(out: Path, scene, done: dict) -> list[tuple[str, list]]:
                                   ("img", "design/levels.png", "quantized height map")]))
     mk = done.get("masks")
     if mk and mk.get("status") != "skipped":
-        blocks.append(("Masks", [("p", f"Mask set: `{mk.get('mask_set')}`. {mk.get('why', '')}"),
+        blocks.append(("Masks", [("p", f"Mask set: `{out / 'masks'}`. {mk.get('why', '')}"),
                                  ("img", "masks/preview_composite.png", "composite of the etch layers (layout view)"),
                                  ("img", f"masks/{deepest_preview(out / 'masks')}", "the deepest etch layer")]))
     ho = done.get("holder")

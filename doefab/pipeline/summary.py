@@ -23,7 +23,7 @@ def _files(out: Path, done: dict) -> list[str]:
     items = []
     mk = done.get("masks") or {}
     if mk.get("mask_set"):
-        folder = Path(mk["mask_set"])
+        folder = out / "masks"  # the run's own copy (the recorded path is where the run was: folders move)
         layouts = sorted(p.name for p in folder.glob("*.gds")) + sorted(p.name for p in folder.glob("*.oas"))
         items.append(f"to the fab: {folder}/ ({', '.join(layouts + ['manifest.json', 'README.txt'])})")
     ho = done.get("holder") or {}

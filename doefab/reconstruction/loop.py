@@ -103,7 +103,8 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
                 save(step)
             if bar is not None:
                 bar.n = int(min(time.perf_counter() - t0, budget))
-                bar.set_postfix(step=step, loss=f"{loss:.4f}", **{metric: f"{last:.4g}"})
+                shown = f"{last:.4g}" if np.isfinite(last) else "–"  # none before the first validation
+                bar.set_postfix(step=step, loss=f"{loss:.4f}", **{metric: shown})
                 bar.refresh()
     finally:
         if bar is not None:
@@ -119,4 +120,6 @@ def _bar(progress: bool, budget: float, elapsed: float, desc: str):
         return None
     from tqdm import tqdm
 
-    return tqdm(total=int(budget), initial=int(min(elapsed, budget)), desc=desc, unit="s")
+    # the bar counts the time budget's seconds: no rate ("s/s"), the steps and metrics as its postfix
+    return tqdm(total=int(budget), initial=int(min(elapsed, budget)), desc=desc, unit="s",
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} s [{elapsed}<{remaining}{postfix}]")

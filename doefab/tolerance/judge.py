@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import time
 from collections import OrderedDict
 from contextlib import contextmanager
@@ -237,22 +236,22 @@ class PSFJudge:
         key = (json.dumps(err.to_json(), sort_keys=True, default=str), r0, r1, c0, c_end)
         if self._relief_cache[0] != key:  # one part's relief serves its coded-only and its two-half PSFs
             self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)).to(self.device))
-        fields = self._relief_cache[1].reshape(-1, r1 - r0, c_end - c0)[:, :, :c1 - c0]
+        fields, ones = self._relief_cache[1], None
         if c_end < c1:  # plain glass beyond the relief's reach
-            fields = torch.cat([fields, torch.ones(fields.shape[0], r1 - r0, c1 - c_end, dtype=fields.dtype,
-                                                   device=fields.device)], dim=2)
+            ones = torch.ones(r1 - r0, c1 - c_end, dtype=torch.complex64, device=self.device)
 
         def at(i: int) -> torch.Tensor:
-            return fields[i]
+            f = fields[i].to(self.device).reshape(r1 - r0, c_end - c0)[:, :c1 - c0]
+            return f if ones is None else torch.cat([f, ones], dim=1)
         return at
 
-    def _relief_fields(self, err: PartErrors, me, plan, rows, cols) -> torch.Tensor:
-        """[W, cells] the part's relief transmittance of the window rows × cols, relative to the plain glass."""
-        from doefab.tolerance.relief import pattern_heights, rotate_fields, transmittance
+    def _relief_fields(self, err: PartErrors, me, plan, rows, cols):
+        """[W, cells] the part's relief transmittance of the window rows × cols, relative to the plain glass
+        (``fields.relief_fields``: a tensor, or one wavelength at a time for a large grid)."""
+        from doefab.tolerance.fields import relief_fields
+        from doefab.tolerance.relief import pattern_heights
 
         (r0, r1), (c0, c_end) = rows, cols
-        th = float(err.mount_rotation)
-        cells = self.relief.n
         full = (1 << self.n_masks) - 1
         heights = pattern_heights(self.n_masks, self.step, err.for_masks(self.n_masks).depth_scale) - full * self.step
         # a tilted die: the light crosses each step at the tilt's angle (a longer optical path, sources.py)
@@ -260,26 +259,12 @@ class PSFJudge:
         phases = [plan.phase_per_metre(i) * (1.0 if not err.mount_tilt else
                                              tilt_phase_factor(float(err.mount_tilt), float(n_of(wl))))
                   for i, wl in enumerate(self.design.wavelengths)]
-        if th == 0.0:
-            fields = transmittance(self.relief.die_histogram(me, (r0, r1), (c0, c_end)), heights, phases)
-        else:
-            big, bigc = self.relief.rotation_window(th, (r0, r1), (c0, c_end))
-            die = self.relief.die_histogram(me, big, bigc)
-            if 2 * len(phases) < die.shape[0]:
-                fields = rotate_fields(transmittance(die, heights, phases), th, (r0, r1), (c0, c_end), big, bigc,
-                                       cells, torch.ones(len(phases), dtype=torch.complex64))
-            else:
-                plain = torch.zeros(die.shape[0])
-                plain[0] = 1.0
-                fields = transmittance(rotate_fields(die, th, (r0, r1), (c0, c_end), big, bigc, cells, plain),
-                                       heights, phases)
+        rough = None
         if err.roughness > 0:
-            rough, resid = roughness_field((r1 - r0, c_end - c0), self.relief.cell, err.roughness,
-                                           err.roughness_corr, err.seed)
-            rough = torch.from_numpy(rough.reshape(-1)).float()
-            for i, c in enumerate(phases):
-                fields[i] *= torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
-        return fields
+            r, resid = roughness_field((r1 - r0, c_end - c0), self.relief.cell, err.roughness, err.roughness_corr,
+                                       err.seed)
+            rough = (torch.from_numpy(r.reshape(-1)).float(), resid)
+        return relief_fields(self.relief, me, heights, phases, rows, cols, rough)
 
     def psfs(self, err: PartErrors, halves=("coded",), kernel: int | None = None) -> dict:
         """{half: (n_depths, n_wavelengths, K, K)} PSFs of the part."""

@@ -269,3 +269,19 @@ def test_the_tornado_table_gives_each_delivered_change_its_scene_noise(tmp_path)
     lead = _summary(md)[0]
     assert "mask overlay (0.5 µm at the budget's 1σ costs 0.049 of the PSF metric; no error judged through the " \
            "network lowered what the part delivers by more than the judge's scene noise)" in lead
+
+
+def test_the_files_to_send_name_the_run_folder_where_it_is_now(tmp_path):
+    """A run folder that was moved (or copied) after its masks stage names its own masks and holder folders, not
+    the paths recorded where the run was."""
+    from doefab.pipeline.summary import summary_items
+
+    out = tmp_path / "moved_run"
+    (out / "masks").mkdir(parents=True)
+    (out / "masks" / "grating.gds").write_bytes(b"")
+    done = {"masks": {"status": "ran", "mask_set": str(tmp_path / "old_place" / "masks")},
+            "holder": {"status": "ran", "files": ["holder.stl"]}}
+    items = summary_items(out, done, "hyperspectral")[1][1]
+    assert f"to the fab: {out / 'masks'}/ (grating.gds, manifest.json, README.txt)" in items
+    assert f"to the printer: {out / 'holder'}/ (holder.stl)" in items
+    assert not any("old_place" in i for i in items)

@@ -1,0 +1,103 @@
+"""A part's relief transmittance at each wavelength, built within a memory budget.
+
+The judge builds the relief of a window of the die (``relief.ReliefModel``: the pattern areas of each cell, turned
+by the mount rotation) and its transmittance at every wavelength. For the shipped designs that is a few hundred
+megabytes and is built at once. A larger design grid (a camera with more DOE pixels across its aperture, a finer
+tolerance grid) times many wavelengths would need tens of gigabytes at once: a 31-band grating of 2188 DOE pixels
+across, on the tolerance stage's twofold grid, took 11 GB before its first PSF. Above ``FIELD_BYTES`` the
+transmittance is therefore computed one wavelength at a time from the pattern areas, which are kept instead
+(``PerWavelength``), and the mount rotation turns the pattern areas a few at a time (``ROTATE_BYTES``). The
+values are the same to float32 rounding (the matrix products and FFTs run in other batch shapes).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+__all__ = ["relief_fields", "PerWavelength", "FIELD_BYTES", "ROTATE_BYTES"]
+
+FIELD_BYTES = 2 * 2**30  # bytes of complex64 transmittance built at once; above it, one wavelength at a time
+ROTATE_BYTES = 256 * 2**20  # bytes of pattern areas the mount rotation turns at once (its FFTs need ~5× that)
+
+
+class PerWavelength:
+    """``self[i]``: wavelength i's transmittance [cells] complex64, computed when asked from the pattern areas
+    ``hist`` [2^M, cells], the pattern heights (m), each wavelength's phase per metre of relief and, with
+    roughness, its height field and unresolved rms (m), as ``relief_fields`` computes it for all at once."""
+
+    def __init__(self, hist: torch.Tensor, heights: np.ndarray, phases, rough=None):
+        self.hist, self.heights, self.phases, self.rough = hist, heights, list(phases), rough
+        self.shape = (len(self.phases), hist.shape[1])
+
+    def __len__(self) -> int:
+        return len(self.phases)
+
+    def __getitem__(self, i: int) -> torch.Tensor:
+        from doefab.tolerance.relief import transmittance
+
+        c = self.phases[i]
+        f = transmittance(self.hist, self.heights, [c])[0]
+        if self.rough is not None:
+            rough, resid = self.rough
+            f = f * torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
+        return f
+
+    def to(self, device) -> PerWavelength:
+        """Itself: each wavelength moves to the device when the judge asks for it."""
+        return self
+
+
+def relief_fields(relief, me, heights: np.ndarray, phases, rows, cols, rough=None):
+    """The transmittance [W, cells] of the die window ``rows`` × ``cols`` (grid cells) of ``relief`` (a
+    ``ReliefModel``) with mask errors ``me`` (``MaskErrors``; its ``mount_rotation`` in radians), at W wavelengths
+    of ``phases`` (rad per metre of relief each), relative to the plain glass: a complex64 tensor, or, above
+    ``FIELD_BYTES``, a ``PerWavelength`` that computes one row at a time. ``rough``: (height field [cells] (m),
+    unresolved rms (m)) of the etch roughness, or None.
+
+    Example: ``relief_fields(judge.relief, judge.mask_errors(err), heights, phases, (0, 64), (0, 64))``.
+    """
+    from doefab.tolerance.relief import rotate_fields, transmittance
+
+    (r0, r1), (c0, c_end) = rows, cols
+    th = float(me.mount_rotation)
+    n_w, cells = len(phases), (r1 - r0) * (c_end - c0)
+    if th == 0.0:
+        hist = relief.die_histogram(me, (r0, r1), (c0, c_end))
+    else:
+        big, bigc = relief.rotation_window(th, (r0, r1), (c0, c_end))
+        die = relief.die_histogram(me, big, bigc)
+        if 2 * n_w < die.shape[0]:  # fewer wavelengths than patterns: turn the transmittance
+            fields = rotate_fields(transmittance(die, heights, phases), th, (r0, r1), (c0, c_end), big, bigc,
+                                   relief.n, torch.ones(n_w, dtype=torch.complex64))
+            return _roughen(fields, phases, rough)
+        hist = _rotate_patterns(die, th, (r0, r1), (c0, c_end), big, bigc, relief.n)
+    if n_w * cells * 8 > FIELD_BYTES:
+        return PerWavelength(hist, heights, phases, rough)
+    return _roughen(transmittance(hist, heights, phases), phases, rough)
+
+
+def _rotate_patterns(die: torch.Tensor, th: float, rows, cols, big, bigc, n: int) -> torch.Tensor:
+    """The pattern areas ``die`` [2^M, big × bigc cells] turned by ``th`` onto ``rows`` × ``cols``, at most
+    ``ROTATE_BYTES`` of them at a time (outside the die window: the first pattern, unetched glass)."""
+    from doefab.tolerance.relief import rotate_fields
+
+    plain = torch.zeros(die.shape[0])
+    plain[0] = 1.0
+    per = max(1, int(ROTATE_BYTES // max(1, die[0].numel() * die.element_size())))
+    if per >= die.shape[0]:
+        return rotate_fields(die, th, rows, cols, big, bigc, n, plain)
+    return torch.cat([rotate_fields(die[a:a + per], th, rows, cols, big, bigc, n, plain[a:a + per])
+                      for a in range(0, die.shape[0], per)])
+
+
+def _roughen(fields: torch.Tensor, phases, rough) -> torch.Tensor:
+    """``fields`` [W, cells] times each wavelength's roughness transmittance (in place), if any."""
+    if rough is None:
+        return fields
+    r, resid = rough
+    for i, c in enumerate(phases):
+        fields[i] *= torch.polar(torch.full_like(r, math.exp(-0.5 * (c * resid) ** 2)), c * r)
+    return fields
