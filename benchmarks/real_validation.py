@@ -68,10 +68,9 @@ DECISIONS = (
 
 def budget_now() -> str:
     """The digest of the shipped tolerance budget, as honest captures record it (``conditions.budget_sha256``)."""
-    from doefab.tolerance.conditions import _budget_crosstalk
-    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.conditions import budget_sha256
 
-    return _budget_crosstalk(load_budget())["budget_sha256"]
+    return budget_sha256()
 
 
 def evaluate_split(task: str, split: str, images: int, size: int, work: Path, weights_dir=None,

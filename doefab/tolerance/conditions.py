@@ -37,7 +37,8 @@ from doefab.applications import has
 from doefab.reconstruction.data import PART_MODEL, PART_SEEDS  # every split's seeds in one place
 
 __all__ = ["Conditions", "honest", "measured", "clean", "PART_SEEDS", "DEPTH_REFINE", "fine_planes", "for_splits",
-           "CONDITIONS", "model_sources_sha256", "crop_columns", "crop_rows", "crosstalk_residual", "measured_crop"]
+           "CONDITIONS", "model_sources_sha256", "budget_sha256", "crop_columns", "crop_rows", "crosstalk_residual",
+           "measured_crop"]
 
 CONDITIONS = ("honest", "clean")
 
@@ -191,9 +192,18 @@ def _budget_crosstalk(budget: dict) -> dict:
     from doefab.tolerance.surrogate import base_part
 
     sensor = replace(base_part(budget), **sensor_errors(budget))
-    b = {k: v for k, v in budget.items() if k != "defaults_used"}
-    digest = hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
-    return {"crosstalk": sensor if any(sensor.crosstalk) else None, "budget_sha256": digest}
+    return {"crosstalk": sensor if any(sensor.crosstalk) else None, "budget_sha256": budget_sha256(budget)}
+
+
+def budget_sha256(budget: dict | None = None) -> str:
+    """The 16-hex-digit digest of a tolerance budget (default: the shipped one) that honest captures record as
+    ``Conditions.budget_sha256``: evaluations made under another budget are told apart by it.
+
+    Example: ``budget_sha256() == honest("hdr", "masks/streak/design", "val").budget_sha256``."""
+    from doefab.tolerance.errors import load_budget
+
+    b = {k: v for k, v in (budget or load_budget()).items() if k != "defaults_used"}
+    return hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def model_sources_sha256(packages=PART_MODEL) -> str:

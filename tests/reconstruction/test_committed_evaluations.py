@@ -32,14 +32,14 @@ def cache(tmp_path, monkeypatch):
 
 def _budget_recorded(recorded: str) -> dict:
     """The shipped budget, or the shipped budget less its tilt, whichever has the digest ``recorded``."""
-    from doefab.tolerance.conditions import _budget_crosstalk
+    from doefab.tolerance.conditions import budget_sha256
     from doefab.tolerance.errors import load_budget
 
     budget = load_budget()
-    if _budget_crosstalk(budget)["budget_sha256"] == recorded:
+    if budget_sha256(budget) == recorded:
         return budget
     del budget["mounting"]["tilt_sigma_deg"]
-    assert _budget_crosstalk(budget)["budget_sha256"] == recorded, "the shipped budget changed beyond the tilt"
+    assert budget_sha256(budget) == recorded, "the shipped budget changed beyond the tilt"
     return budget
 
 

@@ -349,3 +349,21 @@ def test_measured_conditions_with_a_camera_use_it_for_every_scene_and_say_so():
     d = cond.describe()
     assert d["crosstalk_source"] == "measured" and d["budget_sha256"] is None and len(d["crosstalk_sha256"]) == 16
     assert C.measured(pair, "val").describe().get("crosstalk_source") is None  # the budget's sensor otherwise
+
+
+def test_the_budget_digest_tells_budgets_apart_and_is_what_honest_captures_record(monkeypatch):
+    """``budget_sha256``: the shipped budget's by default; another value anywhere gives another digest; the record
+    of which defaults were used does not count; ``honest`` conditions carry the same digest."""
+    import copy
+
+    from doefab.tolerance import conditions as cond
+    from doefab.tolerance.errors import load_budget
+
+    budget = load_budget()
+    assert cond.budget_sha256() == cond.budget_sha256(budget) and len(cond.budget_sha256()) == 16
+    other = copy.deepcopy(budget)
+    other["mounting"]["tilt_sigma_deg"] = float(other["mounting"].get("tilt_sigma_deg", 0.0)) + 0.01
+    assert cond.budget_sha256(other) != cond.budget_sha256(budget)
+    assert cond.budget_sha256({**budget, "defaults_used": ["anything"]}) == cond.budget_sha256(budget)
+    monkeypatch.setattr(cond, "_parts", lambda task, d, split, n, budget, progress: [])  # no PSFs computed here
+    assert cond.honest("hdr", "unused", "val", budget=other).budget_sha256 == cond.budget_sha256(other)
