@@ -84,6 +84,7 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
         history.append([0, 0.0, float("nan"), validate()])
     bar = _bar(progress, budget, elapsed, desc)
     last = history[-1][3] if history else float("nan")
+    validated = validate_first or step >= val_every  # the bar shows a dash until the metric exists
     try:
         while time.perf_counter() - t0 < budget and (max_steps is None or step < max_steps):
             done = (time.perf_counter() - t0) / budget  # the schedule follows whichever budget binds first
@@ -97,14 +98,13 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
                                   f"{ckpt} (lower the learning rate)")
             step += 1
             if step % val_every == 0:
-                last = validate()
+                last, validated = validate(), True
             history.append([step, round(time.perf_counter() - t0, 2), float(loss), last])
             if step % val_every == 0:
                 save(step)
             if bar is not None:
                 bar.n = int(min(time.perf_counter() - t0, budget))
-                shown = f"{last:.4g}" if np.isfinite(last) else "–"  # none before the first validation
-                bar.set_postfix(step=step, loss=f"{loss:.4f}", **{metric: shown})
+                bar.set_postfix(step=step, loss=f"{loss:.4f}", **{metric: f"{last:.4g}" if validated else "–"})
                 bar.refresh()
     finally:
         if bar is not None:

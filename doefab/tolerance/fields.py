@@ -54,8 +54,10 @@ def relief_fields(relief, me, heights: np.ndarray, phases, rows, cols, rough=Non
     """The transmittance [W, cells] of the die window ``rows`` × ``cols`` (grid cells) of ``relief`` (a
     ``ReliefModel``) with mask errors ``me`` (``MaskErrors``; its ``mount_rotation`` in radians), at W wavelengths
     of ``phases`` (rad per metre of relief each), relative to the plain glass: a complex64 tensor, or, above
-    ``FIELD_BYTES``, a ``PerWavelength`` that computes one row at a time. ``rough``: (height field [cells] (m),
-    unresolved rms (m)) of the etch roughness, or None.
+    ``FIELD_BYTES``, a ``PerWavelength`` that computes one row at a time. With fewer than half as many wavelengths
+    as patterns and a mount rotation, the transmittance itself is turned, whole (it is then smaller than the pattern
+    areas it is made from). ``rough``: (height field [cells] (m), unresolved rms (m)) of the etch roughness, or
+    None.
 
     Example: ``relief_fields(judge.relief, judge.mask_errors(err), heights, phases, (0, 64), (0, 64))``.
     """
