@@ -200,9 +200,9 @@ def budget_sha256(budget: dict | None = None) -> str:
     ``Conditions.budget_sha256``: evaluations made under another budget are told apart by it.
 
     Example: ``budget_sha256() == honest("hdr", "masks/streak/design", "val").budget_sha256``."""
-    from doefab.tolerance.errors import load_budget
+    from doefab.tolerance.errors import budget_values, load_budget
 
-    b = {k: v for k, v in (budget or load_budget()).items() if k != "defaults_used"}
+    b = budget_values(budget or load_budget())
     return hashlib.sha256(json.dumps(b, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -216,8 +216,9 @@ def model_sources_sha256(packages=PART_MODEL) -> str:
 
 def _key(task, design, split, n, budget, kernel, chain) -> str:
     from doefab.fabrication.levels import levels_sha256
+    from doefab.tolerance.errors import budget_values
 
-    b = {k: v for k, v in budget.items() if k != "defaults_used"}
+    b = budget_values(budget)
     planes = list(fine_planes(design.depths)) if has(task, "depth") else None  # the rendering planes themselves
     text = json.dumps([task, levels_sha256(design.levels), design.n_levels, split, n, b, planes,
                        PART_SEEDS[split], list(design.depths), list(design.wavelengths), kernel,

@@ -20,7 +20,7 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
            "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios",
-           "sensor_crosstalk"]
+           "sensor_crosstalk", "budget_values"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -92,6 +92,14 @@ def load_budget(path: str | Path | None = None) -> dict:
                 have[key] = v
                 used.append(f"{sec}.{key}")
     return {**merged, "defaults_used": used}
+
+
+def budget_values(budget: dict) -> dict:
+    """A loaded budget's values without its ``defaults_used`` record (what its digests are taken of: the same
+    values give the same budget, whichever file spelt them out).
+
+    Example: ``budget_values(load_budget())["mounting"]``."""
+    return {k: v for k, v in budget.items() if k != "defaults_used"}
 
 
 def budget_problems(path: str | Path) -> list[str]:

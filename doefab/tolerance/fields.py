@@ -30,20 +30,13 @@ class PerWavelength:
 
     def __init__(self, hist: torch.Tensor, heights: np.ndarray, phases, rough=None):
         self.hist, self.heights, self.phases, self.rough = hist, heights, list(phases), rough
-        self.shape = (len(self.phases), hist.shape[1])
-
-    def __len__(self) -> int:
-        return len(self.phases)
 
     def __getitem__(self, i: int) -> torch.Tensor:
         from doefab.tolerance.relief import transmittance
 
         c = self.phases[i]
         f = transmittance(self.hist, self.heights, [c])[0]
-        if self.rough is not None:
-            rough, resid = self.rough
-            f = f * torch.polar(torch.full_like(rough, math.exp(-0.5 * (c * resid) ** 2)), c * rough)
-        return f
+        return f if self.rough is None else f * _roughness(c, self.rough)
 
     def to(self, device) -> PerWavelength:
         """Itself: each wavelength moves to the device when the judge asks for it."""
@@ -99,7 +92,13 @@ def _roughen(fields: torch.Tensor, phases, rough) -> torch.Tensor:
     """``fields`` [W, cells] times each wavelength's roughness transmittance (in place), if any."""
     if rough is None:
         return fields
-    r, resid = rough
     for i, c in enumerate(phases):
-        fields[i] *= torch.polar(torch.full_like(r, math.exp(-0.5 * (c * resid) ** 2)), c * r)
+        fields[i] *= _roughness(c, rough)
     return fields
+
+
+def _roughness(c: float, rough) -> torch.Tensor:
+    """[cells] complex64: the etch roughness's transmittance at phase ``c`` per metre of relief, from ``rough`` =
+    (height field [cells] (m), unresolved rms (m)): the resolved heights' phase, the unresolved rms's loss."""
+    r, resid = rough
+    return torch.polar(torch.full_like(r, math.exp(-0.5 * (c * resid) ** 2)), c * r)

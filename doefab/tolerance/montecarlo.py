@@ -26,7 +26,7 @@ import numpy as np
 
 from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
-from doefab.tolerance.errors import sample_errors
+from doefab.tolerance.errors import budget_values, sample_errors
 
 __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
@@ -37,7 +37,7 @@ def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, wei
     """What a samples.jsonl must have been written for to be resumed: the design (level map, camera, bands,
     planes, levels), the budget, seed, grid, the mask set's alignment chain and, through networks, the network's
     weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
-    b = {k: v for k, v in budget.items() if k != "defaults_used"}
+    b = budget_values(budget)
     system = {"camera": design.camera.to_dict(), "wavelengths_m": list(design.wavelengths), "n_levels": design.n_levels,
               "depths_m": [z if math.isfinite(z) else "inf" for z in design.depths]}
     out = {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),

@@ -29,11 +29,11 @@ PARTS = {
 def test_a_relief_built_one_wavelength_at_a_time_gives_the_same_psfs(many_bands, monkeypatch, name):
     part = PARTS[name]
     ref = PSFJudge(many_bands).psfs(part, halves=("coded", "uncoded"), kernel=KERNEL)
-    assert len(PSFJudge(many_bands).design.wavelengths) == BANDS
     monkeypatch.setattr(fields, "FIELD_BYTES", 0)  # every grid counts as large
     monkeypatch.setattr(fields, "ROTATE_BYTES", 1)  # one pattern turned at a time
     judge = PSFJudge(many_bands)
     got = judge.psfs(part, halves=("coded", "uncoded"), kernel=KERNEL)
+    assert len(judge.design.wavelengths) == BANDS
     kept = judge._relief_cache[1]
     assert isinstance(kept, fields.PerWavelength)
     assert kept.hist.shape[0] == 16  # the pattern areas are kept, not the wavelengths' transmittances
