@@ -102,11 +102,12 @@ def test_the_fab_page_explains_every_manifest_field():
 def site(tmp_path_factory):
     """The site built as ``bash scripts/docs.sh`` builds it (warnings are errors), into a fresh folder."""
     out = tmp_path_factory.mktemp("site")
+    (out / "tmp").mkdir()  # the tutorials' working folders (tempfile.mkdtemp) stay inside the test's folder
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
                            "-d", str(out / "doctrees"), str(REPO / "docs"), str(out / "html")],
                           capture_output=True, text=True, timeout=1800, cwd=REPO,
-                          env={**os.environ, "DOEFAB_DOCS_REUSE_TUTORIALS": "0"})
+                          env={**os.environ, "DOEFAB_DOCS_REUSE_TUTORIALS": "0", "TMPDIR": str(out / "tmp")})
     assert proc.returncode == 0, (f"the documentation does not build strictly (install the docs extra with "
                                   f"bash scripts/setup.sh):\n{proc.stdout[-4000:]}\n{proc.stderr[-6000:]}")
     return out / "html", time.perf_counter() - t0
@@ -122,6 +123,10 @@ def test_the_site_builds_strictly_with_every_tutorial_run(site):
         assert "Total running time of the script" in page
     for name in ("doefab.Camera", "doefab.split_aperture_psf", "holder_cad.write_holder"):
         assert (html / "api" / "generated" / f"{name}.html").is_file()
+    # each tutorial that writes files wrote them in a fresh temporary folder, none in the repository or beside it
+    written = {p.name.rsplit("-", 1)[0] for p in (html.parent / "tmp").iterdir() if p.is_dir()}
+    made = {m for s in tutorials for m in re.findall(r'mkdtemp\(prefix="([\w-]+)-"\)', s.read_text())}
+    assert len(made) >= 5 and made <= written, (made, written)
 
 
 def test_the_readme_commands_are_the_docs_commands(site):
