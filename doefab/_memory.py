@@ -10,7 +10,7 @@ the tolerance workers. An API user applies it with one call.
 
 from __future__ import annotations
 
-__all__ = ["keep_freed_memory", "MALLOC_ENV"]
+__all__ = ["keep_freed_memory", "available_bytes", "MALLOC_ENV"]
 
 _TRIM_NEVER = 2**31 - 1  # bytes: the largest value mallopt takes (an int)
 # glibc's environment names for the two settings keep_freed_memory makes: no mmap'd blocks, no heap trimming
@@ -43,3 +43,33 @@ def keep_freed_memory() -> bool:
         return False
     _MALLOC_SET = bool(ok)
     return _MALLOC_SET
+
+
+def available_bytes() -> int | None:
+    """The memory this process can still take, in bytes: the kernel's ``MemAvailable`` (``/proc/meminfo``),
+    lowered to what is left under a cgroup v2 limit (``memory.max`` − ``memory.current``) inside a container;
+    None where neither can be read (not Linux).
+
+    Example:
+        >>> from doefab._memory import available_bytes
+        >>> n = available_bytes()
+        >>> n is None or n > 0
+        True
+    """
+    from pathlib import Path
+
+    found = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        cg = Path("/sys/fs/cgroup")
+        limit = (cg / "memory.max").read_text().strip()
+        if limit != "max":
+            found.append(max(0, int(limit) - int((cg / "memory.current").read_text())))
+    except (OSError, ValueError):
+        pass
+    return min(found) if found else None

@@ -17,10 +17,64 @@ import math
 import numpy as np
 import torch
 
-__all__ = ["relief_fields", "PerWavelength", "FIELD_BYTES", "ROTATE_BYTES"]
+__all__ = ["relief_fields", "PerWavelength", "part_bytes", "parts_that_fit", "require_memory", "FIELD_BYTES",
+           "ROTATE_BYTES"]
 
 FIELD_BYTES = 2 * 2**30  # bytes of complex64 transmittance built at once; above it, one wavelength at a time
 ROTATE_BYTES = 256 * 2**20  # bytes of pattern areas the mount rotation turns at once (its FFTs need ~5× that)
+
+
+# a judged part's peak memory per grid cell: a fixed share (the transmittance, the propagation's canvases) and
+# one per pattern area (the die's and the turned window's); and what the process holds besides (torch, networks)
+CELL_BYTES, PATTERN_BYTES, PROCESS_BYTES = 112, 6, 2**29
+
+
+def part_bytes(doe_pixels: int, supersample: int, n_masks: int) -> int:
+    """Bytes one process needs to judge one part of a design of ``doe_pixels`` DOE pixels across and ``n_masks``
+    binary masks on the ``supersample``× grid: (S·N)² cells × (112 + 6 · 2^M) bytes + 0.5 GiB. Measured peaks (2
+    threads, both halves, a turned part): 16 levels, N = 2000, S = 1, 2, 4: 1.08, 3.21, 11.0 GB (this gives 1.37,
+    3.87, 13.9); 2 levels, N = 2188, S = 1, 2: 0.92, 2.15 GB (1.13, 2.91). It errs on the high side.
+
+    Example: ``part_bytes(2188, 2, 4) / 1e9`` → 4.5 (GB).
+    """
+    cells = (int(doe_pixels) * int(supersample)) ** 2
+    return cells * (CELL_BYTES + PATTERN_BYTES * (1 << int(n_masks))) + PROCESS_BYTES
+
+
+def parts_that_fit(doe_pixels: int, supersample: int, n_masks: int, available: int | None = None) -> int | None:
+    """How many parts (``part_bytes`` each) fit at once in ``available`` bytes (None: what this machine has now,
+    ``doefab._memory.available_bytes``); None where that is unknown."""
+    from doefab._memory import available_bytes
+
+    available = available_bytes() if available is None else available
+    return None if available is None else int(available // part_bytes(doe_pixels, supersample, n_masks))
+
+
+def require_memory(doe_pixels: int, grid: int, n_masks: int, bounds: dict | None = None,
+                   available: int | None = None) -> None:
+    """Refuse, before any part is judged, a study whose parts on the ``grid``× grid do not fit in the memory
+    available (``parts_that_fit``: one part per process); the message names the largest grid that fits and, from
+    the grid study, ``bounds`` ({grid: the task metric's error bound there}), what that grid costs in accuracy."""
+    from doefab.errors import DoefabError
+
+    if parts_that_fit(doe_pixels, grid, n_masks, available) != 0:
+        return
+    from doefab._memory import available_bytes
+
+    have = available_bytes() if available is None else available
+    need = part_bytes(doe_pixels, grid, n_masks)
+    fits = [s for s in range(grid - 1, 0, -1) if parts_that_fit(doe_pixels, s, n_masks, have)]
+    where = f"on a machine with {math.ceil(need / 1e9)} GB free or a Dask cluster whose workers have it " \
+            f"(doefab tolerance --scheduler tcp://HOST:PORT)"
+    if not fits:
+        fix = f"run it {where}"
+    else:
+        b = (bounds or {}).get(fits[0], (bounds or {}).get(str(fits[0])))
+        cost = "" if b is None else f"; the grid study bounds the task metric's error there by {b:.2g}"
+        fix = (f"fix the grid with the scene's tolerance.supersample = {fits[0]} (doefab tolerance --grid "
+               f"{fits[0]}){cost}, or run it {where}")
+    raise DoefabError(f"one part of this design ({doe_pixels} DOE pixels across, {1 << n_masks} levels) on the "
+                      f"{grid}× grid needs about {need / 1e9:.1f} GB and {have / 1e9:.1f} GB is available: {fix}")
 
 
 class PerWavelength:

@@ -20,3 +20,19 @@ def depth_design(tmp_path_factory):
     root = tmp_path_factory.mktemp("cond")
     d.save(root / "design")
     return root / "design"
+
+
+@pytest.fixture(scope="session")
+def design_dir(tmp_path_factory):
+    """A 100-pixel streak design of one band whose coded half is a 16-level staircase: a design that judges fast."""
+    root = tmp_path_factory.mktemp("tol")
+    cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
+                        sensor_distance=50e-3, focus_distance=5.0)
+    row = (np.arange(100) % 16).astype(np.uint8)
+    lv = np.tile(row, (100, 1))
+    lv[:, 50:] = 15  # plain half
+    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam, wavelengths=(550e-9,),
+               depths=(5.0,), height=doefab.levels_to_height(lv, cam), levels=lv,
+               metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
+    d.save(root / "design")
+    return root / "design"

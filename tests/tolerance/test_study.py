@@ -13,21 +13,6 @@ from doefab.tolerance import montecarlo, study
 from doefab.tolerance.errors import PartErrors, load_budget
 
 
-@pytest.fixture(scope="module")
-def design_dir(tmp_path_factory):
-    root = tmp_path_factory.mktemp("tol")
-    cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
-                        sensor_distance=50e-3, focus_distance=5.0)
-    row = (np.arange(100) % 16).astype(np.uint8)
-    lv = np.tile(row, (100, 1))
-    lv[:, 50:] = 15  # plain half
-    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam, wavelengths=(550e-9,),
-               depths=(5.0,), height=doefab.levels_to_height(lv, cam), levels=lv,
-               metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
-    d.save(root / "design")
-    return root / "design"
-
-
 def test_a_noisy_calibration_leaves_its_own_error_and_what_it_cannot_hold(design_dir):
     """Uncalibrated crosstalk costs; calibrated, the coded view is what the 2 × 2 algebra of Eq. 29 predicts for
     the estimated ratios (here written with numpy's inverse): the nominal view plus the calibration's error
