@@ -186,7 +186,7 @@ def _fab_rows(cam, n_levels: int) -> list[tuple]:
     return [("substrate index", cam.material.index(lam), "", f"{cam.material.name} at the design wavelength "
              f"{lam * 1e9:.0f} nm"),
             ("etch depth of 2π", step * n_levels * 1e9, "nm", f"λ / (n − 1): {n_levels} levels of {step * 1e9:.1f} nm on "
-             f"{mask_count(n_levels)} binary masks")]
+             f"{mask_count(n_levels)} binary mask{'' if mask_count(n_levels) == 1 else 's'}")]
 
 
 def _task_rows(cam, task, lams) -> list[tuple]:

@@ -64,3 +64,13 @@ def test_a_band_on_the_edge_of_the_published_range_is_inside_and_each_wavelength
     assert fit_range_warning(PMMA, [436.8e-9, 1052e-9]) is None
     note = fit_range_warning(PMMA, [420e-9, 420e-9, 500e-9])
     assert note.count("420 nm") == 1 and "500 nm" not in note
+
+
+@pytest.mark.parametrize("levels, masks", [(2, "1 binary mask"), (8, "3 binary masks")])
+def test_the_mask_count_is_said_in_words_that_agree(tmp_path, levels, masks):
+    text = (REPO / "scenes" / "my_camera.toml").read_text()
+    assert "n_levels = 8" in text
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("n_levels = 8", f"n_levels = {levels}"))
+    meaning = next(r["meaning"] for r in explain(resolve(load_scene(p))) if r["quantity"] == "etch depth of 2π")
+    assert f"{levels} levels of " in meaning and meaning.endswith(f" nm on {masks}")
