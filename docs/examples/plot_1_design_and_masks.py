@@ -100,8 +100,9 @@ print(sorted(p.name for p in (work / "masks").iterdir()))
 manifest = json.loads((work / "masks" / "manifest.json").read_text())
 for layer in sorted(manifest["layers"], key=lambda x: x["process_step"]):
     depth = f"{layer['etch_depth_nm']:8.3f} nm" if "etch_depth_nm" in layer else "  (chrome)  "
-    print(f"step {layer['process_step']}: layer {layer['layer']}  {depth}  aligns to plate "
-          f"{layer['aligns_to_plate']}")
+    to = layer["aligns_to_plate"]
+    print(f"step {layer['process_step']}: layer {layer['layer']}  {depth}  "
+          + ("written first" if to is None else f"aligns to plate {to}"))
 print("layout mirrored in x:", manifest["mirrored_x"])
 
 # %%

@@ -150,8 +150,9 @@ def fab_readme(man: dict) -> str:
     for L in man["layers"]:
         depth = f", etch depth {L['etch_depth_nm']} nm ± {L['etch_depth_tolerance_nm']} nm" if "etch_depth_nm" in L else ""
         lines.append(f"  layer {L['layer']} (plate {L['plate']}, step {L['process_step']}): {L['purpose']}{depth}; "
-                     f"{L['polygons_mean']}; {L['mask_polarity']} for {L['resist_tone']} resist; aligns to plate "
-                     f"{L['aligns_to_plate']}.")
+                     f"{L['polygons_mean']}; {L['mask_polarity']} for {L['resist_tone']} resist; "
+                     + ("the first plate, aligned to no other." if L["aligns_to_plate"] is None else
+                        f"aligns to plate {L['aligns_to_plate']}."))
     lines += [
         "",
         f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "

@@ -94,6 +94,9 @@ def test_eight_level_design_makes_three_layers_that_rebuild_the_map(cam, tmp_pat
     assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
     readme = (tmp_path / "m" / "README.txt").read_text()
     assert "8 levels" in readme and "Level k = 7 − Σ" in readme
+    chrome = next(line for line in readme.splitlines() if "chrome aperture" in line)
+    assert chrome.endswith("the first plate, aligned to no other.") and "None" not in readme  # words, not Python
+    assert "aligns to plate 0." in next(line for line in readme.splitlines() if line.startswith("  layer 1 "))
     assert (tmp_path / "m" / "preview_layer3.png").is_file() and not (tmp_path / "m" / "preview_layer4.png").exists()
 
 
