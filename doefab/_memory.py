@@ -47,8 +47,9 @@ def keep_freed_memory() -> bool:
 
 def available_bytes() -> int | None:
     """The memory this process can still take, in bytes: the kernel's ``MemAvailable`` (``/proc/meminfo``),
-    lowered to what is left under a cgroup v2 limit (``memory.max`` − ``memory.current``) inside a container;
-    None where neither can be read (not Linux).
+    lowered to the room left under each cgroup memory limit above this process (v2: ``memory.max`` −
+    ``memory.current``; v1: ``memory.limit_in_bytes`` − ``memory.usage_in_bytes``; the reclaimable inactive page
+    cache counted as free) inside a container or a batch job; None where nothing can be read (not Linux).
 
     Example:
         >>> from doefab._memory import available_bytes
@@ -65,11 +66,36 @@ def available_bytes() -> int | None:
                 found.append(int(line.split()[1]) * 1024)
     except (OSError, ValueError, IndexError):
         pass
+    found += _cgroup_rooms(Path("/sys/fs/cgroup"))
+    return min(found) if found else None
+
+
+def _cgroup_rooms(root) -> list[int]:
+    """The room under each cgroup v2 memory limit from this process's group up to ``root``, and under a cgroup v1
+    memory limit (bytes)."""
     try:
-        cg = Path("/sys/fs/cgroup")
-        limit = (cg / "memory.max").read_text().strip()
-        if limit != "max":
-            found.append(max(0, int(limit) - int((cg / "memory.current").read_text())))
+        rel = next(line[3:].strip() for line in open("/proc/self/cgroup") if line.startswith("0::"))
+    except (OSError, StopIteration):
+        rel = "/"
+    group, rooms = root / rel.lstrip("/"), []
+    for d in (group, *group.parents):
+        try:
+            limit = (d / "memory.max").read_text().strip()
+            if limit != "max":
+                stat = dict(line.split() for line in (d / "memory.stat").read_text().splitlines())
+                used = int((d / "memory.current").read_text()) - int(stat.get("inactive_file", 0))
+                rooms.append(max(0, int(limit) - used))
+        except (OSError, ValueError):
+            pass
+        if d == root:
+            break
+    try:  # cgroup v1: the memory controller's own group as this process sees it
+        v1 = root / "memory"
+        limit = int((v1 / "memory.limit_in_bytes").read_text())
+        if limit < 2**62:
+            stat = dict(line.split() for line in (v1 / "memory.stat").read_text().splitlines())
+            used = int((v1 / "memory.usage_in_bytes").read_text()) - int(stat.get("total_inactive_file", 0))
+            rooms.append(max(0, limit - used))
     except (OSError, ValueError):
         pass
-    return min(found) if found else None
+    return rooms

@@ -61,7 +61,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
                      8e9, "bytes", fft_bytes <= 8e9, "a coarser design grid (design.sampling) or fewer pixels"))
     if "tolerance" in scene.stages and scene.tolerance is not None:
-        rows += _tolerance_memory(cam, s["n_levels"], scene.tolerance.get("supersample"))
+        rows += _tolerance_memory(cam, s["n_levels"], len(lams), scene.tolerance.get("supersample"))
     if precision_check:
         from doefab.fabrication.levels import levels_to_height
 
@@ -110,23 +110,24 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     return rows
 
 
-def _tolerance_memory(cam, n_levels: int, supersample) -> list[dict]:
-    """The memory one part of the tolerance stage takes on the grid the scene fixes (else the finest the grid study
-    can start from, 1×) against what this machine has available (``tolerance.fields.part_bytes``); none where that
-    is unknown."""
+def _tolerance_memory(cam, n_levels: int, n_bands: int, supersample) -> list[dict]:
+    """The memory one part of the tolerance stage takes on the grid the scene fixes (else the design grid, the
+    coarsest the grid study can pick) against what this machine has available (``tolerance.fields.part_bytes``);
+    none where that is unknown."""
     from doefab._memory import available_bytes
     from doefab.tolerance.fields import part_bytes
+    from doefab.tolerance.grid import GRIDS, REFERENCE
 
     have = available_bytes()
     if have is None:
         return []
     s, m = int(supersample or 1), int(n_levels).bit_length() - 1
-    need = part_bytes(cam.doe_pixels, s, m)
-    finer = "" if supersample else (f"; the grid study may refine it: 2× {part_bytes(cam.doe_pixels, 2, m) / 1e9:.1f}"
-                                    f" GB, 4× {part_bytes(cam.doe_pixels, 4, m) / 1e9:.1f} GB")
-    return [_row(f"tolerance: one judged part's memory on the {s}× grid (this machine's available memory{finer})", need,
-                 have, "bytes", need <= have, "a machine with more memory, or fewer DOE pixels (a larger "
-                 "camera.doe_pitch_um)" + (" or a coarser tolerance.supersample" if s > 1 else ""))]
+    need = part_bytes(cam.doe_pixels, s, m, n_bands)
+    finer = "" if supersample else "; the grid study may pick a finer one: " + ", ".join(
+        f"{g}× {part_bytes(cam.doe_pixels, g, m, n_bands) / 1e9:.1f} GB" for g in (*GRIDS[1:], REFERENCE))
+    return [_row(f"tolerance: one judged part's memory on the {s}× grid, against this machine's available memory"
+                 f"{finer}", need, have, "bytes", need <= have, "a machine with more memory, fewer DOE pixels (a "
+                 "larger camera.doe_pitch_um)" + (", or a coarser tolerance.supersample" if s > 1 else ""))]
 
 
 def explain(res: ResolvedScene) -> list[dict]:

@@ -66,7 +66,7 @@ def per_mask(name: str, value, n_masks: int) -> tuple:
     if not v:
         return (MASK_NOMINAL[name],) * n_masks
     if len(v) != n_masks:
-        raise DoefabError(f"{name} needs one entry per mask: this design has {n_masks} masks "
+        raise DoefabError(f"{name} needs one entry per mask: this design has {n_masks} mask{'s' * (n_masks != 1)} "
                           f"({1 << n_masks} levels), got {len(v)}")
     return v
 

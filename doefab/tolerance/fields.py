@@ -17,64 +17,77 @@ import math
 import numpy as np
 import torch
 
-__all__ = ["relief_fields", "PerWavelength", "part_bytes", "parts_that_fit", "require_memory", "FIELD_BYTES",
-           "ROTATE_BYTES"]
+__all__ = ["relief_fields", "PerWavelength", "part_bytes", "part_size", "parts_that_fit", "require_memory",
+           "FIELD_BYTES", "ROTATE_BYTES"]
 
 FIELD_BYTES = 2 * 2**30  # bytes of complex64 transmittance built at once; above it, one wavelength at a time
 ROTATE_BYTES = 256 * 2**20  # bytes of pattern areas the mount rotation turns at once (its FFTs need ~5× that)
 
 
-# a judged part's peak memory per grid cell: a fixed share (the transmittance, the propagation's canvases) and
-# one per pattern area (the die's and the turned window's); and what the process holds besides (torch, networks)
+# a judged part's peak memory per grid cell: a fixed share (one transmittance, the propagation's canvases), one per
+# pattern area (the die's and the turned window's) and, below FIELD_BYTES, each wavelength's transmittance; and what
+# the process holds besides (torch, networks)
 CELL_BYTES, PATTERN_BYTES, PROCESS_BYTES = 112, 6, 2**29
 
 
-def part_bytes(doe_pixels: int, supersample: int, n_masks: int) -> int:
-    """Bytes one process needs to judge one part of a design of ``doe_pixels`` DOE pixels across and ``n_masks``
-    binary masks on the ``supersample``× grid: (S·N)² cells × (112 + 6 · 2^M) bytes + 0.5 GiB. Measured peaks (2
-    threads, both halves, a turned part): 16 levels, N = 2000, S = 1, 2, 4: 1.08, 3.21, 11.0 GB (this gives 1.37,
-    3.87, 13.9); 2 levels, N = 2188, S = 1, 2: 0.92, 2.15 GB (1.13, 2.91). It errs on the high side.
+def part_bytes(doe_pixels: int, supersample: int, n_masks: int, n_wavelengths: int = 1) -> int:
+    """Bytes one process needs to judge one part of a design of ``doe_pixels`` DOE pixels across, ``n_masks``
+    binary masks and ``n_wavelengths`` bands on the ``supersample``× grid: (S·N)² cells × (112 + 6·2^M + 8·W)
+    bytes + 0.5 GiB, the 8·W only while the W transmittances are built at once (≤ ``FIELD_BYTES``). Measured peaks
+    (2 threads, both halves of a turned part): 16 levels, 3 bands, N = 2000, S = 1, 2, 4: 1.08, 3.21, 11.0 GB (this
+    gives 1.46, 4.25, 15.4); 2 levels, 3 bands, N = 2188, S = 1, 2: 0.92, 2.15 GB (1.25, 3.37); 16 levels, 31 bands,
+    N = 2188, S = 2: 3.6 GB (4.5, one band at a time). It errs on the high side.
 
-    Example: ``part_bytes(2188, 2, 4) / 1e9`` → 4.5 (GB).
+    Example: ``part_bytes(2188, 2, 4, 31) / 1e9`` → 4.5 (GB).
     """
     cells = (int(doe_pixels) * int(supersample)) ** 2
-    return cells * (CELL_BYTES + PATTERN_BYTES * (1 << int(n_masks))) + PROCESS_BYTES
+    bands = 8 * int(n_wavelengths) * cells
+    per = CELL_BYTES + PATTERN_BYTES * (1 << int(n_masks))
+    return cells * per + (bands if bands <= FIELD_BYTES else 0) + PROCESS_BYTES
 
 
-def parts_that_fit(doe_pixels: int, supersample: int, n_masks: int, available: int | None = None) -> int | None:
+def parts_that_fit(size: tuple, supersample: int, available: int | None = None) -> int | None:
     """How many parts (``part_bytes`` each) fit at once in ``available`` bytes (None: what this machine has now,
-    ``doefab._memory.available_bytes``); None where that is unknown."""
+    ``doefab._memory.available_bytes``); None where that is unknown. ``size``: (DOE pixels across, masks, bands)."""
     from doefab._memory import available_bytes
 
     available = available_bytes() if available is None else available
-    return None if available is None else int(available // part_bytes(doe_pixels, supersample, n_masks))
+    return None if available is None else int(available // part_bytes(size[0], supersample, *size[1:]))
 
 
-def require_memory(doe_pixels: int, grid: int, n_masks: int, bounds: dict | None = None,
+def require_memory(size: tuple, grid: int, grids: tuple, bounds: dict | None = None, parts: int = 1,
                    available: int | None = None) -> None:
-    """Refuse, before any part is judged, a study whose parts on the ``grid``× grid do not fit in the memory
-    available (``parts_that_fit``: one part per process); the message names the largest grid that fits and, from
-    the grid study, ``bounds`` ({grid: the task metric's error bound there}), what that grid costs in accuracy."""
+    """Refuse, before any part is judged, a study whose ``parts`` parts at once (one per process) on the ``grid``×
+    grid do not fit in the memory available (``parts_that_fit``; ``size``: (DOE pixels across, masks, bands)); the
+    message names the largest of the grid study's ``grids`` (``grid.GRIDS``) that fits and, from its ``bounds``
+    ({grid: the task metric's error bound there}), what that grid costs in accuracy."""
     from doefab.errors import DoefabError
 
-    if parts_that_fit(doe_pixels, grid, n_masks, available) != 0:
+    fit = parts_that_fit(size, grid, available)
+    if fit is None or fit >= parts:
         return
     from doefab._memory import available_bytes
 
     have = available_bytes() if available is None else available
-    need = part_bytes(doe_pixels, grid, n_masks)
-    fits = [s for s in range(grid - 1, 0, -1) if parts_that_fit(doe_pixels, s, n_masks, have)]
-    where = f"on a machine with {math.ceil(need / 1e9)} GB free or a Dask cluster whose workers have it " \
-            f"(doefab tolerance --scheduler tcp://HOST:PORT)"
+    need = parts * part_bytes(size[0], grid, *size[1:])
+    fits = [s for s in sorted(grids, reverse=True) if s < grid and (parts_that_fit(size, s, have) or 0) >= parts]
+    what = f"{parts} parts at once" if parts > 1 else "one part"
+    where = f"on a machine with {math.ceil(need / 1e9)} GB free" + (", or with fewer workers" if parts > 1 else "")
     if not fits:
         fix = f"run it {where}"
     else:
-        b = (bounds or {}).get(fits[0], (bounds or {}).get(str(fits[0])))
+        b = {int(k): v for k, v in (bounds or {}).items()}.get(fits[0])
         cost = "" if b is None else f"; the grid study bounds the task metric's error there by {b:.2g}"
         fix = (f"fix the grid with the scene's tolerance.supersample = {fits[0]} (doefab tolerance --grid "
                f"{fits[0]}){cost}, or run it {where}")
-    raise DoefabError(f"one part of this design ({doe_pixels} DOE pixels across, {1 << n_masks} levels) on the "
-                      f"{grid}× grid needs about {need / 1e9:.1f} GB and {have / 1e9:.1f} GB is available: {fix}")
+    raise DoefabError(f"{what} of this design ({size[0]} DOE pixels across, {1 << size[1]} levels, {size[2]} bands) "
+                      f"on the {grid}× grid need{'s' if parts == 1 else ''} about {need / 1e9:.1f} GB and "
+                      f"{have / 1e9:.1f} GB is available: {fix}")
+
+
+def part_size(design, n_masks: int) -> tuple:
+    """(DOE pixels across, masks, bands) of ``design``: what ``part_bytes`` takes."""
+    return design.camera.doe_pixels, int(n_masks), len(design.wavelengths)
 
 
 class PerWavelength:

@@ -105,12 +105,13 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     each part through its task's proposed network too (from ``weights_dir``; None: the shipped one).
 
     scheduler: None (in process, or a local process pool of ``workers``; None: ``auto_workers``, no more than fit in
-    the memory available (``fields.parts_that_fit``), in process on a CUDA device), ``"local:N"`` (a Dask ``LocalCluster`` of N workers, one GPU each on a CUDA device) or
-    ``"tcp://HOST:PORT"`` (an existing Dask scheduler). ``device``: where the parts' PSFs and networks run ("auto",
-    "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``).
+    the memory available (``fields.parts_that_fit``), in process on a CUDA device), ``"local:N"`` (a Dask
+    ``LocalCluster`` of N workers, one GPU each on a CUDA device) or ``"tcp://HOST:PORT"`` (an existing Dask
+    scheduler). ``device``: where the parts' PSFs and networks run ("auto", "cpu", "cuda", "cuda:N"; None: the
+    current default, ``doefab._devices.default_device``).
     """
     from doefab._devices import resolve_device, using_device
-    from doefab.tolerance.fields import parts_that_fit
+    from doefab.tolerance.fields import part_size, parts_that_fit
     from doefab.tolerance.study import evaluate_part, judge_for
 
     if device is not None:  # the default device of this call and of the workers it starts
@@ -149,7 +150,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     ddir = str(design_dir)
     wdir = None if weights_dir is None else str(weights_dir)
     if not workers:  # one per core, as many as fit in memory (``fields.parts_that_fit``), in process on a GPU
-        fit = parts_that_fit(judge.design.camera.doe_pixels, supersample, judge.n_masks)
+        fit = parts_that_fit(part_size(judge.design, judge.n_masks), supersample)
         workers = 1 if cuda else max(1, min(auto_workers(len(todo)), fit if fit is not None else len(todo)))
     try:
         if scheduler:

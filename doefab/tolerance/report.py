@@ -74,8 +74,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     grids = ({k: v["grid"] for k, v in res["grid"]["kinds"].items()} if grid == "auto" else
              {k.name: int(grid) for k in KINDS})
     mc_grid = res["grid"]["monte_carlo_grid"]
-    if scheduler is None or str(scheduler).startswith("local:"):  # parts judged on this machine
-        _require_memory(judge, mc_grid, res["grid"])
+    _require_memory(judge, mc_grid, res["grid"], workers, scheduler)
     t = time.perf_counter()
     res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
                                                                             weights_dir, progress, network_top), reused)
@@ -142,16 +141,25 @@ def _grid_record(judge, budget, grid, progress) -> dict:
     return {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
 
 
-def _require_memory(judge, grid: int, record: dict) -> None:
-    """``fields.require_memory`` for the design of ``judge`` on ``grid``, with the grid study's bounds (the largest
-    over its error kinds at each grid) from ``record``."""
-    from doefab.tolerance.fields import require_memory
+def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
+    """``fields.require_memory`` for the design of ``judge`` on ``grid`` (the tornado judges its parts in this
+    process; the Monte Carlo's ``workers`` or ``local:N`` Dask workers judge that many at once here, a ``tcp://``
+    cluster's elsewhere), with the grid study's bounds (the largest over its error kinds at each grid) from
+    ``record``."""
+    from doefab.tolerance.fields import part_size, require_memory
+    from doefab.tolerance.grid import GRIDS
 
     bounds: dict = {}
     for v in record.get("kinds", {}).values():
         for s, b in v.get("bound", {}).items():
             bounds[int(s)] = max(bounds.get(int(s), 0.0), float(b))
-    require_memory(judge.design.camera.doe_pixels, grid, judge.n_masks, bounds)
+    if not scheduler:
+        parts = workers or 1  # auto: no more workers than fit (``montecarlo.monte_carlo``)
+    elif str(scheduler).startswith("local:"):
+        parts = int(str(scheduler).split(":", 1)[1])
+    else:
+        parts = 1  # a tcp:// cluster's workers judge elsewhere
+    require_memory(part_size(judge.design, judge.n_masks), grid, GRIDS, bounds, parts=parts)
 
 
 STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
