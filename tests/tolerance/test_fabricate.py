@@ -65,7 +65,7 @@ def test_depth_scale_on_an_n_level_process_follows_the_grating_formula(cam, n_le
     row = h[32, 16:16 + 32]  # whole periods of N pixels (32 pixels)
     assert first_order_from_samples(row, PITCH, n_levels * PITCH, n) == pytest.approx(eta_formula(n_levels, alpha),
                                                                                     abs=1e-10)
-    with pytest.raises(DoefabError, match=f"this design has {masks} masks"):
+    with pytest.raises(DoefabError, match=f"this design has {masks} mask{'s' if masks != 1 else ''} \\("):
         fabricated_height(lv, cam, LAM, depth_scale=(alpha,) * (masks + 1), n_levels=n_levels)
 
 
