@@ -82,9 +82,7 @@ def _cgroup_rooms(root) -> list[int]:
         try:
             limit = (d / "memory.max").read_text().strip()
             if limit != "max":
-                stat = dict(line.split() for line in (d / "memory.stat").read_text().splitlines())
-                used = int((d / "memory.current").read_text()) - int(stat.get("inactive_file", 0))
-                rooms.append(max(0, int(limit) - used))
+                rooms.append(_room(int(limit), d, "memory.current", "inactive_file"))
         except (OSError, ValueError):
             pass
         if d == root:
@@ -93,9 +91,14 @@ def _cgroup_rooms(root) -> list[int]:
         v1 = root / "memory"
         limit = int((v1 / "memory.limit_in_bytes").read_text())
         if limit < 2**62:
-            stat = dict(line.split() for line in (v1 / "memory.stat").read_text().splitlines())
-            used = int((v1 / "memory.usage_in_bytes").read_text()) - int(stat.get("total_inactive_file", 0))
-            rooms.append(max(0, limit - used))
+            rooms.append(_room(limit, v1, "memory.usage_in_bytes", "total_inactive_file"))
     except (OSError, ValueError):
         pass
     return rooms
+
+
+def _room(limit: int, group, usage: str, inactive: str) -> int:
+    """Bytes left under ``limit`` in a cgroup folder: the limit less its ``usage`` file's count, the reclaimable
+    page cache (``memory.stat``'s ``inactive`` entry) counted as free."""
+    stat = dict(line.split() for line in (group / "memory.stat").read_text().splitlines())
+    return max(0, limit - int((group / usage).read_text()) + int(stat.get(inactive, 0)))

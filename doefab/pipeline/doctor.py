@@ -115,13 +115,14 @@ def _tolerance_memory(cam, n_levels: int, n_bands: int, supersample) -> list[dic
     coarsest the grid study can pick) against what this machine has available (``tolerance.fields.part_bytes``);
     none where that is unknown."""
     from doefab._memory import available_bytes
+    from doefab.fabrication.process import mask_count
     from doefab.tolerance.fields import part_bytes
     from doefab.tolerance.grid import GRIDS, REFERENCE
 
     have = available_bytes()
     if have is None:
         return []
-    s, m = int(supersample or 1), int(n_levels).bit_length() - 1
+    s, m = int(supersample or 1), mask_count(n_levels)
     need = part_bytes(cam.doe_pixels, s, m, n_bands)
     finer = "" if supersample else "; the grid study may pick a finer one: " + ", ".join(
         f"{g}× {part_bytes(cam.doe_pixels, g, m, n_bands) / 1e9:.1f} GB" for g in (*GRIDS[1:], REFERENCE))

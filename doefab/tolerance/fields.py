@@ -61,16 +61,14 @@ def require_memory(size: tuple, grid: int, grids: tuple, bounds: dict | None = N
     grid do not fit in the memory available (``parts_that_fit``; ``size``: (DOE pixels across, masks, bands)); the
     message names the largest of the grid study's ``grids`` (``grid.GRIDS``) that fits and, from its ``bounds``
     ({grid: the task metric's error bound there}), what that grid costs in accuracy."""
+    from doefab._memory import available_bytes
     from doefab.errors import DoefabError
 
-    fit = parts_that_fit(size, grid, available)
-    if fit is None or fit >= parts:
+    have = available_bytes() if available is None else available  # read once: the message states what was judged
+    if have is None or parts_that_fit(size, grid, have) >= parts:
         return
-    from doefab._memory import available_bytes
-
-    have = available_bytes() if available is None else available
     need = parts * part_bytes(size[0], grid, *size[1:])
-    fits = [s for s in sorted(grids, reverse=True) if s < grid and (parts_that_fit(size, s, have) or 0) >= parts]
+    fits = [s for s in sorted(grids, reverse=True) if s < grid and parts_that_fit(size, s, have) >= parts]
     what = f"{parts} parts at once" if parts > 1 else "one part"
     where = f"on a machine with {math.ceil(need / 1e9)} GB free" + (", or with fewer workers" if parts > 1 else "")
     if not fits:

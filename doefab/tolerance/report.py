@@ -148,17 +148,14 @@ def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
     ``record``."""
     from doefab.tolerance.fields import part_size, require_memory
     from doefab.tolerance.grid import GRIDS
+    from doefab.tolerance.montecarlo import parse_scheduler
 
     bounds: dict = {}
     for v in record.get("kinds", {}).values():
         for s, b in v.get("bound", {}).items():
             bounds[int(s)] = max(bounds.get(int(s), 0.0), float(b))
-    if not scheduler:
-        parts = workers or 1  # auto: no more workers than fit (``montecarlo.monte_carlo``)
-    elif str(scheduler).startswith("local:"):
-        parts = int(str(scheduler).split(":", 1)[1])
-    else:
-        parts = 1  # a tcp:// cluster's workers judge elsewhere
+    # auto workers: no more than fit (``montecarlo.monte_carlo``); a tcp:// cluster's workers judge elsewhere
+    parts = (workers or 1) if not scheduler else (parse_scheduler(scheduler) or 1)
     require_memory(part_size(judge.design, judge.n_masks), grid, GRIDS, bounds, parts=parts)
 
 
