@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 from doefab.cli._args import add_device_arg, number
+from doefab.tolerance.schedulers import MAX_WORKERS
 
 
 def register(sub) -> None:
@@ -46,11 +47,11 @@ def register(sub) -> None:
                         "Monte Carlo on it, and its yield minus the direct judgement's on parts it never saw (the "
                         "direct Monte Carlo's when there are at least 16), with a 95 %% interval")
     p.add_argument("--workers", type=_workers, default=None,
-                   help="local worker processes, 1–64, or auto (default: one per core when there are at least 4 "
-                        "parts per core, else in process)")
+                   help=f"local worker processes, 1–{MAX_WORKERS}, or auto (default: one per core when there are "
+                        "at least 4 parts per core, else in process)")
     p.add_argument("--scheduler", type=scheduler_arg, default=None,
-                   help="Dask: local:N (a LocalCluster of N = 1..64 workers; one GPU each on a CUDA --device) or "
-                        "tcp://HOST:PORT")
+                   help=f"Dask: local:N (a LocalCluster of N = 1..{MAX_WORKERS} workers; one GPU each on a CUDA "
+                        "--device) or tcp://HOST:PORT")
     add_device_arg(p)
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
@@ -67,37 +68,20 @@ def _grid(text: str):
 def _workers(text: str):
     if text == "auto":
         return None
-    return number(int, 1, 64, unit="processes", hint=" (or auto)")(text)
+    return number(int, 1, MAX_WORKERS, unit="processes", hint=" (or auto)")(text)
 
 
 def scheduler_arg(text: str) -> str:
-    """``local:N`` (N = 1..64 workers) or ``tcp://HOST:PORT`` (PORT 1..65535), checked when the flag is parsed."""
-    kind, _, rest = text.partition(":")
-    if kind == "local" and rest.isdigit() and 1 <= int(rest) <= 64:
-        return text
-    if kind == "local":
-        raise argparse.ArgumentTypeError(f"local:N takes a worker count N = 1..64, got {text!r} (e.g. local:2)")
-    host, _, port = rest.removeprefix("//").rpartition(":")
-    if kind == "tcp" and rest.startswith("//") and host and port.isdigit() and 1 <= int(port) <= 65535:
-        return text
-    raise argparse.ArgumentTypeError(f"expects local:N or tcp://HOST:PORT, got {text!r} (e.g. local:2 or "
-                                     f"tcp://127.0.0.1:8786)")
-
-
-def check_scheduler_reachable(text: str | None, timeout_s: float = 5.0) -> None:
-    """A ``tcp://HOST:PORT`` scheduler must accept a connection before any work (not after the grid study)."""
-    import socket
-
+    """``local:N`` or ``tcp://HOST:PORT`` (``tolerance.schedulers.parse_scheduler``), checked when the flag is
+    parsed."""
     from doefab.errors import DoefabError
+    from doefab.tolerance.schedulers import parse_scheduler
 
-    if not text or not text.startswith("tcp://"):
-        return
-    host, _, port = text.removeprefix("tcp://").rpartition(":")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
-    except OSError as exc:
-        raise DoefabError(f"--scheduler {text}: no Dask scheduler answers there ({exc.strerror or exc}): start one "
-                          f"(dask scheduler --port {port}, then dask worker {text}) or use local:N") from None
+        parse_scheduler(text)
+    except DoefabError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def _check_network(design_task: str, ddir, weights_dir) -> None:
@@ -122,6 +106,7 @@ def run(args) -> int:
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import STEPS, run_study
+    from doefab.tolerance.schedulers import check_reachable
 
     ddir, design = design_folder(args.design)  # validated before any output exists
     if args.weights_dir is not None and not args.networks:
@@ -134,7 +119,9 @@ def run(args) -> int:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
-    check_scheduler_reachable(args.scheduler)
+    if args.workers is not None and args.scheduler:
+        raise DoefabError("--workers and --scheduler both say where the parts run: give one")
+    check_reachable(args.scheduler, "--scheduler")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in ("samples.jsonl", STEPS)))
     args.resume_hint = f"finished samples are kept in {out.path}: rerun the same command with --resume"

@@ -61,7 +61,8 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
                      8e9, "bytes", fft_bytes <= 8e9, "a coarser design grid (design.sampling) or fewer pixels"))
     if "tolerance" in scene.stages and scene.tolerance is not None:
-        rows += _tolerance_memory(cam, s["n_levels"], len(lams), scene.tolerance.get("supersample"))
+        rows += _tolerance_memory(cam, s["n_levels"], len(lams), scene.tolerance)
+        rows += _scheduler_rows(scene.tolerance.get("scheduler"))
     if precision_check:
         from doefab.fabrication.levels import levels_to_height
 
@@ -110,25 +111,45 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     return rows
 
 
-def _tolerance_memory(cam, n_levels: int, n_bands: int, supersample) -> list[dict]:
-    """The memory one part of the tolerance stage takes on the grid the scene fixes (else the design grid, the
-    coarsest the grid study can pick) against what this machine has available (``tolerance.fields.part_bytes``);
-    none where that is unknown."""
+def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:
+    """The memory the parts the tolerance stage judges at once take (one; ``tolerance.workers`` or a ``local:N``
+    scheduler's N) on the grid the scene fixes (else the design grid, the coarsest the grid study can pick) against
+    what this machine has available (``tolerance.fields.part_bytes``); none where that is unknown."""
     from doefab._memory import available_bytes
     from doefab.fabrication.process import mask_count
     from doefab.tolerance.fields import part_bytes
     from doefab.tolerance.grid import GRIDS, REFERENCE
+    from doefab.tolerance.schedulers import parse_scheduler
 
     have = available_bytes()
     if have is None:
         return []
+    supersample = tol.get("supersample")
+    parts = tol.get("workers") or (parse_scheduler(tol["scheduler"]) if tol.get("scheduler") else None) or 1
     s, m = int(supersample or 1), mask_count(n_levels)
-    need = part_bytes(cam.doe_pixels, s, m, n_bands)
+    need = parts * part_bytes(cam.doe_pixels, s, m, n_bands)
     finer = "" if supersample else "; the grid study may pick a finer one: " + ", ".join(
-        f"{g}× {part_bytes(cam.doe_pixels, g, m, n_bands) / 1e9:.1f} GB" for g in (*GRIDS[1:], REFERENCE))
-    return [_row(f"tolerance: one judged part's memory on the {s}× grid, against this machine's available memory"
-                 f"{finer}", need, have, "bytes", need <= have, "a machine with more memory, fewer DOE pixels (a "
-                 "larger camera.doe_pitch_um)" + (", or a coarser tolerance.supersample" if s > 1 else ""))]
+        f"{g}× {parts * part_bytes(cam.doe_pixels, g, m, n_bands) / 1e9:.1f} GB" for g in (*GRIDS[1:], REFERENCE))
+    what = f"{parts} judged parts' memory (one per worker)" if parts > 1 else "one judged part's memory"
+    return [_row(f"tolerance: {what} on the {s}× grid, against this machine's available memory{finer}", need, have,
+                 "bytes", need <= have, "a machine with more memory, fewer DOE pixels (a larger camera.doe_pitch_um)"
+                 + (", or a coarser tolerance.supersample" if s > 1 else "")
+                 + (", or fewer tolerance workers" if parts > 1 else ""))]
+
+
+def _scheduler_rows(scheduler: str | None) -> list[dict]:
+    """Whether the scene's ``tcp://`` Dask scheduler answers, as ``doefab run`` requires before any stage."""
+    from doefab.errors import DoefabError
+    from doefab.tolerance.schedulers import check_reachable, parse_scheduler
+
+    if not scheduler or parse_scheduler(scheduler) is not None:
+        return []
+    try:
+        check_reachable(scheduler, "tolerance.scheduler")
+    except DoefabError as exc:
+        return [_row(f"tolerance: the Dask scheduler {scheduler} answers", 0.0, 1.0, "", False, str(exc),
+                     at_least=True)]
+    return [_row(f"tolerance: the Dask scheduler {scheduler} answers", 1.0, 1.0, "", True, at_least=True)]
 
 
 def explain(res: ResolvedScene) -> list[dict]:

@@ -16,6 +16,7 @@ from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import STAGES, Scene
 from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, run_stage
 from doefab.pipeline.stages import resolve
+from doefab.tolerance.schedulers import check_reachable
 
 __all__ = ["run_scene", "prepare_scene", "foreign_stage_folders"]
 
@@ -33,6 +34,8 @@ def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> ResolvedS
     if bad:
         raise DoefabError(f"--force {', '.join(bad)}: not a stage; stages are {', '.join(STAGES)}")
     res = resolve(scene)  # validates the camera and the design settings before any work
+    if "tolerance" in scene.stages and scene.tolerance is not None:  # a Dask scheduler answers before any stage
+        check_reachable(scene.tolerance.get("scheduler"), "tolerance.scheduler")
     foreign = foreign_stage_folders(scene, out)
     if foreign:
         raise DoefabError(f"{', '.join(map(str, foreign))}: a stage folder without doefab's ownership marker "

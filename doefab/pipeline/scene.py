@@ -91,6 +91,11 @@ def _value_problem(where: str, v, key) -> str | None:
         return None if v in key.choices else f"{where} {v!r} is not one of {', '.join(map(str, key.choices))}"
     if not _typed(v, key.kind):
         return f"{where} must be {'a number' if key.kind == 'float' else key.kind}, got {v!r}"
+    if key.resolve is not None:
+        try:
+            key.resolve(v)
+        except DoefabError as exc:
+            return f"{where}: {exc}"
     if key.kind in ("float", "int") and key.lo is not None:
         if not math.isfinite(v) or not key.lo <= v <= key.hi:
             return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{_hint(v, key)}".rstrip()
@@ -212,6 +217,8 @@ def load_scene(path: str | Path) -> Scene:
     tol = raw.get("tolerance")
     if isinstance(tol, dict):
         problems += _budget_problems(p, tol.get("budget", "default"))
+        if "workers" in tol and "scheduler" in tol:
+            problems.append("tolerance.workers and tolerance.scheduler both say where the parts run: keep one")
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,

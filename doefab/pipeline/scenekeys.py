@@ -17,8 +17,9 @@ from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.camera import PRESETS
 from doefab.optics.materials import SUBSTRATES, substrate_name
+from doefab.tolerance.schedulers import MAX_WORKERS, parse_scheduler
 
-__all__ = ["Key", "KEYS", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
+__all__ = ["Key", "KEYS", "HOW_NOT_WHAT", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
            "toml_value"]
 
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
@@ -30,8 +31,8 @@ class Key:
     unit (as in its name: mm, µm, nm, m, px), allowed range [lo, hi] in that unit, choices, default and meaning.
 
     A list key's ``item`` is the kind of each of its items ("float": within [lo, hi], or one of the words in
-    ``choices``; "choice": one of ``choices``); each item may appear once. A choice key with a ``resolve``
-    takes whatever that resolver accepts (it returns the choice meant, or raises a DoefabError)."""
+    ``choices``; "choice": one of ``choices``); each item may appear once. A choice or str key with a
+    ``resolve`` takes whatever that resolver accepts (it returns the choice meant, or raises a DoefabError)."""
 
     section: str  # "" for top-level keys
     name: str
@@ -44,6 +45,11 @@ class Key:
     help: str = ""
     item: str = ""
     resolve: Callable | None = None
+
+
+def _scheduler(value) -> None:
+    """A scene's ``tolerance.scheduler``, checked as ``--scheduler`` is (``tolerance.schedulers``)."""
+    parse_scheduler(value)
 
 
 KEYS = (
@@ -136,7 +142,19 @@ KEYS = (
     Key("tolerance", "samples", "int", "parts", 0, 100000, default="20", help="Monte Carlo parts"),
     Key("tolerance", "supersample", "int", "", 1, 8, default="the grid study's choice",
         help="fix the simulation grid (cells per DOE pixel)"),
+    Key("tolerance", "workers", "int", "processes", 1, MAX_WORKERS, default="auto",
+        help="local worker processes judging the Monte Carlo's parts (auto: one per core when there are at least 4 "
+             "parts per core, no more than fit in memory); how the parts run, not what they give: a change reruns "
+             "nothing"),
+    Key("tolerance", "scheduler", "str", default="none", resolve=_scheduler,
+        help="a Dask scheduler judging the Monte Carlo's parts instead of local workers: local:N (a LocalCluster of "
+             "N workers started for the run) or tcp://HOST:PORT (a running scheduler, which must answer when the "
+             "run starts); a change reruns nothing"),
 )
+
+
+# keys of a section that say how a stage runs, not what it computes: a change to them reruns nothing
+HOW_NOT_WHAT = {"tolerance": ("workers", "scheduler")}
 
 
 # keys a scene file may still hold under an earlier name: (section, old name) -> the name to write instead

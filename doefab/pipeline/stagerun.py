@@ -14,6 +14,7 @@ from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.resolved import ResolvedScene
+from doefab.pipeline.scenekeys import HOW_NOT_WHAT
 from doefab.pipeline.stages import (_scene_budget, stage_design, stage_holder, stage_masks, stage_reconstruction,
                                     stage_tolerance)
 from doefab.pipeline.system import resolve, scene_holder, scene_sensor
@@ -71,7 +72,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
     if name == "design":
         parts = {"design": res.design_key()}
     else:
-        parts = {s: scene.raw.get(s) for s in SECTION[name]}
+        parts = {s: _what(s, scene.raw.get(s)) for s in SECTION[name]}
     if name == "masks":  # the die the masks are laid out on follows the holder's keys too
         parts["die_m"] = res.die_m
     parts["task"] = scene.task
@@ -89,6 +90,12 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
             parts.update(scene_sensor(scene).entry(has(scene.task, "spectral")))
     return _h(parts)
+
+
+def _what(section: str, values):
+    """A scene section's keys less those that say how a stage runs, not what it computes (``HOW_NOT_WHAT``)."""
+    how = HOW_NOT_WHAT.get(section, ())
+    return {k: v for k, v in values.items() if k not in how} if isinstance(values, dict) and how else values
 
 
 def budget_digest(scene) -> str | None:

@@ -299,7 +299,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
                   grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
                   budget_path=path, networks=judge if networks else False,
                   weights_dir=None if shipped_fits else weights,
-                  network_top=2 if quick else 5)
+                  network_top=2 if quick else 5, workers=tol.get("workers"), scheduler=tol.get("scheduler"))
     return {"status": "ran", "why": f"{samples} Monte Carlo parts " + ("through the network" if networks else
                                                                       "at PSF level (no network for this system)")
             + ("" if quick else " and the quantization study")

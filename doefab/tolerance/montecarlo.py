@@ -27,6 +27,7 @@ import numpy as np
 from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
 from doefab.tolerance.errors import budget_values, sample_errors
+from doefab.tolerance.schedulers import parse_scheduler
 
 __all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
@@ -209,25 +210,10 @@ def _worker_init():
     torch.set_num_threads(1)
 
 
-def parse_scheduler(scheduler: str) -> int | None:
-    """Worker count of ``local:N`` (N ≥ 1), None for ``tcp://HOST:PORT``; anything else is refused."""
-    if scheduler.startswith("local:"):
-        try:
-            nw = int(scheduler.split(":", 1)[1])
-        except ValueError:
-            nw = 0
-        if nw < 1:
-            raise DoefabError(f"--scheduler local:N needs a worker count N ≥ 1, got {scheduler!r}")
-        return nw
-    if scheduler.startswith("tcp://") and len(scheduler) > len("tcp://"):
-        return None
-    raise DoefabError(f"--scheduler must be local:N or tcp://HOST:PORT, got {scheduler!r}")
-
-
 def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, weights_dir=None):
     from doefab.tolerance.study import evaluate_part
 
-    nw = parse_scheduler(scheduler)
+    nw = parse_scheduler(scheduler, "--scheduler")
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:

@@ -34,11 +34,13 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
               network_top: int | None = None) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
-    Monte Carlo (None: one per core when there are enough parts). ``networks``: False, True (the network judge's
-    default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
+    Monte Carlo (None: one per core when there are enough parts); ``scheduler``: a Dask scheduler instead
+    (``schedulers.parse_scheduler``; a ``tcp://`` one must answer before any work). ``networks``: False, True (the
+    network judge's default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
     from doefab._memory import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
 
+    _check_runners(workers, scheduler)
     keep_freed_memory()
     from doefab.applications import of_design
     from doefab.tolerance.spec import limits_text, nominal_failures
@@ -141,6 +143,21 @@ def _grid_record(judge, budget, grid, progress) -> dict:
     return {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
 
 
+def _check_runners(workers, scheduler) -> None:
+    """Where the Monte Carlo's parts run, as the API was told: ``workers`` (1..``MAX_WORKERS``) or a ``scheduler``
+    that parses and, for ``tcp://``, answers; not both."""
+    from doefab.errors import DoefabError
+    from doefab.tolerance.schedulers import MAX_WORKERS, check_reachable
+
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or not 1 <= workers <= MAX_WORKERS):
+        raise DoefabError(f"workers = {workers!r}: give a whole number of processes, 1..{MAX_WORKERS}, or None (one "
+                          f"per core when there are enough parts)")
+    if workers is not None and scheduler is not None:
+        raise DoefabError(f"workers = {workers} and scheduler = {scheduler!r} both say where the parts run: give one")
+    check_reachable(scheduler, "scheduler")
+
+
 def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
     """``fields.require_memory`` for the design of ``judge`` on ``grid`` (the tornado judges its parts in this
     process; the Monte Carlo's ``workers`` or ``local:N`` Dask workers judge that many at once here, a ``tcp://``
@@ -148,7 +165,7 @@ def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
     ``record``."""
     from doefab.tolerance.fields import part_size, require_memory
     from doefab.tolerance.grid import GRIDS
-    from doefab.tolerance.montecarlo import parse_scheduler
+    from doefab.tolerance.schedulers import parse_scheduler
 
     bounds: dict = {}
     for v in record.get("kinds", {}).values():

@@ -3,6 +3,7 @@ measured in a process of its own; a study whose parts do not fit is refused befo
 grid that fits; the Monte Carlo starts no more worker processes than fit; doctor shows the row."""
 
 import json
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -96,10 +97,11 @@ def test_a_study_is_refused_before_any_part_when_memory_is_short(design_dir, tmp
     monkeypatch.setattr(doefab._memory, "available_bytes", lambda: fields.part_bytes(100, 1, 4) + 1)
     with pytest.raises(DoefabError, match="supersample = 1"):
         run_study(design_dir, load_budget(None), tmp_path / "s", samples=2, grid=2, progress=False)
-    # a tcp:// cluster judges the Monte Carlo elsewhere, but the tornado here: refused all the same
-    with pytest.raises(DoefabError, match="supersample = 1"):
+    # a tcp:// cluster judges the Monte Carlo elsewhere, but the tornado here: refused all the same (a listening
+    # socket stands for the scheduler, which must answer before any work)
+    with socket.create_server(("127.0.0.1", 0)) as server, pytest.raises(DoefabError, match="supersample = 1"):
         run_study(design_dir, load_budget(None), tmp_path / "t", samples=2, grid=2, progress=False,
-                  scheduler="tcp://127.0.0.1:1")
+                  scheduler=f"tcp://127.0.0.1:{server.getsockname()[1]}")
     with pytest.raises(DoefabError, match="2 parts at once"):  # two local Dask workers on the design grid
         run_study(design_dir, load_budget(None), tmp_path / "u", samples=2, grid=1, progress=False, scheduler="local:2")
     assert not (tmp_path / "s" / "samples.jsonl").exists()  # refused before the Monte Carlo
@@ -142,7 +144,7 @@ def test_doctor_shows_a_parts_memory_and_fails_where_it_does_not_fit(tmp_path, m
 
     def row(path):
         scene = load_scene(path)
-        return scene, next(r for r in diagnose(scene, precision_check=False) if "judged part's memory" in r["check"])
+        return scene, next(r for r in diagnose(scene, precision_check=False) if "judged part" in r["check"])
     monkeypatch.setattr(doefab._memory, "available_bytes", lambda: 10**12)
     scene, fixed = row(REPO / "scenes" / "hdr.toml")
     n = resolve(scene).camera.doe_pixels
@@ -152,6 +154,13 @@ def test_doctor_shows_a_parts_memory_and_fails_where_it_does_not_fit(tmp_path, m
     assert auto["ok"] and auto["value"] == fields.part_bytes(n, 1, 4, bands)
     for g in (4, 8):  # what a finer grid would take
         assert f"{g}× {fields.part_bytes(n, g, 4, bands) / 1e9:.1f} GB" in auto["check"]
+    pool = tmp_path / "pool.toml"  # three local workers judge three parts at once
+    pool.write_text(text.replace("supersample = 1", "supersample = 1\nworkers = 3"))
+    _, three = row(pool)
+    assert three["value"] == 3 * fields.part_bytes(n, 1, 4, bands) and "3 judged parts" in three["check"]
+    monkeypatch.setattr(doefab._memory, "available_bytes", lambda: 2 * fields.part_bytes(n, 1, 4, bands))
+    assert row(REPO / "scenes" / "hdr.toml")[1]["ok"] and not row(pool)[1]["ok"]
+    assert "fewer tolerance workers" in row(pool)[1]["fix"]
     monkeypatch.setattr(doefab._memory, "available_bytes", lambda: 10**6)
     _, bad = row(REPO / "scenes" / "hdr.toml")
     assert not bad["ok"] and "more memory" in bad["fix"]
