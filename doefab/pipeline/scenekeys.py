@@ -19,8 +19,8 @@ from doefab.optics.camera import PRESETS
 from doefab.optics.materials import SUBSTRATES, substrate_name
 from doefab.tolerance.schedulers import MAX_WORKERS, parse_scheduler
 
-__all__ = ["Key", "KEYS", "HOW_NOT_WHAT", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template", "key_table_markdown",
-           "toml_value"]
+__all__ = ["Key", "KEYS", "HOW_NOT_WHAT", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template",
+           "key_table_markdown", "toml_value"]
 
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
 
