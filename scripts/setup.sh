@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create .venv at the repository root and install doefab with everything its commands and tests use.
-# PyTorch: the CPU build 2.13.0 is pinned first (it installs from local disk on the project machines), so
-# no multi-gigabyte CUDA build is ever pulled; pyproject.toml itself keeps a range (torch>=2.2).
+# PyTorch: the CPU build 2.13.0+cpu is pinned first (from local disk on the project machines, else from PyTorch's
+# CPU index), so no multi-gigabyte CUDA build is ever pulled; pyproject.toml itself keeps a range (torch>=2.2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Debian's chromium checks the HTML report in a real browser (tests/pipeline); installed when missing and
@@ -20,6 +20,15 @@ if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
     exit 0
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet "torch==2.13.0"
+# the CPU build by its local version (PyPI's Linux wheel of 2.13.0 is a CUDA build of several GB): from a wheel
+# on local disk where pip is pointed at one (the project machines), else from PyTorch's CPU index; a torch
+# already in .venv (a GPU user's CUDA build) is left as it is
+if ! .venv/bin/python -c "import torch" 2> /dev/null; then
+    if ! .venv/bin/python -m pip install --quiet "torch==2.13.0+cpu" 2> /dev/null; then
+        .venv/bin/python -m pip install --quiet "torch==2.13.0+cpu" --index-url https://download.pytorch.org/whl/cpu \
+            --extra-index-url https://pypi.org/simple
+    fi
+    .venv/bin/python -c "import torch; assert not torch.version.cuda, f'torch {torch.__version__}: not a CPU build'"
+fi
 .venv/bin/python -m pip install --quiet -e ".[test,klayout,cad,cluster,docs]"
 echo "$want" > "$stamp"
