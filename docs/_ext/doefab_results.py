@@ -238,12 +238,40 @@ def render(m: Measurement, problems: list[str]) -> str:
     return "\n".join(lines)
 
 
+HEADING = re.compile(r"^#+ (.+?)\s*$", re.M)
+INCLUDE = re.compile(r"_generated/results/([\w.-]+)\.md")
+
+
+def drop_repeated_headings(texts: dict[str, str]) -> dict[str, str]:
+    """Each generated file without its title (its first heading) where its page already shows that title: as a
+    heading of its own (the section the file is included under) or as the title of a file it includes before (the
+    variants of one measurement share a title). Headings inside a file stay: under different titles the same
+    sub-heading names a section of each."""
+    out = dict(texts)
+    for page in sorted((ROOT / "docs" / "results").glob("*.md")):
+        src = page.read_text()
+        seen = {h.strip() for h in HEADING.findall(src)}
+        for name in INCLUDE.findall(src):
+            if name not in out:
+                continue
+            lines = out[name].split("\n")
+            first = next((i for i, line in enumerate(lines) if HEADING.match(line)), None)
+            if first is None:
+                continue
+            title = HEADING.match(lines[first]).group(1).strip()
+            if title in seen:
+                out[name] = "\n".join(lines[:first] + lines[first + 1:])
+            seen.add(title)
+    return out
+
+
 def write_pages() -> list[str]:
     """Write every measurement's Markdown; returns the problems found."""
     problems: list[str] = []
     OUT.mkdir(parents=True, exist_ok=True)
+    texts = drop_repeated_headings({m.name: render(m, problems) for m in MEASUREMENTS})
     for m in MEASUREMENTS:
-        text = render(m, problems)
+        text = texts[m.name]
         path = OUT / f"{m.name}.md"
         if not path.is_file() or path.read_text() != text:
             path.write_text(text)

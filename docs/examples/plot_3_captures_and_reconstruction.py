@@ -48,8 +48,10 @@ print(f"light in the window: coded {float(pair.coded.sum()) / 3:.3f}, uncoded {f
 # Simulate the two captures
 # -------------------------
 # ``simulate_captures`` blurs each colour channel with its PSF, adds the default Poisson–Gaussian noise and
-# clips to [0, 1]. The coded capture spreads each highlight into a streak that stays below clipping; the
-# plain capture clips it.
+# clips to [0, 1]. The coded capture spreads each highlight into a long streak: near a bright highlight the
+# streak clips too (and, spread over more pixels, it clips more of this frame than the plain capture does), but
+# its far parts stay below clipping and still measure the highlight's radiance, which the plain capture's clipped
+# pixels have lost.
 coded, uncoded = doefab.simulate_captures(scene, pair, seed=0)
 print("captures", coded.shape, coded.dtype, f"in [{coded.min():.2f}, {coded.max():.2f}]")
 print(f"clipped pixels: coded {(coded >= 0.999).any(axis=0).mean() * 100:.2f} %, "

@@ -13,7 +13,7 @@ narrow-band filters, dark frames) and white-wall pairs as 16-bit TIFFs, then
 4. ``doefab reconstruct``: the part's captures of a scene into an OpenEXR file,
 
 and compares the diagnosis with the truth. The part here is a streak design on a smaller camera than the other
-tutorials' (a 64 × 64 DOE grid, four levels), so that the fit takes a minute; for the committed streak design the
+tutorials' (a 64 × 64 DOE grid, four levels), so that the fit takes seconds; for the committed streak design the
 commands are the same (``doefab calibrate lab/recordings.toml --design masks/streak --out out/cal`` and so on;
 see :doc:`/guide/after-the-fab` for what to record and how).
 """

@@ -81,7 +81,19 @@ def build_parser() -> argparse.ArgumentParser:
     for name, subparser in sub.choices.items():
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                help="show the Python traceback of an error")
+        # the descriptions are the modules' docstrings, written for the API pages: a terminal shows ``x`` as x
+        subparser.description = _plain(subparser.description)
+        subparser.epilog = _plain(subparser.epilog)
     return parser
+
+
+def _plain(text: str | None) -> str | None:
+    """reStructuredText's inline literals (``x``) and roles (:doc:`x`, :func:`x`) as plain text."""
+    import re
+
+    if text is None:
+        return None
+    return re.sub(r"(?::[a-z]+:)?`{1,2}([^`]+?)`{1,2}", r"\1", text)
 
 
 def _one_line(text: str) -> str:

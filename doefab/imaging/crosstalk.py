@@ -39,7 +39,7 @@ MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20�
 
 
 def mix_crosstalk(left, right, alpha_lr, alpha_rl):
-    """Seed Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch)."""
+    """The paper's Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch)."""
     check_pair(alpha_lr, alpha_rl)
     a, b = _ratio("alpha_lr", alpha_lr, left), _ratio("alpha_rl", alpha_rl, left)
     return (1 - a) * left + b * right, a * left + (1 - b) * right

@@ -90,7 +90,7 @@ class DepthNet(nn.Module):
 
 
 def depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: float = 1.0) -> torch.Tensor:
-    """Seed Eq. 28: L1 on depth plus L1 on its horizontal and vertical gradients."""
+    """The paper's Eq. 28: L1 on depth plus L1 on its horizontal and vertical gradients."""
     l1 = (pred - target).abs().mean()
     gx = ((pred[..., :, 1:] - pred[..., :, :-1]) - (target[..., :, 1:] - target[..., :, :-1])).abs().mean()
     gy = ((pred[..., 1:, :] - pred[..., :-1, :]) - (target[..., 1:, :] - target[..., :-1, :])).abs().mean()

@@ -349,3 +349,23 @@ def test_the_citing_page_and_citation_cff_cite_the_same_paper_and_version():
     ascii_family = {"Côté": "C{\\^o}t{\\'e}"}
     assert names == [f"{ascii_family.get(a['family-names'], a['family-names'])}, {a['given-names']}"
                      for a in paper["authors"]]
+
+
+def test_a_results_title_is_shown_once_per_page(tmp_path, monkeypatch):
+    """A results file's title that repeats its page's section heading, or the title of a variant included before
+    it, is left out of the generated file; the headings inside a file stay."""
+    import doefab_results
+
+    monkeypatch.setattr(doefab_results, "OUT", tmp_path / "generated")
+    assert doefab_results.write_pages() == []
+    gen = {p.stem: p.read_text() for p in (tmp_path / "generated").glob("*.md")}
+    coverage = "Diagnosis coverage on parts of known errors"
+    variants = [n for n in gen if n.startswith("diagnose_coverage")]
+    assert len(variants) >= 3 and sum(f"### {coverage}" in gen[n] for n in variants) <= 1
+    title = "Where a network-judged part's time goes"
+    assert f"## {title}" in (REPO / "docs" / "results" / "tolerance.md").read_text().replace("### ", "## ")
+    assert title not in gen["judge_profile"]
+    for design in ("streak", "grating"):  # each tolerance report keeps its own sections
+        assert "#### Monte Carlo" in gen[f"tolerance_{design}"] and "#### Simulation grid" in gen[f"tolerance_{design}"]
+    made = doefab_results.drop_repeated_headings({"a": "### Shared\n\ntext"})
+    assert made == {"a": "### Shared\n\ntext"}  # a file no page includes keeps its title

@@ -1,6 +1,6 @@
 """The authors' published route, kept as a benchmark baseline (not for production use).
 
-Seed Eq. 1–7 as published code does it: the quadratic lens phase (Eq. 4) and the source's spherical phase
+The paper's Eq. 1–7 as published code does it: the quadratic lens phase (Eq. 4) and the source's spherical phase
 (Eq. 1) sampled on the DOE grid, the grid zero-padded by R/2 on each side, a Fresnel transfer-function
 convolution over the lens-to-sensor distance, and average pooling to the sensor pitch. At 5.4 µm the
 lens phase changes by several radians per DOE pixel at the aperture edge, so this route aliases
