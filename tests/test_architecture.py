@@ -24,7 +24,7 @@ ALLOWED = {
     "cli": None,  # the command line may use everything
 }
 # below every stage: each may import these, and they import only one another
-BASE = {"errors", "io", "plotting", "applications", "validate", "_devices", "_memory"}
+BASE = {"errors", "io", "plotting", "applications", "validate", "_devices", "_memory", "diekey"}
 # holder_cad is a library beside the stages: it may import doefab's base modules only, but for its command line
 # (``python -m holder_cad`` is ``doefab holder``)
 HOLDER_CLI = {"cli.py", "__main__.py"}

@@ -29,6 +29,9 @@ def register(sub) -> None:
     p.add_argument("--oasis", action="store_true", help="also write OASIS (identical geometry, much smaller)")
     p.add_argument("--die-mm", type=number(float, 1, 300, unit="mm"), default=12.0,
                    help="die size, square, in mm (default 12)")
+    p.add_argument("--die-chamfer-mm", type=number(float, 0, 150, unit="mm"), default=None,
+                   help="the dicing outline's key: the larger of the two chamfers on the coded half's corners, as "
+                        "the holder's die_chamfer_mm (default 2, or a quarter of a smaller die; 0: a square die)")
     p.add_argument("--cd-um", type=number(float, 0.1, 1000, unit="µm"), default=None,
                    help="critical dimension in µm (default: the pixel pitch)")
     p.add_argument("--vertex-cap", type=number(int, 5, 8190), default=4000,
@@ -73,16 +76,25 @@ def run(args) -> int:
         raise DoefabError(f"--etch-order {' '.join(map(str, args.etch_order))} must name each etch layer of this "
                           f"{design.n_levels}-level design ({' '.join(map(str, layers))}) once, e.g. --etch-order "
                           f"{' '.join(map(str, layers[::-1]))}")
+    if args.die_chamfer_mm is not None and args.die_chamfer_mm >= args.die_mm / 2:
+        raise DoefabError(f"--die-chamfer-mm {args.die_chamfer_mm:g} must be below half the die (--die-mm "
+                          f"{args.die_mm:g}): give a smaller chamfer, e.g. {args.die_mm / 4:g}")
     claim_output(args, "masks", replace=args.force)  # validates --out before any work
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
+                       **({} if args.die_chamfer_mm is None else {"die_chamfer_m": args.die_chamfer_mm * 1e-3}),
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
                        align_chain=args.align_chain, resist=args.resist,
                        etch_order=None if args.etch_order is None else tuple(args.etch_order),
                        use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)
     report = export_masks(design, Path(args.out), opts, design_dir=args.design, force=args.force)
     for lay, st in report["layers"].items():
+        corners = report.get("width_space", {}).get(str(lay), {}).get("corner_contacts")
         print(f"layer {lay}: {st['polygons']} polygons, {st['vertices']} vertices (max {st['max_vertices']}), "
-              f"{st['mismatched_pixels_gdstk']} mismatched pixels")
+              f"{st['mismatched_pixels_gdstk']} mismatched pixels"
+              + ("" if corners is None else f", {corners} corner contacts"))
+    if any(w.get("corner_contacts") for w in report.get("width_space", {}).values()):
+        print("corner contacts: etched pixels that touch only at a corner, where a Euclidean width/space check finds "
+              "zero width (they may print pinched or bridged); report.json lists the first of each layer (µm)")
     sizes = ", ".join(f"{k} {v / 1e6:.1f} MB" for k, v in report["file_bytes"].items())
     print(f"wrote and verified {args.out} ({sizes}) in {report['export_seconds']:.1f} s")
     return 0

@@ -16,13 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from doefab.diekey import DEFAULT_CHAMFER_MM, SECOND_CHAMFER
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
-from doefab.fabrication.manifest import depth_fields, fab_readme
+from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readme
 from doefab.fabrication.marks import MarkSpec, key_site, mark_layout
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
@@ -38,7 +39,9 @@ class MaskOptions:
 
     Attributes:
         name: base name of the GDS/OASIS files.  oasis: also write OASIS (identical geometry).
-        die_m: die (plate pattern) size, square, metres.  cd_m: critical dimension (default: the pixel pitch).
+        die_m: die (plate pattern) size, square, metres.  die_chamfer_m: the dicing outline's key, the larger of
+            the two chamfers on the coded half's corners (``doefab.diekey``; the holder's ``die_chamfer_mm``),
+            metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a smaller die's side.  cd_m: critical dimension (default: the pixel pitch).
         vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
         align_chain: ``"chrome"`` (every etch mask aligns to the chrome keys; errors don't accumulate) or
             ``"sequential"`` (mask k aligns to the plate written before it).
@@ -56,6 +59,7 @@ class MaskOptions:
     name: str = "doe"
     oasis: bool = False
     die_m: float = 12e-3
+    die_chamfer_m: float | None = None
     cd_m: float | None = None
     vertex_cap: int = 4000
     align_chain: str = "chrome"
@@ -65,6 +69,16 @@ class MaskOptions:
     use_klayout: bool = True
     pattern_faces: str = "lens"
     extra: dict = field(default_factory=dict)
+
+
+def _chamfer_m(opts: MaskOptions) -> float:
+    """The die key's larger chamfer (m): as given, else the holder's default or a quarter of a smaller die."""
+    return opts.die_chamfer_m if opts.die_chamfer_m is not None else min(DEFAULT_CHAMFER_MM * 1e-3, opts.die_m / 4)
+
+
+def _chamfer_nm(opts: MaskOptions) -> int:
+    """The die key's larger chamfer in nm, even (both legs whole nanometres)."""
+    return 2 * int(round(_chamfer_m(opts) * 0.5e9))
 
 
 def _nm(value_m: float, what: str) -> int:
@@ -129,13 +143,16 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
                           f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
+    if _chamfer_m(opts) >= opts.die_m / 2:
+        raise DoefabError(f"die_chamfer_m = {_chamfer_m(opts):g} m must be below half the die ({opts.die_m / 2:g} "
+                          f"m): give a smaller one (the holder's die_chamfer_mm), e.g. {opts.die_m / 4:g} m")
     out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
     spec = MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
-                    cd_nm=cd_nm)
+                    cd_nm=cd_nm, chamfer_nm=_chamfer_nm(opts), coded_sign=1 if opts.pattern_faces == "lens" else -1)
     align_to = _alignment(order, opts.align_chain)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
@@ -222,6 +239,10 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
                             ("critical dimension cd_m", pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
             raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
+    c = _chamfer_m(opts)
+    if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
+        raise DoefabError(f"die_chamfer_m = {c!r} m must be a length ≥ 0: the holder's die_chamfer_mm, "
+                          f"{DEFAULT_CHAMFER_MM:g} mm by default")
     if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
         raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
     return order
@@ -293,7 +314,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
     })
     n = lv.shape[0]
     return {
-        "format": "doefab mask set 1",
+        "format": MASK_SET_FORMAT,
         "files": files,
         "database_unit_m": 1e-9, "user_unit_m": 1e-6,
         "layers": layers,
@@ -316,6 +337,14 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
                          "toward the lens the layout column j holds design column N−1−j (coded half x > 0 in "
                          "the layout)") if opts.pattern_faces == "lens" else "layout column j = design column j",
         "die_m": die_nm * 1e-9,
+        "die_chamfer_m": _chamfer_nm(opts) * 1e-9,
+        "mark_clear_margin_m": MarkSpec(0, 0, 0).clear_margin_nm * 1e-9,
+        "mark_clear_margin_means": "the chrome plate leaves the glass clear this far beyond every mark's bounding box",
+        "die_outline_means": (f"layer 100, the dicing outline: the two corners of the coded half (x "
+                              f"{'>' if opts.pattern_faces == 'lens' else '<'} 0 in the layout) chamfered, legs "
+                              f"die_chamfer_m at +y and {SECOND_CHAMFER:g} × that at −y; they key the die in the "
+                              "holder's pocket (not turned, not flipped), and the alignment keys they cut off are "
+                              "needed only until the last etch"),
         "clear_aperture_diameter_m": camera.aperture_diameter,
         "coded_half": "x < 0 (left columns of the level map)",
         "design_wavelength_m": camera.design_wavelength,

@@ -69,7 +69,15 @@ def _spec(man: dict, n_masks: int) -> tuple[MarkSpec, dict[int, int]]:
           and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= n_masks and str(v) != k
                   for k, v in chain.items()),
           "alignment_chain", f"= {chain!r} does not map each etch plate {', '.join(plates)} to another plate")
-    spec = MarkSpec(die_nm=int(round(die * 1e9)), aperture_radius_nm=int(round(ap / 2 * 1e9)), cd_nm=cd)
+    chamfer = man.get("die_chamfer_m", 0.0)  # a set written before the die was keyed: a square outline
+    _need(not isinstance(chamfer, bool) and isinstance(chamfer, (int, float)) and 0 <= chamfer < die / 2,
+          "die_chamfer_m", f"= {chamfer!r} is not a length in metres below half the die")
+    margin = man.get("mark_clear_margin_m", 0.0)  # a set written before the marks had clear fields: none
+    _need(not isinstance(margin, bool) and isinstance(margin, (int, float)) and 0 <= margin <= 1e-3,
+          "mark_clear_margin_m", f"= {margin!r} is not a length in metres up to 1 mm")
+    spec = MarkSpec(die_nm=int(round(die * 1e9)), aperture_radius_nm=int(round(ap / 2 * 1e9)), cd_nm=cd,
+                    chamfer_nm=int(round(chamfer * 1e9)), coded_sign=1 if man.get("mirrored_x") else -1,
+                    clear_margin_nm=int(round(margin * 1e9)))
     return spec, {int(k): v for k, v in chain.items()}
 
 

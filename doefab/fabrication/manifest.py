@@ -14,12 +14,18 @@ import json
 import math
 from pathlib import Path
 
+from doefab.diekey import SECOND_CHAMFER
 from doefab.errors import DoefabError
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.optics.materials import Material, material_by_name
 
-__all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM"]
+__all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM", "MASK_SET_FORMAT"]
+
+_FORMATS = {"gds": "GDSII", "oasis": "OASIS"}  # the manifest's file keys, as a fab names the formats
+# the manifest's format: 2 adds the keyed die outline and the marks' clear fields, and the README words the files'
+# formats and the layout's view as a fab reads them; a set of format 1 keeps its README's words (it still verifies)
+MASK_SET_FORMAT = "doefab mask set 2"
 
 # the manifest rounds depths to 0.001 nm; a field further than this from its re-derived value was edited
 DEPTH_TOLERANCE_NM = 0.002
@@ -131,14 +137,38 @@ def _against_design(man: dict, design_json: Path) -> list[str]:
     return problems
 
 
+def _clear_fields(man: dict) -> str:
+    """The README's words on the clear fields round the marks, from the manifest (none in an older set)."""
+    m = man.get("mark_clear_margin_m") or 0.0
+    if not m:
+        return ""
+    return (f" The chrome plate leaves the glass clear {m * 1e6:g} µm beyond every mark of every plate: its keys, "
+            "verniers and CD ladder are chrome inside those clear fields, and the etch plates' marks land on bare "
+            "silica.")
+
+
+def _dicing(man: dict) -> str:
+    """The README's words on the keyed dicing outline (``doefab.diekey``), from the manifest."""
+    c = man.get("die_chamfer_m") or 0.0
+    if not c:
+        return "."
+    side = ">" if man.get("mirrored_x") else "<"
+    return (f": dice along it. The two corners of the coded half (x {side} 0 in the layout) are chamfered, legs "
+            f"{c * 1e3:g} mm at +y and {SECOND_CHAMFER * c * 1e3:g} mm at −y: they key the die in the holder's pocket "
+            "(not turned, not flipped); the alignment keys they cut off are needed only until the last etch.")
+
+
 def fab_readme(man: dict) -> str:
     """``README.txt`` of a mask set: the manifest in words, for the fab (verification compares the two)."""
     n_levels = manifest_levels(man)
+    first = man.get("format") == "doefab mask set 1"
+    formats = "GDSII" if first else " and ".join(_FORMATS.get(k, k) for k in man["files"])
+    view = man["mirror_means"] if first else man["mirror_means"][:1].upper() + man["mirror_means"][1:]
     lines = [
         "doefab mask set — instructions for the fab",
         "",
-        f"Files: {', '.join(man['files'].values())} (GDSII, 1 nm database unit, 1 µm user unit), manifest.json "
-        "(machine-readable), preview_*.png, report.json (verification).",
+        f"Files: {', '.join(man['files'].values())} ({formats}, 1 nm database unit, 1 µm user unit), "
+        "manifest.json (machine-readable), preview_*.png, report.json (verification).",
         f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
         f"{n_levels} levels, step d = {man['level_step_nm']} nm.",
         f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
@@ -157,9 +187,9 @@ def fab_readme(man: dict) -> str:
         "",
         f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
         "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
-        "keys of the plate it aligns to and carries its own cross).",
+        "keys of the plate it aligns to and carries its own cross)." + _clear_fields(man),
         f"Level k = {n_levels - 1} − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
-        "The layout is drawn as seen from the patterned face. " + man["mirror_means"] + ".",
-        "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline.",
+        "The layout is drawn as seen from the patterned face. " + view + ".",
+        "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline" + _dicing(man),
     ]
     return "\n".join(lines) + "\n"

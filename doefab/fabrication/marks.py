@@ -3,7 +3,10 @@
 Scheme (all marks outside the clear aperture, in the four die corners):
 - The chrome plate (layer 5, process step 1) is written first. It leaves chrome everywhere outside the
   clear aperture (the baffle), with clear slits on the y axis above and below the aperture marking the
-  split line (x = 0), and chrome alignment crosses ("keys") at the four key sites.
+  split line (x = 0), a clear field around every mark of every plate (``clear_fields``), and chrome alignment
+  crosses ("keys") at the four key sites inside theirs.
+- The die outline (layer 100) is the dicing outline, keyed for the holder (``doefab.diekey``: two unequal
+  chamfers on the coded half's corners).
 - Every etch plate m (m = 0..M−1, one per binary mask) carries (layer 10, datatype m+1) a clear window over the key sites of the layer it
   aligns to, plus its own cross at its own key site (so a later mask could align to it); on layer 11,
   datatype m+1, a vernier (pitch p·(1 + 1/10) against the reference layer's pitch p scale) and a CD ladder
@@ -23,8 +26,10 @@ from dataclasses import dataclass
 import gdstk
 import numpy as np
 
-__all__ = ["MarkSpec", "chrome_polygons", "mark_polygons", "key_site", "check_mark_placement", "mark_layout",
-           "smallest_die_m"]
+from doefab.diekey import die_outline
+
+__all__ = ["MarkSpec", "chrome_polygons", "clear_fields", "mark_polygons", "key_site", "check_mark_placement",
+           "mark_layout", "smallest_die_m"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
@@ -39,6 +44,9 @@ class MarkSpec:
     die_nm: int
     aperture_radius_nm: int
     cd_nm: int
+    chamfer_nm: int = 0  # the die key's larger chamfer (``doefab.diekey``); 0: a square outline
+    coded_sign: int = 1  # the coded half's side of the layout: x > 0 (1, pattern toward the lens) or x < 0 (−1)
+    clear_margin_nm: int = 40_000  # clear glass the chrome plate leaves round every mark (0: marks on chrome)
 
 
 def _rect(x0, y0, x1, y1, layer, datatype):
@@ -60,8 +68,22 @@ def _cross(cx, cy, layer, datatype):
             _rect(cx - w // 2, cy - a, cx + w // 2, cy + a, layer, datatype)]
 
 
-def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float = 5.0) -> list:
-    """Chrome that stays on the die: the die minus the clear aperture, minus the split-line slits.
+def clear_fields(marks: list, margin_nm: int) -> list:
+    """The clear field around each mark (the die outline, layer 100, aside): its bounding box grown by
+    ``margin_nm`` on every side (``MarkSpec.clear_margin_nm``), merged.
+    The chrome plate leaves these bare, so its chrome keys, verniers and ladder stand in clear glass where an
+    aligner and a microscope see them, and the etch plates' own crosses and ladders land on silica, not on chrome
+    (which would mask their etch)."""
+    m = margin_nm
+    boxes = [gdstk.rectangle((x0 - m, y0 - m), (x1 + m, y1 + m))
+             for (x0, y0), (x1, y1) in (poly.bounding_box() for poly in marks if poly.layer != 100)]
+    return gdstk.boolean(boxes, [], "or") if boxes and m > 0 else []
+
+
+def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float = 5.0, marks: list = ()) -> list:
+    """Chrome that stays on the die: the die minus the clear aperture, minus the split-line slits, minus the clear
+    field around each of ``marks`` (:func:`clear_fields`, ``spec.clear_margin_nm``; the chrome plate's marks are
+    chrome inside it).
 
     The disk is a polygon whose chords deviate from the circle by at most ``circle_tolerance_nm``;
     the hole is joined to the outer boundary the GDSII way (gdstk's boolean links holes with a cut).
@@ -73,7 +95,8 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
     slit_w, gap, length = 20_000, 100_000, 600_000
     slits = [gdstk.rectangle((-slit_w // 2, r + gap), (slit_w // 2, r + gap + length)),
              gdstk.rectangle((-slit_w // 2, -r - gap - length), (slit_w // 2, -r - gap))]
-    out = gdstk.boolean(die, [disk, *slits], "not", layer=layer, datatype=0)
+    out = gdstk.boolean(die, [disk, *slits, *clear_fields(list(marks), spec.clear_margin_nm)], "not", layer=layer,
+                        datatype=0)
     return out
 
 
@@ -107,20 +130,24 @@ def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
                 polys.append(_rect(x, -h + 150_000, x + w, -h + 250_000, 11, plate))
                 x += 2 * w
             x += 40_000
-    polys.append(_rect(-h, -h, h, h, 100, 0))
+    # the dicing outline, keyed (``doefab.diekey``): the chamfers may cut a corner's keys, needed only until the
+    # last etch
+    polys.append(gdstk.Polygon(die_outline(spec.die_nm, spec.die_nm, spec.chamfer_nm, spec.coded_sign), 100, 0))
     return polys
 
 
 def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
-    """(marks off the die, marks inside the clear aperture) among ``polys`` (the die outline aside)."""
-    h, r = spec.die_nm // 2, spec.aperture_radius_nm
+    """(marks off the die, marks whose clear field reaches the clear aperture) among ``polys`` (the die outline
+    aside)."""
+    h, r, m = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm
     off_die = into_aperture = 0
     for poly in polys:
         if poly.layer == 100:
             continue
         (x0, y0), (x1, y1) = poly.bounding_box()
         off_die += bool(x0 < -h or y0 < -h or x1 > h or y1 > h)
-        dx, dy = max(x0, -x1, 0.0), max(y0, -y1, 0.0)  # the box's nearest point to the aperture's centre
+        # the clear field's nearest point to the aperture's centre
+        dx, dy = max(x0 - m, -x1 - m, 0.0), max(y0 - m, -y1 - m, 0.0)
         into_aperture += bool(dx * dx + dy * dy < r * r)
     return off_die, into_aperture
 
@@ -166,7 +193,8 @@ def mark_layout(spec: MarkSpec, align_to: dict[int, int], vertex_cap: int,
     ``vertex_cap`` vertices fractured into pieces within it (the export writes these; verification redraws
     them from the manifest and compares)."""
     out = []
-    for big in chrome_polygons(spec, chrome_layer) + check_mark_placement(spec, align_to):
+    marks = check_mark_placement(spec, align_to)
+    for big in chrome_polygons(spec, chrome_layer, marks=marks) + marks:
         pieces = [big] if len(big.points) <= vertex_cap else big.fracture(max_points=vertex_cap, precision=1e-3)
         out += [(np.rint(poly.points).astype(np.int64), big.layer, big.datatype) for poly in pieces]
     return out

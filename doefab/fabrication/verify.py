@@ -28,7 +28,7 @@ from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import etch_layer
 from doefab.fabrication.layout_check import check_layout, expected_layout, listed_layers
 from doefab.fabrication.layout_read import LayerPolygons, LayoutFile
-from doefab.fabrication.manifest import depth_problems, fab_readme, manifest_levels
+from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_problems, fab_readme, manifest_levels
 from doefab.fabrication.process import mask_count
 
 __all__ = ["verify_mask_set", "width_space_report", "preview_names"]
@@ -57,7 +57,10 @@ def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int, 
 
 def width_space_report(plane: np.ndarray, cd_px: int, pitch_m: float, origin_m: tuple[float, float],
                        max_locations: int = 10) -> dict:
-    """Features (etched) and spaces (unetched) narrower than ``cd_px`` pixels, and isolated single pixels."""
+    """Features (etched) and spaces (unetched) narrower than ``cd_px`` pixels along a row or a column, isolated
+    single pixels, and corner contacts: 2 × 2 pixel blocks whose etched pixels touch only at a corner (a
+    checkerboard pair), where a Euclidean width/space check finds a zero width or space (the corner may print
+    pinched or bridged), with the first ``max_locations`` of each in µm."""
 
     def narrow(mask):
         bad = np.zeros_like(mask)
@@ -82,6 +85,13 @@ def width_space_report(plane: np.ndarray, cd_px: int, pitch_m: float, origin_m: 
     locs = [[round(origin_m[0] * 1e6 + (c + 0.5) * pitch_m * 1e6, 3), round(origin_m[1] * 1e6 - (r + 0.5) * pitch_m * 1e6, 3)]
             for r, c in zip(rows[:max_locations], cols[:max_locations])]
     out = {"isolated_single_pixels": int(isolated.sum()), "isolated_locations_um": locs}
+    a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, :-1], p[1:, 1:]  # each 2 × 2 block's four pixels
+    corner = (a & d & ~b & ~c) | (b & c & ~a & ~d)
+    rows, cols = np.nonzero(corner)  # the shared corner: right of and below the block's first pixel
+    out["corner_contacts"] = int(corner.sum())
+    out["corner_locations_um"] = [[round(origin_m[0] * 1e6 + (j + 1) * pitch_m * 1e6, 3),
+                                   round(origin_m[1] * 1e6 - (i + 1) * pitch_m * 1e6, 3)]
+                                  for i, j in zip(rows[:max_locations], cols[:max_locations])]
     if cd_px > 1:
         out["features_below_cd_px"] = int(narrow(p).sum())
         out["spaces_below_cd_px"] = int(narrow(~p).sum())
@@ -103,7 +113,7 @@ def _check_manifest(man, mpath: Path) -> None:
             raise CheckFailed(f"{mpath}: {key} {what}")
 
     need(isinstance(man, dict), "(top level)", "must be a JSON object")
-    need(str(man.get("format", "")).startswith("doefab mask set"), "format", "is not 'doefab mask set 1'")
+    need(str(man.get("format", "")).startswith("doefab mask set"), "format", f"is not '{MASK_SET_FORMAT}'")
     p = man.get("pitch_m")
     need(isinstance(p, (int, float)) and 1e-7 <= p <= 1e-3, "pitch_m", f"= {p!r} is not a pitch in metres (1e-7–1e-3)")
     sh = man.get("shape")

@@ -20,7 +20,7 @@ from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
-           "stage_reconstruction", "stage_tolerance"]
+           "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set"]
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -105,7 +105,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
 
     design_dir = out.parent / "design"
     fab = scene.fabrication
-    committed_set = repo_mask_set(res)
+    committed_set = repo_mask_set(res, scene_die_chamfer_m(scene))
     if committed_set is not None and fab.get("pattern_faces", "lens") == "lens":
         t = time.perf_counter()
         copy_mask_set(committed_set, out)
@@ -116,6 +116,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                 "mask_set": str(out)}
     d = Design.load(design_dir)
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)), die_m=res.die_m,
+                       die_chamfer_m=scene_die_chamfer_m(scene),
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
     # the export writes a fresh folder of its own beside the stage folder, then moves in (run_stage marks it again)
     tmp = out.parent / f".{out.name}.export"
@@ -144,9 +145,10 @@ def copy_mask_set(src: Path, out: Path) -> None:
         os.replace(tmp, dst)
 
 
-def repo_mask_set(res: ResolvedScene) -> Path | None:
+def repo_mask_set(res: ResolvedScene, die_chamfer_m: float) -> Path | None:
     """The repository's committed mask set of a reused design (``masks/<design>``), when this is a checkout that
-    has it and its level map is the design's; None otherwise (an installed package exports the masks itself)."""
+    has it, its level map is the design's and its die (side and key, ``die_chamfer_m``) the scene's holder's; None
+    otherwise (an installed package exports the masks itself)."""
     if not res.reuse:
         return None
     folder = REPO / "masks" / res.settings["design_task"]
@@ -154,9 +156,19 @@ def repo_mask_set(res: ResolvedScene) -> Path | None:
 
     try:
         same = levels_sha256(Design.load(folder / "design").levels) == levels_sha256(res.committed.levels)
-    except DoefabError:  # no mask set here (an installed package), or a damaged one
+        man = json.loads((folder / "manifest.json").read_text())
+    except (DoefabError, OSError, ValueError):  # no mask set here (an installed package), or a damaged one
         return None
-    return folder if same else None
+    die = (round(man.get("die_m", 0.0) * 1e9), round(man.get("die_chamfer_m", 0.0) * 1e9))
+    return folder if same and die == (round(res.die_m * 1e9), round(die_chamfer_m * 1e9)) else None
+
+
+def scene_die_chamfer_m(scene) -> float:
+    """The die key's larger chamfer (m) the scene's holder takes (``holder.die_chamfer_mm``), which the mask set's
+    dicing outline draws (``doefab.diekey``)."""
+    from doefab.diekey import DEFAULT_CHAMFER_MM
+
+    return float(scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)) * 1e-3
 
 
 def stage_holder(scene, res, out: Path, quick: bool) -> dict:

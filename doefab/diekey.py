@@ -1,0 +1,36 @@
+"""The DOE die's key: its outline, a rectangle whose two corners on the DOE's coded half are chamfered, the
+larger at +y, so that the die fits its holder's pocket one way only (not turned, not flipped: no symmetry of the
+rectangle maps the pair of unequal chamfers onto itself). One outline for the mask set (the dicing outline, layer
+100) and for the holder (its pocket), in whatever unit the caller uses.
+
+Seen from the DOE's patterned face (the mask layout's view) the coded half lies at x > 0 when that face is toward
+the lens and at x < 0 when it is toward the scene; seen from the lens side (the holder's pocket) always at x > 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "SECOND_CHAMFER"]
+
+DEFAULT_CHAMFER_MM = 2.0  # the larger chamfer's leg (mm)
+SECOND_CHAMFER = 0.5  # the smaller chamfer's leg, a fraction of the larger
+
+
+def die_outline(width: float, height: float, chamfer: float, coded_sign: int = 1) -> np.ndarray:
+    """(N, 2) counter-clockwise outline of a ``width`` × ``height`` die centred on the origin, the corners of the
+    coded half (x > 0 for ``coded_sign`` = 1, x < 0 for −1) chamfered with legs ``chamfer`` (at +y) and
+    ``SECOND_CHAMFER`` × ``chamfer`` (at −y); a plain rectangle for ``chamfer`` = 0. Units: the caller's.
+
+    Example:
+        >>> die_outline(12.0, 12.0, 2.0).round(2).tolist()
+        [[-6.0, -6.0], [5.0, -6.0], [6.0, -5.0], [6.0, 4.0], [4.0, 6.0], [-6.0, 6.0]]
+    """
+    w, h, c, c2 = width / 2, height / 2, chamfer, SECOND_CHAMFER * chamfer
+    if chamfer <= 0:
+        pts = np.array([[-w, -h], [w, -h], [w, h], [-w, h]], float)
+    else:
+        pts = np.array([[-w, -h], [w - c2, -h], [w, -h + c2], [w, h - c], [w - c, h], [-w, h]], float)
+    if coded_sign < 0:  # the mirror image, still counter-clockwise
+        pts = pts[::-1] * [-1.0, 1.0]
+    return pts
