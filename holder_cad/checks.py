@@ -2,8 +2,9 @@
 
 watertight and a valid volume (trimesh ``is_volume``), the declared number of bodies, manifold3d status
 NoError, minimum wall thickness measured on the mesh by ray casting (thread teeth excluded), die-to-pocket
-gap from a section at mid-pocket height, clear aperture unobstructed (axial rays through the aperture disk
-hit nothing in the assembly), and the overhang area beyond 45° in print orientation.
+gap from a section at mid-pocket height, clear aperture unobstructed (axial rays through the aperture disk, and
+rays at the field's half-angle through it, hit nothing in the assembly), and the overhang area beyond 45° in print
+orientation.
 """
 
 from __future__ import annotations
@@ -98,21 +99,35 @@ def _join(name):
     return getattr(JoinType, name)
 
 
-def aperture_clear(assembly_parts, radius_mm: float, rings: int = 12) -> int:
-    """Number of axial rays through the aperture disk (radius_mm) that hit the assembly (0 = unobstructed)."""
-    hits = 0
-    zs = [m.bounding_box() for m in assembly_parts]
-    z0 = min(b[2] for b in zs) - 10
-    z1 = max(b[5] for b in zs) + 10
+def aperture_clear(assembly_parts, radius_mm: float, rings: int = 12, angle_deg: float = 0.0, z_mm: float = 0.0,
+                   azimuths: int = 8, die_mm: float = 0.0) -> int:
+    """Number of rays through the aperture disk (radius_mm, in the plane z = z_mm of the use position: the DOE
+    face and its chrome stop) that hit the assembly (0 = unobstructed): axial rays, or at ``angle_deg`` to the
+    axis from ``azimuths`` directions round it (the light of a field point that far off axis), refracted inside
+    the ``die_mm`` thick die in front of the disk (index ``DIE_INDEX_MIN``) and straight in air."""
+    from holder_cad.derive import DIE_INDEX_MIN
+
+    b = [m.bounding_box() for m in assembly_parts]
+    reach = max(max(x[5] for x in b) - z_mm, z_mm - min(x[2] for x in b)) + 10  # beyond the assembly both ways
+    spread = die_mm * math.tan(math.asin(math.sin(math.radians(angle_deg)) / DIE_INDEX_MIN))  # inside the die
     pts = [(0.0, 0.0)]
     for k in range(1, rings + 1):
         r = radius_mm * k / rings
         n = 6 * k
         pts += [(r * math.cos(2 * math.pi * j / n), r * math.sin(2 * math.pi * j / n)) for j in range(n)]
+    t = math.radians(angle_deg)
+    dirs = [(0.0, 0.0, 1.0)] if angle_deg == 0 else [
+        (math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t))
+        for a in (2 * math.pi * j / azimuths for j in range(azimuths))]
+    hits = 0
     for x, y in pts:
-        for m in assembly_parts:
-            if m.ray_cast((x, y, z0), (x, y, z1)):
-                hits += 1
+        for d in dirs:
+            s = reach / d[2]  # to the planes the assembly lies between
+            c, r = math.hypot(d[0], d[1]) or 1.0, spread
+            xb, yb, zb = x + r * d[0] / c, y + r * d[1] / c, z_mm + die_mm  # where it left the die's back
+            for a, e in (((x, y, z_mm), (x - s * d[0], y - s * d[1], z_mm - reach)),  # toward the lens
+                         ((xb, yb, zb), (xb + s * d[0], yb + s * d[1], zb + reach))):  # toward the scene
+                hits += sum(bool(m.ray_cast(a, e)) for m in assembly_parts)
     return hits
 
 
@@ -161,6 +176,11 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
         out["aperture_rays_blocked"] = blocked
         out["passed"] &= blocked == 0
     measured = doe_face_height(assembly, p) if assembly else None
+    if assembly and p.field_half_angle_deg > 0:  # the field's edge, through the DOE face (its chrome stop)
+        face = measured if measured is not None else p.washer_recess_mm
+        out["field_rays_blocked"] = aperture_clear(assembly, p.clear_aperture_mm / 2, 6, p.field_half_angle_deg, face,
+                                                   die_mm=p.die_thickness_mm)
+        out["passed"] &= out["field_rays_blocked"] == 0
     if measured is not None:
         reach = p.thread_length_mm if p.mount == "thread" else 0.0
         out["doe_face_above_lens_side_end_mm"] = round(measured, 4)
@@ -199,6 +219,8 @@ def failing(checks: dict) -> list[str]:
     out += checks.get("fit_failures", [])
     if checks.get("aperture_rays_blocked"):
         out.append(f"aperture_rays_blocked = {checks['aperture_rays_blocked']}")
+    if checks.get("field_rays_blocked"):
+        out.append(f"field_rays_blocked = {checks['field_rays_blocked']} (at the field's half-angle)")
     for b in checks.get("fit_bounds", []):
         if not b["ok"]:
             out.append(f"{b['quantity']} = {b['value']:.3g} {b['unit']} (allowed {b['min']:g}–{b['max']:g})")

@@ -20,8 +20,10 @@ from __future__ import annotations
 import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
-           "standard_pitch_mm", "standard_depth_mm", "widest_aperture_mm", "min_flange_diameter_mm", "min_flange_height_mm", "flange_diameter_mm", "flange_height_mm",
-           "max_flange_diameter_mm"]
+           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "THREAD_PLAY_MIN", "ISO_DEPTH",
+           "widest_aperture_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
+           "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
+           "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
 SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
@@ -34,16 +36,42 @@ COMMON_FILTER_THREADS_MM = (25.0, 27.0, 28.0, 30.5, 34.0, 37.0, 39.0, 40.5, 43.0
 DERIVED = {
     "thread_pitch_mm": "from thread_diameter_mm: 0.5 up to 40.5, 0.75 up to 82, 1.0 above",
     "thread_depth_mm": "0.4 × thread_pitch_mm",
+    "thread_clearance_mm": "0.22 × thread_pitch_mm (the 45° tooth clears the ISO 60° groove; 59 % engaged)",
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
 }
 
 
-def widest_aperture_mm(die_side_mm: float, wall_mm: float, aperture_margin_mm: float) -> float:
-    """The widest clear aperture a die of this (shorter) side holds: its pocket's ledge is ``wall_mm`` wide and
-    the hole ``aperture_margin_mm`` larger than the aperture all round (an aperture must stay below this)."""
-    return die_side_mm - 2 * wall_mm - 2 * aperture_margin_mm
+LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on
+RETENTION_DEPTH_MM = 4.0  # the die-retention screws' pilot holes, from the cartridge's lens-side end (M2: 2 × ⌀)
+MAX_FIELD_HALF_ANGLE_DEG = 45.0  # the flared hole in front of the DOE: its overhang prints without support up to 45°
+# the lowest refractive index of a DOE substrate (calcium fluoride, 1.434 at 550 nm): inside the die an off-axis ray
+# spreads by at most thickness × tan(asin(sin θ / DIE_INDEX_MIN)) between the hole and the DOE's chrome stop
+DIE_INDEX_MIN = 1.43
+FLARE_SLACK_MM = 0.1  # the hole's least radial clearance of the field's light, for a print's undersized holes
+
+
+def seat_margin_mm(aperture_margin_mm: float, die_thickness_mm: float, field_half_angle_deg: float,
+                   wall_mm: float) -> float:
+    """How much wider than the clear aperture (radius, mm) the hole is where the die rests on it:
+    ``aperture_margin_mm``, or where the light of the field's edge needs more, its spread inside the die (refracted
+    at ``DIE_INDEX_MIN``) plus ``FLARE_SLACK_MM`` plus what the flare gains over the ``wall_mm`` high step the hole
+    keeps straight below the seat (so the seat's rim has wall_mm of material under it).
+
+    Example: ``round(seat_margin_mm(0.3, 1.0, 24.0, 1.2), 2)`` → 0.93 (mm)."""
+    t = math.radians(field_half_angle_deg)
+    if t <= 0:
+        return aperture_margin_mm
+    inside = math.asin(math.sin(t) / DIE_INDEX_MIN)
+    return max(aperture_margin_mm, die_thickness_mm * math.tan(inside) + FLARE_SLACK_MM + wall_mm * math.tan(t))
+
+
+def widest_aperture_mm(die_side_mm: float, seat_margin: float) -> float:
+    """The widest clear aperture a die of this (shorter) side holds: the hole ``seat_margin`` (``seat_margin_mm``)
+    larger than the aperture all round where the die rests, and a ``LEDGE_MM`` ledge round it to rest on (an
+    aperture must stay below this)."""
+    return die_side_mm - 2 * LEDGE_MM - 2 * seat_margin
 
 
 def next_filter_thread_mm(diameter_mm: float) -> float:
@@ -57,6 +85,19 @@ def standard_pitch_mm(thread_diameter_mm: float) -> float:
     if thread_diameter_mm <= 40.5:
         return 0.5
     return 0.75 if thread_diameter_mm <= 82.0 else 1.0
+
+
+# the printed tooth (45° flanks, a 0.1 × pitch crest) fits the ISO 60° female groove (0.75 × pitch wide at its minor
+# diameter) only with this much radial play per pitch: its width there, 0.1·P + 2·(0.541·P − play), ≤ 0.75·P
+THREAD_PLAY_MIN = 0.2165
+ISO_DEPTH = 0.54127  # an ISO metric thread's basic depth of engagement, × pitch: (D − D1) / 2
+
+
+def thread_clearance_mm(pitch_mm: float) -> float:
+    """The printed thread's radial play (mm) in a filter thread of this pitch: 0.22 × pitch, just above the least
+    at which its 45° tooth clears the lens's 60° groove (``THREAD_PLAY_MIN``); 0.32 × pitch, 59 % of the ISO basic
+    depth (``ISO_DEPTH``), stays engaged."""
+    return round(0.22 * pitch_mm, 6)
 
 
 def standard_depth_mm(pitch_mm: float) -> float:

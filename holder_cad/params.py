@@ -5,8 +5,8 @@ The part is two bodies printed separately, each flat on the bed and support-free
   slip-fit sleeve, a 45°-chamfered flange, a cylindrical bore for the cartridge, four M2 pilot holes and
   10° graduation notches on its rim;
 - the **cartridge**: a flange that rests on the base and a body that reaches down the bore to the lens side,
-  holding the fused-silica die in a keyed pocket (one chamfered die corner: the die fits one way only, not
-  rotated, not flipped), with a clear aperture, two M2 retention screws whose washers overlap the die edge,
+  holding the fused-silica die in a keyed pocket (two unequal chamfered die corners: the die fits one way only,
+  not rotated, not flipped), with a clear aperture, two M2 retention screws whose washers overlap the die edge,
   two 100° arc slots centred on ±x (any rotation can be locked on the base's pilot holes: the thread's
   start angle does not matter) and two index notches at ±y, on the split-line direction.
 """
@@ -17,65 +17,12 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from doefab.diekey import DEFAULT_CHAMFER_MM, SECOND_CHAMFER
 from holder_cad import derive
+from holder_cad.bounds import fit_bounds
+from holder_cad.ranges import KEY_PROUD_MM, PARAM_RANGES, HolderError, given_problem
 
 __all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES", "given_problem"]
-
-
-class HolderError(ValueError):
-    """Impossible or unprintable holder parameters (the message names the parameters)."""
-
-
-# every length parameter's range (mm), checked first so a value out of range is named before anything derived
-# from it; the fit bounds the README states (die clearance 0.05–1 mm, thread pitch 0.25–1.5 mm, tooth depth
-# 0.1–0.8 mm, wall up to 10 mm, washer recess up to 3 mm) and sanity bounds on the rest (filter threads and lens
-# barrels of 20–150 mm, parts that fit a printer bed)
-PARAM_RANGES = {
-    "thread_diameter_mm": (20.0, 150.0, "filter threads; 49 for the EF 50 mm f/1.8 STM"),
-    "thread_pitch_mm": (0.25, 1.5, "filter threads have pitches 0.5–1.0 mm"),
-    "thread_depth_mm": (0.1, 0.8, "a printable tooth of a filter thread"),
-    "thread_length_mm": (0.5, 30.0, "the engaged thread length"),
-    "barrel_diameter_mm": (20.0, 150.0, "a lens front barrel"),
-    "sleeve_length_mm": (1.0, 100.0, "the slip-fit sleeve"),
-    "lens_face_to_glass_mm": (0.01, 50.0, "filter face to front glass: measure your lens"),
-    "die_width_mm": (2.0, 100.0, "the fused-silica die"),
-    "die_height_mm": (2.0, 100.0, "the fused-silica die"),
-    "die_thickness_mm": (0.1, 10.0, "the fused-silica die"),
-    "die_chamfer_mm": (0.1, 50.0, "the keyed die corner"),
-    "clear_aperture_mm": (0.5, 100.0, "the DOE clear aperture"),
-    "aperture_margin_mm": (0.01, 10.0, "extra radius of the hole"),
-    "clearance_mm": (0.05, 1.0, "below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
-    "wall_mm": (0.1, 10.0, "between one nozzle line and 10 mm"),
-    "nozzle_mm": (0.1, 2.0, "a printer nozzle"),
-    "flange_diameter_mm": (20.0, 250.0, "fits a printer bed"),
-    "flange_height_mm": (0.5, 50.0, "the base flange"),
-    "cartridge_flange_mm": (0.5, 50.0, "the cartridge flange"),
-    "screw_clearance_mm": (0.5, 10.0, "an M2 clearance hole is 2.4 mm"),
-    "pilot_hole_mm": (0.3, 10.0, "an M2 pilot hole is 1.7 mm"),
-    "washer_diameter_mm": (1.0, 30.0, "an M2 washer is 5–6 mm"),
-    "washer_recess_mm": (0.05, 3.0, "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
-    "max_doe_to_lens_mm": (0.2, 50.0, "the farthest the DOE may sit from the lens"),
-}
-
-
-def given_problem(values: dict) -> str | None:
-    """What is wrong with given holder parameters taken one at a time (None: nothing): each length positive,
-    finite and in its range, the mount and the facet count known. The checks between parameters (the die in its
-    pocket, the thread's teeth, the flange) are :class:`HolderParams`'."""
-    errs = [f"{k} must be a positive length in mm, got {v!r}" for k, v in values.items() if k.endswith("_mm") and (
-        isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0)]
-    if errs:
-        return "; ".join(errs)
-    out = [f"{k} {values[k]:g} is outside {lo:g}–{hi:g} mm ({why})" for k, (lo, hi, why) in PARAM_RANGES.items()
-           if k in values and values[k] is not None and not lo <= values[k] <= hi]
-    if out:
-        return "; ".join(out)
-    if values.get("mount", "thread") not in ("thread", "slip"):
-        return f"mount must be 'thread' or 'slip', got {values['mount']!r}"
-    seg = values.get("segments", 128)
-    if isinstance(seg, bool) or not isinstance(seg, int) or not 32 <= seg <= 1024:
-        return f"segments must be an integer in 32..1024 (facets per circle), got {seg!r}"
-    return None
 
 
 @dataclass(frozen=True)
@@ -93,9 +40,16 @@ class HolderParams:
         lens_face_to_glass_mm: from the lens's filter face (or barrel front) to the front glass vertex; the
             DOE-to-lens distance follows from it (measure your lens; 3.5 is an estimate for the EF 50/1.8 STM).
         die_width_mm, die_height_mm, die_thickness_mm: the fused-silica die (12 × 12 × 1 fits the 8.64 mm
-            aperture and the mask set's marks).  die_chamfer_mm: the keyed die corner (top-left, coded side).
+            aperture and the mask set's marks).  die_chamfer_mm: the larger of the two chamfered die corners
+            that key the die (``doefab.diekey``: the coded half's, this one at +y, the other half as large).
         clear_aperture_mm: DOE clear aperture (8.64).  aperture_margin_mm: extra radius of the hole.
-        clearance_mm: fit clearance per side (die in pocket, cartridge in bore, thread).
+        field_half_angle_deg: the half-angle of the field of view (degrees) the hole in front of the DOE passes
+            unvignetted: it flares toward the scene at this angle (24: the prototype's 50 mm lens on a full-frame
+            sensor, atan(21.6 / 50) = 23.4°; at most 45°, the steepest overhang that prints without support).
+        clearance_mm: fit clearance per side (die in pocket, cartridge in bore, sleeve on barrel).
+        thread_clearance_mm: the male thread's outer radius below the nominal (by default 0.22 × pitch): at least
+            0.2165 × pitch, for the printed 45° tooth to clear the lens's 60° groove, and at most what leaves a
+            quarter of the ISO basic depth (0.541 × pitch) engaged.
         wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
         flange_diameter_mm: outer diameter of both flanges (by default the least that holds the lock screws).
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
@@ -106,7 +60,7 @@ class HolderParams:
             assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
 
-    The four parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
+    The five parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
     thread (or barrel) and the die by the rules of :mod:`holder_cad.derive`, and :attr:`derived` names them.
     Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter that violates
     one is refused before anything is built, with the parameter to change and a value that works.
@@ -123,10 +77,12 @@ class HolderParams:
     die_width_mm: float = 12.0
     die_height_mm: float = 12.0
     die_thickness_mm: float = 1.0
-    die_chamfer_mm: float = 1.5
+    die_chamfer_mm: float = DEFAULT_CHAMFER_MM
     clear_aperture_mm: float = 8.64
     aperture_margin_mm: float = 0.3
+    field_half_angle_deg: float = 24.0
     clearance_mm: float = 0.25
+    thread_clearance_mm: float | None = None
     wall_mm: float = 1.2
     nozzle_mm: float = 0.4
     flange_diameter_mm: float | None = None
@@ -144,11 +100,13 @@ class HolderParams:
         self._check_given()
         self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
         self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
+        self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm))
         self._check_die_and_thread()
         self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))
         self._check_flange_diameter()
         self._resolve("flange_height_mm", derive.flange_height_mm(self))
         self._check_flange_height()
+        self._check_flare()
         bad = [b for b in fit_bounds(self) if not b["ok"]]
         if bad:
             raise HolderError("; ".join(f"{b['quantity']} = {b['value']:.3g} {b['unit']} is outside "
@@ -176,16 +134,29 @@ class HolderParams:
             raise HolderError(f"wall_mm ({self.wall_mm:g}) is below nozzle_mm ({self.nozzle_mm:g}): a printer "
                               f"cannot make walls thinner than one line: set wall_mm = {self.nozzle_mm:g} or more")
         side = min(self.die_width_mm, self.die_height_mm)
-        ledge = derive.widest_aperture_mm(side, self.wall_mm, self.aperture_margin_mm)
+        ledge = derive.widest_aperture_mm(side, self.seat_margin_mm)
         if self.clear_aperture_mm >= ledge:
-            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm:g}) + margins does not fit inside the "
-                              f"die ({self.die_width_mm:g} × {self.die_height_mm:g} mm) with a {self.wall_mm:g} mm "
+            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm:g}) + margins ({self.seat_margin_mm:.2f} "
+                              f"mm round it where the die sits, for the field's light) does not fit inside the "
+                              f"die ({self.die_width_mm:g} × {self.die_height_mm:g} mm) with a {derive.LEDGE_MM:g} mm "
                               f"ledge: set clear_aperture_mm = {math.floor(100 * ledge - 1) / 100:g} or less, or "
                               f"die_width_mm and die_height_mm to "
-                              f"{math.ceil(self.clear_aperture_mm + side - ledge + 0.01):g} or more")
+                              f"{math.ceil(self.clear_aperture_mm + side - ledge + 0.01):g} or more"
+                              + (", or a smaller field_half_angle_deg (the light of a wider field spreads more "
+                                 "inside the die)" if self.seat_margin_mm > self.aperture_margin_mm else ""))
         if self.die_chamfer_mm >= 0.5 * side:
             raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) must be less than half the die's shorter "
                               f"side ({side:g} mm): set die_chamfer_mm = {min(1.5, side / 4):g}")
+        # a die turned or flipped puts a square corner where the pocket has the smaller chamfer, or the smaller
+        # chamfer where it has the larger: that corner, s·c/√2 or (1 − s)·c/√2 beyond the pocket's chamfer, must
+        # stand proud of it by KEY_PROUD_MM however the die slides in the pocket (√2 × the clearance along the
+        # diagonal, and the clearance itself)
+        reach = ((1 + math.sqrt(2)) * self.clearance_mm + KEY_PROUD_MM) * math.sqrt(2)
+        least = reach / min(SECOND_CHAMFER, 1 - SECOND_CHAMFER)
+        if self.die_chamfer_mm <= least:
+            raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) is too small to key the die with "
+                              f"clearance_mm {self.clearance_mm:g}: a flipped die would still fit the pocket; set "
+                              f"die_chamfer_mm = {math.ceil(10 * least + 1e-9) / 10:g} or more")
         if self.thread_depth_mm * 2 >= self.thread_pitch_mm:
             raise HolderError(f"thread_depth_mm ({self.thread_depth_mm:g}) is too deep for thread_pitch_mm "
                               f"({self.thread_pitch_mm:g}) with 45° flanks (depth < pitch / 2): set "
@@ -197,6 +168,25 @@ class HolderParams:
                               f"die edge by {overlap:.2f} mm (< 0.5 mm): set washer_diameter_mm = {need:g} or more")
         if self.cartridge_need_mm > self.cartridge_radius_mm + 1e-9:
             raise HolderError(self._die_too_large())
+
+    def _check_flare(self) -> None:
+        """The hole in front of the DOE, flared toward the scene at ``field_half_angle_deg``, leaves wall_mm of the
+        cartridge around it (its body and, in its flange, the lock-screw slots)."""
+        room = min(self.cartridge_radius_mm, self.pilot_radius_mm - self.screw_clearance_mm / 2) - self.wall_mm
+        if self.aperture_flare_radius_mm <= room + 1e-9 and self._flare_to_screws_mm() >= self.wall_mm - 1e-9:
+            return
+        if self.aperture_flare_radius_mm <= room + 1e-9:
+            raise HolderError(f"field_half_angle_deg ({self.field_half_angle_deg:g}°): the hole in front of the DOE, "
+                              f"flared at that angle, comes within {self._flare_to_screws_mm():.2f} mm of the die's "
+                              f"retention screws (wall_mm {self.wall_mm:g}): set a smaller field_half_angle_deg, or "
+                              f"a larger die (die_width_mm, die_height_mm)")
+        fits = (a / 10 for a in range(int(10 * self.field_half_angle_deg), -1, -1))
+        widest = next(a for a in fits if self._flare_radius(a) <= room + 1e-9)
+        raise HolderError(f"field_half_angle_deg ({self.field_half_angle_deg:g}°): the hole in front of the DOE, "
+                          f"flared at that angle over {self.aperture_depth_mm:.2f} mm, reaches a radius of "
+                          f"{self.aperture_flare_radius_mm:.2f} mm, beyond the {room:.2f} mm the cartridge has with "
+                          f"wall_mm around it: set field_half_angle_deg = {widest:g} or less (a wider field's corners "
+                          f"are vignetted by the holder), or use a larger thread")
 
     def _die_too_large(self) -> str:
         """The refusal of a die the cartridge cannot hold, with a thread (or barrel) and a die that work."""
@@ -250,8 +240,14 @@ class HolderParams:
     # ---- derived dimensions (mm) --------------------------------------------------------------
     @property
     def thread_major_radius_mm(self) -> float:
-        """Outer radius of the printed male thread (mm), half the nominal diameter less ``clearance_mm``."""
-        return self.thread_diameter_mm / 2 - self.clearance_mm
+        """Outer radius of the printed male thread (mm), half the nominal diameter less ``thread_clearance_mm``."""
+        return self.thread_diameter_mm / 2 - self.thread_clearance_mm
+
+    @property
+    def thread_engagement_mm(self) -> float:
+        """How far (mm, radially) the printed thread reaches into the lens's female thread: its outer radius less
+        the female thread's minor radius, (D − 1.0825·P) / 2 (ISO basic profile): 0.541·P − thread_clearance_mm."""
+        return self.thread_major_radius_mm - (self.thread_diameter_mm - 2 * derive.ISO_DEPTH * self.thread_pitch_mm) / 2
 
     @property
     def thread_root_radius_mm(self) -> float:
@@ -286,6 +282,46 @@ class HolderParams:
         (a recess runs from the pocket to ``washer_recess_half_mm`` beyond its screw)."""
         rw = self.washer_recess_half_mm
         return max(self.die_diagonal_mm / 2 + self.clearance_mm, math.hypot(self.screw_offset_mm + rw, rw)) + self.wall_mm
+
+    @property
+    def aperture_depth_mm(self) -> float:
+        """How far the hole in front of the DOE reaches (mm): from the cartridge's scene-side face to the die."""
+        length = self.base_height_mm if self.mount == "thread" else self.flange_height_mm
+        return self.cartridge_flange_mm + length - self.washer_recess_mm - self.die_thickness_mm
+
+    @property
+    def seat_margin_mm(self) -> float:
+        """How much wider than the clear aperture the hole is where the die rests on it (mm, radius;
+        :func:`holder_cad.derive.seat_margin_mm`)."""
+        return derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, self.field_half_angle_deg,
+                                     self.wall_mm)
+
+    @property
+    def flare_step_mm(self) -> float:
+        """How far below the die the hole stays straight before it flares (mm): ``wall_mm`` (0 without a flare)."""
+        return self.wall_mm if self.field_half_angle_deg > 0 else 0.0
+
+    @property
+    def aperture_flare_radius_mm(self) -> float:
+        """The hole's radius at the cartridge's scene-side face (mm): the clear aperture's plus ``seat_margin_mm``
+        at the die, widening at ``field_half_angle_deg`` toward the scene below a ``flare_step_mm`` straight step."""
+        return self._flare_radius(self.field_half_angle_deg)
+
+    def _flare_to_screws_mm(self) -> float:
+        """The material (mm) between the flared hole and the bottom of the retention screws' pilot holes, square to
+        the flare."""
+        t = math.radians(self.field_half_angle_deg)
+        top = self.cartridge_flange_mm + (self.base_height_mm if self.mount == "thread" else self.flange_height_mm)
+        z_cone = top - self.washer_recess_mm - self.die_thickness_mm - self.flare_step_mm  # where the flare starts
+        z_hole = top - derive.RETENTION_DEPTH_MM
+        r_at_hole = self.clear_aperture_mm / 2 + self.seat_margin_mm + max(z_cone - z_hole, 0.0) * math.tan(t)
+        return (self.screw_offset_mm - self.pilot_hole_mm / 2 - r_at_hole) * math.cos(t)
+
+    def _flare_radius(self, angle_deg: float) -> float:
+        margin = derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, angle_deg, self.wall_mm)
+        step = self.wall_mm if angle_deg > 0 else 0.0
+        return (self.clear_aperture_mm / 2 + margin
+                + (self.aperture_depth_mm - step) * math.tan(math.radians(angle_deg)))
 
     @property
     def chamfer_height_mm(self) -> float:
@@ -344,40 +380,3 @@ class HolderParams:
     def to_dict(self) -> dict:
         """Every parameter by name (lengths in millimetres), as ``holder.json`` stores them."""
         return dataclasses.asdict(self)
-
-
-def _param_row(p: HolderParams, name: str) -> tuple:
-    lo, hi, why = PARAM_RANGES[name]
-    return name, getattr(p, name), lo, hi, "mm", why
-
-
-def fit_bounds(p: HolderParams, doe_to_lens_mm: float | None = None) -> list[dict]:
-    """Bounds on the derived quantities that decide whether the holder fits and works (millimetres).
-
-    ``doe_to_lens_mm``: a measured value (from the built mesh) instead of the formula's. Each entry:
-    quantity, value, min, max, unit, ok, fix.
-    """
-    d = p.doe_to_lens_mm if doe_to_lens_mm is None else doe_to_lens_mm
-    cart_len = p.base_height_mm if p.mount == "thread" else p.flange_height_mm
-    rows = [
-        ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
-         "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
-         "lens_face_to_glass_mm"),
-        ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",
-         "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
-        ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",
-         PARAM_RANGES["washer_recess_mm"][2]),
-        ("die_seat_thickness_mm", p.cartridge_flange_mm + cart_len - p.washer_recess_mm - p.die_thickness_mm,
-         p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
-                               "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),
-        ("wall_mm", p.wall_mm, p.nozzle_mm, 10.0, "mm", "wall_mm between one nozzle line and 10 mm"),
-    ]
-    if p.mount == "thread":
-        rows += [
-            _param_row(p, "thread_pitch_mm"),
-            ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
-             "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
-            _param_row(p, "thread_depth_mm"),
-        ]
-    return [{"quantity": q, "value": float(v), "min": lo, "max": hi, "unit": u, "ok": bool(lo <= v <= hi), "fix": fix}
-            for q, v, lo, hi, u, fix in rows]

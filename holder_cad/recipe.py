@@ -87,13 +87,15 @@ def offset_convex(points: np.ndarray, d: float) -> np.ndarray:
 
 
 def die_outline(p: HolderParams) -> np.ndarray:
-    """Die outline in the cartridge frame (mm, CCW): rectangle centred on the axis, top-left corner chamfered.
-
-    Seen from the lens side with the split line vertical, the chamfer is at the top of the coded (x < 0)
-    half; a flipped or rotated die does not fit the pocket.
+    """Die outline in the cartridge frame (mm, CCW), as the mask set's dicing outline draws it
+    (``doefab.diekey.die_outline``): a rectangle centred on the axis whose two corners on the coded half are
+    chamfered, ``die_chamfer_mm`` at +y and half that at −y. The cartridge's top in print orientation is its lens
+    side, and seen from there the coded half lies at x > 0 (the mask layout with the pattern toward the lens); a
+    turned or flipped die does not fit the pocket.
     """
-    w, h, c = p.die_width_mm / 2, p.die_height_mm / 2, p.die_chamfer_mm
-    return np.array([[-w, -h], [w, -h], [w, h], [-w + c, h], [-w, h - c]])
+    from doefab.diekey import die_outline as outline
+
+    return outline(p.die_width_mm, p.die_height_mm, p.die_chamfer_mm, coded_sign=1)
 
 
 def thread_section(p: HolderParams, n: int = 120) -> np.ndarray:
@@ -188,11 +190,16 @@ def cartridge_body(p: HolderParams) -> Body:
     pocket = offset_convex(die_outline(p), p.clearance_mm)
     die_top = top - p.washer_recess_mm  # the DOE face, toward the lens; washers sit on the die edge above it
     body.subs.append(Prism(tuple(map(tuple, pocket)), die_top - p.die_thickness_mm, top + 1.0))
-    body.subs.append(Cyl(p.clear_aperture_mm / 2 + p.aperture_margin_mm, -1.0, top + 1.0))
+    r_hole = p.clear_aperture_mm / 2 + p.seat_margin_mm
+    body.subs.append(Cyl(r_hole, -1.0, top + 1.0))
+    # toward the scene, below a straight step (wall_mm of material under the seat's rim), the hole flares at the
+    # field's half-angle: the light of the whole field reaches the whole aperture
+    z = die_top - p.die_thickness_mm - p.flare_step_mm
+    body.subs.append(Cone(r_hole + (z + 1.0) * math.tan(math.radians(p.field_half_angle_deg)), r_hole, -1.0, z))
     # retention: two M2 screws beside the pocket (±x side centres), washers recessed to overlap the die edge
     for sx in (-1, 1):
         cx = sx * p.screw_offset_mm
-        body.subs.append(Cyl(p.pilot_hole_mm / 2, top - 5.0, top + 1.0, cx, 0.0))
+        body.subs.append(Cyl(p.pilot_hole_mm / 2, top - derive.RETENTION_DEPTH_MM, top + 1.0, cx, 0.0))
         rw = p.washer_recess_half_mm  # recess: a rectangle from the pocket wall (square corners)
         edge = p.die_width_mm / 2 + p.clearance_mm - 0.01
         x0, x1 = (edge, cx + rw) if sx > 0 else (cx - rw, -edge)

@@ -98,13 +98,14 @@ def scene_die_m(scene: Scene, cam) -> float:
     from doefab.fabrication.marks import smallest_die_m
     from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
 
-    from holder_cad.derive import widest_aperture_mm
+    from holder_cad.derive import seat_margin_mm, widest_aperture_mm
     from holder_cad.params import HolderParams
 
     n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
-    h = {k: scene.holder.get(k, getattr(HolderParams, k)) for k in ("wall_mm", "aperture_margin_mm")}
+    h = {k: scene.holder.get(k, getattr(HolderParams, k))
+         for k in ("aperture_margin_mm", "die_thickness_mm", "field_half_angle_deg", "wall_mm")}
     aperture_mm = cam.aperture_diameter * 1e3
-    holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, **h)) + 1  # the least whole mm whose pocket holds it
+    holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, seat_margin_mm(**h))) + 1  # the least whole mm
     need = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
                           floor_m=max(12, holder_mm) * 1e-3)
     given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}

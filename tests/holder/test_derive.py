@@ -15,7 +15,7 @@ from holder_cad.params import HolderError, HolderParams
 
 # common photographic filter threads (mm) and the shipped mask sets' 12 mm × 12 mm die (the parameters' default)
 FILTER_THREADS_MM = [25, 27, 28, 30.5, 34, 37, 39, 40.5, 43, 46, 49, 52, 55, 58, 62, 67, 72, 77, 82, 86, 95]
-DERIVED = {"thread_pitch_mm", "thread_depth_mm", "flange_diameter_mm", "flange_height_mm"}
+DERIVED = {"thread_pitch_mm", "thread_depth_mm", "thread_clearance_mm", "flange_diameter_mm", "flange_height_mm"}
 LAYER_MM = 0.2
 
 
@@ -27,13 +27,13 @@ def _standard_pitch(d: float) -> float:
 def _least_thread_for_the_die(p: HolderParams) -> float:
     """The smallest thread (mm) whose cartridge holds the die's square-cornered washer recesses with a wall,
     from the part's stated layout: screw at the pocket edge + clearance + wall + pilot radius, recess reaching
-    the washer radius + clearance past the screw; cartridge = thread radius − clearance − tooth − wall −
+    the washer radius + clearance past the screw; cartridge = thread radius − the thread's play − tooth − wall −
     clearance."""
     c, wall = p.clearance_mm, p.wall_mm
     rw = p.washer_diameter_mm / 2 + c
     screw = p.die_width_mm / 2 + c + wall + p.pilot_hole_mm / 2
     corner = math.hypot(screw + rw, rw)
-    return 2 * (corner + wall + c + 0.2 + wall + c)  # 0.2 mm: the tooth of a 0.5 mm pitch
+    return 2 * (corner + wall + c + 0.2 + wall + 0.1)  # a 0.5 mm pitch's tooth (0.2 mm) and play (0.1 mm)
 
 
 def _layers_supported(m) -> float:
@@ -103,7 +103,8 @@ def test_the_shipped_holder_keeps_its_thread_and_height():
 @pytest.mark.parametrize("kw, key", [
     ({"thread_diameter_mm": 52.0, "flange_diameter_mm": 57.0}, "flange_diameter_mm"),
     ({"thread_diameter_mm": 40.5, "flange_diameter_mm": 57.0, "flange_height_mm": 6.0}, "flange_height_mm"),
-    ({"thread_diameter_mm": 49.0, "flange_diameter_mm": 200.0}, "flange_diameter_mm"),
+    # (the fix is a flange ~50 mm tall: a hole that long passes a 10° field, not the default 24°)
+    ({"thread_diameter_mm": 49.0, "flange_diameter_mm": 200.0, "field_half_angle_deg": 10.0}, "flange_diameter_mm"),
     ({"thread_diameter_mm": 30.5, "thread_depth_mm": 0.3}, "thread_depth_mm"),
     ({"washer_diameter_mm": 4.0}, "washer_diameter_mm"),
     ({"clear_aperture_mm": 11.0}, "clear_aperture_mm"),

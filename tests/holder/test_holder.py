@@ -30,7 +30,7 @@ def test_default_part_passes_every_check(tmp_path):
 @pytest.mark.parametrize("kw", [
     {"thread_diameter_mm": 52.0, "flange_diameter_mm": 60.0},
     {"thread_diameter_mm": 58.0, "flange_diameter_mm": 66.0},
-    {"die_width_mm": 13.0, "die_height_mm": 12.0, "die_thickness_mm": 1.5, "clearance_mm": 0.3},
+    {"die_width_mm": 13.0, "die_height_mm": 12.0, "die_thickness_mm": 1.5, "clearance_mm": 0.3, "die_chamfer_mm": 2.4},
     {"mount": "slip", "flange_diameter_mm": 70.0},
 ])
 def test_parameter_sweep_passes(tmp_path, kw):
@@ -46,9 +46,9 @@ def test_thread_geometry_is_the_filter_thread():
     sec = np.array(base.slice(1.0).to_polygons()[0])
     polys = base.slice(1.0).to_polygons()
     r_all = np.concatenate([np.hypot(*np.array(q).T) for q in polys])
-    assert r_all.max() == pytest.approx(49.0 / 2 - p.clearance_mm, abs=0.01)
+    assert r_all.max() == pytest.approx(49.0 / 2 - 0.22 * 0.75, abs=0.01)  # the thread's play: 0.22 × pitch
     sec = thread_section(p)
-    assert np.hypot(*sec.T).min() == pytest.approx(49.0 / 2 - p.clearance_mm - 0.3, abs=1e-9)
+    assert np.hypot(*sec.T).min() == pytest.approx(49.0 / 2 - 0.22 * 0.75 - 0.3, abs=1e-9)
     # one pitch up, the section repeats (single-start thread, pitch 0.75 mm)
     a = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9).to_polygons(), key=len)).T), 3))
     b = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9 + 0.75).to_polygons(), key=len)).T), 3))

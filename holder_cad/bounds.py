@@ -1,0 +1,58 @@
+"""Bounds on the holder's derived quantities that decide whether it fits and works (``fit_bounds``)."""
+
+from __future__ import annotations
+
+import math
+
+from holder_cad import derive
+from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES
+
+__all__ = ["fit_bounds"]
+
+
+def _param_row(p, name: str) -> tuple:
+    lo, hi, why = PARAM_RANGES[name]
+    return name, getattr(p, name), lo, hi, "mm", why
+
+
+def _play_fix(p) -> str:
+    """What the thread's play must be: enough for the printed 45° tooth to clear the lens's 60° groove, little
+    enough to leave ``ENGAGED_MIN`` of the basic thread depth engaged."""
+    lo = math.ceil(2000 * derive.THREAD_PLAY_MIN * p.thread_pitch_mm) / 2000
+    hi = math.floor(2000 * (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm) / 2000
+    return (f"the printed thread's play must let its 45° tooth clear the lens's 60° groove and leave a quarter of "
+            f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
+
+
+def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
+    """Bounds on the derived quantities that decide whether the holder fits and works (millimetres).
+
+    ``doe_to_lens_mm``: a measured value (from the built mesh) instead of the formula's. Each entry:
+    quantity, value, min, max, unit, ok, fix.
+    """
+    d = p.doe_to_lens_mm if doe_to_lens_mm is None else doe_to_lens_mm
+    cart_len = p.base_height_mm if p.mount == "thread" else p.flange_height_mm
+    rows = [
+        ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
+         "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
+         "lens_face_to_glass_mm"),
+        ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",
+         "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
+        ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",
+         PARAM_RANGES["washer_recess_mm"][2]),
+        ("die_seat_thickness_mm", p.cartridge_flange_mm + cart_len - p.washer_recess_mm - p.die_thickness_mm,
+         p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
+                               "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),
+        ("wall_mm", p.wall_mm, p.nozzle_mm, 10.0, "mm", "wall_mm between one nozzle line and 10 mm"),
+    ]
+    if p.mount == "thread":
+        rows += [
+            _param_row(p, "thread_pitch_mm"),
+            ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
+             "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
+            ("thread_clearance_mm", p.thread_clearance_mm, derive.THREAD_PLAY_MIN * p.thread_pitch_mm,
+             (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm, "mm", _play_fix(p)),
+            _param_row(p, "thread_depth_mm"),
+        ]
+    return [{"quantity": q, "value": float(v), "min": lo, "max": hi, "unit": u, "ok": bool(lo <= v <= hi), "fix": fix}
+            for q, v, lo, hi, u, fix in rows]

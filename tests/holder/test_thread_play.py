@@ -1,0 +1,43 @@
+"""The printed thread fits the lens's ISO metric filter thread: with its derived play the printed tooth (45°
+flanks) is no wider than the female thread's 60° groove where they meet, and it still engages; a play that jams
+the tooth or leaves too little engaged is refused. The ISO basic profile is computed here from its definition
+(H = √3/2·P; the internal thread's minor diameter D1 = D − 2·(5/8)·H; its groove 3/4·P wide there)."""
+
+import math
+
+import pytest
+
+from holder_cad.params import HolderError, HolderParams
+from holder_cad.recipe import thread_section
+
+
+def _groove_and_tooth(p: HolderParams) -> tuple[float, float, float]:
+    """(the female groove's width at D1, the printed tooth's width at that radius, the radial engagement), mm."""
+    pitch, d = p.thread_pitch_mm, p.thread_diameter_mm
+    h = math.sqrt(3) / 2 * pitch
+    r1 = d / 2 - 5 / 8 * h  # the internal thread's minor radius
+    groove = pitch - pitch / 4  # its crest flat is P/4 wide: the space between its crests 3P/4
+    r = thread_section(p, 720)
+    crest = float(max(math.hypot(x, y) for x, y in r))  # the printed thread's outer radius, from its section
+    depth = crest - r1  # how far the printed tooth reaches past the female crests
+    crest_flat = (pitch - 2 * p.thread_depth_mm) / 2
+    tooth = crest_flat + 2 * depth  # 45° flanks widen it by the depth on each side
+    return groove, tooth, depth
+
+
+@pytest.mark.parametrize("thread", [30.5, 49.0, 95.0])
+def test_the_derived_play_clears_the_groove_and_engages(thread):
+    p = HolderParams(thread_diameter_mm=thread)
+    groove, tooth, depth = _groove_and_tooth(p)
+    assert tooth <= groove + 1e-9
+    basic = 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm
+    assert depth >= 0.5 * basic  # more than half the basic depth engaged (59 %)
+
+
+@pytest.mark.parametrize("play, words", [(0.10, "between 0.1625 and"), (0.40, "between 0.1625 and")])
+def test_a_play_that_jams_or_barely_engages_is_refused(play, words):
+    with pytest.raises(HolderError, match=f"thread_clearance_mm = {play:.3g} mm is outside.*{words}"):
+        HolderParams(thread_clearance_mm=play)
+    hp = HolderParams()
+    ok = HolderParams(thread_clearance_mm=0.25)  # the old default: loose, a third of the depth engaged
+    assert _groove_and_tooth(ok)[1] < _groove_and_tooth(hp)[1]
