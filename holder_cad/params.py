@@ -171,22 +171,25 @@ class HolderParams:
 
     def _check_flare(self) -> None:
         """The hole in front of the DOE, flared toward the scene at ``field_half_angle_deg``, leaves wall_mm of the
-        cartridge around it (its body and, in its flange, the lock-screw slots)."""
-        room = min(self.cartridge_radius_mm, self.pilot_radius_mm - self.screw_clearance_mm / 2) - self.wall_mm
-        if self.aperture_flare_radius_mm <= room + 1e-9 and self._flare_to_screws_mm() >= self.wall_mm - 1e-9:
+        cartridge around it (its body, the die's retention screws and, in its flange, the lock-screw slots)."""
+        if self._flare_fits(self.field_half_angle_deg):
             return
-        if self.aperture_flare_radius_mm <= room + 1e-9:
-            raise HolderError(f"field_half_angle_deg ({self.field_half_angle_deg:g}°): the hole in front of the DOE, "
-                              f"flared at that angle, comes within {self._flare_to_screws_mm():.2f} mm of the die's "
-                              f"retention screws (wall_mm {self.wall_mm:g}): set a smaller field_half_angle_deg, or "
-                              f"a larger die (die_width_mm, die_height_mm)")
         fits = (a / 10 for a in range(int(10 * self.field_half_angle_deg), -1, -1))
-        widest = next(a for a in fits if self._flare_radius(a) <= room + 1e-9)
+        widest = next((a for a in fits if self._flare_fits(a)), 0.0)
         raise HolderError(f"field_half_angle_deg ({self.field_half_angle_deg:g}°): the hole in front of the DOE, "
                           f"flared at that angle over {self.aperture_depth_mm:.2f} mm, reaches a radius of "
-                          f"{self.aperture_flare_radius_mm:.2f} mm, beyond the {room:.2f} mm the cartridge has with "
-                          f"wall_mm around it: set field_half_angle_deg = {widest:g} or less (a wider field's corners "
-                          f"are vignetted by the holder), or use a larger thread")
+                          f"{self.aperture_flare_radius_mm:.2f} mm and comes within "
+                          f"{self._flare_to_screws_mm(self.field_half_angle_deg):.2f} mm of the die's retention "
+                          f"screws, leaving the cartridge less than wall_mm ({self.wall_mm:g} mm) round it: set "
+                          f"field_half_angle_deg = {widest:g} or less (a wider field's corners are vignetted by the "
+                          f"holder), or use a larger thread or die")
+
+    def _flare_fits(self, angle_deg: float) -> bool:
+        """Whether a hole flared at ``angle_deg`` leaves wall_mm round it: to the cartridge's side and its flange's
+        lock-screw slots, and to the die's retention screws."""
+        room = min(self.cartridge_radius_mm, self.pilot_radius_mm - self.screw_clearance_mm / 2) - self.wall_mm
+        return (self._flare_radius(angle_deg) <= room + 1e-9
+                and self._flare_to_screws_mm(angle_deg) >= self.wall_mm - 1e-9)
 
     def _die_too_large(self) -> str:
         """The refusal of a die the cartridge cannot hold, with a thread (or barrel) and a die that work."""
@@ -307,14 +310,16 @@ class HolderParams:
         at the die, widening at ``field_half_angle_deg`` toward the scene below a ``flare_step_mm`` straight step."""
         return self._flare_radius(self.field_half_angle_deg)
 
-    def _flare_to_screws_mm(self) -> float:
-        """The material (mm) between the flared hole and the bottom of the retention screws' pilot holes, square to
-        the flare."""
-        t = math.radians(self.field_half_angle_deg)
+    def _flare_to_screws_mm(self, angle_deg: float) -> float:
+        """The material (mm) between a hole flared at ``angle_deg`` and the bottom of the retention screws' pilot
+        holes, square to the flare."""
+        t = math.radians(angle_deg)
         top = self.cartridge_flange_mm + (self.base_height_mm if self.mount == "thread" else self.flange_height_mm)
-        z_cone = top - self.washer_recess_mm - self.die_thickness_mm - self.flare_step_mm  # where the flare starts
+        step = self.wall_mm if angle_deg > 0 else 0.0
+        z_cone = top - self.washer_recess_mm - self.die_thickness_mm - step  # where the flare starts
         z_hole = top - derive.RETENTION_DEPTH_MM
-        r_at_hole = self.clear_aperture_mm / 2 + self.seat_margin_mm + max(z_cone - z_hole, 0.0) * math.tan(t)
+        margin = derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, angle_deg, self.wall_mm)
+        r_at_hole = self.clear_aperture_mm / 2 + margin + max(z_cone - z_hole, 0.0) * math.tan(t)
         return (self.screw_offset_mm - self.pilot_hole_mm / 2 - r_at_hole) * math.cos(t)
 
     def _flare_radius(self, angle_deg: float) -> float:
