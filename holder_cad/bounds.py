@@ -18,7 +18,7 @@ def _param_row(p, name: str) -> tuple:
 def _play_fix(p) -> str:
     """What the thread's play must be: enough for the printed 45° tooth to clear the lens's 60° groove, little
     enough to leave ``ENGAGED_MIN`` of the basic thread depth engaged."""
-    lo = math.ceil(2000 * derive.THREAD_PLAY_MIN * p.thread_pitch_mm) / 2000
+    lo = math.ceil(2000 * derive.least_thread_play_mm(p.thread_pitch_mm, p.thread_depth_mm)) / 2000
     hi = math.floor(2000 * (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm) / 2000
     return (f"the printed thread's play must let its 45° tooth clear the lens's 60° groove and leave a quarter of "
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
@@ -50,7 +50,8 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
             _param_row(p, "thread_pitch_mm"),
             ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
              "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
-            ("thread_clearance_mm", p.thread_clearance_mm, derive.THREAD_PLAY_MIN * p.thread_pitch_mm,
+            ("thread_clearance_mm", p.thread_clearance_mm, derive.least_thread_play_mm(p.thread_pitch_mm,
+                                                                                       p.thread_depth_mm),
              (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm, "mm", _play_fix(p)),
             _param_row(p, "thread_depth_mm"),
         ]

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
-           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "THREAD_PLAY_MIN", "ISO_DEPTH",
+           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm"]
@@ -36,7 +36,7 @@ COMMON_FILTER_THREADS_MM = (25.0, 27.0, 28.0, 30.5, 34.0, 37.0, 39.0, 40.5, 43.0
 DERIVED = {
     "thread_pitch_mm": "from thread_diameter_mm: 0.5 up to 40.5, 0.75 up to 82, 1.0 above",
     "thread_depth_mm": "0.4 × thread_pitch_mm",
-    "thread_clearance_mm": "0.22 × thread_pitch_mm (the 45° tooth clears the ISO 60° groove; 59 % engaged)",
+    "thread_clearance_mm": "0.22 × thread_pitch_mm for the default tooth (its 45° flanks clear the ISO 60° groove)",
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
@@ -87,17 +87,24 @@ def standard_pitch_mm(thread_diameter_mm: float) -> float:
     return 0.75 if thread_diameter_mm <= 82.0 else 1.0
 
 
-# the printed tooth (45° flanks, a 0.1 × pitch crest) fits the ISO 60° female groove (0.75 × pitch wide at its minor
-# diameter) only with this much radial play per pitch: its width there, 0.1·P + 2·(0.541·P − play), ≤ 0.75·P
-THREAD_PLAY_MIN = 0.2165
 ISO_DEPTH = 0.54127  # an ISO metric thread's basic depth of engagement, × pitch: (D − D1) / 2
 
 
-def thread_clearance_mm(pitch_mm: float) -> float:
-    """The printed thread's radial play (mm) in a filter thread of this pitch: 0.22 × pitch, just above the least
-    at which its 45° tooth clears the lens's 60° groove (``THREAD_PLAY_MIN``); 0.32 × pitch, 59 % of the ISO basic
-    depth (``ISO_DEPTH``), stays engaged."""
-    return round(0.22 * pitch_mm, 6)
+def least_thread_play_mm(pitch_mm: float, depth_mm: float) -> float:
+    """The least radial play (mm) at which the printed tooth (45° flanks, ``depth_mm`` deep, its crest flat
+    (pitch − 2·depth) / 2) fits the lens's ISO 60° groove, 0.75 × pitch wide at the female thread's minor diameter:
+    the tooth's width there, crest + 2·(0.541·P − play), at most that (0.2165 × pitch for the 0.4 × pitch tooth).
+
+    Example: ``round(least_thread_play_mm(0.75, 0.3), 4)`` → 0.1622 (mm)."""
+    crest = (pitch_mm - 2 * depth_mm) / 2
+    return max(0.0, ISO_DEPTH * pitch_mm - (0.75 * pitch_mm - crest) / 2)
+
+
+def thread_clearance_mm(pitch_mm: float, depth_mm: float) -> float:
+    """The printed thread's radial play (mm) in a filter thread of this pitch and tooth depth: 0.0035 × pitch more
+    than the least at which its 45° tooth clears the lens's 60° groove (``least_thread_play_mm``): 0.22 × pitch for
+    the 0.4 × pitch tooth, which leaves 0.32 × pitch, 59 % of the ISO basic depth (``ISO_DEPTH``), engaged."""
+    return round(least_thread_play_mm(pitch_mm, depth_mm) + 0.0035 * pitch_mm, 6)
 
 
 def standard_depth_mm(pitch_mm: float) -> float:

@@ -100,7 +100,7 @@ class HolderParams:
         self._check_given()
         self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
         self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
-        self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm))
+        self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm, self.thread_depth_mm))
         self._check_die_and_thread()
         self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))
         self._check_flange_diameter()

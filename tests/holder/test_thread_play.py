@@ -25,13 +25,13 @@ def _groove_and_tooth(p: HolderParams) -> tuple[float, float, float]:
     return groove, tooth, depth
 
 
-@pytest.mark.parametrize("thread", [30.5, 49.0, 95.0])
-def test_the_derived_play_clears_the_groove_and_engages(thread):
-    p = HolderParams(thread_diameter_mm=thread)
+@pytest.mark.parametrize("thread, depth", [(30.5, None), (49.0, None), (95.0, None), (49.0, 0.2)])
+def test_the_derived_play_clears_the_groove_and_engages(thread, depth):
+    p = HolderParams(thread_diameter_mm=thread, thread_depth_mm=depth)  # 0.2 mm: a shallower tooth, a wider crest
     groove, tooth, depth = _groove_and_tooth(p)
     assert tooth <= groove + 1e-9
     basic = 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm
-    assert depth >= 0.5 * basic  # more than half the basic depth engaged (59 %)
+    assert depth >= 0.4 * basic  # 47–59 % of the basic depth engaged
 
 
 @pytest.mark.parametrize("play, words", [(0.10, "between 0.1625 and"), (0.40, "between 0.1625 and")])
