@@ -31,7 +31,6 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
     quantity, value, min, max, unit, ok, fix.
     """
     d = p.doe_to_lens_mm if doe_to_lens_mm is None else doe_to_lens_mm
-    cart_len = p.base_height_mm if p.mount == "thread" else p.flange_height_mm
     rows = [
         ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
          "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
@@ -40,7 +39,7 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
          "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
         ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",
          PARAM_RANGES["washer_recess_mm"][2]),
-        ("die_seat_thickness_mm", p.cartridge_flange_mm + cart_len - p.washer_recess_mm - p.die_thickness_mm,
+        ("die_seat_thickness_mm", p.cartridge_flange_mm + p.cartridge_length_mm - p.washer_recess_mm - p.die_thickness_mm,
          p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
                                "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),
         ("wall_mm", p.wall_mm, p.nozzle_mm, 10.0, "mm", "wall_mm between one nozzle line and 10 mm"),

@@ -105,11 +105,11 @@ def aperture_clear(assembly_parts, radius_mm: float, rings: int = 12, angle_deg:
     face and its chrome stop) that hit the assembly (0 = unobstructed): axial rays, or at ``angle_deg`` to the
     axis from ``azimuths`` directions round it (the light of a field point that far off axis), refracted inside
     the ``die_mm`` thick die in front of the disk (index ``DIE_INDEX_MIN``) and straight in air."""
-    from holder_cad.derive import DIE_INDEX_MIN
+    from holder_cad.derive import die_spread_mm
 
     b = [m.bounding_box() for m in assembly_parts]
     reach = max(max(x[5] for x in b) - z_mm, z_mm - min(x[2] for x in b)) + 10  # beyond the assembly both ways
-    spread = die_mm * math.tan(math.asin(math.sin(math.radians(angle_deg)) / DIE_INDEX_MIN))  # inside the die
+    spread = die_spread_mm(die_mm, angle_deg)  # inside the die
     pts = [(0.0, 0.0)]
     for k in range(1, rings + 1):
         r = radius_mm * k / rings

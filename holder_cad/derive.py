@@ -21,7 +21,7 @@ import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
            "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "least_thread_play_mm", "ISO_DEPTH",
-           "widest_aperture_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
+           "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm"]
 
@@ -52,6 +52,12 @@ DIE_INDEX_MIN = 1.43
 FLARE_SLACK_MM = 0.1  # the hole's least radial clearance of the field's light, for a print's undersized holes
 
 
+def die_spread_mm(die_thickness_mm: float, angle_deg: float) -> float:
+    """How far (mm) the light of a field point ``angle_deg`` off axis moves sideways crossing the die, refracted at
+    ``DIE_INDEX_MIN`` (Snell's law). Example: ``round(die_spread_mm(1.0, 24.0), 3)`` → 0.297."""
+    return die_thickness_mm * math.tan(math.asin(math.sin(math.radians(angle_deg)) / DIE_INDEX_MIN))
+
+
 def seat_margin_mm(aperture_margin_mm: float, die_thickness_mm: float, field_half_angle_deg: float,
                    wall_mm: float) -> float:
     """How much wider than the clear aperture (radius, mm) the hole is where the die rests on it:
@@ -60,11 +66,10 @@ def seat_margin_mm(aperture_margin_mm: float, die_thickness_mm: float, field_hal
     keeps straight below the seat (so the seat's rim has wall_mm of material under it).
 
     Example: ``round(seat_margin_mm(0.3, 1.0, 24.0, 1.2), 2)`` → 0.93 (mm)."""
-    t = math.radians(field_half_angle_deg)
-    if t <= 0:
+    if field_half_angle_deg <= 0:
         return aperture_margin_mm
-    inside = math.asin(math.sin(t) / DIE_INDEX_MIN)
-    return max(aperture_margin_mm, die_thickness_mm * math.tan(inside) + FLARE_SLACK_MM + wall_mm * math.tan(t))
+    flare = wall_mm * math.tan(math.radians(field_half_angle_deg))
+    return max(aperture_margin_mm, die_spread_mm(die_thickness_mm, field_half_angle_deg) + FLARE_SLACK_MM + flare)
 
 
 def widest_aperture_mm(die_side_mm: float, seat_margin: float) -> float:

@@ -188,7 +188,7 @@ class HolderParams:
         """Whether a hole flared at ``angle_deg`` leaves wall_mm round it: to the cartridge's side and its flange's
         lock-screw slots, and to the die's retention screws."""
         room = min(self.cartridge_radius_mm, self.pilot_radius_mm - self.screw_clearance_mm / 2) - self.wall_mm
-        return (self._flare_radius(angle_deg) <= room + 1e-9
+        return (self._hole_radius(angle_deg, self.aperture_depth_mm) <= room + 1e-9
                 and self._flare_to_screws_mm(angle_deg) >= self.wall_mm - 1e-9)
 
     def _die_too_large(self) -> str:
@@ -287,10 +287,15 @@ class HolderParams:
         return max(self.die_diagonal_mm / 2 + self.clearance_mm, math.hypot(self.screw_offset_mm + rw, rw)) + self.wall_mm
 
     @property
+    def cartridge_length_mm(self) -> float:
+        """The cartridge's body below its flange (mm): it reaches the base's lens-side end (the thread's tip, or the
+        slip-fit plate's face)."""
+        return self.base_height_mm if self.mount == "thread" else self.flange_height_mm
+
+    @property
     def aperture_depth_mm(self) -> float:
         """How far the hole in front of the DOE reaches (mm): from the cartridge's scene-side face to the die."""
-        length = self.base_height_mm if self.mount == "thread" else self.flange_height_mm
-        return self.cartridge_flange_mm + length - self.washer_recess_mm - self.die_thickness_mm
+        return self.cartridge_flange_mm + self.cartridge_length_mm - self.washer_recess_mm - self.die_thickness_mm
 
     @property
     def seat_margin_mm(self) -> float:
@@ -302,31 +307,29 @@ class HolderParams:
     @property
     def flare_step_mm(self) -> float:
         """How far below the die the hole stays straight before it flares (mm): ``wall_mm`` (0 without a flare)."""
-        return self.wall_mm if self.field_half_angle_deg > 0 else 0.0
+        return self._flare_step(self.field_half_angle_deg)
 
     @property
     def aperture_flare_radius_mm(self) -> float:
         """The hole's radius at the cartridge's scene-side face (mm): the clear aperture's plus ``seat_margin_mm``
         at the die, widening at ``field_half_angle_deg`` toward the scene below a ``flare_step_mm`` straight step."""
-        return self._flare_radius(self.field_half_angle_deg)
+        return self._hole_radius(self.field_half_angle_deg, self.aperture_depth_mm)
+
+    def _flare_step(self, angle_deg: float) -> float:
+        return self.wall_mm if angle_deg > 0 else 0.0
+
+    def _hole_radius(self, angle_deg: float, below_die_mm: float) -> float:
+        """The radius (mm) of a hole flared at ``angle_deg``, ``below_die_mm`` in front of the die's back face."""
+        margin = derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, angle_deg, self.wall_mm)
+        return (self.clear_aperture_mm / 2 + margin
+                + max(below_die_mm - self._flare_step(angle_deg), 0.0) * math.tan(math.radians(angle_deg)))
 
     def _flare_to_screws_mm(self, angle_deg: float) -> float:
         """The material (mm) between a hole flared at ``angle_deg`` and the bottom of the retention screws' pilot
         holes, square to the flare."""
-        t = math.radians(angle_deg)
-        top = self.cartridge_flange_mm + (self.base_height_mm if self.mount == "thread" else self.flange_height_mm)
-        step = self.wall_mm if angle_deg > 0 else 0.0
-        z_cone = top - self.washer_recess_mm - self.die_thickness_mm - step  # where the flare starts
-        z_hole = top - derive.RETENTION_DEPTH_MM
-        margin = derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, angle_deg, self.wall_mm)
-        r_at_hole = self.clear_aperture_mm / 2 + margin + max(z_cone - z_hole, 0.0) * math.tan(t)
-        return (self.screw_offset_mm - self.pilot_hole_mm / 2 - r_at_hole) * math.cos(t)
-
-    def _flare_radius(self, angle_deg: float) -> float:
-        margin = derive.seat_margin_mm(self.aperture_margin_mm, self.die_thickness_mm, angle_deg, self.wall_mm)
-        step = self.wall_mm if angle_deg > 0 else 0.0
-        return (self.clear_aperture_mm / 2 + margin
-                + (self.aperture_depth_mm - step) * math.tan(math.radians(angle_deg)))
+        seat_to_hole = derive.RETENTION_DEPTH_MM - self.washer_recess_mm - self.die_thickness_mm
+        r_at_hole = self._hole_radius(angle_deg, seat_to_hole)
+        return (self.screw_offset_mm - self.pilot_hole_mm / 2 - r_at_hole) * math.cos(math.radians(angle_deg))
 
     @property
     def chamfer_height_mm(self) -> float:

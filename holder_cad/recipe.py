@@ -182,8 +182,7 @@ def cartridge_body(p: HolderParams) -> Body:
     """The DOE cartridge in print orientation: flange on the bed (z = 0), lens-side end at the top."""
     rf = p.flange_diameter_mm / 2
     cf = p.cartridge_flange_mm
-    length = p.base_height_mm if p.mount == "thread" else p.flange_height_mm  # reaches the lens-side face
-    top = cf + length
+    top = cf + p.cartridge_length_mm  # the lens-side face
     body = Body("cartridge")
     body.adds.append(Cyl(rf, 0.0, cf))
     body.adds.append(Cyl(p.cartridge_radius_mm, cf - 1e-3, top))

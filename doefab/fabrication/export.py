@@ -24,7 +24,7 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readme
-from doefab.fabrication.marks import MarkSpec, key_site, mark_layout
+from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_layout
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
@@ -41,7 +41,8 @@ class MaskOptions:
         name: base name of the GDS/OASIS files.  oasis: also write OASIS (identical geometry).
         die_m: die (plate pattern) size, square, metres.  die_chamfer_m: the dicing outline's key, the larger of
             the two chamfers on the coded half's corners (``doefab.diekey``; the holder's ``die_chamfer_mm``),
-            metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a smaller die's side.  cd_m: critical dimension (default: the pixel pitch).
+            metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a smaller die's side.
+        cd_m: critical dimension (default: the pixel pitch).
         vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
         align_chain: ``"chrome"`` (every etch mask aligns to the chrome keys; errors don't accumulate) or
             ``"sequential"`` (mask k aligns to the plate written before it).
@@ -338,7 +339,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
                          "the layout)") if opts.pattern_faces == "lens" else "layout column j = design column j",
         "die_m": die_nm * 1e-9,
         "die_chamfer_m": _chamfer_nm(opts) * 1e-9,
-        "mark_clear_margin_m": MarkSpec(0, 0, 0).clear_margin_nm * 1e-9,
+        "mark_clear_margin_m": CLEAR_MARGIN_NM * 1e-9,
         "mark_clear_margin_means": "the chrome plate leaves the glass clear this far beyond every mark's bounding box",
         "die_outline_means": (f"layer 100, the dicing outline: the two corners of the coded half (x "
                               f"{'>' if opts.pattern_faces == 'lens' else '<'} 0 in the layout) chamfered, legs "

@@ -29,12 +29,13 @@ import numpy as np
 from doefab.diekey import die_outline
 
 __all__ = ["MarkSpec", "chrome_polygons", "clear_fields", "mark_polygons", "key_site", "check_mark_placement",
-           "mark_layout", "smallest_die_m"]
+           "mark_layout", "smallest_die_m", "CLEAR_MARGIN_NM"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
 WINDOW_NM = 260_000
 SITE_STEP_NM = 300_000
+CLEAR_MARGIN_NM = 40_000  # the clear glass the chrome plate leaves round every mark's bounding box
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class MarkSpec:
     cd_nm: int
     chamfer_nm: int = 0  # the die key's larger chamfer (``doefab.diekey``); 0: a square outline
     coded_sign: int = 1  # the coded half's side of the layout: x > 0 (1, pattern toward the lens) or x < 0 (−1)
-    clear_margin_nm: int = 40_000  # clear glass the chrome plate leaves round every mark (0: marks on chrome)
+    clear_margin_nm: int = CLEAR_MARGIN_NM  # clear glass the chrome plate leaves round every mark (0: none)
 
 
 def _rect(x0, y0, x1, y1, layer, datatype):

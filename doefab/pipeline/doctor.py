@@ -119,13 +119,13 @@ def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]
     from doefab.fabrication.process import mask_count
     from doefab.tolerance.fields import part_bytes
     from doefab.tolerance.grid import GRIDS, REFERENCE
-    from doefab.tolerance.schedulers import parse_scheduler
+    from doefab.tolerance.schedulers import parts_at_once
 
     have = available_bytes()
     if have is None:
         return []
     supersample = tol.get("supersample")
-    parts = tol.get("workers") or (parse_scheduler(tol["scheduler"]) if tol.get("scheduler") else None) or 1
+    parts = parts_at_once(tol.get("workers"), tol.get("scheduler"))
     s, m = int(supersample or 1), mask_count(n_levels)
     need = parts * part_bytes(cam.doe_pixels, s, m, n_bands)
     finer = "" if supersample else "; the grid study may pick a finer one: " + ", ".join(

@@ -47,11 +47,6 @@ class Key:
     resolve: Callable | None = None
 
 
-def _scheduler(value) -> None:
-    """A scene's ``tolerance.scheduler``, checked as ``--scheduler`` is (``tolerance.schedulers``)."""
-    parse_scheduler(value)
-
-
 KEYS = (
     Key("", "task", "choice", choices=tuple(APPLICATIONS), default="required",
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
@@ -146,7 +141,7 @@ KEYS = (
         help="local worker processes judging the Monte Carlo's parts (auto: one per core when there are at least 4 "
              "parts per core, no more than fit in memory); how the parts run, not what they give: a change reruns "
              "nothing"),
-    Key("tolerance", "scheduler", "str", default="none", resolve=_scheduler,
+    Key("tolerance", "scheduler", "str", default="none", resolve=parse_scheduler,
         help="a Dask scheduler judging the Monte Carlo's parts instead of local workers: local:N (a LocalCluster of "
              "N workers started for the run) or tcp://HOST:PORT (a running scheduler, which must answer when the "
              "run starts); a change reruns nothing"),

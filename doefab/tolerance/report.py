@@ -165,15 +165,13 @@ def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
     ``record``."""
     from doefab.tolerance.fields import part_size, require_memory
     from doefab.tolerance.grid import GRIDS
-    from doefab.tolerance.schedulers import parse_scheduler
+    from doefab.tolerance.schedulers import parts_at_once
 
     bounds: dict = {}
     for v in record.get("kinds", {}).values():
         for s, b in v.get("bound", {}).items():
             bounds[int(s)] = max(bounds.get(int(s), 0.0), float(b))
-    # auto workers: no more than fit (``montecarlo.monte_carlo``); a tcp:// cluster's workers judge elsewhere
-    parts = (workers or 1) if not scheduler else (parse_scheduler(scheduler) or 1)
-    require_memory(part_size(judge.design, judge.n_masks), grid, GRIDS, bounds, parts=parts)
+    require_memory(part_size(judge.design, judge.n_masks), grid, GRIDS, bounds, parts=parts_at_once(workers, scheduler))
 
 
 STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)

@@ -13,7 +13,7 @@ import re
 
 from doefab.errors import DoefabError
 
-__all__ = ["MAX_WORKERS", "parse_scheduler", "check_reachable"]
+__all__ = ["MAX_WORKERS", "parse_scheduler", "check_reachable", "parts_at_once"]
 
 MAX_WORKERS = 64  # local worker processes (a pool's or a LocalCluster's) one study starts at most
 
@@ -67,3 +67,17 @@ def check_reachable(text: str | None, name: str = "--scheduler", timeout_s: floa
     except OSError as exc:
         raise DoefabError(f"{_who(text, name)}: no Dask scheduler answers there ({exc.strerror or exc}): start one "
                           f"(dask scheduler --port {port}, then dask worker {text}) or use local:N") from None
+
+
+def parts_at_once(workers: int | None, scheduler: str | None) -> int:
+    """How many parts this machine judges at once: ``workers`` (None: one, as the automatic count starts no more
+    workers than fit), a ``local:N`` scheduler's N, or one for a ``tcp://`` cluster, whose workers judge elsewhere
+    (the tornado still judges here).
+
+    Example:
+        >>> parts_at_once(None, "local:3"), parts_at_once(2, None), parts_at_once(None, "tcp://h:8786")
+        (3, 2, 1)
+    """
+    if scheduler:
+        return parse_scheduler(scheduler) or 1
+    return workers or 1
