@@ -24,6 +24,14 @@ def _play_fix(p) -> str:
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
 
 
+def _head_fix(p) -> str:
+    """How to keep the retention screws' heads clear of the lens glass."""
+    need = derive.washer_recess_mm(p)
+    return (f"the M2 screw heads ({p.screw_head_mm:g} mm on {p.washer_thickness_mm:g} mm washers) sweep the lens's front "
+            f"glass as the base turns: set washer_recess_mm = {need:g} or more (the DOE then sits "
+            f"{p.glass_gap_mm + need:.2f} mm from the glass), or leave it out (it follows), or use a lower head")
+
+
 def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
     """Bounds on the derived quantities that decide whether the holder fits and works (millimetres).
 
@@ -35,6 +43,8 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
         ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
          "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
          "lens_face_to_glass_mm"),
+        ("screw_head_to_glass_mm", round(d - p.washer_thickness_mm - p.screw_head_mm, 6),
+         derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm", _head_fix(p)),
         ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",
          "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
         ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",

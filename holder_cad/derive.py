@@ -10,6 +10,8 @@ that conflicts is refused by :class:`holder_cad.params.HolderParams` with the va
   holes and slots with ``wall_mm`` on both sides.
 - ``flange_height_mm``: threaded base: the smallest half millimetre above the 45° chamfer plus ``wall_mm``
   that leaves the lock-screw pilot holes ``PILOT_DEPTH_MM`` deep; slip-fit plate: ``SLIP_PLATE_MM``.
+- ``washer_recess_mm``: the least tenth of a millimetre that sinks the retention washers into the cartridge's
+  lens-side end and keeps the M2 screw heads on them ``HEAD_GLASS_CLEARANCE_MM`` clear of the lens glass.
 
 Functions take a parameter set whose other dimensions are already resolved (duck-typed, any object with the
 ``HolderParams`` fields and properties).
@@ -23,7 +25,8 @@ __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILO
            "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
-           "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm"]
+           "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm", "HEAD_GLASS_CLEARANCE_MM",
+           "washer_recess_mm"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
 SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
@@ -40,7 +43,12 @@ DERIVED = {
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
+    "washer_recess_mm": "the least tenth of a mm that sinks the washers and keeps the screw heads 0.2 mm clear of "
+                        "the lens glass",
 }
+# the retention screws' heads sweep a circle over the lens's front glass as the base is screwed in: they stay this
+# far in front of the glass's vertex plane (twice a printed part's length tolerance, about 0.1 mm)
+HEAD_GLASS_CLEARANCE_MM = 0.2
 
 
 LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on
@@ -159,3 +167,13 @@ def max_flange_diameter_mm(p, height_mm: float) -> float:
     by_chamfer = height_mm - wall + major
     by_pilots = 2 * (height_mm - PILOT_DEPTH_MM - p.pilot_hole_mm / 2 - wall * math.sqrt(2) + major) - p.bore_radius_mm
     return float(math.floor(2 * min(by_chamfer, by_pilots) + _EPS))
+
+
+def washer_recess_mm(p) -> float:
+    """The derived washer recess (mm): the least tenth of a millimetre that sinks each retention washer
+    (``washer_thickness_mm``) into the cartridge's lens-side end and keeps the screw head on it (``screw_head_mm``
+    tall) ``HEAD_GLASS_CLEARANCE_MM`` in front of the lens glass's vertex plane, ``glass_gap_mm`` beyond that end.
+    For the defaults (0.3 mm washer, 1.3 mm head, glass 1.0 mm beyond the thread's tip) it is 0.8 mm."""
+    washer = p.washer_thickness_mm
+    need = max(washer, washer + p.screw_head_mm - p.glass_gap_mm + HEAD_GLASS_CLEARANCE_MM)
+    return math.ceil(10 * need - 1e-6) / 10

@@ -55,12 +55,17 @@ class HolderParams:
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
         cartridge_flange_mm: the cartridge flange's height.
         screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
-        washer_diameter_mm, washer_recess_mm: retention washers (recessed so nothing protrudes to the lens).
+        washer_diameter_mm, washer_thickness_mm: the two retention washers (6 × 0.3 mm; ISO 7089's M2 washer is
+            0.3 mm thick).  screw_head_mm: the M2 retention screws' head height (1.3: ISO 1207 or ISO 14580 cheese
+            head; 1.6 for a pan head, 2.0 for a socket head).
+        washer_recess_mm: how deep the washers sit below the cartridge's lens-side end, where the DOE's face is
+            (by default the least tenth of a mm that sinks the washers and keeps the screw heads on them 0.2 mm
+            clear of the lens glass as the base turns).
         max_doe_to_lens_mm: the farthest the DOE may sit in front of the lens glass (the split-aperture optics
             assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
 
-    The five parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
+    The six parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
     thread (or barrel) and the die by the rules of :mod:`holder_cad.derive`, and :attr:`derived` names them.
     Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter that violates
     one is refused before anything is built, with the parameter to change and a value that works.
@@ -91,7 +96,9 @@ class HolderParams:
     screw_clearance_mm: float = 2.4
     pilot_hole_mm: float = 1.7
     washer_diameter_mm: float = 6.0
-    washer_recess_mm: float = 0.6
+    washer_thickness_mm: float = 0.3
+    screw_head_mm: float = 1.3
+    washer_recess_mm: float | None = None
     max_doe_to_lens_mm: float = 5.0
     segments: int = 128
 
@@ -106,6 +113,7 @@ class HolderParams:
         self._check_flange_diameter()
         self._resolve("flange_height_mm", derive.flange_height_mm(self))
         self._check_flange_height()
+        self._resolve("washer_recess_mm", derive.washer_recess_mm(self))
         self._check_flare()
         bad = [b for b in fit_bounds(self) if not b["ok"]]
         if bad:
@@ -350,8 +358,20 @@ class HolderParams:
         The DOE face sits ``washer_recess_mm`` inside the cartridge's lens-side end, which is flush with the
         base's lens-side end (the thread's tip, or the plate's face against the barrel).
         """
+        return self.glass_gap_mm + self.washer_recess_mm
+
+    @property
+    def glass_gap_mm(self) -> float:
+        """From the cartridge's lens-side end (flush with the thread's tip, or the plate's face) to the lens glass
+        vertex (mm)."""
         reach = self.thread_length_mm if self.mount == "thread" else 0.0
-        return self.lens_face_to_glass_mm - reach + self.washer_recess_mm
+        return self.lens_face_to_glass_mm - reach
+
+    @property
+    def screw_head_to_glass_mm(self) -> float:
+        """From the top of the retention screws' heads, on their washers on the die's face, to the lens glass
+        vertex plane (mm)."""
+        return self.doe_to_lens_mm - self.washer_thickness_mm - self.screw_head_mm
 
     @property
     def screw_offset_mm(self) -> float:

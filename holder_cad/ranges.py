@@ -47,6 +47,8 @@ PARAM_RANGES = {
     "screw_clearance_mm": (0.5, 10.0, "an M2 clearance hole is 2.4 mm"),
     "pilot_hole_mm": (0.3, 10.0, "an M2 pilot hole is 1.7 mm"),
     "washer_diameter_mm": (1.0, 30.0, "an M2 washer is 5–6 mm"),
+    "washer_thickness_mm": (0.05, 2.0, "an M2 washer is 0.3 mm thick"),
+    "screw_head_mm": (0.3, 5.0, "an M2 cheese head is 1.3 mm tall, a pan head 1.6, a socket head 2"),
     "washer_recess_mm": (0.05, 3.0, "the recess holds an M2 washer (0.3 mm) and must stay within the cartridge"),
     "max_doe_to_lens_mm": (0.2, 50.0, "the farthest the DOE may sit from the lens"),
 }

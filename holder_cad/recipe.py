@@ -17,7 +17,7 @@ from holder_cad import derive
 from holder_cad.params import HolderParams
 
 __all__ = ["Cyl", "Cone", "Revolve", "Prism", "Twisted", "Body", "base_body", "cartridge_body", "coupon_bodies",
-           "die_outline", "offset_convex", "thread_section"]
+           "die_outline", "offset_convex", "thread_section", "COUPON_GRIP_MM"]
 
 
 @dataclass(frozen=True)
@@ -214,14 +214,34 @@ def cartridge_body(p: HolderParams) -> Body:
     return body
 
 
+COUPON_GRIP_MM = 2.0  # the threaded coupon ring's grip rim beyond the thread
+
+
+def _coupon_thread_ring(p: HolderParams) -> Body:
+    """The base's thread and bore under a narrow grip rim (the thread plus ``COUPON_GRIP_MM``, over a 45° chamfer
+    and ``wall_mm``), without the flange, its lock-screw holes and graduations: the thread's fit and the flange
+    face's seat on the lens, and the cartridge's slide in the bore, for about half the base's plastic."""
+    t = p.thread_length_mm
+    ring = Body("coupon_ring")
+    ring.adds.append(Twisted(tuple(map(tuple, thread_section(p))), 0.0, t, 360.0 * t / p.thread_pitch_mm))
+    r0, rg = p.thread_root_radius_mm - 0.02, p.thread_major_radius_mm + COUPON_GRIP_MM
+    z_a = t - (p.thread_major_radius_mm - r0)
+    top = z_a + (rg - r0) + p.wall_mm
+    ring.adds.append(Revolve(((0.0, z_a), (r0, z_a), (rg, z_a + (rg - r0)), (rg, top), (0.0, top))))
+    ring.subs.append(Cyl(p.bore_radius_mm, -1.0, top + 1.0))
+    return ring
+
+
 def coupon_bodies(p: HolderParams) -> list[Body]:
-    """Fit-test coupon: a short thread (or sleeve) ring and a die pocket, quick to print."""
-    # the lowest flange the thread's chamfer and the pilot holes allow (derived), a thin plate for a sleeve
-    q = p.replace(flange_height_mm=None if p.mount == "thread" else derive.PILOT_DEPTH_MM,
-                  sleeve_length_mm=min(p.sleeve_length_mm, 4.0))
-    ring = base_body(q)
-    ring.name = "coupon_ring"
-    ring.subs = [s for s in ring.subs if not isinstance(s, Prism)]  # no graduations
+    """Fit-test coupon, quick to print: a thread ring with a grip rim (or a thin plate and a short sleeve) and a
+    die pocket."""
+    if p.mount == "thread":
+        ring = _coupon_thread_ring(p)
+    else:  # a thin plate and a short sleeve
+        ring = base_body(p.replace(flange_height_mm=derive.PILOT_DEPTH_MM, sleeve_length_mm=min(p.sleeve_length_mm,
+                                                                                              4.0)))
+        ring.name = "coupon_ring"
+        ring.subs = [s for s in ring.subs if not isinstance(s, Prism)]  # no graduations
     w = p.die_width_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     h = p.die_height_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     t = p.die_thickness_mm + 0.05 + p.wall_mm

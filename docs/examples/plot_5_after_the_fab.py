@@ -22,7 +22,7 @@ see :doc:`/guide/after-the-fab` for what to record and how).
 # The part that was made
 # ----------------------
 # A streak design (the HDR task) in four levels, made by two etch masks, then a part made from it with both etches
-# 8 % too shallow and the second mask 2 µm off in x, mounted 1.6 mm in front of the lens as the holder puts it.
+# 8 % too shallow and the second mask 2 µm off in x, mounted 1.8 mm in front of the lens as the holder puts it.
 # ``PartErrors`` is the tolerance study's description of a part, in SI units.
 import json
 import tempfile
@@ -47,7 +47,7 @@ design = doefab.optimize("streak", iterations=20, camera=camera, task_params={"k
                          lr=0.05, seed=0, progress=False, n_levels=4)
 work = Path(tempfile.mkdtemp(prefix="doefab-after-the-fab-"))
 design.save(work / "design")
-truth = PartErrors(depth_scale=(0.92, 0.92), overlay=((0.0, 0.0), (2e-6, 0.0)), axial_gap=1.6e-3)
+truth = PartErrors(depth_scale=(0.92, 0.92), overlay=((0.0, 0.0), (2e-6, 0.0)), axial_gap=1.8e-3)
 print(f"bands {', '.join(f'{w * 1e9:g}' for w in design.wavelengths)} nm, plane {design.depths[0]:g} m, "
       f"{design.n_levels} levels")
 

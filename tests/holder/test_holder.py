@@ -20,11 +20,29 @@ def test_default_part_passes_every_check(tmp_path):
     assert c["die_to_pocket_gap_mm"] == pytest.approx(0.25, abs=0.01)
     assert c["aperture_rays_blocked"] == 0
     assert rep["coupon_checks"]["passed"]
-    assert rep["doe_to_lens_mm"] == pytest.approx(3.5 - 2.5 + 0.6)
+    # the DOE's face sits as deep as the screw heads need: an ISO 1207 M2 cheese head (1.3 mm) on an M2 washer
+    # (0.3 mm) stays 0.2 mm in front of the glass, 3.5 − 2.5 mm beyond the thread's tip: the least tenth is 0.8 mm
+    assert rep["doe_to_lens_mm"] == pytest.approx(3.5 - 2.5 + 0.8)
+    assert rep["doe_to_lens_mm"] - 0.3 - 1.3 >= 0.2 - 1e-6  # measured on the mesh: heads clear of the glass
     saved = json.loads((tmp_path / "holder.json").read_text())
     assert saved["parameters"]["thread_diameter_mm"] == 49.0 and saved["units"] == "mm"
     for f in ("holder.stl", "holder.3mf", "coupon.stl"):
         assert (tmp_path / f).stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("kw, need", [({}, 0.8), ({"screw_head_mm": 2.0}, 1.5),
+                                      ({"thread_length_mm": 2.0, "washer_thickness_mm": 0.5}, 0.5)])
+def test_screw_heads_clear_the_lens_glass(kw, need):
+    """The heads on their washers sweep the front glass as the base turns: a recess that leaves them less than
+    0.2 mm in front of the glass's vertex plane is refused with the least that works (glass 3.5 mm behind the
+    filter face, the thread's tip 2.5 mm (2.0 mm) in front of it)."""
+    glass = 3.5 - kw.get("thread_length_mm", 2.5)
+    head = kw.get("washer_thickness_mm", 0.3) + kw.get("screw_head_mm", 1.3)
+    assert HolderParams(**kw).washer_recess_mm == pytest.approx(max(need, kw.get("washer_thickness_mm", 0.3)))
+    assert glass + need - head >= 0.2 - 1e-9 and glass + need - 0.1 - head < 0.2  # the least tenth that clears
+    with pytest.raises(HolderError, match=f"screw_head_to_glass_mm.*set washer_recess_mm = {need:g} or more"):
+        HolderParams(**kw, washer_recess_mm=round(need - 0.1, 1))
+    HolderParams(**kw, washer_recess_mm=need)
 
 
 @pytest.mark.parametrize("kw", [
