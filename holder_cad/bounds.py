@@ -27,8 +27,8 @@ def _play_fix(p) -> str:
 def _head_fix(p) -> str:
     """How to keep the retention screws' heads clear of the lens glass."""
     need = derive.washer_recess_mm(p)
-    return (f"the M2 screw heads ({p.screw_head_mm:g} mm on {p.washer_thickness_mm:g} mm washers) sweep the lens's front "
-            f"glass as the base turns: set washer_recess_mm = {need:g} or more (the DOE then sits "
+    return (f"the M2 screw heads ({p.screw_head_mm:g} mm on {p.washer_thickness_mm:g} mm washers) sweep the "
+            f"lens's front glass as the base turns: set washer_recess_mm = {need:g} or more (the DOE then sits "
             f"{p.glass_gap_mm + need:.2f} mm from the glass), or leave it out (it follows), or use a lower head")
 
 

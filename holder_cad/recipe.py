@@ -17,7 +17,12 @@ from holder_cad import derive
 from holder_cad.params import HolderParams
 
 __all__ = ["Cyl", "Cone", "Revolve", "Prism", "Twisted", "Body", "base_body", "cartridge_body", "coupon_bodies",
-           "die_outline", "offset_convex", "thread_section", "COUPON_GRIP_MM"]
+           "die_outline", "offset_convex", "thread_section", "COUPON_GRIP_MM", "LEAD_IN_INSET_MM",
+           "LEAD_IN_SLOPE"]
+
+COUPON_GRIP_MM = 2.0  # the threaded coupon ring's grip rim beyond the thread
+LEAD_IN_INSET_MM = 0.05  # the thread's lead-in cone starts this far inside the root radius on the bed
+LEAD_IN_SLOPE = 0.8  # and widens this much per unit of height
 
 
 @dataclass(frozen=True)
@@ -140,14 +145,26 @@ def _notch(r_outer: float, angle: float, depth: float, width: float) -> tuple:
     return (tip, (out * math.cos(a), out * math.sin(a)), (out * math.cos(b), out * math.sin(b)))
 
 
+def _thread(p: HolderParams, body: Body) -> None:
+    """The male thread from the bed (z = 0) to ``thread_length_mm``, its teeth chamfered where it starts on the bed:
+    a cone from ``LEAD_IN_INSET_MM`` inside the root radius at z = 0, widening ``LEAD_IN_SLOPE`` mm per mm of
+    height (39° from the axis: within the 45° that prints without support, facets included) to the full tooth
+    about half a millimetre up, so the first layer's squash (elephant's foot) stays within the root and the
+    thread starts in the lens without binding. (A cone through the root's own edge is a degenerate cut for the
+    B-rep kernel.)"""
+    t, r_in = p.thread_length_mm, p.thread_root_radius_mm - LEAD_IN_INSET_MM
+    body.adds.append(Twisted(tuple(map(tuple, thread_section(p))), 0.0, t, 360.0 * t / p.thread_pitch_mm))
+    r_out = p.thread_major_radius_mm + 0.5
+    body.subs.append(Revolve(((r_in - LEAD_IN_SLOPE, -1.0), (r_out, -1.0), (r_out, (r_out - r_in) / LEAD_IN_SLOPE))))
+
+
 def base_body(p: HolderParams) -> Body:
     """The base ring in print orientation (flat face on the bed at z = 0)."""
     rf = p.flange_diameter_mm / 2
     body = Body("base")
     if p.mount == "thread":
         t, fh = p.thread_length_mm, p.flange_height_mm
-        sec = thread_section(p)
-        body.adds.append(Twisted(tuple(map(tuple, sec)), 0.0, t, 360.0 * t / p.thread_pitch_mm))
+        _thread(p, body)
         # flange with a 45° chamfer underneath, starting just inside the thread root so no face overhangs
         r0 = p.thread_root_radius_mm - 0.02
         z_a = t - (p.thread_major_radius_mm - r0)
@@ -214,16 +231,13 @@ def cartridge_body(p: HolderParams) -> Body:
     return body
 
 
-COUPON_GRIP_MM = 2.0  # the threaded coupon ring's grip rim beyond the thread
-
-
 def _coupon_thread_ring(p: HolderParams) -> Body:
     """The base's thread and bore under a narrow grip rim (the thread plus ``COUPON_GRIP_MM``, over a 45° chamfer
     and ``wall_mm``), without the flange, its lock-screw holes and graduations: the thread's fit and the flange
     face's seat on the lens, and the cartridge's slide in the bore, for about half the base's plastic."""
     t = p.thread_length_mm
     ring = Body("coupon_ring")
-    ring.adds.append(Twisted(tuple(map(tuple, thread_section(p))), 0.0, t, 360.0 * t / p.thread_pitch_mm))
+    _thread(p, ring)
     r0, rg = p.thread_root_radius_mm - 0.02, p.thread_major_radius_mm + COUPON_GRIP_MM
     z_a = t - (p.thread_major_radius_mm - r0)
     top = z_a + (rg - r0) + p.wall_mm

@@ -26,3 +26,26 @@ def test_coupon_ring_is_the_bases_thread_for_half_the_plastic(thread):
     # every 0.2 mm layer rests on the one below (45°); their volume is the ring's to within one layer (the last
     # one overshoots its top)
     assert abs(_layers_supported(ring) - ring.volume()) < 0.2 * ring.slice(b[5] - 0.1).area()
+
+
+@pytest.mark.parametrize("kw", [{}, {"thread_diameter_mm": 77.0}, {"thread_diameter_mm": 30.5, "die_width_mm": 10.0,
+                                                                   "die_height_mm": 10.0, "clear_aperture_mm": 6.0}])
+def test_thread_starts_on_the_bed_with_a_lead_in(kw):
+    """Where the thread meets the bed its teeth are cut back to just inside the root (the first layer's squash
+    stays there), growing 0.8 mm per mm of height (steeper than the 45° limit) to the full tooth: the base's and
+    the coupon's alike."""
+    import numpy as np
+
+    p = HolderParams(**kw)
+    base = build_parts(p)["base"]
+    ring = build_manifold(next(b for b in coupon_bodies(p) if b.name == "coupon_ring"), p.segments)
+
+    def reach(m, z):  # the outermost radius of the section at height z (mm)
+        pts = np.concatenate([np.asarray(q) for q in m.slice(z).to_polygons()])
+        return np.hypot(pts[:, 0], pts[:, 1]).max()
+
+    root, major = p.thread_root_radius_mm, p.thread_major_radius_mm
+    for m in (base, ring):
+        for z in (0.02, 0.1, 0.2):  # on the cone from 0.05 mm inside the root
+            assert reach(m, z) == pytest.approx(root - 0.05 + 0.8 * z, abs=2e-3), z
+        assert reach(m, (p.thread_depth_mm + 0.05) / 0.8 + 0.05) == pytest.approx(major, abs=1e-3)  # full tooth
