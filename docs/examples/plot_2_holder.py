@@ -87,11 +87,15 @@ ax.set_axis_off()
 # %%
 # Print, then fit
 # ---------------
-# Print ``coupon.stl`` first: a thread ring and a die pocket, a few minutes on a printer. If the die does not
-# drop into the pocket, raise ``clearance_mm``; if the ring does not turn into the filter thread, raise
-# ``clearance_mm`` or lower ``thread_depth_mm``. Rebuild and print ``holder.stl`` (or ``holder.3mf``).
+# Print ``coupon.stl`` first: a die pocket and a ring with the base's thread and bore under a grip rim, less than
+# half the base's plastic. If the die does not drop into the pocket, raise ``clearance_mm``; if the ring does not
+# turn into the filter thread, raise ``thread_clearance_mm`` (the table above gives the most it may be); if it
+# turns but wobbles, lower it. Rebuild and print ``holder.stl`` (or ``holder.3mf``).
 #
 # The clearances also decide how well the DOE is aligned. ``doefab tolerance --holder holder.json`` takes the
 # decenter and rotation a built holder allows, and its measured DOE-to-lens distance, into the tolerance
-# study (see the tolerance tutorial):
-print(f"doefab tolerance --design masks/streak --holder {out / 'holder.json'} --samples 200 --out out/tol/streak")
+# study (see the tolerance tutorial), for example for a holder built with ``doefab holder --out out/holder``:
+#
+# .. code-block:: bash
+#
+#    doefab tolerance --design masks/streak --holder out/holder/holder.json --samples 200 --out out/tol/streak
