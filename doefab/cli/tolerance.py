@@ -106,7 +106,7 @@ def run(args) -> int:
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import STEPS, run_study
-    from doefab.tolerance.schedulers import check_reachable
+    from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
     ddir, design = design_folder(args.design)  # validated before any output exists
     if args.weights_dir is not None and not args.networks:
@@ -119,8 +119,9 @@ def run(args) -> int:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
-    if args.workers is not None and args.scheduler:
-        raise DoefabError("--workers and --scheduler both say where the parts run: give one")
+    both = runner_conflict(args.workers, args.scheduler, ("--workers", "--scheduler"))
+    if both:
+        raise DoefabError(both)
     check_reachable(args.scheduler, "--scheduler")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in ("samples.jsonl", STEPS)))

@@ -217,8 +217,10 @@ def load_scene(path: str | Path) -> Scene:
     tol = raw.get("tolerance")
     if isinstance(tol, dict):
         problems += _budget_problems(p, tol.get("budget", "default"))
-        if "workers" in tol and "scheduler" in tol:
-            problems.append("tolerance.workers and tolerance.scheduler both say where the parts run: keep one")
+        from doefab.tolerance.schedulers import runner_conflict
+
+        both = runner_conflict(tol.get("workers"), tol.get("scheduler"), ("tolerance.workers", "tolerance.scheduler"))
+        problems += [both] if both else []
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,

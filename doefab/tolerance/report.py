@@ -147,14 +147,15 @@ def _check_runners(workers, scheduler) -> None:
     """Where the Monte Carlo's parts run, as the API was told: ``workers`` (1..``MAX_WORKERS``) or a ``scheduler``
     that parses and, for ``tcp://``, answers; not both."""
     from doefab.errors import DoefabError
-    from doefab.tolerance.schedulers import MAX_WORKERS, check_reachable
+    from doefab.tolerance.schedulers import MAX_WORKERS, check_reachable, runner_conflict
 
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or not 1 <= workers <= MAX_WORKERS):
         raise DoefabError(f"workers = {workers!r}: give a whole number of processes, 1..{MAX_WORKERS}, or None (one "
                           f"per core when there are enough parts)")
-    if workers is not None and scheduler is not None:
-        raise DoefabError(f"workers = {workers} and scheduler = {scheduler!r} both say where the parts run: give one")
+    both = runner_conflict(workers, scheduler)
+    if both:
+        raise DoefabError(both)
     check_reachable(scheduler, "scheduler")
 
 

@@ -4,7 +4,8 @@ scene's ``tolerance.scheduler``): ``local:N``, a Dask ``LocalCluster`` of N work
 ``tcp://HOST:PORT``, a running Dask scheduler whose workers judge the parts.
 
 One check of each, shared by the command line, the scene file and the API: the text's form when it is given
-(``parse_scheduler``), and, before any work, that a ``tcp://`` scheduler answers (``check_reachable``).
+(``parse_scheduler``), that at most one of the two is given (``runner_conflict``), and, before any work, that a
+``tcp://`` scheduler answers (``check_reachable``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import re
 
 from doefab.errors import DoefabError
 
-__all__ = ["MAX_WORKERS", "parse_scheduler", "check_reachable", "parts_at_once"]
+__all__ = ["MAX_WORKERS", "parse_scheduler", "check_reachable", "parts_at_once", "runner_conflict"]
 
 MAX_WORKERS = 64  # local worker processes (a pool's or a LocalCluster's) one study starts at most
 
@@ -47,6 +48,21 @@ def parse_scheduler(text, name: str = "") -> int | None:
         return None
     raise DoefabError(f"{_who(text, name)} is not a Dask scheduler: give local:N (N = 1..{MAX_WORKERS} workers "
                       f"started for the study) or tcp://HOST:PORT (a running scheduler), {example}")
+
+
+def runner_conflict(workers, scheduler, names: tuple[str, str] = ("workers", "scheduler")) -> str | None:
+    """What is wrong when both a worker count and a scheduler are given (None: at most one is), in the words of
+    the interface that took them (``names``: the flags, scene keys or arguments).
+
+    Example:
+        >>> runner_conflict(2, "local:2", ("--workers", "--scheduler"))
+        '--workers and --scheduler both say where the parts run: give one'
+        >>> runner_conflict(None, "local:2") is None
+        True
+    """
+    if workers is not None and scheduler is not None:
+        return f"{names[0]} and {names[1]} both say where the parts run: give one"
+    return None
 
 
 def check_reachable(text: str | None, name: str = "--scheduler", timeout_s: float = 5.0) -> None:
