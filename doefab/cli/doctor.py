@@ -37,7 +37,7 @@ def _diagnose(args, scene) -> int:
     from doefab.pipeline.system import resolve
 
     res = resolve(scene)
-    facts = explain(res)
+    facts = explain(res, scene)
     width = max(len(f["quantity"]) for f in facts)
     print(f"{args.scene}: the system")
     for f in facts:

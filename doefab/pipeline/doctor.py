@@ -152,9 +152,9 @@ def _scheduler_rows(scheduler: str | None) -> list[dict]:
     return [_row(f"tolerance: the Dask scheduler {scheduler} answers", 1.0, 1.0, "", True, at_least=True)]
 
 
-def explain(res: ResolvedScene) -> list[dict]:
+def explain(res: ResolvedScene, scene=None) -> list[dict]:
     """What a resolved scene's numbers imply: [{quantity, value, unit, meaning}] (thin lens; the DOE at the
-    aperture; λ the middle of the task's bands)."""
+    aperture; λ the middle of the task's bands); with the ``scene``, also the field its holder's hole passes."""
     cam, task = res.camera, res.task
     lams = sorted(res.settings["wavelengths_m"])
     lam = lams[len(lams) // 2]
@@ -176,8 +176,28 @@ def explain(res: ResolvedScene) -> list[dict]:
             ("depth of field (2 px blur)", near, "m", f"near limit; far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m'} (focus {cam.focus_distance:g} m)")]
     rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res.settings["n_levels"])
-             + _sensor_rows(res.sensor, res.settings["design_task"]))
+             + _sensor_rows(res.sensor, res.settings["design_task"]) + _holder_rows(scene, cam))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
+
+
+def _holder_rows(scene, cam) -> list[tuple]:
+    """The field's half-angle the holder's hole in front of the DOE passes, and where it comes from."""
+    if scene is None or "holder" not in scene.stages:
+        return []
+    from doefab.pipeline.system import scene_field_half_angle_deg
+
+    from holder_cad.params import HolderParams
+
+    angle = scene_field_half_angle_deg(scene, cam)
+    if "field_half_angle_deg" in scene.holder:
+        why = "holder.field_half_angle_deg, as given"
+    elif angle is not None:
+        why = (f"atan(sensor diagonal / 2 / sensor distance) = atan({scene.camera['sensor_diagonal_mm']:g} / 2 / "
+               f"{cam.sensor_distance * 1e3:.4g} mm)")
+    else:
+        angle = HolderParams.field_half_angle_deg
+        why = "the holder's default (a full-frame sensor at 50 mm): set camera.sensor_diagonal_mm for your sensor"
+    return [("field the holder's hole passes (half-angle)", angle, "°", why)]
 
 
 #: what a capture's clip means for the task of each design
