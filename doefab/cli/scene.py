@@ -1,6 +1,6 @@
 """``doefab scene new --task T --out FILE``: a commented scene file with every key, its unit, range and
-default (values for a 35 mm f/4 camera with 3.76 µm pixels to edit); ``doefab scene keys``: the key table.
-Check a scene with ``doefab doctor FILE`` and run it with ``doefab run FILE``."""
+default (values for a 35 mm f/4 camera with 3.76 µm pixels on an APS-C sensor to edit); ``doefab scene keys``:
+the key table. Check a scene with ``doefab doctor FILE`` and run it with ``doefab run FILE``."""
 
 from __future__ import annotations
 

@@ -214,7 +214,7 @@ def template(task: str) -> str:
     ex = _EXAMPLES[task]
     values = {("camera", "focal_length_mm"): 35.0, ("camera", "f_number"): 4.0, ("camera", "lens_f_number"): 2.0,
               ("camera", "focus_distance_m"): 3.5 if has(task, "depth") else 5.0, ("camera", "sensor_pitch_um"): 3.76,
-              ("camera", "doe_pitch_um"): 4.0, ("fabrication", "n_levels"): 16,
+              ("camera", "sensor_diagonal_mm"): 28.2, ("camera", "doe_pitch_um"): 4.0, ("fabrication", "n_levels"): 16,
               ("fabrication", "material"): "fused silica", ("fabrication", "min_feature_um"): 2.0,
               ("reconstruction", "weights"): "train", ("reconstruction", "minutes"): 6.0,
               ("tolerance", "samples"): 12, ("tolerance", "budget"): "default"}
