@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 from holder_cad import derive
-from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES
+from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES, least_key_chamfer_mm
 
-__all__ = ["fit_bounds"]
+__all__ = ["fit_bounds", "recess_chamfer_problem"]
 
 
 def _param_row(p, name: str) -> tuple:
@@ -22,6 +22,24 @@ def _play_fix(p) -> str:
     hi = math.floor(2000 * (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm) / 2000
     return (f"the printed thread's play must let its 45° tooth clear the lens's 60° groove and leave a quarter of "
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
+
+
+def recess_chamfer_problem(p) -> str | None:
+    """What is wrong (None: nothing) when the coded half's washer recess reaches past the pocket's straight side
+    into its keyed chamfer: the pocket's chamfer, offset by the clearance, leaves that side up to
+    h/2 − die_chamfer_mm + clearance·(√2 − 1) from the die's middle, and a recess beyond it leaves a
+    knife-edge."""
+    rw = p.washer_recess_half_mm
+    straight = p.die_height_mm / 2 - p.die_chamfer_mm + p.clearance_mm * (math.sqrt(2) - 1)
+    if rw <= straight + 1e-9:
+        return None
+    chamfer = math.floor(10 * (p.die_chamfer_mm - rw + straight) + 1e-9) / 10
+    washer = math.floor(10 * 2 * (straight - p.clearance_mm) + 1e-9) / 10
+    keyed = chamfer > least_key_chamfer_mm(p.clearance_mm)  # a smaller chamfer that still keys the die
+    return (f"the retention washers' recesses ({rw:g} mm either side of the die's middle) reach the pocket's keyed "
+            f"chamfer (die_chamfer_mm {p.die_chamfer_mm:g} on a {p.die_height_mm:g} mm die), where they would leave a "
+            f"knife-edge of plastic: set " + (f"die_chamfer_mm = {chamfer:g} or less, or " if keyed else "")
+            + f"washer_diameter_mm = {washer:g} or less, or a taller die")
 
 
 def _head_fix(p) -> str:
@@ -43,6 +61,9 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
         ("doe_to_lens_mm", d, 0.2, p.max_doe_to_lens_mm, "mm",
          "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
          "lens_face_to_glass_mm"),
+        ("lens_side_end_to_glass_mm", round(d - p.washer_recess_mm, 6), derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm",
+         "the thread's tip (and the cartridge's end, flush with it) must stop short of the lens glass as the base "
+         "turns: a shorter thread_length_mm, or check lens_face_to_glass_mm"),
         ("screw_head_to_glass_mm", round(d - p.washer_thickness_mm - p.screw_head_mm, 6),
          derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm", _head_fix(p)),
         ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",

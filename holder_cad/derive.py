@@ -52,7 +52,7 @@ HEAD_GLASS_CLEARANCE_MM = 0.2
 
 
 LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on
-RETENTION_DEPTH_MM = 4.0  # the die-retention screws' pilot holes, from the cartridge's lens-side end (M2: 2 × ⌀)
+RETENTION_DEPTH_MM = 3.4  # the die-retention screws' pilot holes below the washers' seat (the DOE's face): 1.7 × ⌀
 MAX_FIELD_HALF_ANGLE_DEG = 45.0  # the flared hole in front of the DOE: its overhang prints without support up to 45°
 # the lowest refractive index of a DOE substrate (calcium fluoride, 1.434 at 550 nm): inside the die an off-axis ray
 # spreads by at most thickness × tan(asin(sin θ / DIE_INDEX_MIN)) between the hole and the DOE's chrome stop

@@ -17,10 +17,10 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from doefab.diekey import DEFAULT_CHAMFER_MM, SECOND_CHAMFER
+from doefab.diekey import DEFAULT_CHAMFER_MM
 from holder_cad import derive
-from holder_cad.bounds import fit_bounds
-from holder_cad.ranges import KEY_PROUD_MM, PARAM_RANGES, HolderError, given_problem
+from holder_cad.bounds import fit_bounds, recess_chamfer_problem
+from holder_cad.ranges import PARAM_RANGES, HolderError, given_problem, least_key_chamfer_mm
 
 __all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES", "given_problem"]
 
@@ -55,12 +55,10 @@ class HolderParams:
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
         cartridge_flange_mm: the cartridge flange's height.
         screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
-        washer_diameter_mm, washer_thickness_mm: the two retention washers (6 × 0.3 mm; ISO 7089's M2 washer is
-            0.3 mm thick).  screw_head_mm: the M2 retention screws' head height (1.3: ISO 1207 or ISO 14580 cheese
-            head; 1.6 for a pan head, 2.0 for a socket head).
-        washer_recess_mm: how deep the washers sit below the cartridge's lens-side end, where the DOE's face is
-            (by default the least tenth of a mm that sinks the washers and keeps the screw heads on them 0.2 mm
-            clear of the lens glass as the base turns).
+        washer_diameter_mm, washer_thickness_mm: the retention washers (6 × 0.3 mm).  screw_head_mm: the M2
+            retention screws' head height (1.3: an ISO 1207 or ISO 14580 cheese head; pan 1.6, socket 2.0).
+        washer_recess_mm: how deep the washers and the DOE's face sit below the cartridge's lens-side end (by
+            default the least tenth of a mm that keeps the screw heads 0.2 mm clear of the lens glass).
         max_doe_to_lens_mm: the farthest the DOE may sit in front of the lens glass (the split-aperture optics
             assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
@@ -155,12 +153,7 @@ class HolderParams:
         if self.die_chamfer_mm >= 0.5 * side:
             raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) must be less than half the die's shorter "
                               f"side ({side:g} mm): set die_chamfer_mm = {min(1.5, side / 4):g}")
-        # a die turned or flipped puts a square corner where the pocket has the smaller chamfer, or the smaller
-        # chamfer where it has the larger: that corner, s·c/√2 or (1 − s)·c/√2 beyond the pocket's chamfer, must
-        # stand proud of it by KEY_PROUD_MM however the die slides in the pocket (√2 × the clearance along the
-        # diagonal, and the clearance itself)
-        reach = ((1 + math.sqrt(2)) * self.clearance_mm + KEY_PROUD_MM) * math.sqrt(2)
-        least = reach / min(SECOND_CHAMFER, 1 - SECOND_CHAMFER)
+        least = least_key_chamfer_mm(self.clearance_mm)
         if self.die_chamfer_mm <= least:
             raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) is too small to key the die with "
                               f"clearance_mm {self.clearance_mm:g}: a flipped die would still fit the pocket; set "
@@ -174,6 +167,9 @@ class HolderParams:
             need = math.ceil(2 * (self.washer_diameter_mm / 2 + 0.5 - overlap) * 2 - 1e-9) / 2
             raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm:g}) overlap the "
                               f"die edge by {overlap:.2f} mm (< 0.5 mm): set washer_diameter_mm = {need:g} or more")
+        problem = recess_chamfer_problem(self)
+        if problem:
+            raise HolderError(problem)
         if self.cartridge_need_mm > self.cartridge_radius_mm + 1e-9:
             raise HolderError(self._die_too_large())
 
@@ -335,7 +331,7 @@ class HolderParams:
     def _flare_to_screws_mm(self, angle_deg: float) -> float:
         """The material (mm) between a hole flared at ``angle_deg`` and the bottom of the retention screws' pilot
         holes, square to the flare."""
-        seat_to_hole = derive.RETENTION_DEPTH_MM - self.washer_recess_mm - self.die_thickness_mm
+        seat_to_hole = derive.RETENTION_DEPTH_MM - self.die_thickness_mm  # the holes' bottom below the die's back
         r_at_hole = self._hole_radius(angle_deg, seat_to_hole)
         return (self.screw_offset_mm - self.pilot_hole_mm / 2 - r_at_hole) * math.cos(math.radians(angle_deg))
 
@@ -366,12 +362,6 @@ class HolderParams:
         vertex (mm)."""
         reach = self.thread_length_mm if self.mount == "thread" else 0.0
         return self.lens_face_to_glass_mm - reach
-
-    @property
-    def screw_head_to_glass_mm(self) -> float:
-        """From the top of the retention screws' heads, on their washers on the die's face, to the lens glass
-        vertex plane (mm)."""
-        return self.doe_to_lens_mm - self.washer_thickness_mm - self.screw_head_mm
 
     @property
     def screw_offset_mm(self) -> float:

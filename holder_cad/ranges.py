@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import math
 
+from doefab.diekey import SECOND_CHAMFER
 from holder_cad import derive
 
-__all__ = ["HolderError", "PARAM_RANGES", "given_problem", "KEY_PROUD_MM", "ENGAGED_MIN"]
+__all__ = ["HolderError", "PARAM_RANGES", "given_problem", "KEY_PROUD_MM", "ENGAGED_MIN", "least_key_chamfer_mm"]
 
 
 KEY_PROUD_MM = 0.1  # how far a turned-over die's corner must stand into the pocket's keyed wall (it cannot go in)
@@ -77,3 +78,13 @@ def given_problem(values: dict) -> str | None:
     if isinstance(seg, bool) or not isinstance(seg, int) or not 32 <= seg <= 1024:
         return f"segments must be an integer in 32..1024 (facets per circle), got {seg!r}"
     return None
+
+
+def least_key_chamfer_mm(clearance_mm: float) -> float:
+    """The least ``die_chamfer_mm`` that keys the die in a pocket ``clearance_mm`` wider all round: a die turned or
+    flipped puts a square corner where the pocket has the smaller chamfer, or the smaller chamfer where it has the
+    larger; that corner, s·c/√2 or (1 − s)·c/√2 beyond the pocket's chamfer, must stand proud of it by
+    ``KEY_PROUD_MM`` however the die slides in the pocket (√2 × the clearance along the diagonal, and the clearance
+    itself). Example: ``round(least_key_chamfer_mm(0.25), 2)`` → 1.99."""
+    reach = ((1 + math.sqrt(2)) * clearance_mm + KEY_PROUD_MM) * math.sqrt(2)
+    return reach / min(SECOND_CHAMFER, 1 - SECOND_CHAMFER)

@@ -215,7 +215,7 @@ def cartridge_body(p: HolderParams) -> Body:
     # retention: two M2 screws beside the pocket (±x side centres), washers recessed to overlap the die edge
     for sx in (-1, 1):
         cx = sx * p.screw_offset_mm
-        body.subs.append(Cyl(p.pilot_hole_mm / 2, top - derive.RETENTION_DEPTH_MM, top + 1.0, cx, 0.0))
+        body.subs.append(Cyl(p.pilot_hole_mm / 2, die_top - derive.RETENTION_DEPTH_MM, top + 1.0, cx, 0.0))
         rw = p.washer_recess_half_mm  # recess: a rectangle from the pocket wall (square corners)
         edge = p.die_width_mm / 2 + p.clearance_mm - 0.01
         x0, x1 = (edge, cx + rw) if sx > 0 else (cx - rw, -edge)

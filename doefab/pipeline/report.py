@@ -73,7 +73,7 @@ def _stage_items(scene, done: dict, res: ResolvedScene) -> list[tuple]:
                   f"{len(s['wavelengths_m'])} wavelength(s), {len(s['depths_m'])} depth plane(s), "
                   f"PSF window {s['kernel_px']} px. Only these samples were computed."),
             ("table", stages), ("p", "The system this run designed for (`doefab doctor` explains the same):"),
-            ("table", system_table(res))]
+            ("table", system_table(res, scene))]
 
 
 def _stage_blocks(out: Path, scene, done: dict) -> list[tuple[str, list]]:
@@ -214,8 +214,9 @@ def _page(name: str, body: list[str]) -> str:
             "</body></html>\n")
 
 
-def system_table(res: ResolvedScene) -> list[list[str]]:
-    """The resolved scene's camera, bands and fab as rows (quantity, value, what it means)."""
+def system_table(res: ResolvedScene, scene=None) -> list[list[str]]:
+    """The resolved scene's camera, bands and fab (and with the ``scene``, its holder's field) as rows (quantity,
+    value, what it means)."""
     from doefab.pipeline.doctor import explain
 
     if getattr(res, "camera", None) is None:  # a report of stages without a resolved scene
@@ -232,7 +233,7 @@ def system_table(res: ResolvedScene) -> list[list[str]]:
         own = res.sensor.differs_from(None, spectral)
         rows.append(["sensor", res.sensor.describe(with_response=spectral),
                      "this camera's sensor" if own else "the default (prototype) sensor"])
-    for r in explain(res):
+    for r in explain(res, scene):
         rows.append([r["quantity"], f"{r['value']:.4g} {r['unit']}".strip(), r["meaning"]])
     rows += [["warning", "", note] for note in res.warnings]
     return rows

@@ -171,7 +171,10 @@ def _holder_checks(scene: Scene, cam) -> list[str]:
     try:
         HolderParams(**params)
     except (HolderError, DoefabError) as exc:
-        return [f"holder: {exc}"]
+        sensor = "field_half_angle_deg" not in scene.holder and "field_half_angle_deg" in params
+        why = (f" (its {params['field_half_angle_deg']:g}° follows from camera.sensor_diagonal_mm: set "
+               "holder.field_half_angle_deg)") if sensor and "field_half_angle" in str(exc) else ""
+        return [f"holder: {exc}{why}"]
     return []
 
 

@@ -29,7 +29,8 @@ def test_coupon_ring_is_the_bases_thread_for_half_the_plastic(thread):
 
 
 @pytest.mark.parametrize("kw", [{}, {"thread_diameter_mm": 77.0}, {"thread_diameter_mm": 30.5, "die_width_mm": 10.0,
-                                                                   "die_height_mm": 10.0, "clear_aperture_mm": 6.0}])
+                                                                   "die_height_mm": 10.0, "clear_aperture_mm": 6.0,
+                                                                   "washer_diameter_mm": 5.7}])
 def test_thread_starts_on_the_bed_with_a_lead_in(kw):
     """Where the thread meets the bed its teeth are cut back to just inside the root (the first layer's squash
     stays there), growing 0.8 mm per mm of height (steeper than the 45° limit) to the full tooth: the base's and

@@ -45,6 +45,29 @@ def test_screw_heads_clear_the_lens_glass(kw, need):
     HolderParams(**kw, washer_recess_mm=need)
 
 
+def test_the_lens_side_end_stays_clear_of_the_glass():
+    """The thread's tip, with the cartridge's end flush with it, turns 0.2 mm or more in front of the glass: a
+    thread as long as the lens's glass is deep is refused, however deep the washers could sink; a slip-fit plate
+    rests on the barrel's face, 3.5 mm in front of the glass, and sinks the washers just below its end."""
+    for kw in ({"thread_length_mm": 3.4}, {"lens_face_to_glass_mm": 2.0}):
+        with pytest.raises(HolderError, match=r"lens_side_end_to_glass_mm .* a shorter thread_length_mm"):
+            HolderParams(**kw)
+    HolderParams(thread_length_mm=3.3)
+    slip = HolderParams(mount="slip")
+    assert slip.washer_recess_mm == pytest.approx(0.3) and slip.doe_to_lens_mm == pytest.approx(3.5 + 0.3)
+
+
+def test_washer_recesses_stay_off_the_keyed_chamfer(tmp_path):
+    """A 10 mm die keyed by a 2 mm chamfer: its pocket's straight side ends 5 − 2 + 0.25·(√2 − 1) = 3.10 mm from
+    the die's middle, and 6 mm washers' recesses (3.25 mm either side) would cut into the key, leaving a knife-edge
+    the wall check measured at 0.05 mm. Refused with washers that end on the straight side, which build."""
+    kw = {"thread_diameter_mm": 30.5, "die_width_mm": 10.0, "die_height_mm": 10.0, "clear_aperture_mm": 6.0}
+    with pytest.raises(HolderError, match=r"keyed chamfer .* set washer_diameter_mm = 5.7 or less"):
+        HolderParams(**kw)
+    rep = write_holder(HolderParams(**kw, washer_diameter_mm=5.7), tmp_path, step=False, renders=False)
+    assert rep["checks"]["passed"] and rep["checks"]["bodies"]["cartridge"]["min_wall_mm"] >= 1.2 - 0.01
+
+
 @pytest.mark.parametrize("kw", [
     {"thread_diameter_mm": 52.0, "flange_diameter_mm": 60.0},
     {"thread_diameter_mm": 58.0, "flange_diameter_mm": 66.0},

@@ -3,7 +3,6 @@ resolver with the API), every item of a list key, the tolerance budget the scene
 the scene keys ``doctor`` names where a sampling check fails."""
 
 import itertools
-import re
 
 import pytest
 

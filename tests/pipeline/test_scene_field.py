@@ -40,4 +40,10 @@ def test_a_field_wider_than_the_flare_prints_is_refused(tmp_path):
     with pytest.raises(DoefabError, match=r"camera.sensor_diagonal_mm 150 .* more than the 45° .* set "
                                           r"holder.field_half_angle_deg"):
         resolve(scene)
-    resolve(_scene(tmp_path, "sensor_diagonal_mm = 150", "field_half_angle_deg = 30.0", "ok.toml"))
+    resolve(_scene(tmp_path, "sensor_diagonal_mm = 150", "field_half_angle_deg = 25.0", "ok.toml"))
+    # a field the cartridge's flare cannot pass with wall_mm round it says which key set it
+    wide = _scene(tmp_path, "sensor_diagonal_mm = 43.3", name="wide.toml")
+    wide.camera["focal_length_mm"] = 24.0
+    with pytest.raises(DoefabError, match=r"set field_half_angle_deg = [\d.]+ or less .* follows from "
+                                          r"camera.sensor_diagonal_mm"):
+        resolve(wide)
