@@ -26,7 +26,7 @@ __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILO
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm", "HEAD_GLASS_CLEARANCE_MM",
-           "washer_recess_mm"]
+           "washer_recess_mm", "LEAD_IN_INSET_MM", "LEAD_IN_SLOPE"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
 SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
@@ -49,6 +49,12 @@ DERIVED = {
 # the retention screws' heads sweep a circle over the lens's front glass as the base is screwed in: they stay this
 # far in front of the glass's vertex plane (twice a printed part's length tolerance, about 0.1 mm)
 HEAD_GLASS_CLEARANCE_MM = 0.2
+
+
+# the thread's lead-in where it starts on the bed: a cone from LEAD_IN_INSET_MM inside the root radius, widening
+# LEAD_IN_SLOPE mm per mm of height to the full tooth
+LEAD_IN_INSET_MM = 0.05
+LEAD_IN_SLOPE = 0.8
 
 
 LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on

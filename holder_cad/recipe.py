@@ -17,12 +17,9 @@ from holder_cad import derive
 from holder_cad.params import HolderParams
 
 __all__ = ["Cyl", "Cone", "Revolve", "Prism", "Twisted", "Body", "base_body", "cartridge_body", "coupon_bodies",
-           "die_outline", "offset_convex", "thread_section", "COUPON_GRIP_MM", "LEAD_IN_INSET_MM",
-           "LEAD_IN_SLOPE"]
+           "die_outline", "offset_convex", "thread_section", "COUPON_GRIP_MM"]
 
 COUPON_GRIP_MM = 2.0  # the threaded coupon ring's grip rim beyond the thread
-LEAD_IN_INSET_MM = 0.05  # the thread's lead-in cone starts this far inside the root radius on the bed
-LEAD_IN_SLOPE = 0.8  # and widens this much per unit of height
 
 
 @dataclass(frozen=True)
@@ -152,10 +149,10 @@ def _thread(p: HolderParams, body: Body) -> None:
     about half a millimetre up, so the first layer's squash (elephant's foot) stays within the root and the
     thread starts in the lens without binding. (A cone through the root's own edge is a degenerate cut for the
     B-rep kernel.)"""
-    t, r_in = p.thread_length_mm, p.thread_root_radius_mm - LEAD_IN_INSET_MM
+    t, r_in, slope = p.thread_length_mm, p.thread_root_radius_mm - derive.LEAD_IN_INSET_MM, derive.LEAD_IN_SLOPE
     body.adds.append(Twisted(tuple(map(tuple, thread_section(p))), 0.0, t, 360.0 * t / p.thread_pitch_mm))
     r_out = p.thread_major_radius_mm + 0.5
-    body.subs.append(Revolve(((r_in - LEAD_IN_SLOPE, -1.0), (r_out, -1.0), (r_out, (r_out - r_in) / LEAD_IN_SLOPE))))
+    body.subs.append(Revolve(((r_in - slope, -1.0), (r_out, -1.0), (r_out, (r_out - r_in) / slope))))
 
 
 def base_body(p: HolderParams) -> Body:
