@@ -35,11 +35,14 @@ def recess_chamfer_problem(p) -> str | None:
         return None
     chamfer = math.floor(10 * (p.die_chamfer_mm - rw + straight) + 1e-9) / 10
     washer = math.floor(10 * 2 * (straight - p.clearance_mm) + 1e-9) / 10
-    keyed = chamfer > least_key_chamfer_mm(p.clearance_mm)  # a smaller chamfer that still keys the die
+    overlap_least = 2 * (0.5 + p.screw_offset_mm - p.die_width_mm / 2)  # washers must overlap the die by 0.5 mm
+    taller = math.ceil(2 * (rw + p.die_chamfer_mm - p.clearance_mm * (math.sqrt(2) - 1)) - 1e-9)
+    fixes = ([f"die_chamfer_mm = {chamfer:g} or less"] if chamfer > least_key_chamfer_mm(p.clearance_mm) else []) + (
+        [f"washer_diameter_mm = {washer:g} or less"] if washer >= overlap_least else []) + [
+        f"die_height_mm = {taller:g} or more"]
     return (f"the retention washers' recesses ({rw:g} mm either side of the die's middle) reach the pocket's keyed "
             f"chamfer (die_chamfer_mm {p.die_chamfer_mm:g} on a {p.die_height_mm:g} mm die), where they would leave a "
-            f"knife-edge of plastic: set " + (f"die_chamfer_mm = {chamfer:g} or less, or " if keyed else "")
-            + f"washer_diameter_mm = {washer:g} or less, or a taller die")
+            f"knife-edge of plastic: set " + ", or ".join(fixes))
 
 
 def _head_fix(p) -> str:
@@ -63,13 +66,18 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
          "lens_face_to_glass_mm"),
         ("lens_side_end_to_glass_mm", round(d - p.washer_recess_mm, 6), derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm",
          "the thread's tip (and the cartridge's end, flush with it) must stop short of the lens glass as the base "
-         "turns: a shorter thread_length_mm, or check lens_face_to_glass_mm"),
+         "turns: a shorter thread_length_mm, or check lens_face_to_glass_mm" if p.mount == "thread" else
+         "the cartridge's end must stop short of the lens glass: check lens_face_to_glass_mm"),
         ("screw_head_to_glass_mm", round(d - p.washer_thickness_mm - p.screw_head_mm, 6),
          derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm", _head_fix(p)),
         ("die_to_pocket_clearance_mm", p.clearance_mm, *PARAM_RANGES["clearance_mm"][:2], "mm",
          "clearance_mm: " + PARAM_RANGES["clearance_mm"][2]),
         ("washer_recess_mm", p.washer_recess_mm, p.nozzle_mm / 2, PARAM_RANGES["washer_recess_mm"][1], "mm",
          PARAM_RANGES["washer_recess_mm"][2]),
+        ("retention_hole_floor_mm", p.cartridge_flange_mm + p.cartridge_length_mm - p.washer_recess_mm
+         - derive.RETENTION_DEPTH_MM, p.wall_mm, 1e3, "mm", f"the retention screws' pilot holes, "
+         f"{derive.RETENTION_DEPTH_MM:g} mm below the washers' seat, must stop wall_mm short of the cartridge's "
+         "scene-side face: a smaller washer_recess_mm, or a taller cartridge (cartridge_flange_mm, flange_height_mm)"),
         ("die_seat_thickness_mm", p.cartridge_flange_mm + p.cartridge_length_mm - p.washer_recess_mm - p.die_thickness_mm,
          p.wall_mm, 1e3, "mm", "material under the die pocket must be at least wall_mm: a smaller "
                                "washer_recess_mm or die_thickness_mm, or a longer thread/flange"),

@@ -248,11 +248,11 @@ def coupon_bodies(p: HolderParams) -> list[Body]:
     die pocket."""
     if p.mount == "thread":
         ring = _coupon_thread_ring(p)
-    else:  # a thin plate and a short sleeve
-        ring = base_body(p.replace(flange_height_mm=derive.PILOT_DEPTH_MM, sleeve_length_mm=min(p.sleeve_length_mm,
-                                                                                              4.0)))
-        ring.name = "coupon_ring"
-        ring.subs = [s for s in ring.subs if not isinstance(s, Prism)]  # no graduations
+    else:  # the base's plate, thin, and a short sleeve over the barrel (the base's own, without its screw holes)
+        fh, ls = derive.PILOT_DEPTH_MM, min(p.sleeve_length_mm, 4.0)
+        rin = p.barrel_diameter_mm / 2 + p.clearance_mm
+        ring = Body("coupon_ring", [Cyl(p.flange_diameter_mm / 2, 0.0, fh), Cyl(rin + p.wall_mm, fh - 1e-3, fh + ls)],
+                    [Cyl(rin, fh, fh + ls + 1.0), Cyl(p.bore_radius_mm, -1.0, fh + 1.0)])
     w = p.die_width_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     h = p.die_height_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     t = p.die_thickness_mm + 0.05 + p.wall_mm

@@ -57,13 +57,31 @@ def test_the_lens_side_end_stays_clear_of_the_glass():
     assert slip.washer_recess_mm == pytest.approx(0.3) and slip.doe_to_lens_mm == pytest.approx(3.5 + 0.3)
 
 
+@pytest.mark.parametrize("recess", [None, 1.5])
+def test_retention_holes_grip_below_the_washers_seat(recess):
+    """The retention screws' pilot holes reach 3.4 mm below the washers' seat (the DOE's face) however deep the
+    recess: read on the cartridge mesh, whose sections lose both holes' area (2 × π × 0.85²) at that depth."""
+    p = HolderParams(**({} if recess is None else {"washer_recess_mm": recess}))
+    cart = build_parts(p)["cartridge"]
+    bottom = cart.bounding_box()[5] - p.washer_recess_mm - 3.4
+    step = cart.slice(bottom - 0.01).area() - cart.slice(bottom + 0.01).area()
+    assert step == pytest.approx(2 * np.pi * 0.85 ** 2, rel=0.1)
+    # a cartridge too short for holes that deep below a deep recess is refused before anything is built
+    with pytest.raises(HolderError, match=r"retention_hole_floor_mm .* a smaller washer_recess_mm"):
+        HolderParams(mount="slip", flange_height_mm=2.0, washer_recess_mm=1.5)
+
+
 def test_washer_recesses_stay_off_the_keyed_chamfer(tmp_path):
     """A 10 mm die keyed by a 2 mm chamfer: its pocket's straight side ends 5 − 2 + 0.25·(√2 − 1) = 3.10 mm from
     the die's middle, and 6 mm washers' recesses (3.25 mm either side) would cut into the key, leaving a knife-edge
     the wall check measured at 0.05 mm. Refused with washers that end on the straight side, which build."""
     kw = {"thread_diameter_mm": 30.5, "die_width_mm": 10.0, "die_height_mm": 10.0, "clear_aperture_mm": 6.0}
-    with pytest.raises(HolderError, match=r"keyed chamfer .* set washer_diameter_mm = 5.7 or less"):
+    with pytest.raises(HolderError, match=r"keyed chamfer .* set washer_diameter_mm = 5.7 or less, or "
+                                          r"die_height_mm = 11 or more"):
         HolderParams(**kw)
+    # a 9.6 mm die: no washer both overlaps it by 0.5 mm and ends before the chamfer, so only a taller die is named
+    with pytest.raises(HolderError, match=r"knife-edge of plastic: set die_height_mm = 11 or more$"):
+        HolderParams(**{**kw, "die_width_mm": 9.6, "die_height_mm": 9.6, "clear_aperture_mm": 5.0})
     rep = write_holder(HolderParams(**kw, washer_diameter_mm=5.7), tmp_path, step=False, renders=False)
     assert rep["checks"]["passed"] and rep["checks"]["bodies"]["cartridge"]["min_wall_mm"] >= 1.2 - 0.01
 

@@ -27,6 +27,10 @@ def test_the_sensor_diagonal_sets_the_holders_field(tmp_path):
     # a given half-angle wins; without either, the holder keeps its own default
     given = _scene(tmp_path, "sensor_diagonal_mm = 43.27", "field_half_angle_deg = 10.0", "g.toml")
     assert scene_holder(given, resolve(given).camera)["field_half_angle_deg"] == 10.0
+    from doefab.pipeline.report import system_table  # the run report's system table says the same
+
+    assert any(r[0].startswith("field the holder's hole passes") and r[1] == f"{expected:.4g} °"
+               for r in system_table(res, scene))
     plain = _scene(tmp_path, name="p.toml")
     assert "field_half_angle_deg" not in scene_holder(plain, resolve(plain).camera)
     # the holder stage (and the masks' die, which the flare can widen) rerun for another sensor
