@@ -24,6 +24,17 @@ def _play_fix(p) -> str:
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
 
 
+def _turns_fix(p) -> str:
+    """What the thread's length must be: ``MIN_FULL_TURNS``–20 turns of full tooth between the lead-in and the
+    flange's chamfer."""
+    lead, pitch = derive.lead_in_mm(p), p.thread_pitch_mm
+    rest = lead + p.thread_depth_mm
+    lo = math.ceil(10 * (derive.MIN_FULL_TURNS * pitch + rest) - 1e-6) / 10
+    hi = math.floor(10 * (20 * pitch + rest) + 1e-6) / 10
+    return (f"the thread must bear {derive.MIN_FULL_TURNS:g}–20 turns of full tooth between its {lead:.2f} mm "
+            f"lead-in and the flange's chamfer: set thread_length_mm between {lo:g} and {hi:g}, or leave it out")
+
+
 def recess_chamfer_problem(p) -> str | None:
     """What is wrong (None: nothing) when the coded half's washer recess reaches past the pocket's straight side
     into its keyed chamfer: the pocket's chamfer, offset by the clearance, leaves that side up to
@@ -86,8 +97,8 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
     if p.mount == "thread":
         rows += [
             _param_row(p, "thread_pitch_mm"),
-            ("thread_engagement_turns", p.thread_length_mm / p.thread_pitch_mm, 2.0, 20.0, "turns",
-             "thread_length_mm must give 2–20 turns of thread_pitch_mm"),
+            ("thread_full_tooth_turns", derive.full_tooth_turns(p), derive.MIN_FULL_TURNS, 20.0, "turns",
+             _turns_fix(p)),
             ("thread_clearance_mm", p.thread_clearance_mm, derive.least_thread_play_mm(p.thread_pitch_mm,
                                                                                        p.thread_depth_mm),
              (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm, "mm", _play_fix(p)),

@@ -6,6 +6,8 @@ that conflicts is refused by :class:`holder_cad.params.HolderParams` with the va
 - ``thread_pitch_mm``: the commonest pitch of a filter thread of that diameter: 0.5 mm up to 40.5 mm, 0.75 mm
   up to 82 mm, 1.0 mm above (some lenses differ, e.g. M37 × 0.75: measure yours and set it).
 - ``thread_depth_mm``: 0.4 × the pitch (45° flanks leave 0.1 × pitch flats at crest and root).
+- ``thread_length_mm``: 2.5 mm, or the least tenth of a millimetre more that gives ``MIN_FULL_TURNS`` turns of
+  full tooth between the lead-in (``lead_in_mm``) and the flange's chamfer (3.0 mm for a 1.0 mm pitch).
 - ``flange_diameter_mm``: the smallest whole millimetre that holds the thread (or sleeve) and the lock-screw
   holes and slots with ``wall_mm`` on both sides.
 - ``flange_height_mm``: threaded base: the smallest half millimetre above the 45° chamfer plus ``wall_mm``
@@ -26,7 +28,8 @@ __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILO
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm", "HEAD_GLASS_CLEARANCE_MM",
-           "washer_recess_mm", "LEAD_IN_INSET_MM", "LEAD_IN_SLOPE"]
+           "washer_recess_mm", "LEAD_IN_INSET_MM", "LEAD_IN_SLOPE", "lead_in_mm", "MIN_FULL_TURNS",
+           "full_tooth_turns", "thread_length_mm", "groove_filled_mm"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
 SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
@@ -39,6 +42,8 @@ COMMON_FILTER_THREADS_MM = (25.0, 27.0, 28.0, 30.5, 34.0, 37.0, 39.0, 40.5, 43.0
 DERIVED = {
     "thread_pitch_mm": "from thread_diameter_mm: 0.5 up to 40.5, 0.75 up to 82, 1.0 above",
     "thread_depth_mm": "0.4 × thread_pitch_mm",
+    "thread_length_mm": "2.5, or the least tenth of a mm more giving two turns of full tooth between the lead-in "
+                        "and the flange's chamfer",
     "thread_clearance_mm": "0.22 × thread_pitch_mm for the default tooth (its 45° flanks clear the ISO 60° groove)",
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
@@ -55,6 +60,41 @@ HEAD_GLASS_CLEARANCE_MM = 0.2
 # LEAD_IN_SLOPE mm per mm of height to the full tooth
 LEAD_IN_INSET_MM = 0.05
 LEAD_IN_SLOPE = 0.8
+# the least turns of full tooth in a full groove (between the lead-in and the flange's chamfer) that hold the
+# holder square in the lens's thread
+MIN_FULL_TURNS = 2.0
+_THREAD_LENGTH_MM = 2.5  # the default thread length, where it gives MIN_FULL_TURNS
+
+
+def lead_in_mm(p) -> float:
+    """Height (mm) of the thread's lead-in, from the bed to where its cone reaches the full tooth's crest:
+    (``thread_depth_mm`` + ``LEAD_IN_INSET_MM``) / ``LEAD_IN_SLOPE``.
+
+    Example: 0.4375 mm for the 0.3 mm tooth of a 0.75 mm pitch."""
+    return (p.thread_depth_mm + LEAD_IN_INSET_MM) / LEAD_IN_SLOPE
+
+
+def groove_filled_mm(p) -> float:
+    """Height (mm) where the flange's 45° chamfer, which reaches the tooth's crest at the thread's end (the lens's
+    filter face), reaches the groove's bottom: ``thread_length_mm`` less ``thread_depth_mm``. Above it the
+    groove is partly filled and the lens's tooth no longer fits it whole."""
+    return p.thread_length_mm - p.thread_depth_mm
+
+
+def full_tooth_turns(p) -> float:
+    """Turns of full tooth in a full groove, between the lead-in's top and the flange's chamfer: the turns that
+    bear in the lens's thread. Example: 2.35 for the default 2.5 mm thread of a 0.75 mm pitch
+    ((2.5 − 0.3 − 0.4375) / 0.75)."""
+    return (groove_filled_mm(p) - lead_in_mm(p)) / p.thread_pitch_mm
+
+
+def thread_length_mm(p) -> float:
+    """The derived thread length (mm): 2.5 mm, or the least tenth of a millimetre more that gives ``MIN_FULL_TURNS``
+    turns of full tooth between the lead-in and the flange's chamfer (``p``'s pitch and tooth depth resolved).
+
+    Example: 2.5 mm for a 0.75 mm pitch; 3.0 mm for a 1.0 mm pitch (0.5625 mm lead-in, 2 mm, 0.4 mm chamfer)."""
+    need = MIN_FULL_TURNS * p.thread_pitch_mm + lead_in_mm(p) + p.thread_depth_mm
+    return max(_THREAD_LENGTH_MM, math.ceil(10 * need - 1e-6) / 10)
 
 
 LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on

@@ -33,8 +33,8 @@ class HolderParams:
         mount: ``"thread"`` (male filter thread into the lens) or ``"slip"`` (sleeve over the front barrel).
         thread_diameter_mm: nominal filter thread diameter (49 for the Canon EF 50 mm f/1.8 STM).
         thread_pitch_mm: thread pitch (by default the commonest for the diameter: 0.75 for 49 mm).
-        thread_depth_mm: tooth height (by default 0.4 × pitch; 45° flanks).
-        thread_length_mm: engaged thread length (2.5).
+        thread_depth_mm: tooth height (by default 0.4 × pitch; 45° flanks).  thread_length_mm: the thread's length
+            (by default 2.5, or more for two full-tooth turns above the lead-in).
         barrel_diameter_mm: outer diameter of the lens front barrel (slip fit only).
         sleeve_length_mm: slip-fit sleeve length.
         lens_face_to_glass_mm: from the lens's filter face (or barrel front) to the front glass vertex; the
@@ -53,8 +53,7 @@ class HolderParams:
         wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
         flange_diameter_mm: outer diameter of both flanges (by default the least that holds the lock screws).
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
-        cartridge_flange_mm: the cartridge flange's height.
-        screw_clearance_mm, pilot_hole_mm: M2 clearance hole and pilot (self-tapping) hole diameters.
+        cartridge_flange_mm: its flange's height.  screw_clearance_mm, pilot_hole_mm: M2 clearance, pilot hole ⌀.
         washer_diameter_mm, washer_thickness_mm: the retention washers (6 × 0.3 mm).  screw_head_mm: the M2
             retention screws' head height (1.3: an ISO 1207 or ISO 14580 cheese head; pan 1.6, socket 2.0).
         washer_recess_mm: how deep the washers and the DOE's face sit below the cartridge's lens-side end (by
@@ -63,7 +62,7 @@ class HolderParams:
             assume it close to the aperture; 5 mm keeps the PSF change small, see the tolerance study).
         segments: facets of a full circle (mesh path).
 
-    The six parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
+    The seven parameters of :data:`holder_cad.derive.DERIVED` default to ``None``: they then follow from the
     thread (or barrel) and the die by the rules of :mod:`holder_cad.derive`, and :attr:`derived` names them.
     Every derived quantity that decides the fit has a bound (:func:`fit_bounds`); a parameter that violates
     one is refused before anything is built, with the parameter to change and a value that works.
@@ -73,7 +72,7 @@ class HolderParams:
     thread_diameter_mm: float = 49.0
     thread_pitch_mm: float | None = None
     thread_depth_mm: float | None = None
-    thread_length_mm: float = 2.5
+    thread_length_mm: float | None = None
     barrel_diameter_mm: float = 56.0
     sleeve_length_mm: float = 8.0
     lens_face_to_glass_mm: float = 3.5
@@ -105,6 +104,7 @@ class HolderParams:
         self._check_given()
         self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
         self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
+        self._resolve("thread_length_mm", derive.thread_length_mm(self))
         self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm, self.thread_depth_mm))
         self._check_die_and_thread()
         self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))

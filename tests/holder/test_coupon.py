@@ -5,7 +5,8 @@ import pytest
 
 from holder_cad.build import build_parts
 from holder_cad.mesh import build_manifold
-from holder_cad.params import HolderParams
+from holder_cad.bounds import fit_bounds
+from holder_cad.params import HolderError, HolderParams
 from holder_cad.recipe import coupon_bodies
 
 from tests.holder.test_derive import _layers_supported
@@ -50,3 +51,35 @@ def test_thread_starts_on_the_bed_with_a_lead_in(kw):
         for z in (0.02, 0.1, 0.2):  # on the cone from 0.05 mm inside the root
             assert reach(m, z) == pytest.approx(root - 0.05 + 0.8 * z, abs=2e-3), z
         assert reach(m, (p.thread_depth_mm + 0.05) / 0.8 + 0.05) == pytest.approx(major, abs=1e-3)  # full tooth
+
+
+@pytest.mark.parametrize("thread", [49.0, 95.0])
+def test_thread_bears_two_full_turns_between_its_lead_in_and_the_flange(thread):
+    """Measured on the base's mesh: from where the lead-in reaches the full tooth to where the flange's chamfer
+    starts to fill the groove there are at least two turns of the pitch, for the default length of each pitch (a
+    1.0 mm pitch needs a longer thread than 2.5 mm); the same as the fit bound reports, and a thread too short for
+    two is refused with the length that gives them."""
+    import numpy as np
+
+    p = HolderParams(thread_diameter_mm=thread)
+    base = build_parts(p)["base"]
+    root, major = p.thread_root_radius_mm, p.thread_major_radius_mm
+
+    def radii(z):  # the section's outer contour at height z: (innermost, outermost) radius (mm)
+        pts = np.concatenate([np.asarray(q) for q in base.slice(z).to_polygons()])
+        r = np.hypot(pts[:, 0], pts[:, 1])
+        r = r[r > root - 0.3]  # not the bore
+        return r.min(), r.max()
+
+    zs = np.arange(0.005, p.thread_length_mm, 0.005)
+    full = next(z for z in zs if radii(z)[1] > major - 1e-3)  # the lead-in's top
+    filled = next(z for z in zs if radii(z)[0] > root + 1e-3)  # the chamfer reaches the groove's bottom
+    turns = (filled - full) / p.thread_pitch_mm
+    assert turns >= 2.0
+    bound = next(b for b in fit_bounds(p) if b["quantity"] == "thread_full_tooth_turns")
+    assert bound["value"] == pytest.approx(turns, abs=0.03) and bound["ok"]
+    if thread == 95.0:
+        assert p.thread_length_mm > 2.5
+        with pytest.raises(HolderError, match=r"thread_full_tooth_turns.*set thread_length_mm between "
+                                              f"{p.thread_length_mm:g} and"):
+            HolderParams(thread_diameter_mm=thread, thread_length_mm=p.thread_length_mm - 0.1)

@@ -15,7 +15,7 @@ from holder_cad.params import HolderError, HolderParams
 
 # common photographic filter threads (mm) and the shipped mask sets' 12 mm × 12 mm die (the parameters' default)
 FILTER_THREADS_MM = [25, 27, 28, 30.5, 34, 37, 39, 40.5, 43, 46, 49, 52, 55, 58, 62, 67, 72, 77, 82, 86, 95]
-DERIVED = {"thread_pitch_mm", "thread_depth_mm", "thread_clearance_mm", "flange_diameter_mm", "flange_height_mm",
+DERIVED = {"thread_pitch_mm", "thread_depth_mm", "thread_length_mm", "thread_clearance_mm", "flange_diameter_mm", "flange_height_mm",
            "washer_recess_mm"}
 LAYER_MM = 0.2
 

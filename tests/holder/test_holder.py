@@ -31,12 +31,12 @@ def test_default_part_passes_every_check(tmp_path):
 
 
 @pytest.mark.parametrize("kw, need", [({}, 0.8), ({"screw_head_mm": 2.0}, 1.5),
-                                      ({"thread_length_mm": 2.0, "washer_thickness_mm": 0.5}, 0.5)])
+                                      ({"lens_face_to_glass_mm": 4.0, "washer_thickness_mm": 0.5}, 0.5)])
 def test_screw_heads_clear_the_lens_glass(kw, need):
     """The heads on their washers sweep the front glass as the base turns: a recess that leaves them less than
     0.2 mm in front of the glass's vertex plane is refused with the least that works (glass 3.5 mm behind the
-    filter face, the thread's tip 2.5 mm (2.0 mm) in front of it)."""
-    glass = 3.5 - kw.get("thread_length_mm", 2.5)
+    filter face (4.0 mm), the thread's tip 2.5 mm in front of it)."""
+    glass = kw.get("lens_face_to_glass_mm", 3.5) - 2.5
     head = kw.get("washer_thickness_mm", 0.3) + kw.get("screw_head_mm", 1.3)
     assert HolderParams(**kw).washer_recess_mm == pytest.approx(max(need, kw.get("washer_thickness_mm", 0.3)))
     assert glass + need - head >= 0.2 - 1e-9 and glass + need - 0.1 - head < 0.2  # the least tenth that clears

@@ -32,13 +32,13 @@ def test_holder_checks_measure_the_doe_distance_on_the_mesh():
     from holder_cad.checks import run_checks
     from holder_cad.params import HolderParams
 
-    p = HolderParams(washer_recess_mm=1.5, thread_length_mm=2.0)
+    p = HolderParams(washer_recess_mm=1.5, lens_face_to_glass_mm=4.0)
     parts = build_parts(p)
     c = run_checks(parts, assembly(parts, p), p, expected_bodies=2)
     # independent of the formula: the face sits washer_recess_mm above the lens-side end of the assembly
     assert c["doe_face_above_lens_side_end_mm"] == pytest.approx(1.5, abs=1e-3)
-    assert c["doe_to_lens_mm"] == pytest.approx(3.5 - 2.0 + 1.5, abs=1e-3)
-    assert {b["quantity"] for b in c["fit_bounds"]} >= {"doe_to_lens_mm", "thread_engagement_turns",
+    assert c["doe_to_lens_mm"] == pytest.approx(4.0 - 2.5 + 1.5, abs=1e-3)
+    assert {b["quantity"] for b in c["fit_bounds"]} >= {"doe_to_lens_mm", "thread_full_tooth_turns",
                                                         "die_to_pocket_clearance_mm", "wall_mm"}
 
 
