@@ -24,15 +24,26 @@ def _play_fix(p) -> str:
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
 
 
-def _turns_fix(p) -> str:
-    """What the thread's length must be: ``MIN_FULL_TURNS``–20 turns of full tooth between the lead-in and the
-    flange's chamfer."""
-    lead, pitch = derive.lead_in_mm(p), p.thread_pitch_mm
-    rest = lead + p.thread_depth_mm
+def _thread_lengths_mm(p) -> tuple[float, float]:
+    """(least, longest) thread length (mm, tenths) that bears ``MIN_FULL_TURNS``–20 turns of full tooth between
+    the lead-in and the flange's chamfer and keeps its tip ``HEAD_GLASS_CLEARANCE_MM`` in front of the lens glass
+    (and within the parameter's range)."""
+    pitch, rest = p.thread_pitch_mm, derive.lead_in_mm(p) + p.thread_depth_mm
     lo = math.ceil(10 * (derive.MIN_FULL_TURNS * pitch + rest) - 1e-6) / 10
-    hi = math.floor(10 * (20 * pitch + rest) + 1e-6) / 10
-    return (f"the thread must bear {derive.MIN_FULL_TURNS:g}–20 turns of full tooth between its {lead:.2f} mm "
-            f"lead-in and the flange's chamfer: set thread_length_mm between {lo:g} and {hi:g}, or leave it out")
+    glass = p.lens_face_to_glass_mm - derive.HEAD_GLASS_CLEARANCE_MM
+    hi = math.floor(10 * min(20 * pitch + rest, glass, PARAM_RANGES["thread_length_mm"][1]) + 1e-6) / 10
+    return lo, hi
+
+
+def _thread_fix(p, what: str) -> str:
+    """How to make the thread bear two turns and stop short of the glass (``what``: the bound's own words)."""
+    lo, hi = _thread_lengths_mm(p)
+    if lo <= hi:
+        derived = lo <= derive.thread_length_mm(p) <= hi
+        return f"{what}: set thread_length_mm between {lo:g} and {hi:g}" + (", or leave it out" if derived else "")
+    return (f"{what}: two turns of the {p.thread_pitch_mm:g} mm pitch need a {lo:g} mm thread, but the lens glass, "
+            f"lens_face_to_glass_mm ({p.lens_face_to_glass_mm:g} mm) behind the filter face, leaves room for "
+            f"{hi:g} mm: measure lens_face_to_glass_mm again, or mount the holder on the barrel (mount = \"slip\")")
 
 
 def recess_chamfer_problem(p) -> str | None:
@@ -76,8 +87,8 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
          "the DOE must sit close to, but clear of, the lens glass: check thread_length_mm, washer_recess_mm and "
          "lens_face_to_glass_mm"),
         ("lens_side_end_to_glass_mm", round(d - p.washer_recess_mm, 6), derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm",
-         "the thread's tip (and the cartridge's end, flush with it) must stop short of the lens glass as the base "
-         "turns: a shorter thread_length_mm, or check lens_face_to_glass_mm" if p.mount == "thread" else
+         _thread_fix(p, "the thread's tip (and the cartridge's end, flush with it) must stop short of the lens "
+                        "glass as the base turns") if p.mount == "thread" else
          "the cartridge's end must stop short of the lens glass: check lens_face_to_glass_mm"),
         ("screw_head_to_glass_mm", round(d - p.washer_thickness_mm - p.screw_head_mm, 6),
          derive.HEAD_GLASS_CLEARANCE_MM, 1e3, "mm", _head_fix(p)),
@@ -98,7 +109,8 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
         rows += [
             _param_row(p, "thread_pitch_mm"),
             ("thread_full_tooth_turns", derive.full_tooth_turns(p), derive.MIN_FULL_TURNS, 20.0, "turns",
-             _turns_fix(p)),
+             _thread_fix(p, f"the thread must bear {derive.MIN_FULL_TURNS:g}–20 turns of full tooth between its "
+                            f"{derive.lead_in_mm(p):.2f} mm lead-in and the flange's chamfer")),
             ("thread_clearance_mm", p.thread_clearance_mm, derive.least_thread_play_mm(p.thread_pitch_mm,
                                                                                        p.thread_depth_mm),
              (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm, "mm", _play_fix(p)),

@@ -77,7 +77,8 @@ def lead_in_mm(p) -> float:
 def groove_filled_mm(p) -> float:
     """Height (mm) where the flange's 45° chamfer, which reaches the tooth's crest at the thread's end (the lens's
     filter face), reaches the groove's bottom: ``thread_length_mm`` less ``thread_depth_mm``. Above it the
-    groove is partly filled and the lens's tooth no longer fits it whole."""
+    groove is partly filled; the turns counted as bearing end there (a margin: with the default play the lens's
+    tooth crest stops 0.08 × pitch short of the groove's bottom, so the filling reaches it 0.08 × pitch higher)."""
     return p.thread_length_mm - p.thread_depth_mm
 
 

@@ -28,7 +28,7 @@ PARAM_RANGES = {
     "thread_diameter_mm": (20.0, 150.0, "filter threads; 49 for the EF 50 mm f/1.8 STM"),
     "thread_pitch_mm": (0.25, 1.5, "filter threads have pitches 0.5–1.0 mm"),
     "thread_depth_mm": (0.1, 0.8, "a printable tooth of a filter thread"),
-    "thread_length_mm": (0.5, 30.0, "the engaged thread length"),
+    "thread_length_mm": (0.5, 30.0, "the thread's length, lead-in included"),
     "barrel_diameter_mm": (20.0, 150.0, "a lens front barrel"),
     "sleeve_length_mm": (1.0, 100.0, "the slip-fit sleeve"),
     "lens_face_to_glass_mm": (0.01, 50.0, "filter face to front glass: measure your lens"),
