@@ -4,8 +4,9 @@ through, the crosstalk its sensor has and its calibration leaves, the capture no
 gives, for every variant, the per-scene metrics that ``benchmarks/results/real_validation.json`` records, to 1e-6
 of themselves (most agree exactly; a few differ in their last digits).
 
-The part is drawn from the budget the evaluations record (their budget digest): the shipped budget, or the shipped
-budget as it was before the mount tilt was modelled (less its ``tilt_sigma_deg`` key), whichever has that digest.
+The part is drawn from the shipped budget; its digest must be the one the evaluations record, or differ from it only
+by a change these designs do not see (``UNSEEN_CHANGES``: the holder's DOE-to-glass gap), so the committed numbers
+are the shipped budget's.
 
 The depth task is not compared: the digest of its measured scenes (``real_sha256["depth"]``) hashes linear images made
 with float32 powers whose last bits follow numpy's vector paths, so a machine without AVX-512 computes another
@@ -30,16 +31,21 @@ def cache(tmp_path, monkeypatch):
     monkeypatch.setenv("DOEFAB_CACHE", str(tmp_path / "cache"))
 
 
-def _budget_recorded(recorded: str) -> dict:
-    """The shipped budget, or the shipped budget less its tilt, whichever has the digest ``recorded``."""
+# changes to the shipped budget since the evaluations were scored that these designs do not see: the holder's
+# DOE-to-glass gap (1.6 mm before the retention screws' heads were kept 0.2 mm clear of the glass, now 1.8 mm) —
+# an axial gap changes no PSF where the DOE is the aperture stop, as in the shipped designs
+UNSEEN_CHANGES = ({"axial_gap_mm": 1.6},)
+
+
+def _shipped_budget(recorded: str) -> dict:
+    """The shipped budget, whose digest must be ``recorded`` or differ from it only by ``UNSEEN_CHANGES``."""
     from doefab.tolerance.conditions import budget_sha256
     from doefab.tolerance.errors import load_budget
 
     budget = load_budget()
-    if budget_sha256(budget) == recorded:
-        return budget
-    del budget["mounting"]["tilt_sigma_deg"]
-    assert budget_sha256(budget) == recorded, "the shipped budget changed beyond the tilt"
+    earlier = [budget] + [{**budget, "mounting": {**budget["mounting"], **c}} for c in UNSEEN_CHANGES]
+    assert recorded in {budget_sha256(b) for b in earlier}, ("the shipped budget changed since the committed "
+                                                            "evaluations: score them again (benchmarks/real_validation.py)")
     return budget
 
 
@@ -57,7 +63,7 @@ def test_scene_zero_of_the_measured_set_scores_as_committed(task, cache):
     assert {k: now[k] for k in COMPONENTS[task]} == {k: ref["real_sha256"][k] for k in COMPONENTS[task]}
     recs = {v: load_reconstructor(task, v) for v in ref["weights"]}
     assert {v: r.meta["weights_sha256"] for v, r in recs.items()} == {v: w["sha256"] for v, w in ref["weights"].items()}
-    budget = _budget_recorded(ref["conditions"]["budget_sha256"])
+    budget = _shipped_budget(ref["conditions"]["budget_sha256"])
     with one_thread():  # part 0 of the split's six: the same draw (SeedSequence.spawn), the one scene 0 goes through
         cond = honest(task, design_dir(task), "real", 1, budget)
         rows, _, _ = _score(task, "real", ref["images"], ref["size_px"], recs, None, Sensor(), cond, False,
