@@ -33,7 +33,7 @@ def cache(tmp_path, monkeypatch):
 
 # changes to the shipped budget since the evaluations were scored that these designs do not see: the holder's
 # DOE-to-glass gap (1.6 mm before the retention screws' heads were kept 0.2 mm clear of the glass, now 1.8 mm) —
-# an axial gap changes no PSF where the DOE is the aperture stop, as in the shipped designs
+# an axial gap changes no PSF where the DOE's baffle is the aperture stop, as in the shipped designs
 UNSEEN_CHANGES = ({"axial_gap_mm": 1.6},)
 
 
