@@ -28,10 +28,10 @@ def _thread_lengths_mm(p) -> tuple[float, float]:
     """(least, longest) thread length (mm, tenths) that bears ``MIN_FULL_TURNS``–20 turns of full tooth between
     the lead-in and the flange's chamfer and keeps its tip ``HEAD_GLASS_CLEARANCE_MM`` in front of the lens glass
     (and within the parameter's range)."""
-    pitch, rest = p.thread_pitch_mm, derive.lead_in_mm(p) + p.thread_depth_mm
-    lo = math.ceil(10 * (derive.MIN_FULL_TURNS * pitch + rest) - 1e-6) / 10
+    lo = math.ceil(10 * derive.length_for_turns_mm(p, derive.MIN_FULL_TURNS) - 1e-6) / 10
     glass = p.lens_face_to_glass_mm - derive.HEAD_GLASS_CLEARANCE_MM
-    hi = math.floor(10 * min(20 * pitch + rest, glass, PARAM_RANGES["thread_length_mm"][1]) + 1e-6) / 10
+    longest = min(derive.length_for_turns_mm(p, 20.0), glass, PARAM_RANGES["thread_length_mm"][1])
+    hi = math.floor(10 * longest + 1e-6) / 10
     return lo, hi
 
 

@@ -29,7 +29,7 @@ __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILO
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm", "HEAD_GLASS_CLEARANCE_MM",
            "washer_recess_mm", "LEAD_IN_INSET_MM", "LEAD_IN_SLOPE", "lead_in_mm", "MIN_FULL_TURNS",
-           "full_tooth_turns", "thread_length_mm", "groove_filled_mm"]
+           "full_tooth_turns", "thread_length_mm", "groove_filled_mm", "length_for_turns_mm"]
 
 PILOT_DEPTH_MM = 2.0  # an M2 lock screw bites at least its own diameter into the base
 SLIP_PLATE_MM = 6.0  # the slip-fit base's plate
@@ -89,13 +89,19 @@ def full_tooth_turns(p) -> float:
     return (groove_filled_mm(p) - lead_in_mm(p)) / p.thread_pitch_mm
 
 
+def length_for_turns_mm(p, turns: float) -> float:
+    """The thread length (mm) that bears ``turns`` turns of full tooth (:func:`full_tooth_turns` inverted): the
+    turns, the lead-in and the tooth depth the flange's chamfer fills. Example: 2.9625 mm for two turns of a
+    1.0 mm pitch (2 + 0.5625 + 0.4)."""
+    return turns * p.thread_pitch_mm + lead_in_mm(p) + p.thread_depth_mm
+
+
 def thread_length_mm(p) -> float:
     """The derived thread length (mm): 2.5 mm, or the least tenth of a millimetre more that gives ``MIN_FULL_TURNS``
     turns of full tooth between the lead-in and the flange's chamfer (``p``'s pitch and tooth depth resolved).
 
     Example: 2.5 mm for a 0.75 mm pitch; 3.0 mm for a 1.0 mm pitch (0.5625 mm lead-in, 2 mm, 0.4 mm chamfer)."""
-    need = MIN_FULL_TURNS * p.thread_pitch_mm + lead_in_mm(p) + p.thread_depth_mm
-    return max(_THREAD_LENGTH_MM, math.ceil(10 * need - 1e-6) / 10)
+    return max(_THREAD_LENGTH_MM, math.ceil(10 * length_for_turns_mm(p, MIN_FULL_TURNS) - 1e-6) / 10)
 
 
 LEDGE_MM = 0.5  # the least floor ring round the hole that the die rests on

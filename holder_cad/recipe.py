@@ -155,26 +155,44 @@ def _thread(p: HolderParams, body: Body) -> None:
     body.subs.append(Revolve(((r_in - slope, -1.0), (r_out, -1.0), (r_out, (r_out - r_in) / slope))))
 
 
+def _chamfer_foot(p: HolderParams) -> tuple[float, float]:
+    """(radius, height) (mm) where the flange's 45° chamfer over the thread starts: just inside the thread's root,
+    so no face overhangs, and low enough that the cone reaches the crest at the thread's end."""
+    r0 = p.thread_root_radius_mm - 0.02
+    return r0, p.thread_length_mm - (p.thread_major_radius_mm - r0)
+
+
+def _threaded_ring(p: HolderParams, body: Body, r_outer: float, top: float) -> None:
+    """The thread, and over it a ring of radius ``r_outer`` up to ``top`` whose underside is the 45° chamfer from
+    :func:`_chamfer_foot`; the bore through both."""
+    _thread(p, body)
+    r0, z_a = _chamfer_foot(p)
+    body.adds.append(Revolve(((0.0, z_a), (r0, z_a), (r_outer, z_a + (r_outer - r0)), (r_outer, top), (0.0, top))))
+    body.subs.append(Cyl(p.bore_radius_mm, -1.0, top + 1.0))
+
+
+def _slip_plate(p: HolderParams, body: Body, plate_mm: float, sleeve_mm: float) -> None:
+    """A plate of the flange's diameter, ``plate_mm`` thick on the bed (its lens side up), the sleeve over the
+    barrel ``sleeve_mm`` long above it, and the bore through the plate."""
+    rin = p.barrel_diameter_mm / 2 + p.clearance_mm
+    body.adds.append(Cyl(p.flange_diameter_mm / 2, 0.0, plate_mm))
+    body.adds.append(Cyl(rin + p.wall_mm, plate_mm - 1e-3, plate_mm + sleeve_mm))
+    body.subs.append(Cyl(rin, plate_mm, plate_mm + sleeve_mm + 1.0))
+    body.subs.append(Cyl(p.bore_radius_mm, -1.0, plate_mm + 1.0))
+
+
 def base_body(p: HolderParams) -> Body:
     """The base ring in print orientation (flat face on the bed at z = 0)."""
     rf = p.flange_diameter_mm / 2
     body = Body("base")
     if p.mount == "thread":
-        t, fh = p.thread_length_mm, p.flange_height_mm
-        _thread(p, body)
-        # flange with a 45° chamfer underneath, starting just inside the thread root so no face overhangs
-        r0 = p.thread_root_radius_mm - 0.02
-        z_a = t - (p.thread_major_radius_mm - r0)
-        top = t + fh
-        body.adds.append(Revolve(((0.0, z_a), (r0, z_a), (rf, z_a + (rf - r0)), (rf, top), (0.0, top))))
+        t = p.thread_length_mm
+        top = t + p.flange_height_mm
+        _threaded_ring(p, body, rf, top)
+        r0, z_a = _chamfer_foot(p)
     else:
-        fh, ls = p.flange_height_mm, p.sleeve_length_mm
-        rin = p.barrel_diameter_mm / 2 + p.clearance_mm
-        body.adds.append(Cyl(rf, 0.0, fh))  # the plate, printed on the bed (its lens side faces up)
-        body.adds.append(Cyl(rin + p.wall_mm, fh - 1e-3, fh + ls))
-        body.subs.append(Cyl(rin, fh, fh + ls + 1.0))
-        top = fh
-    body.subs.append(Cyl(p.bore_radius_mm, -1.0, top + 1.0))
+        top = p.flange_height_mm
+        _slip_plate(p, body, top, p.sleeve_length_mm)
     r_hole = p.pilot_hole_mm / 2
     for k in range(4):  # M2 pilot holes for the cartridge's lock screws
         a = math.pi / 4 + k * math.pi / 2
@@ -232,14 +250,9 @@ def _coupon_thread_ring(p: HolderParams) -> Body:
     """The base's thread and bore under a narrow grip rim (the thread plus ``COUPON_GRIP_MM``, over a 45° chamfer
     and ``wall_mm``), without the flange, its lock-screw holes and graduations: the thread's fit and the flange
     face's seat on the lens, and the cartridge's slide in the bore, for about half the base's plastic."""
-    t = p.thread_length_mm
     ring = Body("coupon_ring")
-    _thread(p, ring)
-    r0, rg = p.thread_root_radius_mm - 0.02, p.thread_major_radius_mm + COUPON_GRIP_MM
-    z_a = t - (p.thread_major_radius_mm - r0)
-    top = z_a + (rg - r0) + p.wall_mm
-    ring.adds.append(Revolve(((0.0, z_a), (r0, z_a), (rg, z_a + (rg - r0)), (rg, top), (0.0, top))))
-    ring.subs.append(Cyl(p.bore_radius_mm, -1.0, top + 1.0))
+    (r0, z_a), rg = _chamfer_foot(p), p.thread_major_radius_mm + COUPON_GRIP_MM
+    _threaded_ring(p, ring, rg, z_a + (rg - r0) + p.wall_mm)
     return ring
 
 
@@ -249,10 +262,8 @@ def coupon_bodies(p: HolderParams) -> list[Body]:
     if p.mount == "thread":
         ring = _coupon_thread_ring(p)
     else:  # the base's plate, thin, and a short sleeve over the barrel (the base's own, without its screw holes)
-        fh, ls = derive.PILOT_DEPTH_MM, min(p.sleeve_length_mm, 4.0)
-        rin = p.barrel_diameter_mm / 2 + p.clearance_mm
-        ring = Body("coupon_ring", [Cyl(p.flange_diameter_mm / 2, 0.0, fh), Cyl(rin + p.wall_mm, fh - 1e-3, fh + ls)],
-                    [Cyl(rin, fh, fh + ls + 1.0), Cyl(p.bore_radius_mm, -1.0, fh + 1.0)])
+        ring = Body("coupon_ring")
+        _slip_plate(p, ring, derive.PILOT_DEPTH_MM, min(p.sleeve_length_mm, 4.0))
     w = p.die_width_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     h = p.die_height_mm / 2 + p.clearance_mm + p.wall_mm + 1.0
     t = p.die_thickness_mm + 0.05 + p.wall_mm
