@@ -25,7 +25,7 @@ from typing import Callable, NamedTuple
 from doefab.errors import DoefabError
 
 __all__ = ["Application", "Metric", "APPLICATIONS", "application", "of_design", "has", "design_is", "NAMES",
-           "DESIGN_TASKS", "PROPERTIES", "HDR_PEAK", "View"]
+           "DESIGN_TASKS", "PROPERTIES", "HDR_PEAK", "View", "band_problem"]
 
 HDR_PEAK = 256.0  # the paper's Table 1: HDR PSNR with a maximum value of 2^8 (radiance; 1 is the plain capture's clip)
 
@@ -174,6 +174,21 @@ def design_is(design_task: str, what: str) -> bool:
     Example: ``design_is("half-ring", "depth")`` → True."""
     app = of_design(design_task)
     return has(app.name if app is not None else "", what)  # an unknown ``what`` is an error either way
+
+
+def band_problem(name: str, wavelengths_m) -> str | None:
+    """Why a design on ``wavelengths_m`` (metres) cannot feed application ``name``'s networks, or None when it can.
+    A spectral application takes any bands (its scenes are spectra on them); the others' scenes are the camera's
+    own RGB, so their networks need one PSF per colour channel: three bands, red first (longest to shortest).
+
+    Example: ``band_problem("depth", [656e-9, 589e-9, 486e-9])`` → None; ``band_problem("depth", [1064e-9])`` →
+    ``"the depth network takes the camera's RGB captures: …"``."""
+    nm = [round(float(w) * 1e9, 3) for w in wavelengths_m]
+    if has(name, "spectral") or (len(nm) == 3 and nm[0] > nm[1] > nm[2]):
+        return None
+    got = ", ".join(f"{w:g}" for w in nm)
+    return (f"the {name} network takes the camera's RGB captures, one PSF per colour channel: it needs three bands "
+            f"in nm, red first (e.g. [656, 589, 486]), got [{got}]")
 
 
 class View(Mapping):

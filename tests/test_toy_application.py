@@ -67,7 +67,10 @@ def toy(grating_design, tmp_path, monkeypatch):
         apps.APPLICATIONS["hdr"], name="toy", design_task="toy-grating", primary_metric="psnr",
         network="toy_network", highlights=False, kernel=31, crop=64, summary="a toy"))
     folder = tmp_path / "design"
-    dataclasses.replace(Design.load(grating_design(80, 31)), task="toy-grating").save(folder)
+    d = Design.load(grating_design(80, 31))
+    # an RGB application's bands go red first, one per colour channel (``applications.band_problem``)
+    dataclasses.replace(d, task="toy-grating", wavelengths=tuple(reversed(d.wavelengths)), psf_quantized=None,
+                        targets=None).save(folder)
     monkeypatch.setattr(committed, "committed_dir", lambda name: folder)
     return folder
 

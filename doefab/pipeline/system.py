@@ -18,7 +18,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
                                       quick_sampling, sampling_checks)
-from doefab.applications import application, design_is, has
+from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
 
@@ -290,6 +290,9 @@ def _checks(scene: Scene, cam, task) -> list[str]:
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
                    f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
+    if "reconstruction" in scene.stages and (bands := band_problem(scene.task, task.wavelengths(cam))):
+        out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
+                   f"bands alone")
     if has(scene.task, "spectral") and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
         out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
                    " keep the bands within it")

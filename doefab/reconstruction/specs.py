@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from doefab.applications import View, application, has
+from doefab.applications import View, application, band_problem, has
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
@@ -89,6 +89,8 @@ def _pair_cached(folder: str, task: str, stamp: tuple):
     d = Design.load(folder)
     if d.task != get_spec(task).design:
         return None, d.task
+    if problem := band_problem(task, d.wavelengths):
+        raise DoefabError(f"{folder}: {problem}: design it for three such bands (a scene's optics.wavelengths_nm)")
     plan = PSFPlan(d.camera, d.wavelengths, d.depths, network_kernel(task, d.task_params.get("kernel_size")))
     with torch.no_grad():
         pair = plan(d.quantized_height)  # the design's own L levels

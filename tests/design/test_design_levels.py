@@ -147,3 +147,22 @@ def test_the_networks_see_the_psf_of_the_designs_own_levels_in_its_own_window(ei
         as16 = plan(eight.levels * h2pi / 16)  # the level map read as if it had 16 levels
     assert torch.allclose(pair.coded, want8.coded, atol=1e-7, rtol=1e-5)
     assert not torch.allclose(pair.coded, as16.coded, atol=1e-5, rtol=1e-3)
+
+
+@pytest.mark.parametrize("bands", [(550e-9,), (486e-9, 589e-9, 656e-9), (656e-9, 589e-9, 486e-9, 450e-9)])
+def test_an_rgb_network_refuses_a_design_whose_bands_are_not_red_green_blue(eight, tmp_path, bands):
+    """The HDR network's scenes are the camera's RGB: a design on one band, on three listed blue first (its 486 nm
+    PSF would blur the red channel), or on four is refused by name before any PSF is computed; the same levels on
+    red, green, blue are taken."""
+    from doefab.reconstruction.specs import psf_pair
+
+    d = tmp_path / "bands"
+    Design(**{**eight.__dict__, "wavelengths": bands, "psf_quantized": None, "targets": None}).save(d)
+    with pytest.raises(DoefabError) as exc:
+        psf_pair("hdr", d)
+    got = ", ".join(f"{w * 1e9:g}" for w in bands)
+    assert "three bands" in str(exc.value) and "red first" in str(exc.value) and f"got [{got}]" in str(exc.value)
+    ok = tmp_path / "rgb"
+    rgb = (630e-9, 532e-9, 450e-9)
+    Design(**{**eight.__dict__, "wavelengths": rgb, "psf_quantized": None, "targets": None}).save(ok)
+    assert tuple(psf_pair("hdr", ok)[0].wavelengths) == rgb
