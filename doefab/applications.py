@@ -179,7 +179,7 @@ def design_is(design_task: str, what: str) -> bool:
 def band_problem(name: str, wavelengths_m) -> str | None:
     """Why a design on ``wavelengths_m`` (metres) cannot feed application ``name``'s networks, or None when it can.
     A spectral application takes any bands (its scenes are spectra on them); the others' scenes are the camera's
-    own RGB, so their networks need one PSF per colour channel: three bands, red first (longest to shortest).
+    own RGB, so their networks need one PSF per colour channel: three bands, longest first (R, G, B).
 
     Example: ``band_problem("depth", [656e-9, 589e-9, 486e-9])`` → None; ``band_problem("depth", [1064e-9])`` →
     ``"the depth network takes the camera's RGB captures: …"``."""
@@ -188,7 +188,7 @@ def band_problem(name: str, wavelengths_m) -> str | None:
         return None
     got = ", ".join(f"{w:g}" for w in nm)
     return (f"the {name} network takes the camera's RGB captures, one PSF per colour channel: it needs three bands "
-            f"in nm, red first (e.g. [656, 589, 486]), got [{got}]")
+            f"in nm, longest first (red, green, blue; e.g. [656, 589, 486]), got [{got}]")
 
 
 class View(Mapping):

@@ -125,7 +125,7 @@ def task_design_arg(args, need_weights_dir: bool):
     if not getattr(args, "design", None):
         return None
     d, design = design_folder(args.design)  # validated: a clear error before any work
-    check_design_task(args.task, design.task, args.design, flag="--task")
+    check_design_task(args.task, design.task, args.design, flag="--task", wavelengths=design.wavelengths)
     if need_weights_dir and getattr(args, "weights_dir", None) is None:
         raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")
     return d.resolve()

@@ -24,7 +24,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from doefab.applications import APPLICATIONS, design_is
+from doefab.applications import APPLICATIONS, design_is, of_design
 from doefab.cli._args import add_device_arg, add_sensor_args, number
 
 
@@ -73,6 +73,7 @@ def run(args) -> int:
     from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
+    from doefab.reconstruction.specs import check_bands
 
     if args.psf is not None:
         return _run_on_pair(args)
@@ -88,6 +89,7 @@ def run(args) -> int:
     d, design = design_folder(args.design)
     if not design_is(design.task, "depth"):
         raise DoefabError(f"{d}: end-to-end fine-tuning is for depth (half-ring) designs")
+    check_bands(of_design(design.task).name, design.wavelengths, d)  # before the output folder is made
     sensor = sensor_arg(args)
     if args.weights_dir is not None:  # the starting network, checked before any PSF is computed
         from doefab.reconstruction.loader import weights_record

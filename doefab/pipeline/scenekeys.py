@@ -92,7 +92,7 @@ KEYS = (
         help="read noise, rms electrons (at the ISO used)"),
     Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, item="float", default="the task's",
         help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10); HDR and depth "
-             "networks take three, red first, one per colour channel"),
+             "networks take three, longest first, one per colour channel (R, G, B)"),
     Key("optics", "depths_m", "list", "m", 1e-3, 1e6, choices=("inf",), item="float", default="the task's",
         help="depth planes (depth: 1–5 m every 0.25; others: the focus distance); \"inf\" for a plane wave"),
     Key("optics", "kernel_px", "int", "px", 15, 1023, default="95, 191, 63",

@@ -290,7 +290,8 @@ def _checks(scene: Scene, cam, task) -> list[str]:
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
                    f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
-    if "reconstruction" in scene.stages and (bands := band_problem(scene.task, task.wavelengths(cam))):
+    networks = "reconstruction" in scene.stages and scene.reconstruction.get("weights", "shipped") != "shipped"
+    if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # "shipped": skipped, another design
         out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
                    f"bands alone")
     if has(scene.task, "spectral") and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):

@@ -18,7 +18,7 @@ from doefab.applications import View, application, band_problem, has
 from doefab.errors import DoefabError
 
 __all__ = ["TaskSpec", "SPECS", "get_spec", "design_dir", "psf_pair", "make_batch", "crop_margin", "render_scene",
-           "check_design_task", "network_kernel", "training_crop"]
+           "check_design_task", "check_bands", "network_kernel", "training_crop"]
 
 
 @dataclass(frozen=True)
@@ -55,13 +55,23 @@ def training_crop(task: str, crop: int | None = None) -> int:
     return crop
 
 
-def check_design_task(task: str, design_task: str, where, flag: str = "task") -> None:
-    """Refuse a design of another task than ``task``'s networks take (a grating design for the HDR network)."""
+def check_design_task(task: str, design_task: str, where, flag: str = "task", wavelengths=None) -> None:
+    """Refuse a design of another task than ``task``'s networks take (a grating design for the HDR network), and
+    with ``wavelengths`` (metres) one on bands they cannot take (``check_bands``)."""
     spec = get_spec(task)
     if design_task != spec.design:
         owner = {s.design: s.name for s in SPECS.values()}.get(design_task)
         kind = f"a {owner} ({design_task})" if owner else f"a {design_task!r}"
         raise DoefabError(f"{where} is {kind} design; {flag} {task} needs a {spec.design} design")
+    if wavelengths is not None:
+        check_bands(task, wavelengths, where)
+
+
+def check_bands(task: str, wavelengths, where) -> None:
+    """Refuse a design at ``where`` on bands (metres) that ``task``'s networks cannot take
+    (``applications.band_problem``: an RGB application's three, longest first)."""
+    if problem := band_problem(task, wavelengths):
+        raise DoefabError(f"{where}: {problem}: design it for three such bands (a scene's optics.wavelengths_nm)")
 
 
 def design_dir(task: str) -> Path:
@@ -89,8 +99,7 @@ def _pair_cached(folder: str, task: str, stamp: tuple):
     d = Design.load(folder)
     if d.task != get_spec(task).design:
         return None, d.task
-    if problem := band_problem(task, d.wavelengths):
-        raise DoefabError(f"{folder}: {problem}: design it for three such bands (a scene's optics.wavelengths_nm)")
+    check_bands(task, d.wavelengths, folder)
     plan = PSFPlan(d.camera, d.wavelengths, d.depths, network_kernel(task, d.task_params.get("kernel_size")))
     with torch.no_grad():
         pair = plan(d.quantized_height)  # the design's own L levels

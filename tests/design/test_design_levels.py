@@ -149,10 +149,12 @@ def test_the_networks_see_the_psf_of_the_designs_own_levels_in_its_own_window(ei
     assert not torch.allclose(pair.coded, as16.coded, atol=1e-5, rtol=1e-3)
 
 
-@pytest.mark.parametrize("bands", [(550e-9,), (486e-9, 589e-9, 656e-9), (656e-9, 589e-9, 486e-9, 450e-9)])
-def test_an_rgb_network_refuses_a_design_whose_bands_are_not_red_green_blue(eight, tmp_path, bands):
-    """The HDR network's scenes are the camera's RGB: a design on one band, on three listed blue first (its 486 nm
-    PSF would blur the red channel), or on four is refused by name before any PSF is computed; the same levels on
+@pytest.mark.parametrize("bands", [(550e-9,), (486e-9, 589e-9, 656e-9), (656e-9, 486e-9, 589e-9),
+                                   (656e-9, 589e-9, 486e-9, 450e-9)])
+def test_an_rgb_network_refuses_a_design_whose_bands_are_not_red_green_blue(eight, tmp_path, monkeypatch, bands):
+    """The HDR network's scenes are the camera's RGB: a design on one band, on three not listed longest first (a
+    486 nm PSF would blur the red or green channel), or on four is refused by name, by ``psf_pair`` (train,
+    evaluate, the network judge) and by ``train --design`` before its output folder is made; the same levels on
     red, green, blue are taken."""
     from doefab.reconstruction.specs import psf_pair
 
@@ -161,7 +163,17 @@ def test_an_rgb_network_refuses_a_design_whose_bands_are_not_red_green_blue(eigh
     with pytest.raises(DoefabError) as exc:
         psf_pair("hdr", d)
     got = ", ".join(f"{w * 1e9:g}" for w in bands)
-    assert "three bands" in str(exc.value) and "red first" in str(exc.value) and f"got [{got}]" in str(exc.value)
+    assert "three bands" in str(exc.value) and "longest first" in str(exc.value) and f"got [{got}]" in str(exc.value)
+    import doefab.tolerance.conditions as conditions
+    from doefab.cli import main
+
+    def no_work(*a, **k):
+        raise AssertionError("the fabricated parts' PSFs were computed before the design was refused")
+
+    monkeypatch.setattr(conditions, "for_splits", no_work)  # an internal error (exit 1) if reached
+    out = tmp_path / "net"
+    assert main(["train", "--task", "hdr", "--design", str(d), "--minutes", "0.05", "--out", str(out)]) == 2
+    assert not out.exists()
     ok = tmp_path / "rgb"
     rgb = (630e-9, 532e-9, 450e-9)
     Design(**{**eight.__dict__, "wavelengths": rgb, "psf_quantized": None, "targets": None}).save(ok)

@@ -131,20 +131,23 @@ def test_a_scene_and_its_budget_saved_with_a_byte_order_mark_load(tmp_path):
     assert load_budget(tmp_path / "b.toml")["etch"]["systematic_sigma_percent"] == 2.0
 
 
-@pytest.mark.parametrize("task, bands, stages, refused", [
-    ("depth", "[1064]", None, True),                        # a monochrome NIR design: the RGB network cannot take it
-    ("hdr", "[486, 589, 656]", None, True),                 # blue first: the 486 nm PSF would blur the red channel
-    ("hdr", "[656, 589, 486, 450]", None, True),
-    ("depth", "[1064]", '["design", "masks", "holder"]', False),  # designed and written for the band alone
-    ("hdr", "[630, 532, 450]", None, False),
-    ("hyperspectral", "[450, 500, 550, 600, 650]", None, False),  # spectra take any bands
+@pytest.mark.parametrize("task, bands, stages, weights, refused", [
+    ("depth", "[1064]", None, "train", True),              # a monochrome NIR design: the RGB network cannot take it
+    ("hdr", "[486, 589, 656]", None, "shipped-anyway", True),  # blue first: the 486 nm PSF would blur the red channel
+    ("hdr", "[656, 486, 589]", None, "train", True),       # red first, but green and blue swapped
+    ("hdr", "[656, 589, 486, 450]", None, "train", True),
+    ("depth", "[1064]", '["design", "masks", "holder", "tolerance"]', "train", False),  # no network: designed alone
+    ("depth", "[1064]", None, None, False),  # the shipped networks skip another design: nothing reads its bands
+    ("hdr", "[630, 532, 450]", None, "train", False),
+    ("hyperspectral", "[450, 500, 550, 600, 650]", None, "train", False),  # spectra take any bands
 ])
-def test_a_network_route_needs_one_band_per_rgb_channel(tmp_path, task, bands, stages, refused):
-    """doctor and run (both ``resolve``) refuse an RGB application's bands that are not three, red first, when the
-    scene reconstructs; without the reconstruction stage the design goes ahead on them."""
+def test_a_network_route_needs_one_band_per_rgb_channel(tmp_path, task, bands, stages, weights, refused):
+    """doctor and run (both ``resolve``) refuse an RGB application's bands that are not three, longest first, when
+    the scene trains or evaluates networks on its design; without them the design goes ahead on its bands."""
     from doefab.pipeline.system import resolve
 
-    text = (f"stages = {stages}\n" if stages else "") + f"[optics]\nwavelengths_nm = {bands}\n"
+    text = ((f"stages = {stages}\n" if stages else "") + f"[optics]\nwavelengths_nm = {bands}\n"
+            + (f'[reconstruction]\nweights = "{weights}"\n' if weights else ""))
     scene = load_scene(_scene(tmp_path, text, task))
     if not refused:
         got = [w * 1e9 for w in resolve(scene).settings["wavelengths_m"]]
@@ -153,5 +156,5 @@ def test_a_network_route_needs_one_band_per_rgb_channel(tmp_path, task, bands, s
     with pytest.raises(DoefabError) as exc:
         resolve(scene)
     msg = str(exc.value)
-    assert "optics.wavelengths_nm" in msg and "three bands" in msg and "red first" in msg, msg
+    assert "optics.wavelengths_nm" in msg and "three bands" in msg and "longest first (red, green, blue" in msg, msg
     assert f"got {bands}" in msg and 'leave "reconstruction" out of stages' in msg
