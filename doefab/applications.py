@@ -182,7 +182,8 @@ def band_problem(name: str, wavelengths_m) -> str | None:
     own RGB, so their networks need one PSF per colour channel: three bands, longest first (R, G, B).
 
     Example: ``band_problem("depth", [656e-9, 589e-9, 486e-9])`` → None; ``band_problem("depth", [1064e-9])`` →
-    ``"the depth network takes the camera's RGB captures: …"``."""
+    ``"the depth network takes the camera's RGB captures, one PSF per colour channel: it needs three bands …,
+    got [1064]"``."""
     nm = [round(float(w) * 1e9, 3) for w in wavelengths_m]
     if has(name, "spectral") or (len(nm) == 3 and nm[0] > nm[1] > nm[2]):
         return None
