@@ -186,24 +186,22 @@ def base_body(p: HolderParams) -> Body:
     rf = p.flange_diameter_mm / 2
     body = Body("base")
     if p.mount == "thread":
-        t = p.thread_length_mm
-        top = t + p.flange_height_mm
+        top = p.thread_length_mm + p.flange_height_mm
         _threaded_ring(p, body, rf, top)
         r0, z_a = _chamfer_foot(p)
+        # the pilot holes stop wall_mm (measured square to the 45° chamfer) above the chamfer; the graduations
+        # stay wall_mm clear of it
+        z_lo, z0 = p.thread_length_mm + p.pilot_stop_mm, z_a + (rf - r0) + p.wall_mm
     else:
         top = p.flange_height_mm
         _slip_plate(p, body, top, p.sleeve_length_mm)
+        z_lo = z0 = -1.0  # through the plate
     r_hole = p.pilot_hole_mm / 2
     for k in range(4):  # M2 pilot holes for the cartridge's lock screws
         a = math.pi / 4 + k * math.pi / 2
-        if p.mount == "thread":  # stop wall_mm (measured square to the 45° chamfer) above the chamfer
-            z_lo = t + p.pilot_stop_mm
-        else:
-            z_lo = -1.0
         body.subs.append(Cyl(r_hole, z_lo, top + 1.0, p.pilot_radius_mm * math.cos(a),
                              p.pilot_radius_mm * math.sin(a)))
-    # 10° graduations (deeper every 90°) on the flange rim, wall_mm clear of the chamfer below
-    z0 = (z_a + (rf - r0) + p.wall_mm) if p.mount == "thread" else -1.0
+    # 10° graduations (deeper every 90°) on the flange rim
     for k in range(36):
         depth = 1.0 if k % 9 == 0 else 0.5
         body.subs.append(Prism(_notch(rf, math.radians(10 * k), depth, 0.8), z0, top + 1.0))
