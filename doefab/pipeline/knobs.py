@@ -162,12 +162,13 @@ def _training_knob(out: Path, scene, done: dict, rdir: Path):
     """The validation curves of the networks this run evaluated: those it trained (``reconstruction/weights``)
     or the shipped ones; none when the reconstruction stage used no network."""
     from doefab.reconstruction.metrics import metric_label
+    from doefab.pipeline.scenekeys import weights_mode
     from doefab.reconstruction.weights import history_path
 
     rc = done.get("reconstruction") or {}
     if rc.get("status") in (None, "skipped"):
         return None
-    trained = rc.get("weights") == "train"
+    trained = weights_mode(rc.get("weights")).trains
     folder = out / "reconstruction" / "weights" if trained else None
     curves = [(v, history_path(scene.task, v, folder)) for v in ("proposed", "coded_only", "uncoded_only")]
     if not any(p.is_file() for _, p in curves):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from doefab.applications import APPLICATIONS, has
 from doefab._devices import DEVICE_WORDS, check_device
@@ -20,9 +20,43 @@ from doefab.optics.materials import SUBSTRATES, substrate_name
 from doefab.tolerance.schedulers import MAX_WORKERS, parse_scheduler
 
 __all__ = ["Key", "KEYS", "HOW_NOT_WHAT", "RENAMED", "STAGES", "keys_of", "item_text", "values_text", "template",
-           "key_table_markdown", "toml_value"]
+           "key_table_markdown", "toml_value", "WeightsMode", "WEIGHTS_MODES", "weights_mode"]
 
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance", "report")
+
+
+class WeightsMode(NamedTuple):
+    """Which networks a scene's reconstruction stage evaluates (the ``reconstruction.weights`` key), one row each.
+    name: the key's value.  trains: networks are trained here for the scene's system (in the stage's
+    ``weights`` folder).  any_system: the stage runs on a new design or another sensor (False: it is skipped
+    there; the shipped networks fit only the committed design and the default sensor).  flagged: the networks
+    were not trained for the captures they see; the report says so with a warning.  help: one line."""
+
+    name: str
+    trains: bool
+    any_system: bool
+    flagged: bool
+    help: str
+
+
+WEIGHTS_MODES = {m.name: m for m in (
+    WeightsMode("shipped", False, False, False, "the shipped networks (the committed designs')"),
+    WeightsMode("train", True, True, False, "networks trained for this design"),
+    WeightsMode("shipped-anyway", False, True, True, "the shipped ones given this design's PSF (with a warning)"))}
+
+
+DEFAULT_WEIGHTS = "shipped"
+
+
+def weights_mode(name: str | None) -> WeightsMode:
+    """The ``WEIGHTS_MODES`` row of ``name`` (None: the key's default, ``DEFAULT_WEIGHTS``).
+
+    Example::
+
+        >>> weights_mode("train").trains
+        True
+    """
+    return WEIGHTS_MODES[DEFAULT_WEIGHTS if name is None else name]
 
 
 @dataclass(frozen=True)
@@ -130,9 +164,8 @@ KEYS = (
     Key("fabrication", "pattern_faces", "choice", choices=("lens", "scene"), default="lens",
         help="which way the patterned face is mounted (the layout is mirrored for lens)"),
     Key("fabrication", "oasis", "bool", default="false", help="also write OASIS"),
-    Key("reconstruction", "weights", "choice", choices=("shipped", "train", "shipped-anyway"), default="shipped",
-        help="shipped networks (the committed designs'), networks trained for this design, or the shipped ones "
-             "given this design's PSF (with a warning)"),
+    Key("reconstruction", "weights", "choice", choices=tuple(WEIGHTS_MODES), default=DEFAULT_WEIGHTS,
+        help="; ".join(f"{m.name}: {m.help}" for m in WEIGHTS_MODES.values())),
     Key("reconstruction", "minutes", "float", "min", 0.05, 600.0, default="6",
         help="training time per network (weights = train)"),
     Key("reconstruction", "images", "int", "scenes", 1, 10000, default="4", help="held-out test scenes"),

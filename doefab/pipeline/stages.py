@@ -17,6 +17,7 @@ from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json
 from doefab.pipeline.resolved import ResolvedScene
+from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
@@ -193,16 +194,16 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     from doefab.tolerance.conditions import for_splits
 
     rec, task = scene.reconstruction, scene.task
-    mode = rec.get("weights", "shipped")
+    mode = weights_mode(rec.get("weights"))
     design = None if res.reuse else out.parent / "design"
     sensor = res.sensor  # None: the default sensor
-    if design is not None and mode == "shipped":
+    if design is not None and not mode.any_system:
         return {"status": "skipped", "why": f"the shipped networks are trained for the committed "
                                             f"{res.settings['design_task']} design, not this scene's: set "
                                             f"reconstruction.weights = \"train\" to train networks for it, or "
                                             f"\"shipped-anyway\" to evaluate the shipped ones on its captures"}
     other_sensor = shipped_sensor_differs(task, sensor)
-    if other_sensor and mode == "shipped":
+    if other_sensor and not mode.any_system:
         return {"status": "skipped", "why": f"the shipped networks are trained for another sensor ("
                                             f"{'; '.join(other_sensor)}): set reconstruction.weights = \"train\" "
                                             f"to train networks for this camera, or \"shipped-anyway\" to evaluate "
@@ -210,7 +211,7 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     budget = _scene_budget(scene)
     parts = 2
     weights_dir, warm = None, {}
-    if mode == "train":
+    if mode.trains:
         from doefab.reconstruction.train import train
         from doefab.reconstruction.weights import WEIGHTS_DIR
 
@@ -227,35 +228,56 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
     size = 128 if quick else int(rec.get("size_px", 256))
     cond = for_splits(task, design, "honest", ("test",), parts, budget=budget)["test"]
     r = evaluate(task, out, images=images, size=size, weights_dir=weights_dir, design=design, conditions=cond,
-                 other_design=mode == "shipped-anyway", sensor=sensor, split="test")
-    why = {"shipped": "shipped networks of the committed design",
-           "train": "trained here for this design (" + ", ".join(
-               f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" if w else
-               f"{v}: continued from its checkpoint" for v, w in warm.items()) + ")",
-           "shipped-anyway": "WARNING: the shipped networks, trained for the committed design and the default "
-                             "sensor, evaluated on this system's captures (told its PSFs); train networks for it "
-                             "for fair numbers"}[mode]
+                 other_design=mode.flagged, sensor=sensor, split="test")
+    why = ("trained here for this design (" + ", ".join(
+        f"{v}: {w['tensors']}/{w['of']} tensors warm-started from the shipped network" if w else
+        f"{v}: continued from its checkpoint" for v, w in warm.items()) + ")" if mode.trains else
+        "WARNING: the shipped networks, trained for the committed design and the default sensor, evaluated on "
+        "this system's captures (told its PSFs); train networks for it for fair numbers" if mode.flagged else
+        "shipped networks of the committed design")
     return {"status": "ran" if weights_dir else "reused",
             "why": why + f"; evaluated on {images} held-out scenes of {size}² px from the test split (not the final "
                          f"test set, which only doefab evaluate --split final reads), captured through {parts} "
                          f"fabricated parts with crosstalk unmixed by a noisy calibration (the network told the "
                          f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor, task)})",
-            "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode, "split": r["split"],
+            "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode.name, "split": r["split"],
             "design_levels_sha256": _design_sha(out.parent / "design")}
 
 
-def shipped_sensor_differs(task: str, sensor) -> list[str]:
-    """What of ``sensor`` (None: the default) the shipped ``task`` networks were not trained for (empty: nothing)."""
-    if sensor is None:
+def shipped_sensor_differs(task: str, sensor, folder: Path | None = None) -> list[str]:
+    """What of ``sensor`` (None: the default) the ``task`` networks in ``folder`` (None: the shipped ones) were
+    not trained for (empty: nothing)."""
+    if sensor is None and folder is None:  # the shipped networks are the default sensor's
         return []
+    from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.weights import weights_paths
 
     try:
-        meta = json.loads(weights_paths(task, "proposed")[1].read_text())
+        meta = json.loads(weights_paths(task, "proposed", folder)[1].read_text())
     except (OSError, ValueError):
         meta = {}
-    return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
-                               spectral=has(task, "spectral"))
+    return (sensor or Sensor()).differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
+                                             spectral=has(task, "spectral"))
+
+
+def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:
+    """The networks the reconstruction stage of the run in ``root`` trained (``weights = "train"``) for the design
+    in ``root/design`` and the scene's sensor: (their folder, "") or (None, why none: "" where it trained none)."""
+    folder = root / "reconstruction"
+    try:
+        rec = json.loads((folder / "stage.json").read_text())
+    except (OSError, ValueError):
+        return None, ""
+    mode = WEIGHTS_MODES.get(rec.get("weights")) if isinstance(rec, dict) else None
+    if mode is None or not mode.trains or not (folder / "weights").is_dir():
+        return None, ""
+    if not rec.get("complete") or rec.get("design_levels_sha256") != _design_sha(root / "design"):
+        return None, (f"the networks in {folder / 'weights'} were trained for another design: run the "
+                      f"reconstruction stage again to judge this one through its own")
+    if other := shipped_sensor_differs(scene.task, res.sensor, folder / "weights"):
+        return None, (f"the networks in {folder / 'weights'} were trained for another sensor ({'; '.join(other)}): "
+                      f"run the reconstruction stage again to judge this one through its own")
+    return folder / "weights", ""
 
 
 def _sensor_text(sensor, task: str) -> str:
@@ -300,9 +322,9 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     # the scene's sensor noise (where not the default's): the PSF-level judge's crosstalk calibration draws it
     budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
     samples = 3 if quick else int(tol.get("samples", 20))
-    weights = out.parent / "reconstruction" / "weights"
-    shipped_fits = res.reuse and not shipped_sensor_differs(scene.task, res.sensor)
-    networks = shipped_fits or weights.is_dir()
+    own, stale = networks_trained_here(scene, res, out.parent)  # before the shipped ones, which fit one system
+    shipped_fits = own is None and res.reuse and not shipped_sensor_differs(scene.task, res.sensor)
+    networks = own is not None or shipped_fits
     # the parts' captures: the reconstruction table's split and scene size (``netjudge``), SCENES per part
     judge = {"images": 2 if quick else SCENES, "size": 128 if quick else int(scene.reconstruction.get("size_px", 256)),
              "split": "test"}
@@ -310,12 +332,14 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
                   grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
                   budget_path=path, networks=judge if networks else False,
-                  weights_dir=None if shipped_fits else weights,
+                  weights_dir=own,
                   network_top=2 if quick else 5, workers=tol.get("workers"), scheduler=tol.get("scheduler"))
-    return {"status": "ran", "why": f"{samples} Monte Carlo parts " + ("through the network" if networks else
-                                                                      "at PSF level (no network for this system)")
+    through = ("through the networks this scene trained" if own else "through the shipped networks" if networks
+               else "at PSF level (no network for this system)")
+    return {"status": "ran", "why": f"{samples} Monte Carlo parts {through}"
             + ("" if quick else " and the quantization study")
             + ("; mounting errors from this scene's holder" if holder.is_file() else "")
+            + (f"; {stale}" if stale else "")
             + ("" if networks or not res.reuse else "; the shipped networks are for another sensor")
             + ("" if not networks else f"; each part judged on {judge['images']} test scenes of {judge['size']}² px "
                                         f"(the reconstruction table's split and size) captured by the sensor its "

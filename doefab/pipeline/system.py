@@ -21,6 +21,7 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_fact
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
+from doefab.pipeline.scenekeys import weights_mode
 
 __all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
            "scene_field_half_angle_deg", "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
@@ -290,8 +291,9 @@ def _checks(scene: Scene, cam, task) -> list[str]:
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
                    f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
-    networks = "reconstruction" in scene.stages and scene.reconstruction.get("weights", "shipped") != "shipped"
-    if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # "shipped": skipped, another design
+    mode = weights_mode(scene.reconstruction.get("weights"))
+    networks = "reconstruction" in scene.stages and mode.any_system
+    if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # else skipped on another design
         out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
                    f"bands alone")
     if has(scene.task, "spectral") and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):

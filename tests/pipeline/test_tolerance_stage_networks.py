@@ -1,0 +1,90 @@
+"""Which networks the tolerance stage judges its parts through: those the scene's reconstruction stage trained for
+this very design and sensor, else the shipped ones where they fit the system, else none (PSF level). Networks
+an earlier run trained for another design or sensor, left in the run folder, are never used."""
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import doefab
+from doefab.design.design import Design, levels_sha256
+from doefab.imaging.sensor import Sensor
+from doefab.pipeline import stages
+from doefab.pipeline.scene import load_scene
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _design(folder: Path, seed: int) -> str:
+    cam = doefab.Camera(aperture_diameter=0.2e-3, doe_pitch=5.4e-6, doe_pixels=40, sensor_pitch=5.4e-6,
+                        sensor_distance=50e-3, focus_distance=5.0)
+    lv = np.random.default_rng(seed).integers(0, 16, (40, 40)).astype(np.uint8)
+    d = Design(task="streak", task_params={"kernel_size": 31, "arm_px": 8}, camera=cam, wavelengths=(550e-9,),
+               depths=(5.0,), height=doefab.levels_to_height(lv, cam), levels=lv,
+               metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
+    d.save(folder)
+    return levels_sha256(lv)
+
+
+def _run_folder(tmp_path, mode: str, trained_for: str, sensor: dict | None = None) -> Path:
+    """A run folder whose reconstruction stage ran with ``mode`` and whose weights are for ``trained_for``."""
+    root = tmp_path / "run"
+    _design(root / "design", 0)
+    other = _design(tmp_path / "other_design", 1)
+    rec = root / "reconstruction"
+    (rec / "weights").mkdir(parents=True)
+    meta = {"sensor": (sensor or Sensor().record(with_response=False))}
+    (rec / "weights" / "hdr_proposed.json").write_text(json.dumps(meta))
+    sha = _design_sha(root) if trained_for == "this" else other
+    (rec / "stage.json").write_text(json.dumps({"stage": "reconstruction", "complete": True, "weights": mode,
+                                                "design_levels_sha256": sha}))
+    return root
+
+
+def _design_sha(root: Path) -> str:
+    return levels_sha256(Design.load(root / "design").levels)
+
+
+def _judged_by(root: Path, monkeypatch, reuse: bool) -> tuple[dict, str]:
+    import doefab.tolerance.report as report
+
+    seen = {}
+
+    def spy(design_dir, budget, out, **kw):
+        seen.update(kw)
+        return {"summary": None, "level": "network" if kw["networks"] else "psf"}
+
+    monkeypatch.setattr(report, "run_study", spy)
+    info = stages.stage_tolerance(load_scene(REPO / "scenes" / "hdr.toml"), SimpleNamespace(reuse=reuse, sensor=None),
+                                  root / "tolerance", True)
+    return seen, info["why"]
+
+
+def test_the_networks_this_scene_trained_for_its_design_judge_it(tmp_path, monkeypatch):
+    root = _run_folder(tmp_path, "train", "this")
+    for reuse in (True, False):  # before the shipped ones too, where those would fit
+        seen, why = _judged_by(root, monkeypatch, reuse)
+        assert seen["networks"] and seen["weights_dir"] == root / "reconstruction" / "weights"
+        assert "through the networks this scene trained" in why
+
+
+@pytest.mark.parametrize("trained_for, sensor, words", [
+    ("other", None, "trained for another design"),
+    ("this", {"full_well_e": 900.0, "read_noise_e": 7.0}, "trained for another sensor"),
+])
+def test_networks_left_from_another_system_are_never_used(tmp_path, monkeypatch, trained_for, sensor, words):
+    root = _run_folder(tmp_path, "train", trained_for, sensor)
+    seen, why = _judged_by(root, monkeypatch, reuse=False)  # a new design: no shipped network fits it
+    assert seen["networks"] is False and seen["weights_dir"] is None
+    assert words in why and "run the reconstruction stage again" in why and "at PSF level" in why
+    seen, why = _judged_by(root, monkeypatch, reuse=True)  # the committed design: the shipped networks fit
+    assert seen["networks"] and seen["weights_dir"] is None and "through the shipped networks" in why
+
+
+def test_a_stage_that_trained_nothing_lends_no_networks(tmp_path, monkeypatch):
+    root = _run_folder(tmp_path, "shipped-anyway", "this")  # a weights folder it did not write
+    seen, why = _judged_by(root, monkeypatch, reuse=False)
+    assert seen["networks"] is False and "trained for" not in why
