@@ -15,8 +15,8 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import HOW_NOT_WHAT
-from doefab.pipeline.stages import (_scene_budget, scene_die_chamfer_m, stage_design, stage_holder, stage_masks,
-                                    stage_reconstruction, stage_tolerance)
+from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_die_chamfer_m, stage_design,
+                                    stage_holder, stage_masks, stage_reconstruction, stage_tolerance)
 from doefab.pipeline.system import resolve, scene_holder, scene_sensor
 
 __all__ = ["STAGE_FUNCS", "STAGE_KIND", "run_stage", "stage_hash", "has_progress", "budget_digest"]
@@ -61,12 +61,15 @@ SECTION = {"masks": ("fabrication",), "holder": ("holder",),  # the design's: Re
            "reconstruction": ("reconstruction",), "tolerance": ("tolerance",), "report": ()}
 
 
-def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None) -> str:
+def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | None = None,
+               root: Path | None = None) -> str:
     """The stage's inputs: for the design the resolved scene's ``design_key`` (its design settings, however the
     scene file spelled them; ``res``: the scene resolved, resolved here when None and needed), for the others
     their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its
     upstream stages' hashes, for the holder the source of ``holder_cad`` that builds it and, for the stages that
-    draw fabricated parts from it, the tolerance budget's content (not only its file name)."""
+    draw fabricated parts from it, the tolerance budget's content (not only its file name); for the tolerance
+    stage of the run in ``root`` also the networks it judges through (``networks_trained_here``: those its
+    reconstruction stage trained, also when this run did not run that stage)."""
     if name in ("design", "masks", "holder") and res is None:
         res = resolve(scene)
     if name == "design":
@@ -90,6 +93,10 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
         parts["budget"] = budget_digest(scene)
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
             parts.update(scene_sensor(scene).entry(has(scene.task, "spectral")))
+    if name == "tolerance" and root is not None:
+        own, _ = networks_trained_here(scene, res if res is not None else resolve(scene), Path(root))
+        if own is not None:  # (none: the hash is as without ``root``)
+            parts["networks"] = json.loads((own.parent / "stage.json").read_text()).get("hash")
     return _h(parts)
 
 
@@ -108,7 +115,7 @@ def budget_digest(scene) -> str | None:
 def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, force: bool) -> dict:
     """Run (or reuse) one stage; its record (status, why, seconds, hash) is kept in ``<stage>/stage.json``."""
     out = out_root / name
-    h = stage_hash(scene, name, done, quick, res)
+    h = stage_hash(scene, name, done, quick, res, out_root)
     rec_path = out / "stage.json"
     old = {}
     if rec_path.is_file():

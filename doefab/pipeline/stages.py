@@ -260,6 +260,10 @@ def shipped_sensor_differs(task: str, sensor, folder: Path | None = None) -> lis
                                              spectral=has(task, "spectral"))
 
 
+_RETRAIN = ("run the reconstruction stage (\"reconstruction\" in stages, weights = \"train\") to judge the parts "
+            "through networks trained for them")
+
+
 def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:
     """The networks the reconstruction stage of the run in ``root`` trained (``weights = "train"``) for the design
     in ``root/design`` and the scene's sensor: (their folder, "") or (None, why none: "" where it trained none)."""
@@ -271,12 +275,11 @@ def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:
     mode = WEIGHTS_MODES.get(rec.get("weights")) if isinstance(rec, dict) else None
     if mode is None or not mode.trains or not (folder / "weights").is_dir():
         return None, ""
-    if not rec.get("complete") or rec.get("design_levels_sha256") != _design_sha(root / "design"):
-        return None, (f"the networks in {folder / 'weights'} were trained for another design: run the "
-                      f"reconstruction stage again to judge this one through its own")
+    if rec.get("design_levels_sha256") != _design_sha(root / "design"):  # a finished record: an unfinished has no mode
+        return None, (f"the networks in {folder / 'weights'} were trained for another design: {_RETRAIN}")
     if other := shipped_sensor_differs(scene.task, res.sensor, folder / "weights"):
         return None, (f"the networks in {folder / 'weights'} were trained for another sensor ({'; '.join(other)}): "
-                      f"run the reconstruction stage again to judge this one through its own")
+                      f"{_RETRAIN}")
     return folder / "weights", ""
 
 

@@ -40,7 +40,7 @@ def _run_folder(tmp_path, mode: str, trained_for: str, sensor: dict | None = Non
     (rec / "weights" / "hdr_proposed.json").write_text(json.dumps(meta))
     sha = _design_sha(root) if trained_for == "this" else other
     (rec / "stage.json").write_text(json.dumps({"stage": "reconstruction", "complete": True, "weights": mode,
-                                                "design_levels_sha256": sha}))
+                                                "design_levels_sha256": sha, "hash": "1" * 16}))
     return root
 
 
@@ -79,7 +79,7 @@ def test_networks_left_from_another_system_are_never_used(tmp_path, monkeypatch,
     root = _run_folder(tmp_path, "train", trained_for, sensor)
     seen, why = _judged_by(root, monkeypatch, reuse=False)  # a new design: no shipped network fits it
     assert seen["networks"] is False and seen["weights_dir"] is None
-    assert words in why and "run the reconstruction stage again" in why and "at PSF level" in why
+    assert words in why and "run the reconstruction stage" in why and "at PSF level" in why
     seen, why = _judged_by(root, monkeypatch, reuse=True)  # the committed design: the shipped networks fit
     assert seen["networks"] and seen["weights_dir"] is None and "through the shipped networks" in why
 
@@ -88,3 +88,21 @@ def test_a_stage_that_trained_nothing_lends_no_networks(tmp_path, monkeypatch):
     root = _run_folder(tmp_path, "shipped-anyway", "this")  # a weights folder it did not write
     seen, why = _judged_by(root, monkeypatch, reuse=False)
     assert seen["networks"] is False and "trained for" not in why
+
+
+def test_the_stage_is_judged_again_when_the_networks_it_would_use_change(tmp_path):
+    """A tolerance stage that judged at PSF level because the networks were stale runs again once the
+    reconstruction stage has trained this design's (also in a run of that stage alone), and again when they are
+    retrained."""
+    from doefab.pipeline.stagerun import stage_hash
+
+    scene, res = load_scene(REPO / "scenes" / "hdr.toml"), SimpleNamespace(reuse=False, sensor=None)
+    root = _run_folder(tmp_path, "train", "other")
+    record = root / "reconstruction" / "stage.json"
+    stale = stage_hash(scene, "tolerance", {}, False, res, root)
+    assert stage_hash(scene, "tolerance", {}, False, res, root) == stale
+    rec = json.loads(record.read_text())
+    record.write_text(json.dumps({**rec, "design_levels_sha256": _design_sha(root)}))
+    trained = stage_hash(scene, "tolerance", {}, False, res, root)
+    record.write_text(json.dumps({**rec, "design_levels_sha256": _design_sha(root), "hash": "2" * 16}))
+    assert len({stale, trained, stage_hash(scene, "tolerance", {}, False, res, root)}) == 3
