@@ -131,6 +131,12 @@ def aperture_clear(assembly_parts, radius_mm: float, rings: int = 12, angle_deg:
     return hits
 
 
+def _thread_teeth(p: HolderParams):
+    """Where the thread's teeth are (a mask over points, mm): they are not walls (0.3 mm by design)."""
+    r_root, t = p.thread_root_radius_mm, p.thread_length_mm
+    return lambda c: (np.hypot(c[:, 0], c[:, 1]) > r_root - 0.05) & (c[:, 2] < t + 0.05)
+
+
 def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: int) -> dict:
     """All checks; ``parts`` maps body name -> Manifold in print orientation."""
     from holder_cad.mesh import to_trimesh
@@ -141,13 +147,7 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
         tm = to_trimesh(m)
         comps = len(m.decompose())
         n_bodies += comps
-        exclude = None
-        if name in ("base", "coupon_ring") and p.mount == "thread":
-            r_root, t = p.thread_root_radius_mm, p.thread_length_mm
-
-            def exclude(c, r_root=r_root, t=t):  # thread teeth are not walls (0.3 mm by design)
-                return (np.hypot(c[:, 0], c[:, 1]) > r_root - 0.05) & (c[:, 2] < t + 0.05)
-
+        exclude = _thread_teeth(p) if name in ("base", "coupon_ring") and p.mount == "thread" else None
         loc: list = []
         wall = wall_thickness(m, exclude, where=loc)
         oh = overhang_area(m)
