@@ -21,7 +21,8 @@ from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
-           "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set"]
+           "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
+           "networks_trained_here", "shipped_sensor_differs"]
 
 REPO = Path(__file__).resolve().parents[2]
 
