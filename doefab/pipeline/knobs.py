@@ -161,8 +161,8 @@ def committed_point(design_name: str, design_dir: Path) -> tuple[tuple[float, fl
 def _training_knob(out: Path, scene, done: dict, rdir: Path):
     """The validation curves of the networks this run evaluated: those it trained (``reconstruction/weights``)
     or the shipped ones; none when the reconstruction stage used no network."""
-    from doefab.reconstruction.metrics import metric_label
     from doefab.pipeline.scenekeys import weights_mode
+    from doefab.reconstruction.metrics import metric_label
     from doefab.reconstruction.weights import history_path
 
     rc = done.get("reconstruction") or {}
