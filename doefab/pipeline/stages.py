@@ -245,42 +245,41 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
             "design_levels_sha256": _design_sha(out.parent / "design")}
 
 
-def shipped_sensor_differs(task: str, sensor, folder: Path | None = None) -> list[str]:
-    """What of ``sensor`` (None: the default) the ``task`` networks in ``folder`` (None: the shipped ones) were
-    not trained for (empty: nothing)."""
-    if sensor is None and folder is None:  # the shipped networks are the default sensor's
+def shipped_sensor_differs(task: str, sensor) -> list[str]:
+    """What of ``sensor`` (None: the default) the shipped ``task`` networks were not trained for (empty: nothing)."""
+    if sensor is None:
         return []
-    from doefab.imaging.sensor import Sensor
     from doefab.reconstruction.weights import weights_paths
 
     try:
-        meta = json.loads(weights_paths(task, "proposed", folder)[1].read_text())
+        meta = json.loads(weights_paths(task, "proposed")[1].read_text())
     except (OSError, ValueError):
         meta = {}
-    return (sensor or Sensor()).differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
-                                             spectral=has(task, "spectral"))
-
-
-_RETRAIN = ("run the reconstruction stage (\"reconstruction\" in stages, weights = \"train\") to judge the parts "
-            "through networks trained for them")
+    return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
+                               spectral=has(task, "spectral"))
 
 
 def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:
-    """The networks the reconstruction stage of the run in ``root`` trained (``weights = "train"``) for the design
-    in ``root/design`` and the scene's sensor: (their folder, "") or (None, why none: "" where it trained none)."""
+    """The networks the reconstruction stage of the run in ``root`` trained (``weights = "train"``), when the
+    loader's check (``reconstruction.loader.weights_record``) finds them trained for the design in
+    ``root/design`` and the scene's sensor: (their folder, "") or (None, why none: "" where it trained none)."""
+    from doefab.imaging.sensor import Sensor
+    from doefab.reconstruction.loader import weights_record
+
     folder = root / "reconstruction"
     try:
         rec = json.loads((folder / "stage.json").read_text())
     except (OSError, ValueError):
         return None, ""
     mode = WEIGHTS_MODES.get(rec.get("weights")) if isinstance(rec, dict) else None
-    if mode is None or not mode.trains or not (folder / "weights").is_dir():
+    if mode is None or not mode.trains or not (folder / "weights").is_dir():  # an unfinished record has no mode
         return None, ""
-    if rec.get("design_levels_sha256") != _design_sha(root / "design"):  # a finished record: an unfinished has no mode
-        return None, (f"the networks in {folder / 'weights'} were trained for another design: {_RETRAIN}")
-    if other := shipped_sensor_differs(scene.task, res.sensor, folder / "weights"):
-        return None, (f"the networks in {folder / 'weights'} were trained for another sensor ({'; '.join(other)}): "
-                      f"{_RETRAIN}")
+    try:
+        weights_record(scene.task, "proposed", folder / "weights", root / "design", res.sensor or Sensor())
+    except DoefabError as exc:
+        return None, (f"not judged through the networks in {folder / 'weights'}: {exc}; or run the reconstruction "
+                      f"stage (\"reconstruction\" in stages, weights = \"train\") to train networks for this "
+                      f"design and sensor")
     return folder / "weights", ""
 
 

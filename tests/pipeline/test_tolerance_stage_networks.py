@@ -2,6 +2,7 @@
 this very design and sensor, else the shipped ones where they fit the system, else none (PSF level). Networks
 an earlier run trained for another design or sensor, left in the run folder, are never used."""
 
+import hashlib
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -14,6 +15,7 @@ from doefab.design.design import Design, levels_sha256
 from doefab.imaging.sensor import Sensor
 from doefab.pipeline import stages
 from doefab.pipeline.scene import load_scene
+from doefab.reconstruction.weights import WEIGHTS_FORMAT
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -30,18 +32,28 @@ def _design(folder: Path, seed: int) -> str:
 
 
 def _run_folder(tmp_path, mode: str, trained_for: str, sensor: dict | None = None) -> Path:
-    """A run folder whose reconstruction stage ran with ``mode`` and whose weights are for ``trained_for``."""
+    """A run folder whose reconstruction stage ran with ``mode`` and whose weights' record says they are for
+    ``trained_for`` ("this" design or an "other" one) and ``sensor`` (None: the default sensor)."""
     root = tmp_path / "run"
     _design(root / "design", 0)
     other = _design(tmp_path / "other_design", 1)
-    rec = root / "reconstruction"
-    (rec / "weights").mkdir(parents=True)
-    meta = {"sensor": (sensor or Sensor().record(with_response=False))}
-    (rec / "weights" / "hdr_proposed.json").write_text(json.dumps(meta))
-    sha = _design_sha(root) if trained_for == "this" else other
-    (rec / "stage.json").write_text(json.dumps({"stage": "reconstruction", "complete": True, "weights": mode,
-                                                "design_levels_sha256": sha, "hash": "1" * 16}))
+    _write_weights(root, _design_sha(root) if trained_for == "this" else other, sensor)
+    (root / "reconstruction" / "stage.json").write_text(json.dumps(
+        {"stage": "reconstruction", "complete": True, "weights": mode, "hash": "1" * 16}))
     return root
+
+
+def _write_weights(root: Path, design_sha: str, sensor: dict | None = None) -> None:
+    """The proposed network's file and its record, as ``train`` writes them (the file's bytes are not a network:
+    the tolerance stage reads the record only)."""
+    folder = root / "reconstruction" / "weights"
+    folder.mkdir(parents=True, exist_ok=True)
+    data = b"weights"
+    (folder / "hdr_proposed.pt").write_bytes(data)
+    meta = {"format": WEIGHTS_FORMAT, "task": "hdr", "variant": "proposed", "design_levels_sha256": design_sha,
+            "arch": {}, "weights_sha256": hashlib.sha256(data).hexdigest(),
+            "sensor": sensor or Sensor().record(with_response=False)}
+    (folder / "hdr_proposed.json").write_text(json.dumps(meta))
 
 
 def _design_sha(root: Path) -> str:
@@ -101,8 +113,7 @@ def test_the_stage_is_judged_again_when_the_networks_it_would_use_change(tmp_pat
     record = root / "reconstruction" / "stage.json"
     stale = stage_hash(scene, "tolerance", {}, False, res, root)
     assert stage_hash(scene, "tolerance", {}, False, res, root) == stale
-    rec = json.loads(record.read_text())
-    record.write_text(json.dumps({**rec, "design_levels_sha256": _design_sha(root)}))
+    _write_weights(root, _design_sha(root))  # trained for this design by a run of the reconstruction stage
     trained = stage_hash(scene, "tolerance", {}, False, res, root)
-    record.write_text(json.dumps({**rec, "design_levels_sha256": _design_sha(root), "hash": "2" * 16}))
+    record.write_text(json.dumps({**json.loads(record.read_text()), "hash": "2" * 16}))  # and retrained
     assert len({stale, trained, stage_hash(scene, "tolerance", {}, False, res, root)}) == 3
