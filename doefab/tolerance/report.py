@@ -78,7 +78,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     mc_grid = res["grid"]["monte_carlo_grid"]
     _require_memory(judge, mc_grid, res["grid"], workers, scheduler)
     t = time.perf_counter()
-    res["tornado"] = cached_step(out, "tornado", key, lambda: study.tornado(design_dir, budget, grids, networks,
+    res["tornado"] = cached_step(out, "tornado", _tornado_key(key, networks), lambda: study.tornado(design_dir, budget, grids, networks,
                                                                             weights_dir, progress, network_top), reused)
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
@@ -185,6 +185,16 @@ def _step_key(judge, budget, grid, networks, weights_dir, network_top) -> dict:
     return {**run_identity(judge.design, budget, 0, 1, networks, weights_dir, judge.chain), "grid_arg": str(grid),
             "network_top": network_top, "weights_dir": None if weights_dir is None else str(Path(weights_dir).resolve()),
             "kind_magnitudes": {k.name: k.from_budget(budget) for k in KINDS}}  # what each error is judged at
+
+
+def _tornado_key(key: dict, networks) -> dict:
+    """The tornado step's key: the study's, marked where its judge's scenes are not the defaults. Tornadoes kept
+    before the mark were judged on the default scenes whatever the study asked for, and are computed again."""
+    from doefab.tolerance.netjudge import judge_settings
+
+    if networks and judge_settings(networks) != judge_settings(True):
+        return {**key, "tornado_scenes": "the study's"}
+    return key
 
 
 def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):

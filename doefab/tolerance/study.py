@@ -114,7 +114,7 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
         present = [k for k in present if k.name in top]
-        return sorted(tornado_rows(design_dir, budget, present, grids, True, weights_dir, progress) + rest,
+        return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) + rest,
                       key=lambda r: -abs(r["delta"]))
     return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress),
                   key=lambda r: -abs(r["delta"]))
