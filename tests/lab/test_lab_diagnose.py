@@ -421,3 +421,19 @@ def test_the_scan_finds_an_overlays_other_basins():
     # a fit one grid step from the first minimum (−1.5 against −1.0): that minimum is its own basin, not another
     near = scan(model, np.array([-1.5, -0.15]), jac)
     assert sorted(float(xm[0]) for xm, _ in near) == [2.0, 3.5]
+
+
+def test_the_diagnosis_progress_counts_parts_and_claims_no_total(capsys):
+    """How many parts a fit computes is known only when it converges (thousands, about 4× what its minimum steps
+    suggest): the progress line counts them and their rate, and shows no total or time left it cannot know."""
+    from types import SimpleNamespace
+
+    from doefab.lab.diagnose import _bar
+
+    model = SimpleNamespace(free=[object()] * 16)
+    bar = _bar(True, model, 8)
+    for _ in range(3):
+        model.tick()
+    assert bar.total is None and bar.n == 3
+    bar.close()
+    assert _bar(False, model, 8) is None
