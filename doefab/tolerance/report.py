@@ -78,8 +78,9 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     mc_grid = res["grid"]["monte_carlo_grid"]
     _require_memory(judge, mc_grid, res["grid"], workers, scheduler)
     t = time.perf_counter()
-    res["tornado"] = cached_step(out, "tornado", _tornado_key(key, networks), lambda: study.tornado(design_dir, budget, grids, networks,
-                                                                            weights_dir, progress, network_top), reused)
+    res["tornado"] = cached_step(out, "tornado", _tornado_key(key, networks),
+                                 lambda: study.tornado(design_dir, budget, grids, networks, weights_dir, progress,
+                                                       network_top), reused)
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
         if "network_delta_scenes" in r:
@@ -188,11 +189,12 @@ def _step_key(judge, budget, grid, networks, weights_dir, network_top) -> dict:
 
 
 def _tornado_key(key: dict, networks) -> dict:
-    """The tornado step's key: the study's, marked where its judge's scenes are not the defaults. Tornadoes kept
-    before the mark were judged on the default scenes whatever the study asked for, and are computed again."""
+    """The tornado step's key: the study's, marked where it judges its top errors through the network
+    (``network_top``) on other scenes than the defaults. Such tornadoes kept before the mark were judged on the
+    default scenes whatever the study asked for, and are computed again."""
     from doefab.tolerance.netjudge import judge_settings
 
-    if networks and judge_settings(networks) != judge_settings(True):
+    if networks and key.get("network_top") is not None and judge_settings(networks) != judge_settings(True):
         return {**key, "tornado_scenes": "the study's"}
     return key
 

@@ -430,7 +430,7 @@ def test_the_diagnosis_progress_counts_parts_and_claims_no_total(capsys):
 
     from doefab.lab.diagnose import _bar
 
-    model = SimpleNamespace(free=[object()] * 16)
+    model = SimpleNamespace(free=[SimpleNamespace(key="overlay")] * 16)
     bar = _bar(True, model, 8)
     for _ in range(3):
         model.tick()

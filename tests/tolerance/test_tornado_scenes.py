@@ -39,14 +39,17 @@ def test_the_tornados_network_rows_are_judged_on_the_scenes_the_study_asks_for(m
 
 
 def test_a_kept_tornado_is_judged_again_only_where_the_study_asked_for_other_scenes_than_the_defaults(tmp_path):
-    """Tornadoes kept by earlier code were judged on the default scenes whatever the study asked for: those of a
-    study on other scenes are computed again; the rest (default scenes, PSF level) are still reused."""
+    """Tornadoes kept by earlier code judged their top errors (``network_top``) on the default scenes whatever the
+    study asked for: those of a study on other scenes are computed again; the rest (default scenes, PSF level,
+    every error through the network) are still reused."""
     from doefab.tolerance.report import _tornado_key, cached_step
 
-    key = {"design": "d", "network_judge": "as asked"}
-    cases = [(True, False), ({"images": 8, "size": 256, "split": "test"}, False), (False, False),
-             ({"images": 2, "size": 128, "split": "test"}, True), ({"images": 8, "size": 256, "split": "val"}, True)]
-    for i, (networks, again) in enumerate(cases):
+    top, every = {"design": "d", "network_top": 2}, {"design": "d", "network_top": None}
+    quick = {"images": 2, "size": 128, "split": "test"}
+    cases = [(top, True, False), (top, {"images": 8, "size": 256, "split": "test"}, False), (top, False, False),
+             (top, quick, True), (top, {"images": 8, "size": 256, "split": "val"}, True),
+             (every, quick, False)]  # every error judged through the network: those rows had the study's scenes
+    for i, (key, networks, again) in enumerate(cases):
         out = tmp_path / str(i)
         cached_step(out, "tornado", key, lambda: ["kept"])
         got = cached_step(out, "tornado", _tornado_key(key, networks), lambda: ["judged again"])
