@@ -423,7 +423,7 @@ def test_the_scan_finds_an_overlays_other_basins():
     assert sorted(float(xm[0]) for xm, _ in near) == [2.0, 3.5]
 
 
-def test_the_diagnosis_progress_counts_parts_and_claims_no_total(capsys):
+def test_the_diagnosis_progress_counts_parts_and_claims_no_total():
     """How many parts a fit computes is known only when it converges (thousands, about 4× what its minimum steps
     suggest): the progress line counts them and their rate, and shows no total or time left it cannot know."""
     from types import SimpleNamespace
