@@ -103,6 +103,7 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
     error, or for the ``network_top`` largest at PSF level."""
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
+    rest = []  # the errors judged at PSF level only
     if networks and network_top is not None:
         nj = network_judge_for(design_dir, 1, weights_dir, networks)
         kernel = nj.rec.pair.coded.shape[-1]  # the network's
@@ -114,9 +115,7 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
         present = [k for k in present if k.name in top]
-        return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) + rest,
-                      key=lambda r: -abs(r["delta"]))
-    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress),
+    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) + rest,
                   key=lambda r: -abs(r["delta"]))
 
 
