@@ -17,6 +17,7 @@ from doefab.applications import design_is
 from doefab.io import atomic_write_text
 from doefab.pipeline.knobs import BENCHMARK, REPO, knob_plots
 from doefab.pipeline.resolved import ResolvedScene
+from doefab.pipeline.stagerun import kept_note
 
 __all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview", "system_table", "REPO"]
 
@@ -62,8 +63,8 @@ def _stage_items(scene, done: dict, res: ResolvedScene) -> list[tuple]:
     """The Stages section: what ran, was reused or skipped and why, and the system it was designed for."""
     stages = [["stage", "status", "why", "seconds"]]
     for name, info in done.items():
-        st = info.get("status", "?") + (" (unchanged: kept from the previous run)" if info.get("reused_from_previous_run")
-                                        else "")
+        note = kept_note(name, info)
+        st = info.get("status", "?") + (f" (unchanged: {note})" if note else "")
         stages.append([name, st, info.get("why", ""), f"{info.get('seconds', 0):.1f}"])
     for name in ("design", "masks", "holder", "reconstruction", "tolerance"):
         if name not in done:

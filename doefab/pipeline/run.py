@@ -14,7 +14,7 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, folder_lock, owned_by_doefab
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import STAGES, Scene
-from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, run_stage
+from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, kept_note, run_stage
 from doefab.pipeline.stages import resolve
 from doefab.tolerance.schedulers import check_reachable
 
@@ -69,8 +69,7 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
         done[name] = run_stage(scene, res, name, out, done, quick, force=name in force)
         if progress:
             info = done[name]
-            took = ("kept from the previous run" if info.get("reused_from_previous_run")
-                    else f"{info['seconds']:.1f} s")
+            took = kept_note(name, info) or f"{info['seconds']:.1f} s"
             print(f"[doefab run] {name}: {info['status']} ({info.get('why', '')}) {took}", flush=True)
     report = None
     if "report" in scene.stages:
@@ -78,8 +77,8 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
 
         report = write_report(out, scene, done, res)
     summary = {"scene": str(scene.path), "task": scene.task, "quick": quick,
-               "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash",
-                                                        "reused_from_previous_run")} for k, v in done.items()},
+               "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash", "reused_from_previous_run",
+                                                        "other_code")} for k, v in done.items()},
                "seconds": round(time.perf_counter() - t0, 1), "report": report, "warnings": res.warnings,
                "device": describe_device()}
     atomic_write_json(out / "run.json", summary)

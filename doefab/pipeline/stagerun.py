@@ -5,6 +5,7 @@ left in place). The stages themselves are ``doefab.pipeline.stages``.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
@@ -19,9 +20,31 @@ from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_
                                     stage_holder, stage_masks, stage_reconstruction, stage_tolerance)
 from doefab.pipeline.system import resolve, scene_holder, scene_sensor
 
-__all__ = ["STAGE_FUNCS", "STAGE_KIND", "run_stage", "stage_hash", "has_progress", "budget_digest"]
+__all__ = ["STAGE_FUNCS", "STAGE_KIND", "run_stage", "stage_hash", "has_progress", "budget_digest", "code_sha256",
+           "kept_note"]
 
 STAGE_KIND = "run stage"  # the ownership marker's kind of a stage folder (its ``stage`` field names the stage)
+
+
+@functools.lru_cache(maxsize=1)
+def code_sha256() -> str:
+    """The digest of this doefab's sources (``io.sources_sha256``), recorded in each finished stage's
+    ``stage.json``: a stage kept from a run of other code is reused as it is (its inputs' hash leaves the code out,
+    so that an upgrade does not recompute hours of work unasked) and ``kept_note`` says so."""
+    from doefab.io import sources_sha256
+
+    return sources_sha256(Path(__file__).resolve().parents[2], ("doefab",))[:16]
+
+
+def kept_note(name: str, info: dict) -> str:
+    """What the run log and the report say of stage ``name`` whose record ``info`` ``run_stage`` returned: empty
+    when it ran, else that it was kept, and, when other doefab code (or code that did not record itself) made it,
+    which flag computes it again."""
+    if not info.get("reused_from_previous_run"):
+        return ""
+    if not info.get("other_code"):
+        return "kept from the previous run"
+    return f"kept from the previous run, which other doefab code made: --force {name} computes it again"
 
 
 def _h(obj) -> str:
@@ -125,6 +148,7 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
             old = {}
     if not force and old.get("hash") == h and old.get("complete"):
         old["reused_from_previous_run"] = True
+        old["other_code"] = old.get("code") != code_sha256()
         return old
     if not owned_by_doefab(out, STAGE_KIND, stage=name):  # prepare_scene refuses this before any work
         raise DoefabError(f"{out} is not a doefab {name} stage folder (no ownership marker): move it away")
@@ -146,7 +170,7 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     if info_resumed:
         info["why"] = info.get("why", "") + f"; continued from the interrupted run's {', '.join(keep)}"
     mark_folder(out, STAGE_KIND, stage=name)
-    info.update(stage=name, hash=h, seconds=round(time.perf_counter() - t, 2), complete=True,
+    info.update(stage=name, hash=h, code=code_sha256(), seconds=round(time.perf_counter() - t, 2), complete=True,
                 files=sorted(set(stage_files(out)) - theirs - {"stage.json", MARKER}))
     atomic_write_json(rec_path, info)
     return info
