@@ -244,23 +244,34 @@ def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int 
     model = PartModel(design_dir, measured, b, device=device)
     t0 = time.perf_counter()
     bar = _bar(progress, model, starts)
-    try:
+    try:  # the line stays up, naming the step, until the record is whole: the uncertainty computes parts too
         got = fit(model, starts, seed)
+        _step(bar, "uncertainty")
+        cur = estimate(model, got, seed)
+        seconds = time.perf_counter() - t0
+        err = model.errors(got["x"])
+        misfit = {"nominal": _plain_misfit(model, PartErrors(), fine=True),
+                  "fitted": _plain_misfit(model, err, fine=True)}
+        metric = psf_metric(model, got["x"])
+        if delivered:
+            _step(bar, "delivered quality through the network")
+        net = delivered_metric(model, err, delivered)
     finally:
         if bar is not None:
             bar.close()
-    cur = estimate(model, got, seed)
-    seconds = time.perf_counter() - t0
-    err = model.errors(got["x"])
-    misfit = {"nominal": _plain_misfit(model, PartErrors(), fine=True), "fitted": _plain_misfit(model, err, fine=True)}
-    net = delivered_metric(model, err, delivered)
-    return assemble(model, got, cur, misfit, psf_metric(model, got["x"]), net,
+    return assemble(model, got, cur, misfit, metric, net,
                     {"seconds": seconds, "parts": model.evaluations, "starts": got["starts"]})
 
 
 def _plain_misfit(model: PartModel, err: PartErrors, fine: bool = False) -> float:
     """The unweighted misfit of the part ``err`` (``fine``: on the finer grid)."""
     return float(np.sum((model.psfs(err, fine) - model.measured) ** 2))
+
+
+def _step(bar, what: str) -> None:
+    """Name the diagnosis's step on its progress line (``bar``: None without one)."""
+    if bar is not None:
+        bar.set_description(f"diagnose: {what}")
 
 
 def _bar(progress: bool, model: PartModel, starts: int):
@@ -271,7 +282,7 @@ def _bar(progress: bool, model: PartModel, starts: int):
         return None
     from tqdm import tqdm
 
-    bar = tqdm(total=None, desc=f"diagnose ({starts} starts)", unit="part")
+    bar = tqdm(total=None, desc=f"diagnose: fit from {starts} starts", unit="part")
     model.tick = lambda: bar.update(1)
     return bar
 

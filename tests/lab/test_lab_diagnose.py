@@ -437,3 +437,32 @@ def test_the_diagnosis_progress_counts_parts_and_claims_no_total():
     assert bar.total is None and bar.n == 3
     bar.close()
     assert _bar(False, model, 8) is None
+
+
+def test_the_progress_line_stays_up_through_the_uncertainty(small_design, budget, monkeypatch):
+    """The uncertainty computes parts as the fit does (the held errors' draws on the finer grid): the line stays
+    up and names that step until the record is whole, instead of closing when the fit ends."""
+    from doefab.lab import diagnose as dg
+
+    seen = {}
+
+    def fake_fit(model, starts, seed):
+        model.psfs(PartErrors())  # a part: the line counts it
+        return {"x": np.zeros(len(model.free))}
+
+    def fake_estimate(model, got, seed):
+        before = model.evaluations
+        model.psfs(PartErrors(edge_bias=0.01e-6), fine=True)  # a part of the uncertainty's
+        bar = seen["bar"]
+        seen.update(desc=bar.desc, n=bar.n, parts=model.evaluations - before, closed=bar.disable)
+        raise RuntimeError("stop here")
+
+    real_bar = dg._bar
+    monkeypatch.setattr(dg, "_bar", lambda *a: seen.setdefault("bar", real_bar(*a)))
+    monkeypatch.setattr(dg, "fit", fake_fit)
+    monkeypatch.setattr(dg, "estimate", fake_estimate)
+    with pytest.raises(RuntimeError, match="stop here"):
+        dg.diagnose(recorded(small_design, PartErrors()), small_design, budget, starts=1, progress=True)
+    assert seen["desc"].startswith("diagnose: uncertainty") and not seen["closed"]
+    assert seen["parts"] == 1 and seen["n"] == 2  # the fit's part and the uncertainty's, both counted
+    assert seen["bar"].disable  # closed on the way out
