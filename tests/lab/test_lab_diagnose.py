@@ -331,6 +331,26 @@ def test_a_part_asked_again_is_not_computed_again(small_design, budget):
     assert model.evaluations == 2
 
 
+def test_the_models_judges_keep_only_the_latest_parts_psfs(small_design, budget):
+    """A fit's parts are nearly all new: the model's judges keep the latest part's PSFs only (a larger cache served
+    few and fragmented the heap), on both grids, and the numbers are those of a fresh judge's."""
+    from doefab.lab.partmodel import PartModel
+    from doefab.tolerance.judge import PSFJudge
+
+    model = PartModel(small_design, recorded(small_design, TRUTH), budget)
+    parts = [dataclasses.replace(TRUTH, edge_bias=b * 1e-9, mount_shift=(s * 1e-6, 0.0))
+             for b, s in ((10, 1.5), (20, 1.5), (30, 2.0))]
+    got = [model.psfs(e, fine=fine, scale=False) for e in parts for fine in (False, True)]
+    for judge in (model.judge, model._fine):
+        assert len(judge._kept) <= len(model.halves), len(judge._kept)
+    j = model.judge
+    fresh = PSFJudge(j.design, 1, margin=j.margin, chain=j.chain)
+    with torch.no_grad():
+        ref = fresh.psfs(parts[1], halves=model.halves, kernel=model.kernel)
+    np.testing.assert_allclose(got[2], np.stack([ref[h].double().numpy() for h in model.halves]), rtol=1e-5,
+                               atol=1e-12)
+
+
 def test_the_held_errors_whiten_the_residual_as_generalised_least_squares():
     """``PartModel.hold`` from k drawn PSF changes: ``whiten`` is (I + UUᵀ)^(−1/2) (U's columns the weighted
     deviations from their mean over √(k − 1) and the weighted mean itself, whose size is uncertain; checked against
