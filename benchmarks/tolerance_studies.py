@@ -60,7 +60,7 @@ def _kept_rows() -> dict:
 
 def main() -> None:
     designs = sys.argv[1:] or ["streak", "grating", "half-ring"]
-    rows = ["| design | nominal PSF metric | mean of 24 parts (95 % interval) | spec | yield (Wilson 95 %) | "
+    rows = ["| design | nominal PSF metric | mean of 24 parts (95 % t interval) | spec | yield (Wilson 95 %) | "
             "largest single losses at the budget's 1σ |", "| --- | --- | --- | --- | --- | --- |"]
     kept = _kept_rows()
     for d in ("streak", "grating", "half-ring"):

@@ -307,13 +307,19 @@ def interval_text(ci, fmt: str = ".3f") -> str:
 
 
 def mean_ci(values) -> dict:
-    """Mean and 95 % interval of the mean (normal approximation; nan below two values), and the 5th, 50th and
-    95th percentiles of the values themselves (what one part delivers, not the mean's uncertainty)."""
+    """Mean and 95 % interval of the mean (Student's t with n − 1 degrees of freedom: a study's few parts leave the
+    spread itself uncertain, and the normal approximation's 1.96 made the interval 5.5 % too narrow at 24 parts,
+    12 % at 12 and 2.2× at 3; nan below two values), and the 5th, 50th and 95th percentiles of the values
+    themselves (what one part delivers, not the mean's uncertainty).
+
+    Example: ``mean_ci([0.4, 0.6, 0.6, 0.8])["ci95"]`` → [0.340…, 0.859…] (t = 3.18 at 3 degrees of freedom)."""
+    from scipy.stats import t
+
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     if v.size == 0:
         return {"mean": float("nan"), "ci95": [float("nan")] * 2, "ci95_width": float("nan")}
-    half = 1.96 * v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
+    half = float(t.ppf(0.975, len(v) - 1)) * v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
     m = float(v.mean())
     p05, p50, p95 = (float(x) for x in np.percentile(v, [5, 50, 95]))
     return {"mean": m, "ci95": [m - half, m + half], "ci95_width": float(2 * half),

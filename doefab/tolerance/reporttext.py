@@ -133,7 +133,7 @@ def summary_lines(res: dict) -> list[str]:
         lines.append(f"- **Yield at PSF level** ({spec_words(res, 'psf') or 'no limit'}): {y['value']:.2f}, 95 % "
                      f"Wilson interval {interval_text(y['ci95'], '.2f')}.")
         for label, v in s.get("network", {}).items():
-            ms = ", ".join(f"{_name(task, k)} {metric_text(task, k, d['mean'])} (mean's interval "
+            ms = ", ".join(f"{_name(task, k)} {metric_text(task, k, d['mean'])} (mean's interval over parts "
                            f"{_interval(task, k, d['ci95'])}"
                            + (f"; parts 5–95 %: {_interval(task, k, d['parts_p05_p50_p95'][::2])}"
                               if "parts_p05_p50_p95" in d and len(res.get("samples", [])) >= 5 else "") + ")"
