@@ -31,11 +31,14 @@ def html_text(text: str) -> str:
     return re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", text)
 
 
-def write_report(out: Path, scene, done: dict, res: ResolvedScene) -> dict:
-    """Write report.md and report.html; returns the list of images referenced."""
+def write_report(out: Path, scene, done: dict, res: ResolvedScene, quick: bool = False) -> dict:
+    """Write report.md and report.html; returns the list of images referenced. ``quick``: the run was
+    ``--quick``, which the summary says first (``stages.quick_note``)."""
+    from doefab.pipeline.stages import quick_note
     from doefab.pipeline.summary import summary_items
 
-    blocks = [("Summary", summary_items(out, done, scene.task)), ("Stages", _stage_items(scene, done, res))]
+    first = [("p", quick_note())] if quick else []
+    blocks = [("Summary", first + summary_items(out, done, scene.task)), ("Stages", _stage_items(scene, done, res))]
     blocks += _stage_blocks(out, scene, done)
     blocks.append(("Error against run time", [("p", "Each knob's error against its run time, with the chosen setting "
                                                     "marked; the caption says whether a plot is this run's or a "

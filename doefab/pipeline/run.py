@@ -75,7 +75,7 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
     if "report" in scene.stages:
         from doefab.pipeline.report import write_report
 
-        report = write_report(out, scene, done, res)
+        report = write_report(out, scene, done, res, quick)
     summary = {"scene": str(scene.path), "task": scene.task, "quick": quick,
                "stages": {k: {kk: v.get(kk) for kk in ("status", "why", "seconds", "hash", "reused_from_previous_run",
                                                         "other_code")} for k, v in done.items()},

@@ -22,7 +22,12 @@ from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_
 
 __all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
            "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
-           "networks_trained_here", "shipped_sensor_differs"]
+           "networks_trained_here", "shipped_sensor_differs", "QUICK", "quick_note"]
+
+#: what ``doefab run --quick`` cuts, each in one place (the stages read it, the report's ``quick_note`` says it):
+#: design iterations at most, the networks' training minutes each, the reconstruction table's and the tolerance
+#: judge's scenes and their side, the Monte Carlo's parts and the tornado's errors judged through the network
+QUICK = {"design_iterations": 10, "train_minutes": 0.2, "images": 2, "size_px": 128, "parts": 3, "network_top": 2}
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -31,12 +36,23 @@ def _design_run(settings: dict, quick: bool, quick_factor: int | None = None) ->
     """(iterations, sampling) of the design stage's run for these settings (quick: at most 10 iterations on a grid
     about 4× coarser, by ``quick_factor``: the factor ``resolve`` found that divides the grid and keeps the PSF
     routes' sampling, ``system.quick_sampling``)."""
-    iters = min(int(settings["iterations"]), 10) if quick else int(settings["iterations"])
+    iters = min(int(settings["iterations"]), QUICK["design_iterations"]) if quick else int(settings["iterations"])
     sampling = int(settings["sampling"])
     if quick:
         sampling = quick_factor if quick_factor is not None else quick_sampling(
             int(settings["camera"]["doe_pixels"]), sampling)
     return iters, sampling
+
+
+def quick_note() -> str:
+    """What the report of a ``--quick`` run says first: what the flag cut (``QUICK``) and that its numbers show
+    every stage running, not what the design or its parts deliver."""
+    q = QUICK
+    return (f"**A quick run** (`doefab run --quick`): a new design at most {q['design_iterations']} iterations on a "
+            f"coarser grid, networks trained here {60 * q['train_minutes']:.0f} s each, the reconstruction table and "
+            f"each judged part on {q['images']} scenes of {q['size_px']}² px, {q['parts']} Monte Carlo parts. It "
+            f"shows that every stage runs on this scene; its numbers are not what the design or its parts deliver: "
+            f"run without --quick for those.")
 
 
 def redesign_note(res: ResolvedScene, quick: bool) -> str:
@@ -217,16 +233,16 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
         from doefab.reconstruction.weights import WEIGHTS_DIR
 
         weights_dir = out / "weights"
-        minutes = 0.2 if quick else float(rec.get("minutes", 6))
+        minutes = QUICK["train_minutes"] if quick else float(rec.get("minutes", 6))
         cond = for_splits(task, design, "honest", ("train", "val"), parts if quick else 6, budget=budget)
         for v in ("proposed", "coded_only", "uncoded_only"):
             run_dir = out / f"run_{v}"
             r = train(task, v, minutes, run_dir, weights_dir=weights_dir, design=design, conditions=cond, sensor=sensor,
-                      warm_start=WEIGHTS_DIR, progress=True, val_images=2 if quick else 8,
+                      warm_start=WEIGHTS_DIR, progress=True, val_images=QUICK["images"] if quick else 8,
                       resume=(run_dir / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
             warm[v] = r["training"]["warm_start"]
-    images = 2 if quick else int(rec.get("images", 4))
-    size = 128 if quick else int(rec.get("size_px", 256))
+    images = QUICK["images"] if quick else int(rec.get("images", 4))
+    size = QUICK["size_px"] if quick else int(rec.get("size_px", 256))
     cond = for_splits(task, design, "honest", ("test",), parts, budget=budget)["test"]
     r = evaluate(task, out, images=images, size=size, weights_dir=weights_dir, design=design, conditions=cond,
                  other_design=mode.flagged, sensor=sensor, split="test")
@@ -324,19 +340,21 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     noise, default = scene_sensor(scene).record(with_response=False), Sensor().record(with_response=False)
     # the scene's sensor noise (where not the default's): the PSF-level judge's crosstalk calibration draws it
     budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
-    samples = 3 if quick else int(tol.get("samples", 20))
+    samples = QUICK["parts"] if quick else int(tol.get("samples", 20))
     own, stale = networks_trained_here(scene, res, out.parent)  # before the shipped ones, which fit one system
     shipped_fits = own is None and res.reuse and not shipped_sensor_differs(scene.task, res.sensor)
     networks = own is not None or shipped_fits
     # the parts' captures: the reconstruction table's split and scene size (``netjudge``), SCENES per part
-    judge = {"images": 2 if quick else SCENES, "size": 128 if quick else int(scene.reconstruction.get("size_px", 256)),
+    judge = {"images": QUICK["images"] if quick else SCENES,
+             "size": QUICK["size_px"] if quick else int(scene.reconstruction.get("size_px", 256)),
              "split": "test"}
     out.mkdir(parents=True, exist_ok=True)
     r = run_study(out.parent / "design", budget, out, samples=samples, seed=0,
                   grid=int(tol["supersample"]) if "supersample" in tol else "auto", do_levels=not quick,
                   budget_path=path, networks=judge if networks else False,
                   weights_dir=own,
-                  network_top=2 if quick else 5, workers=tol.get("workers"), scheduler=tol.get("scheduler"))
+                  network_top=QUICK["network_top"] if quick else 5, workers=tol.get("workers"),
+                  scheduler=tol.get("scheduler"))
     through = ("through the networks this scene trained" if own else "through the shipped networks" if networks
                else "at PSF level (no network for this system)")
     return {"status": "ran", "why": f"{samples} Monte Carlo parts {through}"

@@ -99,6 +99,13 @@ def test_quick_run_end_to_end(quick_run):
     for needle in ("Delivered, network given the nominal PSF", "highlight PSNR", "yield", "Wilson", "Limited by",
                    "Would buy the most", "to the fab:", "to the printer:"):
         assert needle in summary, needle
+    # a quick run says so first, with what it cut as this run did it: its numbers are not the design's
+    note = summary[:summary.index("</p>")]
+    judge = tol["network_judge"]
+    assert "A quick run" in note and "are not what the design or its parts deliver" in note
+    assert f"{len(tol['samples'])} Monte Carlo parts" in note
+    assert f"{judge['images']} scenes of {judge['size']}² px" in note
+    assert "A quick run" not in summary[len(note):]
     # the run's masks folder holds the whole mask set it reports (a reused design's copied from the repository)
     masks = out / "masks"
     assert (masks / "streak.gds").read_bytes() == (REPO / "masks" / "streak" / "streak.gds").read_bytes()
