@@ -35,6 +35,13 @@ def test_my_camera_scene_is_explained_by_hand_computed_optics():
     assert rows["substrate index"] == pytest.approx(n, abs=2e-5)
     assert rows["etch depth of 2π"] == pytest.approx(550 / (n - 1), rel=1e-4)
     assert res.settings["n_levels"] == 8 and len(res.settings["wavelengths_m"]) == 21
+    # the near limit: the point whose image, behind the sensor, blurs a cone of the aperture to two pixels on it
+    near = rows["depth of field's near limit (2 px blur)"]
+    v = 1 / (1 / f - 1 / near)  # the near point's image distance
+    assert d * (v - s) / v == pytest.approx(2 * 3.76e-6, rel=1e-6)
+    far = next(r for r in explain(res) if r["quantity"].startswith("depth of field"))["meaning"]
+    v_far = 1 / (1 / f - 1 / float(far.split("far limit ")[1].split(" m")[0]))  # in front of the sensor
+    assert d * (s - v_far) / v_far == pytest.approx(2 * 3.76e-6, rel=0.01)  # far printed to 3 digits, ×3 here
 
 
 def test_bands_outside_the_substrates_published_dispersion_are_named(tmp_path):
