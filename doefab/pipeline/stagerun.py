@@ -44,7 +44,7 @@ def kept_note(name: str, info: dict) -> str:
         return ""
     if not info.get("other_code"):
         return "kept from the previous run"
-    return f"kept from the previous run, which other doefab code made: --force {name} computes it again"
+    return f"kept from the previous run, made by other doefab code: --force {name} computes it again"
 
 
 def _h(obj) -> str:

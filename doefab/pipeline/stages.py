@@ -24,10 +24,13 @@ __all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design",
            "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
            "networks_trained_here", "shipped_sensor_differs", "QUICK", "quick_note"]
 
-#: what ``doefab run --quick`` cuts, each in one place (the stages read it, the report's ``quick_note`` says it):
-#: design iterations at most, the networks' training minutes each, the reconstruction table's and the tolerance
-#: judge's scenes and their side, the Monte Carlo's parts and the tornado's errors judged through the network
-QUICK = {"design_iterations": 10, "train_minutes": 0.2, "images": 2, "size_px": 128, "parts": 3, "network_top": 2}
+#: the numbers ``doefab run --quick`` cuts (the stages read them, the report's ``quick_note`` says them): design
+#: iterations at most, the networks' training minutes each and the fabricated parts their training captures draw,
+#: the reconstruction table's and the tolerance judge's scenes and their side, the Monte Carlo's parts and the
+#: tornado's errors judged through the network; besides, a quick run skips the quantization study, the holder's
+#: STEP file and KLayout's mask check
+QUICK = {"design_iterations": 10, "train_minutes": 0.2, "train_parts": 2, "images": 2, "size_px": 128, "parts": 3,
+         "network_top": 2}
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -48,11 +51,12 @@ def quick_note() -> str:
     """What the report of a ``--quick`` run says first: what the flag cut (``QUICK``) and that its numbers show
     every stage running, not what the design or its parts deliver."""
     q = QUICK
-    return (f"**A quick run** (`doefab run --quick`): a new design at most {q['design_iterations']} iterations on a "
-            f"coarser grid, networks trained here {60 * q['train_minutes']:.0f} s each, the reconstruction table and "
-            f"each judged part on {q['images']} scenes of {q['size_px']}² px, {q['parts']} Monte Carlo parts. It "
-            f"shows that every stage runs on this scene; its numbers are not what the design or its parts deliver: "
-            f"run without --quick for those.")
+    return (f"**A quick run** (`doefab run --quick`): a new design at most {q['design_iterations']} iterations, on a "
+            f"coarser grid where a factor divides the DOE grid; networks trained here {60 * q['train_minutes']:.0f} s "
+            f"each; the reconstruction table and each judged part on {q['images']} scenes of {q['size_px']}² px; "
+            f"{q['parts']} Monte Carlo parts; no quantization study, STEP file or KLayout mask check. It shows that "
+            f"every stage runs on this scene; its numbers are not what the design or its parts deliver: run without "
+            f"--quick for those.")
 
 
 def redesign_note(res: ResolvedScene, quick: bool) -> str:
@@ -234,7 +238,8 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
 
         weights_dir = out / "weights"
         minutes = QUICK["train_minutes"] if quick else float(rec.get("minutes", 6))
-        cond = for_splits(task, design, "honest", ("train", "val"), parts if quick else 6, budget=budget)
+        cond = for_splits(task, design, "honest", ("train", "val"), QUICK["train_parts"] if quick else 6,
+                          budget=budget)
         for v in ("proposed", "coded_only", "uncoded_only"):
             run_dir = out / f"run_{v}"
             r = train(task, v, minutes, run_dir, weights_dir=weights_dir, design=design, conditions=cond, sensor=sensor,

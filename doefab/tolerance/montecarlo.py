@@ -308,7 +308,7 @@ def interval_text(ci, fmt: str = ".3f") -> str:
 
 def mean_ci(values) -> dict:
     """Mean and 95 % interval of the mean (Student's t with n − 1 degrees of freedom: a study's few parts leave the
-    spread itself uncertain, and the normal approximation's 1.96 made the interval 5.5 % too narrow at 24 parts,
+    spread itself uncertain, and t's interval is 5.5 % wider than the normal approximation's 1.96 at 24 parts,
     12 % at 12 and 2.2× at 3; nan below two values), and the 5th, 50th and 95th percentiles of the values
     themselves (what one part delivers, not the mean's uncertainty).
 

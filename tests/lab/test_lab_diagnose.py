@@ -460,8 +460,9 @@ def test_the_diagnosis_progress_counts_parts_and_claims_no_total():
 
 
 def test_the_progress_line_stays_up_through_the_uncertainty(small_design, budget, monkeypatch):
-    """The uncertainty computes parts as the fit does (the held errors' draws on the finer grid): the line stays
-    up and names that step until the record is whole, instead of closing when the fit ends."""
+    """The uncertainty computes parts as the fit does (the held errors' draws on the finer grid), and the delivered
+    quality renders scenes: the line stays up and names each step until the record is whole, instead of closing
+    when the fit ends."""
     from doefab.lab import diagnose as dg
 
     seen = {}
@@ -475,14 +476,23 @@ def test_the_progress_line_stays_up_through_the_uncertainty(small_design, budget
         model.psfs(PartErrors(edge_bias=0.01e-6), fine=True)  # a part of the uncertainty's
         bar = seen["bar"]
         seen.update(desc=bar.desc, n=bar.n, parts=model.evaluations - before, closed=bar.disable)
+        return {}
+
+    def fake_delivered(model, err, compute):
+        seen.update(delivered=seen["bar"].desc, delivered_closed=seen["bar"].disable)
         raise RuntimeError("stop here")
 
     real_bar = dg._bar
     monkeypatch.setattr(dg, "_bar", lambda *a: seen.setdefault("bar", real_bar(*a)))
     monkeypatch.setattr(dg, "fit", fake_fit)
     monkeypatch.setattr(dg, "estimate", fake_estimate)
+    monkeypatch.setattr(dg, "_plain_misfit", lambda *a, **k: 0.0)
+    monkeypatch.setattr(dg, "psf_metric", lambda *a: {})
+    monkeypatch.setattr("doefab.lab.diagreport.delivered_metric", fake_delivered)
     with pytest.raises(RuntimeError, match="stop here"):
-        dg.diagnose(recorded(small_design, PartErrors()), small_design, budget, starts=1, progress=True)
+        dg.diagnose(recorded(small_design, PartErrors()), small_design, budget, starts=1, progress=True,
+                    delivered=True)
     assert seen["desc"].startswith("diagnose: uncertainty") and not seen["closed"]
     assert seen["parts"] == 1 and seen["n"] == 2  # the fit's part and the uncertainty's, both counted
+    assert seen["delivered"].startswith("diagnose: delivered quality") and not seen["delivered_closed"]
     assert seen["bar"].disable  # closed on the way out

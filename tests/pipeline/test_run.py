@@ -103,6 +103,7 @@ def test_quick_run_end_to_end(quick_run):
     note = summary[:summary.index("</p>")]
     judge = tol["network_judge"]
     assert "A quick run" in note and "are not what the design or its parts deliver" in note
+    assert "at most 10 iterations" in note and "networks trained here 12 s each" in note
     assert f"{len(tol['samples'])} Monte Carlo parts" in note
     assert f"{judge['images']} scenes of {judge['size']}² px" in note
     assert "A quick run" not in summary[len(note):]

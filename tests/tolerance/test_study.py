@@ -71,6 +71,9 @@ def test_summary_statistics():
 
     half = t.ppf(0.975, 3) * np.std([0.4, 0.6, 0.6, 0.8], ddof=1) / 2  # Student's t: 3.18, not 1.96, at 4 parts
     assert s["metric"]["ci95"] == pytest.approx([0.6 - half, 0.6 + half])
+    two = montecarlo.mean_ci([0.4, 0.6])["ci95"]  # two parts: t = 12.7 at one degree of freedom
+    assert two == pytest.approx([0.5 - 12.7062 * 0.1, 0.5 + 12.7062 * 0.1], rel=1e-5)
+    assert all(np.isnan(montecarlo.mean_ci([0.4, float("nan")])["ci95"]))  # one part left: no interval
     assert s["yield"]["value"] == 0.75 and 0 < s["yield"]["ci95"][0] < 0.75 < s["yield"]["ci95"][1] <= 1
     # relative limit: at most 0.25 below the nominal 0.9 → 0.65: two of four parts pass
     s = montecarlo.summarize(rows, {"hdr": {"psf_metric_loss_max": 0.25}}, "hdr", {"psf": {"psf_metric": 0.9}})
