@@ -36,10 +36,10 @@ FINE = 2  # the grid of the fit's last steps, times the design grid
 STEP = 0.05  # the Jacobian's central-difference step, budget σ
 RECENT = 4  # parts whose PSFs a model keeps
 # bytes of PSFs the model's judges keep for reuse (``PSFJudge.KEEP_BYTES``): none beyond the latest part's. A fit's
-# parts are nearly all new, so a larger cache served few of them (the same time per part without it), and the small
-# PSFs it held, kept among each part's large transient buffers, fragmented the heap: a 1276²-pixel design's
-# diagnosis grew by about 2 MB per part (1.5–1.7 GB after one 364-part start against 0.86 GB without; 2.8 GB and
-# climbing after 1000 parts of the whole diagnosis)
+# parts are nearly all new, so a larger cache served few of them, and the small PSFs it held, kept among each
+# part's large transient buffers, fragmented the heap (``benchmarks/diagnose_memory.py``, a 1276² grid: with the
+# judge's default cache the process grew from 0.93 to 1.94 GB over parts 50–400, about 3 MB per part, while the
+# PSFs it held took 0.087 GB; with this setting it stays at 0.73–0.78 GB, at 0.39 s per part against 0.40)
 JUDGE_KEEP_BYTES = 0
 HELD_DRAWS = 16  # parts drawn from the budget's errors the fit holds, for their share of the uncertainty
 HOLD_DRAWS = 32  # parts drawn likewise for the fit's model of them (``PartModel.hold``)
