@@ -102,6 +102,7 @@ MEASUREMENTS = (
     Measurement("depth_gap", "benchmarks/depth_gap.py", (R + "depth_gap.md",)),
     Measurement("judge_rounding", "benchmarks/judge_rounding.py", (R + "judge_rounding.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
+    Measurement("diagnose_memory", "benchmarks/diagnose_memory.py", (R + "diagnose_memory.md",)),
     Measurement("diagnose_coverage_seed43", None, (R + "diagnose_coverage_seed43/diagnose_coverage.md",),
                 command=".venv/bin/python benchmarks/diagnose_coverage.py --block 64 --parts 20 --seed 43 "
                         "--results benchmarks/results/diagnose_coverage_seed43"),
