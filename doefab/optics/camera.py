@@ -106,6 +106,18 @@ class Camera:
         27.5 mm)."""
         return self.aperture_diameter <= self.lens_pupil_diameter
 
+    def defocus_blur_px(self, depth: float) -> float:
+        """Diameter of the geometric blur of a point at ``depth`` metres (``inf``: a plane wave), in sensor pixels:
+        ``D·s·|1/z_focus − 1/z| / pitch``, with D the DOE aperture (thin lens, the DOE at the aperture, as the PSFs
+        are computed). Each half of the split aperture blurs the point into a half disc of this diameter, its
+        straight edge through the point's image, so its light reaches half of it from the image on every side.
+
+        Example: ``Camera(focus_distance=5.0).defocus_blur_px(float("inf"))`` is the blur of a star when focused
+        at 5 m."""
+        inv_z = 0.0 if math.isinf(depth) else 1.0 / depth
+        inv_f = 0.0 if math.isinf(self.focus_distance) else 1.0 / self.focus_distance
+        return self.aperture_diameter * self.sensor_distance * abs(inv_f - inv_z) / self.sensor_pitch
+
     def replace(self, **changes) -> "Camera":
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)

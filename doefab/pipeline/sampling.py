@@ -3,8 +3,9 @@ stage optimises on (``design.sampling``, ``--quick``'s factor), and the scene ke
 
 ``resolve`` runs these checks before any work, so ``doefab doctor`` refuses exactly the scenes the design stage
 would stop on: a sampling that does not divide the grid, a nearest plane whose point source changes its phase too
-fast between (design) pixels, a window beyond the design grid's alias-free field. ``quick_sampling`` picks the
-``--quick`` coarsening among the factors that pass.
+fast between (design) pixels, a window beyond the design grid's alias-free field, a window too small for the
+plain half's defocus blur at a plane (``window_blur_checks``). ``quick_sampling`` picks the ``--quick`` coarsening
+among the factors that pass.
 """
 
 from __future__ import annotations
@@ -14,9 +15,46 @@ import math
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks"]
+           "design_grid_problems", "design_factor_checks", "sampling_checks", "BLUR_ROOM_PX", "worst_blur",
+           "window_blur_checks"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
+#: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
+#: window's edge: diffraction spreads its light past the geometric edge (a 63 px window loses about 2.5 % of the
+#: half's light where the half disc reaches its edge, 2 % with 2 px of room, 0.5 % in focus, by wave-optics
+#: PSFs; tests/pipeline/test_window_blur.py)
+BLUR_ROOM_PX = 2
+
+
+def worst_blur(cam, depths) -> tuple[float, float]:
+    """(plane in metres, the plain half's geometric blur radius there in sensor px) at the plane of the largest
+    blur (``Camera.defocus_blur_px`` / 2: the half disc reaches that far from the point's image)."""
+    return max(((z, cam.defocus_blur_px(z) / 2) for z in depths), key=lambda zr: zr[1])
+
+
+def window_blur_checks(cam, task) -> list[str]:
+    """The PSF window must hold the plain half's defocus blur (its geometric half disc) at every plane: the light
+    beyond the window is missing from the simulated captures. The fixes, each leaving ``BLUR_ROOM_PX`` of room: a
+    wider window (where the alias-free field and the key's range allow), a focus between the planes, or a smaller
+    aperture."""
+    k = task.kernel_size
+    z, r = worst_blur(cam, task.depths(cam))
+    if r <= k // 2:
+        return []
+    fixes, reach = [], k // 2 - BLUR_ROOM_PX
+    need = 2 * math.ceil(r + BLUR_ROOM_PX) + 1
+    alias = min(task.wavelengths(cam)) * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
+    if need <= 1023 and need / 2 + 0.5 <= alias:
+        fixes.append(f"optics.kernel_px ≥ {need}")
+    inv = [0.0 if math.isinf(d) else 1 / d for d in task.depths(cam)]
+    mid = (max(inv) + min(inv)) / 2  # the focus that blurs the nearest and the farthest plane alike
+    if mid > 0 and r * (max(inv) - min(inv)) / 2 / max(abs(1 / cam.focus_distance - i) for i in inv) <= reach:
+        fixes.append(f"camera.focus_distance_m = {1 / mid:.3g} (between the planes)")
+    fixes.append(f"camera.f_number ≥ {cam.focal_length / (cam.aperture_diameter * reach / r) * 1.01:.3g}")
+    return [f"optics.kernel_px {k}: the plain half blurs a point at {z:g} m into a half disc {2 * r:.0f} px across "
+            f"(D·s·|1/z_focus − 1/z| with the focus at {cam.focus_distance:g} m), and the PSF window reaches "
+            f"{k // 2} px from the point's image: the light beyond it would be missing from the simulated captures; "
+            f"set " + " or ".join(fixes)]
 
 
 def source_phase_step(cam, lam_min: float, z_near: float) -> float:

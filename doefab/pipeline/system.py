@@ -7,8 +7,8 @@ length or sensor distance, DOE aperture or f-number, the lens's own f-number, fo
 (the DOE grid is the aperture divided by the DOE pitch, rounded up to an even number of pixels so the split
 falls on a pixel edge), material and design wavelength. ``resolve`` then checks the physics before any work:
 the fab must resolve the DOE pixel, the grid must stay within memory, the window must hold the task's light
-(a grating's longest first order, a streak's arms, a half-ring's largest ring), the PSF window must sit inside
-the pupil sampling's alias-free field. Every problem is listed with its key and its fix.
+(a grating's longest first order, a streak's arms, a half-ring's largest ring, the plain half's defocus blur at
+every plane), the PSF window must sit inside the pupil sampling's alias-free field. Every problem is listed with its key and its fix.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import math
 
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
-                                      quick_sampling, sampling_checks)
+                                      quick_sampling, sampling_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -342,7 +342,8 @@ def resolve(scene: Scene) -> ResolvedScene:
         else:
             factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
-                         + sampling_checks(scene, cam, cfg) + design_factor_checks(scene, cam, task, factor)
+                         + window_blur_checks(cam, task) + sampling_checks(scene, cam, cfg)
+                         + design_factor_checks(scene, cam, task, factor)
                          + _holder_checks(scene, cam))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
