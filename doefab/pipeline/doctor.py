@@ -52,7 +52,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
                      half <= alias_half, " or ".join(
                          [f"optics.kernel_px ≤ {int(2 * alias_half / cam.sensor_pitch - 1)}"]
                          + pitch_fix(cam, lam_min * cam.sensor_distance / (2 * half)))))
-    rows.append(_blur_row(cam, depths, k))
+    rows += _blur_row(cam, depths, k)
     z_near = min(depths)
     step = source_phase_step(cam, lam_min, z_near)
     rows.append(_row(f"source phase step per pupil sample at the nearest depth ({z_near:g} m)", step,
@@ -112,14 +112,15 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     return rows
 
 
-def _blur_row(cam, depths, k: int) -> dict:
+def _blur_row(cam, depths, k: int) -> list[dict]:
     """The plain half's defocus blur (its half disc's radius) at its widest plane against the PSF window's reach,
-    as ``resolve`` refuses it (``sampling.window_blur_checks``, which names the fixes)."""
+    as ``resolve`` refuses it (``sampling.window_blur_checks``, which names the fixes); none where every plane is
+    at the focus."""
     from doefab.pipeline.sampling import worst_blur
 
     z, r = worst_blur(cam, depths)
-    return _row(f"plain half's defocus blur inside the PSF window (its radius at {z:g} m)", r, k // 2, "px",
-                r <= k // 2, "optics.kernel_px")
+    return [_row(f"plain half's defocus blur inside the PSF window (its radius at {z:g} m)", r, k // 2, "px",
+                 r <= k // 2, "optics.kernel_px")] if r > 0 else []
 
 
 def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:

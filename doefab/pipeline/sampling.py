@@ -20,9 +20,9 @@ __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix",
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 #: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
-#: window's edge: diffraction spreads its light past the geometric edge (a 63 px window loses about 2.5 % of the
-#: half's light where the half disc reaches its edge, 2 % with 2 px of room, 0.5 % in focus, by wave-optics
-#: PSFs; tests/pipeline/test_window_blur.py)
+#: window's edge: diffraction spreads its light past the geometric edge (a 63 px window loses 2.1–2.7 % of the
+#: half's light where the half disc reaches its edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm,
+#: by wave-optics PSFs; tests/pipeline/test_window_blur.py)
 BLUR_ROOM_PX = 2
 
 
@@ -32,29 +32,65 @@ def worst_blur(cam, depths) -> tuple[float, float]:
     return max(((z, cam.defocus_blur_px(z) / 2) for z in depths), key=lambda zr: zr[1])
 
 
-def window_blur_checks(cam, task) -> list[str]:
+def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") -> list[str]:
     """The PSF window must hold the plain half's defocus blur (its geometric half disc) at every plane: the light
     beyond the window is missing from the simulated captures. The fixes, each leaving ``BLUR_ROOM_PX`` of room: a
-    wider window (where the alias-free field and the key's range allow), a focus between the planes, or a smaller
-    aperture."""
+    wider window (where the alias-free field and the key's range allow), and with ``variant`` (the camera the
+    scene builds with some of its camera keys changed, None where it refuses them) a focus between the planes
+    and a smaller aperture (``aperture_key``: the scene's own, ``f_number`` or ``aperture_diameter_mm``), each
+    checked on the camera it gives."""
     k = task.kernel_size
-    z, r = worst_blur(cam, task.depths(cam))
+    depths = task.depths(cam)
+    z, r = worst_blur(cam, depths)
     if r <= k // 2:
         return []
-    fixes, reach = [], k // 2 - BLUR_ROOM_PX
+    fixes = []
     need = 2 * math.ceil(r + BLUR_ROOM_PX) + 1
     alias = min(task.wavelengths(cam)) * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
     if need <= 1023 and need / 2 + 0.5 <= alias:
         fixes.append(f"optics.kernel_px ≥ {need}")
-    inv = [0.0 if math.isinf(d) else 1 / d for d in task.depths(cam)]
-    mid = (max(inv) + min(inv)) / 2  # the focus that blurs the nearest and the farthest plane alike
-    if mid > 0 and r * (max(inv) - min(inv)) / 2 / max(abs(1 / cam.focus_distance - i) for i in inv) <= reach:
-        fixes.append(f"camera.focus_distance_m = {1 / mid:.3g} (between the planes)")
-    fixes.append(f"camera.f_number ≥ {cam.focal_length / (cam.aperture_diameter * reach / r) * 1.01:.3g}")
-    return [f"optics.kernel_px {k}: the plain half blurs a point at {z:g} m into a half disc {2 * r:.0f} px across "
-            f"(D·s·|1/z_focus − 1/z| with the focus at {cam.focus_distance:g} m), and the PSF window reaches "
+    if variant is not None:
+        fixes += _camera_fixes(cam, depths, r, k // 2 - BLUR_ROOM_PX, variant, aperture_key)
+    return [f"optics.kernel_px {k}: the plain half blurs a point at {z:g} m into a half disc of {r:.1f} px radius "
+            f"(D·s·|1/z_focus − 1/z| / 2 with the focus at {cam.focus_distance:g} m), and the PSF window reaches "
             f"{k // 2} px from the point's image: the light beyond it would be missing from the simulated captures; "
-            f"set " + " or ".join(fixes)]
+            + ("set " + " or ".join(fixes) if fixes else "no window in the alias-free field, focus or f-number in its "
+               "key's range holds it: bring optics.depths_m closer together")]
+
+
+def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: str) -> list[str]:
+    """The focus between the planes (the harmonic middle of the nearest and farthest) and the aperture that bring
+    the blur's radius ``r`` within ``reach`` px, where the scene's camera keys' ranges allow them and the camera
+    they give (its sensor distance moves with the focus when the scene fixes the focal length) holds the blur."""
+    from doefab.pipeline.scenekeys import keys_of
+
+    keys = keys_of("camera")
+
+    def fits(name: str, value: float) -> bool:
+        new = variant(**{name: value}) if keys[name].lo <= value <= keys[name].hi else None
+        return new is not None and worst_blur(new, depths)[1] <= reach
+
+    out = []
+    inv = [0.0 if math.isinf(d) else 1 / d for d in depths]
+    mid = (max(inv) + min(inv)) / 2
+    if mid > 0 and fits("focus_distance_m", float(f"{1 / mid:.3g}")):
+        out.append(f"camera.focus_distance_m = {1 / mid:.3g} (between the planes)")
+    scale = reach / r  # the blur's radius is proportional to the aperture
+    if aperture_key == "aperture_diameter_mm":
+        d = _round3(cam.aperture_diameter * 1e3 * scale, math.floor)
+        if fits("aperture_diameter_mm", d):
+            out.append(f"camera.aperture_diameter_mm ≤ {d:g}")
+    else:
+        n = _round3(cam.focal_length / (cam.aperture_diameter * scale), math.ceil)
+        if fits("f_number", n):
+            out.append(f"camera.f_number ≥ {n:g}")
+    return out
+
+
+def _round3(x: float, direction) -> float:
+    """``x`` to three significant digits, rounded by ``direction`` (math.floor or math.ceil)."""
+    step = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return round(direction(x / step) * step, 12)
 
 
 def source_phase_step(cam, lam_min: float, z_near: float) -> float:

@@ -7,8 +7,9 @@ length or sensor distance, DOE aperture or f-number, the lens's own f-number, fo
 (the DOE grid is the aperture divided by the DOE pitch, rounded up to an even number of pixels so the split
 falls on a pixel edge), material and design wavelength. ``resolve`` then checks the physics before any work:
 the fab must resolve the DOE pixel, the grid must stay within memory, the window must hold the task's light
-(a grating's longest first order, a streak's arms, a half-ring's largest ring, the plain half's defocus blur at
-every plane), the PSF window must sit inside the pupil sampling's alias-free field. Every problem is listed with its key and its fix.
+(a grating's longest first order, a streak's arms, a half-ring's largest ring, the plain half's defocus blur
+at every plane), the PSF window must sit inside the pupil sampling's alias-free field. Every problem is listed
+with its key and its fix.
 """
 
 from __future__ import annotations
@@ -244,6 +245,16 @@ def scene_task(scene: Scene, committed, cam):
     return task
 
 
+def _camera_variant(scene: Scene, keys: dict):
+    """The camera the scene builds with ``keys`` of its camera table changed, or None where it refuses them."""
+    import dataclasses
+
+    try:
+        return scene_camera(dataclasses.replace(scene, camera={**scene.camera, **keys}))
+    except DoefabError:
+        return None
+
+
 def defocus_ring_px(cam, params: dict) -> float:
     """The half aperture's geometric blur radius (sensor px) at the nearest plane when it is sharp at the
     farthest: the radius a defocus-law ring needs there (D·s·|1/z_near − 1/z_far| / 2)."""
@@ -342,7 +353,10 @@ def resolve(scene: Scene) -> ResolvedScene:
         else:
             factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
-                         + window_blur_checks(cam, task) + sampling_checks(scene, cam, cfg)
+                         + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys),
+                                              "aperture_diameter_mm" if "aperture_diameter_mm" in scene.camera
+                                              else "f_number")
+                         + sampling_checks(scene, cam, cfg)
                          + design_factor_checks(scene, cam, task, factor)
                          + _holder_checks(scene, cam))
     if problems:

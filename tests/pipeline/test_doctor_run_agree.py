@@ -174,7 +174,7 @@ def test_doctor_passes_only_what_every_design_grid_can_sample(tmp_path, monkeypa
     the full grid, the run's design grid and the quick run's; when doctor refuses for sampling, its first
     suggested fix, applied, passes doctor and every grid the route computes. (The window's own check, which
     refuses these near planes' defocus blur in the 63 px window, is left out here: test_window_blur.py.)"""
-    monkeypatch.setattr(system, "window_blur_checks", lambda cam, task: [])
+    monkeypatch.setattr(system, "window_blur_checks", lambda *args: [])
     path = _depth_scene(tmp_path, near, pitch_um, sampling)
     try:
         res = resolve(load_scene(path))
