@@ -15,8 +15,8 @@ import math
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks", "BLUR_ROOM_PX", "worst_blur",
-           "window_blur_checks"]
+           "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "BLUR_ROOM_PX",
+           "worst_blur", "window_blur_checks"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 #: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
@@ -24,6 +24,12 @@ MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory i
 #: half's light where the half disc reaches its edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm,
 #: by wave-optics PSFs; tests/pipeline/test_window_blur.py)
 BLUR_ROOM_PX = 2
+
+
+def alias_free_px(cam, lam: float) -> float:
+    """Half-width of the alias-free field the DOE's sampling leaves at wavelength ``lam`` (metres), in sensor
+    pixels: λ·s / (2·DOE pitch) / sensor pitch; a window of k px fits where k/2 + 0.5 does not exceed it."""
+    return lam * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
 
 
 def worst_blur(cam, depths) -> tuple[float, float]:
@@ -46,7 +52,7 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
         return []
     fixes = []
     need = 2 * math.ceil(r + BLUR_ROOM_PX) + 1
-    alias = min(task.wavelengths(cam)) * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
+    alias = alias_free_px(cam, min(task.wavelengths(cam)))
     if need <= 1023 and need / 2 + 0.5 <= alias:
         fixes.append(f"optics.kernel_px ≥ {need}")
     if variant is not None:
@@ -157,7 +163,7 @@ def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:
     step = source_phase_step(dcam, lam_min, z_near)
     if step > SOURCE_PHASE_LIMIT:
         out.append(("step", step))
-    alias = lam_min * dcam.sensor_distance / (2 * dcam.doe_pitch) / dcam.sensor_pitch
+    alias = alias_free_px(dcam, lam_min)
     if task.kernel_size / 2 + 0.5 > alias:
         out.append(("alias", alias))
     return out

@@ -17,8 +17,8 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
-from doefab.pipeline.sampling import (MAX_DOE_PIXELS, design_camera, design_factor_checks, design_grid_problems,
-                                      quick_sampling, sampling_checks, window_blur_checks)
+from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
+                                      design_grid_problems, quick_sampling, sampling_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -280,7 +280,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         except DoefabError as exc:
             out.append(f"camera.doe_pitch_um / fabrication.min_feature_um: {exc}")
     lam_min = min(task.wavelengths(cam))
-    alias = lam_min * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
+    alias = alias_free_px(cam, lam_min)
     if k / 2 + 0.5 > alias:
         out.append(f"optics.kernel_px {k} reaches beyond the DOE sampling's alias-free field ({2 * alias - 1:.0f} px "
                    f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
