@@ -68,7 +68,7 @@ def expand(patterns: list[str] | str, base: Path, what: str) -> list[Path]:
         found = sorted(Path(p) for p in glob.glob(full, recursive=True) if os.path.isfile(p))
         if not found:
             raise DoefabError(f"{what}: no file matches {str(pattern)!r} (looked in {base}): check the path, "
-                              f"which is relative to the recordings file's folder, and the glob")
+                              f"which is relative to that folder unless absolute, and the glob")
         for p in found:
             if p not in seen:
                 seen.add(p)
@@ -116,8 +116,9 @@ def _read_png(path: Path) -> np.ndarray:
     bits, colour = _png_header(path)
     if bits not in (8, 16) or colour not in (0, 2):
         kind = {0: "grey", 2: "RGB", 3: "palette", 4: "grey+alpha", 6: "RGBA"}.get(colour, f"type {colour}")
-        raise DoefabError(f"{path} is a {bits}-bit {kind} PNG: frames must be 8- or 16-bit grey or 8-bit RGB PNGs "
-                          f"without alpha; save the camera's values as a 16-bit TIFF or .npy")
+        raise DoefabError(f"{path} is {'an' if bits == 8 else 'a'} {bits}-bit {kind} PNG: frames must be 8- or "
+                          f"16-bit grey or 8-bit RGB PNGs without alpha; save the camera's values as a 16-bit TIFF "
+                          f"or .npy")
     if bits == 16 and colour == 2:
         raise DoefabError(f"{path} is a 16-bit colour PNG, of which Pillow (the PNG reader) keeps only 8 bits: "
                           f"save the frame as a 16-bit TIFF (tifffile) or .npy")
@@ -185,7 +186,7 @@ def read_frame(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
     path = Path(path)
     fmt = frame_format(path, pixel_format)
     if not path.is_file():
-        raise DoefabError(f"{path} not found: check the path (relative to the recordings file's folder)")
+        raise DoefabError(f"{path} not found: check the path")
     readers = {"npy": lambda p: np.load(p, allow_pickle=False), "png": _read_png, "tiff": _read_tiff,
                "raw": _read_raw}
     try:

@@ -15,7 +15,11 @@ from doefab.validate import metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
-__all__ = ["Camera", "PRESETS"]
+__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE"]
+
+#: a DOE baffle and a lens entrance pupil whose diameters differ by at most this fraction are "about equal": either
+#: may be the stop (the reports say so); a lens pupil narrower by more cuts the DOE (``Camera.lens_cuts_doe``)
+STOP_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,17 @@ class Camera:
         the DOE itself, so an axial gap between DOE and lens moves nothing (the paper's prototype: 8.64 mm against
         27.5 mm)."""
         return self.aperture_diameter <= self.lens_pupil_diameter
+
+    @property
+    def lens_cuts_doe(self) -> bool:
+        """True when the lens's entrance pupil is narrower than the DOE's baffle by more than ``STOP_TOLERANCE``:
+        the lens then blocks the DOE's outer ring and splits the aperture at its own stop, while the PSFs are
+        computed over the whole baffle, split at the DOE. Scenes refuse such a camera
+        (``pipeline.sampling.stop_checks``); the about-equal case is modelled (the DOE's diffraction over the gap
+        to the lens is propagated).
+
+        Example: ``Camera(lens_f_number=8.0).lens_cuts_doe`` is True (a 6.2 mm pupil against the 8.64 mm DOE)."""
+        return self.lens_pupil_diameter < self.aperture_diameter * (1 - STOP_TOLERANCE)
 
     def defocus_blur_px(self, depth: float) -> float:
         """Diameter of the geometric blur of a point at ``depth`` metres (``inf``: a plane wave), in sensor pixels:

@@ -187,7 +187,8 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field's near limit (2 px blur)", near, "m", f"far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m: {far - near:.3g} m deep'} about the focus at "
-             f"{cam.focus_distance:g} m")]
+             + ("infinity (the hyperfocal focus would reach from half the near limit)" if inv_f == 0 else
+                f"{cam.focus_distance:g} m"))]
     rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res.settings["n_levels"])
              + _sensor_rows(res.sensor, res.settings["design_task"]) + _holder_rows(scene, cam))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]

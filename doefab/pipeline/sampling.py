@@ -4,7 +4,8 @@ stage optimises on (``design.sampling``, ``--quick``'s factor), and the scene ke
 ``resolve`` runs these checks before any work, so ``doefab doctor`` refuses exactly the scenes the design stage
 would stop on: a sampling that does not divide the grid, a nearest plane whose point source changes its phase too
 fast between (design) pixels, a window beyond the design grid's alias-free field, a window too small for the
-plain half's defocus blur at a plane (``window_blur_checks``). ``quick_sampling`` picks the ``--quick`` coarsening
+plain half's defocus blur at a plane (``window_blur_checks``), a lens whose entrance pupil cuts the DOE's baffle
+(``stop_checks``). ``quick_sampling`` picks the ``--quick`` coarsening
 among the factors that pass.
 """
 
@@ -16,7 +17,7 @@ from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
            "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "BLUR_ROOM_PX",
-           "worst_blur", "window_blur_checks"]
+           "worst_blur", "window_blur_checks", "stop_checks", "distance_text"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 #: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
@@ -58,10 +59,16 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
     if variant is not None:
         fixes += _camera_fixes(cam, depths, r, k // 2 - BLUR_ROOM_PX, variant, aperture_key)
     return [f"optics.kernel_px {k}: the plain half blurs a point at {z:g} m into a half disc of {r:.1f} px radius "
-            f"(D·s·|1/z_focus − 1/z| / 2 with the focus at {cam.focus_distance:g} m), and the PSF window reaches "
-            f"{k // 2} px from the point's image: the light beyond it would be missing from the simulated captures; "
+            f"(D·s·|1/z_focus − 1/z| / 2, focused at {distance_text(cam.focus_distance)}), and the PSF window "
+            f"reaches {k // 2} px from the point's image: the light beyond it would be missing from the simulated "
+            f"captures; "
             + ("set " + " or ".join(fixes) if fixes else "no window in the alias-free field, focus or f-number in its "
                "key's range holds it: bring optics.depths_m closer together")]
+
+
+def distance_text(z: float) -> str:
+    """A distance in words: ``"2 m"``, or ``"infinity"``."""
+    return f"{z:g} m" if math.isfinite(z) else "infinity"
 
 
 def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: str) -> list[str]:
@@ -91,6 +98,22 @@ def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: st
         if fits("f_number", n):
             out.append(f"camera.f_number ≥ {n:g}")
     return out
+
+
+def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
+    """The DOE's baffle must be the aperture stop, or about as wide as the lens's entrance pupil
+    (``Camera.lens_cuts_doe``): the PSFs carry the light of the whole baffle, split at the DOE, and a narrower lens
+    pupil would block the baffle's outer ring. The fix makes the baffle no wider than the pupil (``aperture_key``:
+    the scene's own, ``f_number`` or ``aperture_diameter_mm``)."""
+    if not cam.lens_cuts_doe:
+        return []
+    pupil, doe = cam.lens_pupil_diameter * 1e3, cam.aperture_diameter * 1e3
+    fix = (f"camera.aperture_diameter_mm ≤ {_round3(pupil, math.floor):g}" if aperture_key == "aperture_diameter_mm"
+           else f"camera.f_number ≥ {_round3(cam.lens_f_number, math.ceil):g}")
+    return [f"camera.lens_f_number {cam.lens_f_number:g}: the lens's {pupil:.2f} mm entrance pupil is narrower than "
+            f"the DOE's {doe:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs (computed "
+            f"over the whole baffle) carry: make the DOE the aperture stop with {fix}, or set camera.lens_f_number to "
+            f"the lens's own wide-open f-number if it opens wider"]
 
 
 def _round3(x: float, direction) -> float:

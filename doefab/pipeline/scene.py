@@ -97,7 +97,7 @@ def _value_problem(where: str, v, key) -> str | None:
         except DoefabError as exc:
             return f"{where}: {exc}"
     if key.kind in ("float", "int") and key.lo is not None:
-        if not math.isfinite(v) or not key.lo <= v <= key.hi:
+        if not (key.inf and v == math.inf) and (not math.isfinite(v) or not key.lo <= v <= key.hi):
             return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{_hint(v, key)}".rstrip()
     return None
 

@@ -79,6 +79,7 @@ class Key:
     help: str = ""
     item: str = ""
     resolve: Callable | None = None
+    inf: bool = False  # a float key that also takes inf (TOML's ``inf``)
 
 
 KEYS = (
@@ -101,9 +102,10 @@ KEYS = (
     Key("camera", "f_number", "float", "", 0.5, 64.0, default="from aperture_diameter_mm",
         help="focal length / DOE aperture, instead of aperture_diameter_mm"),
     Key("camera", "lens_f_number", "float", "", 0.5, 64.0, default="1.8 (prototype)",
-        help="the lens's own f-number wide open: decides whether the DOE's baffle is the aperture stop"),
-    Key("camera", "focus_distance_m", "float", "m", 1e-3, 1e6, default="5 (3.5 for depth)",
-        help="object distance imaged sharply"),
+        help="the lens's own f-number wide open: its entrance pupil must not be narrower than the DOE's "
+             "baffle, which is then the aperture stop"),
+    Key("camera", "focus_distance_m", "float", "m", 1e-3, 1e6, default="5 (3.5 for depth)", inf=True,
+        help="object distance imaged sharply; inf focuses at infinity (the sensor one focal length behind the lens)"),
     Key("camera", "sensor_pitch_um", "float", "µm", 0.3, 100.0, default="5.4 (prototype)",
         help="sensor pixel pitch"),
     Key("camera", "sensor_diagonal_mm", "float", "mm", 1.0, 200.0, default="none: the holder's 24°",
@@ -219,7 +221,7 @@ def values_text(k: Key) -> str:
     if k.choices:
         return ", ".join(map(str, k.choices)) + (" (any case)" if k.resolve else "")
     if k.lo is not None:
-        return _range(k)
+        return _range(k) + (", or inf" if k.inf else "")
     return {"bool": "true or false", "str": "text, no unit"}[k.kind]
 
 

@@ -18,7 +18,8 @@ import math
 
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
-                                      design_grid_problems, quick_sampling, sampling_checks, window_blur_checks)
+                                      design_grid_problems, distance_text, quick_sampling, sampling_checks,
+                                      stop_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -301,7 +302,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
-                   f"focus distance ({cam.focus_distance:g} m); set camera.focus_distance_m instead, or drop depths_m")
+                   f"focus distance, {distance_text(cam.focus_distance)}: set camera.focus_distance_m or drop depths_m")
     mode = weights_mode(scene.reconstruction.get("weights"))
     networks = "reconstruction" in scene.stages and mode.any_system
     if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # else skipped on another design
@@ -352,10 +353,10 @@ def resolve(scene: Scene) -> ResolvedScene:
             problems.append(str(exc))
         else:
             factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
+            aperture = "aperture_diameter_mm" if "aperture_diameter_mm" in scene.camera else "f_number"
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
-                         + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys),
-                                              "aperture_diameter_mm" if "aperture_diameter_mm" in scene.camera
-                                              else "f_number")
+                         + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys), aperture)
+                         + stop_checks(cam, aperture)
                          + sampling_checks(scene, cam, cfg)
                          + design_factor_checks(scene, cam, task, factor)
                          + _holder_checks(scene, cam))

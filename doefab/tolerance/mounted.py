@@ -29,20 +29,17 @@ import math
 import numpy as np
 import torch
 
-from doefab.optics.camera import Camera
+from doefab.optics.camera import STOP_TOLERANCE, Camera
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, plane_batches, scratch_kwargs
 from doefab.optics.pupil import pupil_half, source_path_difference
 
-__all__ = ["MountedPlan", "stop_case"]
+__all__ = ["MountedPlan", "stop_case", "STOP_TOLERANCE"]
 
 
 #: a sample the plain half covers less than this is off it (``MountedPlan.plain_key``): the exact area formula
 #: leaves about 3e-17 on samples wholly across the split
 PLAIN_COVER = 1e-9
-
-#: a baffle and a pupil whose diameters differ by at most this fraction are "about equal" in reports
-STOP_TOLERANCE = 0.01
 
 
 def stop_case(camera: Camera) -> str:

@@ -81,3 +81,23 @@ def test_the_mask_count_is_said_in_words_that_agree(tmp_path, levels, masks):
     p.write_text(text.replace("n_levels = 8", f"n_levels = {levels}"))
     meaning = next(r["meaning"] for r in explain(resolve(load_scene(p))) if r["quantity"] == "etch depth of 2π")
     assert f"{levels} levels of " in meaning and meaning.endswith(f" nm on {masks}")
+
+
+@pytest.mark.parametrize("value,accepted", [("inf", True), ("-inf", False), ("nan", False), ("2e6", False)])
+def test_a_camera_focused_at_infinity(tmp_path, value, accepted):
+    """``focus_distance_m = inf`` puts the sensor one focal length behind the lens; the near limit is then the
+    hyperfocal distance D·f / (2 px) and the far limit infinity. Other non-finite or too-far values are refused."""
+    from doefab.errors import DoefabError
+
+    path = tmp_path / "inf.toml"
+    path.write_text(f'task = "hdr"\nstages = ["design"]\n[camera]\nfocal_length_mm = 35.0\nf_number = 4.0\n'
+                    f'lens_f_number = 2.0\nfocus_distance_m = {value}\nsensor_pitch_um = 3.76\n')
+    if not accepted:
+        with pytest.raises(DoefabError, match="camera.focus_distance_m"):
+            resolve(load_scene(path))
+        return
+    res = resolve(load_scene(path))
+    assert math.isinf(res.camera.focus_distance) and res.camera.sensor_distance == pytest.approx(35e-3, rel=1e-12)
+    row = next(r for r in explain(res) if r["quantity"].startswith("depth of field"))
+    assert row["value"] == pytest.approx(35e-3 / 4.0 * 35e-3 / (2 * 3.76e-6), rel=1e-9)
+    assert "far limit ∞" in row["meaning"] and "infinity" in row["meaning"] and "inf m" not in row["meaning"]

@@ -1,0 +1,60 @@
+"""A scene whose lens's entrance pupil is narrower than the DOE's baffle is refused (``sampling.stop_checks``): the
+PSFs carry the whole baffle's light, split at the DOE, and such a lens would block the baffle's outer ring. The
+numbers are the thin lens's by hand: a 35 mm lens focused at 5 m, its pupil focal length / lens f-number across."""
+
+import re
+
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.pipeline.doctor import diagnose
+from doefab.pipeline.scene import load_scene
+from doefab.pipeline.system import resolve
+
+CAM = {"focal_length_mm": 35.0, "focus_distance_m": 5.0, "sensor_pitch_um": 3.76, "doe_pitch_um": 4.0}
+
+
+def _scene(tmp_path, name="s.toml", **camera):
+    text = 'task = "hdr"\nstages = ["design"]\n[camera]\n' + "".join(
+        f"{k} = {v}\n" for k, v in {**CAM, **camera}.items())
+    path = tmp_path / name
+    path.write_text(text)
+    return load_scene(path)
+
+
+def _refusal(scene) -> str:
+    with pytest.raises(DoefabError) as err:
+        resolve(scene)
+    msg = str(err.value)
+    with pytest.raises(DoefabError) as doc:  # doctor refuses what run refuses
+        diagnose(scene, precision_check=False)
+    assert "entrance pupil is narrower" in str(doc.value)
+    return msg
+
+
+def test_a_lens_pupil_narrower_than_the_baffle_is_refused_and_the_fix_passes(tmp_path):
+    msg = _refusal(_scene(tmp_path, f_number=4.0, lens_f_number=5.6))
+    # pupil 35 mm / 5.6 = 6.25 mm, baffle 35 mm / 4 = 8.75 mm
+    assert "6.25 mm entrance pupil" in msg and "8.75 mm baffle" in msg, msg
+    value = float(re.search(r"camera\.f_number ≥ ([\d.]+)", msg).group(1))
+    assert value == pytest.approx(5.6)
+    assert resolve(_scene(tmp_path, "fixed.toml", f_number=value, lens_f_number=5.6)).camera.doe_is_stop
+
+
+def test_a_scene_that_sets_the_aperture_is_told_the_aperture(tmp_path):
+    msg = _refusal(_scene(tmp_path, aperture_diameter_mm=9.0, lens_f_number=5.0))
+    assert "camera.f_number" not in msg
+    value = float(re.search(r"camera\.aperture_diameter_mm ≤ ([\d.]+)", msg).group(1))
+    assert value == pytest.approx(35 / 5.0)  # the pupil
+    resolve(_scene(tmp_path, "fixed.toml", aperture_diameter_mm=value, lens_f_number=5.0))
+
+
+@pytest.mark.parametrize("narrower,refused", [(0.005, False), (0.015, True), (-0.5, False)])
+def test_a_pupil_about_as_wide_as_the_baffle_is_accepted(tmp_path, narrower, refused):
+    """Within 1 % either may be the stop (the model propagates the DOE's diffraction over the gap to the lens);
+    a pupil 1.5 % narrower cuts the DOE; a wider one leaves the baffle the stop."""
+    scene = _scene(tmp_path, aperture_diameter_mm=8.0, lens_f_number=35 / (8.0 * (1 - narrower)))
+    if refused:
+        assert "8.00 mm baffle" in _refusal(scene)
+    else:
+        resolve(scene)
