@@ -195,23 +195,40 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
 
 
 def _holder_rows(scene, cam) -> list[tuple]:
-    """The field's half-angle the holder's hole in front of the DOE passes, and where it comes from."""
-    if scene is None or "holder" not in scene.stages:
-        return []
+    """The field's half-angle the holder's hole in front of the DOE passes, and where it comes from (with a holder
+    stage), and what the field's edge does to the DOE's phase (wherever the field is known)."""
     from doefab.pipeline.system import scene_field_half_angle_deg
 
     from holder_cad.params import HolderParams
 
+    if scene is None:
+        return []
     angle = scene_field_half_angle_deg(scene, cam)
     if "field_half_angle_deg" in scene.holder:
         why = "holder.field_half_angle_deg, as given"
     elif angle is not None:
         why = (f"atan(sensor diagonal / 2 / sensor distance) = atan({scene.camera['sensor_diagonal_mm']:g} / 2 / "
                f"{cam.sensor_distance * 1e3:.4g} mm)")
-    else:
+    elif "holder" in scene.stages:
         angle = HolderParams.field_half_angle_deg
         why = "the holder's default (a full-frame sensor at 50 mm): set camera.sensor_diagonal_mm for your sensor"
-    return [("field the holder's hole passes (half-angle)", angle, "°", why)]
+    else:
+        return []
+    rows = [("field the holder's hole passes (half-angle)", angle, "°", why)] if "holder" in scene.stages else []
+    return rows + [_oblique_step_row(cam, angle)]
+
+
+def _oblique_step_row(cam, angle_deg: float) -> tuple:
+    """The phase of one etch step for a plane wave at the field's edge against on axis: k·h·(n·cos θt − cos θ),
+    sin θ = n·sin θt (Snell), against k·h·(n − 1), at the design wavelength (``tilt_phase_factor``, the same
+    obliquity as a tilted die's). The PSFs are computed on axis."""
+    from doefab.tolerance.sources import tilt_phase_factor
+
+    n = float(cam.material.index(cam.design_wavelength))
+    change = (tilt_phase_factor(math.radians(angle_deg), n) - 1) * 100
+    return ("etch step's phase at the field's edge", change, "%", f"k·h·(n cos θt − cos θ) against k·h·(n − 1) at "
+            f"{angle_deg:.1f}°: the image's corners see the DOE as if etched {change:.1f} % deeper (the PSFs are "
+            f"computed on axis; doefab tolerance --sweep shows what an etch-depth error costs)")
 
 
 #: what a capture's clip means for the task of each design

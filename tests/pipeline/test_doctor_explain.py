@@ -101,3 +101,34 @@ def test_a_camera_focused_at_infinity(tmp_path, value, accepted):
     row = next(r for r in explain(res) if r["quantity"].startswith("depth of field"))
     assert row["value"] == pytest.approx(35e-3 / 4.0 * 35e-3 / (2 * 3.76e-6), rel=1e-9)
     assert "far limit ∞" in row["meaning"] and "infinity" in row["meaning"] and "inf m" not in row["meaning"]
+
+
+def _silica(lam_um: float) -> float:  # Malitson 1965, fused silica: B1..B3, C1..C3 (µm)
+    b, c = (0.6961663, 0.4079426, 0.8974794), (0.0684043, 0.1162414, 9.896161)
+    x = lam_um ** 2
+    return math.sqrt(1 + sum(bi * x / (x - ci ** 2) for bi, ci in zip(b, c)))
+
+
+@pytest.mark.parametrize("stages,diagonal,angle", [
+    ('["design"]', 43.3, None),  # a full-frame sensor 50.5 mm behind the lens: atan(21.65 / 50.505)
+    ('["design", "holder"]', None, 24.0),  # the holder's default field
+    ('["design"]', None, False)])  # no field known: no row
+def test_the_etch_steps_phase_at_the_fields_edge_is_snells(tmp_path, stages, diagonal, angle):
+    """A plane wave at θ crosses a step h of glass with the phase k·h·(n·cos θt − cos θ), n·sin θt = sin θ,
+    against k·h·(n − 1) on axis (fused silica at the 550 nm design wavelength)."""
+    path = tmp_path / "field.toml"
+    path.write_text(f'task = "hdr"\nstages = {stages}\n[camera]\nfocal_length_mm = 50.0\nf_number = 5.6\n'
+                    f'lens_f_number = 1.8\nfocus_distance_m = 5.0\n'
+                    + (f"sensor_diagonal_mm = {diagonal}\n" if diagonal else ""))
+    scene = load_scene(path)
+    rows = {r["quantity"]: r for r in explain(resolve(scene), scene)}
+    if angle is False:
+        assert "etch step's phase at the field's edge" not in rows
+        return
+    s = 1 / (1 / 50e-3 - 1 / 5.0)
+    th = math.atan(diagonal * 1e-3 / 2 / s) if angle is None else math.radians(angle)
+    n = _silica(0.55)
+    t = math.asin(math.sin(th) / n)
+    expect = ((n * math.cos(t) - math.cos(th)) / (n - 1) - 1) * 100
+    assert rows["etch step's phase at the field's edge"]["value"] == pytest.approx(expect, abs=0.01)
+    assert 5 < expect < 7  # the prototype's field: about 6 % deeper at the corners
