@@ -36,7 +36,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
 
     from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
     from doefab.pipeline.stages import resolve
-    from doefab.pipeline.sampling import phase_step_fix, pitch_fix, source_phase_step
+    from doefab.pipeline.sampling import distance_text, phase_step_fix, pitch_fix, source_phase_step
 
     res = res if res is not None else resolve(scene)  # the caller's, when it resolved the scene already
     cam = res.camera
@@ -55,7 +55,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     rows += _blur_row(cam, depths, k)
     z_near = min(depths)
     step = source_phase_step(cam, lam_min, z_near)
-    rows.append(_row(f"source phase step per pupil sample at the nearest depth ({z_near:g} m)", step,
+    rows.append(_row(f"source phase step per pupil sample at the nearest depth ({distance_text(z_near)})", step,
                      SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
                      phase_step_fix(cam, lam_min, z_near, step)))
     fft_bytes = (2 * cam.doe_pixels) ** 2 * 8 * 3
@@ -116,10 +116,11 @@ def _blur_row(cam, depths, k: int) -> list[dict]:
     """The plain half's defocus blur (its half disc's radius) at its widest plane against the PSF window's reach,
     as ``resolve`` refuses it (``sampling.window_blur_checks``, which names the fixes); none where every plane is
     at the focus."""
-    from doefab.pipeline.sampling import worst_blur
+    from doefab.pipeline.sampling import distance_text, worst_blur
 
     z, r = worst_blur(cam, depths)
-    return [_row(f"plain half's defocus blur inside the PSF window (its radius at {z:g} m)", r, k // 2, "px",
+    return [_row(f"plain half's defocus blur inside the PSF window (its radius at {distance_text(z)})", r, k // 2,
+                 "px",
                  r <= k // 2, "optics.kernel_px")] if r > 0 else []
 
 
@@ -180,14 +181,16 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
     rows = [("focal length", f * 1e3, "mm", "thin lens focused at the focus distance"),
             ("f-number (DOE aperture)", f / d, "", f"{d * 1e3:.2f} mm clear aperture; each half passes half the light"),
             ("lens f-number", cam.lens_f_number, "", "the DOE's baffle is the aperture stop" if cam.doe_is_stop
-             else "the lens is the aperture stop: the DOE's diffraction over the gap is propagated"),
+             else "the lens's pupil, up to 1 % narrower than the baffle, is taken as the aperture stop: the DOE's "
+             "diffraction over the gap is propagated"),
             ("diffraction limit (Airy radius)", airy, "sensor px", f"1.22 λ s / D at {lam * 1e9:.0f} nm; below 1 px "
              "the sensor, not diffraction, limits detail"),
             ("DOE pixels across the aperture", cam.doe_pixels, "px", f"at {cam.doe_pitch * 1e6:g} µm, "
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field's near limit (2 px blur)", near, "m", f"far limit "
              f"{'∞' if math.isinf(far) else f'{far:.3g} m: {far - near:.3g} m deep'} about the focus at "
-             + ("infinity (the hyperfocal focus would reach from half the near limit)" if inv_f == 0 else
+             + ("infinity (focused at the near limit, the hyperfocal distance, it would reach from half of it to ∞)"
+                if inv_f == 0 else
                 f"{cam.focus_distance:g} m"))]
     rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res.settings["n_levels"])
              + _sensor_rows(res.sensor, res.settings["design_task"]) + _holder_rows(scene, cam))

@@ -58,8 +58,8 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
         fixes.append(f"optics.kernel_px ≥ {need}")
     if variant is not None:
         fixes += _camera_fixes(cam, depths, r, k // 2 - BLUR_ROOM_PX, variant, aperture_key)
-    return [f"optics.kernel_px {k}: the plain half blurs a point at {z:g} m into a half disc of {r:.1f} px radius "
-            f"(D·s·|1/z_focus − 1/z| / 2, focused at {distance_text(cam.focus_distance)}), and the PSF window "
+    return [f"optics.kernel_px {k}: the plain half blurs a point at {distance_text(z)} into a half disc of {r:.1f} px "
+            f"radius (D·s·|1/z_focus − 1/z| / 2, focused at {distance_text(cam.focus_distance)}), and the PSF window "
             f"reaches {k // 2} px from the point's image: the light beyond it would be missing from the simulated "
             f"captures; "
             + ("set " + " or ".join(fixes) if fixes else "no window in the alias-free field, focus or f-number in its "
@@ -81,7 +81,7 @@ def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: st
 
     def fits(name: str, value: float) -> bool:
         new = variant(**{name: value}) if keys[name].lo <= value <= keys[name].hi else None
-        return new is not None and worst_blur(new, depths)[1] <= reach
+        return new is not None and worst_blur(new, depths)[1] <= reach and not new.lens_cuts_doe
 
     out = []
     inv = [0.0 if math.isinf(d) else 1 / d for d in depths]
@@ -119,7 +119,7 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
 def _round3(x: float, direction) -> float:
     """``x`` to three significant digits, rounded by ``direction`` (math.floor or math.ceil)."""
     step = 10.0 ** (math.floor(math.log10(x)) - 2)
-    return round(direction(x / step) * step, 12)
+    return round(direction(round(x / step, 9)) * step, 12)  # 4.98 / 0.01 is 498.00000000000006: not 499
 
 
 def source_phase_step(cam, lam_min: float, z_near: float) -> float:

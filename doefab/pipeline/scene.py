@@ -89,6 +89,8 @@ def _value_problem(where: str, v, key) -> str | None:
                 return f"{where}: {exc}"
             return None
         return None if v in key.choices else f"{where} {v!r} is not one of {', '.join(map(str, key.choices))}"
+    if key.inf and (v == "inf" or v == math.inf):  # inf, or "inf" as a list of depths writes it
+        return None
     if not _typed(v, key.kind):
         return f"{where} must be {'a number' if key.kind == 'float' else key.kind}, got {v!r}"
     if key.resolve is not None:
@@ -97,7 +99,7 @@ def _value_problem(where: str, v, key) -> str | None:
         except DoefabError as exc:
             return f"{where}: {exc}"
     if key.kind in ("float", "int") and key.lo is not None:
-        if not (key.inf and v == math.inf) and (not math.isfinite(v) or not key.lo <= v <= key.hi):
+        if not math.isfinite(v) or not key.lo <= v <= key.hi:
             return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{_hint(v, key)}".rstrip()
     return None
 
@@ -105,6 +107,8 @@ def _value_problem(where: str, v, key) -> str | None:
 def _bad_item(x, key) -> bool:
     """Whether one item of a list key is outside what the key's items take."""
     if x in key.choices and isinstance(x, str):
+        return False
+    if "inf" in key.choices and isinstance(x, float) and x == math.inf:  # inf, unquoted, as a float key takes it
         return False
     if key.item == "choice":
         return True

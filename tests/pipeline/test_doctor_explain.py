@@ -83,7 +83,8 @@ def test_the_mask_count_is_said_in_words_that_agree(tmp_path, levels, masks):
     assert f"{levels} levels of " in meaning and meaning.endswith(f" nm on {masks}")
 
 
-@pytest.mark.parametrize("value,accepted", [("inf", True), ("-inf", False), ("nan", False), ("2e6", False)])
+@pytest.mark.parametrize("value,accepted", [("inf", True), ('"inf"', True), ("-inf", False), ("nan", False),
+                                            ("2e6", False)])
 def test_a_camera_focused_at_infinity(tmp_path, value, accepted):
     """``focus_distance_m = inf`` puts the sensor one focal length behind the lens; the near limit is then the
     hyperfocal distance D·f / (2 px) and the far limit infinity. Other non-finite or too-far values are refused."""
@@ -101,6 +102,10 @@ def test_a_camera_focused_at_infinity(tmp_path, value, accepted):
     row = next(r for r in explain(res) if r["quantity"].startswith("depth of field"))
     assert row["value"] == pytest.approx(35e-3 / 4.0 * 35e-3 / (2 * 3.76e-6), rel=1e-9)
     assert "far limit ∞" in row["meaning"] and "infinity" in row["meaning"] and "inf m" not in row["meaning"]
+    from doefab.pipeline.doctor import diagnose
+
+    checks = [r["check"] for r in diagnose(load_scene(path), precision_check=False)]
+    assert any("nearest depth (infinity)" in c for c in checks) and not any("inf m" in c for c in checks), checks
 
 
 def _silica(lam_um: float) -> float:  # Malitson 1965, fused silica: B1..B3, C1..C3 (µm)
@@ -112,14 +117,19 @@ def _silica(lam_um: float) -> float:  # Malitson 1965, fused silica: B1..B3, C1.
 @pytest.mark.parametrize("stages,diagonal,angle", [
     ('["design"]', 43.3, None),  # a full-frame sensor 50.5 mm behind the lens: atan(21.65 / 50.505)
     ('["design", "holder"]', None, 24.0),  # the holder's default field
-    ('["design"]', None, False)])  # no field known: no row
+    ('["design"]', None, False),  # no field known: no row
+    ('["design", "holder"]', None, 30.0)])  # as given, at a 1 µm design wavelength
 def test_the_etch_steps_phase_at_the_fields_edge_is_snells(tmp_path, stages, diagonal, angle):
     """A plane wave at θ crosses a step h of glass with the phase k·h·(n·cos θt − cos θ), n·sin θt = sin θ,
-    against k·h·(n − 1) on axis (fused silica at the 550 nm design wavelength)."""
+    against k·h·(n − 1) on axis (fused silica at the design wavelength: 550 nm, or 1000 nm where the field is
+    given as 30°)."""
+    wide = angle == 30.0
     path = tmp_path / "field.toml"
     path.write_text(f'task = "hdr"\nstages = {stages}\n[camera]\nfocal_length_mm = 50.0\nf_number = 5.6\n'
                     f'lens_f_number = 1.8\nfocus_distance_m = 5.0\n'
-                    + (f"sensor_diagonal_mm = {diagonal}\n" if diagonal else ""))
+                    + (f"sensor_diagonal_mm = {diagonal}\n" if diagonal else "")
+                    + ("[holder]\nfield_half_angle_deg = 30.0\n[fabrication]\ndesign_wavelength_nm = 1000\n"
+                       if wide else ""))
     scene = load_scene(path)
     rows = {r["quantity"]: r for r in explain(resolve(scene), scene)}
     if angle is False:
@@ -127,8 +137,23 @@ def test_the_etch_steps_phase_at_the_fields_edge_is_snells(tmp_path, stages, dia
         return
     s = 1 / (1 / 50e-3 - 1 / 5.0)
     th = math.atan(diagonal * 1e-3 / 2 / s) if angle is None else math.radians(angle)
-    n = _silica(0.55)
+    n = _silica(1.0 if wide else 0.55)
     t = math.asin(math.sin(th) / n)
     expect = ((n * math.cos(t) - math.cos(th)) / (n - 1) - 1) * 100
-    assert rows["etch step's phase at the field's edge"]["value"] == pytest.approx(expect, abs=0.01)
-    assert 5 < expect < 7  # the prototype's field: about 6 % deeper at the corners
+    assert rows["etch step's phase at the field's edge"]["value"] == pytest.approx(expect, rel=1e-6 if wide else 1e-3)
+    assert 9 < expect < 11 if wide else 5 < expect < 7  # the prototype's field: about 6 % deeper at the corners
+
+
+@pytest.mark.parametrize("plane,accepted", [("inf", True), ('"inf"', True), ("-inf", False)])
+def test_a_plane_at_infinity_is_written_either_way(tmp_path, plane, accepted):
+    """``optics.depths_m`` takes a plane at infinity as TOML's inf or as the word "inf", as the focus does."""
+    from doefab.errors import DoefabError
+
+    path = tmp_path / "plane.toml"
+    path.write_text(f'task = "hdr"\nstages = ["design"]\n[camera]\nfocus_distance_m = inf\n[optics]\n'
+                    f'depths_m = [{plane}]\n')
+    if accepted:
+        assert resolve(load_scene(path)).settings["depths_m"] == ["inf"]
+    else:
+        with pytest.raises(DoefabError, match="optics.depths_m"):
+            resolve(load_scene(path))
