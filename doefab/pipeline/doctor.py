@@ -120,8 +120,7 @@ def _blur_row(cam, depths, k: int) -> list[dict]:
 
     z, r = worst_blur(cam, depths)
     return [_row(f"plain half's defocus blur inside the PSF window (its radius at {distance_text(z)})", r, k // 2,
-                 "px",
-                 r <= k // 2, "optics.kernel_px")] if r > 0 else []
+                 "px", r <= k // 2, "optics.kernel_px")] if r > 0 else []
 
 
 def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:
@@ -167,7 +166,10 @@ def _scheduler_rows(scheduler: str | None) -> list[dict]:
 
 def explain(res: ResolvedScene, scene=None) -> list[dict]:
     """What a resolved scene's numbers imply: [{quantity, value, unit, meaning}] (thin lens; the DOE at the
-    aperture; λ the middle of the task's bands); with the ``scene``, also the field its holder's hole passes."""
+    aperture; λ the middle of the task's bands); with the ``scene``, also the field its holder's hole passes and what
+    the field's edge does to the etch step."""
+    from doefab.optics.camera import STOP_TOLERANCE
+
     cam, task = res.camera, res.task
     lams = sorted(res.settings["wavelengths_m"])
     lam = lams[len(lams) // 2]
@@ -181,8 +183,8 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
     rows = [("focal length", f * 1e3, "mm", "thin lens focused at the focus distance"),
             ("f-number (DOE aperture)", f / d, "", f"{d * 1e3:.2f} mm clear aperture; each half passes half the light"),
             ("lens f-number", cam.lens_f_number, "", "the DOE's baffle is the aperture stop" if cam.doe_is_stop
-             else "the lens's pupil, up to 1 % narrower than the baffle, is taken as the aperture stop: the DOE's "
-             "diffraction over the gap is propagated"),
+             else f"the lens's pupil, up to {STOP_TOLERANCE * 100:g} % narrower than the baffle, is taken as the "
+             "aperture stop: the DOE's diffraction over the gap is propagated"),
             ("diffraction limit (Airy radius)", airy, "sensor px", f"1.22 λ s / D at {lam * 1e9:.0f} nm; below 1 px "
              "the sensor, not diffraction, limits detail"),
             ("DOE pixels across the aperture", cam.doe_pixels, "px", f"at {cam.doe_pitch * 1e6:g} µm, "
@@ -193,11 +195,11 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
                 if inv_f == 0 else
                 f"{cam.focus_distance:g} m"))]
     rows += (_task_rows(cam, task, lams) + _fab_rows(cam, res.settings["n_levels"])
-             + _sensor_rows(res.sensor, res.settings["design_task"]) + _holder_rows(scene, cam))
+             + _sensor_rows(res.sensor, res.settings["design_task"]) + _field_rows(scene, cam))
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
 
 
-def _holder_rows(scene, cam) -> list[tuple]:
+def _field_rows(scene, cam) -> list[tuple]:
     """The field's half-angle the holder's hole in front of the DOE passes, and where it comes from (with a holder
     stage), and what the field's edge does to the DOE's phase (wherever the field is known)."""
     from doefab.pipeline.system import scene_field_half_angle_deg
