@@ -54,6 +54,30 @@ def number_in(name: str, value, lo: float, hi: float, integer: bool = False, uni
     return v
 
 
+INF_WORDS = ("inf", "infinity")  # how a TOML or JSON file may write a distance at infinity (any case), besides inf
+
+
+def distance_or_inf(value) -> float | None:
+    """A distance as read from a file: the number (metres), ``math.inf`` for TOML's ``inf`` or one of ``INF_WORDS``
+    (JSON has no infinity), or None for anything else (a bool, another word, NaN). The range is the caller's.
+
+    Example: ``[distance_or_inf(v) for v in (2, "inf", float("inf"), "far")]`` → ``[2.0, inf, inf, None]``.
+    """
+    if isinstance(value, str):
+        return math.inf if value.strip().lower() in INF_WORDS else None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or math.isnan(value):
+        return None
+    return float(value)
+
+
+def distance_record(z: float) -> float | str:
+    """A distance (metres) as a JSON record writes it: the number, or ``"inf"`` for a point at infinity.
+
+    Example: ``distance_record(float("inf"))`` → ``"inf"``; ``distance_record(2)`` → ``2.0``.
+    """
+    return float(z) if math.isfinite(z) else INF_WORDS[0]
+
+
 _METRE_PREFIXES = (("nm", 1e-9), ("µm", 1e-6), ("mm", 1e-3))
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.validate import distance_or_inf, distance_record
 from doefab.fabrication.levels import levels_sha256, levels_to_height
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text
@@ -40,10 +41,6 @@ def _versions() -> dict:
     except ImportError:  # pragma: no cover
         pass
     return out
-
-
-def _json_depth(z: float):
-    return z if math.isfinite(z) else "inf"
 
 
 @dataclass
@@ -97,7 +94,7 @@ class Design:
             "task_params": self.task_params,
             "camera": self.camera.to_dict(),
             "wavelengths_m": list(self.wavelengths),
-            "depths_m": [_json_depth(z) for z in self.depths],
+            "depths_m": [distance_record(z) for z in self.depths],
             "metrics": self.metrics,
             "seed": self.seed,
             "optimizer": self.optimizer,
@@ -215,10 +212,9 @@ def _check_meta(meta, where: Path) -> dict:
         bad("depths_m", "must be a non-empty list of depths in metres (or \"inf\")")
     depths = []
     for z in zs:
-        if z == "inf":
-            depths.append(math.inf)
-        elif isinstance(z, (int, float)) and not isinstance(z, bool) and math.isfinite(z) and 0 < z <= 1e6:
-            depths.append(float(z))
+        d = distance_or_inf(z)
+        if d is not None and (d == math.inf or 0 < d <= 1e6):
+            depths.append(d)
         else:
             bad("depths_m", f"holds {z!r}: depths are metres > 0 (or \"inf\")")
     out["depths_m"] = depths

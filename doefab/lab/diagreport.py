@@ -22,6 +22,7 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_text
 from doefab.lab.partmodel import BOUND, FINE
+from doefab.validate import distance_record
 
 __all__ = ["assemble", "check_design", "delivered_metric", "actions", "write_report", "deviations", "OUTSIDE",
            "FINETUNE_LOSS",
@@ -133,7 +134,7 @@ def assemble(model, got: dict, cur: dict, misfit: dict, psf_metric: dict, delive
                    "parts": run["parts"], "seconds": run["seconds"],
                    "starts": run["starts"], "at_bound": [r["p"].label for r in rows if r["at_bound"]]},
            "measured": {"halves": list(model.halves), "wavelengths_nm": [d.wavelengths[i] * 1e9 for i in model.wl],
-                        "depths_m": [d.depths[i] if math.isfinite(d.depths[i]) else "inf" for i in model.dz]},
+                        "depths_m": [distance_record(d.depths[i]) for i in model.dz]},
            "model": {"corner_rounding_um": model.base.corner_rounding * 1e6,
                      "not_fitted": ["mask rotation", "surface roughness", "dual-pixel crosstalk"]}}
     out["actions"] = actions(out)

@@ -9,7 +9,7 @@ Schema (paths relative to the file; globs allowed; every key below, nothing else
     [[psf]]                        # one point-source recording
     half = "coded"                 # the aperture half that was open: coded | plain
     view = "coded"                 # the dual-pixel view the frames are: coded (right) | plain (left)
-    depth_m = 5.0                  # source distance in metres, or "inf"
+    depth_m = 5.0                  # source distance in metres, or inf ("inf")
     wavelength_nm = 550            # a narrow-band source, monochrome frames ... (xor)
     channels = "rgb"               # ... a broadband source, colour frames, one PSF per channel (3-band designs)
     frames = ["psf/coded_*.tiff"]
@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from doefab.validate import unit_hint
+from doefab.validate import distance_or_inf, unit_hint
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.lab.frames import PIXEL_FORMATS, expand
@@ -163,15 +163,12 @@ class _Table:
 
 def _depth(tab: _Table):
     v = tab.t.get("depth_m")
-    if isinstance(v, str) and v.strip().lower() in ("inf", "infinity"):
-        return math.inf
+    d = distance_or_inf(v)
     if v is None:
         tab.bad("depth_m", " is missing: give the source distance in metres, or \"inf\"")
-    elif isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or v <= 0:
+    elif d is None or d <= 0:
         tab.bad("depth_m", f" = {v!r} must be a distance > 0 in metres, or \"inf\"")
-    else:
-        return float(v)
-    return None
+    return d if d is not None and d > 0 else None
 
 
 def _wavelength(tab: _Table) -> tuple:

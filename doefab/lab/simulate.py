@@ -161,15 +161,12 @@ def write_lab_recordings(folder, design_dir, err=None, *, supersample: int = 2, 
         toml += _write_walls(folder, frames, dark_frames, size, gain, read_noise_e, crosstalk, rng)
     atomic_write_json(folder / "truth.json", {
         "design": str(design_dir.resolve()), "errors": err.to_json(), "supersample": supersample,
-        "wavelengths_m": [d.wavelengths[i] for i in bands], "depths_m": [_json_depth(d.depths[i]) for i in planes],
+        "wavelengths_m": [d.wavelengths[i] for i in bands],
+        "depths_m": [v.distance_record(d.depths[i]) for i in planes],
         "shift_px": [float(s) for s in shift_px], "photons_per_frame": float(photons), "gain_e_per_dn": gain,
         "black_level_dn": BLACK_LEVEL_DN, "read_noise_e": float(read_noise_e), "crosstalk": list(crosstalk),
         "wall_level_e": WALL_FRACTION * (_TOP_DN - BLACK_LEVEL_DN) * gain, "size_px": size, "seed": seed})
     return atomic_write_text(folder / "recordings.toml", "\n".join(toml))
-
-
-def _json_depth(z: float):
-    return z if math.isfinite(z) else "inf"
 
 
 def _shifted_all(stack: np.ndarray, shift_px) -> np.ndarray:

@@ -11,7 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from doefab.validate import metres_hint
+from doefab.validate import distance_or_inf, distance_record, metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
@@ -154,7 +154,7 @@ class Camera:
             "doe_pixels": self.doe_pixels,
             "sensor_pitch_m": self.sensor_pitch,
             "sensor_distance_m": self.sensor_distance,
-            "focus_distance_m": self.focus_distance if math.isfinite(self.focus_distance) else "inf",
+            "focus_distance_m": distance_record(self.focus_distance),
             "design_wavelength_m": self.design_wavelength,
             "focal_length_m": self.focal_length,
             "lens_f_number": self.lens_f_number,
@@ -173,7 +173,8 @@ class Camera:
         vals = {k: record_number(d, k, lo, hi, unit, where, integer=(k == "doe_pixels"))
                 for k, (lo, hi, unit) in RECORD_RANGES.items()}
         fd = d["focus_distance_m"]
-        focus = math.inf if fd == "inf" else record_number(d, "focus_distance_m", 1e-3, 1e6, "m", where)
+        inf = distance_or_inf(fd) == math.inf
+        focus = math.inf if inf else record_number(d, "focus_distance_m", 1e-3, 1e6, "m", where)
         material = Material.from_dict(d["material"], where=f"{where}: material")
         n = float(material.index(vals["design_wavelength_m"]))
         if not 1.0 < n < 4.0:

@@ -17,6 +17,7 @@ import numpy as np
 
 from doefab.applications import has
 from doefab.pipeline.resolved import ResolvedScene
+from doefab.validate import distance_or_inf
 
 __all__ = ["diagnose", "explain"]
 
@@ -42,7 +43,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     cam = res.camera
     s = res.settings
     lams = s["wavelengths_m"]
-    depths = [math.inf if z == "inf" else z for z in s["depths_m"]]
+    depths = [distance_or_inf(z) for z in s["depths_m"]]
     k = s["kernel_px"]
     rows = []
     lam_min = min(lams)

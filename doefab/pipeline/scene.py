@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from doefab.validate import metres_hint, unit_hint
+from doefab.validate import distance_or_inf, metres_hint, unit_hint
 from doefab.applications import APPLICATIONS, View
 from doefab.errors import DoefabError
 from doefab.io import read_toml
@@ -89,10 +89,11 @@ def _value_problem(where: str, v, key) -> str | None:
                 return f"{where}: {exc}"
             return None
         return None if v in key.choices else f"{where} {v!r} is not one of {', '.join(map(str, key.choices))}"
-    if key.inf and (v == "inf" or v == math.inf):  # inf, or "inf" as a list of depths writes it
+    if key.inf and distance_or_inf(v) == math.inf:  # inf, or "inf"
         return None
     if not _typed(v, key.kind):
-        return f"{where} must be {'a number' if key.kind == 'float' else key.kind}, got {v!r}"
+        what = "a number" + (" or inf" if key.inf else "") if key.kind == "float" else key.kind
+        return f"{where} must be {what}, got {v!r}"
     if key.resolve is not None:
         try:
             key.resolve(v)
@@ -108,7 +109,7 @@ def _bad_item(x, key) -> bool:
     """Whether one item of a list key is outside what the key's items take."""
     if x in key.choices and isinstance(x, str):
         return False
-    if "inf" in key.choices and isinstance(x, float) and x == math.inf:  # inf, unquoted, as a float key takes it
+    if key.inf and distance_or_inf(x) == math.inf:  # inf, or "inf", as a float key takes it
         return False
     if key.item == "choice":
         return True
@@ -128,9 +129,10 @@ def _list_problem(where: str, v, key) -> str | None:
     if bad:
         hint = next((h for x in bad if _typed(x, "float") for h in [_hint(x, key)] if h), "")
         problems.append(f"{where} holds {', '.join(map(repr, bad))}: each item must be {item_text(key)}{hint}")
-    twice = [x for i, x in enumerate(v) if x in v[:i]]
+    same = [distance_or_inf(x) if key.inf and distance_or_inf(x) is not None else x for x in v]  # inf is "inf"
+    twice = [x for i, x in enumerate(v) if same[i] in same[:i]]
     if twice:
-        once = [x for i, x in enumerate(v) if x not in v[:i]]
+        once = [x for i, x in enumerate(v) if same[i] not in same[:i]]
         problems.append(f"{where} holds {', '.join(map(repr, dict.fromkeys(twice)))} more than once: list each "
                         f"item once, e.g. {toml_value(once)}")
     return "; ".join(problems) or None

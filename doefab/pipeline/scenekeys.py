@@ -64,8 +64,8 @@ class Key:
     """One scene key: its section ("" for top-level keys), name, kind (float, int, str, bool, list, choice),
     unit (as in its name: mm, µm, nm, m, px), allowed range [lo, hi] in that unit, choices, default and meaning.
 
-    A list key's ``item`` is the kind of each of its items ("float": within [lo, hi], or one of the words in
-    ``choices``; "choice": one of ``choices``); each item may appear once. A choice or str key with a
+    A list key's ``item`` is the kind of each of its items ("float": within [lo, hi], or inf with ``inf``;
+    "choice": one of ``choices``); each item may appear once. A choice or str key with a
     ``resolve`` takes whatever that resolver accepts (it returns the choice meant, or raises a DoefabError)."""
 
     section: str  # "" for top-level keys
@@ -79,7 +79,7 @@ class Key:
     help: str = ""
     item: str = ""
     resolve: Callable | None = None
-    inf: bool = False  # a float key that also takes inf (TOML's ``inf``)
+    inf: bool = False  # a float key (or a list key's float items) that also takes inf (TOML's inf, or "inf")
 
 
 KEYS = (
@@ -129,8 +129,8 @@ KEYS = (
     Key("optics", "wavelengths_nm", "list", "nm", 300.0, 1100.0, item="float", default="the task's",
         help="bands to design and reconstruct for (RGB 656/589/486; spectra 400–700 every 10); HDR and depth "
              "networks take three, longest first, one per colour channel (R, G, B)"),
-    Key("optics", "depths_m", "list", "m", 1e-3, 1e6, choices=("inf",), item="float", default="the task's",
-        help="depth planes (depth: 1–5 m every 0.25; others: the focus distance); \"inf\" for a plane wave"),
+    Key("optics", "depths_m", "list", "m", 1e-3, 1e6, inf=True, item="float", default="the task's",
+        help="depth planes (depth: 1–5 m every 0.25; others: the focus distance); inf for a plane wave"),
     Key("optics", "kernel_px", "int", "px", 15, 1023, default="95, 191, 63",
         help="PSF window in sensor pixels"),
     Key("design", "optimizer", "choice", choices=("adam", "lbfgs", "mma"), default="the committed design's",
@@ -207,10 +207,10 @@ def _range(k: Key) -> str:
 
 
 def item_text(k: Key) -> str:
-    """What each item of a list key takes: one of its choices, or a number in its range (or one of its words)."""
+    """What each item of a list key takes: one of its choices, or a number in its range (or inf)."""
     if k.item == "choice":
         return "one of " + ", ".join(map(str, k.choices))
-    return f"within {k.lo:g}–{k.hi:g} {k.unit}" + "".join(f' or "{w}"' for w in k.choices)
+    return f"within {k.lo:g}–{k.hi:g} {k.unit}" + (" or inf" if k.inf else "")
 
 
 def values_text(k: Key) -> str:

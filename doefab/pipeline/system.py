@@ -24,6 +24,7 @@ from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
 from doefab.pipeline.scenekeys import weights_mode
+from doefab.validate import distance_or_inf, distance_record
 
 __all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
            "scene_field_half_angle_deg", "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
@@ -54,7 +55,7 @@ def scene_camera(scene: Scene, problems: list | None = None):
 
     c, fab = scene.camera, scene.fabrication
     base = Camera.preset(c.get("preset", application(scene.task).camera_preset))
-    focus = float(c.get("focus_distance_m", base.focus_distance))
+    focus = distance_or_inf(c.get("focus_distance_m", base.focus_distance))
     inv_focus = 0.0 if math.isinf(focus) else 1.0 / focus
     if "sensor_distance_mm" in c or "sensor_distance_m" in c:
         s = c["sensor_distance_mm"] * 1e-3 if "sensor_distance_mm" in c else float(c["sensor_distance_m"])
@@ -221,7 +222,7 @@ def scene_task(scene: Scene, committed, cam):
         params["wavelengths_m"] = tuple(w * 1e-9 for w in o["wavelengths_nm"])
         if design_is(dname, "spectral"):
             params["n_bands"] = len(o["wavelengths_nm"])
-    planes = [math.inf if z == "inf" else float(z) for z in o.get("depths_m", [])]
+    planes = [distance_or_inf(z) for z in o.get("depths_m", [])]
     if design_is(dname, "depth") and any(math.isinf(z) for z in planes):
         raise DoefabError(f"optics.depths_m {o['depths_m']}: a depth design's planes are finite distances (its ring "
                           f"law needs 1/z at every plane): drop \"inf\"")
@@ -298,7 +299,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         if r + task.delta_px + 1 > k // 2:
             out.append(f"the half-ring's largest ring ({r:.0f} px) does not fit optics.kernel_px {k}: raise kernel_px "
                        f"or lower design.ring_max_px")
-    planes = [math.inf if z == "inf" else float(z) for z in scene.optics.get("depths_m", [])]
+    planes = [distance_or_inf(z) for z in scene.optics.get("depths_m", [])]
     if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
@@ -317,7 +318,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
 def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
     lams, depths = tuple(task.wavelengths(cam)), tuple(task.depths(cam))
     s = {"design_task": dname, "camera": cam.to_dict(), "wavelengths_m": list(lams),
-         "depths_m": [z if math.isfinite(z) else "inf" for z in depths], "kernel_px": task.kernel_size,
+         "depths_m": [distance_record(z) for z in depths], "kernel_px": task.kernel_size,
          "task_params": {k: v for k, v in task.params().items() if k not in ("period_m", "wavelengths_m", "planes_m")},
          "optimizer": design.get("optimizer", cfg.get("optimizer", "adam")),
          "iterations": design.get("iterations", cfg.get("iterations", task.default_iterations)),

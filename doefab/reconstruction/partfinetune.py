@@ -21,6 +21,7 @@ import torch
 from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
+from doefab.validate import distance_record
 
 __all__ = ["fit_to_network", "check_capture", "pair_record", "finetune_on_pair"]
 
@@ -74,7 +75,7 @@ def pair_record(pair: PSFPair, path: str | Path | None = None) -> dict:
     if path is not None:
         out = {"file": str(Path(path).resolve()), "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
     return {**out, "provenance": getattr(pair, "provenance", None), "wavelengths_m": [float(w) for w in
-            pair.wavelengths], "depths_m": [float(z) if np.isfinite(z) else "inf" for z in pair.depths],
+            pair.wavelengths], "depths_m": [distance_record(z) for z in pair.depths],
             "kernel_px": int(pair.coded.shape[-1])}
 
 

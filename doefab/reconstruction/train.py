@@ -27,6 +27,7 @@ from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair, training_crop
 from doefab.reconstruction.weights import weights_target, write_weights
+from doefab.validate import distance_record
 
 __all__ = ["train", "fit_network", "model_inputs", "evaluate_batch", "sensor_response_for", "arch_for_design",
            "copy_matching"]
@@ -152,7 +153,7 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                                               max_steps=max_steps)
     record = {"design": spec.design if design is None else str(design), "design_levels_sha256": sha, "arch": arch,
               "psf": {"kernel_px": int(pair.coded.shape[-1]), "wavelengths_m": list(pair.wavelengths),
-                      "depths_m": [z if np.isfinite(z) else "inf" for z in pair.depths], "route": "spectral",
+                      "depths_m": [distance_record(z) for z in pair.depths], "route": "spectral",
                       "from": f"the design's {_design_levels(task, design)}-level level map (levels.npy)"},
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,

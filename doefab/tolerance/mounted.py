@@ -63,12 +63,13 @@ def stop_case(camera: Camera) -> str:
 
 
 def _distinct(x: float, y: float) -> tuple[str, str]:
-    """``x`` and ``y`` with two decimals, or more where two would print different numbers alike."""
+    """``x`` and ``y`` with two decimals, or more (up to six) where two would print different numbers alike; two
+    for numbers alike to six decimals (a lens pupil equal to the baffle)."""
     for decimals in range(2, 7):
         a, b = f"{x:.{decimals}f}", f"{y:.{decimals}f}"
         if a != b:
-            break
-    return a, b
+            return a, b
+    return f"{x:.2f}", f"{y:.2f}"
 
 
 class MountedPlan:
