@@ -17,7 +17,7 @@ from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
            "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "BLUR_ROOM_PX",
-           "worst_blur", "window_blur_checks", "stop_checks", "distance_text"]
+           "worst_blur", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 #: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
@@ -114,6 +114,21 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
             f"the DOE's {doe:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs (computed "
             f"over the whole baffle) carry: make the DOE the aperture stop with {fix}, or set camera.lens_f_number to "
             f"the lens's own wide-open f-number if it opens wider"]
+
+
+def grid_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = "f_number") -> str:
+    """What brings a DOE grid of ``aperture`` / ``pitch`` pixels (m, m) within ``MAX_DOE_PIXELS``: a coarser pitch,
+    or a smaller aperture in the scene's own key (``aperture_key``: ``f_number``, with ``focal`` the focal length
+    in m, or ``aperture_diameter_mm``), each rounded to three digits on the side that fits.
+
+    Example: ``grid_fixes(71.43e-3, 4e-6, 0.2)`` → ``"camera.doe_pitch_um ≥ 8.72 or camera.f_number ≥ 6.11"``.
+    """
+    widest = MAX_DOE_PIXELS * pitch
+    if aperture_key == "aperture_diameter_mm":
+        smaller = f"camera.aperture_diameter_mm ≤ {_round3(widest * 1e3, math.floor):g}"
+    else:
+        smaller = f"camera.f_number ≥ {_round3(focal / widest, math.ceil):g}"
+    return f"camera.doe_pitch_um ≥ {_round3(aperture / MAX_DOE_PIXELS * 1e6, math.ceil):g} or {smaller}"
 
 
 def _round3(x: float, direction) -> float:

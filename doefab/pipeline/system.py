@@ -19,7 +19,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
                                       design_grid_problems, distance_text, quick_sampling, sampling_checks,
-                                      stop_checks, window_blur_checks)
+                                      grid_fixes, stop_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -75,8 +75,9 @@ def scene_camera(scene: Scene, problems: list | None = None):
     changed = any(k in c for k in ("aperture_diameter_mm", "f_number", "doe_pitch_um"))
     pixels = 2 * math.ceil(aperture / pitch / 2 - 1e-9) if changed else base.doe_pixels
     if pixels > MAX_DOE_PIXELS:
+        key = "aperture_diameter_mm" if "aperture_diameter_mm" in c else "f_number"
         problem(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): above "
-                f"{MAX_DOE_PIXELS}²; raise camera.doe_pitch_um or lower camera.aperture_diameter_mm")
+                f"{MAX_DOE_PIXELS}²; set {grid_fixes(aperture, pitch, focal, key)}")
         pixels, pitch = MAX_DOE_PIXELS, aperture / MAX_DOE_PIXELS  # stand-in grid for the other checks
     try:
         material = material_by_name(fab["material"]) if "material" in fab else base.material

@@ -1,0 +1,46 @@
+"""A DOE grid above ``MAX_DOE_PIXELS`` across is refused with the pitch and the aperture that bring it within the
+limit, each in the scene's own key and rounded to the side that fits (by hand: a 200 mm lens at f/2.8 has a
+71.43 mm DOE aperture, 17 858 pixels of 4 µm)."""
+
+import re
+
+import pytest
+
+from doefab.errors import DoefabError
+from doefab.pipeline.sampling import MAX_DOE_PIXELS
+from doefab.pipeline.scene import load_scene
+from doefab.pipeline.system import resolve
+
+CAM = {"focal_length_mm": 200.0, "focus_distance_m": 5.0, "sensor_pitch_um": 3.76, "doe_pitch_um": 4.0}
+
+
+def _problems(tmp_path, **camera) -> str:
+    path = tmp_path / "s.toml"
+    path.write_text('task = "hdr"\nstages = ["design"]\n[camera]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in {**CAM, **camera}.items()))
+    try:
+        resolve(load_scene(path))
+    except DoefabError as exc:
+        return str(exc)
+    return ""
+
+
+def _fix(msg: str, key: str) -> float:
+    return float(re.search(rf"camera\.{key} [≥≤] ([\d.]+)", msg).group(1))
+
+
+@pytest.mark.parametrize("aperture_key", ["f_number", "aperture_diameter_mm"])
+def test_a_grid_above_the_limit_names_fixes_that_fit(tmp_path, aperture_key):
+    wide = {"f_number": 2.8} if aperture_key == "f_number" else {"aperture_diameter_mm": 200 / 2.8}
+    msg = _problems(tmp_path, **wide)
+    assert "the DOE grid would be 17858² pixels" in msg, msg
+    pitch_um = _fix(msg, "doe_pitch_um")
+    assert pitch_um == pytest.approx(8.72)  # 71.43 mm / 8192 = 8.7193 µm, rounded up
+    assert "the DOE grid" not in _problems(tmp_path, **wide, **{"doe_pitch_um": pitch_um})
+    smaller = _fix(msg, aperture_key)
+    # f/6.11: 200 mm / (8192 × 4 µm) = f/6.1035 rounded up; 8192 × 4 µm = 32.768 mm rounded down
+    assert smaller == pytest.approx(6.11 if aperture_key == "f_number" else 32.7)
+    assert "the DOE grid" not in _problems(tmp_path, **{aperture_key: smaller})
+    other = "aperture_diameter_mm" if aperture_key == "f_number" else "f_number"
+    assert f"camera.{other}" not in msg  # the fix is in the key the scene sets
+    assert MAX_DOE_PIXELS * pitch_um * 1e-3 >= 200 / 2.8
