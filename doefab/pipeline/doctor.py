@@ -269,6 +269,26 @@ def _fab_rows(cam, n_levels: int) -> list[tuple]:
              f"{mask_count(n_levels)} binary mask{'' if mask_count(n_levels) == 1 else 's'}")]
 
 
+def _finer_grating(cam, task, lams, spots) -> str:
+    """Where the grating spreads the bands over fewer pixels than there are bands (more than 1.5 bands per pixel):
+    the period that spreads them one per pixel, in DOE pixels, and the window its farthest first order needs."""
+    from doefab.tasks.grating import grating_spot_px, period_for_spread
+
+    n = len(lams)
+    per_px = (n - 1) / max(abs(spots[1] - spots[0]), 1e-9)
+    if n < 2 or per_px <= 1.5:
+        return ""
+    period = period_for_spread(cam, lams[0], lams[-1], n - 1)
+    if not math.isfinite(period):
+        return ""
+    period = math.floor(period * 1e6 * 100) / 100 * 1e-6  # down to 0.01 µm: at least one band per pixel
+    far = grating_spot_px(cam, lams[-1], period)
+    return (f"; here {per_px:.1f} bands per pixel ({n} bands {(lams[-1] - lams[0]) / (n - 1) * 1e9:.3g} nm apart): "
+            f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel ({period / cam.doe_pitch:.1f} "
+            f"DOE pixels per period; its first order at {lams[-1] * 1e9:.0f} nm lands {far:.0f} px off axis, "
+            f"within optics.kernel_px ≥ {2 * math.ceil(far + task.box_px + 3) + 1})")
+
+
 def _task_rows(cam, task, lams) -> list[tuple]:
     from doefab.tasks.grating import GratingTask, grating_spot_px
     from doefab.tasks.halfring import HalfRingTask
@@ -280,7 +300,7 @@ def _task_rows(cam, task, lams) -> list[tuple]:
                  f"first order from {abs(spots[0]):.1f} px ({lams[0] * 1e9:.0f} nm) to {abs(spots[1]):.1f} px "
                  f"({lams[-1] * 1e9:.0f} nm) off axis (s·λ/Λ, Λ = {task.period(cam) * 1e6:.3g} µm)"),
                 ("spectral sampling", (lams[-1] - lams[0]) * 1e9 / max(abs(spots[1] - spots[0]), 1e-9), "nm/px",
-                 "bands closer than this land on the same pixel")]
+                 "bands closer than this land on the same pixel" + _finer_grating(cam, task, lams, spots))]
     if isinstance(task, StreakTask):
         return [("streak arms", task.arm_px, "sensor px", f"each arm {task.arm_px} px long, "
                  f"{2 * task.band_px + 1} px wide: a highlight's light spread over them")]

@@ -12,7 +12,7 @@ from doefab.optics.camera import Camera
 from doefab.optics.elements import blazed_grating_height
 from doefab.tasks.base import HALF_LIGHT, Task
 
-__all__ = ["GratingTask", "grating_spot_px"]
+__all__ = ["GratingTask", "grating_spot_px", "period_for_spread"]
 
 
 def grating_spot_px(camera: Camera, wavelength: float, period: float) -> float:
@@ -21,6 +21,22 @@ def grating_spot_px(camera: Camera, wavelength: float, period: float) -> float:
     ``period`` Λ in metres.
     """
     return camera.sensor_distance * math.tan(math.asin(wavelength / period)) / camera.sensor_pitch
+
+
+def period_for_spread(camera: Camera, lam_min: float, lam_max: float, spread_px: float) -> float:
+    """The grating period Λ (m) whose first orders of ``lam_min`` and ``lam_max`` (m) land ``spread_px`` sensor
+    pixels apart (``grating_spot_px``; the spread falls as Λ grows, so one root above ``lam_max``).
+
+    Example: a 4.4 mm sensor distance with 1.4 µm pixels spreads 400–700 nm over 30 px at Λ ≈ 31.4 µm:
+    ``period_for_spread(cam, 400e-9, 700e-9, 30.0)``.
+    """
+    from scipy.optimize import brentq
+
+    def spread(period: float) -> float:
+        return grating_spot_px(camera, lam_max, period) - grating_spot_px(camera, lam_min, period) - spread_px
+
+    lo, hi = lam_max * (1 + 1e-9), lam_max * 1e6
+    return float(brentq(spread, lo, hi, xtol=1e-15, rtol=1e-12)) if spread(lo) > 0 > spread(hi) else math.nan
 
 
 @dataclass

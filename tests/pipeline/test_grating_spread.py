@@ -1,0 +1,79 @@
+"""``doefab doctor``'s spectral-sampling row says, where the grating spreads the bands over fewer pixels than
+there are bands, the period that spreads them one per pixel (``tasks.grating.period_for_spread``). By hand: a
+phone camera (4.38 mm lens focused at 1 m, 1.4 µm pixels) keeps the template's 96 µm period, which it spreads
+400–700 nm over s·(tan θ700 − tan θ400) / p ≈ 9.8 px: 31 bands, 3.1 per pixel."""
+
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+import doefab
+from doefab.pipeline.doctor import explain
+from doefab.pipeline.scene import load_scene
+from doefab.pipeline.system import resolve
+from doefab.tasks.grating import period_for_spread
+
+PHONE = {"focal_length_mm": 4.38, "f_number": 1.73, "lens_f_number": 1.73, "focus_distance_m": 1.0,
+         "sensor_pitch_um": 1.4, "doe_pitch_um": 4.0}
+
+
+def _spread_px(s: float, p: float, period: float, lo: float = 400e-9, hi: float = 700e-9) -> float:
+    """First orders' distance by the grating equation sin θ = λ / Λ, written out here."""
+    def x(lam):
+        sin = lam / period
+        return s * sin / math.sqrt(1 - sin * sin) / p
+    return x(hi) - x(lo)
+
+
+@pytest.mark.parametrize("spread", [5.0, 30.0, 120.0])
+def test_the_period_spreads_the_band_over_the_pixels_asked(spread):
+    cam = doefab.Camera(sensor_distance=4.4e-3, sensor_pitch=1.4e-6)
+    period = period_for_spread(cam, 400e-9, 700e-9, spread)
+    assert _spread_px(4.4e-3, 1.4e-6, period) == pytest.approx(spread, rel=1e-9)
+    small_angle = 4.4e-3 * 300e-9 / 1.4e-6 / spread  # Λ ≈ s Δλ / (p · spread) where λ ≪ Λ
+    assert period == pytest.approx(small_angle, rel=0.03 if spread < 50 else 0.2)
+    assert period > small_angle  # tan θ > sin θ: the exact spread needs a coarser period than the small angle's
+
+
+def _scene(tmp_path, name="s.toml", design=""):
+    path = tmp_path / name
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in PHONE.items()) + f"[design]\n{design}")
+    return load_scene(path)
+
+
+def _sampling(res) -> tuple[float, str]:
+    row = next(r for r in explain(res) if r["quantity"] == "spectral sampling")
+    return row["value"], row["meaning"]
+
+
+def test_a_coarse_spread_names_the_period_that_spreads_one_band_per_pixel(tmp_path):
+    res = resolve(_scene(tmp_path, design="grating_period_um = 96.0\n"))
+    s = res.camera.sensor_distance
+    value, meaning = _sampling(res)
+    assert value == pytest.approx(300 / _spread_px(s, 1.4e-6, 96e-6), rel=1e-6)
+    assert "3.1 bands per pixel" in meaning, meaning
+    period_um = float(re.search(r"design\.grating_period_um = ([\d.]+)", meaning).group(1))
+    kernel = int(re.search(r"optics\.kernel_px ≥ (\d+)", meaning).group(1))
+    assert _spread_px(s, 1.4e-6, period_um * 1e-6) >= 30  # one band per pixel or better
+    assert _spread_px(s, 1.4e-6, (period_um + 0.02) * 1e-6) < 30  # and no finer than it needs
+    fixed = resolve(_fixed(tmp_path, period_um, kernel))  # refused if the window were too small
+    v2, m2 = _sampling(fixed)
+    assert v2 <= 10.0 and "bands per pixel" not in m2, m2
+
+
+def _fixed(tmp_path, period_um: float, kernel: int):
+    path = tmp_path / "fixed.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in PHONE.items())
+                    + f"[optics]\nkernel_px = {kernel}\n[design]\ngrating_period_um = {period_um}\n")
+    return load_scene(path)
+
+
+def test_the_shipped_hyperspectral_scenes_get_no_note():
+    repo = Path(__file__).resolve().parents[2]
+    for name in ("hyperspectral.toml", "my_camera.toml"):
+        _, meaning = _sampling(resolve(load_scene(repo / "scenes" / name)))
+        assert meaning == "bands closer than this land on the same pixel", (name, meaning)
