@@ -75,7 +75,11 @@ def distance_record(z: float) -> float | str:
 
     Example: ``distance_record(float("inf"))`` → ``"inf"``; ``distance_record(2)`` → ``2.0``.
     """
-    return float(z) if math.isfinite(z) else INF_WORDS[0]
+    if z == math.inf:
+        return INF_WORDS[0]
+    if not math.isfinite(z):
+        raise DoefabError(f"a distance must be a number or +inf, got {z!r}")
+    return float(z)
 
 
 _METRE_PREFIXES = (("nm", 1e-9), ("µm", 1e-6), ("mm", 1e-3))

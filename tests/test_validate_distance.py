@@ -29,6 +29,34 @@ def test_distance_record_round_trips_through_json(z):
     assert distance_or_inf(json.loads(text)) == z
 
 
+@pytest.mark.parametrize("z", [-math.inf, math.nan])
+def test_distance_record_refuses_what_is_no_distance(z):
+    with pytest.raises(DoefabError, match="number or \\+inf"):
+        distance_record(z)
+
+
+@pytest.mark.parametrize("word", ["inf", "Infinity"])
+def test_camera_and_design_records_read_infinity_in_either_word(word):
+    """A camera record (``Camera.from_dict``) and a design record's planes read the words a scene takes."""
+    import doefab
+    from doefab.design.design import _check_meta
+
+    d = doefab.Camera(focus_distance=math.inf).to_dict()
+    assert d["focus_distance_m"] == "inf"
+    assert doefab.Camera.from_dict({**d, "focus_distance_m": word}).focus_distance == math.inf
+    meta = _design_meta()
+    assert _check_meta({**meta, "depths_m": [2.0, word]}, "design.json")["depths_m"] == [2.0, math.inf]
+
+
+def _design_meta() -> dict:
+    import io
+    from pathlib import Path
+
+    packed = Path(__file__).resolve().parents[1] / "doefab" / "designs" / "streak.npz"
+    with np.load(io.BytesIO(packed.read_bytes()), allow_pickle=False) as z:
+        return json.loads(z["design_json"].tobytes())
+
+
 def _lab_depth(tmp_path, value: str):
     from doefab.lab.recordings import load_recordings
 
@@ -63,7 +91,7 @@ def _scene_error(tmp_path, body: str) -> str:
 def test_a_plane_at_infinity_spelled_twice_is_one_plane_twice(tmp_path):
     """inf and "inf" in one list of planes are the same plane: refused as listed twice, with the list once."""
     msg = _scene_error(tmp_path, 'task = "depth"\n[optics]\ndepths_m = [1.0, inf, "Infinity"]\n')
-    assert "more than once" in msg and "e.g. [1.0, inf]" in msg, msg
+    assert "holds inf more than once ('Infinity' and inf are one plane)" in msg and "e.g. [1.0, inf]" in msg, msg
 
 
 @pytest.mark.parametrize("key,value,says", [

@@ -30,6 +30,7 @@ def run(args) -> int:
 
     import doefab
     from doefab.io import atomic_write_json
+    from doefab.validate import distance_record
     from doefab.cli._output import claim_output
     from doefab.plotting import plot_height, psf_pair_figure
 
@@ -43,7 +44,7 @@ def run(args) -> int:
     plan = doefab.PSFPlan(cam, RGB_M, depths, args.kernel)
     out = claim.create()
     summary = {"camera": cam.to_dict(), "wavelengths_m": list(RGB_M),
-               "depths_m": [d if math.isfinite(d) else "inf" for d in depths], "kernel_px": args.kernel,
+               "depths_m": [distance_record(d) for d in depths], "kernel_px": args.kernel,
                "results": {}}
     bar = tqdm(designs.items(), desc="demo PSFs", unit="design")
     for name, height in bar:

@@ -271,7 +271,10 @@ def _fab_rows(cam, n_levels: int) -> list[tuple]:
 
 def _finer_grating(cam, task, lams, spots) -> str:
     """Where the grating spreads the bands over fewer pixels than there are bands (more than 1.5 bands per pixel):
-    the period that spreads them one per pixel, in DOE pixels, and the window its farthest first order needs."""
+    the period that spreads them one per pixel, in DOE pixels, and the window its farthest first order needs; or,
+    where that window would leave the DOE sampling's alias-free field or the key's range, that no period does."""
+    from doefab.pipeline.sampling import alias_free_px
+    from doefab.pipeline.scenekeys import keys_of
     from doefab.tasks.grating import grating_spot_px, period_for_spread
 
     n = len(lams)
@@ -283,10 +286,17 @@ def _finer_grating(cam, task, lams, spots) -> str:
         return ""
     period = math.floor(period * 1e6 * 100) / 100 * 1e-6  # down to 0.01 µm: at least one band per pixel
     far = grating_spot_px(cam, lams[-1], period)
-    return (f"; here {per_px:.1f} bands per pixel ({n} bands {(lams[-1] - lams[0]) / (n - 1) * 1e9:.3g} nm apart): "
-            f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel ({period / cam.doe_pitch:.1f} "
-            f"DOE pixels per period; its first order at {lams[-1] * 1e9:.0f} nm lands {far:.0f} px off axis, "
-            f"within optics.kernel_px ≥ {2 * math.ceil(far + task.box_px + 3) + 1})")
+    kernel = 2 * math.ceil(far + task.box_px + 3) + 1
+    here = f"; here {per_px:.1f} bands per pixel ({n} bands {(lams[-1] - lams[0]) / (n - 1) * 1e9:.3g} nm apart): "
+    field = alias_free_px(cam, lams[0])
+    if kernel / 2 + 0.5 > field or kernel > keys_of("optics")["kernel_px"].hi:
+        return (here + f"no grating period spreads them one per pixel on this DOE pitch ({period * 1e6:g} µm would "
+                f"put the first order at {lams[-1] * 1e9:.0f} nm {far:.0f} px off axis, needing a {kernel} px window; "
+                f"the alias-free field at {lams[0] * 1e9:.0f} nm is {2 * field - 1:.0f} px): list fewer bands in "
+                f"optics.wavelengths_nm, or a finer camera.doe_pitch_um")
+    return (here + f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel "
+            f"({period / cam.doe_pitch:.1f} DOE pixels per period; its first order at {lams[-1] * 1e9:.0f} nm lands {far:.0f} px off axis, within "
+            f"optics.kernel_px ≥ {kernel})")
 
 
 def _task_rows(cam, task, lams) -> list[tuple]:

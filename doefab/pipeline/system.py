@@ -226,7 +226,7 @@ def scene_task(scene: Scene, committed, cam):
     planes = [distance_or_inf(z) for z in o.get("depths_m", [])]
     if design_is(dname, "depth") and any(math.isinf(z) for z in planes):
         raise DoefabError(f"optics.depths_m {o['depths_m']}: a depth design's planes are finite distances (its ring "
-                          f"law needs 1/z at every plane): drop \"inf\"")
+                          f"law needs 1/z at every plane): drop the plane at infinity")
     if planes and design_is(dname, "depth") and [round(z, 9) for z in planes] != [round(z, 9) for z in own.depths(cam)]:
         params["planes_m"] = tuple(planes)
     for key, name, scale in (("streak_arm_px", "arm_px", 1), ("streak_band_px", "band_px", 1),

@@ -54,7 +54,7 @@ def test_a_coarse_spread_names_the_period_that_spreads_one_band_per_pixel(tmp_pa
     s = res.camera.sensor_distance
     value, meaning = _sampling(res)
     assert value == pytest.approx(300 / _spread_px(s, 1.4e-6, 96e-6), rel=1e-6)
-    assert "3.1 bands per pixel" in meaning, meaning
+    assert "3.1 bands per pixel" in meaning and "7.9 DOE pixels per period" in meaning, meaning  # 31.43 / 4 µm
     period_um = float(re.search(r"design\.grating_period_um = ([\d.]+)", meaning).group(1))
     kernel = int(re.search(r"optics\.kernel_px ≥ (\d+)", meaning).group(1))
     assert _spread_px(s, 1.4e-6, period_um * 1e-6) >= 30  # one band per pixel or better
@@ -77,3 +77,17 @@ def test_the_shipped_hyperspectral_scenes_get_no_note():
     for name in ("hyperspectral.toml", "my_camera.toml"):
         _, meaning = _sampling(resolve(load_scene(repo / "scenes" / name)))
         assert meaning == "bands closer than this land on the same pixel", (name, meaning)
+
+
+def test_no_period_is_named_where_its_window_would_leave_the_alias_free_field(tmp_path):
+    """151 bands 2 nm apart would need Λ ≈ 6.35 µm (1.6 DOE pixels of 4 µm) and a window of about 707 px, while
+    the DOE sampling's alias-free field at 400 nm is λ·s / (2·pitch) / p ≈ 157 px each way: no period fits."""
+    bands = ", ".join(str(400 + 2 * i) for i in range(151))
+    path = tmp_path / "many.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in PHONE.items()) + f"[optics]\nwavelengths_nm = [{bands}]\n")
+    res = resolve(load_scene(path))
+    _, meaning = _sampling(res)
+    assert "no grating period spreads them one per pixel" in meaning and "design.grating_period_um" not in meaning
+    field = 400e-9 * res.camera.sensor_distance / (2 * 4e-6) / 1.4e-6
+    assert f"alias-free field at 400 nm is {2 * field - 1:.0f} px" in meaning, meaning

@@ -46,7 +46,7 @@ def test_the_systems_physics_problems_are_listed_together(tmp_path):
                    "holder: "):
         assert needle in msg, needle
     p.write_text('task = "depth"\n[optics]\ndepths_m = [0.5, 1.0, 2.0, "inf"]\n')
-    with pytest.raises(DoefabError, match=r"optics.depths_m .*drop \"inf\""):
+    with pytest.raises(DoefabError, match=r"optics.depths_m .*drop the plane at infinity"):
         resolve(load_scene(p))
 
 
