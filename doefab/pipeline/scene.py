@@ -130,7 +130,7 @@ def _list_problem(where: str, v, key) -> str | None:
         hint = next((h for x in bad if _typed(x, "float") for h in [_hint(x, key)] if h), "")
         problems.append(f"{where} holds {', '.join(map(repr, bad))}: each item must be {item_text(key)}{hint}")
     same = [distance_or_inf(x) if key.inf and distance_or_inf(x) is not None else x for x in v]  # inf is "inf"
-    twice = [same[i] for i, x in enumerate(v) if same[i] in same[:i]]
+    twice = [math.inf if same[i] == math.inf else x for i, x in enumerate(v) if same[i] in same[:i]]
     spellings = {repr(x) for x, s in zip(v, same) if s == math.inf}
     also = f" ({' and '.join(sorted(spellings))} are one plane)" if len(spellings) > 1 else ""
     if twice:
