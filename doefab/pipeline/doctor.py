@@ -277,26 +277,26 @@ def _finer_grating(cam, task, lams, spots) -> str:
     from doefab.pipeline.scenekeys import keys_of
     from doefab.tasks.grating import grating_spot_px, period_for_spread
 
-    n = len(lams)
+    n, lo, hi = len(lams), min(lams), max(lams)  # the scene's list in any order
     per_px = (n - 1) / max(abs(spots[1] - spots[0]), 1e-9)
     if n < 2 or per_px <= 1.5:
         return ""
-    period = period_for_spread(cam, lams[0], lams[-1], n - 1)
+    period = period_for_spread(cam, lo, hi, n - 1)
     if not math.isfinite(period):
         return ""
     period = math.floor(period * 1e6 * 100) / 100 * 1e-6  # down to 0.01 µm: at least one band per pixel
-    far = grating_spot_px(cam, lams[-1], period)
+    far = grating_spot_px(cam, hi, period)
     kernel = 2 * math.ceil(far + task.box_px + 3) + 1
-    here = f"; here {per_px:.1f} bands per pixel ({n} bands {(lams[-1] - lams[0]) / (n - 1) * 1e9:.3g} nm apart): "
-    field = alias_free_px(cam, lams[0])
+    here = f"; here {per_px:.1f} bands per pixel ({n} bands {(hi - lo) / (n - 1) * 1e9:.3g} nm apart): "
+    field = alias_free_px(cam, lo)
     if kernel / 2 + 0.5 > field or kernel > keys_of("optics")["kernel_px"].hi:
         return (here + f"no grating period spreads them one per pixel on this DOE pitch ({period * 1e6:g} µm would "
-                f"put the first order at {lams[-1] * 1e9:.0f} nm {far:.0f} px off axis, needing a {kernel} px window; "
-                f"the alias-free field at {lams[0] * 1e9:.0f} nm is {2 * field - 1:.0f} px): list fewer bands in "
+                f"put the first order at {hi * 1e9:.0f} nm {far:.0f} px off axis, needing a {kernel} px window; "
+                f"the alias-free field at {lo * 1e9:.0f} nm is {2 * field - 1:.0f} px): list fewer bands in "
                 f"optics.wavelengths_nm, or a finer camera.doe_pitch_um")
     return (here + f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel "
-            f"({period / cam.doe_pitch:.1f} DOE pixels per period; its first order at {lams[-1] * 1e9:.0f} nm lands {far:.0f} px off axis, within "
-            f"optics.kernel_px ≥ {kernel})")
+            f"({period / cam.doe_pitch:.1f} DOE pixels per period; its first order at {hi * 1e9:.0f} nm lands "
+            f"{far:.0f} px off axis, within optics.kernel_px ≥ {kernel})")
 
 
 def _task_rows(cam, task, lams) -> list[tuple]:

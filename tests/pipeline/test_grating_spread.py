@@ -91,3 +91,16 @@ def test_no_period_is_named_where_its_window_would_leave_the_alias_free_field(tm
     assert "no grating period spreads them one per pixel" in meaning and "design.grating_period_um" not in meaning
     field = 400e-9 * res.camera.sensor_distance / (2 * 4e-6) / 1.4e-6
     assert f"alias-free field at 400 nm is {2 * field - 1:.0f} px" in meaning, meaning
+
+
+def test_the_note_reads_the_bands_in_any_order(tmp_path):
+    """The same 31 bands listed from 700 nm down to 400 nm get the same period as listed upwards."""
+    notes = []
+    for name, order in (("up.toml", range(400, 701, 10)), ("down.toml", range(700, 399, -10))):
+        path = tmp_path / name
+        path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                        + "".join(f"{k} = {v}\n" for k, v in PHONE.items())
+                        + f"[optics]\nwavelengths_nm = [{', '.join(map(str, order))}]\n"
+                        + "[design]\ngrating_period_um = 96.0\n")
+        notes.append(re.search(r"design\.grating_period_um = [\d.]+", _sampling(resolve(load_scene(path)))[1]))
+    assert notes[0] and notes[1] and notes[0].group(0) == notes[1].group(0) == "design.grating_period_um = 31.43"
