@@ -286,7 +286,7 @@ def _finer_grating(cam, task, lams, spots) -> str:
         return ""
     period = math.floor(period * 1e6 * 100) / 100 * 1e-6  # down to 0.01 µm: at least one band per pixel
     far = grating_spot_px(cam, hi, period)
-    kernel = 2 * math.ceil(far + task.box_px + 3) + 1
+    kernel = task.window_px(far)
     here = f"; here {per_px:.1f} bands per pixel ({n} bands {(hi - lo) / (n - 1) * 1e9:.3g} nm apart): "
     field = alias_free_px(cam, lo)
     if kernel / 2 + 0.5 > field or kernel > keys_of("optics")["kernel_px"].hi:

@@ -17,7 +17,7 @@ from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
            "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "BLUR_ROOM_PX",
-           "worst_blur", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes"]
+           "worst_blur", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 #: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
@@ -114,6 +114,12 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
             f"the DOE's {doe:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs (computed "
             f"over the whole baffle) carry: make the DOE the aperture stop with {fix}, or set camera.lens_f_number to "
             f"the lens's own wide-open f-number if it opens wider"]
+
+
+def aperture_key(camera_keys: dict) -> str:
+    """The key a scene's ``[camera]`` section sets its DOE aperture with: ``aperture_diameter_mm`` where given,
+    else ``f_number`` (what the fixes of the stop, blur and grid checks name)."""
+    return "aperture_diameter_mm" if "aperture_diameter_mm" in camera_keys else "f_number"
 
 
 def grid_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = "f_number") -> str:

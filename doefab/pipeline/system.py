@@ -19,7 +19,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
                                       design_grid_problems, distance_text, quick_sampling, sampling_checks,
-                                      grid_fixes, stop_checks, window_blur_checks)
+                                      aperture_key, grid_fixes, stop_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -75,9 +75,8 @@ def scene_camera(scene: Scene, problems: list | None = None):
     changed = any(k in c for k in ("aperture_diameter_mm", "f_number", "doe_pitch_um"))
     pixels = 2 * math.ceil(aperture / pitch / 2 - 1e-9) if changed else base.doe_pixels
     if pixels > MAX_DOE_PIXELS:
-        key = "aperture_diameter_mm" if "aperture_diameter_mm" in c else "f_number"
         problem(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): above "
-                f"{MAX_DOE_PIXELS}²; set {grid_fixes(aperture, pitch, focal, key)}")
+                f"{MAX_DOE_PIXELS}²; set {grid_fixes(aperture, pitch, focal, aperture_key(c))}")
         pixels, pitch = MAX_DOE_PIXELS, aperture / MAX_DOE_PIXELS  # stand-in grid for the other checks
     try:
         material = material_by_name(fab["material"]) if "material" in fab else base.material
@@ -291,7 +290,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in task.wavelengths(cam))
         if far + task.box_px + 2 > k // 2:
             out.append(f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis; the window "
-                       f"needs kernel_px ≥ {2 * math.ceil(far + task.box_px + 3) + 1}")
+                       f"needs kernel_px ≥ {task.window_px(far)}")
     if isinstance(task, StreakTask) and task.arm_px + task.band_px + 1 > k // 2:
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
                    f"{2 * (task.arm_px + task.band_px + 2) + 1}")
@@ -355,7 +354,7 @@ def resolve(scene: Scene) -> ResolvedScene:
             problems.append(str(exc))
         else:
             factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
-            aperture = "aperture_diameter_mm" if "aperture_diameter_mm" in scene.camera else "f_number"
+            aperture = aperture_key(scene.camera)
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
                          + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys), aperture)
                          + stop_checks(cam, aperture)

@@ -78,6 +78,11 @@ class GratingTask(Task):
         if self.period_m is None:
             self.period_m = self.period_pixels * camera.doe_pitch
 
+    def window_px(self, far_px: float) -> int:
+        """The odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
+        margin: what ``optics.kernel_px`` must reach."""
+        return 2 * math.ceil(far_px + self.box_px + 3) + 1
+
     def period(self, camera: Camera) -> float:
         """Grating period Λ in metres."""
         return self.period_m if self.period_m is not None else self.period_pixels * camera.doe_pitch
