@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import weakref
 from collections import OrderedDict
 from contextlib import contextmanager
 from pathlib import Path
@@ -82,6 +83,7 @@ class PSFJudge:
     read from the manifest beside the design folder). ``device``: where the PSFs are propagated ("auto", "cpu",
     "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``)."""
 
+    _LIVE: weakref.WeakSet = weakref.WeakSet()  # the process's judges (``_free_reliefs``)
     KEEP_BYTES = 256 * 2**20  # PSFs ``reuse`` keeps: a tornado's coded halves (12 of 4.5 MB for a 31-band grating)
 
     def __init__(self, design_dir, supersample: int = 1, threads: int | None = None, margin: float = DEFAULT_MARGIN,
@@ -114,6 +116,7 @@ class PSFJudge:
         self._plans: dict = {}
         self._uncoded = None
         self._relief_cache: tuple = (None, None)
+        PSFJudge._LIVE.add(self)
         self._kept: OrderedDict = OrderedDict()  # {(source, half): PSF} of the latest PSFs computed (``reuse``)
         self._plain_of: OrderedDict = OrderedDict()  # {source: the key its plain half is kept under}
         self._min_kernel = 0  # part PSFs are computed at this kernel at least (``computing_at``)
@@ -235,6 +238,7 @@ class PSFJudge:
         c_end = min(cells, max(c0 + 1, int(self.plain_from + reach)))
         key = (json.dumps(err.to_json(), sort_keys=True, default=str), r0, r1, c0, c_end)
         if self._relief_cache[0] != key:  # one part's relief serves its coded-only and its two-half PSFs
+            self._free_reliefs()
             self._relief_cache = (key, self._relief_fields(err, me, plan, (r0, r1), (c0, c_end)).to(self.device))
         fields, ones = self._relief_cache[1], None
         if c_end < c1:  # plain glass beyond the relief's reach
@@ -244,6 +248,16 @@ class PSFJudge:
             f = fields[i].to(self.device).reshape(r1 - r0, c_end - c0)[:, :c1 - c0]
             return f if ones is None else torch.cat([f, ones], dim=1)
         return at
+
+    def _free_reliefs(self) -> None:
+        """Free the relief this judge keeps, and those the process's judges on other grids keep, before a new relief
+        is built: a study holds a judge per grid, and on a 31-band design a kept relief is a transmittance of 8
+        bytes per cell and band (``doefab tolerance --samples 1`` of a 31-band design of 634 DOE pixels
+        on the 4× and 8× grids peaked at 5.9 and 8.1 GB with the last part's relief held while the next was built,
+        at 4.1 and 6.1-6.5 GB without)."""
+        for other in list(PSFJudge._LIVE):
+            if other is self or other.supersample != self.supersample:
+                other._relief_cache = (None, None)
 
     def _relief_fields(self, err: PartErrors, me, plan, rows, cols):
         """[W, cells] the part's relief transmittance of the window rows × cols, relative to the plain glass

@@ -55,3 +55,26 @@ def test_pattern_areas_turned_a_few_at_a_time_are_those_turned_at_once(monkeypat
     got = fields._rotate_patterns(die, th, rows, cols, big, bigc, 40)
     torch.testing.assert_close(got, ref, rtol=1e-6, atol=1e-6)
     torch.testing.assert_close(got.sum(dim=0), torch.ones(got.shape[1]), rtol=0, atol=1e-4)  # still a partition
+
+
+def test_a_part_frees_the_last_parts_relief_and_other_grids_before_it_builds_its_own(many_bands, monkeypatch):
+    """A judge keeps the relief of the last part it judged; a study holds a judge per grid. Each kept relief of
+    another grid, and the judge's own, is freed before a new one is built, so that at most one grid's relief is
+    held while another is built; a judge on the same grid keeps its own."""
+    coarse, twin, fine = PSFJudge(many_bands), PSFJudge(many_bands), PSFJudge(many_bands, 2)
+    first, second = PARTS["rough"], PARTS["turned, rough, tilted"]
+    coarse.psfs(first, kernel=KERNEL)
+    twin.psfs(first, kernel=KERNEL)
+    held = []
+    build = PSFJudge._relief_fields
+
+    def spy(self, *args):
+        held.append((self._relief_cache[1], [j._relief_cache[1] is None for j in (coarse, twin, fine)]))
+        return build(self, *args)
+    monkeypatch.setattr(PSFJudge, "_relief_fields", spy)
+    coarse.psfs(second, kernel=KERNEL)
+    assert held[-1] == (None, [True, False, True])  # its own freed first; the twin on its grid keeps its own
+    fine.psfs(second, kernel=KERNEL)
+    assert held[-1] == (None, [True, True, True])  # both judges of the other grid freed
+    assert fine._relief_cache[1] is not None and len(held) == 2
+
