@@ -80,7 +80,8 @@ def test_a_study_that_does_not_fit_is_refused_naming_a_grid_the_study_measured()
         bounds = {"1": 0.02, "2": 0.004, "4": 0.001}  # as the cached grid record holds them (JSON keys)
         fields.require_memory(size, 4, GRIDS, bounds=bounds, available=have)
     msg = str(e.value)
-    assert "4× grid needs about 16.9 GB" in msg  # 8000² cells × (112 + 6·16 + 16·3) B + 0.5 GiB and "tolerance.supersample = 2" in msg and "--grid 2" in msg
+    assert "4× grid needs about 16.9 GB" in msg  # 8000² cells × (112 + 6·16 + 16·3) B + 0.5 GiB
+    assert "tolerance.supersample = 2" in msg and "--grid 2" in msg
     assert "by 0.004" in msg  # what the coarser grid costs, from the grid study
     with pytest.raises(DoefabError, match="supersample = 4"):  # 8×: the next grid down the study measured is 4×
         fields.require_memory(size, 8, GRIDS, available=fields.part_bytes(2000, 7, 4, 3))
