@@ -31,7 +31,6 @@ __all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sens
            "MAX_DOE_PIXELS"]
 
 
-
 def is_custom_camera(scene: Scene, cam=None) -> bool:
     """Whether the scene's camera (``cam``: it, already built) differs from its preset (a key equal to the
     preset's value changes nothing)."""
