@@ -325,6 +325,18 @@ def _design_sha(folder: Path) -> str:
     return levels_sha256(Design.load(folder).levels)
 
 
+def _mounting_note(holder_built: bool, budget_path) -> str:
+    """Where the study's mounting errors (decenter, rotation, gap) come from: the holder this scene built, the
+    scene's own budget, or, with neither, the shipped budget's, which are a 3D-printed filter-thread holder's (a
+    phone or a lens without a filter thread is mounted otherwise: the note names the key to change)."""
+    if holder_built:
+        return "; mounting errors from this scene's holder"
+    if budget_path is None:
+        return ("; mounting errors from the shipped budget's 3D-printed filter-thread holder (this scene builds no "
+                "holder): where the DOE is mounted otherwise, set tolerance.budget to a budget of that mount")
+    return ""
+
+
 def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     """The scene's part judged through its task's network: delivered quality, its yield against the budget's
     [spec], a tornado in delivered terms for the errors that matter most, the grid each error needs; the
@@ -364,7 +376,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
                else "at PSF level (no network for this system)")
     return {"status": "ran", "why": f"{samples} Monte Carlo parts {through}"
             + ("" if quick else " and the quantization study")
-            + ("; mounting errors from this scene's holder" if holder.is_file() else "")
+            + _mounting_note(holder.is_file(), path)
             + (f"; {stale}" if stale else "")
             + ("" if networks or not res.reuse else "; the shipped networks are for another sensor")
             + ("" if not networks else f"; each part judged on {judge['images']} test scenes of {judge['size']}² px "

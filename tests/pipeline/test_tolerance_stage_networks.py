@@ -117,3 +117,21 @@ def test_the_stage_is_judged_again_when_the_networks_it_would_use_change(tmp_pat
     trained = stage_hash(scene, "tolerance", {}, False, res, root)
     record.write_text(json.dumps({**json.loads(record.read_text()), "hash": "2" * 16}))  # and retrained
     assert len({stale, trained, stage_hash(scene, "tolerance", {}, False, res, root)}) == 3
+
+
+def test_the_stage_says_where_its_mounting_errors_come_from(tmp_path, monkeypatch):
+    """The shipped budget's mounting errors are a 3D-printed filter-thread holder's: a scene that builds no holder
+    and keeps that budget is told so, with the key to change; one that built its holder, or set a budget of its
+    own, is not."""
+    import doefab.pipeline.stages as st
+    import doefab.tolerance.errors as errors
+
+    root = _run_folder(tmp_path, "train", "this")
+    _, why = _judged_by(root, monkeypatch, reuse=True)  # no holder.json beside the design, the default budget
+    assert "shipped budget's 3D-printed filter-thread holder" in why and "set tolerance.budget" in why
+    (root / "holder").mkdir()
+    (root / "holder" / "holder.json").write_text("{}")
+    monkeypatch.setattr(errors, "holder_mounting", lambda path: {"decenter_max_mm": 0.1})
+    _, why = _judged_by(root, monkeypatch, reuse=True)
+    assert "mounting errors from this scene's holder" in why and "tolerance.budget" not in why
+    assert st._mounting_note(False, tmp_path / "lab_budget.toml") == ""  # the scene's own budget: nothing to add
