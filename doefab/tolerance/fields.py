@@ -26,24 +26,28 @@ ROTATE_BYTES = 256 * 2**20  # bytes of pattern areas the mount rotation turns at
 
 # a judged part's peak memory per grid cell: a fixed share (one transmittance, the propagation's canvases), one per
 # pattern area (the die's and the turned window's), and each wavelength's transmittance twice (the relief's and what
-# it is built from) when built at once (below FIELD_BYTES), else a few wavelengths' (ONE_AT_A_TIME_BYTES); and what
+# it is built from) when built at once (below FIELD_BYTES); built one at a time, ONE_AT_A_TIME_BYTES in its place:
+# a few wavelengths' transmittances and the heap's growth from part to part, whose freed blocks of hundreds of
+# megabytes the next blocks of other sizes do not fit (freed memory is kept, ``doefab.keep_freed_memory``); and what
 # the process holds besides (torch, networks)
 CELL_BYTES, PATTERN_BYTES, PROCESS_BYTES = 112, 6, 2**29
-BAND_BYTES, ONE_AT_A_TIME_BYTES = 16, 32
+BAND_BYTES, ONE_AT_A_TIME_BYTES = 16, 240
 
 
 def part_bytes(doe_pixels: int, supersample: int, n_masks: int, n_wavelengths: int = 1) -> int:
     """Bytes one process needs to judge one part of a design of ``doe_pixels`` DOE pixels across, ``n_masks``
     binary masks and ``n_wavelengths`` bands on the ``supersample``× grid, as a ``doefab`` command runs it (freed
     memory kept for reuse, ``doefab.keep_freed_memory``): (S·N)² cells × (112 + 6·2^M + 16·W) bytes + 0.5 GiB, the
-    16·W while the W transmittances are built at once (8·W·cells ≤ ``FIELD_BYTES``), 32 bytes in its place when
+    16·W while the W transmittances are built at once (8·W·cells ≤ ``FIELD_BYTES``), 240 bytes in its place when
     they are built one at a time. Measured peaks (2 threads, both halves of a turned part): 16 levels, 3 bands,
     N = 2000, S = 1, 2, 4: 1.08, 3.21, 11.0 GB (this gives 1.56, 4.63, 16.9); 2 levels, 3 bands, N = 2188, S = 1,
-    2: 0.92, 2.15 GB (1.36, 3.83); 16 levels, 31 bands, N = 2188, S = 2: 3.6 GB (5.1, one band at a time); and a
-    whole study (``doefab tolerance --samples 1``, the tornado's 13 parts and one Monte Carlo part in one process)
-    of 16 levels, 31 bands, N = 634, S = 4, 8: 4.1, 6.1-6.5 GB (5.1, 6.7). It errs on the high side.
+    2: 0.92, 2.15 GB (1.36, 3.83); 16 levels, 31 bands, N = 2188, S = 2: 3.6 GB for one part, 8.0 GB for its whole
+    ``doefab run --quick`` (9.1, one band at a time); and whole studies of 16 levels, 31 bands, N = 634:
+    ``doefab tolerance --samples 1`` on the 4× and 8× grids 4.1 and 6.1-6.5 GB (5.1, 12.1), the tolerance stage of
+    ``doefab run --quick`` (through the networks) on the 8× grid 8.6-11.8 GB from run to run (12.1). It errs on the
+    high side.
 
-    Example: ``part_bytes(2188, 2, 4, 31) / 1e9`` → 5.1 (GB).
+    Example: ``part_bytes(2188, 2, 4, 31) / 1e9`` → 9.1 (GB).
     """
     cells = (int(doe_pixels) * int(supersample)) ** 2
     at_once = 8 * int(n_wavelengths) * cells <= FIELD_BYTES
