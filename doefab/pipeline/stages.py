@@ -325,16 +325,22 @@ def _design_sha(folder: Path) -> str:
     return levels_sha256(Design.load(folder).levels)
 
 
-def _mounting_note(holder_built: bool, budget_path) -> str:
-    """Where the study's mounting errors (decenter, rotation, gap) come from: the holder this scene built, the
-    scene's own budget, or, with neither, the shipped budget's, which are a 3D-printed filter-thread holder's (a
-    phone or a lens without a filter thread is mounted otherwise: the note names the key to change)."""
+def _mounting_note(holder_built: bool, budget_path, budget: dict) -> str:
+    """Where the study's mounting errors (decenter, rotation, tilt, gap) come from: the holder this run built, the
+    scene's own budget, or the shipped budget's, which are a 3D-printed filter-thread holder's (a phone or a lens
+    without a filter thread is mounted otherwise: the note names the key to change). ``budget``: as
+    ``load_budget(budget_path)`` read it (its ``defaults_used``: the keys a budget of the scene's own left out)."""
+    from doefab.tolerance.errors import DEFAULT_BUDGET
+
     if holder_built:
-        return "; mounting errors from this scene's holder"
-    if budget_path is None:
-        return ("; mounting errors from the shipped budget's 3D-printed filter-thread holder (this scene builds no "
-                "holder): where the DOE is mounted otherwise, set tolerance.budget to a budget of that mount")
-    return ""
+        return "; mounting errors from this run's holder"
+    shipped = budget_path is None or Path(budget_path).resolve() == DEFAULT_BUDGET.resolve()
+    left = [k for k in budget.get("defaults_used", []) if k.startswith("mounting.")]
+    if not shipped and not left:
+        return ""
+    which = "mounting errors" if shipped else f"{', '.join(left)} (left out of {Path(budget_path).name})"
+    return (f"; {which} from the shipped budget's 3D-printed filter-thread holder (no holder built in this run): "
+            f"where the DOE is mounted otherwise, set tolerance.budget to a budget of that mount")
 
 
 def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
@@ -376,7 +382,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
                else "at PSF level (no network for this system)")
     return {"status": "ran", "why": f"{samples} Monte Carlo parts {through}"
             + ("" if quick else " and the quantization study")
-            + _mounting_note(holder.is_file(), path)
+            + _mounting_note(holder.is_file(), path, budget)
             + (f"; {stale}" if stale else "")
             + ("" if networks or not res.reuse else "; the shipped networks are for another sensor")
             + ("" if not networks else f"; each part judged on {judge['images']} test scenes of {judge['size']}² px "

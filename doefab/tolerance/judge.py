@@ -252,9 +252,11 @@ class PSFJudge:
     def _free_reliefs(self) -> None:
         """Free the relief this judge keeps, and those the process's judges on other grids keep, before a new relief
         is built: a study holds a judge per grid, and on a 31-band design a kept relief is a transmittance of 8
-        bytes per cell and band (``doefab tolerance --samples 1`` of a 31-band design of 634 DOE pixels
-        on the 4× and 8× grids peaked at 5.9 and 8.1 GB with the last part's relief held while the next was built,
-        at 4.1 and 6.1-6.5 GB without)."""
+        bytes per cell and band (or, above ``fields.FIELD_BYTES``, the pattern areas, 4 bytes per cell and
+        pattern) (``doefab tolerance --samples 1`` of a 31-band design of 634 DOE pixels on the 4× and 8× grids
+        peaked at 5.9 and 8.1 GB with the last part's relief held while the next was built, at 4.1 and 6.1-6.5 GB
+        without). Judges on the same grid keep theirs: a network judge's rendering judge and its PSF judge take the
+        same part in turn, each for more than one set of halves."""
         for other in list(PSFJudge._LIVE):
             if other is self or other.supersample != self.supersample:
                 other._relief_cache = (None, None)

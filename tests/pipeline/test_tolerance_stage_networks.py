@@ -121,17 +121,26 @@ def test_the_stage_is_judged_again_when_the_networks_it_would_use_change(tmp_pat
 
 def test_the_stage_says_where_its_mounting_errors_come_from(tmp_path, monkeypatch):
     """The shipped budget's mounting errors are a 3D-printed filter-thread holder's: a scene that builds no holder
-    and keeps that budget is told so, with the key to change; one that built its holder, or set a budget of its
-    own, is not."""
+    and keeps that budget, or leaves mounting keys out of its own, is told so, with the key to change; one whose
+    run built its holder, or whose budget sets every mounting key, is not."""
     import doefab.pipeline.stages as st
     import doefab.tolerance.errors as errors
 
     root = _run_folder(tmp_path, "train", "this")
     _, why = _judged_by(root, monkeypatch, reuse=True)  # no holder.json beside the design, the default budget
-    assert "shipped budget's 3D-printed filter-thread holder" in why and "set tolerance.budget" in why
+    assert "mounting errors from the shipped budget's 3D-printed filter-thread holder" in why
+    assert "set tolerance.budget" in why
     (root / "holder").mkdir()
     (root / "holder" / "holder.json").write_text("{}")
     monkeypatch.setattr(errors, "holder_mounting", lambda path: {"decenter_max_mm": 0.1})
     _, why = _judged_by(root, monkeypatch, reuse=True)
-    assert "mounting errors from this scene's holder" in why and "tolerance.budget" not in why
-    assert st._mounting_note(False, tmp_path / "lab_budget.toml") == ""  # the scene's own budget: nothing to add
+    assert "mounting errors from this run's holder" in why and "tolerance.budget" not in why
+    shipped = errors.DEFAULT_BUDGET.read_text()
+    own = tmp_path / "lab_budget.toml"
+    own.write_text(shipped)  # every key spelt out: nothing taken from the shipped file
+    assert st._mounting_note(False, own, errors.load_budget(own)) == ""
+    own.write_text(shipped.replace("decenter_max_mm = 0.25\n", ""))  # one mounting key left out
+    note = st._mounting_note(False, own, errors.load_budget(own))
+    assert "mounting.decenter_max_mm (left out of lab_budget.toml) from the shipped budget's" in note
+    assert st._mounting_note(False, errors.DEFAULT_BUDGET, errors.load_budget(errors.DEFAULT_BUDGET)).startswith(
+        "; mounting errors from the shipped budget's")  # the shipped file named by its path

@@ -77,4 +77,3 @@ def test_a_part_frees_the_last_parts_relief_and_other_grids_before_it_builds_its
     fine.psfs(second, kernel=KERNEL)
     assert held[-1] == (None, [True, True, True])  # both judges of the other grid freed
     assert fine._relief_cache[1] is not None and len(held) == 2
-

@@ -57,7 +57,8 @@ def test_the_estimate_covers_a_parts_measured_peak_without_overstating_it_much(n
     assert m["after"] <= est, m  # the whole process, torch and the judge included
     grown, per_cell = m["after"] - m["before"], est - fields.PROCESS_BYTES  # what the estimate gives the cells
     assert grown >= 0.5 * per_cell, (grown, per_cell)  # not far above it
-    if bands == 3:  # 4.2 M cells: the part's own growth is within the cells' share alone (0.68-0.74 of 0.97 GB)
+    # 4.2 M cells: the part's own growth is within the cells' share alone (0.89 of 1.07 GB, freed memory kept)
+    if bands == 3:
         assert grown <= per_cell, (grown, per_cell)
 
 
