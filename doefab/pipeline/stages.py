@@ -330,11 +330,11 @@ def _mounting_note(holder_built: bool, budget_path, budget: dict) -> str:
     scene's own budget, or the shipped budget's, which are a 3D-printed filter-thread holder's (a phone or a lens
     without a filter thread is mounted otherwise: the note names the key to change). ``budget``: as
     ``load_budget(budget_path)`` read it (its ``defaults_used``: the keys a budget of the scene's own left out)."""
-    from doefab.tolerance.errors import DEFAULT_BUDGET
+    from doefab.tolerance.errors import is_shipped_budget
 
     if holder_built:
         return "; mounting errors from this run's holder"
-    shipped = budget_path is None or Path(budget_path).resolve() == DEFAULT_BUDGET.resolve()
+    shipped = is_shipped_budget(budget_path)
     left = [k for k in budget.get("defaults_used", []) if k.startswith("mounting.")]
     if not shipped and not left:
         return ""

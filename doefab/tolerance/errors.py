@@ -19,8 +19,8 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
                                       whole_keys)
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
-           "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors", "crosstalk_ratios",
-           "sensor_crosstalk", "budget_values"]
+           "is_shipped_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors",
+           "crosstalk_ratios", "sensor_crosstalk", "budget_values"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -71,6 +71,11 @@ class PartErrors:
                                                                                      "rotation")})
 
 
+def is_shipped_budget(path: str | Path | None) -> bool:
+    """Whether a budget path names the shipped default budget (None, or ``DEFAULT_BUDGET`` by any path)."""
+    return path is None or Path(path).resolve() == DEFAULT_BUDGET.resolve()
+
+
 def load_budget(path: str | Path | None = None) -> dict:
     """Read and validate a budget file (every problem listed with its key). A key the file leaves out takes the
     shipped default budget's value; ``budget["defaults_used"]`` lists those keys (a ``[spec.<task>]`` table the
@@ -80,7 +85,7 @@ def load_budget(path: str | Path | None = None) -> dict:
     problems = _problems(data)
     if problems:
         raise DoefabError(f"{p}: " + "; ".join(problems))
-    if path is None or p.resolve() == DEFAULT_BUDGET.resolve():
+    if is_shipped_budget(path):
         return {**data, "defaults_used": []}
     base = read_toml(DEFAULT_BUDGET, "default budget")
     used = []

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import torch
 
-__all__ = ["relief_fields", "PerWavelength", "part_bytes", "part_size", "parts_that_fit", "require_memory",
-           "FIELD_BYTES", "ROTATE_BYTES"]
+__all__ = ["relief_fields", "PerWavelength", "part_bytes", "builds_at_once", "part_size", "parts_that_fit",
+           "require_memory", "FIELD_BYTES", "ROTATE_BYTES"]
 
 FIELD_BYTES = 2 * 2**30  # bytes of complex64 transmittance built at once; above it, one wavelength at a time
 ROTATE_BYTES = 256 * 2**20  # bytes of pattern areas the mount rotation turns at once (its FFTs need ~5× that)
@@ -52,10 +52,16 @@ def part_bytes(doe_pixels: int, supersample: int, n_masks: int, n_wavelengths: i
     Example: ``part_bytes(2188, 2, 4, 31) / 1e9`` → 9.1 (GB).
     """
     cells = (int(doe_pixels) * int(supersample)) ** 2
-    at_once = 8 * int(n_wavelengths) * cells <= FIELD_BYTES
+    at_once = builds_at_once(n_wavelengths, cells)
     per = CELL_BYTES + PATTERN_BYTES * (1 << int(n_masks)) + (BAND_BYTES * int(n_wavelengths) if at_once
                                                               else ONE_AT_A_TIME_BYTES)
     return cells * per + PROCESS_BYTES
+
+
+def builds_at_once(n_wavelengths: int, cells: int) -> bool:
+    """Whether the transmittance of ``n_wavelengths`` wavelengths over ``cells`` grid cells (complex64, 8 bytes
+    each) is built at once (within ``FIELD_BYTES``) rather than one wavelength at a time (``PerWavelength``)."""
+    return 8 * int(n_wavelengths) * int(cells) <= FIELD_BYTES
 
 
 def parts_that_fit(size: tuple, supersample: int, available: int | None = None) -> int | None:
@@ -146,7 +152,7 @@ def relief_fields(relief, me, heights: np.ndarray, phases, rows, cols, rough=Non
                                    relief.n, torch.ones(n_w, dtype=torch.complex64))
             return _roughen(fields, phases, rough)
         hist = _rotate_patterns(die, th, (r0, r1), (c0, c_end), big, bigc, relief.n)
-    if n_w * cells * 8 > FIELD_BYTES:
+    if not builds_at_once(n_w, cells):
         return PerWavelength(hist, heights, phases, rough)
     return _roughen(transmittance(hist, heights, phases), phases, rough)
 
