@@ -180,7 +180,7 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
 
         >>> import numpy as np, doefab
         >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
-        >>> pair = doefab.split_aperture_psf(None, cam, [656e-9, 589e-9, 486e-9], [float("inf")], kernel_size=15)
+        >>> pair = doefab.split_aperture_psf(None, cam, [656e-9, 589e-9, 486e-9], [float("inf")], kernel_size=21)
         >>> coded, uncoded = doefab.simulate_captures(np.full((3, 64, 64), 0.5, np.float32), pair, noise="none")
         >>> coded.shape, bool(np.allclose(coded[:, 32, 32], uncoded[:, 32, 32], atol=1e-3))
         ((3, 64, 64), True)

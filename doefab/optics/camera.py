@@ -15,11 +15,16 @@ from doefab.validate import distance_or_inf, distance_record, metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
-__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE"]
+__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX"]
 
 #: a DOE baffle and a lens entrance pupil whose diameters differ by at most this fraction are "about equal": either
 #: may be the stop (the reports say so); a lens pupil narrower by more cuts the DOE (``Camera.lens_cuts_doe``)
 STOP_TOLERANCE = 0.01
+#: the room (sensor px) a window sized for the plain half's geometric blur leaves past it: diffraction spreads the
+#: light past the geometric edge (a 63 px window loses 2.1–2.7 % of the half's light where the half disc reaches its
+#: edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm, by wave-optics PSFs;
+#: tests/pipeline/test_window_blur.py)
+BLUR_ROOM_PX = 2
 
 
 @dataclass(frozen=True)
@@ -132,6 +137,31 @@ class Camera:
         inv_z = 0.0 if math.isinf(depth) else 1.0 / depth
         inv_f = 0.0 if math.isinf(self.focus_distance) else 1.0 / self.focus_distance
         return self.aperture_diameter * self.sensor_distance * abs(inv_f - inv_z) / self.sensor_pitch
+
+    def widest_blur(self, depths) -> tuple[float, float]:
+        """(plane in metres, the plain half's geometric blur radius there in sensor px) at the plane among
+        ``depths`` (metres) of the largest blur: ``defocus_blur_px`` / 2, how far the half disc reaches from the
+        point's image.
+
+        Example: ``Camera().widest_blur([float("inf"), 1.0])`` is 1 m and 32 px (to rounding): at 1 m the 8.64 mm
+        aperture, focused at 5 m, blurs a point into a half disc of 32 px radius."""
+        return max(((float(z), self.defocus_blur_px(z) / 2) for z in depths), key=lambda zr: zr[1])
+
+    def window_holds_blur(self, depths, kernel_size: int) -> bool:
+        """True where a centred window of ``kernel_size`` sensor pixels reaches the plain half's geometric blur at
+        every plane among ``depths`` (metres): its radius (``widest_blur``) is at most ``kernel_size // 2``. Light
+        beyond the window is missing from the PSFs; ``BLUR_ROOM_PX`` more leaves room for diffraction.
+
+        Example: ``Camera().window_holds_blur([1.0], 63)`` is False (32 px of blur, 31 px of window); with
+        ``kernel_size`` 67 it is True."""
+        return self.widest_blur(depths)[1] <= kernel_size // 2 + 1e-9  # a blur of exactly k // 2 px fits
+
+    def window_for_blur(self, depths) -> int:
+        """The smallest odd window (sensor px) that holds the plain half's blur at every plane among ``depths``
+        (metres) with ``BLUR_ROOM_PX`` of room past its edge: 2·⌈radius + room⌉ + 1.
+
+        Example: ``Camera().window_for_blur([1.0])`` is 69 (a 32 px radius, 2 px of room)."""
+        return 2 * math.ceil(self.widest_blur(depths)[1] + BLUR_ROOM_PX - 1e-9) + 1
 
     def replace(self, **changes) -> "Camera":
         """A copy with some fields changed (validated again)."""

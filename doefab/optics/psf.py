@@ -44,9 +44,9 @@ class PSFPair:
     Example:
         >>> import doefab
         >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)
-        >>> pair = doefab.split_aperture_psf(None, cam, [656e-9, 589e-9, 486e-9], [float("inf")], kernel_size=15)
+        >>> pair = doefab.split_aperture_psf(None, cam, [656e-9, 589e-9, 486e-9], [float("inf")], kernel_size=21)
         >>> tuple(pair.coded.shape), pair.depths  # (depths, wavelengths, K, K)
-        ((1, 3, 15, 15), (inf,))
+        ((1, 3, 21, 21), (inf,))
     """
 
     coded: torch.Tensor | None
@@ -138,6 +138,21 @@ def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.f
     return t.to(dtype)
 
 
+def _check_window(camera: Camera, depths, k: int) -> None:
+    """Refuse a centred window that cuts the plain half's geometric blur at a plane (``Camera.window_holds_blur``):
+    the light past its edge would be missing from the PSFs, and the captures made with them."""
+    if camera.window_holds_blur(depths, k):
+        return
+    z, r = camera.widest_blur(depths)
+    need = camera.window_for_blur(depths)
+    focus, at = ("infinity" if math.isinf(d) else f"{d:g} m" for d in (camera.focus_distance, z))
+    raise DoefabError(f"kernel_size {k}: the plain half blurs a point at {at} into a half disc of {r:.1f} px "
+                      f"radius (the camera focused at {focus}), and the window reaches {k // 2} px from the point's "
+                      f"image: the light beyond it would be missing from the PSFs; set the window (kernel_size; "
+                      f"--kernel on the command line) ≥ {need} px, depths nearer the focus, or check=False to accept "
+                      f"PSFs cut by the window")
+
+
 class PSFPlan:
     """Precomputed split-aperture PSF model for one camera, wavelength list, depth list and window.
 
@@ -152,7 +167,8 @@ class PSFPlan:
         pupil_oversample: pupil samples per DOE pixel and axis (heights are held per DOE pixel).
         precision: ``"float32"`` (default) or ``"float64"``.
         center: (u, v) sensor position of the window's centre pixel, metres.
-        check: run the routes' sampling checks (refuse rather than return a wrong PSF).
+        check: run the routes' sampling checks and, for a centred window, check that it holds the plain half's
+            defocus blur at every depth (``Camera.window_holds_blur``): refuse rather than return a wrong PSF.
         device: where the PSFs are computed: "auto" (CUDA when torch sees a GPU), "cpu", "cuda" or "cuda:N";
             None: the current default (``doefab._devices.default_device``). The plan's precomputed tensors live
             there; ``half_psf`` returns tensors there, ``__call__`` returns the pair where the height came from
@@ -205,6 +221,8 @@ class PSFPlan:
             if check:
                 self.route.check(setups[False])
             self._halves[half] = (geo, cov, opd_t, setups, {})
+        if check and not any(self.center):  # after the routes' checks: a sampling problem is told first
+            _check_window(camera, self.depths, self.kernel_size)
 
     def _prepared(self, half: str, envelope: bool):
         geo, cov, opd, setups, cache = self._halves[half]

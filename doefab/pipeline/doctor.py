@@ -117,11 +117,11 @@ def _blur_row(cam, depths, k: int) -> list[dict]:
     """The plain half's defocus blur (its half disc's radius) at its widest plane against the PSF window's reach,
     as ``resolve`` refuses it (``sampling.window_blur_checks``, which names the fixes); none where every plane is
     at the focus."""
-    from doefab.pipeline.sampling import distance_text, worst_blur
+    from doefab.pipeline.sampling import distance_text
 
-    z, r = worst_blur(cam, depths)
+    z, r = cam.widest_blur(depths)
     return [_row(f"plain half's defocus blur inside the PSF window (its radius at {distance_text(z)})", r, k // 2,
-                 "px", r <= k // 2, "optics.kernel_px")] if r > 0 else []
+                 "px", cam.window_holds_blur(depths, k), "optics.kernel_px")] if r > 0 else []
 
 
 def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:

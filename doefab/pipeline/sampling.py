@@ -13,30 +13,20 @@ from __future__ import annotations
 
 import math
 
+from doefab.optics.camera import BLUR_ROOM_PX
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "BLUR_ROOM_PX",
-           "worst_blur", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
+           "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "window_blur_checks",
+           "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
-#: the room (sensor px) the fixes of ``window_blur_checks`` leave between the plain half's geometric blur and the
-#: window's edge: diffraction spreads its light past the geometric edge (a 63 px window loses 2.1–2.7 % of the
-#: half's light where the half disc reaches its edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm,
-#: by wave-optics PSFs; tests/pipeline/test_window_blur.py)
-BLUR_ROOM_PX = 2
 
 
 def alias_free_px(cam, lam: float) -> float:
     """Half-width of the alias-free field the DOE's sampling leaves at wavelength ``lam`` (metres), in sensor
     pixels: λ·s / (2·DOE pitch) / sensor pitch; a window of k px fits where k/2 + 0.5 does not exceed it."""
     return lam * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
-
-
-def worst_blur(cam, depths) -> tuple[float, float]:
-    """(plane in metres, the plain half's geometric blur radius there in sensor px) at the plane of the largest
-    blur (``Camera.defocus_blur_px`` / 2: the half disc reaches that far from the point's image)."""
-    return max(((z, cam.defocus_blur_px(z) / 2) for z in depths), key=lambda zr: zr[1])
 
 
 def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") -> list[str]:
@@ -48,11 +38,11 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
     checked on the camera it gives."""
     k = task.kernel_size
     depths = task.depths(cam)
-    z, r = worst_blur(cam, depths)
-    if r <= k // 2:
+    if cam.window_holds_blur(depths, k):
         return []
+    z, r = cam.widest_blur(depths)
     fixes = []
-    need = 2 * math.ceil(r + BLUR_ROOM_PX) + 1
+    need = cam.window_for_blur(depths)
     alias = alias_free_px(cam, min(task.wavelengths(cam)))
     if need <= 1023 and need / 2 + 0.5 <= alias:
         fixes.append(f"optics.kernel_px ≥ {need}")
@@ -81,7 +71,7 @@ def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: st
 
     def fits(name: str, value: float) -> bool:
         new = variant(**{name: value}) if keys[name].lo <= value <= keys[name].hi else None
-        return new is not None and worst_blur(new, depths)[1] <= reach and not new.lens_cuts_doe
+        return new is not None and new.widest_blur(depths)[1] <= reach and not new.lens_cuts_doe
 
     out = []
     inv = [0.0 if math.isinf(d) else 1 / d for d in depths]
@@ -105,15 +95,25 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
     (``Camera.lens_cuts_doe``): the PSFs carry the light of the whole baffle, split at the DOE, and a narrower lens
     pupil would block the baffle's outer ring. The fix makes the baffle no wider than the pupil (``aperture_key``:
     the scene's own, ``f_number`` or ``aperture_diameter_mm``)."""
+    from doefab.pipeline.scenekeys import keys_of
+
     if not cam.lens_cuts_doe:
         return []
     pupil, doe = cam.lens_pupil_diameter * 1e3, cam.aperture_diameter * 1e3
-    fix = (f"camera.aperture_diameter_mm ≤ {_round3(pupil, math.floor):g}" if aperture_key == "aperture_diameter_mm"
-           else f"camera.f_number ≥ {_round3(cam.lens_f_number, math.ceil):g}")
+    key = keys_of("camera")[aperture_key]
+    if aperture_key == "aperture_diameter_mm":  # the baffle no wider than the pupil, or the f-number no lower
+        value, sign = _round3(pupil, math.floor), "≤"
+    else:
+        value, sign = _round3(cam.lens_f_number, math.ceil), "≥"
+    unit = f" {key.unit}" if key.unit else ""
+    fits = key.lo <= value <= key.hi
+    fix = (f"make the DOE the aperture stop with camera.{aperture_key} {sign} {value:g}, or " if fits
+           else f"no DOE aperture in camera.{aperture_key}'s range ({key.lo:g}–{key.hi:g}{unit}) is as narrow as that "
+           f"pupil: ")
     return [f"camera.lens_f_number {cam.lens_f_number:g}: the lens's {pupil:.2f} mm entrance pupil is narrower than "
             f"the DOE's {doe:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs (computed "
-            f"over the whole baffle) carry: make the DOE the aperture stop with {fix}, or set camera.lens_f_number to "
-            f"the lens's own wide-open f-number if it opens wider"]
+            f"over the whole baffle) carry: {fix}set camera.lens_f_number to the lens's own wide-open f-number if it "
+            f"opens wider"]
 
 
 def aperture_key(camera_keys: dict) -> str:

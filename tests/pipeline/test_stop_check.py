@@ -92,3 +92,21 @@ def _with_focus(path, focus: float):
     out = path.with_name("focused.toml")
     out.write_text(path.read_text().replace("focus_distance_m = 100.0", f"focus_distance_m = {focus}"))
     return out
+
+
+def test_a_pupil_narrower_than_any_doe_aperture_is_told_only_the_lens(tmp_path):
+    """A 4 mm lens at f/64 has a 0.0625 mm pupil, below the 0.1 mm that camera.aperture_diameter_mm takes: the
+    refusal names no aperture the scene would refuse, only the lens's own f-number; at f/32 (0.125 mm) it names
+    the aperture, and that aperture passes the stop check."""
+    cam = {"focal_length_mm": 4.0, "doe_pitch_um": 4.0, "sensor_pitch_um": 1.0, "focus_distance_m": 1.0}
+    msg = _refusal(_scene(tmp_path, **cam, aperture_diameter_mm=0.5, lens_f_number=64.0))
+    assert "0.06 mm entrance pupil" in msg, msg
+    assert "aperture_diameter_mm ≤" not in msg and "range (0.1–200 mm)" in msg, msg
+    msg = _refusal(_scene(tmp_path, **cam, aperture_diameter_mm=0.5, lens_f_number=32.0))
+    value = float(re.search(r"camera\.aperture_diameter_mm ≤ ([\d.]+)", msg).group(1))
+    assert value == pytest.approx(0.125)
+    scene = _scene(tmp_path, "fixed.toml", **cam, aperture_diameter_mm=value, lens_f_number=32.0)
+    try:
+        resolve(scene)
+    except DoefabError as exc:  # a 0.125 mm aperture may fail other checks, not the stop's
+        assert "entrance pupil is narrower" not in str(exc), str(exc)

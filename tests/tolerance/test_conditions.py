@@ -342,7 +342,7 @@ def test_measured_conditions_with_a_camera_use_it_for_every_scene_and_say_so():
     w = 300
     cam = DualPixelCrosstalk(np.full(w, 0.1), np.full(w, 0.05), (np.full(w, 0.1), np.full(w, 0.05)))
     pair = doefab.split_aperture_psf(None, doefab.Camera(doe_pixels=64, doe_pitch=135e-6), [550e-9],
-                                     [float("inf")], kernel_size=7)
+                                     [float("inf")], kernel_size=21)
     cond = C.measured(pair, "val", camera=cam)
     xt = cond.crosstalk_for(0, 2, 64)
     assert np.allclose(xt.estimate[0], 0.1) and np.allclose(xt.alpha_rl, 0.05)
