@@ -13,13 +13,21 @@ from doefab.cli._args import add_device_arg, number
 RGB_M = (656e-9, 589e-9, 486e-9)
 
 
+def _depths(cam) -> tuple:
+    """The demo's planes (m): the camera's focus, a star, a nearer point."""
+    return cam.focus_distance, math.inf, 2.0
+
+
 def register(sub) -> None:
     p = sub.add_parser("demo", help="plot the default camera's coded and uncoded PSFs",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--out", default="out/demo", help="output folder (an earlier demo output there is replaced; "
                                                      "any other non-empty folder is refused)")
-    p.add_argument("--kernel", type=number(int, 15, 511, unit="sensor pixels"), default=255,
-                   help="PSF window K (sensor pixels)")
+    from doefab.optics.camera import Camera
+
+    low = Camera().window_for_blur(_depths(Camera()))
+    p.add_argument("--kernel", type=number(int, low, 511, unit="sensor pixels"), default=255,
+                   help=f"PSF window K (sensor pixels; ≥ {low}: the plain half's blur at 2 m with 2 px of room)")
     add_device_arg(p)
     p.set_defaults(func=run)
 
@@ -36,7 +44,7 @@ def run(args) -> int:
 
     claim = claim_output(args, "demo", replace=True)
     cam = doefab.Camera()
-    depths = (cam.focus_distance, math.inf, 2.0)
+    depths = _depths(cam)
     designs = {
         "blank": doefab.blank_height(cam),
         "grating16": doefab.quantize_height(doefab.blazed_grating_height(cam, 16), cam),

@@ -15,7 +15,7 @@ from doefab.validate import distance_or_inf, distance_record, metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
-__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX"]
+__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX", "window_reach"]
 
 #: a DOE baffle and a lens entrance pupil whose diameters differ by at most this fraction are "about equal": either
 #: may be the stop (the reports say so); a lens pupil narrower by more cuts the DOE (``Camera.lens_cuts_doe``)
@@ -25,6 +25,15 @@ STOP_TOLERANCE = 0.01
 #: edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm, by wave-optics PSFs;
 #: tests/pipeline/test_window_blur.py)
 BLUR_ROOM_PX = 2
+
+
+def window_reach(kernel_size: int) -> int:
+    """How far a centred window of ``kernel_size`` sensor pixels reaches from the point's image on its shorter side
+    (px): its pixels lie at −K//2 … K − 1 − K//2, so (K − 1) // 2 (an even window reaches one pixel less on one
+    side).
+
+    Example: ``window_reach(63)`` is 31, ``window_reach(16)`` is 7."""
+    return (int(kernel_size) - 1) // 2
 
 
 @dataclass(frozen=True)
@@ -149,12 +158,12 @@ class Camera:
 
     def window_holds_blur(self, depths, kernel_size: int) -> bool:
         """True where a centred window of ``kernel_size`` sensor pixels reaches the plain half's geometric blur at
-        every plane among ``depths`` (metres): its radius (``widest_blur``) is at most ``kernel_size // 2``. Light
-        beyond the window is missing from the PSFs; ``BLUR_ROOM_PX`` more leaves room for diffraction.
+        every plane among ``depths`` (metres): its radius (``widest_blur``) is at most ``window_reach(kernel_size)``.
+        Light beyond the window is missing from the PSFs; ``BLUR_ROOM_PX`` more leaves room for diffraction.
 
         Example: ``Camera().window_holds_blur([1.0], 63)`` is False (32 px of blur, 31 px of window); with
         ``kernel_size`` 67 it is True."""
-        return self.widest_blur(depths)[1] <= kernel_size // 2 + 1e-9  # a blur of exactly k // 2 px fits
+        return self.widest_blur(depths)[1] <= window_reach(kernel_size) + 1e-9  # a blur of exactly the reach fits
 
     def window_for_blur(self, depths) -> int:
         """The smallest odd window (sensor px) that holds the plain half's blur at every plane among ``depths``

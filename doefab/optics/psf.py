@@ -18,7 +18,7 @@ import torch
 from doefab import validate as _validate
 from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, window_reach
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
@@ -146,11 +146,11 @@ def _check_window(camera: Camera, depths, k: int) -> None:
     z, r = camera.widest_blur(depths)
     need = camera.window_for_blur(depths)
     focus, at = ("infinity" if math.isinf(d) else f"{d:g} m" for d in (camera.focus_distance, z))
-    raise DoefabError(f"kernel_size {k}: the plain half blurs a point at {at} into a half disc of {r:.1f} px "
-                      f"radius (the camera focused at {focus}), and the window reaches {k // 2} px from the point's "
-                      f"image: the light beyond it would be missing from the PSFs; set the window (kernel_size; "
-                      f"--kernel on the command line) ≥ {need} px, depths nearer the focus, or check=False to accept "
-                      f"PSFs cut by the window")
+    raise DoefabError(f"the {k} px PSF window reaches {window_reach(k)} px from a point's image, and the plain half "
+                      f"blurs a point at {at} into a half disc of {r:.1f} px radius (the camera focused at {focus}): "
+                      f"the light beyond the window would be missing from the PSFs; widen the window to ≥ {need} px "
+                      f"(PSFPlan's kernel_size, a task's task_params kernel_size, --kernel of doefab psf), bring the "
+                      f"depths nearer the focus, or pass PSFPlan(check=False) to accept PSFs cut by the window")
 
 
 class PSFPlan:

@@ -117,11 +117,12 @@ def _blur_row(cam, depths, k: int) -> list[dict]:
     """The plain half's defocus blur (its half disc's radius) at its widest plane against the PSF window's reach,
     as ``resolve`` refuses it (``sampling.window_blur_checks``, which names the fixes); none where every plane is
     at the focus."""
+    from doefab.optics.camera import window_reach
     from doefab.pipeline.sampling import distance_text
 
     z, r = cam.widest_blur(depths)
-    return [_row(f"plain half's defocus blur inside the PSF window (its radius at {distance_text(z)})", r, k // 2,
-                 "px", cam.window_holds_blur(depths, k), "optics.kernel_px")] if r > 0 else []
+    return [_row(f"plain half's defocus blur inside the PSF window (its radius at {distance_text(z)})", r,
+                 window_reach(k), "px", cam.window_holds_blur(depths, k), "optics.kernel_px")] if r > 0 else []
 
 
 def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from doefab.optics.camera import BLUR_ROOM_PX
+from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
@@ -47,11 +47,11 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
     if need <= 1023 and need / 2 + 0.5 <= alias:
         fixes.append(f"optics.kernel_px ≥ {need}")
     if variant is not None:
-        fixes += _camera_fixes(cam, depths, r, k // 2 - BLUR_ROOM_PX, variant, aperture_key)
+        fixes += _camera_fixes(cam, depths, r, window_reach(k) - BLUR_ROOM_PX, variant, aperture_key)
     return [f"optics.kernel_px {k}: the plain half blurs a point at {distance_text(z)} into a half disc of {r:.1f} px "
             f"radius (D·s·|1/z_focus − 1/z| / 2, focused at {distance_text(cam.focus_distance)}), and the PSF window "
-            f"reaches {k // 2} px from the point's image: the light beyond it would be missing from the simulated "
-            f"captures; "
+            f"reaches {window_reach(k)} px from the point's image: the light beyond it would be missing from the "
+            f"simulated captures; "
             + ("set " + " or ".join(fixes) if fixes else "no window in the alias-free field, focus or f-number in its "
                "key's range holds it: bring optics.depths_m closer together")]
 
@@ -71,7 +71,7 @@ def _camera_fixes(cam, depths, r: float, reach: float, variant, aperture_key: st
 
     def fits(name: str, value: float) -> bool:
         new = variant(**{name: value}) if keys[name].lo <= value <= keys[name].hi else None
-        return new is not None and new.widest_blur(depths)[1] <= reach and not new.lens_cuts_doe
+        return new is not None and new.window_holds_blur(depths, 2 * reach + 1) and not new.lens_cuts_doe
 
     out = []
     inv = [0.0 if math.isinf(d) else 1 / d for d in depths]
@@ -94,26 +94,24 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
     """The DOE's baffle must be the aperture stop, or about as wide as the lens's entrance pupil
     (``Camera.lens_cuts_doe``): the PSFs carry the light of the whole baffle, split at the DOE, and a narrower lens
     pupil would block the baffle's outer ring. The fix makes the baffle no wider than the pupil (``aperture_key``:
-    the scene's own, ``f_number`` or ``aperture_diameter_mm``)."""
+    the scene's own, ``f_number`` or ``aperture_diameter_mm``; an f-number where the pupil is narrower than the
+    aperture key's range)."""
     from doefab.pipeline.scenekeys import keys_of
 
     if not cam.lens_cuts_doe:
         return []
     pupil, doe = cam.lens_pupil_diameter * 1e3, cam.aperture_diameter * 1e3
-    key = keys_of("camera")[aperture_key]
-    if aperture_key == "aperture_diameter_mm":  # the baffle no wider than the pupil, or the f-number no lower
-        value, sign = _round3(pupil, math.floor), "≤"
-    else:
-        value, sign = _round3(cam.lens_f_number, math.ceil), "≥"
-    unit = f" {key.unit}" if key.unit else ""
-    fits = key.lo <= value <= key.hi
-    fix = (f"make the DOE the aperture stop with camera.{aperture_key} {sign} {value:g}, or " if fits
-           else f"no DOE aperture in camera.{aperture_key}'s range ({key.lo:g}–{key.hi:g}{unit}) is as narrow as that "
-           f"pupil: ")
+    low = keys_of("camera")["aperture_diameter_mm"].lo
+    if aperture_key == "aperture_diameter_mm" and _round3(pupil, math.floor) >= low:
+        fix = f"camera.aperture_diameter_mm ≤ {_round3(pupil, math.floor):g}"
+    else:  # the f-number the lens has fits its key's range; an aperture below the range's end does not
+        fix = f"camera.f_number ≥ {_round3(cam.lens_f_number, math.ceil):g}" + (
+            f" (in place of camera.aperture_diameter_mm, whose range ends at {low:g} mm)"
+            if aperture_key == "aperture_diameter_mm" else "")
     return [f"camera.lens_f_number {cam.lens_f_number:g}: the lens's {pupil:.2f} mm entrance pupil is narrower than "
             f"the DOE's {doe:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs (computed "
-            f"over the whole baffle) carry: {fix}set camera.lens_f_number to the lens's own wide-open f-number if it "
-            f"opens wider"]
+            f"over the whole baffle) carry: make the DOE the aperture stop with {fix}, or set camera.lens_f_number to "
+            f"the lens's own wide-open f-number if it opens wider"]
 
 
 def aperture_key(camera_keys: dict) -> str:

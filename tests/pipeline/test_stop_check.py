@@ -94,19 +94,19 @@ def _with_focus(path, focus: float):
     return out
 
 
-def test_a_pupil_narrower_than_any_doe_aperture_is_told_only_the_lens(tmp_path):
-    """A 4 mm lens at f/64 has a 0.0625 mm pupil, below the 0.1 mm that camera.aperture_diameter_mm takes: the
-    refusal names no aperture the scene would refuse, only the lens's own f-number; at f/32 (0.125 mm) it names
-    the aperture, and that aperture passes the stop check."""
+def test_a_pupil_narrower_than_the_aperture_keys_range_is_told_an_f_number(tmp_path):
+    """A 4 mm lens at f/64 has a 0.0625 mm pupil, below the 0.1 mm where camera.aperture_diameter_mm's range ends:
+    a scene that sets the aperture is told the f-number in its place (which reaches it, 4 mm / 64), and that scene
+    passes the stop check; at f/32 (0.125 mm) it is told the aperture."""
     cam = {"focal_length_mm": 4.0, "doe_pitch_um": 4.0, "sensor_pitch_um": 1.0, "focus_distance_m": 1.0}
     msg = _refusal(_scene(tmp_path, **cam, aperture_diameter_mm=0.5, lens_f_number=64.0))
     assert "0.06 mm entrance pupil" in msg, msg
-    assert "aperture_diameter_mm ≤" not in msg and "range (0.1–200 mm)" in msg, msg
+    assert "aperture_diameter_mm ≤" not in msg and "camera.f_number ≥ 64 (in place of" in msg, msg
+    for fixed in ({"f_number": 64.0, "lens_f_number": 64.0}, {"aperture_diameter_mm": 0.125, "lens_f_number": 32.0}):
+        try:
+            resolve(_scene(tmp_path, "fixed.toml", **cam, **fixed))
+        except DoefabError as exc:  # so small an aperture may fail other checks, not the stop's
+            assert "entrance pupil is narrower" not in str(exc), str(exc)
     msg = _refusal(_scene(tmp_path, **cam, aperture_diameter_mm=0.5, lens_f_number=32.0))
     value = float(re.search(r"camera\.aperture_diameter_mm ≤ ([\d.]+)", msg).group(1))
     assert value == pytest.approx(0.125)
-    scene = _scene(tmp_path, "fixed.toml", **cam, aperture_diameter_mm=value, lens_f_number=32.0)
-    try:
-        resolve(scene)
-    except DoefabError as exc:  # a 0.125 mm aperture may fail other checks, not the stop's
-        assert "entrance pupil is narrower" not in str(exc), str(exc)
