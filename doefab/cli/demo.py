@@ -25,7 +25,8 @@ def register(sub) -> None:
                                                      "any other non-empty folder is refused)")
     from doefab.optics.camera import Camera
 
-    low = Camera().window_for_blur(_depths(Camera()))
+    cam = Camera()
+    low = cam.window_for_blur(_depths(cam))
     p.add_argument("--kernel", type=number(int, low, 511, unit="sensor pixels"), default=255,
                    help=f"PSF window K (sensor pixels; ≥ {low}: the plain half's blur at 2 m with 2 px of room)")
     add_device_arg(p)

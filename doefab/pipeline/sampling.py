@@ -101,9 +101,9 @@ def stop_checks(cam, aperture_key: str = "f_number") -> list[str]:
     if not cam.lens_cuts_doe:
         return []
     pupil, doe = cam.lens_pupil_diameter * 1e3, cam.aperture_diameter * 1e3
-    low = keys_of("camera")["aperture_diameter_mm"].lo
-    if aperture_key == "aperture_diameter_mm" and _round3(pupil, math.floor) >= low:
-        fix = f"camera.aperture_diameter_mm ≤ {_round3(pupil, math.floor):g}"
+    low, widest = keys_of("camera")["aperture_diameter_mm"].lo, _round3(pupil, math.floor)
+    if aperture_key == "aperture_diameter_mm" and widest >= low:
+        fix = f"camera.aperture_diameter_mm ≤ {widest:g}"
     else:  # the f-number the lens has fits its key's range; an aperture below the range's end does not
         fix = f"camera.f_number ≥ {_round3(cam.lens_f_number, math.ceil):g}" + (
             f" (in place of camera.aperture_diameter_mm, whose range ends at {low:g} mm)"
