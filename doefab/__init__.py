@@ -28,6 +28,7 @@ _EXPORTS = {
     "levels_to_height": "doefab.fabrication.levels",
     "level_step": "doefab.fabrication.levels",
     "optimize": "doefab.design.optimize",
+    "design_time": "doefab.design.pace",
     "Design": "doefab.design.design",
     "get_task": "doefab.tasks",
     "TASKS": "doefab.tasks",

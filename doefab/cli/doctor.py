@@ -1,8 +1,8 @@
 """``doefab doctor SCENE``: what the scene's camera and task imply (f-number, diffraction limit in sensor
 pixels, DOE pixels across the aperture, depth of field, the task's geometry in pixels), then its sampling
 conditions and numerical stiff spots, each with its margin and, where it fails, the fix (exit status 3 if any
-fails), and the device torch computes on (--device, else the scene's device key). Nothing is designed or
-trained."""
+fails), and the device torch computes on (--device, else the scene's device key). A new design's run time is
+measured from a few of its own steps (--no-timing skips it); nothing is designed or trained."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ def register(sub) -> None:
     p.add_argument("scene", help="scene TOML file")
     p.add_argument("--out", default=None, help="also write the checks as JSON to this file")
     p.add_argument("--no-precision", action="store_true", help="skip the float32 vs float64 PSF computation")
+    p.add_argument("--no-timing", action="store_true", help="skip timing a new design's first steps (its run time)")
     add_device_arg(p, scene=True)
     p.set_defaults(func=run)
 
@@ -33,11 +34,11 @@ def _diagnose(args, scene) -> int:
     from doefab._devices import describe_device
     from doefab.errors import CheckFailed
     from doefab.io import atomic_write_json
-    from doefab.pipeline.doctor import diagnose, explain
+    from doefab.pipeline.doctor import design_time_fact, diagnose, explain
     from doefab.pipeline.system import resolve
 
     res = resolve(scene)
-    facts = explain(res, scene)
+    facts = explain(res, scene) + ([] if args.no_timing or "design" not in scene.stages else [design_time_fact(res)])
     width = max(len(f["quantity"]) for f in facts)
     print(f"{args.scene}: the system")
     for f in facts:

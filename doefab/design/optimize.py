@@ -21,19 +21,18 @@ import torch
 from doefab._devices import resolve_device
 from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 from doefab.design.design import Design
+from doefab.design.finish import coded_mask, finalize_levels, finish_design, plain_level
 from doefab.design.nloptrun import run_nlopt
 from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
                                             theta_to_height)
 from doefab.errors import DoefabError
-from doefab.fabrication.levels import level_step, quantize_levels
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.optics.camera import Camera
 from doefab.optics.psf import PSFPlan
-from doefab.optics.pupil import pupil_half
 from doefab.tasks import get_task
 
-__all__ = ["DesignConfig", "optimize", "design_from_theta", "plain_level", "OPTIMIZERS", "coded_mask",
-           "finalize_levels", "sampling_problem", "design_camera"]
+__all__ = ["DesignConfig", "optimize", "prepare_run", "DesignRun", "design_from_theta", "plain_level", "OPTIMIZERS",
+           "coded_mask", "finalize_levels", "sampling_problem", "design_camera"]
 
 OPTIMIZERS = ("adam", "lbfgs", "mma")
 
@@ -119,27 +118,6 @@ def design_camera(camera: Camera, sampling: int) -> Camera:
     return camera.replace(doe_pixels=camera.doe_pixels // sampling, doe_pitch=camera.doe_pitch * sampling)
 
 
-def coded_mask(camera: Camera) -> torch.Tensor:
-    """(N, N) float mask of DOE pixels that carry coded light (inside the aperture, x < 0)."""
-    geo = pupil_half(camera, "coded")
-    m = np.zeros((camera.doe_pixels,) * 2)
-    m[geo.rows, geo.cols] = geo.coverage > 0
-    return torch.from_numpy(m).float()
-
-
-def plain_level(n_levels: int) -> int:
-    """The level of the plain half and of the area outside the clear aperture: the top one (left unetched)."""
-    return n_levels - 1
-
-
-def finalize_levels(height: np.ndarray, camera: Camera, n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
-    """Levels of a design: nearest of ``n_levels`` levels in the coded aperture, the plain level elsewhere."""
-    lv = quantize_levels(height, camera, n_levels)
-    mask = coded_mask(camera).numpy() > 0
-    lv[~mask] = plain_level(n_levels)
-    return lv
-
-
 def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0,
              camera: Camera | None = None, out_dir: str | Path | None = None, resume: bool = False,
              progress: bool = True, device=None, **settings) -> Design:
@@ -168,6 +146,17 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         >>> design.levels.shape, design.n_levels
         ((256, 256), 16)
     """
+    run = prepare_run(task, iterations, optimizer, seed, camera, out_dir, device, **settings)
+    if resume:
+        run.resume()
+    return run.run(progress)
+
+
+def prepare_run(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0,
+                camera: Camera | None = None, out_dir: str | Path | None = None, device=None,
+                **settings) -> DesignRun:
+    """The ``DesignRun`` that ``optimize`` runs with these arguments (the same defaults and checks), set up and
+    not yet run: ``.run()`` optimises, ``.one_step(i)`` takes step ``i`` alone (``design.pace`` times it)."""
     task_obj = get_task(task, **(settings.pop("task_params", None) or {}))
     iterations = task_obj.default_iterations if iterations is None else iterations
     settings.setdefault("lr", task_obj.default_lr)
@@ -188,10 +177,7 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"
     if cfg.start not in STARTS:
         raise DoefabError(f"unknown start {cfg.start!r}: choose one of {STARTS}")
-    run = DesignRun(task_obj, cfg, cam, out_dir, dev)
-    if resume:
-        run.resume()
-    return run.run(progress)
+    return DesignRun(task_obj, cfg, cam, out_dir, dev)
 
 
 class DesignRun:
@@ -294,26 +280,40 @@ class DesignRun:
         if (step + 1) % cfg.checkpoint_every == 0:
             self.checkpoint(step + 1, time.perf_counter() - self.t_start)
 
-    def _adam_steps(self) -> None:
+    def next_batch(self):
+        """The (depth, wavelength) pairs of the next Adam step, drawn with the run's generator (None: all)."""
         cfg, gen, pairs = self.cfg, self.gen, self.pairs
-        for step in range(self.step0, cfg.iterations):
-            batch_pairs = None
-            if cfg.batch < 0:  # stratified: every depth, one random wavelength each
-                wl = torch.randint(len(self.lams), (len(self.depths),), generator=gen).tolist()
-                batch_pairs = [(d, wl[d]) for d in range(len(self.depths))]
-            elif 0 < cfg.batch < len(pairs):
-                idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
-                batch_pairs = [pairs[i] for i in sorted(idx)]
-            self.adam.zero_grad()
-            loss = self.objective(step, batch_pairs)
-            if not torch.isfinite(loss):
-                self.record(step, float(loss.detach()))
+        if cfg.batch < 0:  # stratified: every depth, one random wavelength each
+            wl = torch.randint(len(self.lams), (len(self.depths),), generator=gen).tolist()
+            return [(d, wl[d]) for d in range(len(self.depths))]
+        if 0 < cfg.batch < len(pairs):
+            idx = torch.randperm(len(pairs), generator=gen)[:cfg.batch].tolist()
+            return [pairs[i] for i in sorted(idx)]
+        return None
+
+    def one_step(self, step: int) -> torch.Tensor:
+        """Step ``step`` of the optimiser without recording it: Adam's on its next batch, else (nlopt) one
+        evaluation of the objective over every pair and its gradient. Returns the loss."""
+        if self.adam is None:
+            self.theta.grad = None
+            loss = self.objective(step)
             loss.backward()
-            self.adam.step()
+            return loss.detach()
+        self.adam.zero_grad()
+        loss = self.objective(step, self.next_batch())
+        if not torch.isfinite(loss):
             self.record(step, float(loss.detach()))
+        loss.backward()
+        self.adam.step()
+        return loss.detach()
+
+    def _adam_steps(self) -> None:
+        for step in range(self.step0, self.cfg.iterations):
+            self.record(step, float(self.one_step(step)))
 
     def run(self, progress: bool = True) -> Design:
-        """The optimiser's steps from ``step0``, then the quantized design (``_finish``) with its run times."""
+        """The optimiser's steps from ``step0``, then the quantized design (``finish.finish_design``) with its run
+        times."""
         cfg = self.cfg
         if progress:
             from tqdm import tqdm
@@ -333,52 +333,14 @@ class DesignRun:
             if self.bar is not None:
                 self.bar.close()
         self.checkpoint(cfg.iterations, time.perf_counter() - self.t_start)
-        design = _finish(self.task, cfg, self.cam, self.dcam, self.theta.detach(), self.param, self.history,
-                         self.lams, self.depths, self.dev)
+        design = finish_design(self.task, cfg, self.cam, self.dcam, self.theta.detach(), self.param, self.history,
+                               self.lams, self.depths, self.dev)
         design.extra["wall_time_s"] = round(time.perf_counter() - self.t_start, 1)
         design.extra["optimizer_time_s"] = self.history[-1][1] if self.history else 0.0
         design.extra["evaluations"] = len(self.history)
         if stop_reason:
             design.extra["stop_reason"] = stop_reason
         return design
-
-
-def _finish(task_obj, cfg, cam, dcam, theta, param, history, lams, depths, device=None) -> Design:
-    """Upsample to the preset grid, quantize, and evaluate continuous and quantized metrics at full resolution
-    (the PSFs on ``device``).
-
-    A radial profile is evaluated on the full grid (its knots sit at fixed radii), not repeated per coarse pixel."""
-    radial = cfg.parameterization == "radial"
-    theta, param = theta.cpu(), param.to("cpu")
-    with torch.no_grad():
-        if radial:
-            h_design = theta_to_height(make_parameterization("radial", cam, param.knots).waves(theta), cam)
-        else:
-            h_design = theta_to_height(param.waves(theta), dcam)
-    h_design = h_design.double().numpy()
-    if cfg.sampling > 1 and not radial:
-        h_design = np.kron(h_design, np.ones((cfg.sampling, cfg.sampling)))
-    n_levels = cfg.n_levels
-    levels = finalize_levels(h_design, cam, n_levels)
-    mask = coded_mask(cam).numpy() > 0
-    step = level_step(cam, n_levels)
-    height = np.where(mask, h_design, plain_level(n_levels) * step)
-    plan = PSFPlan(cam, lams, depths, task_obj.kernel_size, halves=("coded",), device=device)
-    with torch.no_grad():
-        psf_c = plan(height).coded
-        psf_q = plan(levels.astype(np.float64) * step).coded
-    mc, mq = task_obj.metric(psf_c, cam), task_obj.metric(psf_q, cam)
-    metrics = {"name": task_obj.metric_name, "continuous": mc["value"], "quantized": mq["value"],
-               "continuous_worst": mc["worst"], "quantized_worst": mq["worst"],
-               "per_entry_axes": ["depth", "wavelength"],
-               "per_entry": {"continuous": mc["per_entry"], "quantized": mq["per_entry"]},
-               "loss_kind": task_obj.loss_kind}
-    return Design(task=task_obj.name, task_params=task_obj.params(), camera=cam, wavelengths=tuple(lams),
-                  depths=tuple(depths), height=height, levels=levels, metrics=metrics, seed=cfg.seed,
-                  optimizer=cfg.optimizer, iterations=cfg.iterations, history=history,
-                  psf_quantized=psf_q.numpy(), targets=task_obj.targets(cam).numpy(), n_levels=n_levels,
-                  extra={"config": cfg.key(), **({"radial_knots_waves": [round(float(v), 6) for v in theta]}
-                                                 if radial else {})})
 
 
 def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str, sampling: int, history=(),
@@ -394,7 +356,7 @@ def design_from_theta(design: Design, theta: torch.Tensor, parameterization: str
                        knots=int(theta.numel()) if radial else 0, start="task", n_levels=design.n_levels)
     dcam = design_camera(design.camera, sampling)
     param = make_parameterization(parameterization, dcam, cfg.knots)
-    out = _finish(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths, design.depths,
-                  device)
+    out = finish_design(task_obj, cfg, design.camera, dcam, theta, param, list(history), design.wavelengths,
+                        design.depths, device)
     out.extra.update(extra or {})
     return out

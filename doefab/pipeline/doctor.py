@@ -59,9 +59,10 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     rows.append(_row(f"source phase step per pupil sample at the nearest depth ({distance_text(z_near)})", step,
                      SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
                      phase_step_fix(cam, lam_min, z_near, step)))
-    fft_bytes = (2 * cam.doe_pixels) ** 2 * 8 * 3
+    fft_bytes = spectral_fft_bytes(cam)
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
-                     8e9, "bytes", fft_bytes <= 8e9, "a coarser design grid (design.sampling) or fewer pixels"))
+                     FFT_BYTES_LIMIT, "bytes", fft_bytes <= FFT_BYTES_LIMIT,
+                     "a coarser design grid (design.sampling) or fewer pixels"))
     if "tolerance" in scene.stages and scene.tolerance is not None:
         rows += _tolerance_memory(cam, s["n_levels"], len(lams), scene.tolerance)
         rows += _scheduler_rows(scene.tolerance.get("scheduler"))
@@ -111,6 +112,37 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
         rows.append(_row(f"Wiener regularisation: the shipped network cannot be checked ({str(exc)[:100]})", 1.0, 1.0,
                          "", False, f"doefab train --task {scene.task}"))
     return rows
+
+
+#: the spectral route's FFT working memory a scene may ask for (bytes)
+FFT_BYTES_LIMIT = 8e9
+
+
+def spectral_fft_bytes(cam) -> int:
+    """The spectral route's FFT working memory on ``cam``'s full grid (bytes): 2× padded pupil, complex64, ~3
+    buffers."""
+    return (2 * cam.doe_pixels) ** 2 * 8 * 3
+
+
+def design_time_fact(res: ResolvedScene) -> dict:
+    """The system fact of the design stage's run time on this machine (minutes): none where the committed design is
+    reused, else measured by ``design.pace.design_time`` on the scene's own design (``stages.design_arguments``),
+    unless its grid's FFTs exceed ``FFT_BYTES_LIMIT`` (a failing check says so)."""
+    from doefab.pipeline.stages import design_arguments
+
+    fact = {"quantity": "design stage's run time", "unit": "min"}
+    if res.reuse:
+        return {**fact, "value": 0.0, "meaning": "the committed design is reused: nothing is optimised"}
+    args = design_arguments(res)
+    if spectral_fft_bytes(res.camera) > FFT_BYTES_LIMIT:
+        return {**fact, "value": float("nan"), "meaning": "not measured: the FFT memory check fails"}
+    from doefab.design.pace import design_time
+
+    t = design_time(**args)
+    return {**fact, "value": t["seconds"] / 60, "meaning": (
+        f"measured here ({t['device']}): {t['iterations']} {args['optimizer']} steps of {t['step_s']:.3g} s on the "
+        f"{t['grid_px']}² grid, {t['evaluations']} full metrics of {t['metric_s']:.3g} s, set-up and the full-grid "
+        f"finish; longer on a busier machine (doefab.design.pace)")}
 
 
 def _blur_row(cam, depths, k: int) -> list[dict]:

@@ -20,8 +20,8 @@ from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
 
-__all__ = ["resolve", "REPO", "redesign_note", "quick_sampling", "stage_design", "stage_masks", "stage_holder",
-           "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
+__all__ = ["resolve", "REPO", "redesign_note", "design_arguments", "quick_sampling", "stage_design", "stage_masks",
+           "stage_holder", "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
            "networks_trained_here", "shipped_sensor_differs", "QUICK", "quick_note"]
 
 #: the numbers ``doefab run --quick`` cuts (the stages read them, the report's ``quick_note`` says them): design
@@ -59,22 +59,31 @@ def quick_note() -> str:
             f"--quick for those.")
 
 
+def design_arguments(res: ResolvedScene, quick: bool = False) -> dict:
+    """The arguments of ``doefab.optimize`` (and ``design.pace.design_time``) for the scene's new design: its task,
+    steps, grid (``_design_run``), the task's bands, planes and geometry bound to its camera, and the rest of its
+    settings."""
+    s = res.settings
+    iters, sampling = _design_run(s, quick, res.quick_sampling)
+    return {"task": s["design_task"], "iterations": iters, "optimizer": s["optimizer"], "seed": s["seed"],
+            "camera": res.camera, "sampling": sampling, "task_params": res.task.params(),
+            "parameterization": s["parameterization"], "knots": int(s["knots"]), "n_levels": int(s["n_levels"])}
+
+
 def redesign_note(res: ResolvedScene, quick: bool) -> str:
-    """One line: why the committed design is not reused, and roughly how long the new one takes (scaled from the
-    committed design's own wall time by iterations and grid pixels) and how large its checkpoint grows."""
-    s, c = res.settings, res.committed_settings
-    why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c[k]})" for k in res.differ)
-    (iters, sampling), (c_iters, c_sampling) = _design_run(s, quick, res.quick_sampling), _design_run(c, False)
-    grid, c_grid = s["camera"]["doe_pixels"] // sampling, c["camera"]["doe_pixels"] // c_sampling
-    took = float(res.committed.extra.get("wall_time_s") or 0.0)
-    minutes = took * iters / max(c_iters, 1) * (grid / max(c_grid, 1)) ** 2 / 60
+    """One line: why the committed design is not reused, what the new one runs (steps, grid), where its run time
+    is measured beforehand (``doefab doctor``) and how large its checkpoint grows."""
+    s = res.settings
+    why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c})"
+                    for k, c in ((k, res.committed_settings[k]) for k in res.differ))
+    iters, sampling = _design_run(s, quick, res.quick_sampling)
+    grid = s["camera"]["doe_pixels"] // sampling
     ckpt = ""
     if s["parameterization"] == "pixel":  # the phase map and Adam's two moments, float32
-        ckpt = f", checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
-    return (f"the committed {res.settings['design_task']} design is not reused: the scene sets {why}; "
-            f"a new design is optimised ({iters} {s['optimizer']} iterations on a {grid}² grid: roughly "
-            f"{max(minutes, 0.1):.1f} min at the pace of the committed design's run ({took:.0f} s), longer on a "
-            f"loaded machine{ckpt})")
+        ckpt = f"; checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
+    return (f"the committed {s['design_task']} design is not reused: the scene sets {why}; a new design is optimised "
+            f"({iters} {s['optimizer']} iterations on a {grid}² grid; doefab doctor measures its run time on this "
+            f"machine beforehand{ckpt})")
 
 
 def _copy_design(src: Path, dst: Path) -> None:
@@ -99,11 +108,7 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         s = res.settings
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
         iters, sampling = _design_run(s, quick, res.quick_sampling)
-        params = res.task.params()  # the scene's bands, planes and geometry, bound to its camera
-        d = doefab.optimize(s["design_task"], iterations=iters, optimizer=s["optimizer"], seed=s["seed"],
-                            camera=res.camera, out_dir=out, sampling=sampling,
-                            task_params=params, parameterization=s["parameterization"], knots=int(s["knots"]),
-                            n_levels=int(s["n_levels"]), progress=True,
+        d = doefab.optimize(**design_arguments(res, quick), out_dir=out, progress=True,
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {', '.join(res.differ)}"

@@ -656,6 +656,11 @@ def _opt(**kw):
                                         "task_params": {"kernel_size": 15, "arm_px": 4}, **kw})
 
 
+def _pace(**kw):
+    return doefab.design_time("streak", **{"iterations": 2, "camera": _cam(), "task_params": {"kernel_size": 15,
+                                                                                             "arm_px": 4}, **kw})
+
+
 def _field():
     import torch
 
@@ -771,6 +776,8 @@ API = [
      {NAN: nan, NEG: -1, ZERO: 0, UNIT: NA, BIG: VALID}),
     ("optimize", "batch", lambda v: _opt(batch=v), {NAN: nan, NEG: -2, ZERO: VALID, UNIT: NA, BIG: 10**12}),
     ("optimize", "n_levels", lambda v: _opt(n_levels=v), {NAN: nan, NEG: -16, ZERO: 0, UNIT: NA, BIG: 10**12}),
+    ("design_time", "steps", lambda v: _pace(steps=v), {NAN: nan, NEG: -1, ZERO: 0, UNIT: NA, BIG: 10**12}),
+    ("design_time", "iterations", lambda v: _pace(iterations=v), {NAN: nan, NEG: -1, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "kernel_size", lambda v: doefab.get_task("streak", kernel_size=v),
      {NAN: nan, NEG: -95, ZERO: 0, UNIT: NA, BIG: 10**12}),
     ("get_task", "period_m", lambda v: doefab.get_task("grating", period_m=v),

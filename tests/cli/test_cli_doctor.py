@@ -21,3 +21,12 @@ def test_doctor_out_replaces_only_its_own_report(tmp_path, capsys):
     mine.write_text("my notes")
     rc, _, err = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", mine], capsys)
     assert rc == 2 and "never replaces" in err and mine.read_text() == "my notes"
+
+
+def test_doctor_says_a_reused_design_costs_no_time_and_no_timing_leaves_the_row_out(tmp_path, capsys):
+    f = tmp_path / "d.json"
+    rc, out, _ = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--out", f], capsys)
+    row = next(r for r in json.loads(f.read_text())["system"] if r["quantity"] == "design stage's run time")
+    assert rc == 0 and row["value"] == 0.0 and "reused" in row["meaning"] and "design stage's run time" in out
+    rc, out, _ = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--no-timing"], capsys)
+    assert rc == 0 and "run time" not in out

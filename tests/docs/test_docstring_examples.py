@@ -4,7 +4,7 @@ import doctest
 
 import pytest
 
-CORE = ("Camera", "split_aperture_psf", "PSFPair", "optimize", "simulate_captures", "load_reconstructor")
+CORE = ("Camera", "split_aperture_psf", "PSFPair", "optimize", "design_time", "simulate_captures", "load_reconstructor")
 
 
 def _run_examples(obj, name: str) -> tuple[int, int]:
