@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import re
 import shutil
@@ -23,8 +24,9 @@ from pathlib import Path
 
 from doefab.errors import DoefabError
 
-__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "staging_dir", "OutputDir",
-           "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker", "mark_folder", "owned_by_doefab", "read_toml"]
+__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "json_ready", "staging_dir",
+           "OutputDir", "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker",
+           "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
 
@@ -70,6 +72,21 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 def atomic_write_json(path: str | Path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+def json_ready(obj):
+    """``obj`` with each non-finite float written as the scene files write it ("inf", "-inf", "nan"): strict JSON
+    readers (a browser's ``JSON.parse``, jq) refuse the ``Infinity`` and ``NaN`` that Python's json writes.
+
+    Example: ``json_ready({"margin": float("inf"), "rows": [1.0, float("nan")]})`` →
+    ``{"margin": "inf", "rows": [1.0, "nan"]}``."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if obj != obj else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    return obj
 
 
 _PLAIN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")

@@ -32,3 +32,15 @@ def test_files_and_folders_respect_the_umask(tmp_path, umask):
     assert stat.S_IMODE((tmp_path / "a" / "f.bin").stat().st_mode) == 0o666 & ~umask
     assert stat.S_IMODE((tmp_path / "s").stat().st_mode) == 0o777 & ~umask
     assert stat.S_IMODE((tmp_path / "s" / "g.bin").stat().st_mode) == 0o666 & ~umask
+
+
+def test_json_ready_writes_non_finite_numbers_as_the_scene_files_do_and_keeps_the_rest():
+    import json
+    import math
+
+    from doefab.io import json_ready
+
+    got = json_ready({"a": [1.5, float("inf"), (float("-inf"), float("nan"))], "b": {"c": math.pi, "d": "x"},
+                      "e": None, "f": 3})
+    assert got == {"a": [1.5, "inf", ["-inf", "nan"]], "b": {"c": math.pi, "d": "x"}, "e": None, "f": 3}
+    json.dumps(got, allow_nan=False)  # strict JSON

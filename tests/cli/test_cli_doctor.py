@@ -30,3 +30,16 @@ def test_doctor_says_a_reused_design_costs_no_time_and_no_timing_leaves_the_row_
     assert rc == 0 and row["value"] == 0.0 and "reused" in row["meaning"] and "design stage's run time" in out
     rc, out, _ = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--no-timing"], capsys)
     assert rc == 0 and "run time" not in out
+
+
+def test_doctors_json_is_strict_json_with_unbounded_margins_written_as_inf(tmp_path, capsys):
+    """The HDR scene's source-phase check at a plane wave has no bound to approach (margin ∞): the report writes it
+    "inf", which strict readers (a browser's JSON.parse) take, where Python's json would write Infinity."""
+    f = tmp_path / "d.json"
+    rc, _, _ = run_cli(["doctor", REPO / "scenes" / "hdr.toml", "--no-precision", "--no-timing", "--out", f], capsys)
+
+    def refuse(c):
+        raise ValueError(f"non-standard JSON constant {c}")
+
+    rows = json.loads(f.read_text(), parse_constant=refuse)["checks"]
+    assert rc == 0 and "inf" in [r["margin"] for r in rows]
