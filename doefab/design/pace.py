@@ -1,8 +1,8 @@
 """How long a design run takes on this machine: a few of its own steps timed and scaled to its iterations.
 
 ``design_time`` sets the run up exactly as ``optimize`` would (``optimize.prepare_run``: the same task, camera,
-grid, batch and device), takes one step to fill the plan's caches, times ``steps`` more and one evaluation of the
-full metric, and adds them up as the run spends its time:
+grid, batch and device), takes one step to fill the plan's caches, times ``steps`` more (their median: a stray slow
+step does not scale to the whole run) and one evaluation of the full metric, and adds them up as the run spends its time:
 
 - the set-up and first step, beyond an ordinary step (the PSF plan, the start);
 - ``iterations`` steps (Adam: one batch of (depth, wavelength) pairs and its gradient; nlopt: one evaluation over
@@ -24,7 +24,7 @@ __all__ = ["design_time"]
 
 
 def design_time(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0,
-                camera=None, device=None, steps: int = 2, **settings) -> dict:
+                camera=None, device=None, steps: int = 3, **settings) -> dict:
     """The wall time of ``optimize(task, iterations, optimizer, seed, camera, device=device, **settings)`` on this
     machine, from ``steps`` of its own steps (module docstring).
 
@@ -61,7 +61,7 @@ def design_time(task="streak", iterations: int | None = None, optimizer: str = "
     run.full_metric(False)
     _sync(run.dev)
     metric = time.perf_counter() - t
-    step = sorted(times)[len(times) // 2]
+    step = sorted(times)[(len(times) - 1) // 2]  # the median (of an even count, the lower middle one)
     cfg = run.cfg
     evals = len(range(0, cfg.iterations, cfg.eval_every)) + int((cfg.iterations - 1) % cfg.eval_every != 0)
     finish = 2 * cfg.sampling ** 2 * metric

@@ -17,8 +17,8 @@ from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks", "alias_free_px", "window_blur_checks",
-           "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
+           "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks", "alias_free_px",
+           "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 
@@ -237,6 +237,33 @@ def design_factor_checks(scene: Scene, cam, task, factor: int) -> list[str]:
     fix = " or ".join([f"design.sampling = {max(fits) if fits else 1}"] + ([depth_fix] if depth_fix else []))
     return [f"{key} {factor}: the design grid ({cam.doe_pixels // factor} px of {dcam.doe_pitch * 1e6:.3g} µm) is "
             f"too coarse for the PSF routes ({what}): set {fix}"]
+
+
+def optimizer_checks(scene: Scene, cam, cfg: dict) -> list[str]:
+    """nlopt's optimisers (``design.optimizer`` lbfgs, mma) take at most ``NLOPT_MAX_VARIABLES`` variables, a pixel
+    design's coded pixels on its design grid: ``doefab run`` would stop at the design stage otherwise. The fix names
+    the finest ``design.sampling`` that fits, or Adam."""
+    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+    from doefab.design.optimize import coded_mask, design_camera
+
+    def setting(key, default):
+        return scene.design.get(key, cfg.get(key, default))
+
+    opt, factor = setting("optimizer", "adam"), int(setting("sampling", 1))
+    if opt == "adam" or setting("parameterization", "pixel") != "pixel" or cam.doe_pixels % factor:
+        return []  # Adam takes any grid; a radial profile's knots are few; ``sampling_checks`` names a bad factor
+
+    def coded(f: int) -> int:
+        return int(coded_mask(design_camera(cam, f)).sum())
+
+    n = coded(factor)
+    if n <= NLOPT_MAX_VARIABLES:
+        return []
+    fits = next((f for f in range(factor + 1, 17) if cam.doe_pixels % f == 0 and coded(f) <= NLOPT_MAX_VARIABLES),
+                None)
+    fix = " or ".join(([f"design.sampling = {fits}"] if fits else []) + ['design.optimizer = "adam"'])
+    return [f"design.optimizer {opt}: the {cam.doe_pixels // factor}² px design grid has {n:,} coded pixels, above the "
+            f"{NLOPT_MAX_VARIABLES:,} variables nlopt's optimisers take: set {fix}"]
 
 
 def sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:

@@ -72,7 +72,8 @@ def design_arguments(res: ResolvedScene, quick: bool = False) -> dict:
 
 def redesign_note(res: ResolvedScene, quick: bool) -> str:
     """One line: why the committed design is not reused, what the new one runs (steps, grid), where its run time
-    is measured beforehand (``doefab doctor``) and how large its checkpoint grows."""
+    is measured beforehand (``doefab doctor``, which times the full run, not ``--quick``'s) and how large its
+    checkpoint grows."""
     s = res.settings
     why = "; ".join(k if isinstance(s[k], (dict, list)) else f"{k} {s[k]} (committed {c})"
                     for k, c in ((k, res.committed_settings[k]) for k in res.differ))
@@ -81,9 +82,9 @@ def redesign_note(res: ResolvedScene, quick: bool) -> str:
     ckpt = ""
     if s["parameterization"] == "pixel":  # the phase map and Adam's two moments, float32
         ckpt = f"; checkpoint ~{3 * 4 * grid**2 / 1e6:.0f} MB"
+    timed = "" if quick else "; doefab doctor measures its run time on this machine beforehand"
     return (f"the committed {s['design_task']} design is not reused: the scene sets {why}; a new design is optimised "
-            f"({iters} {s['optimizer']} iterations on a {grid}² grid; doefab doctor measures its run time on this "
-            f"machine beforehand{ckpt})")
+            f"({iters} {s['optimizer']} iterations on a {grid}² grid{timed}{ckpt})")
 
 
 def _copy_design(src: Path, dst: Path) -> None:

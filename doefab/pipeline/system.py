@@ -18,8 +18,8 @@ import math
 
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
-                                      design_grid_problems, distance_text, quick_sampling, sampling_checks,
-                                      aperture_key, grid_fixes, stop_checks, window_blur_checks)
+                                      design_grid_problems, distance_text, optimizer_checks, quick_sampling,
+                                      sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -357,7 +357,7 @@ def resolve(scene: Scene) -> ResolvedScene:
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
                          + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys), aperture)
                          + stop_checks(cam, aperture)
-                         + sampling_checks(scene, cam, cfg)
+                         + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg)
                          + design_factor_checks(scene, cam, task, factor)
                          + _holder_checks(scene, cam))
     if problems:

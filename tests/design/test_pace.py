@@ -42,20 +42,20 @@ class _Clock:
 
 
 def test_the_estimate_adds_set_up_steps_metrics_and_the_full_grid_finish(monkeypatch):
-    """A scripted clock: set-up 5 s beyond the first step, each step 1 s, a full metric 3 s; 50 steps with the metric
-    every 20 (steps 0, 20, 40 and the last, 49: 4 of them) and a grid coarsened 2× (the finish: two metrics on 4× the
-    pixels). By hand: 5 + 50·1 + 4·3 + 2·4·3 = 91 s."""
+    """A scripted clock: the first step (with the set-up) 6 s, the three timed steps 1.0, 5.0 (a stray slow one) and
+    1.2 s (median 1.2), a full metric 3 s; 50 steps with the metric every 20 (steps 0, 20, 40 and the last, 49: 4 of
+    them) and a grid coarsened 2× (the finish: two metrics on 4× the pixels). By hand: set-up 6 − 1.2 = 4.8, then
+    4.8 + 50·1.2 + 4·3 + 2·4·3 = 100.8 s."""
     clock = _Clock()
+    durations = iter([6.0, 1.0, 5.0, 1.2])
 
     class FakeRun:
         cfg = type("Cfg", (), {"iterations": 50, "eval_every": 20, "sampling": 2})()
         dcam = type("Cam", (), {"doe_pixels": 400})()
         dev = "cpu"
-        first = True
 
         def one_step(self, step):
-            clock.now += 6.0 if self.first else 1.0
-            self.first = False
+            clock.now += next(durations)
 
         def full_metric(self, quantized):
             clock.now += 3.0
@@ -63,8 +63,9 @@ def test_the_estimate_adds_set_up_steps_metrics_and_the_full_grid_finish(monkeyp
     monkeypatch.setattr(pace.time, "perf_counter", clock)
     monkeypatch.setattr(opt, "prepare_run", lambda *a, **k: FakeRun())
     t = pace.design_time("streak", steps=3)
-    assert t["seconds"] == pytest.approx(91.0)
-    assert (t["step_s"], t["metric_s"], t["setup_s"], t["evaluations"], t["grid_px"]) == (1.0, 3.0, 5.0, 4, 400)
+    assert t["seconds"] == pytest.approx(100.8)
+    assert (t["evaluations"], t["grid_px"]) == (4, 400)
+    assert (t["step_s"], t["metric_s"], t["setup_s"]) == pytest.approx((1.2, 3.0, 4.8))
 
 
 def test_steps_outside_their_range_are_one_clear_error():
