@@ -17,8 +17,8 @@ from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks", "alias_free_px",
-           "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
+           "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks", "nlopt_takes",
+           "alias_free_px", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 
@@ -211,10 +211,11 @@ def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:
     return out
 
 
-def design_factor_checks(scene: Scene, cam, task, factor: int) -> list[str]:
+def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None = None) -> list[str]:
     """A point at the nearest plane must be sampled finely enough on the full DOE grid and on the design grid
     (``design.sampling``, else the committed design's), and the window must stay inside the design grid's
-    alias-free field: the design stage computes its PSFs there. Each fix is for the design grid."""
+    alias-free field: the design stage computes its PSFs there. Each fix is for the design grid, and one that
+    the scene's optimiser takes (``nlopt_takes``; else with Adam)."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
     lam_min, z_near = min(task.wavelengths(cam)), min(task.depths(cam))
@@ -230,40 +231,57 @@ def design_factor_checks(scene: Scene, cam, task, factor: int) -> list[str]:
     if not bad:
         return []
     fits = [d for d in range(1, factor) if cam.doe_pixels % d == 0 and not design_grid_problems(cam, task, d)]
+    taken = [d for d in fits if nlopt_takes(scene, cam, cfg or {}, d)]
+    grid_fix = (f"design.sampling = {max(taken)}" if taken else
+                f'design.sampling = {max(fits)} with design.optimizer = "adam"' if fits else "design.sampling = 1")
     key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
     what = "; ".join(f"a point at the nearest plane changes its phase by {v:.2f} rad between design pixels"
                      if k == "step" else f"optics.kernel_px {task.kernel_size} reaches beyond the alias-free field "
                      f"({2 * v - 1:.0f} px)" for k, v in bad)
-    fix = " or ".join([f"design.sampling = {max(fits) if fits else 1}"] + ([depth_fix] if depth_fix else []))
+    fix = " or ".join([grid_fix] + ([depth_fix] if depth_fix else []))
     return [f"{key} {factor}: the design grid ({cam.doe_pixels // factor} px of {dcam.doe_pitch * 1e6:.3g} µm) is "
             f"too coarse for the PSF routes ({what}): set {fix}"]
 
 
-def optimizer_checks(scene: Scene, cam, cfg: dict) -> list[str]:
-    """nlopt's optimisers (``design.optimizer`` lbfgs, mma) take at most ``NLOPT_MAX_VARIABLES`` variables, a pixel
-    design's coded pixels on its design grid: ``doefab run`` would stop at the design stage otherwise. The fix names
-    the finest ``design.sampling`` that fits, or Adam."""
-    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+def nlopt_pixels(scene: Scene, cam, cfg: dict, factor: int) -> int | None:
+    """The variables nlopt would be given on the design grid coarsened by ``factor``: the coded pixels of a pixel
+    design whose ``design.optimizer`` (else the committed design's) is lbfgs or mma; None where nlopt does not run
+    (Adam takes any grid; a radial profile's knots are few)."""
     from doefab.design.optimize import coded_mask, design_camera
 
     def setting(key, default):
         return scene.design.get(key, cfg.get(key, default))
 
-    opt, factor = setting("optimizer", "adam"), int(setting("sampling", 1))
-    if opt == "adam" or setting("parameterization", "pixel") != "pixel" or cam.doe_pixels % factor:
-        return []  # Adam takes any grid; a radial profile's knots are few; ``sampling_checks`` names a bad factor
+    if setting("optimizer", "adam") == "adam" or setting("parameterization", "pixel") != "pixel":
+        return None
+    return int(coded_mask(design_camera(cam, factor)).sum())
 
-    def coded(f: int) -> int:
-        return int(coded_mask(design_camera(cam, f)).sum())
 
-    n = coded(factor)
-    if n <= NLOPT_MAX_VARIABLES:
-        return []
-    fits = next((f for f in range(factor + 1, 17) if cam.doe_pixels % f == 0 and coded(f) <= NLOPT_MAX_VARIABLES),
-                None)
+def nlopt_takes(scene: Scene, cam, cfg: dict, factor: int) -> bool:
+    """Whether the design stage's optimiser takes the design grid coarsened by ``factor`` (``nlopt_pixels``)."""
+    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+
+    n = nlopt_pixels(scene, cam, cfg, factor)
+    return n is None or n <= NLOPT_MAX_VARIABLES
+
+
+def optimizer_checks(scene: Scene, cam, cfg: dict, task) -> list[str]:
+    """nlopt's optimisers (``design.optimizer`` lbfgs, mma) take at most ``NLOPT_MAX_VARIABLES`` variables, a pixel
+    design's coded pixels on its design grid: ``doefab run`` would stop at the design stage otherwise. The fix names
+    the finest coarser ``design.sampling`` that nlopt takes and the PSF routes sample (``design_grid_problems``),
+    else Adam alone."""
+    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+
+    factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
+    if cam.doe_pixels % factor or nlopt_takes(scene, cam, cfg, factor):
+        return []  # ``sampling_checks`` names a factor that does not divide the grid
+    fits = next((f for f in range(factor + 1, 17) if cam.doe_pixels % f == 0 and nlopt_takes(scene, cam, cfg, f)
+                 and not design_grid_problems(cam, task, f)), None)
     fix = " or ".join(([f"design.sampling = {fits}"] if fits else []) + ['design.optimizer = "adam"'])
-    return [f"design.optimizer {opt}: the {cam.doe_pixels // factor}² px design grid has {n:,} coded pixels, above the "
-            f"{NLOPT_MAX_VARIABLES:,} variables nlopt's optimisers take: set {fix}"]
+    opt = scene.design.get("optimizer", cfg.get("optimizer"))
+    return [f"design.optimizer {opt}: the {cam.doe_pixels // factor}² px design grid has "
+            f"{nlopt_pixels(scene, cam, cfg, factor):,} coded pixels, above the {NLOPT_MAX_VARIABLES:,} variables "
+            f"nlopt's optimisers take: set {fix}"]
 
 
 def sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:

@@ -134,7 +134,8 @@ KEYS = (
     Key("optics", "kernel_px", "int", "px", 15, 1023, default="95, 191, 63",
         help="PSF window in sensor pixels"),
     Key("design", "optimizer", "choice", choices=("adam", "lbfgs", "mma"), default="the committed design's",
-        help="optimiser"),
+        help="optimiser; lbfgs and mma (nlopt) take a pixel design of limited size: doctor names the design grid "
+             "they take"),
     Key("design", "iterations", "int", "steps", 1, 100000, default="the committed design's", help="optimiser steps"),
     Key("design", "sampling", "int", "DOE px", 1, 16, default="the committed design's",
         help="DOE pixels per design pixel (2: a half grid, 4× faster)"),

@@ -357,8 +357,8 @@ def resolve(scene: Scene) -> ResolvedScene:
             problems += (_checks(scene, cam, task) + _sensor_checks(scene, sensor, task, cam)
                          + window_blur_checks(cam, task, lambda **keys: _camera_variant(scene, keys), aperture)
                          + stop_checks(cam, aperture)
-                         + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg)
-                         + design_factor_checks(scene, cam, task, factor)
+                         + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg, task)
+                         + design_factor_checks(scene, cam, task, factor, cfg)
                          + _holder_checks(scene, cam))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))

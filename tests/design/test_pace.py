@@ -41,13 +41,14 @@ class _Clock:
         return self.now
 
 
-def test_the_estimate_adds_set_up_steps_metrics_and_the_full_grid_finish(monkeypatch):
-    """A scripted clock: the first step (with the set-up) 6 s, the three timed steps 1.0, 5.0 (a stray slow one) and
-    1.2 s (median 1.2), a full metric 3 s; 50 steps with the metric every 20 (steps 0, 20, 40 and the last, 49: 4 of
-    them) and a grid coarsened 2× (the finish: two metrics on 4× the pixels). By hand: set-up 6 − 1.2 = 4.8, then
-    4.8 + 50·1.2 + 4·3 + 2·4·3 = 100.8 s."""
+@pytest.mark.parametrize("steps, timed, step_s", [(None, [1.0, 5.0, 1.2], 1.2), (2, [1.0, 5.0], 1.0)])
+def test_the_estimate_adds_set_up_steps_metrics_and_the_full_grid_finish(monkeypatch, steps, timed, step_s):
+    """A scripted clock: the first step (with the set-up) 6 s, then the timed steps — by default three, 1.0, 5.0 (a
+    stray slow one) and 1.2 s, median 1.2; two, 1.0 and 5.0, the lower middle 1.0 —, a full metric 3 s; 50 steps
+    with the metric every 20 (steps 0, 20, 40 and the last, 49: 4 of them) and a grid coarsened 2× (the finish: two
+    metrics on 4× the pixels). By hand: (6 − step) + 50·step + 4·3 + 2·4·3 = 100.8 s for 1.2, 91 s for 1.0."""
     clock = _Clock()
-    durations = iter([6.0, 1.0, 5.0, 1.2])
+    durations = iter([6.0, *timed])
 
     class FakeRun:
         cfg = type("Cfg", (), {"iterations": 50, "eval_every": 20, "sampling": 2})()
@@ -62,10 +63,10 @@ def test_the_estimate_adds_set_up_steps_metrics_and_the_full_grid_finish(monkeyp
 
     monkeypatch.setattr(pace.time, "perf_counter", clock)
     monkeypatch.setattr(opt, "prepare_run", lambda *a, **k: FakeRun())
-    t = pace.design_time("streak", steps=3)
-    assert t["seconds"] == pytest.approx(100.8)
+    t = pace.design_time("streak", **({} if steps is None else {"steps": steps}))
+    assert t["seconds"] == pytest.approx({1.2: 100.8, 1.0: 91.0}[step_s])
     assert (t["evaluations"], t["grid_px"]) == (4, 400)
-    assert (t["step_s"], t["metric_s"], t["setup_s"]) == pytest.approx((1.2, 3.0, 4.8))
+    assert (t["step_s"], t["metric_s"], t["setup_s"]) == pytest.approx((step_s, 3.0, 6.0 - step_s))
 
 
 def test_steps_outside_their_range_are_one_clear_error():

@@ -59,3 +59,13 @@ def test_a_grid_beyond_the_fft_memory_limit_is_not_timed(tmp_path, monkeypatch):
     monkeypatch.setattr(pace, "design_time", lambda **k: pytest.fail("timed a grid the memory check refuses"))
     fact = doctor.design_time_fact(res)
     assert fact["value"] != fact["value"] and "not measured" in fact["meaning"]  # nan
+
+
+def test_the_quick_runs_note_does_not_send_the_user_to_doctor(tmp_path):
+    """Doctor times the full run; a --quick run's design is its few coarse steps."""
+    from doefab.pipeline.stages import redesign_note
+
+    res = resolve(_new_design_scene(tmp_path))
+    full, quick = redesign_note(res, False), redesign_note(res, True)
+    assert "doefab doctor measures its run time" in full and "doctor" not in quick
+    assert "(60 adam iterations on a 3200² grid" in full and "(10 adam iterations on a 800² grid" in quick

@@ -53,3 +53,21 @@ def test_adam_and_a_radial_profile_are_not_limited(tmp_path):
     res = resolve(_scene(tmp_path, **{'optimizer = "adam"': 'optimizer = "lbfgs"',
                                       "[design]": '[design]\nparameterization = "radial"'}))
     assert res.settings["parameterization"] == "radial"
+
+
+def test_no_fix_sends_the_scene_back_and_forth_between_nlopt_and_the_grid_checks(tmp_path):
+    """A 851 px window on the HDR camera: the alias-free field reaches λ·s/(2p) = 486 nm · 50 mm / (2 · 2.7 µm) =
+    833 sensor px (5.4 µm) from the axis on the full grid and 417 on the half grid, and the window needs 426. On the
+    full grid nlopt is refused and no coarser grid holds the window: Adam alone is named, and it passes. From a 4×
+    grid (too coarse for the window, though nlopt would take it) the grid that holds it is named with Adam."""
+    reach = {f: 486e-9 * 0.05 / (2 * 2.7e-6 * f) / 5.4e-6 for f in (1, 2)}
+    assert reach[1] > 851 / 2 + 0.5 > reach[2]
+    lines = {'optimizer = "adam"': 'optimizer = "lbfgs"', "kernel_px = 95": "kernel_px = 851"}
+    with pytest.raises(DoefabError) as exc:
+        resolve(_scene(tmp_path, **lines))
+    assert 'set design.optimizer = "adam"' in str(exc.value) and "design.sampling =" not in str(exc.value)
+    assert resolve(_scene(tmp_path, **{"kernel_px = 95": "kernel_px = 851"})).settings["optimizer"] == "adam"
+    with pytest.raises(DoefabError) as exc:
+        resolve(_scene(tmp_path, **lines, **{"sampling = 1": "sampling = 4"}))
+    assert "1 problem(s)" in str(exc.value) and "nlopt" not in str(exc.value)  # the 4× grid is nlopt's to take
+    assert 'set design.sampling = 1 with design.optimizer = "adam"' in str(exc.value)
