@@ -8,7 +8,7 @@ import torch
 
 from doefab.errors import DoefabError
 
-__all__ = ["run_nlopt", "NLOPT_MAX_VARIABLES"]
+__all__ = ["run_nlopt", "check_nlopt_size", "NLOPT_MAX_VARIABLES"]
 
 NLOPT_MAX_VARIABLES = 2_000_000  # nlopt 2.x's L-BFGS fails (runtime_error) from about 2.1 M variables
 
@@ -23,16 +23,23 @@ def run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mask
     lower the loss at all is an error; a later restart without progress ends the run with a stated reason,
     which is returned (None when the whole budget ran). Only the coded pixels (``mask``) are variables.
     """
+    check_nlopt_size(name, mask)
     idx = torch.nonzero(mask.flatten() > 0).flatten().to(theta.device)
-    if idx.numel() > NLOPT_MAX_VARIABLES:
-        raise DoefabError(f"{name}: this design has {idx.numel():,} coded DOE pixels but nlopt's optimisers take at "
-                          f"most {NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
     run = _NloptRun(name, theta, idx, objective, record, step0, iterations)
     run.stage(min(qat_start, iterations), "continuous stage")
     if qat_start < iterations:  # a continuous stage that gave up early leaves its budget unused; QAT still runs
         run.step = max(run.step, qat_start)
         run.stage(iterations, "quantization-aware stage")
     return "; ".join(run.reasons) or None
+
+
+def check_nlopt_size(name: str, mask) -> None:
+    """One error, before any work, where the variables ``mask`` marks (a pixel design's coded pixels, a radial
+    profile's knots) are more than nlopt's optimisers take (``NLOPT_MAX_VARIABLES``)."""
+    n = int((mask > 0).sum())
+    if n > NLOPT_MAX_VARIABLES:
+        raise DoefabError(f"{name}: this design has {n:,} coded DOE pixels but nlopt's optimisers take at most "
+                          f"{NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
 
 
 class _NloptRun:

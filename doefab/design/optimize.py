@@ -22,7 +22,7 @@ from doefab._devices import resolve_device
 from doefab.design.checkpoint import load_checkpoint, save_checkpoint
 from doefab.design.design import Design
 from doefab.design.finish import coded_mask, finalize_levels, finish_design, plain_level
-from doefab.design.nloptrun import run_nlopt
+from doefab.design.nloptrun import check_nlopt_size, run_nlopt
 from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make_parameterization, quantize_ste,
                                             theta_to_height)
 from doefab.errors import DoefabError
@@ -177,7 +177,10 @@ def prepare_run(task="streak", iterations: int | None = None, optimizer: str = "
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"
     if cfg.start not in STARTS:
         raise DoefabError(f"unknown start {cfg.start!r}: choose one of {STARTS}")
-    return DesignRun(task_obj, cfg, cam, out_dir, dev)
+    run = DesignRun(task_obj, cfg, cam, out_dir, dev)
+    if cfg.optimizer != "adam":  # refused before any step (and before design_time times one)
+        check_nlopt_size(cfg.optimizer, run.param.variable_mask(run.mask))
+    return run
 
 
 class DesignRun:

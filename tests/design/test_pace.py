@@ -97,3 +97,15 @@ def test_one_step_of_nlopt_is_one_fresh_gradient_and_no_move():
     (expected,) = torch.autograd.grad(run.objective(1), run.theta)
     assert bool((run.theta.detach() == before).all())
     assert run.theta.grad.numpy() == pytest.approx(expected.numpy(), rel=1e-5, abs=1e-9)
+
+
+def test_a_design_nlopt_would_refuse_is_refused_before_it_is_timed(monkeypatch):
+    """``prepare_run`` refuses what the nlopt driver would (``check_nlopt_size``): here with the limit lowered below
+    the small test grid's coded pixels, so that no large grid is built."""
+    nloptrun = importlib.import_module("doefab.design.nloptrun")
+    monkeypatch.setattr(nloptrun, "NLOPT_MAX_VARIABLES", 100)
+    with monkeypatch.context() as m:
+        m.setattr(opt.DesignRun, "one_step", lambda self, step: pytest.fail("a refused design was stepped"))
+        with pytest.raises(DoefabError, match="nlopt's optimisers take at most 100 variables"):
+            pace.design_time("streak", iterations=5, optimizer="lbfgs", camera=doefab.Camera(**CAM))
+    assert pace.design_time("streak", iterations=5, camera=doefab.Camera(**CAM))["iterations"] == 5  # Adam: no limit
