@@ -2,7 +2,8 @@
 
 ``design_time`` sets the run up exactly as ``optimize`` would (``optimize.prepare_run``: the same task, camera,
 grid, batch and device), takes one step to fill the plan's caches, times ``steps`` more (their median: a stray slow
-step does not scale to the whole run) and one evaluation of the full metric, and adds them up as the run spends its time:
+step does not scale to the whole run) and one evaluation of the full metric, and adds them up as the run spends
+its time:
 
 - the set-up and first step, beyond an ordinary step (the PSF plan, the start);
 - ``iterations`` steps (Adam: one batch of (depth, wavelength) pairs and its gradient; nlopt: one evaluation over
