@@ -8,7 +8,7 @@ import torch
 
 from doefab.errors import DoefabError
 
-__all__ = ["run_nlopt", "check_nlopt_size", "NLOPT_MAX_VARIABLES"]
+__all__ = ["run_nlopt", "check_nlopt_size", "nlopt_takes_variables", "NLOPT_MAX_VARIABLES"]
 
 NLOPT_MAX_VARIABLES = 2_000_000  # nlopt 2.x's L-BFGS fails (runtime_error) from about 2.1 M variables
 
@@ -33,11 +33,16 @@ def run_nlopt(name, theta, objective, record, step0, iterations, qat_start, mask
     return "; ".join(run.reasons) or None
 
 
+def nlopt_takes_variables(n: int) -> bool:
+    """Whether nlopt's optimisers take ``n`` variables (at most ``NLOPT_MAX_VARIABLES``)."""
+    return n <= NLOPT_MAX_VARIABLES
+
+
 def check_nlopt_size(name: str, mask) -> None:
     """One error, before any work, where the variables ``mask`` marks (a pixel design's coded pixels, a radial
-    profile's knots) are more than nlopt's optimisers take (``NLOPT_MAX_VARIABLES``)."""
+    profile's knots) are more than nlopt's optimisers take (``nlopt_takes_variables``)."""
     n = int((mask > 0).sum())
-    if n > NLOPT_MAX_VARIABLES:
+    if not nlopt_takes_variables(n):
         raise DoefabError(f"{name}: this design has {n:,} coded DOE pixels but nlopt's optimisers take at most "
                           f"{NLOPT_MAX_VARIABLES:,} variables: use --sampling 2 (or more) or --optimizer adam")
 

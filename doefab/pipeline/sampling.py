@@ -259,10 +259,10 @@ def nlopt_pixels(scene: Scene, cam, cfg: dict, factor: int) -> int | None:
 
 def nlopt_takes(scene: Scene, cam, cfg: dict, factor: int) -> bool:
     """Whether the design stage's optimiser takes the design grid coarsened by ``factor`` (``nlopt_pixels``)."""
-    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+    from doefab.design.nloptrun import nlopt_takes_variables
 
     n = nlopt_pixels(scene, cam, cfg, factor)
-    return n is None or n <= NLOPT_MAX_VARIABLES
+    return n is None or nlopt_takes_variables(n)
 
 
 def optimizer_checks(scene: Scene, cam, cfg: dict, task) -> list[str]:
@@ -270,17 +270,20 @@ def optimizer_checks(scene: Scene, cam, cfg: dict, task) -> list[str]:
     design's coded pixels on its design grid: ``doefab run`` would stop at the design stage otherwise. The fix names
     the finest coarser ``design.sampling`` that nlopt takes and the PSF routes sample (``design_grid_problems``),
     else Adam alone."""
-    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES
+    from doefab.design.nloptrun import NLOPT_MAX_VARIABLES, nlopt_takes_variables
 
     factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
-    if cam.doe_pixels % factor or nlopt_takes(scene, cam, cfg, factor):
+    if cam.doe_pixels % factor:
         return []  # ``sampling_checks`` names a factor that does not divide the grid
+    n = nlopt_pixels(scene, cam, cfg, factor)  # counted once: a large grid's mask takes a while
+    if n is None or nlopt_takes_variables(n):
+        return []
     fits = next((f for f in range(factor + 1, 17) if cam.doe_pixels % f == 0 and nlopt_takes(scene, cam, cfg, f)
                  and not design_grid_problems(cam, task, f)), None)
     fix = " or ".join(([f"design.sampling = {fits}"] if fits else []) + ['design.optimizer = "adam"'])
     opt = scene.design.get("optimizer", cfg.get("optimizer"))
     return [f"design.optimizer {opt}: the {cam.doe_pixels // factor}² px design grid has "
-            f"{nlopt_pixels(scene, cam, cfg, factor):,} coded pixels, above the {NLOPT_MAX_VARIABLES:,} variables "
+            f"{n:,} coded pixels, above the {NLOPT_MAX_VARIABLES:,} variables "
             f"nlopt's optimisers take: set {fix}"]
 
 

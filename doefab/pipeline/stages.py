@@ -106,10 +106,10 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         info = {"status": "reused", "why": f"the scene's design settings equal the committed design "
                                           f"{res.settings['design_task']} (shipped with doefab)"}
     else:
-        s = res.settings
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
-        iters, sampling = _design_run(s, quick, res.quick_sampling)
-        d = doefab.optimize(**design_arguments(res, quick), out_dir=out, progress=True,
+        args = design_arguments(res, quick)
+        iters, sampling = args["iterations"], args["sampling"]
+        d = doefab.optimize(**args, out_dir=out, progress=True,
                             resume=(out / "checkpoint.pt").is_file())  # an interrupted run's, same inputs
         d.save(out)
         info = {"status": "ran", "why": f"settings differ from the committed design in {', '.join(res.differ)}"
