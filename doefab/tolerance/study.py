@@ -205,8 +205,8 @@ def _quantized_row(design_dir, judge, height, n, supersample, networks, weights_
     d = judge.design
     mapped = f"the {d.n_levels}-level map"
     if n is None and height is None:
-        return {"levels": "continuous", "metric": float("nan"), "worst": float("nan"),
-                "l1_to_nominal": float("nan"), "source": f"n/a: the folder keeps only {mapped}"}
+        return {"levels": "continuous", "metric": None, "worst": None,  # no value: JSON's null, not NaN
+                "l1_to_nominal": None, "source": f"n/a: the folder keeps only {mapped}"}
     h2pi = d.camera.material.height_2pi(d.camera.design_wavelength)
     if n is None:
         h = np.mod(height, h2pi)

@@ -115,6 +115,17 @@ def test_quick_run_end_to_end(quick_run):
     assert (masks / "verification.json").is_file()
 
 
+def _refuse(constant):
+    raise ValueError(f"{constant}: not JSON, a browser's JSON.parse and jq refuse it")
+
+
+def test_every_json_file_the_run_writes_is_strict_json(quick_run):
+    files = sorted(quick_run.rglob("*.json"))
+    assert len(files) >= 5  # run.json and each stage's records
+    for f in files:
+        json.loads(f.read_text(), parse_constant=_refuse)
+
+
 def test_second_run_reuses_unchanged_stages_and_force_recomputes_one(quick_run):
     out = quick_run
     assert main(["run", str(REPO / "scenes" / "hdr.toml"), "--quick", "--out", str(out), "--force", "holder"]) == 0

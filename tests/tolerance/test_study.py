@@ -246,6 +246,10 @@ def test_the_yield_figure_draws_wilsons_band_for_every_n(tmp_path, monkeypatch):
     assert drawn["hi"][0] - drawn["lo"][0] > 0.5  # one passing part: Wilson is wide, Wald would be 0
 
 
+def _refuse(constant):
+    raise ValueError(f"{constant} is not JSON: a browser's JSON.parse refuses it")
+
+
 def test_quantization_rows_say_what_they_were_quantized_from(design_dir):
     rows = study.quantization_study(design_dir, levels=(None, 16, 8))
     assert rows[0]["levels"] == "continuous" and "n/a" in rows[0]["source"]  # this folder has no continuous design
@@ -650,6 +654,8 @@ def test_the_quantization_study_through_the_network_shows_what_each_level_count_
     rows = {r["levels"]: r for r in res["quantization"]}
     assert list(rows) == ["continuous", 16, 8, 4, 2] and len(judged) == 4  # this folder keeps no continuous design
     assert "network" not in rows["continuous"]
+    strict = json.loads((tmp_path / "q" / "tolerance.json").read_text(), parse_constant=_refuse)  # a browser reads it
+    assert [strict["quantization"][0][k] for k in ("metric", "worst", "l1_to_nominal")] == [None, None, None]
     ref = rows[16]["network_scenes"]["nominal_psf"]["psnr_highlight"]
     assert "network_delta" not in rows[16]
     for n in (8, 4, 2):
