@@ -153,6 +153,22 @@ def _check_window(camera: Camera, depths, k: int) -> None:
                       f"depths nearer the focus, or pass PSFPlan(check=False) to accept PSFs cut by the window")
 
 
+def _check_stop(camera: Camera) -> None:
+    """Refuse a camera whose lens pupil is narrower than the DOE's baffle (``Camera.lens_cuts_doe``): the lens
+    would block the baffle's outer ring and split the aperture at its own stop, while the PSFs carry the whole
+    baffle's light, split at the DOE."""
+    if not camera.lens_cuts_doe:
+        return
+    pupil, doe = camera.lens_pupil_diameter, camera.aperture_diameter
+    raise DoefabError(f"Camera: the lens's {pupil * 1e3:.2f} mm entrance pupil (focal_length / lens_f_number = "
+                      f"{camera.focal_length * 1e3:g} mm / {camera.lens_f_number:g}) is narrower than the DOE's "
+                      f"{doe * 1e3:.2f} mm baffle, so the lens would block the DOE's outer ring, which the PSFs "
+                      f"carry: make the DOE the stop with aperture_diameter ≤ {math.floor(pupil * 1e6) / 1e6:g} m, "
+                      f"set lens_f_number to the lens's own wide-open f-number if it opens wider (≤ "
+                      f"{math.floor(camera.focal_length / doe * 1e3) / 1e3:g} holds this DOE), or pass "
+                      f"PSFPlan(check=False) to accept PSFs that ignore the lens's stop")
+
+
 class PSFPlan:
     """Precomputed split-aperture PSF model for one camera, wavelength list, depth list and window.
 
@@ -168,7 +184,8 @@ class PSFPlan:
         precision: ``"float32"`` (default) or ``"float64"``.
         center: (u, v) sensor position of the window's centre pixel, metres.
         check: run the routes' sampling checks and, for a centred window, check that it holds the plain half's
-            defocus blur at every depth (``Camera.window_holds_blur``): refuse rather than return a wrong PSF.
+            defocus blur at every depth (``Camera.window_holds_blur``), and that the lens's pupil does not cut
+            the DOE (``Camera.lens_cuts_doe``): refuse rather than return a wrong PSF.
         device: where the PSFs are computed: "auto" (CUDA when torch sees a GPU), "cpu", "cuda" or "cuda:N";
             None: the current default (``doefab._devices.default_device``). The plan's precomputed tensors live
             there; ``half_psf`` returns tensors there, ``__call__`` returns the pair where the height came from
@@ -198,6 +215,8 @@ class PSFPlan:
         pupil_oversample = _validate.number_in("pupil_oversample", pupil_oversample, 1, 64, integer=True)
         self.center = _validate.sensor_position("center", center)
         self.check = check
+        if check:
+            _check_stop(camera)
         n_idx = camera.material.index(np.asarray(self.wavelengths))
         self._k = [2 * math.pi / lam for lam in self.wavelengths]
         self._dn = [float(v) - 1.0 for v in np.atleast_1d(n_idx)]

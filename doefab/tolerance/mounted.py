@@ -58,7 +58,7 @@ def stop_case(camera: Camera) -> str:
     if camera.doe_is_stop:
         return f"the DOE's {a} mm baffle is narrower than {pupil}: it is the aperture stop, {doe_stop}"
     return (f"{pupil} is narrower than the DOE's {a} mm baffle: the lens is the stop, {lens_stop}; the model still "
-            f"bounds the light by the baffle, which a scene refuses beyond {STOP_TOLERANCE * 100:g} % "
+            f"bounds the light by the baffle, which a scene and a checked PSFPlan refuse beyond {STOP_TOLERANCE * 100:g} % "
             f"(Camera.lens_cuts_doe)")
 
 

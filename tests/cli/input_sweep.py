@@ -739,6 +739,8 @@ API = [
     ("PSFPlan", "wavelength", lambda v: _plan(wavelengths=[v]), {NAN: nan, NEG: -550e-9, ZERO: 0.0, UNIT: 550.0,
                                                                  BIG: 1e12}),
     ("PSFPlan", "kernel_size", lambda v: _plan(kernel_size=v), {NAN: nan, NEG: -15, ZERO: 0, UNIT: NA, BIG: 10**12}),
+    ("PSFPlan", "lens_f_number", lambda v: doefab.PSFPlan(_cam(lens_f_number=v), [550e-9], [5.0], 15),
+     {NAN: nan, NEG: -1.8, ZERO: 0.0, UNIT: NA, BIG: 60.0}),  # 60: a pupil narrower than the DOE's baffle
     ("angular_spectrum", "pitch", lambda v: _asm(pitch=v), {NAN: nan, NEG: -5.4e-6, ZERO: 0.0, UNIT: 5.4, BIG: 1e12}),
     ("angular_spectrum", "wavelength", lambda v: _asm(wavelength=v),
      {NAN: nan, NEG: -550e-9, ZERO: 0.0, UNIT: 550.0, BIG: 1e12}),
