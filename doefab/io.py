@@ -24,7 +24,8 @@ from pathlib import Path
 
 from doefab.errors import DoefabError
 
-__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "json_ready", "staging_dir",
+__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "json_ready", "read_json",
+           "from_json_ready", "staging_dir",
            "OutputDir", "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker",
            "mark_folder", "owned_by_doefab", "read_toml"]
 
@@ -71,7 +72,33 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 
 def atomic_write_json(path: str | Path, obj) -> Path:
-    return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+    """Write ``obj`` as strict JSON (``json_ready``: a non-finite number as "inf", "-inf" or "nan"), which a
+    browser's ``JSON.parse`` and jq read; ``read_json`` gives the numbers back."""
+    return atomic_write_text(path, json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
+
+
+def read_json(path: str | Path):
+    """A JSON file doefab wrote (``atomic_write_json``), each "inf", "-inf" or "nan" string a float again; raises
+    OSError or ValueError as ``json.loads`` does.
+
+    Example: a file holding ``{"margin": "inf"}`` → ``{"margin": inf}``."""
+    return from_json_ready(json.loads(Path(path).read_text()))
+
+
+_NON_FINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
+def from_json_ready(obj):
+    """``json_ready``'s inverse: each "inf", "-inf" or "nan" string a float.
+
+    Example: ``from_json_ready({"rows": [1.0, "nan"]})`` → ``{"rows": [1.0, nan]}``."""
+    if isinstance(obj, str):
+        return _NON_FINITE.get(obj, obj)
+    if isinstance(obj, dict):
+        return {k: from_json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [from_json_ready(v) for v in obj]
+    return obj
 
 
 def json_ready(obj):

@@ -44,3 +44,38 @@ def test_json_ready_writes_non_finite_numbers_as_the_scene_files_do_and_keeps_th
                       "e": None, "f": 3})
     assert got == {"a": [1.5, "inf", ["-inf", "nan"]], "b": {"c": math.pi, "d": "x"}, "e": None, "f": 3}
     json.dumps(got, allow_nan=False)  # strict JSON
+
+
+def _refuse(constant):
+    raise ValueError(f"{constant}: not strict JSON")
+
+
+def test_json_files_are_strict_and_read_back_with_their_non_finite_numbers(tmp_path):
+    """``atomic_write_json`` writes what a strict parser (a browser's ``JSON.parse``, jq) reads; ``read_json`` gives
+    back the same numbers, infinities and NaN included; other strings stay strings."""
+    import json
+    import math
+
+    from doefab.io import atomic_write_json, read_json
+
+    obj = {"margin": float("inf"), "low": float("-inf"), "rows": [1.25, float("nan")], "name": "x", "n": 3,
+           "none": None, "nested": {"focus_distance_m": "inf"}}
+    p = atomic_write_json(tmp_path / "r.json", obj)
+    strict = json.loads(p.read_text(), parse_constant=_refuse)
+    assert strict["margin"] == "inf" and strict["low"] == "-inf" and strict["rows"] == [1.25, "nan"]
+    got = read_json(p)
+    assert got["margin"] == math.inf and got["low"] == -math.inf and math.isnan(got["rows"][1])
+    assert got["rows"][0] == 1.25 and got["name"] == "x" and got["n"] == 3 and got["none"] is None
+    assert got["nested"]["focus_distance_m"] == math.inf  # a distance record's "inf" is the number it stands for
+
+
+def test_a_cached_tolerance_step_is_reused_when_its_key_holds_infinities(tmp_path):
+    """A resumed study reuses a step whose key holds an infinity (as a number or a distance record's "inf"): the
+    key is compared as the file is read back."""
+    from doefab.tolerance.report import cached_step
+
+    key = {"depths_m": ["inf", 2.0], "limit": float("inf")}
+    calls, reused = [], []
+    for _ in range(2):
+        cached_step(tmp_path, "tornado", key, lambda: calls.append(1) or [1.0, float("nan")], reused)
+    assert len(calls) == 1 and reused == ["tornado"]

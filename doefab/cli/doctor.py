@@ -33,7 +33,7 @@ def run(args) -> int:
 def _diagnose(args, scene) -> int:
     from doefab._devices import describe_device
     from doefab.errors import CheckFailed
-    from doefab.io import atomic_write_json, json_ready
+    from doefab.io import atomic_write_json
     from doefab.pipeline.doctor import design_time_fact, diagnose, explain
     from doefab.pipeline.system import resolve
 
@@ -53,8 +53,8 @@ def _diagnose(args, scene) -> int:
         print(f"{'ok  ' if r['ok'] else 'FAIL'} {r['check']}: {val} {r['unit']} (limit {r['bound']} {r['limit']:.4g}, margin "
               f"{r['margin']:.3g})" + (f" — fix: {r['fix']}" if r["fix"] else ""))
     if args.out:
-        atomic_write_json(args.out, json_ready({"written_by": WRITTEN_BY, "scene": str(args.scene), "system": facts,
-                                                "warnings": res.warnings, "checks": rows}))  # strict JSON
+        atomic_write_json(args.out, {"written_by": WRITTEN_BY, "scene": str(args.scene), "system": facts,
+                                     "warnings": res.warnings, "checks": rows})  # strict JSON: margins may be ∞
     bad = [r["check"] for r in rows if not r["ok"]]
     if bad:
         raise CheckFailed(f"{len(bad)} check(s) fail: {'; '.join(bad)}")

@@ -22,7 +22,7 @@ from doefab.errors import DoefabError
 from doefab.validate import distance_or_inf, distance_record
 from doefab.fabrication.levels import levels_sha256, levels_to_height
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
-from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text
+from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
 from doefab.optics.camera import Camera
 
 __all__ = ["Design", "levels_sha256", "FORMAT_VERSION"]
@@ -141,7 +141,7 @@ class Design:
         if not meta_path.is_file():
             raise DoefabError(f"{path} is not a design folder: design.json is missing")
         try:
-            meta = json.loads(meta_path.read_text())
+            meta = read_json(meta_path)
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise DoefabError(f"{meta_path} is not valid JSON ({exc})") from None
         meta = _check_meta(meta, meta_path)

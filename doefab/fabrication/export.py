@@ -7,7 +7,6 @@ then moves the folder into place: no half-written mask set survives a failure.
 from __future__ import annotations
 
 import io
-import json
 import math
 import shutil
 import time
@@ -27,7 +26,7 @@ from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readm
 from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_layout
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
-from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, staging_dir
+from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, read_json, staging_dir
 from doefab.optics.camera import Camera
 
 __all__ = ["MaskOptions", "LevelMap", "export_masks", "layout_levels"]
@@ -266,7 +265,7 @@ def _levels_of(n_levels, design_dir) -> int:
     if meta is None or not meta.is_file():
         return n_levels
     try:
-        recorded = json.loads(meta.read_text()).get("n_levels", DEFAULT_LEVELS)
+        recorded = read_json(meta).get("n_levels", DEFAULT_LEVELS)
     except (OSError, ValueError, AttributeError):
         raise DoefabError(f"{meta} is not a readable design record: load the design with doefab.Design.load "
                           f"to see why") from None

@@ -10,7 +10,6 @@ before it was recorded has 16 levels) and names every field that disagrees.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from doefab.diekey import SECOND_CHAMFER
 from doefab.errors import DoefabError
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
+from doefab.io import read_json
 from doefab.optics.materials import Material, material_by_name
 
 __all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM", "MASK_SET_FORMAT"]
@@ -118,7 +118,7 @@ def _etch_problems(layers, depths_nm: list[float]) -> list[str]:
 
 def _against_design(man: dict, design_json: Path) -> list[str]:
     try:
-        meta = json.loads(design_json.read_text())
+        meta = read_json(design_json)
         cam = meta["camera"]
         lam, name = float(cam["design_wavelength_m"]), cam["material"]["name"]
         levels = meta.get("n_levels", DEFAULT_LEVELS)

@@ -16,7 +16,6 @@ isolated single pixels.
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.layers import etch_layer
 from doefab.fabrication.layout_check import check_layout, expected_layout, listed_layers
 from doefab.fabrication.layout_read import LayerPolygons, LayoutFile
+from doefab.io import read_json
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_problems, fab_readme, manifest_levels
 from doefab.fabrication.process import mask_count
 
@@ -192,7 +192,7 @@ def verify_mask_set(folder: str | Path, levels: np.ndarray | None = None, use_kl
     if not mpath.is_file():
         raise DoefabError(f"{folder} is not a mask set (manifest.json is missing): give the folder doefab masks wrote")
     try:
-        man = json.loads(mpath.read_text())
+        man = read_json(mpath)
     except (ValueError, UnicodeDecodeError) as exc:
         raise CheckFailed(f"{mpath} is not valid JSON ({exc}): the set is corrupt; export it again") from None
     _check_manifest(man, mpath)

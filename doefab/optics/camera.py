@@ -129,8 +129,8 @@ class Camera:
         """True when the lens's entrance pupil is narrower than the DOE's baffle by more than ``STOP_TOLERANCE``:
         the lens then blocks the DOE's outer ring and splits the aperture at its own stop, while the PSFs are
         computed over the whole baffle, split at the DOE. Scenes (``pipeline.sampling.stop_checks``) and
-        ``PSFPlan`` (unless ``check=False``) refuse such a camera; the about-equal case is modelled (the DOE's diffraction over the gap
-        to the lens is propagated).
+        ``PSFPlan`` (unless ``check=False``) refuse such a camera; the about-equal case is modelled (the DOE's
+        diffraction over the gap to the lens is propagated).
 
         Example: ``Camera(lens_f_number=8.0).lens_cuts_doe`` is True (a 6.2 mm pupil against the 8.64 mm DOE)."""
         return self.lens_pupil_diameter < self.aperture_diameter * (1 - STOP_TOLERANCE)

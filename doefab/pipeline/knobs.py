@@ -11,9 +11,9 @@ marked and a caption saying whether the plot is this run's or a repository-wide 
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
+from doefab.io import read_json
 from doefab.plotting import save_figure
 
 __all__ = ["knob_plots", "committed_point", "BENCHMARK", "REPO"]
@@ -140,8 +140,8 @@ def committed_point(design_name: str, design_dir: Path) -> tuple[tuple[float, fl
     from doefab.errors import DoefabError
 
     try:
-        meta = json.loads((committed_dir(design_name) / "design.json").read_text())
-        mine = json.loads((Path(design_dir) / "design.json").read_text())
+        meta = read_json(committed_dir(design_name) / "design.json")
+        mine = read_json(Path(design_dir) / "design.json")
     except (OSError, ValueError, DoefabError):
         return None, ""
     if mine.get("levels_sha256") != meta.get("levels_sha256"):

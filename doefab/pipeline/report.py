@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 from doefab.applications import design_is
-from doefab.io import atomic_write_text
+from doefab.io import atomic_write_text, read_json
 from doefab.pipeline.knobs import BENCHMARK, REPO, knob_plots
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.stagerun import kept_note
@@ -127,7 +127,7 @@ def _stage_blocks(out: Path, scene, done: dict) -> list[tuple[str, list]]:
 
 def _json(path: Path) -> dict:
     try:
-        got = json.loads(path.read_text())
+        got = read_json(path)
     except (OSError, ValueError):
         return {}
     return got if isinstance(got, dict) else {}

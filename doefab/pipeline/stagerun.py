@@ -13,7 +13,7 @@ from pathlib import Path
 
 from doefab.applications import has
 from doefab.errors import DoefabError
-from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab
+from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import HOW_NOT_WHAT
 from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_die_chamfer_m, stage_design,
@@ -66,7 +66,7 @@ def has_progress(folder: Path, stages) -> bool:
     checkpoint, parts or steps (``PROGRESS``)."""
     for s in stages:
         try:
-            if json.loads((Path(folder) / s / "stage.json").read_text()).get("complete"):
+            if read_json(Path(folder) / s / "stage.json").get("complete"):
                 return True
         except (OSError, ValueError):
             pass
@@ -119,7 +119,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
     if name == "tolerance" and root is not None:
         own, _ = networks_trained_here(scene, res if res is not None else resolve(scene), Path(root))
         if own is not None:  # (none: the hash is as without ``root``)
-            parts["networks"] = json.loads((own.parent / "stage.json").read_text()).get("hash")
+            parts["networks"] = read_json(own.parent / "stage.json").get("hash")
     return _h(parts)
 
 
@@ -143,7 +143,7 @@ def run_stage(scene, res, name: str, out_root: Path, done: dict, quick: bool, fo
     old = {}
     if rec_path.is_file():
         try:
-            old = json.loads(rec_path.read_text())
+            old = read_json(rec_path)
         except ValueError:
             old = {}
     if not force and old.get("hash") == h and old.get("complete"):

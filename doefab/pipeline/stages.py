@@ -7,7 +7,6 @@ verified mask set and its shipped networks instead of recomputing them.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import time
@@ -15,7 +14,7 @@ from pathlib import Path
 
 from doefab.applications import has
 from doefab.errors import DoefabError
-from doefab.io import MARKER, atomic_write_json
+from doefab.io import MARKER, atomic_write_json, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
@@ -184,7 +183,7 @@ def repo_mask_set(res: ResolvedScene, die_chamfer_m: float) -> Path | None:
 
     try:
         same = levels_sha256(Design.load(folder / "design").levels) == levels_sha256(res.committed.levels)
-        man = json.loads((folder / "manifest.json").read_text())
+        man = read_json(folder / "manifest.json")
     except (DoefabError, OSError, ValueError):  # no mask set here (an installed package), or a damaged one
         return None
     die = (round(man.get("die_m", 0.0) * 1e9), round(man.get("die_chamfer_m", 0.0) * 1e9))
@@ -279,7 +278,7 @@ def shipped_sensor_differs(task: str, sensor) -> list[str]:
     from doefab.reconstruction.weights import weights_paths
 
     try:
-        meta = json.loads(weights_paths(task, "proposed")[1].read_text())
+        meta = read_json(weights_paths(task, "proposed")[1])
     except (OSError, ValueError):
         meta = {}
     return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
@@ -295,7 +294,7 @@ def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:
 
     folder = root / "reconstruction"
     try:
-        rec = json.loads((folder / "stage.json").read_text())
+        rec = read_json(folder / "stage.json")
     except (OSError, ValueError):
         return None, ""
     mode = WEIGHTS_MODES.get(rec.get("weights")) if isinstance(rec, dict) else None

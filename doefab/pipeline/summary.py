@@ -4,8 +4,9 @@ aperture stop) and the files to send to the fab and to the printer."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from doefab.io import read_json
 
 __all__ = ["summary_items", "tolerance_items"]
 
@@ -13,7 +14,7 @@ __all__ = ["summary_items", "tolerance_items"]
 def _tolerance(out: Path) -> dict | None:
     p = out / "tolerance" / "tolerance.json"
     try:
-        return json.loads(p.read_text())
+        return read_json(p)
     except (OSError, ValueError):
         return None
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,7 @@ import torch
 from doefab.applications import has
 from doefab._devices import resolve_device
 from doefab.errors import DoefabError
+from doefab.io import read_json
 from doefab.optics.psf import PSFPair, describe_bands
 from doefab.reconstruction.models import build_model
 from doefab.reconstruction.networks import VARIANTS
@@ -250,7 +250,7 @@ def _read_weights(task: str, variant: str, weights_dir, design) -> tuple[Path, d
     if not pt.is_file() or not meta_path.is_file():
         _refuse(pt, "no weights (or no metadata record beside them)", *who)
     try:
-        meta = json.loads(meta_path.read_text())
+        meta = read_json(meta_path)
     except (ValueError, UnicodeDecodeError):
         _refuse(meta_path, "the metadata record is not valid JSON", *who)
     need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")

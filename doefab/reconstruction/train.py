@@ -207,12 +207,12 @@ def _design_levels(task: str, design) -> int:
 def _warm_record(out: Path, warm: dict | None, resume: bool) -> dict | None:
     """The warm start of a fresh run, kept in ``out/warm_start.json``; a resumed run reads the record of the run
     it continues (its weights started there, not from scratch)."""
-    import json
+    from doefab.io import read_json
 
     path = out / "warm_start.json"
     if resume:
         try:
-            return json.loads(path.read_text())
+            return read_json(path)
         except (OSError, ValueError):
             return None
     from doefab.io import atomic_write_json

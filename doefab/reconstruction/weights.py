@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 from pathlib import Path
 
 import torch
 
 from doefab.errors import DoefabError
-from doefab.io import atomic_write_bytes, atomic_write_json
+from doefab.io import atomic_write_bytes, atomic_write_json, read_json
 
 __all__ = ["renamed_state", "WEIGHTS_DIR", "weights_paths", "history_path", "is_shipped", "weights_target", "write_weights",
            "WEIGHTS_FORMAT", "foreign_weights_files"]
@@ -71,7 +70,7 @@ def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[P
     if not paths:
         return []
     try:
-        rec = json.loads(meta.read_text())
+        rec = read_json(meta)
         ours = (isinstance(rec, dict) and rec.get("format") == WEIGHTS_FORMAT and rec.get("task") == task
                 and rec.get("variant") == variant)
     except (OSError, ValueError):

@@ -23,7 +23,6 @@ is what a cell holding two heights sends into the far field.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_planes
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
+from doefab.io import read_json
 
 
 __all__ = ["fabricated_height", "alignment_chain", "compose_overlay", "refined_camera", "level_step_for",
@@ -173,7 +173,7 @@ def alignment_chain(design_dir: Path | None, n_masks: int) -> dict:
             man = Path(design_dir).parent / "masks" / "manifest.json"
     if man is not None and man.is_file():
         try:
-            return {int(k): int(v) for k, v in json.loads(man.read_text())["alignment_chain"].items()}
+            return {int(k): int(v) for k, v in read_json(man)["alignment_chain"].items()}
         except (KeyError, ValueError, TypeError):
             pass
     return {m + 1: 0 for m in range(n_masks)}

@@ -26,6 +26,7 @@ import numpy as np
 
 from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
+from doefab.io import read_json
 from doefab.tolerance.errors import budget_values, sample_errors
 from doefab.tolerance.schedulers import parse_scheduler
 
@@ -66,7 +67,7 @@ def network_weights_sha(design_task: str, weights_dir=None) -> str | None:
     if task is None:
         return None
     try:
-        return json.loads(weights_paths(task, "proposed", weights_dir)[1].read_text()).get("weights_sha256")
+        return read_json(weights_paths(task, "proposed", weights_dir)[1]).get("weights_sha256")
     except (OSError, ValueError):
         return None
 

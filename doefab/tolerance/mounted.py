@@ -58,8 +58,8 @@ def stop_case(camera: Camera) -> str:
     if camera.doe_is_stop:
         return f"the DOE's {a} mm baffle is narrower than {pupil}: it is the aperture stop, {doe_stop}"
     return (f"{pupil} is narrower than the DOE's {a} mm baffle: the lens is the stop, {lens_stop}; the model still "
-            f"bounds the light by the baffle, which a scene and a checked PSFPlan refuse beyond {STOP_TOLERANCE * 100:g} % "
-            f"(Camera.lens_cuts_doe)")
+            f"bounds the light by the baffle, which a scene and a checked PSFPlan refuse beyond "
+            f"{STOP_TOLERANCE * 100:g} % (Camera.lens_cuts_doe)")
 
 
 def _distinct(x: float, y: float) -> tuple[str, str]:

@@ -385,7 +385,8 @@ def test_an_empty_budget_file_at_the_command_line_reports_the_defaults_it_took(d
                "--out", str(tmp_path / "te")])
     out = capsys.readouterr().out
     assert rc == 0
-    res = json.loads((tmp_path / "te" / "tolerance.json").read_text())
+    res = json.loads((tmp_path / "te" / "tolerance.json").read_text(), parse_constant=_refuse)  # strict JSON
+    assert res["summary"]["metric"]["ci95"] == ["nan", "nan"]  # one part: no interval, written as scene files do
     assert res["budget"]["overlay"] == load_budget()["overlay"]  # not zeros
     report = (tmp_path / "te" / "report.md").read_text()
     for text in (out, report):
