@@ -96,6 +96,8 @@ MEASUREMENTS = (
     Measurement("run_time", "benchmarks/run_time.py", (R + "run_time.md",)),
     Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
     Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
+    Measurement("spectra_training_content", "benchmarks/spectra_training_content.py",
+                (R + "spectra_training_content.md",)),
     Measurement("tolerance_speed", "benchmarks/tolerance_speed.py", (R + "tolerance_speed.md",)),
     Measurement("judge_profile", "benchmarks/judge_profile.py", (R + "judge_profile.md",)),
     Measurement("pair_reuse", "benchmarks/pair_reuse.py", (R + "pair_reuse.md",)),
