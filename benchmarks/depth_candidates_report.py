@@ -9,7 +9,6 @@ benchmarks/results/depth_candidates.md, docs/depth_candidates_psfs.png and docs/
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ CANDIDATES = [  # name, design folder, weights folder, label
 def main() -> None:
     import doefab
     from doefab.imaging.depth_score import depth_encoding_score
+    from doefab.io import read_json
     from doefab.reconstruction.specs import psf_pair
 
     rows = []
@@ -40,8 +40,8 @@ def main() -> None:
         score = depth_encoding_score(pair.coded, pair.depths)
         ev = D / wname / "eval" / "metrics.json"
         meta = D / wname / "weights" / "depth_proposed.json"
-        m = json.loads(ev.read_text())["rows"]["proposed"] if ev.is_file() else {}
-        t = json.loads(meta.read_text())["training"] if meta.is_file() else {}
+        m = read_json(ev)["rows"]["proposed"] if ev.is_file() else {}
+        t = read_json(meta)["training"] if meta.is_file() else {}
         rows.append({"name": name, "label": label, "metric": d.metrics["quantized"],
                      "worst": d.metrics["quantized_worst"], "score": score["predicted_error_m"],
                      "min_dprime": score["min_dprime"], "mae": m.get("mae", float("nan")),

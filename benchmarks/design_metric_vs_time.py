@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +23,10 @@ CONFIGS = {  # name: (optimizer, sampling, iterations or None for the task defau
 
 
 def history_from_folder(folder: Path):
+    from doefab.io import read_json
+
     rows = list(csv.DictReader(open(folder / "history.csv")))
-    meta = json.loads((folder / "design.json").read_text())
+    meta = read_json(folder / "design.json")
     t = np.array([float(r["wall_time_s"]) for r in rows])
     m = np.array([float(r["metric"]) for r in rows])
     return t, m, meta["metrics"]["quantized"], meta.get("extra", {}).get("wall_time_s", t[-1])

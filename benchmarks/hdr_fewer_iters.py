@@ -15,7 +15,6 @@ benchmarks/results/hdr_fewer_iters.{md,json}, adding the candidate to those alre
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from pathlib import Path
@@ -24,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from doefab.io import read_json  # noqa: E402
 from real_validation import RESULTS, budget_now, evaluate_split, seed_values  # noqa: E402
 
 TASK, VARIANT, STEPS = "hdr", "proposed", 500
@@ -115,7 +115,7 @@ def main() -> None:
     from doefab.io import atomic_write_json, atomic_write_text
 
     solve = tuple(args.solve)
-    committed = json.loads((RESULTS / "real_validation.json").read_text())[TASK]
+    committed = read_json(RESULTS / "real_validation.json")[TASK]
     if committed["real"]["conditions"]["budget_sha256"] != budget_now():
         raise SystemExit("the shipped network's committed scores were made under another tolerance budget: "
                          "re-score it first (benchmarks/real_validation.py --tasks hdr)")
@@ -125,10 +125,10 @@ def main() -> None:
             for s in ("real", "val")}
     secs = timings(weights)
     f = RESULTS / "hdr_fewer_iters.json"
-    res = json.loads(f.read_text()) if f.is_file() else {"candidates": {}}
+    res = read_json(f) if f.is_file() else {"candidates": {}}
     res["shipped"] = {s: committed[s]["rows"][VARIANT] for s in ("real", "val")}
     res["spread_db"] = statistics.stdev(seed_values(committed, committed["seeds"], "psnr_highlight"))
-    meta = json.loads((weights / f"{TASK}_{VARIANT}.json").read_text())
+    meta = read_json(weights / f"{TASK}_{VARIANT}.json")
     res["candidates"]["_".join(map(str, solve))] = {
         "solve": list(solve), "code": runs["real"]["code"], **{s: r["rows"][VARIANT] for s, r in runs.items()},
         "seconds": secs["candidate"], "shipped_seconds": secs["shipped"], "weights_sha256": meta["weights_sha256"],

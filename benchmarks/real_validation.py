@@ -19,7 +19,6 @@ the test split is not read (its depth δ<1.25 is quoted from the committed bench
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -27,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from doefab.io import read_json  # noqa: E402
 from reconstruction_tables import KEYS, NAMES, paired_lines  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
@@ -85,7 +85,7 @@ def evaluate_split(task: str, split: str, images: int, size: int, work: Path, we
     out = work / (name or f"{task}_{split}")
     f = out / "metrics.json"
     if f.is_file():
-        done = json.loads(f.read_text())
+        done = read_json(f)
         shas = {v: load_reconstructor(task, v, weights_dir).meta["weights_sha256"] for v in variants}
         same_set = split != "real" or done.get("real_sha256") == real_components()
         same_set &= done["conditions"].get("budget_sha256") == budget_now()
@@ -328,7 +328,7 @@ def main() -> None:
                     help="rewrite real_validation.md from the committed real_validation.json; evaluate nothing")
     args = ap.parse_args()
     committed = RESULTS / "real_validation.json"
-    before = json.loads(committed.read_text()) if committed.is_file() else {}
+    before = read_json(committed) if committed.is_file() else {}
     if args.render_only:
         return render_committed(before)
     runs = {t: {s: evaluate_split(t, s, args.images, args.size, args.work) for s in SPLITS}
@@ -346,7 +346,7 @@ def main() -> None:
             runs[t], seeds[t] = before[t], before[t].get("seeds", [])
     runs = {t: runs[t] for t in KEYS if t in runs}
     f = RESULTS / "evaluate_depth.json"
-    test_depth = json.loads(f.read_text()) if f.is_file() else None
+    test_depth = read_json(f) if f.is_file() else None
     from doefab.io import atomic_write_json, atomic_write_text
 
     atomic_write_json(RESULTS / "real_validation.json", runs)
@@ -373,7 +373,7 @@ def render_committed(runs: dict) -> None:
     produced = page.read_text().split("Produced by `", 1)[1].split("\n", 1)[0]  # `command`.note
     command, note = produced.split("`.", 1)
     seeds = {t: runs[t].get("seeds", []) for t in runs}
-    atomic_write_text(page, markdown(runs, json.loads(depth.read_text()), seeds, command, note))
+    atomic_write_text(page, markdown(runs, read_json(depth), seeds, command, note))
     print(f"wrote {page} from the committed evaluations")
 
 

@@ -24,7 +24,6 @@ that the ledger holds one honest and one clean read per task and that the publis
 
 from __future__ import annotations
 
-import json
 import shutil
 import sys
 from pathlib import Path
@@ -32,6 +31,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from doefab.applications import APPLICATIONS  # noqa: E402
+from doefab.io import read_json  # noqa: E402
 from doefab.reconstruction.evaluate import FINAL_LEDGER  # noqa: E402  (the file each final read is logged in)
 
 OUT = Path(__file__).parent / "results"
@@ -43,7 +43,7 @@ NAMES = {"rmse": "RMSE", "psnr": "PSNR (dB)", "rmse_highlight": "highlight RMSE"
 
 def _load(root: Path, name: str) -> dict | None:
     f = root / name / "metrics.json"
-    return json.loads(f.read_text()) if f.is_file() else None
+    return read_json(f) if f.is_file() else None
 
 
 def task_table(task: str, honest: dict, clean: dict | None) -> list[str]:
@@ -128,15 +128,15 @@ def tables_markdown(folder: Path = OUT, prefix: str = "evaluate_") -> str:
     for task in KEYS:
         honest, clean = (folder / f"{prefix}{task}.json", folder / f"{prefix}{task}_clean.json")
         if honest.is_file():
-            lines += task_table(task, json.loads(honest.read_text()),
-                                json.loads(clean.read_text()) if clean.is_file() else None)
+            lines += task_table(task, read_json(honest),
+                                read_json(clean) if clean.is_file() else None)
     return "\n".join(lines) + "\n"
 
 
 def _checked(f: Path, honest: Path | None = None, split: str = "test") -> Path:
     """``f``, an evaluation by the current `doefab evaluate` (thread count and weights' SHA-256 recorded; a clean
     one of the same weights and split as ``honest``); else the run stops, naming the fix."""
-    ev = json.loads(f.read_text())
+    ev = read_json(f)
     if "threads" not in ev or any("sha256" not in w for w in ev["weights"].values()):
         sys.exit(f"{f}: made before evaluations recorded their thread count and weights' SHA-256: run doefab "
                  f"evaluate again")
@@ -145,7 +145,7 @@ def _checked(f: Path, honest: Path | None = None, split: str = "test") -> Path:
                  + ("pass --final for the final test set" if ev["split"] == "final" else
                     f"evaluate it again with doefab evaluate --split {split}"))
     if honest is not None:
-        other = json.loads(honest.read_text())
+        other = read_json(honest)
         if ev["split"] != other["split"] or any(w["sha256"] != other["weights"][v]["sha256"]
                                                 for v, w in ev["weights"].items()):
             sys.exit(f"{f} evaluates other weights or another split than {honest}: evaluate both again")

@@ -32,6 +32,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from doefab.io import read_json  # noqa: E402
+
 RESULTS = ROOT / "benchmarks" / "results"
 SPLITS = ("val", "real")
 BINS = ((1.0, 1.5), (1.5, 2.0), (2.0, 2.5), (2.5, 3.0), (3.0, 4.0), (4.0, 5.0))
@@ -80,7 +83,7 @@ def run_rule(rule: str, split: str, images: int, size: int, work: Path) -> dict:
     out = work / f"{split}_{rule.replace(' ', '_')}"
     f = out / "metrics.json"
     if f.is_file():
-        done = json.loads(f.read_text())
+        done = read_json(f)
         if (done["images"], done["size_px"]) == (images, size):
             print(f"{split} {rule}: reusing {f}")
             return done

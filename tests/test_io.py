@@ -79,3 +79,24 @@ def test_a_cached_tolerance_step_is_reused_when_its_key_holds_infinities(tmp_pat
     for _ in range(2):
         cached_step(tmp_path, "tornado", key, lambda: calls.append(1) or [1.0, float("nan")], reused)
     assert len(calls) == 1 and reused == ["tornado"]
+
+
+def test_a_cached_step_whose_key_holds_nan_is_reused_too(tmp_path):
+    from doefab.tolerance.report import cached_step
+
+    calls = []
+    for _ in range(2):
+        cached_step(tmp_path, "grid", {"bound": float("nan")}, lambda: calls.append(1) or 1.0)
+    assert len(calls) == 1
+
+
+def test_a_stage_folder_s_files_named_like_numbers_stay_file_names(tmp_path):
+    """A user's files named "nan" and "inf" in a stage folder are recorded by name; the record read back
+    (``read_json`` turns those strings into numbers) still names them, and a run keeps them."""
+    from doefab.io import atomic_write_json, read_json
+    from doefab.pipeline.stagerun import foreign_entries
+
+    for name in ("nan", "inf", "design.json", "mine.txt"):
+        (tmp_path / name).write_text("x")
+    atomic_write_json(tmp_path / "stage.json", {"foreign": ["nan"], "files": ["design.json", "-inf"]})
+    assert foreign_entries(tmp_path, read_json(tmp_path / "stage.json")) == {"nan", "inf", "mine.txt"}

@@ -187,9 +187,10 @@ def foreign_entries(out: Path, record: dict) -> set[str]:
     own (``foreign``). A record without a list (a run made before stages listed their files) names none."""
     if not out.is_dir():
         return set()
-    theirs = set(record.get("foreign") or ())
+    # file names as written (``read_json`` reads a file named "nan" or "inf" back as a number)
+    theirs = {str(f) for f in record.get("foreign") or ()}
     if isinstance(record.get("files"), list):
-        ours = set(record["files"]) | {"stage.json", MARKER}
+        ours = {str(f) for f in record["files"]} | {"stage.json", MARKER}
         theirs |= {f for f in stage_files(out) if f not in ours}
     return {f for f in theirs if (out / f).exists()}
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.io import atomic_write_json, atomic_write_text, from_json_ready, read_json
+from doefab.io import atomic_write_json, atomic_write_text, from_json_ready, json_ready, read_json
 from doefab.tolerance import plots, study
 from doefab.tolerance.delivered import change_noise
 from doefab.tolerance.errors import PartErrors
@@ -208,7 +208,7 @@ def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = 
     path = Path(out) / STEPS / f"{name}.json"
     try:
         rec = read_json(path)
-        if rec.get("key") == from_json_ready(json.loads(json.dumps(key, default=str))):  # as read_json reads it
+        if rec.get("key") == from_json_ready(json.loads(json.dumps(json_ready(key), default=str))):  # as read back
             if reused is not None:
                 reused.append(name)
             return rec["value"]

@@ -73,3 +73,20 @@ def test_the_named_sources_are_the_scenes_the_evaluation_draws(rv, monkeypatch):
         depth_scene("real", i, sample_rng("real", i), 96, SimpleNamespace(depths=(1.0, 2.0, 5.0)))
     names = [s[0] for s in realdata.depth_scenes()]
     assert [names[k] for k in drawn] == named and len(set(named)) > 1
+
+
+def test_an_evaluation_with_a_scene_without_highlights_still_makes_its_paired_interval(tmp_path):
+    """An HDR evaluation whose scene has no highlight gives NaN there, written "nan" in strict JSON
+    (``atomic_write_json``); the tables read it back as a number and leave that scene out of the paired interval."""
+    from conftest import _benchmark
+
+    from doefab.io import atomic_write_json
+
+    tables = _benchmark("reconstruction_tables")
+    per = {"proposed": [{"psnr_highlight": v} for v in (30.0, float("nan"), 31.0, 29.0)],
+           "uncoded_only": [{"psnr_highlight": v} for v in (27.0, float("nan"), 27.5, 26.0)]}
+    atomic_write_json(tmp_path / "hdr" / "metrics.json", {"per_scene": per})
+    back = tables._load(tmp_path, "hdr")["per_scene"]
+    text = tables._paired(back, "uncoded_only", "psnr_highlight", 1.0, "dB", None, None)
+    # by hand over the three scenes with highlights: differences 3, 3.5, 3; mean 3.17, sd 0.289, t(0.975, 2) 4.303
+    assert text == "+3.17 dB (+2.45 to +3.88); proposed better on 3 of 3 scenes", text
