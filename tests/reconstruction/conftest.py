@@ -23,6 +23,12 @@ def rv():
 
 
 @pytest.fixture(scope="module")
+def tables():
+    """``benchmarks/reconstruction_tables.py`` (the reconstruction tables' code)."""
+    return _benchmark("reconstruction_tables")
+
+
+@pytest.fixture(scope="module")
 def hdr_candidates():
     """``benchmarks/hdr_fewer_iters.py`` (the HDR candidate page's code)."""
     return _benchmark("hdr_fewer_iters")

@@ -75,14 +75,11 @@ def test_the_named_sources_are_the_scenes_the_evaluation_draws(rv, monkeypatch):
     assert [names[k] for k in drawn] == named and len(set(named)) > 1
 
 
-def test_an_evaluation_with_a_scene_without_highlights_still_makes_its_paired_interval(tmp_path):
+def test_an_evaluation_with_a_scene_without_highlights_still_makes_its_paired_interval(tables, tmp_path):
     """An HDR evaluation whose scene has no highlight gives NaN there, written "nan" in strict JSON
     (``atomic_write_json``); the tables read it back as a number and leave that scene out of the paired interval."""
-    from conftest import _benchmark
-
     from doefab.io import atomic_write_json
 
-    tables = _benchmark("reconstruction_tables")
     per = {"proposed": [{"psnr_highlight": v} for v in (30.0, float("nan"), 31.0, 29.0)],
            "uncoded_only": [{"psnr_highlight": v} for v in (27.0, float("nan"), 27.5, 26.0)]}
     atomic_write_json(tmp_path / "hdr" / "metrics.json", {"per_scene": per})
