@@ -24,9 +24,8 @@ from pathlib import Path
 
 from doefab.errors import DoefabError
 
-__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "json_ready", "read_json",
-           "from_json_ready", "staging_dir",
-           "OutputDir", "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker",
+__all__ = ["cache_root", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "json_text", "json_ready",
+           "read_json", "from_json_ready", "staging_dir", "OutputDir", "folder_lock", "sources_sha256", "MARKER", "plain_name", "apply_umask", "read_marker",
            "mark_folder", "owned_by_doefab", "read_toml"]
 
 MARKER = ".doefab-output.json"
@@ -71,10 +70,17 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def json_text(obj, indent: int = 2) -> str:
+    """``obj`` as strict JSON text (``json_ready``: a non-finite number as "inf", "-inf" or "nan"), which a
+    browser's ``JSON.parse`` and jq read; ``read_json`` gives the numbers back.
+
+    Example: ``json_text({"margin": float("inf")}, indent=None)`` → ``'{"margin": "inf"}'``."""
+    return json.dumps(json_ready(obj), indent=indent, allow_nan=False)
+
+
 def atomic_write_json(path: str | Path, obj) -> Path:
-    """Write ``obj`` as strict JSON (``json_ready``: a non-finite number as "inf", "-inf" or "nan"), which a
-    browser's ``JSON.parse`` and jq read; ``read_json`` gives the numbers back."""
-    return atomic_write_text(path, json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
+    """Write ``obj`` as strict JSON (``json_text``)."""
+    return atomic_write_text(path, json_text(obj) + "\n")
 
 
 def read_json(path: str | Path):

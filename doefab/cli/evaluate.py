@@ -22,11 +22,10 @@ weights file's SHA-256 and, with --psf, each pair's file, SHA-256 and provenance
 from __future__ import annotations
 
 import argparse
-import json
 
 from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, add_sensor_args, number
-from doefab.io import json_ready
+from doefab.io import json_text
 
 
 def register(sub) -> None:
@@ -93,8 +92,7 @@ def run(args) -> int:
     res = evaluate(args.task, out.path, args.images, args.size, args.weights_dir, design=design, variants=variants,
                    conditions=cond, split=args.split, sensor=sensor, psf=told, capture_psf=capture,
                    psf_records=None if told is None and capture is None else records)
-    print(json.dumps(json_ready({"rows": res["rows"], **({"by_light": res["by_light"]} if "by_light" in res else {})}),
-                     indent=1, allow_nan=False))
+    print(json_text({"rows": res["rows"], **({"by_light": res["by_light"]} if "by_light" in res else {})}, indent=1))
     print(f"wrote {out.path / 'metrics.json'} and {out.path / 'examples.png'}")
     if args.split == "final":
         print(f"this read of the final test set is logged in {out.path / FINAL_LEDGER}")

@@ -11,12 +11,11 @@ Examples:
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from doefab.cli._args import number, plain_name_arg
 from doefab.errors import DoefabError
-from doefab.io import json_ready
+from doefab.io import json_text
 
 
 def register(sub) -> None:
@@ -58,7 +57,7 @@ def run(args) -> int:
         if args.design or args.out:
             raise DoefabError("--verify DIR checks an existing set; --design/--out export one: give one or the other")
         report = verify_mask_set(args.verify, use_klayout=not args.no_klayout)
-        print(json.dumps(json_ready(report), indent=1, allow_nan=False))
+        print(json_text(report, indent=1))
         files = " and ".join([report["gds"]] + ([report["oasis"]["file"]] if "oasis" in report else []))
         print(f"{args.verify}: verified {files} (0 mismatched pixels on every etch layer, nothing outside the pixel "
               f"grid; chrome, marks and die outline where manifest.json places them within "
