@@ -26,7 +26,7 @@ import numpy as np
 
 from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
-from doefab.io import read_json
+from doefab.io import from_json_ready, json_text, read_json
 from doefab.tolerance.errors import budget_values, sample_errors
 from doefab.tolerance.schedulers import parse_scheduler
 
@@ -84,7 +84,7 @@ def _read_log(log: Path, identity: dict) -> dict:
         return done
     lines = log.read_text().splitlines()
     try:
-        head = json.loads(lines[0])["run"] if lines else None
+        head = from_json_ready(json.loads(lines[0]))["run"] if lines else None
     except (ValueError, KeyError, TypeError):
         head = None
     if head != identity:
@@ -93,7 +93,7 @@ def _read_log(log: Path, identity: dict) -> dict:
                           f"use a new --out, or --force to start again")
     for line in lines[1:]:
         try:
-            r = json.loads(line)
+            r = from_json_ready(json.loads(line))
             done[int(r["index"])] = r
         except (ValueError, KeyError):
             continue  # a line cut by an interruption: recomputed
@@ -129,7 +129,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     identity = run_identity(judge.design, budget, seed, supersample, networks, weights_dir, judge.chain)
     done = _read_log(log, identity)
     if not log.is_file():
-        log.write_text(json.dumps({"run": identity}) + "\n")
+        log.write_text(json_text({"run": identity}, indent=None) + "\n")
     children = np.random.SeedSequence(seed).spawn(n)
     todo = [i for i in range(n) if i not in done]
     errs = {i: sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]),
@@ -143,7 +143,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
         row = {"index": i, "errors": errs[i].to_json(), **res, "seconds": round(time.perf_counter() - t0, 3)}
         done[i] = row
         with open(log, "a") as fh:
-            fh.write(json.dumps(row) + "\n")
+            fh.write(json_text(row, indent=None) + "\n")  # strict JSON lines (jq, a browser)
         if bar is not None:
             bar.update(1)
             bar.set_postfix(metric=f"{res['metric']:.3f}",

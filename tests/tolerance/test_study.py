@@ -63,6 +63,30 @@ def test_interrupted_study_resumes(design_dir, tmp_path):
     assert [r["metric"] for r in again] == [r["metric"] for r in full]
 
 
+def test_the_part_log_is_strict_json_and_a_nan_metric_resumes_as_nan(design_dir, tmp_path, monkeypatch):
+    """samples.jsonl is read by jq and browsers too: a part whose metric is undefined is written as "nan", not as
+    the NaN that strict readers refuse, and a resumed run reads it back as a float NaN, not as text."""
+    import math
+
+    def nan_part(*args, **kw):
+        return {"metric": math.nan, "worst": -math.inf, "l1_to_nominal": 0.0}
+
+    monkeypatch.setattr(study, "evaluate_part", nan_part)
+    out = tmp_path / "nan"
+    montecarlo.monte_carlo(design_dir, load_budget(), 2, out, seed=1, progress=False)
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+
+    lines = (out / "samples.jsonl").read_text().splitlines()
+    rows = [json.loads(line, parse_constant=refuse) for line in lines]
+    assert len(rows) == 3 and rows[1]["metric"] == "nan" and rows[1]["worst"] == "-inf"
+    (out / "samples.jsonl").write_text("\n".join(lines[:2]) + "\n")  # the second part lost: resumed
+    again = montecarlo.monte_carlo(design_dir, load_budget(), 2, out, seed=1, progress=False)
+    assert all(isinstance(r["metric"], float) and math.isnan(r["metric"]) for r in again)
+    assert all(r["worst"] == -math.inf for r in again)
+
+
 def test_summary_statistics():
     rows = [{"metric": m, "worst": m, "l1_to_nominal": 0.0} for m in (0.4, 0.6, 0.6, 0.8)]
     s = montecarlo.summarize(rows, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
