@@ -86,7 +86,7 @@ def parameters(budget: dict, n_masks: int, camera, depths) -> list[Param]:
 
     def s(name):
         return kind(name).from_budget(budget)
-    etch, ov, bias = s("etch depth (systematic)"), s("mask overlay") / math.sqrt(2), s("edge bias")
+    etch, ov, bias = s("etch depth (all plates alike)"), s("mask overlay") / math.sqrt(2), s("edge bias")
     dec, rot, gap = s("decenter across split"), s("mount rotation"), s("axial gap spread")
     in_focus = all(z == camera.focus_distance for z in depths)
     out = []

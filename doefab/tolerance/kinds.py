@@ -36,7 +36,8 @@ def _mask_rotation(v: float, n_masks: int) -> PartErrors:
 class Kind:
     """One error kind. ``build(v, n_masks)``: the part with only this error, of magnitude v (SI), for a design of
     ``n_masks`` masks; ``from_budget``: one standard deviation of what ``errors.sample_errors`` draws of it (SI;
-    a uniform decenter ±d: d/√3 per axis; the etch depth: the systematic and random parts added in quadrature;
+    a uniform decenter ±d: d/√3 per axis; the etch depth: the systematic and random parts added in quadrature, one
+    plate's spread, put on every plate alike;
     a plate's 2-D overlay shift: the rms of its length, √2 × the per-axis sigma), so every kind is judged at the
     same probability point and the ranking compares like with like; an error every part carries alike (corner
     rounding, roughness, crosstalk, the holder's nominal axial gap) at that value; 0 when the budget has none of
@@ -105,7 +106,7 @@ def _crosstalk_value(calibrated: bool):
 
 
 KINDS = (
-    Kind("etch depth (systematic)", "etch depth", "%", 0.01, (-10, -5, -2, 2, 5, 10),
+    Kind("etch depth (all plates alike)", "etch depth", "%", 0.01, (-10, -5, -2, 2, 5, 10),
          lambda v, n: replace(PartErrors(), depth_scale=(1 + v,) * n),
          etch_sigma,
          False,

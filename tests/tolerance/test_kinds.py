@@ -15,7 +15,7 @@ N_MASKS = 4
 # each kind's entries of a part (one per mask or plate, else one), read from the part's fields independently of
 # doefab.tolerance.kinds: a plate's overlay is the length of its 2-D shift
 ENTRIES = {
-    "etch depth (systematic)": lambda p: [d - 1 for d in p.depth_scale],
+    "etch depth (all plates alike)": lambda p: [d - 1 for d in p.depth_scale],
     "mask overlay": lambda p: [math.hypot(dx, dy) for dx, dy in p.overlay],
     "mask rotation": lambda p: list(p.rotation),
     "edge bias": lambda p: [p.edge_bias],

@@ -79,7 +79,7 @@ def test_each_kind_is_judged_at_one_standard_deviation_of_the_parts_the_budget_d
     budget = load_budget()
     rng = np.random.default_rng(11)
     parts = [sample_errors(budget, rng, n_masks=4) for _ in range(4000)]
-    drawn = {"etch depth (systematic)": [p.depth_scale[0] - 1 for p in parts],
+    drawn = {"etch depth (all plates alike)": [p.depth_scale[0] - 1 for p in parts],
              "mask rotation": [p.rotation[2] for p in parts],
              "edge bias": [p.edge_bias for p in parts],
              "decenter across split": [p.mount_shift[0] for p in parts],
