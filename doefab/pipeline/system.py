@@ -265,6 +265,20 @@ def defocus_ring_px(cam, params: dict) -> float:
     return float(min(r, params.get("kernel_size", 63) // 2 - 3))
 
 
+def _longer_period(cam, task, k: int) -> str:
+    """The other fix of a grating whose first order leaves the window: the shortest period that brings it inside,
+    where the bands stay at most 1.5 per sensor pixel apart there (``doctor``'s spectral sampling)."""
+    from doefab.tasks.grating import grating_spot_px, period_for_reach
+
+    lams = task.wavelengths(cam)
+    period = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)
+    if len(lams) > 1 and math.isfinite(period):
+        spread = grating_spot_px(cam, max(lams), period) - grating_spot_px(cam, min(lams), period)
+        if (len(lams) - 1) / spread > 1.5:
+            return ""
+    return f", or design.grating_period_um ≥ {period * 1e6:g}" if math.isfinite(period) else ""
+
+
 def _checks(scene: Scene, cam, task) -> list[str]:
     """Physics guards: each problem with its key and fix."""
     from doefab.fabrication.process import check_min_feature
@@ -289,7 +303,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in task.wavelengths(cam))
         if far + task.box_px + 2 > k // 2:
             out.append(f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis; the window "
-                       f"needs kernel_px ≥ {task.window_px(far)}")
+                       f"needs kernel_px ≥ {task.window_px(far)}" + _longer_period(cam, task, k))
     if isinstance(task, StreakTask) and task.arm_px + task.band_px + 1 > k // 2:
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
                    f"{2 * (task.arm_px + task.band_px + 2) + 1}")

@@ -12,7 +12,7 @@ from doefab.optics.camera import Camera
 from doefab.optics.elements import blazed_grating_height
 from doefab.tasks.base import HALF_LIGHT, Task
 
-__all__ = ["GratingTask", "grating_spot_px", "period_for_spread"]
+__all__ = ["GratingTask", "grating_spot_px", "period_for_spread", "period_for_reach"]
 
 
 def grating_spot_px(camera: Camera, wavelength: float, period: float) -> float:
@@ -37,6 +37,19 @@ def period_for_spread(camera: Camera, lam_min: float, lam_max: float, spread_px:
 
     lo, hi = lam_max * (1 + 1e-9), lam_max * 1e6
     return float(brentq(spread, lo, hi, xtol=1e-15, rtol=1e-12)) if spread(lo) > 0 > spread(hi) else math.nan
+
+
+def period_for_reach(camera: Camera, lam_max: float, reach_px: float) -> float:
+    """The shortest grating period Λ (m) whose first order of ``lam_max`` (m) lands at most ``reach_px`` sensor
+    pixels off axis (``grating_spot_px``): λ / sin(atan(reach · p / s)), rounded up to 0.01 µm.
+
+    Example: 16 mm behind the lens with 1.55 µm pixels, 700 nm lands within 92 px at Λ ≥ 78.55 µm:
+    ``period_for_reach(cam, 700e-9, 92.0)``.
+    """
+    if reach_px <= 0:
+        return math.nan
+    period = lam_max / math.sin(math.atan(reach_px * camera.sensor_pitch / camera.sensor_distance))
+    return math.ceil(round(period * 1e8, 6)) / 1e8
 
 
 @dataclass

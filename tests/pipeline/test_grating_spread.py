@@ -104,3 +104,46 @@ def test_the_note_reads_the_bands_in_any_order(tmp_path):
                         + "[design]\ngrating_period_um = 96.0\n")
         notes.append(re.search(r"design\.grating_period_um = [\d.]+", _sampling(resolve(load_scene(path)))[1]))
     assert notes[0] and notes[1] and notes[0].group(0) == notes[1].group(0) == "design.grating_period_um = 31.43"
+
+
+def _far_px(s: float, p: float, period: float, lam: float = 700e-9) -> float:
+    sin = lam / period
+    return s * sin / math.sqrt(1 - sin * sin) / p
+
+
+def test_a_first_order_beyond_the_window_names_the_shortest_period_that_brings_it_inside(tmp_path):
+    """A 16 mm lens with 1.55 µm pixels and a 2 µm DOE pitch puts the default 16-pixel (32 µm) period's 700 nm order
+    ~227 px off axis, beyond the 191 px window (which holds 95 − 1 − 2 = 92 px with the metric box and its
+    margin): the refusal names the wider window and the shortest period whose 700 nm order lands within it, to
+    0.01 µm; that period passes, 0.01 µm less does not."""
+    cam = {"focal_length_mm": 16.0, "f_number": 4.0, "lens_f_number": 2.0, "sensor_pitch_um": 1.55,
+           "doe_pitch_um": 2.0}
+
+    def scene(design=""):
+        path = tmp_path / "wide.toml"
+        path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                        + "".join(f"{k} = {v}\n" for k, v in cam.items()) + f"[design]\n{design}")
+        return load_scene(path)
+
+    with pytest.raises(doefab.DoefabError) as e:
+        resolve(scene())
+    found = re.search(r"kernel_px ≥ (\d+), or design\.grating_period_um ≥ ([\d.]+)", str(e.value))
+    assert found, str(e.value)
+    period_um = float(found.group(2))
+    s = resolve(scene(f"grating_period_um = {period_um}\n")).camera.sensor_distance
+    assert _far_px(s, 1.55e-6, period_um * 1e-6) <= 92 < _far_px(s, 1.55e-6, (period_um - 0.01) * 1e-6)
+    with pytest.raises(doefab.DoefabError, match="first order lands 92 px off axis"):
+        resolve(scene(f"grating_period_um = {period_um - 0.01:.2f}\n"))
+
+
+def test_no_longer_period_is_named_where_it_would_put_bands_on_the_same_pixel(tmp_path):
+    """151 bands 2 nm apart through the same 16 mm camera: a period that brings 700 nm within 92 px spreads
+    400–700 nm over ~40 px, nearly four bands per pixel, so only the wider window is named."""
+    bands = ", ".join(str(400 + 2 * i) for i in range(151))
+    path = tmp_path / "many.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\nfocal_length_mm = 16.0\nf_number = 4.0\n'
+                    'lens_f_number = 2.0\nsensor_pitch_um = 1.55\ndoe_pitch_um = 2.0\n'
+                    f"[optics]\nwavelengths_nm = [{bands}]\n")
+    with pytest.raises(doefab.DoefabError) as e:
+        resolve(load_scene(path))
+    assert "first order lands" in str(e.value) and "grating_period_um" not in str(e.value), str(e.value)
