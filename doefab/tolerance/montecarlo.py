@@ -26,7 +26,7 @@ import numpy as np
 
 from doefab._memory import MALLOC_ENV, keep_freed_memory
 from doefab.errors import DoefabError
-from doefab.io import from_json_ready, json_text, read_json
+from doefab.io import atomic_write_text, from_json_ready, json_text, read_json
 from doefab.tolerance.errors import budget_values, sample_errors
 from doefab.tolerance.schedulers import parse_scheduler
 
@@ -129,7 +129,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     identity = run_identity(judge.design, budget, seed, supersample, networks, weights_dir, judge.chain)
     done = _read_log(log, identity)
     if not log.is_file():
-        log.write_text(json_text({"run": identity}, indent=None) + "\n")
+        atomic_write_text(log, json_text({"run": identity}, indent=None) + "\n")  # never a cut header
     children = np.random.SeedSequence(seed).spawn(n)
     todo = [i for i in range(n) if i not in done]
     errs = {i: sample_errors(budget, np.random.default_rng(children[i]), seed=int(children[i].generate_state(1)[0]),
