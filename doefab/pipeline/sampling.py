@@ -4,9 +4,9 @@ stage optimises on (``design.sampling``, ``--quick``'s factor), and the scene ke
 ``resolve`` runs these checks before any work, so ``doefab doctor`` refuses exactly the scenes the design stage
 would stop on: a sampling that does not divide the grid, a nearest plane whose point source changes its phase too
 fast between (design) pixels, a window beyond the design grid's alias-free field, a window too small for the
-plain half's defocus blur at a plane (``window_blur_checks``), a lens whose entrance pupil cuts the DOE's baffle
-(``stop_checks``). ``quick_sampling`` picks the ``--quick`` coarsening
-among the factors that pass.
+plain half's defocus blur at a plane (``window_blur_checks``) or for a grating's first orders
+(``grating_window_checks``), a lens whose entrance pupil cuts the DOE's baffle (``stop_checks``).
+``quick_sampling`` picks the ``--quick`` coarsening among the factors that pass.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from doefab.pipeline.scene import Scene
 
 __all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
            "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks", "nlopt_takes",
-           "alias_free_px", "window_blur_checks", "stop_checks", "distance_text", "grid_fixes", "aperture_key"]
+           "alias_free_px", "window_blur_checks", "grating_window_checks", "stop_checks", "distance_text", "grid_fixes",
+           "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 
@@ -54,6 +55,29 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
             f"simulated captures; "
             + ("set " + " or ".join(fixes) if fixes else "no window in the alias-free field, focus or f-number in its "
                "key's range holds it: bring optics.depths_m closer together")]
+
+
+def grating_window_checks(cam, task) -> list[str]:
+    """A grating's first order of every band must land in the PSF window with its metric box and 2 px (the design's
+    target and metric sit there; a period without a first order is refused before, by ``GratingTask.bind``). The
+    fixes: the window that holds it, and the shortest ``design.grating_period_um`` that brings it inside the
+    window the scene has (``tasks.grating.period_for_reach``), where that period is within the key's range and the
+    bands stay at most 1.5 per sensor pixel apart (``doctor``'s spectral sampling note)."""
+    from doefab.pipeline.scenekeys import keys_of
+    from doefab.tasks.grating import grating_spot_px, period_for_reach
+
+    k, lams = task.kernel_size, task.wavelengths(cam)
+    far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in lams)
+    if far + task.box_px + 2 <= k // 2:
+        return []
+    longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)
+    ok = math.isfinite(longer) and longer * 1e6 <= keys_of("design")["grating_period_um"].hi
+    if ok and len(lams) > 1:
+        spread = grating_spot_px(cam, max(lams), longer) - grating_spot_px(cam, min(lams), longer)
+        ok = (len(lams) - 1) / spread <= 1.5
+    return [f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis: raise kernel_px to "
+            f"≥ {task.window_px(far)}" + (f", or keep it and set design.grating_period_um ≥ {longer * 1e6:g} (µm)"
+                                          if ok else "")]
 
 
 def distance_text(z: float) -> str:

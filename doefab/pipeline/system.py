@@ -19,7 +19,8 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
                                       design_grid_problems, distance_text, optimizer_checks, quick_sampling,
-                                      sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks)
+                                      sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks,
+                                      grating_window_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
@@ -265,24 +266,10 @@ def defocus_ring_px(cam, params: dict) -> float:
     return float(min(r, params.get("kernel_size", 63) // 2 - 3))
 
 
-def _longer_period(cam, task, k: int) -> str:
-    """The other fix of a grating whose first order leaves the window: the shortest period that brings it inside,
-    where the bands stay at most 1.5 per sensor pixel apart there (``doctor``'s spectral sampling)."""
-    from doefab.tasks.grating import grating_spot_px, period_for_reach
-
-    lams = task.wavelengths(cam)
-    period = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)
-    if len(lams) > 1 and math.isfinite(period):
-        spread = grating_spot_px(cam, max(lams), period) - grating_spot_px(cam, min(lams), period)
-        if (len(lams) - 1) / spread > 1.5:
-            return ""
-    return f", or design.grating_period_um ≥ {period * 1e6:g}" if math.isfinite(period) else ""
-
-
 def _checks(scene: Scene, cam, task) -> list[str]:
     """Physics guards: each problem with its key and fix."""
     from doefab.fabrication.process import check_min_feature
-    from doefab.tasks.grating import GratingTask, grating_spot_px
+    from doefab.tasks.grating import GratingTask
     from doefab.tasks.halfring import HalfRingTask
     from doefab.tasks.streak import StreakTask
 
@@ -300,10 +287,7 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         out.append(f"optics.kernel_px {k} reaches beyond the DOE sampling's alias-free field ({2 * alias - 1:.0f} px "
                    f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
     if isinstance(task, GratingTask):
-        far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in task.wavelengths(cam))
-        if far + task.box_px + 2 > k // 2:
-            out.append(f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis; the window "
-                       f"needs kernel_px ≥ {task.window_px(far)}" + _longer_period(cam, task, k))
+        out += grating_window_checks(cam, task)
     if isinstance(task, StreakTask) and task.arm_px + task.band_px + 1 > k // 2:
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
                    f"{2 * (task.arm_px + task.band_px + 2) + 1}")

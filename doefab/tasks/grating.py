@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.elements import blazed_grating_height
 from doefab.tasks.base import HALF_LIGHT, Task
@@ -40,16 +41,20 @@ def period_for_spread(camera: Camera, lam_min: float, lam_max: float, spread_px:
 
 
 def period_for_reach(camera: Camera, lam_max: float, reach_px: float) -> float:
-    """The shortest grating period Λ (m) whose first order of ``lam_max`` (m) lands at most ``reach_px`` sensor
-    pixels off axis (``grating_spot_px``): λ / sin(atan(reach · p / s)), rounded up to 0.01 µm.
+    """The shortest grating period Λ (m), to 0.01 µm, whose first order of ``lam_max`` (m) lands at most
+    ``reach_px`` sensor pixels off axis (``grating_spot_px``): λ / sin(atan(reach · p / s)) rounded up, and up
+    again while the rounded period, as a scene writes it in µm, lands beyond the reach; NaN for no reach.
 
-    Example: 16 mm behind the lens with 1.55 µm pixels, 700 nm lands within 92 px at Λ ≥ 78.55 µm:
-    ``period_for_reach(cam, 700e-9, 92.0)``.
+    Example: with the sensor 16 mm behind the lens (``Camera(sensor_distance=16e-3, sensor_pitch=1.55e-6)``),
+    700 nm lands within 92 px at Λ ≥ 78.55 µm: ``period_for_reach(cam, 700e-9, 92.0)`` → 7.855e-05.
     """
     if reach_px <= 0:
         return math.nan
-    period = lam_max / math.sin(math.atan(reach_px * camera.sensor_pitch / camera.sensor_distance))
-    return math.ceil(round(period * 1e8, 6)) / 1e8
+    exact = lam_max / math.sin(math.atan(reach_px * camera.sensor_pitch / camera.sensor_distance))
+    um = math.ceil(exact * 1e8) / 100
+    while grating_spot_px(camera, lam_max, um * 1e-6) > reach_px:
+        um = round(um + 0.01, 2)
+    return um * 1e-6
 
 
 @dataclass
@@ -90,6 +95,12 @@ class GratingTask(Task):
     def bind(self, camera: Camera) -> None:
         if self.period_m is None:
             self.period_m = self.period_pixels * camera.doe_pitch
+        lam = max(self.wavelengths(camera))
+        if self.period_m <= lam:  # sin θ = λ / Λ: no first order
+            raise DoefabError(f"GratingTask: a period of {self.period_m * 1e6:g} µm sends no first order at "
+                              f"{lam * 1e9:g} nm (sin θ = λ / Λ needs Λ > λ): set period_m or period_pixels (a "
+                              f"scene's design.grating_period_um) longer, e.g. {16 * camera.doe_pitch * 1e6:g} µm "
+                              f"(16 DOE pixels)")
 
     def window_px(self, far_px: float) -> int:
         """The odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px

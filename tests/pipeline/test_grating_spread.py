@@ -111,39 +111,73 @@ def _far_px(s: float, p: float, period: float, lam: float = 700e-9) -> float:
     return s * sin / math.sqrt(1 - sin * sin) / p
 
 
+WIDE = {"focal_length_mm": 16.0, "f_number": 4.0, "lens_f_number": 2.0, "sensor_pitch_um": 1.55, "doe_pitch_um": 2.0}
+
+
+def _wide(tmp_path, optics="", design=""):
+    """A 16 mm lens with 1.55 µm pixels and 2 µm DOE pixels (the default period: 16 of them, 32 µm)."""
+    path = tmp_path / "wide.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
+                    + "".join(f"{k} = {v}\n" for k, v in WIDE.items()) + f"[optics]\n{optics}[design]\n{design}")
+    return load_scene(path)
+
+
+def _refusal(scene) -> str:
+    with pytest.raises(doefab.DoefabError) as e:
+        resolve(scene)
+    return str(e.value)
+
+
 def test_a_first_order_beyond_the_window_names_the_shortest_period_that_brings_it_inside(tmp_path):
-    """A 16 mm lens with 1.55 µm pixels and a 2 µm DOE pitch puts the default 16-pixel (32 µm) period's 700 nm order
-    ~227 px off axis, beyond the 191 px window (which holds 95 − 1 − 2 = 92 px with the metric box and its
-    margin): the refusal names the wider window and the shortest period whose 700 nm order lands within it, to
-    0.01 µm; that period passes, 0.01 µm less does not."""
-    cam = {"focal_length_mm": 16.0, "f_number": 4.0, "lens_f_number": 2.0, "sensor_pitch_um": 1.55,
-           "doe_pitch_um": 2.0}
-
-    def scene(design=""):
-        path = tmp_path / "wide.toml"
-        path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\n'
-                        + "".join(f"{k} = {v}\n" for k, v in cam.items()) + f"[design]\n{design}")
-        return load_scene(path)
-
-    with pytest.raises(doefab.DoefabError) as e:
-        resolve(scene())
-    found = re.search(r"kernel_px ≥ (\d+), or design\.grating_period_um ≥ ([\d.]+)", str(e.value))
-    assert found, str(e.value)
-    period_um = float(found.group(2))
-    s = resolve(scene(f"grating_period_um = {period_um}\n")).camera.sensor_distance
+    """The default 32 µm period puts 700 nm ~227 px off axis, beyond the 191 px window (which holds 95 − 1 − 2 =
+    92 px with the metric box and its margin): the refusal names the wider window (2·⌈227 + 1 + 3⌉ + 1) and the
+    shortest period whose 700 nm order lands within it, to 0.01 µm; that period passes, 0.01 µm less does not."""
+    msg = _refusal(_wide(tmp_path))
+    found = re.search(r"lands (\d+) px off axis: raise kernel_px to ≥ (\d+), or keep it and set "
+                      r"design\.grating_period_um ≥ ([\d.]+) \(µm\)", msg)
+    assert found, msg
+    period_um = float(found.group(3))
+    s = resolve(_wide(tmp_path, design=f"grating_period_um = {period_um}\n")).camera.sensor_distance
+    far = _far_px(s, 1.55e-6, 32e-6)
+    assert int(found.group(1)) == round(far) and int(found.group(2)) == 2 * math.ceil(far + 4) + 1
     assert _far_px(s, 1.55e-6, period_um * 1e-6) <= 92 < _far_px(s, 1.55e-6, (period_um - 0.01) * 1e-6)
-    with pytest.raises(doefab.DoefabError, match="first order lands 92 px off axis"):
-        resolve(scene(f"grating_period_um = {period_um - 0.01:.2f}\n"))
+    assert (found.group(1), found.group(2), found.group(3)) == ("227", "463", "78.8")  # the guide's example
+    assert "first order lands 92 px off axis" in _refusal(_wide(tmp_path, design=f"grating_period_um = "
+                                                                                 f"{period_um - 0.01:.2f}\n"))
 
 
-def test_no_longer_period_is_named_where_it_would_put_bands_on_the_same_pixel(tmp_path):
-    """151 bands 2 nm apart through the same 16 mm camera: a period that brings 700 nm within 92 px spreads
-    400–700 nm over ~40 px, nearly four bands per pixel, so only the wider window is named."""
-    bands = ", ".join(str(400 + 2 * i) for i in range(151))
-    path = tmp_path / "many.toml"
-    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\nfocal_length_mm = 16.0\nf_number = 4.0\n'
-                    'lens_f_number = 2.0\nsensor_pitch_um = 1.55\ndoe_pitch_um = 2.0\n'
-                    f"[optics]\nwavelengths_nm = [{bands}]\n")
-    with pytest.raises(doefab.DoefabError) as e:
-        resolve(load_scene(path))
-    assert "first order lands" in str(e.value) and "grating_period_um" not in str(e.value), str(e.value)
+@pytest.mark.parametrize("bands, named", [(56, True), (64, False)])
+def test_the_longer_period_is_named_only_where_the_bands_stay_at_most_one_and_a_half_per_pixel(tmp_path, bands,
+                                                                                              named):
+    """400–700 nm in evenly spaced bands through the period that brings 700 nm within 92 px: the orders spread
+    over ~39 px, so 56 bands are 1.43 per pixel (named) and 64 are 1.62 (only the wider window is named)."""
+    lams = ", ".join(f"{400 + 300 * i / (bands - 1):.4f}" for i in range(bands))
+    msg = _refusal(_wide(tmp_path, optics=f"wavelengths_nm = [{lams}]\n"))
+    assert "first order lands" in msg and ("grating_period_um" in msg) == named, msg
+    period_um = 78.8  # the period the 31-band scene is told (test above): the same reach, the same 700 nm
+    sd = resolve(_wide(tmp_path, design=f"grating_period_um = {period_um}\n")).camera.sensor_distance
+    spread = _far_px(sd, 1.55e-6, period_um * 1e-6) - _far_px(sd, 1.55e-6, period_um * 1e-6, 400e-9)
+    assert ((bands - 1) / spread <= 1.5) == named  # the reason, by the grating equation written out here
+
+
+def test_no_period_is_named_beyond_the_keys_range(tmp_path):
+    """One band at 700 nm, a 15 px window and a 4 px metric box through a 50 mm lens on 1 µm pixels: the order must
+    land within 7 − 4 − 2 = 1 px, which needs Λ ≈ 35 mm, beyond design.grating_period_um's 10 000 µm."""
+    path = tmp_path / "tiny.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\nfocal_length_mm = 50.0\n'
+                    'sensor_pitch_um = 1.0\ndoe_pitch_um = 2.0\n[optics]\nwavelengths_nm = [700]\nkernel_px = 15\n'
+                    '[design]\ngrating_box_px = 4\n')
+    msg = _refusal(load_scene(path))
+    assert "first order lands" in msg and "grating_period_um" not in msg, msg
+
+
+def test_a_period_without_a_first_order_is_refused_in_the_api_and_the_scene(tmp_path):
+    """sin θ = λ / Λ: a 0.6 µm period sends no first order at 700 nm (the key's range starts at 0.5 µm)."""
+    from doefab.tasks.grating import GratingTask
+
+    cam = doefab.Camera(doe_pitch=2e-6, doe_pixels=4320)
+    with pytest.raises(doefab.DoefabError, match="no first order at 700 nm"):
+        GratingTask(period_m=0.6e-6).bind(cam)
+    GratingTask(period_m=0.71e-6).bind(cam)  # above the longest band: accepted
+    msg = _refusal(_wide(tmp_path, design="grating_period_um = 0.6\n"))
+    assert "no first order at 700 nm" in msg and "design.grating_period_um" in msg, msg
