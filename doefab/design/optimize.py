@@ -172,6 +172,8 @@ def prepare_run(task="streak", iterations: int | None = None, optimizer: str = "
     dev = resolve_device(device)
     cam = camera or Camera.preset(task_obj.preset)
     task_obj.bind(cam)
+    if problem := task_obj.window_problem(cam):  # the targets and metric would be cut at the window's edge
+        raise DoefabError(problem)
     cfg.task_params = task_obj.params()
     if cfg.start is None:
         cfg.start = "lens" if cfg.parameterization == "radial" else "task"

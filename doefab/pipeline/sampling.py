@@ -67,9 +67,9 @@ def grating_window_checks(cam, task) -> list[str]:
     from doefab.tasks.grating import grating_spot_px, period_for_reach
 
     k, lams = task.kernel_size, task.wavelengths(cam)
-    far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in lams)
-    if far + task.box_px + 2 <= k // 2:
+    if task.pattern_reach_px(cam) <= k // 2:
         return []
+    far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in lams)
     longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)
     ok = math.isfinite(longer) and longer * 1e6 <= keys_of("design")["grating_period_um"].hi
     if ok and len(lams) > 1:

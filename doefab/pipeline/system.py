@@ -288,14 +288,13 @@ def _checks(scene: Scene, cam, task) -> list[str]:
                    f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
     if isinstance(task, GratingTask):
         out += grating_window_checks(cam, task)
-    if isinstance(task, StreakTask) and task.arm_px + task.band_px + 1 > k // 2:
+    if isinstance(task, StreakTask) and task.pattern_reach_px(cam) > k // 2:
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
                    f"{2 * (task.arm_px + task.band_px + 2) + 1}")
-    if isinstance(task, HalfRingTask):
+    if isinstance(task, HalfRingTask) and task.pattern_reach_px(cam) > k // 2:
         r = max(task.radius_px(z) for z in task.depths(cam))
-        if r + task.delta_px + 1 > k // 2:
-            out.append(f"the half-ring's largest ring ({r:.0f} px) does not fit optics.kernel_px {k}: raise kernel_px "
-                       f"or lower design.ring_max_px")
+        out.append(f"the half-ring's largest ring ({r:.0f} px) does not fit optics.kernel_px {k}: raise kernel_px "
+                   f"to ≥ {2 * math.ceil(task.pattern_reach_px(cam) + 1) + 1} or lower design.ring_max_px")
     planes = [distance_or_inf(z) for z in scene.optics.get("depths_m", [])]
     if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
             round(z, 9) for z in task.depths(cam)]:

@@ -75,6 +75,28 @@ class Task:
     def bind(self, camera: Camera) -> None:
         """Fix physical (metre) parameters from the camera the design is for, before any resampling."""
 
+    # what shrinks the pattern instead of widening the window, for ``window_problem``'s message
+    PATTERN_HINT = ""
+
+    def pattern_reach_px(self, camera: Camera) -> float:
+        """How far from the window's centre the task's target and metric pixels reach on ``camera``, with the
+        task's margin (sensor px): they fit a window of ``kernel_size`` while this is at most kernel_size // 2.
+
+        Example: ``StreakTask(arm_px=40).pattern_reach_px(cam)`` → 42 (its arms, the 1 px band, 1 px)."""
+        return 0.0
+
+    def window_problem(self, camera: Camera) -> str:
+        """"" where the task's pattern fits its window on ``camera`` (``pattern_reach_px``), else what to change:
+        a pattern past the window's edge would be cut from the targets and metric the design optimises.
+
+        Example: ``StreakTask(arm_px=60).window_problem(cam)`` names kernel_size ≥ 127 (its window: 95 px)."""
+        reach, half = self.pattern_reach_px(camera), self.kernel_size // 2
+        if reach <= half:
+            return ""
+        return (f"{type(self).__name__}: its pattern reaches {reach:.1f} px from the centre (with its margin), beyond "
+                f"the {self.kernel_size} px window's {half}: set kernel_size ≥ {2 * math.ceil(reach + 1) + 1}"
+                + (f" or {self.PATTERN_HINT}" if self.PATTERN_HINT else ""))
+
     # --- what to compute ------------------------------------------------------------------------
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
         return tuple(self.wavelengths_m) if self.wavelengths_m else RGB_WAVELENGTHS

@@ -102,6 +102,13 @@ class GratingTask(Task):
                               f"scene's design.grating_period_um) longer, e.g. {16 * camera.doe_pitch * 1e6:g} µm "
                               f"(16 DOE pixels)")
 
+    PATTERN_HINT = "a longer period_m (a scene's design.grating_period_um)"
+
+    def pattern_reach_px(self, camera: Camera) -> float:
+        """The farthest band's first order, its metric box and 2 px (``Task.pattern_reach_px``)."""
+        return max(abs(grating_spot_px(camera, lam, self.period(camera))) for lam in self.wavelengths(camera)) \
+            + self.box_px + 2
+
     def window_px(self, far_px: float) -> int:
         """The odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
         margin: what ``optics.kernel_px`` must reach."""

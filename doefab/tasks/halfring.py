@@ -85,6 +85,12 @@ class HalfRingTask(Task):
         if self.ring_law not in self.RING_LAWS:
             raise DoefabError(f"unknown ring law {self.ring_law!r}: choose one of {self.RING_LAWS}")
 
+    PATTERN_HINT = "a smaller ring_max_px (a scene's design.ring_max_px)"
+
+    def pattern_reach_px(self, camera: Camera) -> float:
+        """The largest ring, its metric's half-width and 1 px (``Task.pattern_reach_px``)."""
+        return max(self.radius_px(z) for z in self.depths(camera)) + self.delta_px + 1
+
     def radius_px(self, z: float) -> float:
         """Target ring radius in pixels at depth z (metres), by the task's ring law."""
         r_near = self.ring_max_px if self.ring_max_px is not None else max(25.0 - 5.0 * self.z_min, 0.0)

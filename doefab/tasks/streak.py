@@ -36,6 +36,12 @@ class StreakTask(Task):
     default_batch: int = field(default=0, init=False)
     RANGES = {**Task.RANGES, "arm_px": (1, 2047, True, "sensor pixels"), "band_px": (0, 64, True, "sensor pixels")}
 
+    PATTERN_HINT = "lower arm_px (a scene's design.streak_arm_px)"
+
+    def pattern_reach_px(self, camera: Camera) -> float:
+        """The arms, the metric's band and 1 px (``Task.pattern_reach_px``)."""
+        return float(self.arm_px + self.band_px + 1)
+
     def _cross(self, width: int) -> torch.Tensor:
         k, c = self.kernel_size, self.kernel_size // 2
         i = torch.arange(k)

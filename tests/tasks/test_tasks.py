@@ -84,3 +84,33 @@ def test_window_loss_weighs_the_worst_entry():
     assert float(task.loss_from_fractions(uneven)) > float(task.loss_from_fractions(even)) + 0.25
     band = get_task("half-ring", loss_kind="band")
     assert float(band.loss_from_fractions(uneven)) == pytest.approx(float(band.loss_from_fractions(even)))
+
+
+def test_a_pattern_past_the_window_is_refused_by_optimize_not_cut(tiny_camera):
+    """A target drawn past the window's edge would be silently cut (its arm, first order or ring outside the PSF):
+    ``optimize`` refuses it, naming the window that holds it. Reaches written out: a streak's arm + band + 1 px
+    (arm 20, band 1 in a 31 px window: 22 > 15; kernel ≥ 2·23 + 1 = 47); a grating's farthest first order
+    s·tan(asin(λ/Λ))/p + box + 2; a ring's largest radius + half-width + 1."""
+    from doefab.tasks.grating import GratingTask
+    from doefab.tasks.halfring import HalfRingTask
+    from doefab.tasks.streak import StreakTask
+
+    with pytest.raises(DoefabError, match=r"reaches 22\.0 px .* 31 px window's 15: set kernel_size ≥ 47 or lower "
+                                          r"arm_px"):
+        doefab.optimize(StreakTask(kernel_size=31, arm_px=20), iterations=1, camera=tiny_camera, progress=False)
+    assert StreakTask(kernel_size=31, arm_px=13).window_problem(tiny_camera) == ""  # 15: the edge fits
+    assert StreakTask(kernel_size=31, arm_px=14).window_problem(tiny_camera) != ""
+
+    cam = doefab.Camera.preset("hyperspectral")
+    g = GratingTask(kernel_size=121)
+    g.bind(cam)
+    far = cam.sensor_distance * math.tan(math.asin(700e-9 / (16 * 5.4e-6))) / cam.sensor_pitch  # ~75 px
+    assert g.pattern_reach_px(cam) == pytest.approx(far + 1 + 2, rel=1e-9)
+    assert "kernel_size ≥" in g.window_problem(cam) and "period_m" in g.window_problem(cam)
+    assert GratingTask(kernel_size=191).window_problem(cam) == ""
+
+    cam = doefab.Camera.preset("depth")
+    ring = HalfRingTask(kernel_size=63, ring_max_px=40.0)  # the nearest plane's ring: 40 px
+    assert ring.pattern_reach_px(cam) == pytest.approx(40 + 1 + 1)
+    assert "ring_max_px" in ring.window_problem(cam)
+    assert HalfRingTask(kernel_size=63, ring_max_px=29.0).window_problem(cam) == ""
