@@ -38,8 +38,20 @@ __all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETER
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
 
 
+def _same_views(left, right, names: str) -> None:
+    """The two views of one capture: arrays of one shape (numpy or torch), or two numbers."""
+    shapes = [tuple(getattr(v, "shape", ())) for v in (left, right)]
+    if shapes[0] != shapes[1]:
+        raise DoefabError(f"{names} must be the two views of one capture, arrays of the same shape, got shapes "
+                          f"{shapes[0]} and {shapes[1]}")
+
+
 def mix_crosstalk(left, right, alpha_lr, alpha_rl):
-    """The paper's Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch)."""
+    """The paper's Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch, of
+    one shape; the ratios are fractions, scalars or arrays broadcastable to the views).
+
+    Example: ``mix_crosstalk(np.ones(4), np.zeros(4), 0.1, 0.05)`` → ``(0.9 · 1, 0.1 · 1)`` per pixel."""
+    _same_views(left, right, "left and right")
     check_pair(alpha_lr, alpha_rl)
     a, b = _ratio("alpha_lr", alpha_lr, left), _ratio("alpha_rl", alpha_rl, left)
     return (1 - a) * left + b * right, a * left + (1 - b) * right
@@ -54,6 +66,7 @@ def unmix_crosstalk(left_star, right_star, alpha_lr, alpha_rl, min_determinant: 
     if not isinstance(min_determinant, (int, float)) or not 0 < min_determinant <= 1:
         raise DoefabError(f"min_determinant must be a number in (0, 1] (the smallest 1 − α_l→r − α_r→l accepted; "
                           f"default {MIN_DETERMINANT}), got {min_determinant!r}")
+    _same_views(left_star, right_star, "left_star and right_star")
     a, b = _ratio("alpha_lr", alpha_lr, left_star), _ratio("alpha_rl", alpha_rl, left_star)
     det = 1 - a - b
     worst = float(det.min()) if hasattr(det, "min") else float(det)

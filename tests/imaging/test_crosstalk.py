@@ -82,3 +82,13 @@ def test_a_ratio_pair_is_physical_only_when_its_determinant_is_positive():
         doefab.mix_crosstalk(np.ones((2, 3)), np.ones((2, 3)), np.array([0.1, 0.5, 0.7]), 0.4)
     with pytest.raises(DoefabError, match="no dual-pixel crosstalk"):
         doefab.simulate_calibration(0.6, 0.6, rows=8)
+
+
+def test_views_of_two_shapes_are_refused_by_name():
+    """Two views of one capture have one shape; numpy would broadcast a [1, W] view against an [H, W] one, torch
+    raise its own shape error: both are refused by name, in both directions of Eq. 29."""
+    for a, b in ((np.ones((4, 6)), np.ones((1, 6))), (torch.ones(1, 3, 8, 8), torch.ones(1, 3, 4, 4))):
+        with pytest.raises(DoefabError, match="left and right must be the two views of one capture"):
+            doefab.mix_crosstalk(a, b, 0.1, 0.05)
+        with pytest.raises(DoefabError, match="left_star and right_star must be the two views"):
+            doefab.unmix_crosstalk(a, b, 0.1, 0.05)
