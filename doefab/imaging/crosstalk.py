@@ -39,8 +39,8 @@ MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20�
 
 
 def _same_views(left, right, names: str) -> None:
-    """The two views of one capture: arrays of one shape (numpy or torch), or two numbers."""
-    shapes = [tuple(getattr(v, "shape", ())) for v in (left, right)]
+    """The two views of one capture: arrays of one shape (numpy, torch or nested lists), or two numbers."""
+    shapes = [tuple(np.shape(v)) for v in (left, right)]
     if shapes[0] != shapes[1]:
         raise DoefabError(f"{names} must be the two views of one capture, arrays of the same shape, got shapes "
                           f"{shapes[0]} and {shapes[1]}")

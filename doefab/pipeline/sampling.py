@@ -67,7 +67,7 @@ def grating_window_checks(cam, task) -> list[str]:
     from doefab.tasks.grating import grating_spot_px, period_for_reach
 
     k, lams = task.kernel_size, task.wavelengths(cam)
-    if task.pattern_reach_px(cam) <= k // 2:
+    if task.fits_window(cam):
         return []
     far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in lams)
     longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)

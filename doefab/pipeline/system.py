@@ -263,7 +263,8 @@ def defocus_ring_px(cam, params: dict) -> float:
     planes = params.get("planes_m") or (params.get("z_min", 1.0), params.get("z_max", 5.0))
     near, far = min(planes), max(planes)
     r = cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
-    return float(min(r, params.get("kernel_size", 63) // 2 - 3))
+    # within the window with the ring's half-width and 1 px (``HalfRingTask.pattern_reach_px``)
+    return float(max(min(r, params.get("kernel_size", 63) // 2 - 2 - params.get("delta_px", 1.0)), 0.0))
 
 
 def _checks(scene: Scene, cam, task) -> list[str]:
@@ -288,13 +289,18 @@ def _checks(scene: Scene, cam, task) -> list[str]:
                    f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
     if isinstance(task, GratingTask):
         out += grating_window_checks(cam, task)
-    if isinstance(task, StreakTask) and task.pattern_reach_px(cam) > k // 2:
+    elif task.fits_window(cam):
+        pass  # the pattern fits its window (``Task.window_problem``, which ``optimize`` refuses by)
+    elif isinstance(task, StreakTask):
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
                    f"{2 * (task.arm_px + task.band_px + 2) + 1}")
-    if isinstance(task, HalfRingTask) and task.pattern_reach_px(cam) > k // 2:
+    elif isinstance(task, HalfRingTask):
         r = max(task.radius_px(z) for z in task.depths(cam))
-        out.append(f"the half-ring's largest ring ({r:.0f} px) does not fit optics.kernel_px {k}: raise kernel_px "
-                   f"to ≥ {2 * math.ceil(task.pattern_reach_px(cam) + 1) + 1} or lower design.ring_max_px")
+        out.append(f"the half-ring's largest ring ({r:.0f} px, {task.delta_px:g} px wide each side) does not fit "
+                   f"optics.kernel_px {k}: raise kernel_px to ≥ {2 * math.ceil(task.pattern_reach_px(cam) + 1) + 1}, "
+                   f"or lower design.ring_max_px or design.ring_width_px")
+    else:  # a task of another application
+        out.append(f"optics.kernel_px {k}: {task.window_problem(cam)}")
     planes = [distance_or_inf(z) for z in scene.optics.get("depths_m", [])]
     if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
             round(z, 9) for z in task.depths(cam)]:

@@ -85,14 +85,21 @@ class Task:
         Example: ``StreakTask(arm_px=40).pattern_reach_px(cam)`` → 42 (its arms, the 1 px band, 1 px)."""
         return 0.0
 
+    def fits_window(self, camera: Camera) -> bool:
+        """Whether the pattern fits the window: ``pattern_reach_px`` at most kernel_size // 2 (to 1e-9 px of
+        rounding: a ring drawn at exactly the edge, 29 · 0.8 / 0.8 = 29.000000000000004, fits).
+
+        Example: ``StreakTask(kernel_size=95, arm_px=45).fits_window(cam)`` → True (47 px of 47)."""
+        return self.pattern_reach_px(camera) <= self.kernel_size // 2 + 1e-9
+
     def window_problem(self, camera: Camera) -> str:
         """"" where the task's pattern fits its window on ``camera`` (``pattern_reach_px``), else what to change:
         a pattern past the window's edge would be cut from the targets and metric the design optimises.
 
         Example: ``StreakTask(arm_px=60).window_problem(cam)`` names kernel_size ≥ 127 (its window: 95 px)."""
-        reach, half = self.pattern_reach_px(camera), self.kernel_size // 2
-        if reach <= half:
+        if self.fits_window(camera):
             return ""
+        reach, half = self.pattern_reach_px(camera), self.kernel_size // 2
         return (f"{type(self).__name__}: its pattern reaches {reach:.1f} px from the centre (with its margin), beyond "
                 f"the {self.kernel_size} px window's {half}: set kernel_size ≥ {2 * math.ceil(reach + 1) + 1}"
                 + (f" or {self.PATTERN_HINT}" if self.PATTERN_HINT else ""))
