@@ -94,8 +94,7 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
     """
     def ratio(pair, num_index):
         l_s, r_s = (np.asarray(x, dtype=np.float64) for x in pair)
-        if l_s.shape != r_s.shape:
-            raise DoefabError(f"a calibration pair's two views differ in shape: {l_s.shape} vs {r_s.shape}")
+        _same_views(l_s, r_s, "a calibration pair's views")
         total = l_s + r_s
         if not np.all(np.isfinite(total)) or np.any(total <= 0):
             raise DoefabError("calibration captures must be finite and lit everywhere (a white wall, not black)")

@@ -69,15 +69,14 @@ def grating_window_checks(cam, task) -> list[str]:
     k, lams = task.kernel_size, task.wavelengths(cam)
     if task.fits_window(cam):
         return []
-    far = max(abs(grating_spot_px(cam, lam, task.period(cam))) for lam in lams)
     longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)
     ok = math.isfinite(longer) and longer * 1e6 <= keys_of("design")["grating_period_um"].hi
     if ok and len(lams) > 1:
         spread = grating_spot_px(cam, max(lams), longer) - grating_spot_px(cam, min(lams), longer)
         ok = (len(lams) - 1) / spread <= 1.5
-    return [f"optics.kernel_px {k}: the grating's first order lands {far:.0f} px off axis: raise kernel_px to "
-            f"≥ {task.window_px(far)}" + (f", or keep it and set design.grating_period_um ≥ {longer * 1e6:g} (µm)"
-                                          if ok else "")]
+    period = f", or keep it and set design.grating_period_um ≥ {longer * 1e6:g} (µm)" if ok else ""
+    return [f"optics.kernel_px {k}: the grating's first order lands {task.first_order_px(cam):.0f} px off axis: "
+            f"raise kernel_px to ≥ {task.window_for_pattern(cam)}{period}"]
 
 
 def distance_text(z: float) -> str:

@@ -293,11 +293,11 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         pass  # the pattern fits its window (``Task.window_problem``, which ``optimize`` refuses by)
     elif isinstance(task, StreakTask):
         out.append(f"design.streak_arm_px {task.arm_px} does not fit optics.kernel_px {k}: raise kernel_px to ≥ "
-                   f"{2 * (task.arm_px + task.band_px + 2) + 1}")
+                   f"{task.window_for_pattern(cam)}")
     elif isinstance(task, HalfRingTask):
         r = max(task.radius_px(z) for z in task.depths(cam))
         out.append(f"the half-ring's largest ring ({r:.0f} px, {task.delta_px:g} px wide each side) does not fit "
-                   f"optics.kernel_px {k}: raise kernel_px to ≥ {2 * math.ceil(task.pattern_reach_px(cam) + 1) + 1}, "
+                   f"optics.kernel_px {k}: raise kernel_px to ≥ {task.window_for_pattern(cam)}, "
                    f"or lower design.ring_max_px or design.ring_width_px")
     else:  # a task of another application
         out.append(f"optics.kernel_px {k}: {task.window_problem(cam)}")

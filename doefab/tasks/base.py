@@ -92,6 +92,12 @@ class Task:
         Example: ``StreakTask(kernel_size=95, arm_px=45).fits_window(cam)`` → True (47 px of 47)."""
         return self.pattern_reach_px(camera) <= self.kernel_size // 2 + 1e-9
 
+    def window_for_pattern(self, camera: Camera) -> int:
+        """The smallest odd window (sensor px) that holds the pattern with 1 px of room: 2·⌈reach + 1⌉ + 1.
+
+        Example: ``StreakTask(arm_px=60).window_for_pattern(cam)`` → 127 (a 62 px reach)."""
+        return 2 * math.ceil(self.pattern_reach_px(camera) + 1) + 1
+
     def window_problem(self, camera: Camera) -> str:
         """"" where the task's pattern fits its window on ``camera`` (``pattern_reach_px``), else what to change:
         a pattern past the window's edge would be cut from the targets and metric the design optimises.
@@ -101,7 +107,7 @@ class Task:
             return ""
         reach, half = self.pattern_reach_px(camera), self.kernel_size // 2
         return (f"{type(self).__name__}: its pattern reaches {reach:.1f} px from the centre (with its margin), beyond "
-                f"the {self.kernel_size} px window's {half}: set kernel_size ≥ {2 * math.ceil(reach + 1) + 1}"
+                f"the {self.kernel_size} px window's {half}: set kernel_size ≥ {self.window_for_pattern(camera)}"
                 + (f" or {self.PATTERN_HINT}" if self.PATTERN_HINT else ""))
 
     # --- what to compute ------------------------------------------------------------------------

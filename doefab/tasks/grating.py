@@ -104,10 +104,13 @@ class GratingTask(Task):
 
     PATTERN_HINT = "a longer period_m (a scene's design.grating_period_um)"
 
+    def first_order_px(self, camera: Camera) -> float:
+        """How far off axis (sensor px) the farthest band's first order lands (``grating_spot_px``)."""
+        return max(abs(grating_spot_px(camera, lam, self.period(camera))) for lam in self.wavelengths(camera))
+
     def pattern_reach_px(self, camera: Camera) -> float:
         """The farthest band's first order, its metric box and 2 px (``Task.pattern_reach_px``)."""
-        return max(abs(grating_spot_px(camera, lam, self.period(camera))) for lam in self.wavelengths(camera)) \
-            + self.box_px + 2
+        return self.first_order_px(camera) + self.box_px + 2
 
     def window_px(self, far_px: float) -> int:
         """The odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
