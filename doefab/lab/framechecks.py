@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.lab.frames import full_scale, read_frame
+from doefab.lab.frames import read_frame, stated_white_level
 
 __all__ = ["FrameSet", "PSFSignal", "read_set", "measure_psf", "psf_signal", "psf_frame_problems",
            "wall_frame_problems", "MIN_KERNEL_SNR", "MIN_PEAK_SNR", "SATURATION"]
@@ -71,7 +71,13 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
                             f"have the same size and channels (re-record it or remove it from the list)")
             continue
         if saturated_fix:
-            top = full_scale(p, pixel_format) if white_level is None else white_level
+            try:
+                top = (stated_white_level(p, pixel_format, "the recordings file's white_level")
+                       if white_level is None else white_level)
+            except DoefabError as exc:  # no clip level known: saturation cannot be checked (said once a set)
+                problems.append(str(exc))
+                saturated_fix = None
+                continue
             peak, what = float(f.max(initial=0.0)), "the file's full scale" if white_level is None else "white_level"
             if peak >= SATURATION * top:
                 problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of {what} "

@@ -10,7 +10,9 @@ LibRaw (rawpy): its visible Bayer mosaic binned 2×2 into R, G (mean of the two 
 - A 16-bit *colour* PNG is refused: Pillow, which reads PNGs, keeps only 8 of its bits (save it as a TIFF).
 - :func:`full_scale` is the largest DN the file can hold: ``2**bits - 1`` of an integer file (a TIFF's
   BitsPerSample, so a 12-bit TIFF gives 4095), the raw's white level; a float file is taken as normalised
-  (1.0) when its values are ≤ 1, else no clipping level is known (``inf``).
+  (1.0) when its values are ≤ 1, else no clipping level is known (``inf``). :func:`stated_white_level` is the
+  sensor's clip level a file states: its full scale, refused (naming the setting that gives it) for floats above 1
+  and integers wider than 16 bits.
 """
 
 from __future__ import annotations
@@ -27,11 +29,12 @@ from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
 
 __all__ = ["PIXEL_FORMATS", "RAW_EXTENSIONS", "frame_format", "expand", "read_frame", "full_scale",
-           "raw_black_level", "bin_bayer", "mean_frames", "write_frame"]
+           "stated_white_level", "raw_black_level", "bin_bayer", "mean_frames", "write_frame"]
 
 PIXEL_FORMATS = ("auto", "npy", "png", "tiff", "raw")
 RAW_EXTENSIONS = (".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
                   ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".mos", ".erf", ".kdc", ".mrw", ".raw", ".rwl")
+SENSOR_BITS = 16  # no camera's digital numbers are wider: a wider integer file's full scale is not its clip level
 _BY_EXT = {".npy": "npy", ".png": "png", ".tif": "tiff", ".tiff": "tiff", **{e: "raw" for e in RAW_EXTENSIONS}}
 
 
@@ -131,8 +134,12 @@ def _read_tiff(path: Path) -> np.ndarray:
     with tifffile.TiffFile(path) as tif:
         series = tif.series[0]
         arr, axes = series.asarray(), series.axes
-    if arr.ndim == 3 and axes.startswith("S") and arr.shape[0] == 3:  # planar RGB
+    if arr.ndim == 3 and axes.startswith("S"):  # planar samples (R, G, B planes)
         arr = np.moveaxis(arr, 0, -1)
+    if arr.ndim == 3 and "S" in axes and arr.shape[-1] != 3:  # grey or colour with alpha / extra samples
+        raise DoefabError(f"{path} holds {arr.shape[-1]} samples per pixel (grey or colour with alpha or extra "
+                          f"samples): frames must be grey or R, G, B without alpha: save the camera's values "
+                          f"without the extra channels (e.g. tifffile.imwrite(path, frame[..., :3]))")
     if arr.ndim == 3 and arr.shape[-1] != 3:
         raise DoefabError(f"{path} holds a stack of {arr.shape[0]} images (shape {arr.shape}): write one frame "
                           f"per file (a glob such as \"frame_*.tiff\" takes them all)")
@@ -239,6 +246,23 @@ def full_scale(path: str | Path, pixel_format: str = "auto") -> float:
     if dtype.kind in "ui":
         return _int_scale(dtype, bits)
     return 1.0 if float(read_frame(path, fmt).max(initial=0.0)) <= 1.0 else math.inf
+
+
+def stated_white_level(path: str | Path, pixel_format: str = "auto", key: str = "white_level") -> float:
+    """The sensor's clipping level (DN) a file states: its :func:`full_scale`, or an error naming ``key`` (the
+    setting that gives it) where the file states none: a float file of values above 1, or an integer file wider
+    than 16 bits (whose full scale, e.g. 4294967295 for 32 bits, no sensor reaches).
+
+    Example: ``stated_white_level("frame.tiff")`` is 65535.0 for a 16-bit TIFF."""
+    top = full_scale(path, pixel_format)
+    if math.isinf(top):
+        raise DoefabError(f"{path} holds floats above 1 and so states no white level: give {key} (the sensor's "
+                          f"clipping level in the file's units), or save the frame scaled to [0, 1]")
+    if top > 2**SENSOR_BITS - 1:
+        raise DoefabError(f"{path} holds {math.log2(top + 1):.0f}-bit integers, whose full scale {top:.0f} DN is "
+                          f"no sensor's clipping level: give {key} (e.g. 4095 for 12-bit, 16383 for 14-bit, 65535 "
+                          f"for 16-bit values), or save the frames as 16-bit TIFFs")
+    return top
 
 
 def mean_frames(paths, pixel_format: str = "auto") -> tuple[np.ndarray, int]:

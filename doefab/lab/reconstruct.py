@@ -225,7 +225,7 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
 
     ``black_level``, ``white_level``: digital numbers (None: the raw's own black level, else 0; the file's full
     scale)."""
-    from doefab.lab.frames import full_scale, raw_black_level, read_frame
+    from doefab.lab.frames import raw_black_level, read_frame, stated_white_level
 
     path = Path(path)
     dn = read_frame(path, pixel_format)
@@ -233,11 +233,8 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
         raise DoefabError(f"{path} is a monochrome frame ({dn.shape[1]}×{dn.shape[0]} px): the networks read colour "
                           f"captures (R, G, B): give the camera's colour frames (a 16-bit RGB TIFF, or the raw/DNG, "
                           f"which is binned to R, G, B)")
-    white = full_scale(path, pixel_format) if white_level is None else float(white_level)
-    if not math.isfinite(white):
-        raise DoefabError(f"{path} holds floats above 1 ({dn.max():.4g}) and so states no white level: give "
-                          f"--white-level (the sensor's clipping level in the file's units), or save it scaled to "
-                          f"[0, 1]")
+    white = (stated_white_level(path, pixel_format, "--white-level") if white_level is None
+             else float(white_level))
     if white_level is None and 1 < white < 2**MIN_BITS - 1:  # (1.0: a float file, normalised)
         raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks "
                           f"need captures of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or "

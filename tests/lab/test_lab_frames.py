@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from doefab.errors import DoefabError
-from doefab.lab.frames import bin_bayer, expand, full_scale, mean_frames, raw_black_level, read_frame, write_frame
+from doefab.lab.frames import (bin_bayer, expand, full_scale, mean_frames, raw_black_level, read_frame,
+                              stated_white_level, write_frame)
 
 # the CFA letters of a DNG's CFAPattern tag values (0 = red, 1 = green, 2 = blue)
 _CFA = {"R": 0, "G": 1, "B": 2}
@@ -105,6 +106,42 @@ def test_unreadable_and_foreign_files_are_named_with_a_fix(tmp_path):
     np.save(tmp_path / "rgba.npy", np.ones((4, 4, 4)))
     with pytest.raises(DoefabError, match=r"rgba\.npy has shape \(4, 4, 4\)"):
         read_frame(tmp_path / "rgba.npy")
+
+
+def test_tiffs_with_alpha_are_refused_as_such_not_as_stacks(tmp_path):
+    import tifffile
+
+    rgb = np.random.default_rng(5).integers(0, 60000, (9, 7, 3)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "rgba.tiff", np.dstack([rgb, rgb[..., :1]]), photometric="rgb", extrasamples=[2])
+    tifffile.imwrite(tmp_path / "ga.tiff", rgb[..., :2], photometric="minisblack", extrasamples=[2])
+    tifffile.imwrite(tmp_path / "planar.tiff", np.moveaxis(np.dstack([rgb, rgb[..., :1]]), -1, 0),
+                     photometric="rgb", planarconfig="separate", extrasamples=[2])
+    for name, n in (("rgba.tiff", 4), ("ga.tiff", 2), ("planar.tiff", 4)):
+        with pytest.raises(DoefabError, match=rf"{name} holds {n} samples per pixel .* without alpha") as exc:
+            read_frame(tmp_path / name)
+        assert "stack" not in str(exc.value)
+    four = rgb[..., 0][None].repeat(4, axis=0)
+    tifffile.imwrite(tmp_path / "stack.tiff", four, photometric="minisblack")  # four grey pages: a stack
+    with pytest.raises(DoefabError, match=r"stack\.tiff holds a stack of 4 images"):
+        read_frame(tmp_path / "stack.tiff")
+
+
+def test_the_white_level_a_file_states(tmp_path):
+    import tifffile
+
+    a = np.random.default_rng(6).integers(0, 4000, (6, 5, 3))
+    write_frame(tmp_path / "c16.tiff", a)
+    assert stated_white_level(tmp_path / "c16.tiff") == 65535
+    tifffile.imwrite(tmp_path / "norm.tiff", (a / 4095).astype(np.float32), photometric="rgb")
+    assert stated_white_level(tmp_path / "norm.tiff") == 1.0
+    tifffile.imwrite(tmp_path / "dn.tiff", a.astype(np.float32), photometric="rgb")
+    with pytest.raises(DoefabError, match=r"dn\.tiff holds floats above 1 .* give --wl"):
+        stated_white_level(tmp_path / "dn.tiff", key="--wl")
+    tifffile.imwrite(tmp_path / "i32.tiff", a.astype(np.int32), photometric="rgb")
+    np.save(tmp_path / "u32.npy", a.astype(np.uint32))
+    for name in ("i32.tiff", "u32.npy"):  # a 12-bit camera's values in 32-bit integers: 2^31 − 1 or 2^32 − 1
+        with pytest.raises(DoefabError, match=r"holds 3[12]-bit integers, whose full scale \d+ DN is no sensor's"):
+            stated_white_level(tmp_path / name)
 
 
 def test_16_bit_colour_png_is_refused_not_truncated(tmp_path):

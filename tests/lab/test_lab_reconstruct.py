@@ -181,6 +181,15 @@ def test_read_capture_scales_by_the_files_full_scale_after_the_black_level(tmp_p
         R.read_capture(tmp_path / "c.tiff", black_level=70000)
 
 
+def test_read_capture_asks_for_the_white_level_of_wide_integer_files(tmp_path):
+    dn = np.random.default_rng(2).integers(0, 4096, (16, 20, 3))
+    np.save(tmp_path / "c.npy", dn.astype(np.int32))  # a 12-bit camera's values saved as 32-bit integers
+    with pytest.raises(DoefabError, match=r"c\.npy holds 31-bit integers.*give --white-level"):
+        R.read_capture(tmp_path / "c.npy")
+    got = R.read_capture(tmp_path / "c.npy", white_level=4095)
+    np.testing.assert_allclose(got, np.moveaxis(dn, -1, 0) / 4095, rtol=1e-6)
+
+
 def test_read_capture_refuses_fewer_than_8_bits(tmp_path, monkeypatch):
     import doefab.lab.frames as frames
 

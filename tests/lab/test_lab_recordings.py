@@ -155,6 +155,19 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     assert msg.count("\n  - ") == 8  # one per problem, every recording checked
 
 
+def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
+    import tifffile
+
+    for i in range(3):  # the saturation check needs the sensor's clip level, which these files do not state
+        tifffile.imwrite(lab / "psf" / f"wide_{i}.tiff", np.rint(_spot() + BLACK).astype(np.int32))
+        tifffile.imwrite(lab / "psf" / f"fdn_{i}.tiff", (_spot() + BLACK).astype(np.float32))
+    msg = _problems(lab, _psf("psf/wide") + _psf("psf/fdn"))
+    assert "wide_0.tiff holds 32-bit integers" in msg and "fdn_0.tiff holds floats above 1" in msg
+    assert msg.count("give the recordings file's white_level") == 2  # once per recording, not per frame
+    rec = load_recordings(_write(lab, "white_level = 65535\n" + _psf("psf/wide") + _psf("psf/fdn")))
+    assert recording_problems(rec, BANDS, PLANES, K) == []
+
+
 def test_wavelengths_depths_and_channels_the_design_cannot_use(lab):
     _frames(lab / "psf", "rgb", np.stack([_spot()] * 3, axis=-1), n=2)
     body = (_psf(source="wavelength_nm = 552") + _psf(depth="2.05") + _psf(depth='"inf"')
