@@ -63,18 +63,26 @@ def default_overlap(rec, psf=None) -> int:
     return _round_up(k)
 
 
+def _too_wide(what: str, overlap: int, tile: int):
+    half = tile // 2 // MULTIPLE * MULTIPLE
+    raise DoefabError(f"{what} ({tile} px): give a tile of at least {2 * overlap} px "
+                      f"(--tile {_round_up(2 * overlap)} --overlap {overlap}) or an overlap of at most {half} px "
+                      f"(--overlap {half})")
+
+
 def check_tiling(tile: int, overlap: int, shape: tuple[int, int], what: str = "the captures") -> None:
     """Refuse a tile or overlap the networks cannot take, or an image smaller than their smallest input, with
     values that work (``tile``, ``overlap``: the ``--tile`` and ``--overlap`` of ``doefab reconstruct``)."""
     for name, v, lo in (("tile", tile, MIN_SIDE), ("overlap", overlap, MULTIPLE)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or v % MULTIPLE:
             good = max(lo, _round_up(v)) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else lo
+            if name == "overlap" and 2 * good > tile:  # both rules in one message: its fix must pass
+                _too_wide(f"overlap {v!r} must be a multiple of {MULTIPLE} pixels and at most half the tile", good,
+                          tile)
             raise DoefabError(f"{name} {v!r} must be a multiple of {MULTIPLE} pixels, at least {lo} (the networks' "
                               f"input sides are multiples of {MULTIPLE}): e.g. {name} {good} (--{name} {good})")
     if 2 * overlap > tile:
-        raise DoefabError(f"overlap {overlap} px is more than half the tile ({tile} px): give a tile of at least "
-                          f"{2 * overlap} px (--tile {_round_up(2 * overlap)}) or an overlap of at most "
-                          f"{tile // 2 // MULTIPLE * MULTIPLE} px (--overlap {tile // 2 // MULTIPLE * MULTIPLE})")
+        _too_wide(f"overlap {overlap} px is more than half the tile", overlap, tile)
     h, w = shape
     if min(h, w) < MIN_SIDE:
         raise DoefabError(f"{what} are {w}×{h} px: the networks need at least {MIN_SIDE} px on each side: capture "

@@ -137,7 +137,10 @@ def test_tiling_refusals_name_the_value_and_a_fix():
     coded, uncoded = _views(96, 128)
     rec = LocalNet()
     for kw, needle in (({"tile": 80}, "tile 80 must be a multiple of 32"), ({"overlap": 48}, "--overlap 64"),
-                       ({"tile": 64, "overlap": 64}, "more than half the tile (64 px): give a tile of at least 128")):
+                       ({"tile": 64, "overlap": 64}, "more than half the tile (64 px): give a tile of at least 128"),
+                       # both rules in one message, each fix passing both
+                       ({"tile": 128, "overlap": 200}, "multiple of 32 pixels and at most half the tile (128 px): "
+                        "give a tile of at least 448 px (--tile 448 --overlap 224) or an overlap of at most 64 px")):
         with pytest.raises(DoefabError, match=re.escape(needle)):
             R.reconstruct_tiled(rec, coded, uncoded, **{"tile": 64, "overlap": 32, **kw})
     with pytest.raises(DoefabError, match="differ in size"):
