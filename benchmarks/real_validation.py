@@ -207,8 +207,9 @@ def task_lines(task: str, runs: dict, test_depth: dict | None) -> list[str]:
     if task == "depth" and test_depth is not None:
         d_real, d_test = real["rows"]["proposed"]["delta125"], test_depth["rows"]["proposed"]["delta125"]
         lines += [f"Depth δ<1.25 of the proposed network: {d_real:.3f} on the measured set, {d_test:.3f} on the "
-                  f"committed test-split table (benchmarks/results/evaluate_depth.json): a gap of "
-                  f"{d_real - d_test:+.3f}."] + gap_lines(real, test_depth) + [""]
+                  f"committed test-split table (benchmarks/results/evaluate_depth.json, scored under its own "
+                  f"code's budget; the test split read at later code is in benchmarks/results/"
+                  f"depth_error_sources.md): a gap of {d_real - d_test:+.3f}."] + gap_lines(real, test_depth) + [""]
     return lines
 
 
