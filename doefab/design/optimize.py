@@ -27,7 +27,7 @@ from doefab.design.parameterization import (STARTS, isolated_pixel_penalty, make
                                             theta_to_height)
 from doefab.errors import DoefabError
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 from doefab.optics.psf import PSFPlan
 from doefab.tasks import get_task
 
@@ -170,7 +170,7 @@ def prepare_run(task="streak", iterations: int | None = None, optimizer: str = "
                        seed=seed, **settings)
     cfg.check()
     dev = resolve_device(device)
-    cam = camera or Camera.preset(task_obj.preset)
+    cam = Camera.preset(task_obj.preset) if camera is None else require_camera(camera)
     task_obj.bind(cam)
     if problem := task_obj.window_problem(cam):  # the targets and metric would be cut at the window's edge
         raise DoefabError(problem)

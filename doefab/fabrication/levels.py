@@ -17,7 +17,7 @@ import torch
 from doefab.validate import heights, number_in
 from doefab.errors import DoefabError
 from doefab.fabrication.process import DEFAULT_LEVELS
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 
 __all__ = ["level_step", "material_level_step", "levels_to_height", "quantize_levels", "quantize_height", "quantize_torch", "wrap_height",
            "levels_sha256"]
@@ -25,6 +25,7 @@ __all__ = ["level_step", "material_level_step", "levels_to_height", "quantize_le
 
 def level_step(camera: Camera, n_levels: int = DEFAULT_LEVELS) -> float:
     """Height of one level d (metres) = h_2π(design wavelength) / n_levels."""
+    camera = require_camera(camera)
     return material_level_step(camera.material, camera.design_wavelength, n_levels)
 
 

@@ -15,7 +15,7 @@ from doefab.validate import distance_or_inf, distance_record, metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
-__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX", "window_reach"]
+__all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX", "window_reach", "require_camera"]
 
 #: a DOE baffle and a lens entrance pupil whose diameters differ by at most this fraction are "about equal": either
 #: may be the stop (the reports say so); a lens pupil narrower by more cuts the DOE (``Camera.lens_cuts_doe``)
@@ -34,6 +34,19 @@ def window_reach(kernel_size: int) -> int:
 
     Example: ``window_reach(63)`` is 31, ``window_reach(16)`` is 7."""
     return (int(kernel_size) - 1) // 2
+
+
+def require_camera(camera, what: str = "camera") -> "Camera":
+    """``camera`` itself when it is a :class:`Camera`; else one error naming what was given and how to make one.
+
+    Example: ``require_camera(Camera.preset("hdr"))`` returns it; ``require_camera("hdr")`` names
+    ``doefab.Camera.preset("hdr")``."""
+    if isinstance(camera, Camera):
+        return camera
+    hint = (f"doefab.Camera.preset({camera!r})" if isinstance(camera, str) and camera in PRESETS
+            else "doefab.Camera.preset(name) or doefab.Camera(...)")
+    raise DoefabError(f"{what} must be a doefab.Camera, got {type(camera).__name__} {camera!r:.60}: make one with "
+                      f"{hint}")
 
 
 @dataclass(frozen=True)

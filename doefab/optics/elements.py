@@ -6,13 +6,14 @@ import numpy as np
 
 from doefab.validate import number_in, wavelength_m
 from doefab.errors import DoefabError
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 
 __all__ = ["blank_height", "blazed_grating_height"]
 
 
 def blank_height(camera: Camera) -> np.ndarray:
     """(N, N) float64 zeros: a DOE with no structure."""
+    camera = require_camera(camera)
     return np.zeros((camera.doe_pixels, camera.doe_pixels), dtype=np.float64)
 
 
@@ -30,6 +31,7 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
         (N, N) float64 heights, metres. Pixel j's phase is sampled at its centre for the continuous
         blaze, and equals floor(N_steps · frac(x/Λ)) / N_steps of a wave for the staircase.
     """
+    camera = require_camera(camera)
     period_pixels = number_in("period_pixels", period_pixels, 2, 1e6, unit="DOE pixels (not metres)")
     if n_levels is not None:
         n_levels = number_in("n_levels", n_levels, 2, 256, integer=True)

@@ -30,7 +30,7 @@ import torch
 
 from doefab.validate import depths, heights, wavelength_m
 from doefab.errors import DoefabError
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 from doefab.optics.propagators.asm import angular_spectrum
 from doefab.optics.pupil import pupil_half, source_path_difference
 
@@ -73,7 +73,7 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
             the grid's largest angle (sin θ = λ / 2b, b the DOE pitch) over the gap cannot wrap around into the
             grid (linear, not circular, convolution), plus 16 pixels.
     """
-    g = check_gap(gap)
+    camera, g = require_camera(camera), check_gap(gap)
     wavelength = wavelength_m("wavelength", wavelength)
     depth = depths([depth])[0]
     n = camera.doe_pixels

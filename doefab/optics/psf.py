@@ -18,7 +18,7 @@ import torch
 from doefab import validate as _validate
 from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
-from doefab.optics.camera import Camera, window_reach
+from doefab.optics.camera import Camera, require_camera, window_reach
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
@@ -196,8 +196,7 @@ class PSFPlan:
     def __init__(self, camera: Camera, wavelengths, depths, kernel_size: int = 255,
                  halves=HALVES, route="spectral", pupil_oversample: int = 1, precision: str = "float32",
                  center=(0.0, 0.0), check: bool = True, device=None, **route_options):
-        if not isinstance(camera, Camera):
-            raise DoefabError(f"camera must be a doefab.Camera, got {type(camera).__name__}")
+        require_camera(camera)
         self.device = resolve_device(device)
         self.camera = camera
         self.wavelengths = _validate.wavelengths(wavelengths)

@@ -136,7 +136,9 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     """
     from doefab.tolerance.relief import MaskErrors, ReliefModel, corner_bias, mean_height, pattern_heights
 
-    design_wavelength = wavelength_m("design_wavelength", design_wavelength)
+    from doefab.optics.camera import require_camera
+
+    camera, design_wavelength = require_camera(camera), wavelength_m("design_wavelength", design_wavelength)
     roughness_corr, seed = length_m("roughness_corr", roughness_corr, 1e-9, 1e-2), seed_value("seed", seed)
     lv = np.asarray(levels)
     if lv.ndim != 2 or lv.shape[0] != lv.shape[1] or lv.shape[0] != camera.doe_pixels:

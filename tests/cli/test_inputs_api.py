@@ -3,3 +3,49 @@ a ``doefab.DoefabError`` naming the argument; and the sweep covers every subcomm
 
 from input_sweep import (test_api_argument, test_api_path,  # noqa: F401 - collected here
                          test_every_command_line_case_has_its_subcommands_file, test_the_sweep_covers_the_whole_public_api)
+
+
+def _valid(name: str):
+    """A valid value for a public function's required argument ``name`` (other than its camera)."""
+    import numpy as np
+
+    if name in ("height", "levels"):
+        return np.zeros((4, 4), dtype=np.int64 if name == "levels" else np.float64)
+    if "wavelength" in name:
+        return [550e-9] if name.endswith("s") else 550e-9
+    if "depth" in name:
+        return [5.0] if name.endswith("s") else 5.0
+    return {"kernel_size": 31, "gap": 1e-3}.get(name, 1e-3)
+
+
+def _takes_camera():
+    import inspect
+
+    import doefab
+
+    out = []
+    for name in doefab.__all__:
+        f = getattr(doefab, name)
+        if callable(f) and not isinstance(f, type) and "camera" in inspect.signature(f).parameters:
+            out.append(name)
+    return out
+
+
+def test_every_function_taking_a_camera_refuses_anything_else_by_name():
+    import inspect
+
+    import pytest
+
+    import doefab
+    from doefab.errors import DoefabError
+
+    names = _takes_camera()
+    assert {"quantize_levels", "levels_to_height", "optimize", "split_aperture_psf", "blank_height"} <= set(names)
+    for name in names:
+        f = getattr(doefab, name)
+        kw = {p: _valid(p) for p, v in inspect.signature(f).parameters.items()
+              if v.default is inspect.Parameter.empty and v.kind is v.POSITIONAL_OR_KEYWORD and p != "camera"}
+        for bad, fix in (("hdr", "doefab.Camera.preset('hdr')"), (8.64e-3, "doefab.Camera.preset(name)")):
+            with pytest.raises(DoefabError, match="camera must be a doefab.Camera") as exc:
+                f(**kw, camera=bad)
+            assert fix in str(exc.value), (name, str(exc.value))
