@@ -170,3 +170,44 @@ def test_cli_bad_parameter(tmp_path, capsys):
     assert main(["holder", "--out", str(tmp_path), "--set", "wall_mm=0.2", "--no-step", "--no-renders"]) == 2
     assert "wall_mm" in capsys.readouterr().err
     assert main(["holder", "--out", str(tmp_path), "--set", "colour=red"]) == 2
+
+
+def test_facet_sag_is_read_from_the_mesh():
+    from manifold3d import Manifold
+
+    from holder_cad.checks import facet_sag_mm
+
+    for r, n in ((28.5, 128), (78.0, 128), (78.0, 32)):
+        m = Manifold.cylinder(2.0, r, circular_segments=n)
+        mesh = m.to_mesh()
+        v = np.asarray(mesh.vert_properties)
+        v = v[(v[:, 2] == 0.0) & (np.hypot(v[:, 0], v[:, 1]) > r / 2), :2]  # the bottom rim's vertices
+        ring = v[np.argsort(np.arctan2(v[:, 1], v[:, 0]))]  # in angle order
+        mids = 0.5 * (ring + np.roll(ring, -1, axis=0))  # facet midpoints, nearest the axis
+        assert facet_sag_mm(m, n) == pytest.approx(r - np.hypot(*mids.T).min(), rel=1e-3)  # float32 vertices
+
+
+def test_overhangs_narrower_than_the_facets_are_not_counted():
+    from manifold3d import Manifold
+
+    from holder_cad.checks import facet_sag_mm, overhang_area
+
+    def stack(r_bottom):  # a 78 mm radius disc resting on a narrower one: a downward ledge of r − r_bottom
+        return Manifold.cylinder(2.0, r_bottom, circular_segments=128) + Manifold.cylinder(
+            2.0, 78.0, circular_segments=128).translate((0.0, 0.0, 2.0))
+
+    sliver, ledge = stack(78.0 - 0.01), stack(77.5)
+    sag = facet_sag_mm(ledge, 128)  # 0.0235 mm
+    annulus = 64 * np.sin(2 * np.pi / 128) * (78.0**2 - 77.5**2)  # the two 128-gons' areas' difference
+    assert overhang_area(ledge, sliver_mm=sag) == pytest.approx(annulus, rel=1e-6)
+    assert overhang_area(sliver) > 1e-3 > overhang_area(sliver, sliver_mm=sag)  # 0.01 mm wide: the facets' scale
+
+
+@pytest.mark.parametrize("segments", [128, 256])
+def test_the_largest_thread_passes_its_checks(tmp_path, segments):
+    # the 150 mm thread (pitch and flange derived): its facets sit 0.0235 mm inside at 128 segments, and at 256 the
+    # thread's section must be drawn as finely as the bore
+    rep = write_holder(HolderParams(thread_diameter_mm=150.0, segments=segments), tmp_path, step=False,
+                       renders=False)
+    assert rep["checks"]["passed"] and rep["coupon_checks"]["passed"], (rep["checks"]["failing"],
+                                                                         rep["coupon_checks"]["failing"])
