@@ -14,14 +14,18 @@ import math
 import numpy as np
 
 from holder_cad.params import HolderParams, fit_bounds
-from holder_cad.recipe import die_outline
+from holder_cad.recipe import die_outline, thread_points
 
-__all__ = ["wall_thickness", "overhang_area", "facet_sag_mm", "pocket_gap", "aperture_clear", "run_checks"]
+__all__ = ["wall_thickness", "overhang_area", "facet_sag_mm", "facet_tolerance_mm", "pocket_gap", "aperture_clear",
+           "run_checks"]
 
 OVERHANG_LIMIT_DEG = 45.0
 ANGLE_TOLERANCE_DEG = 0.5
 OVERHANG_TOLERANCE_MM2 = 1e-3  # boolean slivers (~1e-7 mm²) are not printable overhangs
 WALL_TOLERANCE_MM = 0.01  # facets of the default 128-gon sit up to 0.009 mm inside a 28.5 mm circle
+# the most the checks allow for the facets' error, under a tenth of a 0.4 mm line; a coarser mesh fails (its walls
+# are that much thinner in the STL): more segments fix it
+FACET_TOLERANCE_MAX_MM = 0.03
 
 
 def facet_sag_mm(manifold, segments: int) -> float:
@@ -33,6 +37,12 @@ def facet_sag_mm(manifold, segments: int) -> float:
     Example: ``facet_sag_mm(manifold3d.Manifold.cylinder(2, 78, circular_segments=128), 128)`` → 0.0235."""
     x0, y0, _, x1, y1, _ = manifold.bounding_box()
     return max(abs(x0), abs(y0), abs(x1), abs(y1)) * (1.0 - math.cos(math.pi / int(segments)))
+
+
+def facet_tolerance_mm(sag_mm: float) -> float:
+    """What the wall and overhang checks allow for the facets' error (mm): ``sag_mm`` (``facet_sag_mm``), at least
+    ``WALL_TOLERANCE_MM`` and at most ``FACET_TOLERANCE_MAX_MM``."""
+    return min(max(WALL_TOLERANCE_MM, sag_mm), FACET_TOLERANCE_MAX_MM)
 
 
 def wall_thickness(manifold, exclude=None, samples: int = 2000, seed: int = 0, where: list | None = None) -> float:
@@ -74,7 +84,8 @@ def wall_thickness(manifold, exclude=None, samples: int = 2000, seed: int = 0, w
 
 def overhang_area(manifold, limit_deg: float = OVERHANG_LIMIT_DEG, sliver_mm: float = 0.0) -> float:
     """Area (mm²) of downward faces steeper than ``limit_deg`` from vertical, excluding the bed (z = min) and
-    faces narrower than ``sliver_mm`` (twice the area over the longest edge: ``facet_sag_mm``'s artefacts)."""
+    connected regions of such faces narrower than ``sliver_mm`` (twice their area over their perimeter: a strip's
+    width; where two faceted circles of nearly one radius meet, a few µm)."""
     mesh = manifold.to_mesh()
     v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
     tri = v[np.asarray(mesh.tri_verts, np.int64)]
@@ -84,9 +95,31 @@ def overhang_area(manifold, limit_deg: float = OVERHANG_LIMIT_DEG, sliver_mm: fl
     zmin = v[:, 2].min()
     on_bed = np.all(np.abs(tri[:, :, 2] - zmin) < 1e-6, axis=1)
     steep = nz < -math.sin(math.radians(limit_deg + ANGLE_TOLERANCE_DEG))
-    longest = np.max([np.linalg.norm(tri[:, i] - tri[:, i - 1], axis=1) for i in range(3)], axis=0)
-    wide = 2 * area >= sliver_mm * longest
-    return float(area[steep & ~on_bed & wide].sum())
+    down = np.flatnonzero(steep & ~on_bed)
+    if sliver_mm > 0 and down.size:
+        down = down[_region_widths(np.asarray(mesh.tri_verts, np.int64)[down], v, area[down]) >= sliver_mm]
+    return float(area[down].sum())
+
+
+def _region_widths(faces: np.ndarray, v: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """Per face of ``faces`` (vertex indices into ``v``): the width of its connected region (faces joined by
+    shared edges), twice the region's area over its perimeter (a strip's width, a disc's radius), mm."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(faces)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(n), 3)
+    _, inv, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    shared = inv[order][1:] == inv[order][:-1]  # an edge two faces of the set share joins them
+    a, b = owner[order][:-1][shared], owner[order][1:][shared]
+    k, label = connected_components(coo_matrix((np.ones(a.size), (a, b)), shape=(n, n)), directed=False)
+    rim = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1) * (counts[inv] == 1)
+    perimeter = np.bincount(label[owner], weights=rim, minlength=k)
+    widths = 2 * np.bincount(label, weights=area, minlength=k) / np.maximum(perimeter, 1e-300)
+    return widths[label]
 
 
 def pocket_gap(cartridge, p: HolderParams, z_mid: float) -> float:
@@ -164,14 +197,17 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
         exclude = _thread_teeth(p) if name in ("base", "coupon_ring") and p.mount == "thread" else None
         loc: list = []
         wall = wall_thickness(m, exclude, where=loc)
-        sag = facet_sag_mm(m, p.segments)
-        oh = overhang_area(m, sliver_mm=sag)
+        facets = min(p.segments, thread_points(p)) if p.mount == "thread" else p.segments  # the coarser polygon
+        sag = facet_sag_mm(m, facets)
+        tol = facet_tolerance_mm(sag)
+        oh = overhang_area(m, sliver_mm=tol)
         entry = {"status": str(m.status()).split(".")[-1], "watertight": bool(tm.is_watertight),
                  "is_volume": bool(tm.is_volume), "volume_mm3": round(float(m.volume()), 3), "bodies": comps,
                  "min_wall_mm": round(wall, 3), "min_wall_at_mm": loc, "overhang_area_beyond_45deg_mm2": round(oh, 3),
+                 "facet_sag_mm": round(sag, 4),
                  "bounding_box_mm": [round(float(x), 4) for x in m.bounding_box()]}
         entry["ok"] = (entry["status"] == "NoError" and entry["watertight"] and entry["is_volume"]
-                       and wall >= p.wall_mm - max(WALL_TOLERANCE_MM, sag) and oh < OVERHANG_TOLERANCE_MM2)
+                       and wall >= p.wall_mm - tol and oh < OVERHANG_TOLERANCE_MM2)
         out["bodies"][name] = entry
         out["passed"] &= entry["ok"]
     out["total_bodies"] = n_bodies
@@ -229,6 +265,9 @@ def failing(checks: dict) -> list[str]:
                                     ("not a volume", not b["is_volume"]),
                                     (f"min wall {b['min_wall_mm']} mm", True)) if bad]
             out.append(f"{name}: {', '.join(why[:2])}; overhang {b['overhang_area_beyond_45deg_mm2']} mm²")
+            if b.get("facet_sag_mm", 0.0) > FACET_TOLERANCE_MAX_MM:
+                out.append(f"{name}'s facets sit {b['facet_sag_mm']} mm inside its largest circle, its walls up to as "
+                           f"much thinner than designed (at most {FACET_TOLERANCE_MAX_MM} mm allowed): raise segments")
     if checks.get("total_bodies") != checks.get("declared_bodies"):
         out.append(f"bodies {checks.get('total_bodies')} (declared {checks.get('declared_bodies')})")
     out += checks.get("fit_failures", [])

@@ -100,20 +100,24 @@ def die_outline(p: HolderParams) -> np.ndarray:
     return outline(p.die_width_mm, p.die_height_mm, p.die_chamfer_mm, coded_sign=1)
 
 
+def thread_points(p: HolderParams) -> int:
+    """Points a turn of the thread's section (``thread_section``): 120, or for a part of more than 128
+    ``segments`` its segments up to 256 (see there)."""
+    return 120 if p.segments <= 128 else min(int(p.segments), 256)
+
+
 def thread_section(p: HolderParams, n: int | None = None) -> np.ndarray:
     """(n, 2) cross-section of a single-start right-hand thread with 45° flanks at z = 0.
 
     The radius at angle θ is the axial profile at z = −P·θ/2π; twisting the section by +360° per pitch
-    sweeps it along the helix. ``n`` (None: 120 points a turn, or for a part of more than 128 ``segments`` its
-    segments up to 256): about as finely as the part's circles, whose facets then sit about as far inside as the
-    thread's. A coarser section's facets cut into the wall behind the root (120 points on a 150 mm thread: 0.025
-    mm, more than a 256-gon bore's facets give back); 256 points cut at most 0.006 mm, within the wall check's 0.01
-    mm, on any thread allowed. The twisted mesh grows with n² (1024 points: the default holder took 98 s and
-    10 GB instead of 3.4 s), and the STEP path's time with n (128 points instead of 120: 4.5 → 6.3 s).
+    sweeps it along the helix. ``n`` (None: ``thread_points``): about as finely as the part's circles. Its facets
+    cut into the wall behind the root by r_root (1 − cos(π / n)) (120 points on a 150 mm thread: 0.025 mm, more than
+    a 256-gon bore's facets give back), which the wall check allows for (``checks.facet_sag_mm`` at the coarser of
+    the two); 256 points cut at most 0.006 mm on any thread allowed. The twisted mesh grows with n² (1024 points:
+    the default holder took 98 s and 10 GB instead of 3.4 s), and the STEP path's time with n (128 points instead
+    of 120: 4.5 → 6.3 s), hence 120 up to 128 segments.
     """
-    if n is None:
-        n = 120 if p.segments <= 128 else min(int(p.segments), 256)
-    n = int(n)
+    n = thread_points(p) if n is None else int(n)
     pitch, depth = p.thread_pitch_mm, p.thread_depth_mm
     r_root = p.thread_root_radius_mm
     flat = (pitch - 2 * depth) / 2  # crest and root flats share what the flanks leave

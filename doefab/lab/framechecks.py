@@ -70,6 +70,7 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
             problems.append(f"{p} is {_shape(f)} but {first} is {_shape(total)}: every frame of a recording must "
                             f"have the same size and channels (re-record it or remove it from the list)")
             continue
+        top = None
         if saturated_fix:
             try:
                 top = (stated_white_level(p, pixel_format, "the recordings file's white_level")
@@ -77,7 +78,7 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
             except DoefabError as exc:  # no clip level known: saturation cannot be checked (said once a set)
                 problems.append(str(exc))
                 saturated_fix = None
-                continue
+        if top is not None:
             peak, what = float(f.max(initial=0.0)), "the file's full scale" if white_level is None else "white_level"
             if peak >= SATURATION * top:
                 problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of {what} "

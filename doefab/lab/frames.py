@@ -138,8 +138,8 @@ def _read_tiff(path: Path) -> np.ndarray:
         arr = np.moveaxis(arr, 0, -1)
     if arr.ndim == 3 and "S" in axes and arr.shape[-1] != 3:  # grey or colour with alpha / extra samples
         raise DoefabError(f"{path} holds {arr.shape[-1]} samples per pixel (grey or colour with alpha or extra "
-                          f"samples): frames must be grey or R, G, B without alpha: save the camera's values "
-                          f"without the extra channels (e.g. tifffile.imwrite(path, frame[..., :3]))")
+                          f"samples): frames must be grey or R, G, B without alpha: save only the camera's grey or "
+                          f"R, G, B values")
     if arr.ndim == 3 and arr.shape[-1] != 3:
         raise DoefabError(f"{path} holds a stack of {arr.shape[0]} images (shape {arr.shape}): write one frame "
                           f"per file (a glob such as \"frame_*.tiff\" takes them all)")
@@ -259,9 +259,9 @@ def stated_white_level(path: str | Path, pixel_format: str = "auto", key: str = 
         raise DoefabError(f"{path} holds floats above 1 and so states no white level: give {key} (the sensor's "
                           f"clipping level in the file's units), or save the frame scaled to [0, 1]")
     if top > 2**SENSOR_BITS - 1:
-        raise DoefabError(f"{path} holds {math.log2(top + 1):.0f}-bit integers, whose full scale {top:.0f} DN is "
+        raise DoefabError(f"{path} holds integers wider than {SENSOR_BITS} bits, whose full scale {top:.0f} DN is "
                           f"no sensor's clipping level: give {key} (e.g. 4095 for 12-bit, 16383 for 14-bit, 65535 "
-                          f"for 16-bit values), or save the frames as 16-bit TIFFs")
+                          f"for 16-bit values)")
     return top
 
 

@@ -63,6 +63,10 @@ def default_overlap(rec, psf=None) -> int:
     return _round_up(k)
 
 
+def _is_count(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+
 def _too_wide(what: str, overlap: int, tile: int):
     half = tile // 2 // MULTIPLE * MULTIPLE
     raise DoefabError(f"{what} ({tile} px): give a tile of at least {2 * overlap} px "
@@ -73,12 +77,15 @@ def _too_wide(what: str, overlap: int, tile: int):
 def check_tiling(tile: int, overlap: int, shape: tuple[int, int], what: str = "the captures") -> None:
     """Refuse a tile or overlap the networks cannot take, or an image smaller than their smallest input, with
     values that work (``tile``, ``overlap``: the ``--tile`` and ``--overlap`` of ``doefab reconstruct``)."""
-    for name, v, lo in (("tile", tile, MIN_SIDE), ("overlap", overlap, MULTIPLE)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or v % MULTIPLE:
-            good = max(lo, _round_up(v)) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else lo
+    whole = [_is_count(v) and v >= lo and v % MULTIPLE == 0 for v, lo in ((tile, MIN_SIDE), (overlap, MULTIPLE))]
+    for name, v, lo, ok in (("tile", tile, MIN_SIDE, whole[0]), ("overlap", overlap, MULTIPLE, whole[1])):
+        if not ok:
+            good = max(lo, _round_up(v)) if _is_count(v) else lo
+            if name == "tile" and whole[1]:  # a tile that also holds the overlap twice: its fix must pass both
+                good = max(good, 2 * overlap)
             if name == "overlap" and 2 * good > tile:  # both rules in one message: its fix must pass
-                _too_wide(f"overlap {v!r} must be a multiple of {MULTIPLE} pixels and at most half the tile", good,
-                          tile)
+                _too_wide(f"overlap {v!r} must be a multiple of {MULTIPLE} pixels, and the next one, {good}, is "
+                          f"more than half the tile", good, tile)
             raise DoefabError(f"{name} {v!r} must be a multiple of {MULTIPLE} pixels, at least {lo} (the networks' "
                               f"input sides are multiples of {MULTIPLE}): e.g. {name} {good} (--{name} {good})")
     if 2 * overlap > tile:

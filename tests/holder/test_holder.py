@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from holder_cad.build import build_parts, write_holder
+from holder_cad.build import HolderCheckError, build_parts, write_holder
 from holder_cad.checks import aperture_clear, pocket_gap
 from holder_cad.params import HolderError, HolderParams
 from holder_cad.recipe import thread_section
@@ -196,11 +196,18 @@ def test_overhangs_narrower_than_the_facets_are_not_counted():
         return Manifold.cylinder(2.0, r_bottom, circular_segments=128) + Manifold.cylinder(
             2.0, 78.0, circular_segments=128).translate((0.0, 0.0, 2.0))
 
-    sliver, ledge = stack(78.0 - 0.01), stack(77.5)
+    sliver, ledge = stack(78.0 - 0.02), stack(77.5)
     sag = facet_sag_mm(ledge, 128)  # 0.0235 mm
     annulus = 64 * np.sin(2 * np.pi / 128) * (78.0**2 - 77.5**2)  # the two 128-gons' areas' difference
     assert overhang_area(ledge, sliver_mm=sag) == pytest.approx(annulus, rel=1e-6)
-    assert overhang_area(sliver) > 1e-3 > overhang_area(sliver, sliver_mm=sag)  # 0.01 mm wide: the facets' scale
+    assert overhang_area(sliver) > 1e-3 > overhang_area(sliver, sliver_mm=sag)  # 0.02 mm wide: the facets' scale
+    assert overhang_area(sliver, sliver_mm=0.01) > 1e-3  # wider than a smaller part's facets: an overhang there
+
+
+def test_a_mesh_too_coarse_for_its_walls_fails_naming_segments(tmp_path):
+    # 64 facets on a 156 mm flange sit 0.094 mm inside it: the STL's walls are that much thinner than designed
+    with pytest.raises(HolderCheckError, match=r"cartridge's facets sit 0\.094 mm inside .*: raise segments"):
+        write_holder(HolderParams(thread_diameter_mm=150.0, segments=64), tmp_path, step=False, renders=False)
 
 
 @pytest.mark.parametrize("segments", [128, 256])
@@ -211,3 +218,7 @@ def test_the_largest_thread_passes_its_checks(tmp_path, segments):
                        renders=False)
     assert rep["checks"]["passed"] and rep["coupon_checks"]["passed"], (rep["checks"]["failing"],
                                                                          rep["coupon_checks"]["failing"])
+    # the facets allowed for are the coarser of the circles' and the thread section's (120 points up to 128 segments)
+    coarsest = 120 if segments == 128 else 256
+    assert rep["checks"]["bodies"]["base"]["facet_sag_mm"] == pytest.approx(78.0 * (1 - np.cos(np.pi / coarsest)),
+                                                                            abs=1e-4)

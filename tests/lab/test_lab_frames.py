@@ -140,8 +140,22 @@ def test_the_white_level_a_file_states(tmp_path):
     tifffile.imwrite(tmp_path / "i32.tiff", a.astype(np.int32), photometric="rgb")
     np.save(tmp_path / "u32.npy", a.astype(np.uint32))
     for name in ("i32.tiff", "u32.npy"):  # a 12-bit camera's values in 32-bit integers: 2^31 − 1 or 2^32 − 1
-        with pytest.raises(DoefabError, match=r"holds 3[12]-bit integers, whose full scale \d+ DN is no sensor's"):
+        with pytest.raises(DoefabError, match=r"holds integers wider than 16 bits, whose full scale 4294967295 DN|"
+                                              r"holds integers wider than 16 bits, whose full scale 2147483647 DN"):
             stated_white_level(tmp_path / name)
+
+
+def test_the_widest_integer_frame_that_states_its_white_level_is_16_bits(tmp_path, monkeypatch):
+    import doefab.lab.frames as frames
+
+    write_frame(tmp_path / "c.tiff", np.zeros((4, 4, 3)))
+    for top, ok in ((2.0**16 - 1, True), (2.0**17 - 1, False)):  # a 17-bit file's full scale: no sensor's level
+        monkeypatch.setattr(frames, "full_scale", lambda *a, top=top, **k: top)
+        if ok:
+            assert stated_white_level(tmp_path / "c.tiff") == top
+        else:
+            with pytest.raises(DoefabError, match="wider than 16 bits, whose full scale 131071 DN"):
+                stated_white_level(tmp_path / "c.tiff")
 
 
 def test_16_bit_colour_png_is_refused_not_truncated(tmp_path):

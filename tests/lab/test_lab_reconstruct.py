@@ -139,8 +139,11 @@ def test_tiling_refusals_name_the_value_and_a_fix():
     for kw, needle in (({"tile": 80}, "tile 80 must be a multiple of 32"), ({"overlap": 48}, "--overlap 64"),
                        ({"tile": 64, "overlap": 64}, "more than half the tile (64 px): give a tile of at least 128"),
                        # both rules in one message, each fix passing both
-                       ({"tile": 128, "overlap": 200}, "multiple of 32 pixels and at most half the tile (128 px): "
-                        "give a tile of at least 448 px (--tile 448 --overlap 224) or an overlap of at most 64 px")):
+                       ({"tile": 128, "overlap": 200}, "multiple of 32 pixels, and the next one, 224, is more than "
+                        "half the tile (128 px): give a tile of at least 448 px (--tile 448 --overlap 224) or an "
+                        "overlap of at most 64 px"),
+                       ({"tile": 100, "overlap": 96}, "tile 100 must be a multiple of 32 pixels, at least 64 (the "
+                        "networks' input sides are multiples of 32): e.g. tile 192 (--tile 192)")):
         with pytest.raises(DoefabError, match=re.escape(needle)):
             R.reconstruct_tiled(rec, coded, uncoded, **{"tile": 64, "overlap": 32, **kw})
     with pytest.raises(DoefabError, match="differ in size"):
@@ -187,7 +190,7 @@ def test_read_capture_scales_by_the_files_full_scale_after_the_black_level(tmp_p
 def test_read_capture_asks_for_the_white_level_of_wide_integer_files(tmp_path):
     dn = np.random.default_rng(2).integers(0, 4096, (16, 20, 3))
     np.save(tmp_path / "c.npy", dn.astype(np.int32))  # a 12-bit camera's values saved as 32-bit integers
-    with pytest.raises(DoefabError, match=r"c\.npy holds 31-bit integers.*give --white-level"):
+    with pytest.raises(DoefabError, match=r"c\.npy holds integers wider than 16 bits.*give --white-level"):
         R.read_capture(tmp_path / "c.npy")
     got = R.read_capture(tmp_path / "c.npy", white_level=4095)
     np.testing.assert_allclose(got, np.moveaxis(dn, -1, 0) / 4095, rtol=1e-6)

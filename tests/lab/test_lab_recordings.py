@@ -162,8 +162,8 @@ def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
         tifffile.imwrite(lab / "psf" / f"wide_{i}.tiff", np.rint(_spot() + BLACK).astype(np.int32))
         tifffile.imwrite(lab / "psf" / f"fdn_{i}.tiff", (_spot() + BLACK).astype(np.float32))
     msg = _problems(lab, _psf("psf/wide") + _psf("psf/fdn"))
-    assert "wide_0.tiff holds 32-bit integers" in msg and "fdn_0.tiff holds floats above 1" in msg
-    assert msg.count("give the recordings file's white_level") == 2  # once per recording, not per frame
+    assert "wide_0.tiff holds integers wider than 16 bits" in msg and "fdn_0.tiff holds floats above 1" in msg
+    assert msg.count("give the recordings file's white_level") == 2  # once per set of frames, not per frame
     rec = load_recordings(_write(lab, "white_level = 65535\n" + _psf("psf/wide") + _psf("psf/fdn")))
     assert recording_problems(rec, BANDS, PLANES, K) == []
 
