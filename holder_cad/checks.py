@@ -104,20 +104,14 @@ def overhang_area(manifold, limit_deg: float = OVERHANG_LIMIT_DEG, sliver_mm: fl
 def _region_widths(faces: np.ndarray, v: np.ndarray, area: np.ndarray) -> np.ndarray:
     """Per face of ``faces`` (vertex indices into ``v``): the width of its connected region (faces joined by
     shared edges), twice the region's area over its perimeter (a strip's width, a disc's radius), mm."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    import trimesh
 
-    n = len(faces)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    owner = np.tile(np.arange(n), 3)
-    _, inv, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
-    order = np.argsort(inv, kind="stable")
-    shared = inv[order][1:] == inv[order][:-1]  # an edge two faces of the set share joins them
-    a, b = owner[order][:-1][shared], owner[order][1:][shared]
-    k, label = connected_components(coo_matrix((np.ones(a.size), (a, b)), shape=(n, n)), directed=False)
-    rim = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1) * (counts[inv] == 1)
-    perimeter = np.bincount(label[owner], weights=rim, minlength=k)
+    tm = trimesh.Trimesh(v, faces, process=False)
+    label = trimesh.graph.connected_component_labels(tm.face_adjacency, node_count=len(faces))
+    rim = trimesh.grouping.group_rows(tm.edges_sorted, require_count=1)  # edges of one face only: the regions' rims
+    length = np.linalg.norm(np.diff(v[tm.edges_sorted[rim]], axis=1)[:, 0], axis=1)
+    k = int(label.max()) + 1
+    perimeter = np.bincount(label[tm.edges_face[rim]], weights=length, minlength=k)
     widths = 2 * np.bincount(label, weights=area, minlength=k) / np.maximum(perimeter, 1e-300)
     return widths[label]
 

@@ -35,6 +35,7 @@ from doefab.fabrication.bitplanes import bit_planes
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.io import read_json
+from doefab.optics.camera import require_camera
 
 
 __all__ = ["fabricated_height", "alignment_chain", "compose_overlay", "refined_camera", "level_step_for",
@@ -135,8 +136,6 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
         (N·s, N·s) float64 heights; with no error, each DOE pixel's height repeated s × s times.
     """
     from doefab.tolerance.relief import MaskErrors, ReliefModel, corner_bias, mean_height, pattern_heights
-
-    from doefab.optics.camera import require_camera
 
     camera, design_wavelength = require_camera(camera), wavelength_m("design_wavelength", design_wavelength)
     roughness_corr, seed = length_m("roughness_corr", roughness_corr, 1e-9, 1e-2), seed_value("seed", seed)
