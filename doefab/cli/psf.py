@@ -1,4 +1,12 @@
-"""``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths."""
+"""``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths.
+
+The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes and window, checked as
+doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on the camera, bands,
+depth planes and window it was designed for). --wavelengths-nm, --depths-m and --kernel replace any of these.
+
+  doefab psf --design masks/streak --out out/psf_streak
+  doefab psf --scene scenes/my_camera.toml --height my_doe.npy --out out/psf_mine
+"""
 
 from __future__ import annotations
 
@@ -16,14 +24,20 @@ from doefab.optics.camera import PRESETS
 def register(sub) -> None:
     p = sub.add_parser("psf", help="compute the split-aperture PSFs of a height map",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--height", help="height map .npy in metres, (N, N) of the preset's DOE grid (default: blank DOE)")
-    p.add_argument("--preset", default="default", choices=list(PRESETS),
-                   help="camera preset (sets the DOE grid the height map must match)")
-    p.add_argument("--wavelengths-nm", type=wavelength_nm, nargs="+", default=[656, 589, 486],
-                   help="wavelengths (nm)")
-    p.add_argument("--depths-m", type=depth_m, nargs="+", default=[float("inf")], help="point depths (m); inf ok")
-    p.add_argument("--kernel", type=number(int, 1, 8191, unit="sensor pixels"), default=255,
-                   help="PSF window K (sensor pixels)")
+    p.add_argument("--height", help="height map .npy in metres, (N, N) of the camera's DOE grid (default: blank DOE)")
+    camera = p.add_mutually_exclusive_group()
+    camera.add_argument("--preset", default=None, choices=list(PRESETS),
+                        help="camera preset (sets the DOE grid the height map must match; default: 'default')")
+    camera.add_argument("--scene", metavar="FILE", default=None,
+                        help="a scene file (.toml): its camera, bands, depth planes and PSF window")
+    camera.add_argument("--design", metavar="DIR", default=None,
+                        help="a design folder or mask set: its L-level DOE, camera, bands, depth planes and window")
+    p.add_argument("--wavelengths-nm", type=wavelength_nm, nargs="+", default=None,
+                   help="wavelengths (nm; default: the scene's or design's, else 656 589 486)")
+    p.add_argument("--depths-m", type=depth_m, nargs="+", default=None,
+                   help="point depths (m; inf ok; default: the scene's or design's, else inf)")
+    p.add_argument("--kernel", type=number(int, 1, 8191, unit="sensor pixels"), default=None,
+                   help="PSF window K (sensor pixels; default: the scene's or design's, else 255)")
     p.add_argument("--pupil-oversample", type=number(int, 1, 8, unit="pupil samples per DOE pixel"), default=1,
                    help="pupil samples per DOE pixel (near points or large windows need more)")
     p.add_argument("--route", default="spectral", choices=["spectral", "mft", "fft", "asm"], help="propagation route")
@@ -34,7 +48,7 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _load_height(path: Path, n: int, preset: str) -> np.ndarray:
+def _load_height(path: Path, n: int, source: str) -> np.ndarray:
     if path.is_dir():
         raise DoefabError(f"--height {path} is a folder: pass a .npy file (heights in metres)")
     if not path.is_file():
@@ -44,9 +58,43 @@ def _load_height(path: Path, n: int, preset: str) -> np.ndarray:
     except (ValueError, OSError, EOFError) as exc:
         raise DoefabError(f"--height {path} is not a readable .npy array ({exc})") from None
     if height.shape != (n, n):
-        raise DoefabError(f"--height {path} has shape {height.shape} but the {preset!r} preset's DOE grid is "
-                          f"({n}, {n}): resample it or choose the --preset whose grid it was made for")
+        raise DoefabError(f"--height {path} has shape {height.shape} but {source}'s DOE grid is ({n}, {n}): resample "
+                          f"it or choose the camera (--preset or --scene) whose grid it was made for")
     return height
+
+
+def _source(args):
+    """(camera, height or None, wavelengths m, depths m, kernel px, what the camera is) from --preset, --scene or
+    --design, the band, depth and window flags replacing theirs."""
+    from doefab.optics.camera import Camera
+
+    if args.design:
+        from doefab.cli._args import design_folder
+        from doefab.tasks import get_task
+
+        if args.height:
+            raise DoefabError("--height and --design both give the DOE: drop one (--design uses the design's "
+                              "L-level height map)")
+        _, d = design_folder(args.design)
+        cam, height, what = d.camera, d.quantized_height, f"the design {args.design}"
+        lams, depths, kernel = d.wavelengths, d.depths, get_task(d.task, **d.task_params).kernel_size
+    elif args.scene:
+        from doefab.pipeline.scene import load_scene
+        from doefab.pipeline.system import resolve
+
+        rs = resolve(load_scene(args.scene))  # every problem doefab run would refuse, before any work
+        cam, height, what = rs.camera, None, f"the scene {args.scene}"
+        lams, depths, kernel = rs.task.wavelengths(cam), rs.task.depths(cam), rs.task.kernel_size
+    else:
+        preset = args.preset or "default"
+        cam, height, what = Camera.preset(preset), None, f"the {preset!r} preset"
+        lams, depths, kernel = [w * 1e-9 for w in (656, 589, 486)], [math.inf], 255
+    if args.height:
+        height = _load_height(Path(args.height), cam.doe_pixels, what)
+    if args.wavelengths_nm is not None:
+        lams = [w * 1e-9 for w in args.wavelengths_nm]
+    depths = list(args.depths_m) if args.depths_m is not None else [float(z) for z in depths]
+    return cam, height, [float(w) for w in lams], depths, int(args.kernel or kernel), what
 
 
 def run(args) -> int:
@@ -55,10 +103,8 @@ def run(args) -> int:
     from doefab.io import atomic_write_bytes
     from doefab.plotting import psf_pair_figure
 
-    cam = doefab.Camera.preset(args.preset)
-    height = _load_height(Path(args.height), cam.doe_pixels, args.preset) if args.height else None
-    lams = [w * 1e-9 for w in args.wavelengths_nm]
-    plan = doefab.PSFPlan(cam, lams, args.depths_m, args.kernel, route=args.route, precision=args.precision,
+    cam, height, lams, depths, kernel, _ = _source(args)
+    plan = doefab.PSFPlan(cam, lams, depths, kernel, route=args.route, precision=args.precision,
                           pupil_oversample=args.pupil_oversample)  # checks sampling before any output exists
     out = claim_output(args, "psf", replace=args.force)
     import torch
@@ -70,15 +116,20 @@ def run(args) -> int:
 
     buf = io.BytesIO()
     np.savez(buf, coded=pair.coded.numpy(), uncoded=pair.uncoded.numpy(), wavelengths_m=np.array(lams),
-             depths_m=np.array(args.depths_m), sensor_pitch_m=cam.sensor_pitch)
+             depths_m=np.array(depths), sensor_pitch_m=cam.sensor_pitch)
     atomic_write_bytes(out.path / "psf.npz", buf.getvalue())
-    psf_pair_figure(out.path / "psf.png", pair.coded.numpy(), pair.uncoded.numpy(), args.depths_m, cam.sensor_pitch,
-                    title=f"PSFs ({', '.join(f'{w:g}' for w in args.wavelengths_nm)} nm summed)")
-    for zi, z in enumerate(args.depths_m):
+    psf_pair_figure(out.path / "psf.png", pair.coded.numpy(), pair.uncoded.numpy(), depths, cam.sensor_pitch,
+                    title=f"PSFs ({_bands(lams)} nm summed)")
+    for zi, z in enumerate(depths):
         print(f"z = {_z(z)}: coded energy in window {float(pair.coded[zi].sum()) / len(lams):.4f}, "
               f"uncoded {float(pair.uncoded[zi].sum()) / len(lams):.4f} (mean over bands; 0.5 = all of the half)")
     print(f"wrote {out.path / 'psf.npz'} and {out.path / 'psf.png'}")
     return 0
+
+
+def _bands(lams) -> str:
+    nm = [round(w * 1e9, 3) for w in lams]
+    return ", ".join(f"{w:g}" for w in nm) if len(nm) <= 6 else f"{len(nm)} bands {nm[0]:g}–{nm[-1]:g}"
 
 
 def _z(z: float) -> str:

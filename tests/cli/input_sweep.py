@@ -417,7 +417,8 @@ DESIGN_DIR = {"missing": (lambda f, t: _missing(t), "design.json is missing"),
               "corrupt": (_corrupt_design, "not valid JSON")}
 DESIGN_COMMANDS = {"masks": ["masks", "--out", "{o}"], "train": ["train", "--task", "hyperspectral", "--out", "{o}"],
                    "evaluate": ["evaluate", "--task", "hyperspectral", "--weights-dir", "{o}w", "--out", "{o}"],
-                   "finetune": ["finetune", "--out", "{o}"], "tolerance": ["tolerance", "--out", "{o}"]}
+                   "finetune": ["finetune", "--out", "{o}"], "tolerance": ["tolerance", "--out", "{o}"],
+                   "psf": ["psf", "--out", "{o}"]}
 
 
 def _file_cases():
@@ -426,6 +427,9 @@ def _file_cases():
         for kind, (make, needle) in SCENE_FILE.items():
             cases.append(pytest.param(lambda f, t, cmd=cmd, make=make: [cmd, make(t)] + (
                 ["--out", t / "o"] if cmd == "run" else []), 2, needle, id=f"{cmd} SCENE-{kind}"))
+    for kind, (make, needle) in SCENE_FILE.items():
+        cases.append(pytest.param(lambda f, t, make=make: ["psf", "--scene", make(t), "--out", t / "o"], 2, needle,
+                                  id=f"psf --scene-{kind}"))
     for cmd, rest in DESIGN_COMMANDS.items():
         for kind, (make, needle) in DESIGN_DIR.items():
             cases.append(pytest.param(lambda f, t, rest=rest, make=make: [
