@@ -23,7 +23,7 @@ from doefab.validate import distance_or_inf, distance_record
 from doefab.fabrication.levels import levels_sha256, levels_to_height
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 
 __all__ = ["Design", "levels_sha256", "FORMAT_VERSION"]
 
@@ -74,6 +74,7 @@ class Design:
     n_levels: int = DEFAULT_LEVELS
 
     def __post_init__(self) -> None:
+        require_camera(self.camera, "Design.camera")
         check_levels(self.n_levels, "Design.n_levels")
         top = int(np.asarray(self.levels).max(initial=0))
         if top >= self.n_levels:

@@ -37,7 +37,7 @@ def material_level_step(material, design_wavelength: float, n_levels: int = DEFA
 
 def wrap_height(height, camera: Camera):
     """Height modulo h_2π at the design wavelength (same type as input), in [0, h_2π)."""
-    h2pi = camera.material.height_2pi(camera.design_wavelength)
+    h2pi = require_camera(camera).material.height_2pi(camera.design_wavelength)
     if isinstance(height, torch.Tensor):
         return torch.remainder(height, h2pi)
     return np.mod(np.asarray(height, dtype=np.float64), h2pi)

@@ -58,6 +58,10 @@ class PSFPair:
     camera: Camera | None = None
     provenance: dict | None = None
 
+    def __post_init__(self) -> None:
+        if self.camera is not None:
+            require_camera(self.camera, "PSFPair.camera")
+
     def save(self, path, provenance: dict | None = None):
         """Write ``psf_pair.npz`` (:func:`doefab.optics.psffile.save_psf_pair`); returns its path."""
         from doefab.optics.psffile import save_psf_pair
