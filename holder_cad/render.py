@@ -1,4 +1,11 @@
-"""PNG renders of the assembled holder from three views (matplotlib, coarse mesh, flat shading)."""
+"""PNG renders of the assembled holder from three views (matplotlib, coarse mesh, flat shading).
+
+matplotlib draws a 3-D collection by the painter's algorithm: each triangle whole, in the order of its mean
+depth. A flat face's long fan triangles (a wide flange's annulus: 75 mm spokes) then sort wrongly against the
+smaller ones below them and show as streaks. So the views are orthographic, the faces turned away from the viewer
+(never visible on a closed mesh) are dropped, and the rest are split to at most ``MAX_EDGE_FRACTION`` of the
+flange's diameter (``trimesh.remesh.subdivide_to_size``) before they are sorted.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +21,32 @@ __all__ = ["render_views"]
 # show the inside; an axis seen edge-on gets no ticks or label (they would pile up on each other)
 VIEWS = {"render_front.png": (90, -90, False, "z"), "render_side.png": (5, -90, True, "y"),
          "render_iso.png": (30, -60, False, None)}
+MAX_EDGE_FRACTION = 0.04  # of the flange's diameter: the longest triangle edge drawn
+
+
+def _view_direction(elev: float, azim: float) -> np.ndarray:
+    """Unit vector from the scene toward an orthographic viewer at ``elev``, ``azim`` degrees (matplotlib's)."""
+    e, a = np.radians(elev), np.radians(azim)
+    return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+
+def facing_triangles(mesh, toward: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles [T, 3, 3] mm, unit normals [T, 3]) of a manifold3d mesh's faces turned toward ``toward`` (a unit
+    vector to the viewer; faces seen edge-on are dropped too), each split until no edge is longer than ``max_edge``
+    (mm).
+
+    Example: a 10 mm cube's ``facing_triangles(cube.to_mesh(), np.array([0, 0, 1.0]), 1.5)`` is its top face in
+    triangles of at most 1.5 mm edges, 100 mm² in all."""
+    import trimesh
+
+    v = np.asarray(mesh.vert_properties)[:, :3].astype(np.float64)
+    f = np.asarray(mesh.tri_verts)
+    tri = v[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
+    front = n @ toward > 1e-6  # edge-on faces (a wall seen from straight above) cover no area
+    v2, f2, idx = trimesh.remesh.subdivide_to_size(v, f[front], max_edge, return_index=True)
+    return v2[f2], n[front][idx]
 
 
 def render_views(p: HolderParams, asm: list, out: Path) -> list[str]:
@@ -34,16 +67,16 @@ def render_views(p: HolderParams, asm: list, out: Path) -> list[str]:
     for fname, (elev, azim, cut, edge_on) in VIEWS.items():
         fig = plt.figure(figsize=(6, 5))
         ax = fig.add_subplot(111, projection="3d")
+        ax.set_proj_type("ortho")
         shown = [m.trim_by_plane((0.0, 1.0, 0.0), 0.0) for m in asm] if cut else asm
         for m, col in zip(shown, colors):
-            mesh = m.to_mesh()
-            v = np.asarray(mesh.vert_properties)[:, :3]
-            tri = v[np.asarray(mesh.tri_verts)]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-12
+            tri, n = facing_triangles(m.to_mesh(), _view_direction(elev, azim),
+                                      MAX_EDGE_FRACTION * p.flange_diameter_mm)
             shade = 0.35 + 0.65 * np.clip(n @ light, 0, 1)
             base = np.array(matplotlib.colors.to_rgb(col))
-            pc = Poly3DCollection(tri, facecolors=shade[:, None] * base[None, :], edgecolors="none")
+            rgb = shade[:, None] * base[None, :]
+            # edges in the face colour: antialiased seams between the split triangles would show the background
+            pc = Poly3DCollection(tri, facecolors=rgb, edgecolors=rgb, linewidths=0.3)
             ax.add_collection3d(pc)
         r = p.flange_diameter_mm / 2
         ax.set_xlim(-r, r)
