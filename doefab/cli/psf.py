@@ -1,7 +1,7 @@
 """``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths.
 
-The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes and window, checked as
-doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on the camera, bands,
+The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device key,
+checked as doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on the camera, bands,
 depth planes and window it was designed for). --wavelengths-nm, --depths-m and --kernel replace any of these.
 
   doefab psf --design masks/streak --out out/psf_streak
@@ -42,7 +42,7 @@ def register(sub) -> None:
                    help="pupil samples per DOE pixel (near points or large windows need more)")
     p.add_argument("--route", default="spectral", choices=["spectral", "mft", "fft", "asm"], help="propagation route")
     p.add_argument("--precision", default="float32", choices=["float32", "float64"], help="arithmetic precision")
-    add_device_arg(p)
+    add_device_arg(p, scene=True)
     p.add_argument("--out", required=True, help="output folder (psf.npz and psf.png)")
     p.add_argument("--force", action="store_true", help="replace an earlier psf output in OUT")
     p.set_defaults(func=run)
@@ -64,8 +64,8 @@ def _load_height(path: Path, n: int, source: str) -> np.ndarray:
 
 
 def _source(args):
-    """(camera, height or None, wavelengths m, depths m, kernel px, what the camera is) from --preset, --scene or
-    --design, the band, depth and window flags replacing theirs."""
+    """(camera, height or None, wavelengths m, depths m, kernel px, the scene's device key or None) from --preset,
+    --scene or --design, the band, depth and window flags replacing theirs."""
     from doefab.optics.camera import Camera
 
     if args.design:
@@ -76,41 +76,44 @@ def _source(args):
             raise DoefabError("--height and --design both give the DOE: drop one (--design uses the design's "
                               "L-level height map)")
         _, d = design_folder(args.design)
-        cam, height, what = d.camera, d.quantized_height, f"the design {args.design}"
+        cam, height, what, device = d.camera, d.quantized_height, f"the design {args.design}", None
         lams, depths, kernel = d.wavelengths, d.depths, get_task(d.task, **d.task_params).kernel_size
     elif args.scene:
         from doefab.pipeline.scene import load_scene
         from doefab.pipeline.system import resolve
 
-        rs = resolve(load_scene(args.scene))  # every problem doefab run would refuse, before any work
-        cam, height, what = rs.camera, None, f"the scene {args.scene}"
+        scene = load_scene(args.scene)
+        rs = resolve(scene)  # every problem doefab run would refuse, before any work
+        cam, height, what, device = rs.camera, None, f"the scene {args.scene}", scene.device
         lams, depths, kernel = rs.task.wavelengths(cam), rs.task.depths(cam), rs.task.kernel_size
     else:
         preset = args.preset or "default"
-        cam, height, what = Camera.preset(preset), None, f"the {preset!r} preset"
+        cam, height, what, device = Camera.preset(preset), None, f"the {preset!r} preset", None
         lams, depths, kernel = [w * 1e-9 for w in (656, 589, 486)], [math.inf], 255
     if args.height:
         height = _load_height(Path(args.height), cam.doe_pixels, what)
     if args.wavelengths_nm is not None:
         lams = [w * 1e-9 for w in args.wavelengths_nm]
     depths = list(args.depths_m) if args.depths_m is not None else [float(z) for z in depths]
-    return cam, height, [float(w) for w in lams], depths, int(args.kernel or kernel), what
+    return cam, height, [float(w) for w in lams], depths, int(args.kernel or kernel), device
 
 
 def run(args) -> int:
     import doefab
+    from doefab._devices import using_device
     from doefab.cli._output import claim_output
     from doefab.io import atomic_write_bytes
     from doefab.plotting import psf_pair_figure
 
-    cam, height, lams, depths, kernel, _ = _source(args)
-    plan = doefab.PSFPlan(cam, lams, depths, kernel, route=args.route, precision=args.precision,
-                          pupil_oversample=args.pupil_oversample)  # checks sampling before any output exists
-    out = claim_output(args, "psf", replace=args.force)
-    import torch
+    cam, height, lams, depths, kernel, scene_device = _source(args)
+    with using_device(scene_device if args.device is None else None, "scene"):  # --device, else the scene's key
+        plan = doefab.PSFPlan(cam, lams, depths, kernel, route=args.route, precision=args.precision,
+                              pupil_oversample=args.pupil_oversample)  # checks sampling before any output exists
+        out = claim_output(args, "psf", replace=args.force)
+        import torch
 
-    with torch.no_grad():
-        pair = plan(height)
+        with torch.no_grad():
+            pair = plan(height)
     out.create()
     import io
 

@@ -1,6 +1,6 @@
 """``--device`` on every command that computes: it sets what ``device=None`` means while the command runs (and
-only then), and a scene's ``device`` key that names a GPU this machine lacks is refused by ``run`` and ``doctor``
-before any work."""
+only then), and a scene's ``device`` key that names a GPU this machine lacks is refused by ``run``, ``doctor`` and
+``psf --scene`` before any work."""
 
 from __future__ import annotations
 
@@ -35,12 +35,34 @@ def test_the_command_computes_on_the_device_its_flag_names(name, monkeypatch):
     assert os.environ[ENV] == "gpu"  # the command's device ends with it
 
 
-@pytest.mark.parametrize("cmd", ["run", "doctor"])
+@pytest.mark.parametrize("cmd", ["run", "doctor", "psf"])
 def test_a_scene_naming_a_gpu_this_machine_lacks_is_refused_before_any_work(cmd, one_clear_error, monkeypatch):
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
 
     def build(fixtures, tmp):
         (tmp / "s.toml").write_text('device = "cuda:1"\n' + HDR.read_text())
-        return [cmd, tmp / "s.toml"] + (["--out", tmp / "o"] if cmd == "run" else [])
+        scene = ["psf", "--scene"] if cmd == "psf" else [cmd]
+        return [*scene, tmp / "s.toml"] + (["--out", tmp / "o"] if cmd != "doctor" else [])
     line = one_clear_error(build, 2, "device: 'cuda:1': torch")
     assert 'device = "cpu"' in line and "sees no CUDA device" in line
+
+
+def test_psf_computes_on_the_scene_device_key_unless_the_flag_names_one(tmp_path, monkeypatch):
+    import doefab
+    from doefab._devices import ENV, default_device
+    from doefab.cli import main
+
+    from doefab.errors import DoefabError
+
+    seen = []
+
+    def plan(*args, **kwargs):
+        seen.append(default_device())
+        raise DoefabError("stopped here")
+
+    monkeypatch.setattr(doefab, "PSFPlan", plan)
+    monkeypatch.setenv(ENV, "gpu")  # what None would mean without the key: not a device at all
+    (tmp_path / "s.toml").write_text('device = "AUTO"\n' + HDR.read_text())
+    for flags in ([], ["--device", "cpu"]):
+        assert main(["psf", "--scene", str(tmp_path / "s.toml"), *flags, "--out", str(tmp_path / "o")]) == 2
+    assert seen == ["auto", "cpu"]  # the scene's key, then the flag over it
