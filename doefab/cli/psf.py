@@ -1,8 +1,9 @@
 """``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths.
 
-The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device key,
-checked as doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on the camera, bands,
-depth planes and window it was designed for). --wavelengths-nm, --depths-m and --kernel replace any of these.
+The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device
+key, checked as doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on
+the camera, bands, depth planes and window it was designed for). --wavelengths-nm, --depths-m and --kernel
+replace any of these.
 
   doefab psf --design masks/streak --out out/psf_streak
   doefab psf --scene scenes/my_camera.toml --height my_doe.npy --out out/psf_mine
