@@ -4,7 +4,7 @@ matplotlib draws a 3-D collection by the painter's algorithm: each triangle whol
 depth. A flat face's long fan triangles (a wide flange's annulus: 75 mm spokes) then sort wrongly against the
 smaller ones below them and show as streaks. So the views are orthographic, the faces turned away from the viewer
 (never visible on a closed mesh) are dropped, and the rest are split to at most ``MAX_EDGE_FRACTION`` of the
-flange's diameter (``trimesh.remesh.subdivide_to_size``) before they are sorted.
+flange's diameter (``trimesh.remesh.subdivide_to_size``) before they are sorted, all parts in one collection.
 """
 
 from __future__ import annotations
@@ -49,6 +49,37 @@ def facing_triangles(mesh, toward: np.ndarray, max_edge: float) -> tuple[np.ndar
     return v2[f2], n[front][idx]
 
 
+def _collection(parts: list, toward: np.ndarray, max_edge: float):
+    """One ``Poly3DCollection`` of every part's facing triangles, flat-shaded in the part's colour (base blue,
+    cartridge red). One for all: matplotlib sorts the triangles within a collection by depth, but whole collections
+    only by their nearest point, which painted all of the cartridge over the base."""
+    import matplotlib.colors
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    light = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    tris, rgbs = [], []
+    for m, col in zip(parts, ("#4878cf", "#d65f5f")):
+        tri, n = facing_triangles(m.to_mesh(), toward, max_edge)
+        tris.append(tri)
+        rgbs.append((0.35 + 0.65 * np.clip(n @ light, 0, 1))[:, None] * np.array(matplotlib.colors.to_rgb(col)))
+    rgb = np.concatenate(rgbs)
+    # edges in the face colour: antialiased seams between the split triangles would show the background
+    return Poly3DCollection(np.concatenate(tris), facecolors=rgb, edgecolors=rgb, linewidths=0.3)
+
+
+def view_axes(fig, r: float, zmin: float, zmax: float, elev: float, azim: float):
+    """3-D axes over x, y in [−r, r] and z in [zmin, zmax] (mm) at one scale, seen orthographically from ``elev``,
+    ``azim`` degrees: the view ``_view_direction`` culls for."""
+    ax = fig.add_subplot(111, projection="3d")
+    ax.set_proj_type("ortho")
+    ax.set_xlim(-r, r)
+    ax.set_ylim(-r, r)
+    ax.set_zlim(zmin, zmax)
+    ax.set_box_aspect((2 * r, 2 * r, zmax - zmin))
+    ax.view_init(elev=elev, azim=azim)
+    return ax
+
+
 def render_views(p: HolderParams, asm: list, out: Path) -> list[str]:
     """Write the three views of ``asm`` (the assembled base and cartridge, manifold3d meshes: a coarse build of
     ``p`` is enough) into ``out``; return the file names."""
@@ -56,41 +87,22 @@ def render_views(p: HolderParams, asm: list, out: Path) -> list[str]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    colors = ["#4878cf", "#d65f5f"]
-    light = np.array([0.3, -0.5, 0.8])
-    light /= np.linalg.norm(light)
     names = []
     zmin = min(m.bounding_box()[2] for m in asm)
-    zmax = max(m.bounding_box()[5] for m in asm)
+    zmax = max(max(m.bounding_box()[5] for m in asm), zmin + 1.0)  # axes in proportion: the culling's view
     for fname, (elev, azim, cut, edge_on) in VIEWS.items():
         fig = plt.figure(figsize=(6, 5))
-        ax = fig.add_subplot(111, projection="3d")
-        ax.set_proj_type("ortho")
+        ax = view_axes(fig, p.flange_diameter_mm / 2, zmin, zmax, elev, azim)
         shown = [m.trim_by_plane((0.0, 1.0, 0.0), 0.0) for m in asm] if cut else asm
-        for m, col in zip(shown, colors):
-            tri, n = facing_triangles(m.to_mesh(), _view_direction(elev, azim),
-                                      MAX_EDGE_FRACTION * p.flange_diameter_mm)
-            shade = 0.35 + 0.65 * np.clip(n @ light, 0, 1)
-            base = np.array(matplotlib.colors.to_rgb(col))
-            rgb = shade[:, None] * base[None, :]
-            # edges in the face colour: antialiased seams between the split triangles would show the background
-            pc = Poly3DCollection(tri, facecolors=rgb, edgecolors=rgb, linewidths=0.3)
-            ax.add_collection3d(pc)
-        r = p.flange_diameter_mm / 2
-        ax.set_xlim(-r, r)
-        ax.set_ylim(-r, r)
-        ax.set_zlim(zmin, zmax)
-        ax.set_box_aspect((2 * r, 2 * r, max(zmax - zmin, 1.0)))
-        ax.view_init(elev=elev, azim=azim)
+        ax.add_collection3d(_collection(shown, _view_direction(elev, azim), MAX_EDGE_FRACTION * p.flange_diameter_mm))
         labels = {"x": "x (mm)", "y": "y (mm)", "z": "z (mm)"}
         for axis, label in labels.items():
             if axis == edge_on:
                 getattr(ax, f"set_{axis}ticks")([])
                 getattr(ax, f"set_{axis}label")("")
             else:
-                getattr(ax, f"set_{axis}label")(label, labelpad=12 if axis == "x" else 8)
+                getattr(ax, f"set_{axis}label")(label, labelpad=(20 if cut else 12) if axis == "x" else 8)
         if edge_on != "z":  # a short z range: three ticks, so the labels do not pile up
             ax.set_zticks(np.round(np.linspace(zmin, zmax, 3), 1))
         ax.tick_params(labelsize=7)

@@ -24,3 +24,42 @@ def test_a_cube_seen_from_above_shows_its_top_face_only_in_small_triangles():
     # from the iso view's corner direction three faces show, 300 mm²
     iso, _ = facing_triangles(cube, np.array([1.0, -1.0, 1.0]) / np.sqrt(3), 20.0)
     assert abs(_area(iso) - 300.0) < 1e-9 and len(iso) == 6
+
+
+def test_the_culling_direction_is_the_direction_matplotlib_views_from():
+    """Each view's ``_view_direction`` points at matplotlib's viewer: a step along it brings a point nearer in
+    matplotlib's own projection and leaves it on the same screen spot (orthographic), a step across it does not
+    change its depth."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d import proj3d
+
+    from holder_cad.render import VIEWS, _view_direction, view_axes
+
+    for elev, azim, _, _ in VIEWS.values():
+        fig = plt.figure()
+        ax = view_axes(fig, 20.0, 0.0, 10.0, elev, azim)
+        fig.canvas.draw()
+        d = _view_direction(elev, azim)
+        across = np.cross(d, [0.3, 0.5, 0.8])
+        pts = np.array([[5.0, 7.0, 3.0], [5.0, 7.0, 3.0] + 4 * d, [5.0, 7.0, 3.0] + 4 * across / np.linalg.norm(across)])
+        x, y, z = proj3d.proj_transform(*pts.T, ax.get_proj())
+        plt.close(fig)
+        assert z[1] < z[0] - 1e-3, (elev, azim)  # nearer
+        assert abs(x[1] - x[0]) < 1e-9 and abs(y[1] - y[0]) < 1e-9, (elev, azim)  # the same spot: orthographic
+        assert abs(z[2] - z[0]) < 1e-9, (elev, azim)
+
+
+def test_split_triangles_keep_their_own_faces_normals():
+    import manifold3d
+
+    from holder_cad.render import facing_triangles
+
+    cube = manifold3d.Manifold.cube((10.0, 10.0, 10.0), True).to_mesh()
+    tri, n = facing_triangles(cube, np.array([1.0, -1.0, 1.0]) / np.sqrt(3), 1.5)
+    assert len(tri) == len(n) and len(tri) > 3 * 2 * (10 / 1.5) ** 2
+    own = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.allclose(own / np.linalg.norm(own, axis=1, keepdims=True), n)
+    assert {tuple(v) for v in np.round(n).astype(int)} == {(1, 0, 0), (0, -1, 0), (0, 0, 1)}
