@@ -44,7 +44,8 @@ def test_the_culling_direction_is_the_direction_matplotlib_views_from():
         fig.canvas.draw()
         d = _view_direction(elev, azim)
         across = np.cross(d, [0.3, 0.5, 0.8])
-        pts = np.array([[5.0, 7.0, 3.0], [5.0, 7.0, 3.0] + 4 * d, [5.0, 7.0, 3.0] + 4 * across / np.linalg.norm(across)])
+        p0 = np.array([5.0, 7.0, 3.0])
+        pts = np.array([p0, p0 + 4 * d, p0 + 4 * across / np.linalg.norm(across)])
         x, y, z = proj3d.proj_transform(*pts.T, ax.get_proj())
         plt.close(fig)
         assert z[1] < z[0] - 1e-3, (elev, azim)  # nearer
