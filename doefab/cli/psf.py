@@ -1,9 +1,9 @@
 """``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths.
 
 The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device
-key, checked as doefab run checks it) or a design's (--design: a design folder or mask set, its L-level DOE on
-the camera, bands, depth planes and window it was designed for). --wavelengths-nm, --depths-m and --kernel
-replace any of these.
+key; the scene must pass doefab doctor as written) or a design's (--design: a design folder or mask set, its
+L-level DOE on the camera, bands, depth planes and window it was designed for). --wavelengths-nm, --depths-m and
+--kernel then replace any of these.
 
   doefab psf --design masks/streak --out out/psf_streak
   doefab psf --scene scenes/my_camera.toml --height my_doe.npy --out out/psf_mine
@@ -22,9 +22,16 @@ from doefab.errors import DoefabError
 from doefab.optics.camera import PRESETS
 
 
+class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The description as written (its examples on their own lines), and each flag's default where it has one."""
+
+    def _get_help_string(self, action):
+        return action.help if action.default is None else super()._get_help_string(action)
+
+
 def register(sub) -> None:
     p = sub.add_parser("psf", help="compute the split-aperture PSFs of a height map",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=_Help)
     p.add_argument("--height", help="height map .npy in metres, (N, N) of the camera's DOE grid (default: blank DOE)")
     camera = p.add_mutually_exclusive_group()
     camera.add_argument("--preset", default=None, choices=list(PRESETS),
@@ -85,6 +92,8 @@ def _source(args):
 
         scene = load_scene(args.scene)
         rs = resolve(scene)  # every problem doefab run would refuse, before any work
+        for note in rs.warnings:
+            print(f"warning: {note}")
         cam, height, what, device = rs.camera, None, f"the scene {args.scene}", scene.device
         lams, depths, kernel = rs.task.wavelengths(cam), rs.task.depths(cam), rs.task.kernel_size
     else:
@@ -133,7 +142,7 @@ def run(args) -> int:
 
 def _bands(lams) -> str:
     nm = [round(w * 1e9, 3) for w in lams]
-    return ", ".join(f"{w:g}" for w in nm) if len(nm) <= 6 else f"{len(nm)} bands {nm[0]:g}–{nm[-1]:g}"
+    return ", ".join(f"{w:g}" for w in nm) if len(nm) <= 6 else f"{len(nm)} bands {min(nm):g}–{max(nm):g}"
 
 
 def _z(z: float) -> str:

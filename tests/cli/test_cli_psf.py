@@ -29,47 +29,62 @@ def _args(argv):
 
 
 def test_design_gives_its_quantized_doe_camera_bands_and_depths(tmp_path):
-    """--design: the PSFs of the design's L-level map (level · level_step_m, read here from design.json) on its own
-    camera — the same as that map given with --height on the camera's preset — and its bands and depths."""
+    """--design: the PSFs of the design's L-level map (level · level_step_m, read here from design.json), not its
+    continuous one, on its own camera — the same as that map given with --height on the camera's preset — and its
+    own bands, depths and window (a copy of the streak design with bands, planes, a window and a continuous
+    height.npy of its own)."""
     import json
+    import shutil
 
     import numpy as np
 
     from doefab.cli.psf import _source
 
-    design = REPO / "masks" / "streak" / "design"
+    design = tmp_path / "design"
+    shutil.copytree(REPO / "masks" / "streak" / "design", design)
     record = json.loads((design / "design.json").read_text())
+    record["wavelengths_m"], record["depths_m"] = [6.3e-7, 5.3e-7, 4.6e-7], [4.0, "inf"]
+    record["task_params"]["kernel_size"] = 101
+    (design / "design.json").write_text(json.dumps(record))
     height = np.load(design / "levels.npy").astype(np.float64) * record["level_step_m"]
     np.save(tmp_path / "h.npy", height)
-    _, _, lams, depths, kernel, _ = _source(_args(["--design", str(design.parent)]))
-    assert lams == record["wavelengths_m"] and depths == record["depths_m"]
-    assert kernel == record["task_params"]["kernel_size"]
-    flags = ["--wavelengths-nm", "589", "--kernel", "31"]
-    assert main(["psf", "--design", str(design.parent), *flags, "--out", str(tmp_path / "d")]) == 0
-    assert main(["psf", "--preset", "hdr", "--height", str(tmp_path / "h.npy"), "--depths-m", str(depths[0]),
-                 *flags, "--out", str(tmp_path / "h")]) == 0
-    assert main(["psf", "--preset", "hdr", "--depths-m", str(depths[0]), *flags, "--out", str(tmp_path / "b")]) == 0
+    np.save(design / "height.npy", height + 0.3 * record["level_step_m"])  # the continuous design: not made
+    _, h, lams, depths, kernel, _ = _source(_args(["--design", str(design)]))
+    assert lams == [6.3e-7, 5.3e-7, 4.6e-7] and depths == [4.0, float("inf")] and kernel == 101
+    assert np.array_equal(h, height)
+    flags = ["--wavelengths-nm", "589", "--kernel", "31", "--depths-m", "4"]
+    assert main(["psf", "--design", str(design), *flags, "--out", str(tmp_path / "d")]) == 0
+    assert main(["psf", "--preset", "hdr", "--height", str(tmp_path / "h.npy"), *flags,
+                 "--out", str(tmp_path / "h")]) == 0
+    assert main(["psf", "--preset", "hdr", *flags, "--out", str(tmp_path / "b")]) == 0
     d, h, b = (np.load(tmp_path / k / "psf.npz") for k in "dhb")
     assert np.allclose(d["coded"], h["coded"], atol=1e-7) and np.allclose(d["uncoded"], b["uncoded"], atol=1e-7)
     assert np.abs(d["coded"] - b["coded"]).max() > 1e-3  # the DOE is there: not the blank part's PSF
-    assert float(d["depths_m"][0]) == depths[0]
 
 
 def test_scene_gives_its_camera_bands_depths_and_window(tmp_path, capsys):
-    """--scene: the scene's camera (its 3.76 µm sensor pixels, 8.75 mm DOE aperture at 4 µm: 2188² pixels), its
-    21 bands and its window, as the scene file states them; a height map of another grid names the scene."""
+    """--scene: the scene's camera (my_camera.toml's 3.76 µm sensor pixels, 8.75 mm DOE aperture at 4 µm: 2188²
+    pixels), and a depth scene's own bands, depth planes and window, as the scene files state them; a height map of
+    another grid names the scene."""
     import numpy as np
 
     from doefab.cli.psf import _source
 
-    scene = REPO / "scenes" / "my_camera.toml"
-    cam, height, lams, depths, kernel, _ = _source(_args(["--scene", str(scene)]))
-    assert height is None and kernel == 191 and cam.doe_pixels == 2188
-    assert np.allclose(lams, np.arange(450, 651, 10) * 1e-9)
-    assert main(["psf", "--scene", str(scene), "--wavelengths-nm", "550", "--kernel", "31", "--out",
+    text = (REPO / "scenes" / "depth.toml").read_text()
+    optics = text[text.index("[optics]"):text.index("[design]")]
+    depth = tmp_path / "depth.toml"
+    depth.write_text(text.replace(optics, "[optics]\nwavelengths_nm = [640, 550, 460]\ndepths_m = [1.5, 2.5, 4.0]\n"
+                                          "kernel_px = 71\n\n"))
+    _, height, lams, depths, kernel, _ = _source(_args(["--scene", str(depth)]))
+    assert height is None and kernel == 71 and depths == [1.5, 2.5, 4.0]
+    assert np.allclose(lams, [640e-9, 550e-9, 460e-9], rtol=0, atol=1e-15)
+    mine = REPO / "scenes" / "my_camera.toml"
+    cam, _, lams, _, _, _ = _source(_args(["--scene", str(mine)]))
+    assert cam.doe_pixels == 2188 and np.allclose(lams, np.arange(450, 651, 10) * 1e-9)
+    assert main(["psf", "--scene", str(mine), "--wavelengths-nm", "550", "--kernel", "31", "--out",
                  str(tmp_path / "s")]) == 0
     s = np.load(tmp_path / "s" / "psf.npz")
-    assert abs(float(s["sensor_pitch_m"]) - 3.76e-6) < 1e-15 and s["coded"].shape == (len(depths), 1, 31, 31)
+    assert abs(float(s["sensor_pitch_m"]) - 3.76e-6) < 1e-15 and s["coded"].shape == (1, 1, 31, 31)
     np.save(tmp_path / "h.npy", np.zeros((3200, 3200)))
-    assert main(["psf", "--scene", str(scene), "--height", str(tmp_path / "h.npy"), "--out", str(tmp_path / "x")]) == 2
+    assert main(["psf", "--scene", str(mine), "--height", str(tmp_path / "h.npy"), "--out", str(tmp_path / "x")]) == 2
     assert "my_camera.toml's DOE grid is (2188, 2188)" in capsys.readouterr().err
