@@ -109,9 +109,18 @@ def design_folder(path):
 
     from doefab.design.design import Design
 
+    from doefab.errors import DoefabError
+
     d = Path(path)
     if (d / "design" / "design.json").is_file():
         d = d / "design"
+    elif d.is_dir() and not (d / "design.json").is_file():
+        inside = sorted(c.name for c in d.iterdir() if (c / "design.json").is_file()
+                        or (c / "design" / "design.json").is_file())
+        hint = (f"; it holds {', '.join(inside[:6])}{' …' if len(inside) > 6 else ''}: give one of them" if inside
+                else "")
+        raise DoefabError(f"{path} is neither a design folder nor a mask set: design.json is missing (give the folder "
+                          f"holding design.json, or a mask set holding design/design.json){hint}")
     return d, Design.load(d)
 
 
