@@ -27,7 +27,7 @@ from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_l
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, read_json, staging_dir
-from doefab.optics.camera import Camera
+from doefab.optics.camera import Camera, require_camera
 
 __all__ = ["MaskOptions", "LevelMap", "export_masks", "layout_levels"]
 
@@ -110,6 +110,9 @@ class LevelMap:
     levels: np.ndarray
     camera: Camera
     n_levels: int = DEFAULT_LEVELS
+
+    def __post_init__(self) -> None:
+        require_camera(self.camera, "LevelMap.camera")
 
 
 def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None, *,

@@ -29,7 +29,7 @@ import math
 import numpy as np
 import torch
 
-from doefab.optics.camera import STOP_TOLERANCE, Camera
+from doefab.optics.camera import STOP_TOLERANCE, Camera, require_camera
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, plane_batches, scratch_kwargs
 from doefab.optics.pupil import pupil_half, source_path_difference
@@ -87,7 +87,7 @@ class MountedPlan:
         from doefab._devices import to_device
 
         self.device = torch.device("cpu") if device is None else torch.device(device)
-        self.camera, self.wavelengths, self.depths = camera, tuple(wavelengths), tuple(depths)
+        self.camera, self.wavelengths, self.depths = require_camera(camera), tuple(wavelengths), tuple(depths)
         self.kernel, self.halves, self.margin = int(kernel), tuple(halves), float(margin)
         self.route = make_route(route)
         self._k = [2 * math.pi / lam for lam in self.wavelengths]

@@ -19,13 +19,15 @@ def _valid(name: str):
 
 
 def _takes_camera():
-    """The public functions and classes (``doefab.__all__``) that take a ``camera``, and the level helpers that
-    their modules export for the design stage."""
+    """The public functions and classes (``doefab.__all__``) that take a ``camera``, the level helpers that
+    their modules export for the design stage, the mask export's ``LevelMap`` and the tolerance's ``MountedPlan``."""
     import doefab
-    from doefab.fabrication import levels
+    from doefab.fabrication import export, levels
+    from doefab.tolerance import mounted
 
     out = {name: getattr(doefab, name) for name in doefab.__all__}
     out.update({f"levels.{n}": getattr(levels, n) for n in ("wrap_height", "quantize_torch")})
+    out.update({"export.LevelMap": export.LevelMap, "mounted.MountedPlan": mounted.MountedPlan})
     return {name: f for name, f in out.items() if callable(f) and "camera" in _parameters(f)}
 
 
@@ -47,7 +49,8 @@ def test_every_function_taking_a_camera_refuses_anything_else_by_name():
 
     found = _takes_camera()
     assert {"quantize_levels", "levels_to_height", "optimize", "split_aperture_psf", "blank_height", "Design",
-            "PSFPlan", "PSFPair", "levels.wrap_height", "levels.quantize_torch"} <= set(found)
+            "PSFPlan", "PSFPair", "levels.wrap_height", "levels.quantize_torch", "export.LevelMap",
+            "mounted.MountedPlan"} <= set(found)
     for name, f in found.items():
         kw = {p: _valid(p) for p, v in _parameters(f).items()
               if v.default is inspect.Parameter.empty and v.kind is v.POSITIONAL_OR_KEYWORD and p != "camera"}
