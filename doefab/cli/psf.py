@@ -1,9 +1,9 @@
 """``doefab psf``: coded/uncoded PSFs of a height map (.npy, metres) for given bands and depths.
 
-The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device
-key; the scene must pass doefab doctor as written) or a design's (--design: a design folder or mask set, its
-L-level DOE on the camera, bands, depth planes and window it was designed for). --wavelengths-nm, --depths-m and
---kernel then replace any of these.
+The camera: a preset (--preset), a scene file's (--scene: its camera, bands, depth planes, window and device key;
+the scene must pass the checks doefab run makes, as written) or a design's (--design: a design folder or mask set,
+its L-level DOE on the camera, bands, depth planes and window it was designed for). --wavelengths-nm, --depths-m
+and --kernel then replace any of these.
 
   doefab psf --design masks/streak --out out/psf_streak
   doefab psf --scene scenes/my_camera.toml --height my_doe.npy --out out/psf_mine
@@ -84,7 +84,7 @@ def _source(args):
             raise DoefabError("--height and --design both give the DOE: drop one (--design uses the design's "
                               "L-level height map)")
         _, d = design_folder(args.design)
-        cam, height, what, device = d.camera, d.quantized_height, f"the design {args.design}", None
+        cam, height, what, device, notes = d.camera, d.quantized_height, f"the design {args.design}", None, []
         lams, depths, kernel = d.wavelengths, d.depths, get_task(d.task, **d.task_params).kernel_size
     elif args.scene:
         from doefab.pipeline.scene import load_scene
@@ -92,18 +92,25 @@ def _source(args):
 
         scene = load_scene(args.scene)
         rs = resolve(scene)  # every problem doefab run would refuse, before any work
-        for note in rs.warnings:
-            print(f"warning: {note}")
+        notes = list(rs.warnings)
         cam, height, what, device = rs.camera, None, f"the scene {args.scene}", scene.device
         lams, depths, kernel = rs.task.wavelengths(cam), rs.task.depths(cam), rs.task.kernel_size
     else:
         preset = args.preset or "default"
-        cam, height, what, device = Camera.preset(preset), None, f"the {preset!r} preset", None
+        cam, height, what, device, notes = Camera.preset(preset), None, f"the {preset!r} preset", None, []
         lams, depths, kernel = [w * 1e-9 for w in (656, 589, 486)], [math.inf], 255
     if args.height:
         height = _load_height(Path(args.height), cam.doe_pixels, what)
     if args.wavelengths_nm is not None:
+        from doefab.optics.materials import fit_range_warning
+
+        # the warning for the bands used, not the scene's: outside the substrate's fitted dispersion the index
+        # is extrapolated
+        notes = [n for n in notes if n != fit_range_warning(cam.material, lams)]
         lams = [w * 1e-9 for w in args.wavelengths_nm]
+        notes += [n for n in [fit_range_warning(cam.material, lams)] if n]
+    for note in notes:
+        print(f"warning: {note}")
     depths = list(args.depths_m) if args.depths_m is not None else [float(z) for z in depths]
     return cam, height, [float(w) for w in lams], depths, int(args.kernel or kernel), device
 

@@ -87,7 +87,8 @@ class MountedPlan:
         from doefab._devices import to_device
 
         self.device = torch.device("cpu") if device is None else torch.device(device)
-        self.camera, self.wavelengths, self.depths = require_camera(camera), tuple(wavelengths), tuple(depths)
+        self.camera = require_camera(camera, "MountedPlan camera")
+        self.wavelengths, self.depths = tuple(wavelengths), tuple(depths)
         self.kernel, self.halves, self.margin = int(kernel), tuple(halves), float(margin)
         self.route = make_route(route)
         self._k = [2 * math.pi / lam for lam in self.wavelengths]

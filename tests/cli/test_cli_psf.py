@@ -40,7 +40,7 @@ def test_design_gives_its_quantized_doe_camera_bands_and_depths(tmp_path):
 
     from doefab.cli.psf import _source
 
-    design = tmp_path / "design"
+    design = tmp_path / "set" / "design"  # a mask set's design, given as the set
     shutil.copytree(REPO / "masks" / "streak" / "design", design)
     record = json.loads((design / "design.json").read_text())
     record["wavelengths_m"], record["depths_m"] = [6.3e-7, 5.3e-7, 4.6e-7], [4.0, "inf"]
@@ -49,11 +49,11 @@ def test_design_gives_its_quantized_doe_camera_bands_and_depths(tmp_path):
     height = np.load(design / "levels.npy").astype(np.float64) * record["level_step_m"]
     np.save(tmp_path / "h.npy", height)
     np.save(design / "height.npy", height + 0.3 * record["level_step_m"])  # the continuous design: not made
-    _, h, lams, depths, kernel, _ = _source(_args(["--design", str(design)]))
+    _, h, lams, depths, kernel, _ = _source(_args(["--design", str(design.parent)]))
     assert lams == [6.3e-7, 5.3e-7, 4.6e-7] and depths == [4.0, float("inf")] and kernel == 101
-    assert np.array_equal(h, height)
+    assert np.allclose(h, height, rtol=1e-12, atol=0)
     flags = ["--wavelengths-nm", "589", "--kernel", "31", "--depths-m", "4"]
-    assert main(["psf", "--design", str(design), *flags, "--out", str(tmp_path / "d")]) == 0
+    assert main(["psf", "--design", str(design.parent), *flags, "--out", str(tmp_path / "d")]) == 0
     assert main(["psf", "--preset", "hdr", "--height", str(tmp_path / "h.npy"), *flags,
                  "--out", str(tmp_path / "h")]) == 0
     assert main(["psf", "--preset", "hdr", *flags, "--out", str(tmp_path / "b")]) == 0
@@ -73,11 +73,18 @@ def test_scene_gives_its_camera_bands_depths_and_window(tmp_path, capsys):
     text = (REPO / "scenes" / "depth.toml").read_text()
     optics = text[text.index("[optics]"):text.index("[design]")]
     depth = tmp_path / "depth.toml"
-    depth.write_text(text.replace(optics, "[optics]\nwavelengths_nm = [640, 550, 460]\ndepths_m = [1.5, 2.5, 4.0]\n"
+    text = text.replace('material = "fused silica"', 'material = "PMMA"')  # fitted on 436.8–1052 nm
+    depth.write_text(text.replace(optics, "[optics]\nwavelengths_nm = [640, 550, 430]\ndepths_m = [1.5, 2.5, 4.0]\n"
                                           "kernel_px = 71\n\n"))
+    capsys.readouterr()
     _, height, lams, depths, kernel, _ = _source(_args(["--scene", str(depth)]))
     assert height is None and kernel == 71 and depths == [1.5, 2.5, 4.0]
-    assert np.allclose(lams, [640e-9, 550e-9, 460e-9], rtol=0, atol=1e-15)
+    assert np.allclose(lams, [640e-9, 550e-9, 430e-9], rtol=0, atol=1e-15)
+    assert "warning: PMMA: 430 nm outside" in capsys.readouterr().out  # the scene's own warnings
+    _source(_args(["--scene", str(depth), "--wavelengths-nm", "550"]))
+    assert "warning" not in capsys.readouterr().out  # about bands not used: dropped
+    _source(_args(["--scene", str(depth), "--wavelengths-nm", "420", "550"]))
+    assert "warning: PMMA: 420 nm outside" in capsys.readouterr().out  # the bands used
     mine = REPO / "scenes" / "my_camera.toml"
     cam, _, lams, _, _, _ = _source(_args(["--scene", str(mine)]))
     assert cam.doe_pixels == 2188 and np.allclose(lams, np.arange(450, 651, 10) * 1e-9)
@@ -88,3 +95,20 @@ def test_scene_gives_its_camera_bands_depths_and_window(tmp_path, capsys):
     np.save(tmp_path / "h.npy", np.zeros((3200, 3200)))
     assert main(["psf", "--scene", str(mine), "--height", str(tmp_path / "h.npy"), "--out", str(tmp_path / "x")]) == 2
     assert "my_camera.toml's DOE grid is (2188, 2188)" in capsys.readouterr().err
+
+
+def test_help_shows_the_examples_on_their_own_lines_and_no_none_default(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):
+        main(["psf", "--help"])
+    text = capsys.readouterr().out
+    assert "\n  doefab psf --design masks/streak --out out/psf_streak\n" in text
+    assert "default: None" not in text and "(default: spectral)" in text
+
+
+def test_many_bands_are_labelled_by_their_span():
+    from doefab.cli.psf import _bands
+
+    assert _bands([w * 1e-9 for w in range(700, 390, -10)]) == "31 bands 400–700"
+    assert _bands([656e-9, 589e-9]) == "656, 589"
