@@ -105,16 +105,11 @@ def plain_name_arg(text: str) -> str:
 
 def design_folder(path):
     """``(folder, Design)`` for a design folder or a mask set (its ``design/``), validated before any work."""
-    from pathlib import Path
-
-    from doefab.design.design import Design
-
+    from doefab.design.design import Design, design_folder_of
     from doefab.errors import DoefabError
 
-    d = Path(path)
-    if (d / "design" / "design.json").is_file():
-        d = d / "design"
-    elif d.is_dir() and not (d / "design.json").is_file():
+    d = design_folder_of(path)
+    if d.is_dir() and not (d / "design.json").is_file():
         inside = _designs_inside(d)
         hint = (f"; it holds {', '.join(inside[:6])}{' …' if len(inside) > 6 else ''}: give one of them" if inside
                 else "")

@@ -78,14 +78,13 @@ def _source(args):
 
     if args.design:
         from doefab.cli._args import design_folder
-        from doefab.tasks import get_task
 
         if args.height:
             raise DoefabError("--height and --design both give the DOE: drop one (--design uses the design's "
                               "L-level height map)")
         _, d = design_folder(args.design)
         cam, height, what, device, notes = d.camera, d.quantized_height, f"the design {args.design}", None, []
-        lams, depths, kernel = d.wavelengths, d.depths, get_task(d.task, **d.task_params).kernel_size
+        lams, depths, kernel = d.wavelengths, d.depths, d.kernel_size
     elif args.scene:
         from doefab.pipeline.scene import load_scene
         from doefab.pipeline.system import resolve

@@ -25,7 +25,7 @@ from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
 from doefab.optics.camera import Camera, require_camera
 
-__all__ = ["Design", "levels_sha256", "FORMAT_VERSION"]
+__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of"]
 
 FORMAT_VERSION = 1
 
@@ -41,6 +41,14 @@ def _versions() -> dict:
     except ImportError:  # pragma: no cover
         pass
     return out
+
+
+def design_folder_of(path: str | Path) -> Path:
+    """The design folder ``path`` names: itself, or a mask set's ``design/``.
+
+    Example: ``design_folder_of("masks/streak")`` is ``masks/streak/design``."""
+    d = Path(path)
+    return d / "design" if (d / "design" / "design.json").is_file() else d
 
 
 @dataclass
@@ -80,6 +88,14 @@ class Design:
         if top >= self.n_levels:
             raise DoefabError(f"the level map holds level {top} but the design has n_levels = {self.n_levels} "
                               f"(levels 0..{self.n_levels - 1}): pass the n_levels it was quantized to")
+
+    @property
+    def kernel_size(self) -> int:
+        """K, the PSF window (sensor pixels) of the design's task: its ``task_params``' kernel_size, else the task's
+        default (a design need not store it)."""
+        from doefab.tasks import get_task
+
+        return int(get_task(self.task, **self.task_params).kernel_size)
 
     @property
     def quantized_height(self) -> np.ndarray:

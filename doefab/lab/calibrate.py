@@ -194,13 +194,12 @@ def measure_walls(rec: Recordings) -> dict | None:
 
 def _design_of(rec: Recordings):
     from doefab.design.design import Design
-    from doefab.tasks import get_task
 
     if rec.design is None:
         raise DoefabError(f"{rec.path} names no design: set design = \"path/to/design\" in it, or pass --design DIR "
                           f"(the design folder or mask set the part was made from)")
     d = Design.load(rec.design)
-    return d, int(get_task(d.task, **d.task_params).kernel_size)
+    return d, d.kernel_size
 
 
 @dataclass

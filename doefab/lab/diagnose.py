@@ -40,8 +40,7 @@ import time
 import numpy as np
 import torch
 
-from doefab.lab.partmodel import (BOUND, HELD_DRAWS, HOLD_DRAWS, STEP, PartModel, design_folder, held_changes,
-                                  held_errors, scaled)
+from doefab.lab.partmodel import BOUND, HELD_DRAWS, HOLD_DRAWS, STEP, PartModel, held_changes, held_errors, scaled
 from doefab.lab.uncertainty import (MAX_CORRELATION, MAX_SIGMA, MIRROR_CHI2, curvature, estimate, jacobian, refine,
                                     tolerance)
 from doefab.tolerance.errors import PartErrors
@@ -233,14 +232,14 @@ def diagnose(measured, design_dir, budget=None, starts: int = STARTS, seed: int 
     ``delivered``: also judge the fitted part through the task's shipped network (``lab.diagreport.delivered_metric``).
     A pair made from another design (its provenance's ``levels_sha256``) is refused before any work."""
     from doefab import validate as v
-    from doefab.design.design import Design
+    from doefab.design.design import Design, design_folder_of
     from doefab.lab.diagreport import assemble, check_design, delivered_metric
     from doefab.tolerance.errors import load_budget
 
     v.number_in("starts", starts, 1, 100, integer=True)
     v.seed("seed", seed)
     b = budget if isinstance(budget, dict) else load_budget(budget)
-    check_design(measured, design_dir if isinstance(design_dir, Design) else Design.load(design_folder(design_dir)))
+    check_design(measured, design_dir if isinstance(design_dir, Design) else Design.load(design_folder_of(design_dir)))
     model = PartModel(design_dir, measured, b, device=device)
     t0 = time.perf_counter()
     bar = _bar(progress, model, starts)
@@ -303,12 +302,12 @@ def fitted_pair(design_dir, errors, device=None):
     """The PSF pair (both halves, the design's task kernel) of the part ``errors`` (a ``PartErrors`` or a
     ``diagnosis.json`` record) at every band and plane of the design in ``design_dir``, on the design grid (1×)
     as the fit computed it: what a lab that recorded some bands or planes gives the networks."""
-    from doefab.design.design import Design
+    from doefab.design.design import Design, design_folder_of
     from doefab.optics.psf import PSFPair
     from doefab.tolerance.judge import PSFJudge
 
     err = errors if isinstance(errors, PartErrors) else part_errors(errors)
-    d = design_folder(design_dir) if not isinstance(design_dir, Design) else design_dir
+    d = design_folder_of(design_dir) if not isinstance(design_dir, Design) else design_dir
     judge = PSFJudge(d, 1, margin=max(0.3e-3, 2 * abs(err.mount_shift[0])), device=device)
     with torch.no_grad():
         got = judge.psfs(err, halves=("coded", "uncoded"))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -29,7 +28,7 @@ from doefab.errors import DoefabError
 from doefab.tolerance.errors import PartErrors
 
 __all__ = ["Param", "parameters", "to_errors", "scaled", "check_pair", "PartModel", "held_changes", "held_errors",
-           "BOUND", "STEP", "ETCH_PRECISION", "HELD_DRAWS", "HOLD_DRAWS", "MEAN_SPREAD", "design_folder"]
+           "BOUND", "STEP", "ETCH_PRECISION", "HELD_DRAWS", "HOLD_DRAWS", "MEAN_SPREAD"]
 
 BOUND = 6.0  # the fit's bounds, budget σ either side of nominal
 FINE = 2  # the grid of the fit's last steps, times the design grid
@@ -158,8 +157,6 @@ def check_pair(measured, design) -> tuple[tuple, list[int], list[int], int]:
     """(halves, band indices, plane indices into the design's, kernel) of a measured pair that ``design`` can
     model: its coded half present, its sensor pitch the design camera's, its bands and planes the design's, its
     PSFs on the design task's kernel (one DoefabError naming the first mismatch and the fix)."""
-    from doefab.tasks import get_task
-
     halves = tuple(h for h in ("coded", "uncoded") if getattr(measured, h, None) is not None)
     if "coded" not in halves:
         raise DoefabError("the measured pair has no coded half: calibrate point-source recordings of the coded half "
@@ -170,7 +167,7 @@ def check_pair(measured, design) -> tuple[tuple, list[int], list[int], int]:
                           f"design camera's {cam.sensor_pitch * 1e6:.4g} µm: calibrate with this design's camera")
     wl = _index(design.wavelengths, measured.wavelengths, "band", lambda v: f"{v * 1e9:.4g} nm")
     dz = _index(design.depths, measured.depths, "source distance", lambda v: f"{v:g} m")
-    kernel, want = int(measured.coded.shape[-1]), get_task(design.task, **design.task_params).kernel_size
+    kernel, want = int(measured.coded.shape[-1]), design.kernel_size
     if kernel != want:
         raise DoefabError(f"the measured pair's PSFs are {kernel} px across but the design's task uses {want} px: "
                           f"calibrate with this design (it crops to its kernel)")
@@ -182,11 +179,11 @@ class PartModel:
     ``Design``) and the residuals of a part against that pair. ``evaluations`` counts the parts computed."""
 
     def __init__(self, design, measured, budget: dict, device=None):
-        from doefab.design.design import Design
+        from doefab.design.design import Design, design_folder_of
         from doefab.fabrication.process import mask_count
         from doefab.tolerance.judge import DEFAULT_MARGIN, PSFJudge, alignment_chain
 
-        self.design_dir = None if isinstance(design, Design) else design_folder(design)
+        self.design_dir = None if isinstance(design, Design) else design_folder_of(design)
         self.design = design if isinstance(design, Design) else Design.load(self.design_dir)
         d, cam = self.design, self.design.camera
         self.halves, self.wl, self.dz, self.kernel = check_pair(measured, d)
@@ -344,9 +341,3 @@ def held_errors(model: "PartModel", x: np.ndarray, draws: int = HELD_DRAWS, seed
     d = held_changes(model, x, draws, seed) - mean
     d = d + MEAN_SPREAD * np.where(np.arange(draws) % 2 == 0, 1.0, -1.0)[:, None] * mean
     return np.stack([model.whiten(row * model.weight.ravel()) for row in d])
-
-
-def design_folder(path) -> Path:
-    """A design folder, or a mask set's ``design/``."""
-    d = Path(path)
-    return d / "design" if (d / "design" / "design.json").is_file() else d

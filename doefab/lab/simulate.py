@@ -123,16 +123,13 @@ def write_lab_recordings(folder, design_dir, err=None, *, supersample: int = 2, 
     ``frames``/``dark_frames``: per recording; ``crosstalk``: (α_l→r, α_r→l) of the sensor's wall frames;
     ``size``: frame side in pixels (default twice the design's kernel). Everything is checked before any file is
     written."""
-    from doefab.design.design import Design
-    from doefab.tasks import get_task
+    from doefab.design.design import Design, design_folder_of
     from doefab.tolerance.errors import PartErrors
 
-    folder, design_dir = Path(folder), Path(design_dir)
-    if (design_dir / "design" / "design.json").is_file():  # a mask set
-        design_dir = design_dir / "design"
+    folder, design_dir = Path(folder), design_folder_of(design_dir)
     _check_args(folder, photons, read_noise_e, shift_px, frames, dark_frames, crosstalk, seed)
     d = Design.load(design_dir)
-    kernel = int(get_task(d.task, **d.task_params).kernel_size)  # the task's kernel (a design may not store it)
+    kernel = d.kernel_size
     size = 2 * kernel if size is None else v.number_in("size", size, kernel, 8192, integer=True, unit="pixels")
     bands = _select("wavelengths_m", wavelengths_m, d.wavelengths, band_index, "nm", 1e9)
     planes = _select("depths_m", depths_m, d.depths, plane_index, "m", 1.0)
