@@ -105,32 +105,14 @@ def plain_name_arg(text: str) -> str:
 
 def design_folder(path):
     """``(folder, Design)`` for a design folder or a mask set (its ``design/``), validated before any work."""
-    from doefab.design.design import Design, design_folder_of
+    from doefab.design.design import Design, design_folder_of, designs_inside_hint
     from doefab.errors import DoefabError
 
     d = design_folder_of(path)
     if d.is_dir() and not (d / "design.json").is_file():
-        inside = _designs_inside(d)
-        hint = (f"; it holds {', '.join(inside[:6])}{' …' if len(inside) > 6 else ''}: give one of them" if inside
-                else "")
         raise DoefabError(f"{path} is neither a design folder nor a mask set: design.json is missing (give the folder "
-                          f"holding design.json, or a mask set holding design/design.json){hint}")
+                          f"holding design.json, or a mask set holding design/design.json){designs_inside_hint(d)}")
     return d, Design.load(d)
-
-
-def _designs_inside(d) -> list[str]:
-    """The names of the design folders and mask sets directly inside folder ``d`` (none where it cannot be read)."""
-
-    def holds(c) -> bool:
-        try:
-            return (c / "design.json").is_file() or (c / "design" / "design.json").is_file()
-        except OSError:  # a child this user may not enter
-            return False
-
-    try:
-        return sorted(c.name for c in d.iterdir() if holds(c))
-    except OSError:
-        return []
 
 
 def task_design_arg(args, need_weights_dir: bool):

@@ -25,7 +25,7 @@ from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
 from doefab.optics.camera import Camera, require_camera
 
-__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of"]
+__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of", "designs_inside_hint"]
 
 FORMAT_VERSION = 1
 
@@ -49,6 +49,26 @@ def design_folder_of(path: str | Path) -> Path:
     Example: ``design_folder_of("masks/streak")`` is ``masks/streak/design``."""
     d = Path(path)
     return d / "design" if (d / "design" / "design.json").is_file() else d
+
+
+def designs_inside_hint(folder: str | Path) -> str:
+    """The end of a "not a design folder" message: ``"; it holds a, b: give one of them"`` naming the design
+    folders and mask sets directly inside ``folder`` (the first six), or ``""`` where it holds none or cannot be
+    read (no hint rather than a misleading permission error).
+
+    Example: ``designs_inside_hint("masks")`` is ``"; it holds grating, half-ring, streak: give one of them"``."""
+
+    def holds(c: Path) -> bool:
+        try:
+            return (c / "design.json").is_file() or (c / "design" / "design.json").is_file()
+        except OSError:  # a child this user may not enter
+            return False
+
+    try:
+        inside = sorted(c.name for c in Path(folder).iterdir() if holds(c))
+    except OSError:
+        return ""
+    return f"; it holds {', '.join(inside[:6])}{' …' if len(inside) > 6 else ''}: give one of them" if inside else ""
 
 
 @dataclass

@@ -77,11 +77,12 @@ def _too_wide(what: str, overlap: int, tile: int):
 def check_tiling(tile: int, overlap: int, shape: tuple[int, int], what: str = "the captures") -> None:
     """Refuse a tile or overlap the networks cannot take, or an image smaller than their smallest input, with
     values that work (``tile``, ``overlap``: the ``--tile`` and ``--overlap`` of ``doefab reconstruct``)."""
-    whole = [_is_count(v) and v >= lo and v % MULTIPLE == 0 for v, lo in ((tile, MIN_SIDE), (overlap, MULTIPLE))]
-    for name, v, lo, ok in (("tile", tile, MIN_SIDE, whole[0]), ("overlap", overlap, MULTIPLE, whole[1])):
-        if not ok:
+    rules = {"tile": (tile, MIN_SIDE), "overlap": (overlap, MULTIPLE)}  # value, least
+    ok = {name: _is_count(v) and v >= lo and v % MULTIPLE == 0 for name, (v, lo) in rules.items()}
+    for name, (v, lo) in rules.items():
+        if not ok[name]:
             good = max(lo, _round_up(v)) if _is_count(v) else lo
-            if name == "tile" and whole[1]:  # a tile that also holds the overlap twice: its fix must pass both
+            if name == "tile" and ok["overlap"]:  # a tile that also holds the overlap twice: its fix must pass both
                 good = max(good, 2 * overlap)
             if name == "overlap" and 2 * good > tile:  # both rules in one message: its fix must pass
                 _too_wide(f"overlap {v!r} must be a multiple of {MULTIPLE} pixels, and the next one, {good}, is "

@@ -195,12 +195,12 @@ def _design(raw: dict, design, base: Path, problems: list) -> Path | None:
         design = (base / raw["design"]).resolve()
     if design is None:
         return None
-    from doefab.design.design import design_folder_of
+    from doefab.design.design import design_folder_of, designs_inside_hint
 
     d = design_folder_of(design)
     if not (d / "design.json").is_file():
         problems.append(f"design: {d} is not a design folder (no design.json): give the folder the part was made "
-                        f"from (a mask set's design/), in the file or with --design")
+                        f"from (a mask set's design/), in the file or with --design{designs_inside_hint(d)}")
     return d
 
 

@@ -121,6 +121,14 @@ def test_wavelength_in_metres_gets_the_unit_hint_and_design_is_resolved(lab, tmp
     assert load_recordings(_write(lab, _psf()), design=lab / "d").design == lab / "d"
 
 
+def test_a_folder_of_designs_given_as_the_design_names_them(lab):
+    for name in ("set_b", "set_a"):
+        (lab / "masks" / name / "design").mkdir(parents=True)
+        (lab / "masks" / name / "design" / "design.json").write_text("{}")
+    with pytest.raises(DoefabError, match=r"masks is not a design folder .*; it holds set_a, set_b: give one of them"):
+        load_recordings(_write(lab, _psf()), design=lab / "masks")
+
+
 def _problems(lab, body, bands=BANDS, planes=PLANES, kernel=K):
     rec = load_recordings(_write(lab, body))
     before = sorted(p.name for p in lab.rglob("*"))
