@@ -18,7 +18,7 @@ from doefab.errors import DoefabError
 from doefab.fabrication.levels import material_level_step
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.io import read_json
-from doefab.optics.materials import Material, material_by_name
+from doefab.optics.materials import Material
 
 __all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM", "MASK_SET_FORMAT"]
 
@@ -56,9 +56,8 @@ def _material(man: dict) -> tuple[Material | None, list[str]]:
     name = rec.get("name") if isinstance(rec, dict) else None
     if not isinstance(name, str):
         return None, [f"material = {rec!r} does not name a substrate"]
-    try:
-        material = material_by_name(name)
-        Material.from_dict(rec, where="material")  # a built-in name with edited coefficients is refused
+    try:  # a material of the user's own with its coefficients; a built-in name with edited ones is refused
+        material = Material.from_dict(rec, where="material")
     except DoefabError as exc:
         return None, [f"material: {exc}"]
     return material, []
