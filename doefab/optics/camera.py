@@ -108,9 +108,6 @@ class Camera:
                 f"DOE grid {self.doe_pixels} px × {self.doe_pitch:g} m = {extent:g} m is smaller than the "
                 f"aperture diameter {self.aperture_diameter:g} m: raise doe_pixels to at least "
                 f"{math.ceil(self.aperture_diameter / self.doe_pitch - 1e-9)} or the pitch")
-        if math.isfinite(fd) and fd <= self.sensor_distance:
-            raise DoefabError(
-                f"focus_distance {fd:g} m must exceed sensor_distance {self.sensor_distance:g} m for a real image")
 
     # ---- derived quantities -------------------------------------------------------------------
     @property

@@ -37,7 +37,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
 
     from doefab.optics.psf import SOURCE_PHASE_LIMIT, PSFPlan
     from doefab.pipeline.stages import resolve
-    from doefab.pipeline.sampling import distance_text, phase_step_fix, pitch_fix, source_phase_step
+    from doefab.pipeline.sampling import distance_text, phase_step_fix, pitch_fix, steepest_plane
 
     res = res if res is not None else resolve(scene)  # the caller's, when it resolved the scene already
     cam = res.camera
@@ -55,16 +55,16 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
                          + pitch_fix(cam, lam_min * cam.sensor_distance / (2 * half)))))
     rows += _blur_row(cam, depths, k)
     z_near = min(depths)
-    step = source_phase_step(cam, lam_min, z_near)
-    rows.append(_row(f"source phase step per pupil sample at the nearest depth ({distance_text(z_near)})", step,
-                     SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
-                     phase_step_fix(cam, lam_min, z_near, step)))
+    z, step = steepest_plane(cam, lam_min, depths)
+    rows.append(_row(f"source phase step per pupil sample at the steepest plane's wavefront ({distance_text(z)})",
+                     step, SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
+                     phase_step_fix(cam, lam_min, z, step)))
     fft_bytes = spectral_fft_bytes(cam)
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
                      FFT_BYTES_LIMIT, "bytes", fft_bytes <= FFT_BYTES_LIMIT,
                      "a coarser design grid (design.sampling) or fewer pixels"))
     if "tolerance" in scene.stages and scene.tolerance is not None:
-        rows += _tolerance_memory(cam, s["n_levels"], len(lams), scene.tolerance)
+        rows += tolerance_memory_rows(cam, s["n_levels"], len(lams), scene.tolerance)
         rows += _scheduler_rows(scene.tolerance.get("scheduler"))
     if precision_check:
         from doefab.fabrication.levels import levels_to_height
@@ -157,7 +157,7 @@ def _blur_row(cam, depths, k: int) -> list[dict]:
                  window_reach(k), "px", cam.window_holds_blur(depths, k), "optics.kernel_px")] if r > 0 else []
 
 
-def _tolerance_memory(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:
+def tolerance_memory_rows(cam, n_levels: int, n_bands: int, tol: dict) -> list[dict]:
     """The memory the parts the tolerance stage judges at once take (one; ``tolerance.workers`` or a ``local:N``
     scheduler's N) on the grid the scene fixes (else the design grid, the coarsest the grid study can pick) against
     what this machine has available (``tolerance.fields.part_bytes``); none where that is unknown."""

@@ -36,11 +36,24 @@ def prepare_scene(scene: Scene, out: str | Path, force: tuple = ()) -> ResolvedS
     res = resolve(scene)  # validates the camera and the design settings before any work
     if "tolerance" in scene.stages and scene.tolerance is not None:  # a Dask scheduler answers before any stage
         check_reachable(scene.tolerance.get("scheduler"), "tolerance.scheduler")
+        _require_tolerance_memory(res, scene.tolerance)
     foreign = foreign_stage_folders(scene, out)
     if foreign:
         raise DoefabError(f"{', '.join(map(str, foreign))}: a stage folder without doefab's ownership marker "
                           f"({MARKER}) is never replaced: move it away or choose another --out")
     return res
+
+
+def _require_tolerance_memory(res: ResolvedScene, tolerance: dict) -> None:
+    """Refuse, before any stage, a tolerance stage whose parts judged at once do not fit in the memory available
+    (the check ``doefab doctor`` shows: ``doctor.tolerance_memory_rows``)."""
+    from doefab.pipeline.doctor import tolerance_memory_rows
+
+    s = res.settings
+    for row in tolerance_memory_rows(res.camera, s["n_levels"], len(s["wavelengths_m"]), tolerance):
+        if not row["ok"]:
+            raise DoefabError(f"{row['check']}: about {row['value'] / 1e9:.1f} GB needed, {row['limit'] / 1e9:.1f} GB "
+                              f"available: use {row['fix']}")
 
 
 def run_scene(scene: Scene, out: str | Path, force: tuple = (), quick: bool = False, progress: bool = True,

@@ -2,10 +2,11 @@
 stage optimises on (``design.sampling``, ``--quick``'s factor), and the scene keys that fix what they refuse.
 
 ``resolve`` runs these checks before any work, so ``doefab doctor`` refuses exactly the scenes the design stage
-would stop on: a sampling that does not divide the grid, a nearest plane whose point source changes its phase too
-fast between (design) pixels, a window beyond the design grid's alias-free field, a window too small for the
-plain half's defocus blur at a plane (``window_blur_checks``) or for a grating's first orders
-(``grating_window_checks``), a lens whose entrance pupil cuts the DOE's baffle (``stop_checks``).
+would stop on: a sampling that does not divide the grid, a plane (the nearest, or one far beyond the focus) whose
+point source changes its phase too fast between (design) pixels (``steepest_plane``), a window beyond the design
+grid's alias-free field, a window too small for the plain half's defocus blur at a plane (``window_blur_checks``)
+or for a grating's first orders (``grating_window_checks``), a lens whose entrance pupil cuts the DOE's baffle
+(``stop_checks``).
 ``quick_sampling`` picks the ``--quick`` coarsening among the factors that pass.
 """
 
@@ -16,10 +17,10 @@ import math
 from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
-__all__ = ["MAX_DOE_PIXELS", "source_phase_step", "pitch_fix", "phase_step_fix", "quick_sampling", "design_camera",
-           "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks", "nlopt_takes",
-           "alias_free_px", "window_blur_checks", "grating_window_checks", "stop_checks", "distance_text", "grid_fixes",
-           "aperture_key"]
+__all__ = ["MAX_DOE_PIXELS", "source_phase_step", "steepest_plane", "pitch_fix", "phase_step_fix", "quick_sampling",
+           "design_camera", "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks",
+           "nlopt_takes", "alias_free_px", "window_blur_checks", "grating_window_checks", "stop_checks",
+           "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
 
@@ -164,16 +165,25 @@ def _round3(x: float, direction) -> float:
     return round(direction(round(x / step, 9)) * step, 12)  # 4.98 / 0.01 is 498.00000000000006: not 499
 
 
-def source_phase_step(cam, lam_min: float, z_near: float) -> float:
-    """The largest change of a point source's phase between pupil samples one DOE pitch apart (rad), at the
-    nearest plane and the shortest wavelength: the PSF routes refuse it above ``SOURCE_PHASE_LIMIT``."""
+def source_phase_step(cam, lam_min: float, z: float) -> float:
+    """The largest change of a point source's phase between pupil samples one DOE pitch apart (rad), for a point
+    at ``z`` metres and the shortest wavelength: the PSF routes refuse it above ``SOURCE_PHASE_LIMIT``."""
     import numpy as np
 
     from doefab.optics.pupil import source_path_difference
 
     r = np.linspace(0, cam.aperture_diameter / 2, 20001)
-    opd = source_path_difference(r**2, z_near, cam.focus_distance)
+    opd = source_path_difference(r**2, z, cam.focus_distance)
     return float(np.max(np.abs(np.diff(opd))) * (cam.doe_pitch / (r[1] - r[0])) * 2 * math.pi / lam_min)
+
+
+def steepest_plane(cam, lam_min: float, depths) -> tuple[float, float]:
+    """(depth in metres, its ``source_phase_step``) of the plane whose point source's wavefront is steepest across
+    the pupil: the nearest when it lies nearer than the focus, the farthest when that lies farther off in inverse
+    depth (a point beyond the focus converges behind the sensor; ``inf`` is the plane wave).
+
+    Example: on a camera focused at 0.3 m, of ``[0.5, 10.0]`` it is 10 m."""
+    return max(((float(z), source_phase_step(cam, lam_min, z)) for z in depths), key=lambda zs: zs[1])
 
 
 def pitch_fix(cam, pitch_max: float) -> list[str]:
@@ -183,21 +193,26 @@ def pitch_fix(cam, pitch_max: float) -> list[str]:
     return [f"camera.doe_pitch_um ≤ {um:.3g}"] if cam.aperture_diameter / (um * 1e-6) <= MAX_DOE_PIXELS else []
 
 
-def phase_step_fix(cam, lam_min: float, z_near: float, step: float, factor: int = 1) -> str:
+def phase_step_fix(cam, lam_min: float, z: float, step: float, factor: int = 1) -> str:
     """The scene keys that bring the source's phase step per pupil sample below the limit on ``cam``'s grid (a
-    design grid coarsened by ``factor``: the DOE pitch it suggests is divided by it): a nearest depth farther
-    away, or a finer DOE pitch (the step is proportional to it). The step is the wavefront's slope at the pupil's
-    edge a, 2π p / λ · (a / √(a² + z²) − a / √(a² + f²)) for a point at z nearer than the focus f."""
+    design grid coarsened by ``factor``: the DOE pitch it suggests is divided by it), for the steepest plane at
+    ``z``: that plane nearer the focus (a nearest depth farther away, or a farthest depth nearer), or a finer DOE
+    pitch (the step is proportional to it). The step is the wavefront's slope at the pupil's edge a,
+    2π p / λ · |a / √(a² + z²) − a / √(a² + f²)| for a point at z with the focus at f."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
     if step <= SOURCE_PHASE_LIMIT:
         return ""
     a, f = cam.aperture_diameter / 2, cam.focus_distance
-    c = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch) + (0.0 if math.isinf(f) else a / math.hypot(a, f))
-    fixes = [f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m (optics.depths_m)"
-             ] if c < 1 and z_near < f else []
+    room = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch)  # the slope the limit allows
+    focus = 0.0 if math.isinf(f) else a / math.hypot(a, f)
+    fixes = []
+    if z < f and (c := focus + room) < 1:
+        fixes.append(f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m (optics.depths_m)")
+    elif z > f and (c := focus - room) > 0:
+        fixes.append(f"a farthest depth ≤ {a * math.sqrt(1 / c**2 - 1) * 0.99:.3g} m (optics.depths_m)")
     fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / step / factor)
-    return " or ".join(fixes) or "a nearest depth farther away"
+    return " or ".join(fixes) or "depth planes nearer the focus distance"
 
 
 def quick_sampling(doe_pixels: int, sampling: int, fits=None) -> int:
@@ -218,14 +233,14 @@ def design_camera(cam, factor: int):
 
 
 def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:
-    """What the PSF routes would refuse on the design grid coarsened by ``factor``: a point at the nearest plane
+    """What the PSF routes would refuse on the design grid coarsened by ``factor``: a point at the steepest plane
     sampled too coarsely, or the window beyond the alias-free field."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
     dcam = design_camera(cam, factor)
-    lam_min, z_near = min(task.wavelengths(cam)), min(task.depths(cam))
+    lam_min = min(task.wavelengths(cam))
     out = []
-    step = source_phase_step(dcam, lam_min, z_near)
+    _, step = steepest_plane(dcam, lam_min, task.depths(cam))
     if step > SOURCE_PHASE_LIMIT:
         out.append(("step", step))
     alias = alias_free_px(dcam, lam_min)
@@ -235,19 +250,20 @@ def design_grid_problems(cam, task, factor: int) -> list[tuple[str, float]]:
 
 
 def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None = None) -> list[str]:
-    """A point at the nearest plane must be sampled finely enough on the full DOE grid and on the design grid
-    (``design.sampling``, else the committed design's), and the window must stay inside the design grid's
-    alias-free field: the design stage computes its PSFs there. Each fix is for the design grid, and one that
+    """A point at the steepest plane (``steepest_plane``) must be sampled finely enough on the full DOE grid and on
+    the design grid (``design.sampling``, else the committed design's), and the window must stay inside the design
+    grid's alias-free field: the design stage computes its PSFs there. Each fix is for the design grid, and one that
     the scene's optimiser takes (``nlopt_takes``; else with Adam)."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
-    lam_min, z_near = min(task.wavelengths(cam)), min(task.depths(cam))
+    lam_min = min(task.wavelengths(cam))
     factor = factor if factor >= 1 and cam.doe_pixels % factor == 0 else 1  # else ``sampling_checks`` says so
     dcam = design_camera(cam, factor)
-    step, dstep = source_phase_step(cam, lam_min, z_near), source_phase_step(dcam, lam_min, z_near)
-    depth_fix = phase_step_fix(dcam, lam_min, z_near, dstep, factor) if dstep > SOURCE_PHASE_LIMIT else ""
+    z, step = steepest_plane(cam, lam_min, task.depths(cam))
+    dz, dstep = steepest_plane(dcam, lam_min, task.depths(cam))
+    depth_fix = phase_step_fix(dcam, lam_min, dz, dstep, factor) if dstep > SOURCE_PHASE_LIMIT else ""
     if step > SOURCE_PHASE_LIMIT:
-        return [f"optics.depths_m: a point at the nearest plane ({z_near:g} m) changes its phase by {step:.2f} rad "
+        return [f"optics.depths_m: a point at {distance_text(z)} changes its phase by {step:.2f} rad "
                 f"between DOE pixels at {lam_min * 1e9:.0f} nm, above the {SOURCE_PHASE_LIMIT:g} rad the PSF "
                 f"routes sample: set {depth_fix}"]
     bad = design_grid_problems(cam, task, factor)
@@ -258,7 +274,7 @@ def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None 
     grid_fix = (f"design.sampling = {max(taken)}" if taken else
                 f'design.sampling = {max(fits)} with design.optimizer = "adam"' if fits else "design.sampling = 1")
     key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
-    what = "; ".join(f"a point at the nearest plane changes its phase by {v:.2f} rad between design pixels"
+    what = "; ".join(f"a point at {distance_text(dz)} changes its phase by {v:.2f} rad between design pixels"
                      if k == "step" else f"optics.kernel_px {task.kernel_size} reaches beyond the alias-free field "
                      f"({2 * v - 1:.0f} px)" for k, v in bad)
     fix = " or ".join([grid_fix] + ([depth_fix] if depth_fix else []))

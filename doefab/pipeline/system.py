@@ -223,6 +223,12 @@ def scene_task(scene: Scene, committed, cam):
         if design_is(dname, "spectral"):
             params["n_bands"] = len(o["wavelengths_nm"])
     planes = [distance_or_inf(z) for z in o.get("depths_m", [])]
+    if inside := [z for z in planes if z <= cam.focal_length]:
+        verb = "lies" if len(inside) == 1 else "lie"
+        raise DoefabError(f"optics.depths_m: {', '.join(f'{z:g}' for z in inside)} m {verb} within the lens's focal "
+                          f"length "
+                          f"({cam.focal_length * 1e3:.3g} mm), where a point forms no real image: set every plane "
+                          f"farther away (the depths are in metres)")
     if design_is(dname, "depth") and any(math.isinf(z) for z in planes):
         raise DoefabError(f"optics.depths_m {o['depths_m']}: a depth design's planes are finite distances (its ring "
                           f"law needs 1/z at every plane): drop the plane at infinity")

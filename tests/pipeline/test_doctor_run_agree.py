@@ -191,3 +191,47 @@ def test_doctor_passes_only_what_every_design_grid_can_sample(tmp_path, monkeypa
         assert not _design_grids_accept(resolve(load_scene(fixed))), (msg, fix[1])
         return
     assert not _design_grids_accept(res), near
+
+
+def _far_scene(tmp_path, far, pitch_um):
+    p = tmp_path / f"far_{far}_{pitch_um}.toml"
+    p.write_text(f'task = "depth"\nstages = ["design"]\n[camera]\nfocus_distance_m = 0.6\ndoe_pitch_um = {pitch_um}\n'
+                 f'[optics]\ndepths_m = [0.6, 1.0, {far}]\n[design]\nsampling = 1\n')
+    return p
+
+
+@pytest.mark.parametrize("far,pitch_um", list(itertools.product((2.0, 5.0, 20.0, 100.0), (8.0, 16.0, 24.0))))
+def test_a_far_plane_beyond_a_near_focus_is_checked_too(tmp_path, monkeypatch, far, pitch_um):
+    """A camera focused at 0.6 m with planes out to ``far``: the farthest plane's wavefront is the steepest (a
+    point beyond the focus converges behind the sensor). Doctor passes only what the PSF route samples on every
+    design grid, and its suggested farthest depth, applied, passes both."""
+    monkeypatch.setattr(system, "window_blur_checks", lambda *args: [])
+    monkeypatch.setattr(psf_module, "_check_window", lambda *args: None)
+    try:
+        res = resolve(load_scene(_far_scene(tmp_path, far, pitch_um)))
+    except DoefabError as exc:
+        msg = str(exc)
+        assert "phase" in msg, msg
+        fix = re.search(r"a farthest depth ≤ ([\d.]+) m", msg)
+        assert fix, msg
+        assert float(fix[1]) < far
+        assert not _design_grids_accept(resolve(load_scene(_far_scene(tmp_path, float(fix[1]), pitch_um)))), msg
+        return
+    assert not _design_grids_accept(res), (far, pitch_um)
+
+
+@pytest.mark.parametrize("near_m, inside", [(0.004, True), (0.0042, True), (0.0044, False), (0.3, False)])
+def test_a_plane_within_the_focal_length_is_named(tmp_path, near_m, inside):
+    """A 4.3 mm phone lens focused at 1 m: a plane nearer than 4.3 mm forms no real image (1/s = 1/f − 1/z < 0),
+    and the refusal says so, not that its blur is too wide."""
+    p = tmp_path / "phone.toml"
+    p.write_text('task = "depth"\nstages = ["design"]\n[camera]\nfocal_length_mm = 4.3\nf_number = 1.8\n'
+                 'lens_f_number = 1.8\nfocus_distance_m = 1.0\nsensor_pitch_um = 1.0\ndoe_pitch_um = 1.0\n'
+                 f'[optics]\ndepths_m = [{near_m}, 0.5, 1.0]\n')
+    try:
+        resolve(load_scene(p))
+    except DoefabError as exc:
+        named = f"{near_m:g} m lies within the lens's focal length (4.3 mm)" in str(exc)
+        assert named == inside and (not inside or "1 problem(s)" in str(exc)), str(exc)
+    else:
+        assert not inside

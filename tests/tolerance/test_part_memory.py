@@ -168,6 +168,16 @@ def test_doctor_shows_a_parts_memory_and_fails_where_it_does_not_fit(tmp_path, m
     monkeypatch.setattr(doefab._memory, "available_bytes", lambda: 10**6)
     _, bad = row(REPO / "scenes" / "hdr.toml")
     assert not bad["ok"] and "more memory" in bad["fix"]
+    # run refuses, before any stage, exactly what doctor fails
+    from doefab.errors import DoefabError
+    from doefab.pipeline.run import prepare_scene
+
+    monkeypatch.setattr(doefab._memory, "available_bytes", lambda: 2 * fields.part_bytes(n, 1, 4, bands))
+    prepare_scene(load_scene(REPO / "scenes" / "hdr.toml"), tmp_path / "run1")
+    with pytest.raises(DoefabError, match=r"3 judged parts.* GB available: use a machine with more memory.*fewer "
+                                          r"tolerance workers"):
+        prepare_scene(load_scene(pool), tmp_path / "run3")
+    assert not (tmp_path / "run3").exists()
 
 
 def resolve(scene):

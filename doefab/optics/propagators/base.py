@@ -135,7 +135,7 @@ def check_smooth_phase(phase: np.ndarray, mask: np.ndarray, limit: float, route:
         raise SamplingError(
             f"[{route}] pupil phase sampling: the {what} changes by {worst:.2f} rad between neighbouring pupil "
             f"samples (limit {limit:.2f} rad). Fix: a finer pupil sampling (pupil_oversample ≥ {need}), a "
-            f"finer DOE pitch, or a source farther from the camera.")
+            f"finer DOE pitch, or a source nearer the plane in focus.")
 
 
 def pixel_integration_matrix(samples: np.ndarray, spacing: float, edges_lo: np.ndarray,
