@@ -118,8 +118,8 @@ def roughness_field(shape: tuple, cell: float, rms: float, corr: float, seed: in
     return field, rms * math.sqrt(max(1 - g * g, 0.0))
 
 
-def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_scale=(), overlay=(), rotation=(),
-                      edge_bias: float = 0.0, roughness: float = 0.0, supersample: int = 4, seed: int = 0,
+def fabricated_height(levels, camera, design_wavelength: float | None = None, depth_scale=(), overlay=(),
+                      rotation=(), edge_bias: float = 0.0, roughness: float = 0.0, supersample: int = 4, seed: int = 0,
                       corner_rounding: float = 0.0, roughness_corr: float = 2e-6,
                       n_levels: int = DEFAULT_LEVELS) -> np.ndarray:
     """Mean height (metres) of each cell of the fabricated DOE on the design grid refined ``supersample`` times.
@@ -127,7 +127,8 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     Args:
         levels: (N, N) integer levels 0..L−1 (the design's level map, row 0 at the top, x < 0 coded).
         camera: the design camera (its pitch and material).
-        design_wavelength: metres; sets the level step d = λ / (n(λ) − 1) / L.
+        design_wavelength: metres; sets the level step d = λ / (n(λ) − 1) / L (None: the camera's own, as
+            ``levels_to_height`` and the mask export take it).
         depth_scale, overlay (metres), rotation (radians): one entry per mask (M = log2 L), or empty for none;
         edge_bias, roughness, corner_rounding, roughness_corr (metres): see the module docstring.
         supersample: cells per DOE pixel and axis (1–16).  seed: seeds the roughness.
@@ -137,7 +138,9 @@ def fabricated_height(levels, camera, design_wavelength: float = 550e-9, depth_s
     """
     from doefab.tolerance.relief import MaskErrors, ReliefModel, corner_bias, mean_height, pattern_heights
 
-    camera, design_wavelength = require_camera(camera), wavelength_m("design_wavelength", design_wavelength)
+    camera = require_camera(camera)
+    design_wavelength = wavelength_m("design_wavelength", camera.design_wavelength if design_wavelength is None
+                                     else design_wavelength)
     roughness_corr, seed = length_m("roughness_corr", roughness_corr, 1e-9, 1e-2), seed_value("seed", seed)
     lv = np.asarray(levels)
     if lv.ndim != 2 or lv.shape[0] != lv.shape[1] or lv.shape[0] != camera.doe_pixels:

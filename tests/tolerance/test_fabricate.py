@@ -162,3 +162,19 @@ def test_edge_bias_roughness_and_bad_units(cam):
 
     with pytest.raises(DoefabError, match="unit"):
         fabricated_height(lv, cam, LAM, overlay=((0.5, 0.0),) * 4)  # 0.5 m: someone meant µm
+
+
+def test_an_error_free_part_is_the_design_on_the_cameras_own_wavelength_by_default():
+    """No errors and no design wavelength given: the heights are ``levels_to_height``'s (the camera's design
+    wavelength, here 633 nm), not a fixed 550 nm's."""
+    from dataclasses import replace
+
+    cam = doefab.Camera(aperture_diameter=0.3e-3, doe_pitch=PITCH, doe_pixels=64, sensor_pitch=5.4e-6,
+                        sensor_distance=50e-3, focus_distance=5.0, design_wavelength=633e-9)
+    lv = grating_levels(8) // 2
+    want = doefab.levels_to_height(lv, cam, n_levels=8)
+    assert np.abs(fabricated_height(lv, cam, supersample=1, n_levels=8) - want).max() < 1e-15
+    n = float(cam.material.index(633e-9))
+    assert want.max() == pytest.approx(7 / 8 * 633e-9 / (n - 1), rel=1e-12)  # the level step λ / (n − 1) / L
+    other = replace(cam, design_wavelength=550e-9)
+    assert fabricated_height(lv, other, supersample=1, n_levels=8).max() < 0.9 * want.max()
