@@ -154,8 +154,7 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     layout = layout_levels(lv, opts.pattern_faces)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
-    spec = MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
-                    cd_nm=cd_nm, chamfer_nm=_chamfer_nm(opts), coded_sign=1 if opts.pattern_faces == "lens" else -1)
+    spec = _mark_spec(camera, opts, die_nm, cd_nm)
     align_to = _alignment(order, opts.align_chain)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
@@ -277,6 +276,13 @@ def _levels_of(n_levels, design_dir) -> int:
         raise DoefabError(f"the design has {n_levels} levels but the one in {design_dir} has {recorded} levels: "
                           f"export the design that folder holds (doefab.Design.load)")
     return n_levels
+
+
+def _mark_spec(camera, opts: MaskOptions, die_nm: int, cd_nm: int) -> MarkSpec:
+    """The marks' geometry for ``opts``: the die, its key chamfer and side, the CD; windows for positive resist."""
+    return MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
+                    cd_nm=cd_nm, chamfer_nm=_chamfer_nm(opts), coded_sign=1 if opts.pattern_faces == "lens" else -1,
+                    windows=opts.resist == "positive")
 
 
 def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:

@@ -75,9 +75,13 @@ def _spec(man: dict, n_masks: int) -> tuple[MarkSpec, dict[int, int]]:
     margin = man.get("mark_clear_margin_m", 0.0)  # a set written before the marks had clear fields: none
     _need(not isinstance(margin, bool) and isinstance(margin, (int, float)) and 0 <= margin <= 1e-3,
           "mark_clear_margin_m", f"= {margin!r} is not a length in metres up to 1 mm")
+    tones = {L.get("resist_tone") for L in man["layers"] if L.get("purpose") == "etch"}
+    tone = next(iter(tones)) if len(tones) == 1 else None
+    _need(tone in ("positive", "negative"), "layers[].resist_tone",
+          f"of the etch layers ({sorted(map(repr, tones))}) is not one tone, positive or negative")
     spec = MarkSpec(die_nm=int(round(die * 1e9)), aperture_radius_nm=int(round(ap / 2 * 1e9)), cd_nm=cd,
                     chamfer_nm=int(round(chamfer * 1e9)), coded_sign=1 if man.get("mirrored_x") else -1,
-                    clear_margin_nm=int(round(margin * 1e9)))
+                    clear_margin_nm=int(round(margin * 1e9)), windows=tone == "positive")
     return spec, {int(k): v for k, v in chain.items()}
 
 

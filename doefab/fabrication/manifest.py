@@ -157,6 +157,13 @@ def _dicing(man: dict) -> str:
             "(not turned, not flipped); the alignment keys they cut off are needed only until the last etch.")
 
 
+def _windows(man: dict) -> str:
+    """How an etch plate shows the keys it aligns to, for the set's resist tone (``marks.MarkSpec.windows``)."""
+    negative = any(L.get("resist_tone") == "negative" for L in man["layers"] if L.get("purpose") == "etch")
+    return ("is clear field, so the keys of the plate it aligns to show through clear glass" if negative else
+            "opens a clear window over the keys of the plate it aligns to")
+
+
 def fab_readme(man: dict) -> str:
     """``README.txt`` of a mask set: the manifest in words, for the fab (verification compares the two)."""
     n_levels = manifest_levels(man)
@@ -185,8 +192,8 @@ def fab_readme(man: dict) -> str:
     lines += [
         "",
         f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
-        "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate opens a clear window over the "
-        "keys of the plate it aligns to and carries its own cross)." + _clear_fields(man),
+        "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate " + _windows(man)
+        + " and carries its own cross)." + _clear_fields(man),
         f"Level k = {n_levels - 1} − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
         "The layout is drawn as seen from the patterned face. " + view + ".",
         "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline" + _dicing(man),

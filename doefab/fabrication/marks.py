@@ -7,11 +7,12 @@ Scheme (all marks outside the clear aperture, in the four die corners):
   crosses ("keys") at the four key sites inside theirs.
 - The die outline (layer 100) is the dicing outline, keyed for the holder (``doefab.diekey``: two unequal
   chamfers on the coded half's corners).
-- Every etch plate m (m = 0..M−1, one per binary mask) carries (layer 10, datatype m+1) a clear window over the key sites of the layer it
-  aligns to, plus its own cross at its own key site (so a later mask could align to it); on layer 11,
-  datatype m+1, a vernier (pitch p·(1 + 1/10) against the reference layer's pitch p scale) and a CD ladder
-  of lines at 1, 1.5, 2 and 3 × the critical dimension. The chrome plate's reference vernier scale and
-  ladder are on layer 11, datatype 0; its keys on layer 10, datatype 0.
+- Every etch plate m (m = 0..M−1, one per binary mask) carries (layer 10, datatype m+1) a clear window over the key
+  sites of the layer it aligns to (for positive resist, whose etch plates are dark field; a clear-field plate for
+  negative resist is clear there without one), plus its own cross at its own key site (so a later mask could
+  align to it); on layer 11, datatype m+1, a vernier (pitch p·(1 + 1/10) against the reference layer's pitch p
+  scale) and a CD ladder of lines at 1, 1.5, 2 and 3 × the critical dimension. The chrome plate's reference
+  vernier scale and ladder are on layer 11, datatype 0; its keys on layer 10, datatype 0.
 
 Each further plate's key sites sit one step further in and its CD ladder one step further along, so a set of
 more masks needs a larger die: :func:`check_mark_placement` refuses marks that fall off the die or into the clear
@@ -48,6 +49,10 @@ class MarkSpec:
     chamfer_nm: int = 0  # the die key's larger chamfer (``doefab.diekey``); 0: a square outline
     coded_sign: int = 1  # the coded half's side of the layout: x > 0 (1, pattern toward the lens) or x < 0 (−1)
     clear_margin_nm: int = CLEAR_MARGIN_NM  # clear glass the chrome plate leaves round every mark (0: none)
+    # whether the etch plates' windows are drawn: a dark-field plate (positive resist) is clear only inside its
+    # polygons, so a window is drawn over the keys; a clear-field plate (negative resist) is clear outside them,
+    # and a drawn window would be chrome over the keys
+    windows: bool = True
 
 
 def _rect(x0, y0, x1, y1, layer, datatype):
@@ -112,7 +117,7 @@ def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
     for plate in range(len(align_to) + 1):
         for cx, cy in key_site(spec, plate):
             polys += _cross(cx, cy, 10, plate)
-        if plate > 0:
+        if plate > 0 and spec.windows:
             for cx, cy in key_site(spec, align_to[plate]):
                 w = WINDOW_NM // 2
                 polys.append(_rect(cx - w, cy - w, cx + w, cy + w, 10, plate))

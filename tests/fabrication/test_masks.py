@@ -182,3 +182,26 @@ def test_export_takes_a_design_not_its_parts(tmp_path):
     export_masks(LevelMap(lv, cam, n_levels=4), tmp_path / "ok", MaskOptions(use_klayout=False), progress=False)
     assert json.loads((tmp_path / "ok" / "manifest.json").read_text())["n_levels"] == 4
     assert not (tmp_path / "m").exists()
+
+
+def test_a_negative_resist_set_keeps_its_keys_in_clear_glass(cam, tmp_path):
+    """Positive resist: the etch plates are dark field, clear inside their polygons, so each draws a 260 µm window
+    over the chrome keys it aligns to. Negative resist: the plates are clear field (chrome inside the polygons), so
+    a drawn window would be chrome over those keys: none is drawn, and each plate's own cross is all it draws on
+    layer 10. Both sets verify."""
+    from doefab.fabrication.marks import KEY_ARM_NM, KEY_WIDTH_NM, WINDOW_NM
+
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    cross = 2 * (2 * KEY_ARM_NM * KEY_WIDTH_NM) - KEY_WIDTH_NM**2  # nm²: two arms, their overlap once
+    for resist, window_area in (("positive", 4 * WINDOW_NM**2), ("negative", 0)):
+        out = tmp_path / resist
+        export_masks(LevelMap(lv, cam), out, MaskOptions(use_klayout=False, resist=resist))
+        cell = gdstk.read_gds(str(out / "doe.gds")).top_level()[0]
+        for plate in (1, 2, 3, 4):
+            polys = cell.get_polygons(layer=10, datatype=plate)
+            drawn = gdstk.boolean(polys, [], "or")  # nm² of the plate's layer 10, overlaps counted once
+            area = sum(p.area() for p in drawn) * 1e6  # µm² → nm²
+            assert area == pytest.approx(window_area + 4 * cross, rel=1e-6), (resist, plate)
+        assert verify_mask_set(out, use_klayout=False)["levels_reproduced"]
+        readme = (out / "README.txt").read_text()
+        assert ("clear window" in readme) == (resist == "positive")
