@@ -9,12 +9,17 @@ the lens and at x < 0 when it is toward the scene; seen from the lens side (the 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "SECOND_CHAMFER"]
+__all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "SECOND_CHAMFER", "KEY_PROUD_MM", "LEAST_CLEARANCE_MM",
+           "least_key_chamfer_mm"]
 
 DEFAULT_CHAMFER_MM = 2.0  # the larger chamfer's leg (mm)
 SECOND_CHAMFER = 0.5  # the smaller chamfer's leg, a fraction of the larger
+KEY_PROUD_MM = 0.1  # how far a turned-over die's corner must stand into the pocket's keyed wall (it cannot go in)
+LEAST_CLEARANCE_MM = 0.05  # the holder's tightest pocket clearance per side (a printed pocket takes no less)
 
 
 def die_outline(width: float, height: float, chamfer: float, coded_sign: int = 1) -> np.ndarray:
@@ -34,3 +39,13 @@ def die_outline(width: float, height: float, chamfer: float, coded_sign: int = 1
     if coded_sign < 0:  # the mirror image, still counter-clockwise
         pts = pts[::-1] * [-1.0, 1.0]
     return pts
+
+
+def least_key_chamfer_mm(clearance_mm: float) -> float:
+    """The least ``die_chamfer_mm`` that keys the die in a pocket ``clearance_mm`` wider all round: a die turned or
+    flipped puts a square corner where the pocket has the smaller chamfer, or the smaller chamfer where it has the
+    larger; that corner, s·c/√2 or (1 − s)·c/√2 beyond the pocket's chamfer, must stand proud of it by
+    ``KEY_PROUD_MM`` however the die slides in the pocket (√2 × the clearance along the diagonal, and the clearance
+    itself). Example: ``round(least_key_chamfer_mm(0.25), 2)`` → 1.99."""
+    reach = ((1 + math.sqrt(2)) * clearance_mm + KEY_PROUD_MM) * math.sqrt(2)
+    return reach / min(SECOND_CHAMFER, 1 - SECOND_CHAMFER)

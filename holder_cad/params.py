@@ -150,10 +150,14 @@ class HolderParams:
                               f"{math.ceil(self.clear_aperture_mm + side - ledge + 0.01):g} or more"
                               + (", or a smaller field_half_angle_deg (the light of a wider field spreads more "
                                  "inside the die)" if self.seat_margin_mm > self.aperture_margin_mm else ""))
-        if self.die_chamfer_mm >= 0.5 * side:
-            raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) must be less than half the die's shorter "
-                              f"side ({side:g} mm): set die_chamfer_mm = {min(1.5, side / 4):g}")
         least = least_key_chamfer_mm(self.clearance_mm)
+        if self.die_chamfer_mm >= 0.5 * side:
+            good = math.ceil(10 * least + 1e-9) / 10  # the least chamfer that keys: within the half side, if any
+            fix = (f"set die_chamfer_mm = {good:g}" if good < 0.5 * side else
+                   f"a larger die or a smaller clearance_mm: no chamfer below half the side keys it at "
+                   f"clearance_mm {self.clearance_mm:g} (it needs more than {least:.2f} mm)")
+            raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) must be less than half the die's shorter "
+                              f"side ({side:g} mm): {fix}")
         if self.die_chamfer_mm <= least:
             raise HolderError(f"die_chamfer_mm ({self.die_chamfer_mm:g}) is too small to key the die with "
                               f"clearance_mm {self.clearance_mm:g}: a flipped die would still fit the pocket; set "

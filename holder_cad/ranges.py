@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import math
 
-from doefab.diekey import SECOND_CHAMFER
+from doefab.diekey import KEY_PROUD_MM, LEAST_CLEARANCE_MM, least_key_chamfer_mm
 from holder_cad import derive
 
 __all__ = ["HolderError", "PARAM_RANGES", "given_problem", "KEY_PROUD_MM", "ENGAGED_MIN", "least_key_chamfer_mm"]
 
 
-KEY_PROUD_MM = 0.1  # how far a turned-over die's corner must stand into the pocket's keyed wall (it cannot go in)
 ENGAGED_MIN = 0.25  # the least share of the ISO basic thread depth the printed thread must engage
 
 
@@ -38,7 +37,8 @@ PARAM_RANGES = {
     "die_chamfer_mm": (0.1, 50.0, "the keyed die corner"),
     "clear_aperture_mm": (0.5, 100.0, "the DOE clear aperture"),
     "aperture_margin_mm": (0.01, 10.0, "extra radius of the hole"),
-    "clearance_mm": (0.05, 1.0, "below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
+    "clearance_mm": (LEAST_CLEARANCE_MM, 1.0,
+                     "below 0.05 mm a printed pocket will not take the die, above 1 mm the die rattles"),
     "thread_clearance_mm": (0.01, 0.5, "the printed thread's radial play in the lens's filter thread"),
     "wall_mm": (0.1, 10.0, "between one nozzle line and 10 mm"),
     "nozzle_mm": (0.1, 2.0, "a printer nozzle"),
@@ -78,13 +78,3 @@ def given_problem(values: dict) -> str | None:
     if isinstance(seg, bool) or not isinstance(seg, int) or not 32 <= seg <= 1024:
         return f"segments must be an integer in 32..1024 (facets per circle), got {seg!r}"
     return None
-
-
-def least_key_chamfer_mm(clearance_mm: float) -> float:
-    """The least ``die_chamfer_mm`` that keys the die in a pocket ``clearance_mm`` wider all round: a die turned or
-    flipped puts a square corner where the pocket has the smaller chamfer, or the smaller chamfer where it has the
-    larger; that corner, s·c/√2 or (1 − s)·c/√2 beyond the pocket's chamfer, must stand proud of it by
-    ``KEY_PROUD_MM`` however the die slides in the pocket (√2 × the clearance along the diagonal, and the clearance
-    itself). Example: ``round(least_key_chamfer_mm(0.25), 2)`` → 1.99."""
-    reach = ((1 + math.sqrt(2)) * clearance_mm + KEY_PROUD_MM) * math.sqrt(2)
-    return reach / min(SECOND_CHAMFER, 1 - SECOND_CHAMFER)

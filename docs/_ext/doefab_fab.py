@@ -194,7 +194,7 @@ def write_figures() -> list[str]:
     colours = {0: "#444444", 1: "#1f77b4", 2: "#ff7f0e", 3: "#2ca02c", 4: "#d62728"}
     fig, axes = plt.subplots(1, 3, figsize=(15, 5.2))
     views = [("whole die", None), ("key sites, lower-left corner", (-6.0, -4.6, -6.0, -4.6)),
-             ("verniers, top edge", (-5.35, -4.9, 5.6, 5.85))]
+             ("plate 1's x vernier, top edge", (-5.35, -4.8, 5.68, 5.9))]
     for ax, (title, box) in zip(axes, views):
         for poly in cell.polygons:
             pts = poly.points * 1e-3  # user unit µm -> mm

@@ -56,6 +56,8 @@ _CLI_NAMES = (
     ("pupil_oversample ≥", "--pupil-oversample ≥"),
     ("resample it or set Camera.doe_pixels", "resample it or choose the --preset whose grid it was made for"),
     ("enlarge die_m", "raise --die-mm"),
+    ("at most the pitch (cd_m)", "at most the pitch (--cd-um)"),
+    ("mm (die_chamfer_m)", "mm (--die-chamfer-mm)"),
 )
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.diekey import DEFAULT_CHAMFER_MM, SECOND_CHAMFER
+from doefab.diekey import DEFAULT_CHAMFER_MM, LEAST_CLEARANCE_MM, SECOND_CHAMFER, least_key_chamfer_mm
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
@@ -23,7 +23,7 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readme
-from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_layout
+from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_layout, nm_to_m, vernier_record
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.verify import verify_mask_set, width_space_report
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, read_json, staging_dir
@@ -72,8 +72,11 @@ class MaskOptions:
 
 
 def _chamfer_m(opts: MaskOptions) -> float:
-    """The die key's larger chamfer (m): as given, else the holder's default or a quarter of a smaller die."""
-    return opts.die_chamfer_m if opts.die_chamfer_m is not None else min(DEFAULT_CHAMFER_MM * 1e-3, opts.die_m / 4)
+    """The die key's larger chamfer (m): as given, else the holder's default (a quarter of a die of 4 mm or less,
+    which that would cut in half)."""
+    if opts.die_chamfer_m is not None:
+        return opts.die_chamfer_m
+    return DEFAULT_CHAMFER_MM * 1e-3 if DEFAULT_CHAMFER_MM * 1e-3 < opts.die_m / 2 else opts.die_m / 4
 
 
 def _chamfer_nm(opts: MaskOptions) -> int:
@@ -132,7 +135,6 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     levels, camera, n_levels = _parts_of(design, design_dir)
     opts = options or MaskOptions()
     t0 = time.perf_counter()
-    n_masks = mask_count(n_levels)
     lv = validate_levels(levels, n_levels)
     n = camera.doe_pixels
     if lv.shape != (n, n):
@@ -152,9 +154,10 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
+    widths = _width_space(layout, n_levels, cd_nm, pitch_nm, origin_nm)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
-    spec = _mark_spec(camera, opts, die_nm, cd_nm)
+    spec = _mark_spec(camera, opts, die_nm, cd_nm, extent_nm)
     align_to = _alignment(order, opts.align_chain)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
@@ -180,11 +183,7 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
         manifest = _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm)
         atomic_write_json(stage / "manifest.json", manifest)
         report = verify_mask_set(stage, lv, use_klayout=opts.use_klayout, complete=False)  # mirrors per the manifest
-        cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
-        report["width_space"] = {str(etch_layer(b)): width_space_report(bit_plane(layout, b, n_levels), cd_px,
-                                                                        camera.doe_pitch,
-                                                                        (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
-                                 for b in range(n_masks)}
+        report["width_space"] = widths
         for lay, nrect in layer_stats.items():
             report["layers"][str(lay)]["rectangles_written"] = nrect
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
@@ -245,6 +244,12 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
     if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
         raise DoefabError(f"die_chamfer_m = {c!r} m must be a length ≥ 0: the holder's die_chamfer_mm, "
                           f"{DEFAULT_CHAMFER_MM:g} mm by default")
+    if 0 < c * 1e3 <= (least := least_key_chamfer_mm(LEAST_CLEARANCE_MM)):
+        raise DoefabError(f"a die key chamfer of {c * 1e3:g} mm (die_chamfer_m) keys the die in no holder's pocket "
+                          f"(even at the tightest {LEAST_CLEARANCE_MM:g} mm clearance a chamfer must exceed "
+                          f"{least:.2f} mm): give the "
+                          f"holder's die_chamfer_mm, {DEFAULT_CHAMFER_MM:g} mm by default, or 0 for an unkeyed "
+                          f"square die")
     if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
         raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
     return order
@@ -278,11 +283,30 @@ def _levels_of(n_levels, design_dir) -> int:
     return n_levels
 
 
-def _mark_spec(camera, opts: MaskOptions, die_nm: int, cd_nm: int) -> MarkSpec:
-    """The marks' geometry for ``opts``: the die, its key chamfer and side, the CD; windows for positive resist."""
+def _width_space(layout: np.ndarray, n_levels: int, cd_nm: int, pitch_nm: int, origin_nm: tuple) -> dict:
+    """Each etch layer's width/space report (``verify.width_space_report``); a CD wider than the pixel pitch that
+    the level map's features or spaces fall below is refused (the plates would carry what the stated CD cannot
+    write)."""
+    cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
+    out = {str(etch_layer(b)): width_space_report(bit_plane(layout, b, n_levels), cd_px, pitch_nm * 1e-9,
+                                                  (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
+           for b in range(mask_count(n_levels))}
+    narrow = {k: r["features_below_cd_px"] + r["spaces_below_cd_px"] for k, r in out.items()}
+    if any(narrow.values()):
+        worst = max(narrow, key=narrow.get)
+        raise DoefabError(f"critical dimension {cd_nm / 1e3:g} µm is wider than the {pitch_nm / 1e3:g} µm pixel "
+                          f"pitch and the level map has features or spaces narrower than it (layer {worst}: "
+                          f"{narrow[worst]} pixels): the plates would carry what that CD cannot write; give a CD of "
+                          f"at most the pitch (cd_m), or a design on a DOE pitch of at least the CD")
+    return out
+
+
+def _mark_spec(camera, opts: MaskOptions, die_nm: int, cd_nm: int, extent_nm: int) -> MarkSpec:
+    """The marks' geometry for ``opts``: the die, its key chamfer and side, the CD, the pixel grid they keep clear
+    of; windows for positive resist."""
     return MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
                     cd_nm=cd_nm, chamfer_nm=_chamfer_nm(opts), coded_sign=1 if opts.pattern_faces == "lens" else -1,
-                    windows=opts.resist == "positive")
+                    windows=opts.resist == "positive", grid_half_nm=extent_nm // 2)
 
 
 def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
@@ -318,7 +342,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "resist_tone": opts.resist,
         "mask_polarity": ("clear field: the plate carries chrome inside the polygons" if positive else
                           "dark field: the plate is clear inside the polygons"),
-        "critical_dimension_nm": 20_000, "aligns_to_plate": None,
+        "critical_dimension_nm": cd_nm, "aligns_to_plate": None,
         "marks": {"keys": [KEY_LAYER, 0], "verniers_cd_ladder": [VERNIER_LAYER, 0]},
     })
     n = lv.shape[0]
@@ -333,10 +357,10 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "process_order": [CHROME_LAYER] + list(order),
         "alignment_chain": {str(k): v for k, v in align_to.items()},
         "alignment_scheme": opts.align_chain,
-        "key_sites_m": {str(p): [[x * 1e-9, y * 1e-9] for x, y in key_site(MarkSpec(die_nm, 0, cd_nm), p)]
+        "key_sites_m": {str(p): [[nm_to_m(x), nm_to_m(y)] for x, y in key_site(MarkSpec(die_nm, 0, cd_nm), p)]
                         for p in range(n_masks + 1)},
-        "pitch_m": pitch_nm * 1e-9,
-        "origin_m": [origin_nm[0] * 1e-9, origin_nm[1] * 1e-9],
+        "pitch_m": nm_to_m(pitch_nm),
+        "origin_m": [nm_to_m(origin_nm[0]), nm_to_m(origin_nm[1])],
         "origin_means": "layout position of the top-left corner of level-map pixel [0, 0]; x right, y up",
         "shape": [n, n], "row0": "top",
         "layout_view": "drawn as seen from the patterned (etched) face, x right, y up",
@@ -345,9 +369,10 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "mirror_means": ("the design is defined looking from the scene into the camera; with the patterned face "
                          "toward the lens the layout column j holds design column N−1−j (coded half x > 0 in "
                          "the layout)") if opts.pattern_faces == "lens" else "layout column j = design column j",
-        "die_m": die_nm * 1e-9,
-        "die_chamfer_m": _chamfer_nm(opts) * 1e-9,
-        "mark_clear_margin_m": CLEAR_MARGIN_NM * 1e-9,
+        "die_m": nm_to_m(die_nm),
+        "die_chamfer_m": nm_to_m(_chamfer_nm(opts)),
+        "verniers": vernier_record(die_nm, cd_nm, align_to),
+        "mark_clear_margin_m": nm_to_m(CLEAR_MARGIN_NM),
         "mark_clear_margin_means": "the chrome plate leaves the glass clear this far beyond every mark's bounding box",
         "die_outline_means": (f"layer 100, the dicing outline: the two corners of the coded half (x "
                               f"{'>' if opts.pattern_faces == 'lens' else '<'} 0 in the layout) chamfered, legs "
@@ -355,7 +380,8 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
                               "holder's pocket (not turned, not flipped), and the alignment keys they cut off are "
                               "needed only until the last etch"),
         "clear_aperture_diameter_m": camera.aperture_diameter,
-        "coded_half": "x < 0 (left columns of the level map)",
+        "coded_half": ("the level map's left columns (x < 0 in the design, looking from the scene); in the layout "
+                       f"x {'>' if opts.pattern_faces == 'lens' else '<'} 0"),
         "design_wavelength_m": camera.design_wavelength,
         "material": camera.material.to_dict(),
         "refractive_index_at_design_wavelength": depths["refractive_index_at_design_wavelength"],

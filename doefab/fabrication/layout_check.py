@@ -21,7 +21,7 @@ import numpy as np
 from doefab.errors import CheckFailed, DoefabError
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER, VERNIER_LAYER,
                                       etch_bit)
-from doefab.fabrication.marks import MarkSpec, key_site, mark_layout
+from doefab.fabrication.marks import MarkSpec, key_site, mark_layout, vernier_record
 
 __all__ = ["TOLERANCE_DBU", "DBU_NM", "expected_layout", "check_layout", "layout_problems", "stray_layers",
            "unlisted_layers", "listed_layers", "layer_name"]
@@ -75,14 +75,27 @@ def _spec(man: dict, n_masks: int) -> tuple[MarkSpec, dict[int, int]]:
     margin = man.get("mark_clear_margin_m", 0.0)  # a set written before the marks had clear fields: none
     _need(not isinstance(margin, bool) and isinstance(margin, (int, float)) and 0 <= margin <= 1e-3,
           "mark_clear_margin_m", f"= {margin!r} is not a length in metres up to 1 mm")
+    legacy = man.get("format") in ("doefab mask set 1", "doefab mask set 2")  # drawn as it was (``MarkSpec.legacy``)
     tones = {L.get("resist_tone") for L in man["layers"] if L.get("purpose") == "etch"}
     tone = next(iter(tones)) if len(tones) == 1 else None
-    _need(tone in ("positive", "negative"), "layers[].resist_tone",
+    _need(legacy or tone in ("positive", "negative"), "layers[].resist_tone",
           f"of the etch layers ({sorted(map(repr, tones))}) is not one tone, positive or negative")
+    grid = 0 if legacy else _grid_half_nm(man)
     spec = MarkSpec(die_nm=int(round(die * 1e9)), aperture_radius_nm=int(round(ap / 2 * 1e9)), cd_nm=cd,
                     chamfer_nm=int(round(chamfer * 1e9)), coded_sign=1 if man.get("mirrored_x") else -1,
-                    clear_margin_nm=int(round(margin * 1e9)), windows=tone == "positive")
+                    clear_margin_nm=int(round(margin * 1e9)), windows=legacy or tone == "positive",
+                    grid_half_nm=grid, legacy=legacy)
     return spec, {int(k): v for k, v in chain.items()}
+
+
+def _grid_half_nm(man: dict) -> int:
+    """Half the pixel grid's width (nm) from the manifest's ``shape`` and ``pitch_m`` (each checked)."""
+    shape, pitch = man.get("shape"), man.get("pitch_m")
+    _need(isinstance(shape, list) and len(shape) == 2 and all(isinstance(v, int) and v > 0 for v in shape),
+          "shape", f"= {shape!r} is not the level map's [rows, columns]")
+    _need(not isinstance(pitch, bool) and isinstance(pitch, (int, float)) and 1e-8 <= pitch <= 1e-2, "pitch_m",
+          f"= {pitch!r} is not a pixel pitch in metres")
+    return int(round(max(shape) * pitch * 1e9)) // 2
 
 
 def _check_key_sites(man: dict, spec: MarkSpec, n_masks: int) -> None:
@@ -106,6 +119,9 @@ def expected_layout(man: dict, n_masks: int) -> dict[tuple[int, int], list[np.nd
     layers; CheckFailed naming a manifest field that cannot be drawn or disagrees with the drawing."""
     spec, align_to = _spec(man, n_masks)
     _check_key_sites(man, spec, n_masks)
+    if not spec.legacy and man.get("verniers") != vernier_record(spec.die_nm, spec.cd_nm, align_to):
+        raise CheckFailed("manifest.json: verniers does not describe the verniers the set draws (sites, scales): the "
+                          "fab would read them wrongly; export the set again")
     try:
         pieces = mark_layout(spec, align_to, int(man["vertex_cap"]), CHROME_LAYER)
     except DoefabError as exc:

@@ -24,8 +24,10 @@ __all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "D
 
 _FORMATS = {"gds": "GDSII", "oasis": "OASIS"}  # the manifest's file keys, as a fab names the formats
 # the manifest's format: 2 adds the keyed die outline and the marks' clear fields, and the README words the files'
-# formats and the layout's view as a fab reads them; a set of format 1 keeps its README's words (it still verifies)
-MASK_SET_FORMAT = "doefab mask set 2"
+# formats and the layout's view as a fab reads them; a set of format 1 keeps its README's words (it still verifies);
+# 3 gives each etch plate its own x and y verniers (``verniers``), marks at least the CD wide, marks clear of the
+# pixel grid and, for negative resist, no windows (a set of format 1 or 2 verifies as it was drawn)
+MASK_SET_FORMAT = "doefab mask set 3"
 
 # the manifest rounds depths to 0.001 nm; a field further than this from its re-derived value was edited
 DEPTH_TOLERANCE_NM = 0.002
@@ -146,6 +148,16 @@ def _clear_fields(man: dict) -> str:
             "silica.")
 
 
+def _verniers(man: dict) -> str:
+    """The README's words on reading the verniers, from the manifest (none in a set of format 1 or 2)."""
+    v = man.get("verniers")
+    if not v:
+        return ""
+    return (f" Verniers: {v['reads']}; {v['bars']} bars {v['bar_width_nm'] / 1e3:g} µm wide, the reference at "
+            f"{v['reference_pitch_nm'] / 1e3:g} µm pitch and the vernier at {v['vernier_pitch_nm'] / 1e3:g} µm, "
+            f"reading ±{v['range_nm'] / 1e3:g} µm; each plate's sites are manifest.json's verniers.sites_m.")
+
+
 def _dicing(man: dict) -> str:
     """The README's words on the keyed dicing outline (``doefab.diekey``), from the manifest."""
     c = man.get("die_chamfer_m") or 0.0
@@ -193,7 +205,7 @@ def fab_readme(man: dict) -> str:
         "",
         f"Process order: layer {' → '.join(str(x) for x in man['process_order'])}. The chrome plate is written "
         "first; alignment scheme: " + man["alignment_scheme"] + " (each etch plate " + _windows(man)
-        + " and carries its own cross)." + _clear_fields(man),
+        + " and carries its own cross)." + _clear_fields(man) + _verniers(man),
         f"Level k = {n_levels - 1} − Σ 2^bit over the masks that etch the pixel; height = k·d above the deepest etch.",
         "The layout is drawn as seen from the patterned face. " + view + ".",
         "Layer 63 (labels) is reserved and not written. Layer 100 is the die outline" + _dicing(man),

@@ -30,13 +30,21 @@ import numpy as np
 from doefab.diekey import die_outline
 
 __all__ = ["MarkSpec", "chrome_polygons", "clear_fields", "mark_polygons", "key_site", "check_mark_placement",
-           "mark_layout", "smallest_die_m", "CLEAR_MARGIN_NM"]
+           "mark_layout", "smallest_die_m", "CLEAR_MARGIN_NM", "vernier_scale", "vernier_sites", "vernier_record",
+           "key_width", "nm_to_m"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
 WINDOW_NM = 260_000
 SITE_STEP_NM = 300_000
 CLEAR_MARGIN_NM = 40_000  # the clear glass the chrome plate leaves round every mark's bounding box
+VERNIER_BARS = 21  # bars per scale, k = −10..10
+VERNIER_STEP_NM = 250  # the reading step: the vernier scale's pitch is the reference's less this
+VERNIER_BAR_NM = 40_000  # bar length across the scale (the zero bars VERNIER_ZERO_EXTRA_NM longer)
+VERNIER_ZERO_EXTRA_NM = 20_000
+VERNIER_LINE_NM = 200_000  # the two scales meet this far inside the die edge
+VERNIER_START_NM = 700_000  # the first site's scales start this far from the top-left corner
+VERNIER_GAP_NM = 200_000  # between two plates' sites
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,10 @@ class MarkSpec:
     # polygons, so a window is drawn over the keys; a clear-field plate (negative resist) is clear outside them,
     # and a drawn window would be chrome over the keys
     windows: bool = True
+    grid_half_nm: int = 0  # half the pixel grid's width: the marks' clear fields stay outside it (0: the aperture)
+    # a set of format 1 or 2 as it was drawn: one 11-bar vernier per plate on a shared reference at the top edge,
+    # 10 µm keys and 20 µm slits and 750 µm between ladders whatever the CD, placed clear of the aperture only
+    legacy: bool = False
 
 
 def _rect(x0, y0, x1, y1, layer, datatype):
@@ -68,8 +80,8 @@ def key_site(spec: MarkSpec, plate: int) -> list[tuple[int, int]]:
     return [(sx * c, sy * c) for sx in (-1, 1) for sy in (-1, 1)]
 
 
-def _cross(cx, cy, layer, datatype):
-    a, w = KEY_ARM_NM, KEY_WIDTH_NM
+def _cross(cx, cy, layer, datatype, w=KEY_WIDTH_NM):
+    a = KEY_ARM_NM
     return [_rect(cx - a, cy - w // 2, cx + a, cy + w // 2, layer, datatype),
             _rect(cx - w // 2, cy - a, cx + w // 2, cy + a, layer, datatype)]
 
@@ -98,7 +110,7 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
     r = spec.aperture_radius_nm
     die = gdstk.rectangle((-h, -h), (h, h))
     disk = gdstk.ellipse((0, 0), r, tolerance=circle_tolerance_nm)
-    slit_w, gap, length = 20_000, 100_000, 600_000
+    slit_w, gap, length = 2 * key_width(spec), 100_000, 600_000
     slits = [gdstk.rectangle((-slit_w // 2, r + gap), (slit_w // 2, r + gap + length)),
              gdstk.rectangle((-slit_w // 2, -r - gap - length), (slit_w // 2, -r - gap))]
     out = gdstk.boolean(die, [disk, *slits, *clear_fields(list(marks), spec.clear_margin_nm)], "not", layer=layer,
@@ -107,46 +119,132 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
 
 
 def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
-    """Keys, windows, verniers and CD ladders for the chrome plate (0) and etch plates 1..M.
+    """Keys, windows, verniers and CD ladders for the chrome plate (0) and etch plates 1..M, and the die outline.
 
     Args:
         align_to: etch plate → the plate it aligns to, one entry per etch plate (e.g. {1: 0, 2: 0, 3: 0, 4: 0}).
     """
     polys = []
-    h = spec.die_nm // 2
     for plate in range(len(align_to) + 1):
         for cx, cy in key_site(spec, plate):
-            polys += _cross(cx, cy, 10, plate)
+            polys += _cross(cx, cy, 10, plate, key_width(spec))
         if plate > 0 and spec.windows:
             for cx, cy in key_site(spec, align_to[plate]):
                 w = WINDOW_NM // 2
                 polys.append(_rect(cx - w, cy - w, cx + w, cy + w, 10, plate))
-        # vernier: 11 bars, reference pitch on plate 0, pitch × 1.1 on the etch plates, along the top edge
-        pitch = 20_000 if plate == 0 else 22_000
-        x_start = -h + 700_000  # every plate's vernier starts at the same x, so they overlay the reference
-        y0 = h - 200_000 - (0 if plate == 0 else 40_000)
-        for k in range(11):
-            x = x_start + k * pitch
-            polys.append(_rect(x, y0, x + 8_000, y0 + 40_000, 11, plate))
-        # CD ladder along the bottom edge: line/space pairs at 1, 1.5, 2, 3 × CD
-        x = -h + 700_000 + plate * 1_500_000 // 2
-        for f in (1.0, 1.5, 2.0, 3.0):
-            w = int(round(spec.cd_nm * f))
-            for _ in range(5):
-                polys.append(_rect(x, -h + 150_000, x + w, -h + 250_000, 11, plate))
-                x += 2 * w
-            x += 40_000
+        polys += _ladder(spec, plate)
+        if spec.legacy:
+            polys += _legacy_vernier(spec, plate)
+    if not spec.legacy:
+        for plate, ref in sorted(align_to.items()):
+            polys += _vernier(spec, plate, ref, "x") + _vernier(spec, plate, ref, "y")
     # the dicing outline, keyed (``doefab.diekey``): the chamfers may cut a corner's keys, needed only until the
     # last etch
     polys.append(gdstk.Polygon(die_outline(spec.die_nm, spec.die_nm, spec.chamfer_nm, spec.coded_sign), 100, 0))
     return polys
 
 
+def key_width(spec: MarkSpec) -> int:
+    """The width (nm) of a key cross's arms and the split-line slits' half width floor: 10 µm, or the CD where that
+    is wider (a set of format 1 or 2: 10 µm whatever the CD)."""
+    return KEY_WIDTH_NM if spec.legacy else max(KEY_WIDTH_NM, spec.cd_nm)
+
+
+def vernier_scale(cd_nm: int) -> tuple[int, int]:
+    """(bar width, reference pitch) of the verniers in nm: bars as wide as the CD (at least 4 µm), the pitch
+    20 µm or four bars, whichever is larger. Example: ``vernier_scale(5400) == (5400, 21600)``."""
+    bar = max(int(cd_nm), 4_000)
+    return bar, max(20_000, 4 * bar)
+
+
+def vernier_sites(spec: MarkSpec, plate: int) -> tuple[int, int]:
+    """(x of the x vernier's zero bars on the top edge, y of the y vernier's zero bars on the left edge), nm, of
+    etch plate ``plate`` (1..M): one pair of sites per plate, side by side from the top-left corner."""
+    bar, pitch = vernier_scale(spec.cd_nm)
+    half = (VERNIER_BARS // 2) * pitch + bar
+    off = VERNIER_START_NM + half + (plate - 1) * (2 * half + VERNIER_GAP_NM)
+    h = spec.die_nm // 2
+    return -h + off, h - off
+
+
+def _vernier(spec: MarkSpec, plate: int, ref: int, axis: str) -> list:
+    """Plate ``plate``'s vernier along ``axis`` against plate ``ref``'s reference scale: ``VERNIER_BARS`` bars at
+    the reference pitch on ``ref`` (toward the die edge) and at that pitch less ``VERNIER_STEP_NM`` on ``plate``
+    (inward), meeting on a line ``VERNIER_LINE_NM`` inside the edge; the middle bars (k = 0) are longer. Bar k of
+    the two scales lines up when ``plate`` sits k · ``VERNIER_STEP_NM`` from ``ref`` along +``axis``."""
+    bar, pitch = vernier_scale(spec.cd_nm)
+    h = spec.die_nm // 2
+    zx, zy = vernier_sites(spec, plate)
+    out = []
+    for k in range(-(VERNIER_BARS // 2), VERNIER_BARS // 2 + 1):
+        length = VERNIER_BAR_NM + (VERNIER_ZERO_EXTRA_NM if k == 0 else 0)
+        for dt, at, inward in ((ref, k * pitch, False), (plate, k * (pitch - VERNIER_STEP_NM), True)):
+            lo = (0, length) if not inward else (-length, 0)  # across the bars, from the meeting line
+            if axis == "x":  # vertical bars along the top edge; the reference toward the edge (+y)
+                c, line = zx + at, h - VERNIER_LINE_NM
+                out.append(_rect(c - bar // 2, line + lo[0], c - bar // 2 + bar, line + lo[1], 11, dt))
+            else:  # horizontal bars along the left edge; the reference toward the edge (−x)
+                c, line = zy + at, -h + VERNIER_LINE_NM
+                out.append(_rect(line - lo[1], c - bar // 2, line - lo[0], c - bar // 2 + bar, 11, dt))
+    return out
+
+
+def vernier_record(die_nm: int, cd_nm: int, align_to: dict[int, int]) -> dict:
+    """The mask manifest's ``verniers``: the scales' geometry, each etch plate's two sites (metres: the zero bars'
+    position along the edge and the scales' meeting line) and how to read them."""
+    bar, pitch = vernier_scale(cd_nm)
+    spec = MarkSpec(die_nm, 0, cd_nm)
+    return {
+        "bars": VERNIER_BARS, "bar_width_nm": bar, "reference_pitch_nm": pitch,
+        "vernier_pitch_nm": pitch - VERNIER_STEP_NM, "reading_step_nm": VERNIER_STEP_NM,
+        "range_nm": (VERNIER_BARS // 2) * VERNIER_STEP_NM,
+        "sites_m": {str(p): {"x": [nm_to_m((x := vernier_sites(spec, p))[0]), nm_to_m(die_nm // 2 - VERNIER_LINE_NM)],
+                             "y": [nm_to_m(-(die_nm // 2) + VERNIER_LINE_NM), nm_to_m(x[1])], "reference_plate": ref}
+                    for p, ref in sorted(align_to.items())},
+        "reads": ("each etch plate has an x vernier on the top edge and a y vernier on the left edge (layer 11, its "
+                  "plate number as datatype) against a reference scale on the plate it aligns to (layer 11, that "
+                  "plate's datatype), the two scales meeting on a line at the site; the longer middle bars are "
+                  f"k = 0. Where bar k (counted from them, + toward +x or +y) of the two scales lines up, the plate "
+                  f"sits k × {VERNIER_STEP_NM / 1000:g} µm from its reference along +x or +y"),
+    }
+
+
+def nm_to_m(nm: int) -> float:
+    """Nanometres as metres for a manifest, without float noise (0.0058, not 0.0058000000000000005)."""
+    return round(nm * 1e-9, 12)
+
+
+def _legacy_vernier(spec: MarkSpec, plate: int) -> list:
+    """A set of format 1 or 2 as drawn: 11 bars along the top edge, the reference pitch on plate 0 and 1.1 × it on
+    every etch plate, all starting at the same x."""
+    h = spec.die_nm // 2
+    pitch = 20_000 if plate == 0 else 22_000
+    y0 = h - 200_000 - (0 if plate == 0 else 40_000)
+    return [_rect(-h + 700_000 + k * pitch, y0, -h + 700_000 + k * pitch + 8_000, y0 + 40_000, 11, plate)
+            for k in range(11)]
+
+
+def _ladder(spec: MarkSpec, plate: int) -> list:
+    """Plate ``plate``'s CD ladder along the bottom edge: five line/space pairs at 1, 1.5, 2 and 3 × the CD, each
+    plate's one ``ladder_step`` further along."""
+    h = spec.die_nm // 2
+    step = 750_000 if spec.legacy else max(750_000, 75 * spec.cd_nm + 260_000)  # a ladder is 75 CD + 160 µm long
+    x, out = -h + 700_000 + plate * step, []
+    for f in (1.0, 1.5, 2.0, 3.0):
+        w = int(round(spec.cd_nm * f))
+        for _ in range(5):
+            out.append(_rect(x, -h + 150_000, x + w, -h + 250_000, 11, plate))
+            x += 2 * w
+        x += 40_000
+    return out
+
+
 def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
-    """(marks off the die, marks whose clear field reaches the clear aperture) among ``polys`` (the die outline
-    aside)."""
-    h, r, m = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm
-    off_die = into_aperture = 0
+    """(marks off the die, marks whose clear field reaches the clear aperture or the pixel grid's square) among
+    ``polys`` (the die outline aside). A clear field in the grid's corners would let the etch plates etch the
+    level map's pixels there (the chrome baffle masks them elsewhere) onto the marks."""
+    h, r, m, g = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm, spec.grid_half_nm
+    off_die = into_pattern = 0
     for poly in polys:
         if poly.layer == 100:
             continue
@@ -154,38 +252,42 @@ def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
         off_die += bool(x0 < -h or y0 < -h or x1 > h or y1 > h)
         # the clear field's nearest point to the aperture's centre
         dx, dy = max(x0 - m, -x1 - m, 0.0), max(y0 - m, -y1 - m, 0.0)
-        into_aperture += bool(dx * dx + dy * dy < r * r)
-    return off_die, into_aperture
+        into_pattern += bool(dx * dx + dy * dy < r * r or (dx < g and dy < g))
+    return off_die, into_pattern
 
 
 def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
     """The marks of :func:`mark_polygons`, every one (keys, windows, verniers, CD ladders) inside the die and clear
-    of the aperture; else one error naming the smallest die (0.1 mm steps) that holds them."""
+    of the aperture and the pixel grid; else one error naming the smallest die (0.1 mm steps) that holds them."""
+    from dataclasses import replace
+
     from doefab.errors import DoefabError
 
     polys = mark_polygons(spec, align_to)
-    off_die, into_aperture = _misplaced(polys, spec)
-    if not off_die and not into_aperture:
+    off_die, into_pattern = _misplaced(polys, spec)
+    if not off_die and not into_pattern:
         return polys
     need = next((die for die in range(spec.die_nm, 300_000_001, 100_000)
-                 if not any(_misplaced(mark_polygons(MarkSpec(die, spec.aperture_radius_nm, spec.cd_nm), align_to),
-                                       MarkSpec(die, spec.aperture_radius_nm, spec.cd_nm)))), None)
+                 if not any(_misplaced(mark_polygons(replace(spec, die_nm=die), align_to),
+                                       replace(spec, die_nm=die)))), None)
     fix = f"enlarge die_m to at least {need / 1e6:g} mm" if need else "use a smaller critical dimension"
+    grid = f" and a {2 * spec.grid_half_nm / 1e6:g} mm pixel grid" if spec.grid_half_nm else ""
     raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
-                      f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
-                      f"{into_aperture} inside the aperture): {fix}")
+                      f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture{grid} ({off_die} off the "
+                      f"die, {into_pattern} inside the aperture or the grid): {fix}")
 
 
 def smallest_die_m(aperture_diameter_m: float, extent_m: float, cd_m: float, n_masks: int,
                    floor_m: float = 12e-3) -> float:
     """The smallest square die in whole millimetres, at least ``floor_m`` (12 mm: the prototype's), that holds a
     pattern ``extent_m`` wide with a 1 mm margin and every mark of ``n_masks`` plates aligned to the chrome keys
-    clear of the aperture (m). Example: ``smallest_die_m(8.64e-3, 8.64e-3, 5.4e-6, 4) == 0.012``."""
+    clear of the aperture and the pattern (m). Example: ``smallest_die_m(8.64e-3, 8.64e-3, 5.4e-6, 4) == 0.012``."""
     radius_nm, cd_nm = int(round(aperture_diameter_m / 2 * 1e9)), max(1, int(round(cd_m * 1e9)))
+    grid_half_nm = int(round(extent_m / 2 * 1e9))
     align_to = {plate: 0 for plate in range(1, n_masks + 1)}
     die_mm = max(math.ceil(floor_m * 1e3 - 1e-9), math.ceil(extent_m * 1e3 + 2 - 1e-9))
     while die_mm < 300:
-        spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm)
+        spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm, grid_half_nm=grid_half_nm)
         if not any(_misplaced(mark_polygons(spec, align_to), spec)):
             return die_mm * 1e-3
         die_mm += 1

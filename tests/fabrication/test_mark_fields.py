@@ -81,3 +81,62 @@ def test_the_report_counts_pixels_touching_only_at_a_corner():
     r = width_space_report(one, 1, 1e-6, (0.0, 0.0))
     assert r["corner_contacts"] == 1 and r["corner_locations_um"] == [[2.0, -2.0]]
     assert width_space_report(np.ones((5, 5), bool), 1, 1e-6, (0.0, 0.0))["corner_contacts"] == 0
+
+
+def _bar_centres(polys, axis: int) -> np.ndarray:
+    return np.sort([np.mean(np.asarray(p.points)[:, axis]) for p in polys])
+
+
+@pytest.mark.parametrize("chain", ["chrome", "sequential"])
+@pytest.mark.parametrize("shift_nm", [(750, 0), (0, -1250), (500, 2000)])
+def test_each_plates_verniers_read_its_overlay(tmp_path, chain, shift_nm):
+    """Every etch plate of an exported set has an x vernier on the top edge and a y vernier on the left edge against
+    a reference on the plate it aligns to, at a site of its own. Plate 2 written shifted by (dx, dy) — here its bars
+    are moved by that much — is read back by finding, from the drawn bars alone, the bar k whose two scales line
+    up: k × 0.25 µm is the shift, along each axis."""
+    import json
+
+    from doefab.fabrication.export import LevelMap, MaskOptions, export_masks
+
+    cam = __import__("doefab").Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100)
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, align_chain=chain))
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    ver = man["verniers"]
+    cell = gdstk.read_gds(str(tmp_path / "m" / "doe.gds")).top_level()[0]
+    seen = set()
+    for plate, site in ver["sites_m"].items():
+        ref = site["reference_plate"]
+        assert ref == man["alignment_chain"][plate] and (chain == "sequential" or ref == 0)
+        for axis, (sx, sy) in (("x", site["x"]), ("y", site["y"])):
+            near = lambda p: np.hypot(*(np.asarray(p.points).mean(axis=0) * 1e-6 - (sx, sy))) < 0.35e-3  # µm → m
+            mine = [p for p in cell.get_polygons(layer=11, datatype=int(plate)) if near(p)]
+            refs = [p for p in cell.get_polygons(layer=11, datatype=ref) if near(p)]
+            assert len(mine) == len(refs) == ver["bars"], (plate, axis)
+            seen.add((round(sx, 6), round(sy, 6)))
+            if plate != "2":
+                continue
+            a = 0 if axis == "x" else 1
+            moved = _bar_centres(mine, a) + shift_nm[a] / 1e3  # µm
+            k = np.argmin(np.abs(moved - _bar_centres(refs, a))) - ver["bars"] // 2
+            assert k * ver["reading_step_nm"] == shift_nm[a], (axis, k)
+    assert len(seen) == 2 * len(ver["sites_m"])  # a site of its own for each plate and axis
+
+
+def test_a_set_of_format_2_verifies_as_it_was_drawn():
+    """A set written before format 3 (the committed sets' format until then): its expected layout is the one it
+    was drawn with — eleven 8 µm bars per plate at the top edge, no per-plate sites — not today's."""
+    import json
+
+    from doefab.fabrication.layout_check import expected_layout
+
+    man = json.loads((Path(__file__).resolve().parents[2] / "masks" / "half-ring" / "manifest.json").read_text())
+    old = {k: v for k, v in man.items() if k != "verniers"} | {"format": "doefab mask set 2"}
+    drawn = expected_layout(old, 4)
+    for plate in range(5):
+        widths = sorted({int(np.ptp(p[:, 0])) for p in drawn[(11, plate)] if np.ptp(p[:, 1]) == 40_000})
+        assert widths == [8_000], (plate, widths)
+        assert sum(np.ptp(p[:, 1]) == 40_000 for p in drawn[(11, plate)]) == 11
+    new = expected_layout(man | {"format": "doefab mask set 3"}, 4) if "verniers" in man else None
+    if new is not None:
+        assert sum(np.ptp(p[:, 1]) == 40_000 for p in new[(11, 1)]) != 11

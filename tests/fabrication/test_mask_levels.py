@@ -158,17 +158,21 @@ def test_the_export_follows_the_design_and_refuses_another_level_count(cam, tmp_
 
 
 def test_marks_of_more_plates_need_a_larger_die(tmp_path):
-    """Plate p's key sites sit 0.3 mm further in than plate p − 1's: around a 2.16 mm aperture a 5 mm die holds the
-    marks of the chrome plate and four etch plates (16 levels), not those of five (32 levels)."""
+    """Plate p's key sites sit 0.3 mm further in than plate p − 1's and its vernier sites one site further along
+    the edges: around a 2.16 mm aperture, the smallest die that holds the marks of the chrome plate and four etch
+    plates (16 levels) does not hold those of five (32 levels); the die the refusal names does."""
+    from doefab.fabrication.marks import smallest_die_m
+
     small = doefab.Camera(aperture_diameter=2.16e-3, doe_pitch=10.8e-6, doe_pixels=200, sensor_pitch=5.4e-6,
                           sensor_distance=50e-3, focus_distance=5.0)
     lv = np.full((200, 200), 15, np.uint8)
-    export_masks(LevelMap(lv, small, n_levels=16), tmp_path / "a", MaskOptions(use_klayout=False, die_m=5e-3))
-    with pytest.raises(DoefabError, match=r"6 plates do not fit a 5 mm die") as exc:
-        export_masks(LevelMap(lv, small, n_levels=32), tmp_path / "b", MaskOptions(use_klayout=False, die_m=5e-3))
+    die = smallest_die_m(2.16e-3, 2.16e-3, 10.8e-6, 4, floor_m=0.0)
+    export_masks(LevelMap(lv, small, n_levels=16), tmp_path / "a", MaskOptions(use_klayout=False, die_m=die))
+    with pytest.raises(DoefabError, match=rf"6 plates do not fit a {die * 1e3:g} mm die") as exc:
+        export_masks(LevelMap(lv, small, n_levels=32), tmp_path / "b", MaskOptions(use_klayout=False, die_m=die))
     assert not (tmp_path / "b").exists()
     need_mm = float(re.search(r"enlarge die_m to at least ([0-9.]+) mm", str(exc.value)).group(1))
-    assert 5 < need_mm <= 5.6  # the sixth plate's keys sit 0.3 mm further in: about 0.3·√2 mm more die
+    assert die * 1e3 < need_mm <= smallest_die_m(2.16e-3, 2.16e-3, 10.8e-6, 5, floor_m=0.0) * 1e3
     rep = export_masks(LevelMap(lv, small, n_levels=32), tmp_path / "b",
                        MaskOptions(use_klayout=False, die_m=need_mm * 1e-3))
     assert rep["marks_present"]

@@ -205,3 +205,32 @@ def test_a_negative_resist_set_keeps_its_keys_in_clear_glass(cam, tmp_path):
         assert verify_mask_set(out, use_klayout=False)["levels_reproduced"]
         readme = (out / "README.txt").read_text()
         assert ("clear window" in readme) == (resist == "positive")
+
+
+def test_a_cd_wider_than_the_pixels_is_refused_where_the_map_has_narrower_features(cam, tmp_path):
+    """A CD of two pixels: refused for a map with single-pixel features (the plates would carry what that CD cannot
+    write), taken for a map whose features and spaces are all 2 × 2 pixel blocks — and then every plate, the chrome
+    one too, states that CD, and every mark is at least that wide."""
+    rng = np.random.default_rng(0)
+    fine = rng.integers(0, 16, (100, 100)).astype(np.uint8)
+    with pytest.raises(DoefabError, match=r"critical dimension 10.8 µm is wider than the 5.4 µm pixel pitch"):
+        export_masks(LevelMap(fine, cam), tmp_path / "a", MaskOptions(use_klayout=False, cd_m=10.8e-6))
+    assert not (tmp_path / "a").exists()
+    blocks = np.kron(rng.integers(0, 16, (50, 50)), np.ones((2, 2))).astype(np.uint8)
+    export_masks(LevelMap(blocks, cam), tmp_path / "b", MaskOptions(use_klayout=False, cd_m=10.8e-6))
+    man = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert {L["critical_dimension_nm"] for L in man["layers"]} == {10_800}
+    cell = gdstk.read_gds(str(tmp_path / "b" / "doe.gds")).top_level()[0]
+    marks = [p for p in cell.polygons if p.layer in (10, 11)]
+    narrowest = min(min(np.ptp(p.points[:, 0]), np.ptp(p.points[:, 1])) for p in marks)  # µm
+    assert narrowest == pytest.approx(10.8)
+
+
+def test_the_largest_die_exports_and_verifies(cam, tmp_path):
+    """A 300 mm die, the top of the range, as `--die-mm 300` gives it (300 × 1e-3 m is 0.30000000000000004 in
+    floating point): the manifest states 0.3 m and the set verifies."""
+    lv = np.full((100, 100), 15, np.uint8)
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, die_m=300 * 1e-3))
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    assert man["die_m"] == 0.3 and man["key_sites_m"]["0"][0] == [-0.14975, -0.14975]
+    assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
