@@ -10,7 +10,7 @@ from pathlib import Path
 
 import doefab
 from doefab.fabrication.bitplanes import bit_plane
-from doefab.fabrication.verify import width_space_report
+from doefab.fabrication.inspection import width_space_report
 
 OUT = Path(__file__).parent / "results"
 

@@ -13,10 +13,11 @@ import math
 
 import numpy as np
 
-__all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "SECOND_CHAMFER", "KEY_PROUD_MM", "LEAST_CLEARANCE_MM",
-           "least_key_chamfer_mm"]
+__all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "DEFAULT_THICKNESS_MM", "SECOND_CHAMFER", "KEY_PROUD_MM",
+           "LEAST_CLEARANCE_MM", "least_key_chamfer_mm"]
 
 DEFAULT_CHAMFER_MM = 2.0  # the larger chamfer's leg (mm)
+DEFAULT_THICKNESS_MM = 1.0  # the die's substrate thickness (mm): the mask set's substrate, the holder's pocket depth
 SECOND_CHAMFER = 0.5  # the smaller chamfer's leg, a fraction of the larger
 KEY_PROUD_MM = 0.1  # how far a turned-over die's corner must stand into the pocket's keyed wall (it cannot go in)
 LEAST_CLEARANCE_MM = 0.05  # the holder's tightest pocket clearance per side (a printed pocket takes no less)

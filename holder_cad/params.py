@@ -17,7 +17,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from doefab.diekey import DEFAULT_CHAMFER_MM
+from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
 from holder_cad import derive
 from holder_cad.bounds import fit_bounds, recess_chamfer_problem
 from holder_cad.ranges import PARAM_RANGES, HolderError, given_problem, least_key_chamfer_mm
@@ -78,7 +78,7 @@ class HolderParams:
     lens_face_to_glass_mm: float = 3.5
     die_width_mm: float = 12.0
     die_height_mm: float = 12.0
-    die_thickness_mm: float = 1.0
+    die_thickness_mm: float = DEFAULT_THICKNESS_MM
     die_chamfer_mm: float = DEFAULT_CHAMFER_MM
     clear_aperture_mm: float = 8.64
     aperture_margin_mm: float = 0.3

@@ -58,6 +58,8 @@ _CLI_NAMES = (
     ("enlarge die_m", "raise --die-mm"),
     ("at most the pitch (cd_m)", "at most the pitch (--cd-um)"),
     ("mm (die_chamfer_m)", "mm (--die-chamfer-mm)"),
+    (", bring the depths nearer the focus, or pass PSFPlan(check=False) to accept PSFs cut by the window",
+     ", or bring the depths nearer the focus"),
 )
 
 

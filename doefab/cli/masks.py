@@ -14,6 +14,7 @@ import argparse
 from pathlib import Path
 
 from doefab.cli._args import number, plain_name_arg
+from doefab.diekey import DEFAULT_THICKNESS_MM
 from doefab.errors import DoefabError
 from doefab.io import json_text
 
@@ -31,19 +32,25 @@ def register(sub) -> None:
                    help="die size, square, in mm (default 12)")
     p.add_argument("--die-chamfer-mm", type=number(float, 0, 150, unit="mm"), default=None,
                    help="the dicing outline's key: the larger of the two chamfers on the coded half's corners, as "
-                        "the holder's die_chamfer_mm (default 2, or a quarter of a smaller die; 0: a square die)")
+                        "the holder's die_chamfer_mm (default 2, or a quarter of a die of 4 mm or less; 0: a square "
+                        "die)")
+    p.add_argument("--substrate-mm", type=number(float, 0.1, 10, unit="mm"), default=DEFAULT_THICKNESS_MM,
+                   help=f"the substrate's thickness in mm, as the holder's die_thickness_mm (default "
+                        f"{DEFAULT_THICKNESS_MM:g})")
     p.add_argument("--cd-um", type=number(float, 0.1, 1000, unit="µm"), default=None,
                    help="critical dimension in µm (default: the pixel pitch)")
     p.add_argument("--vertex-cap", type=number(int, 5, 8190), default=4000,
-                   help="max vertices per polygon (GDSII limit 8190)")
+                   help="max vertices per polygon (GDSII limit 8190; default 4000)")
     p.add_argument("--align-chain", choices=["chrome", "sequential"], default="chrome",
-                   help="every etch mask aligns to the chrome keys, or each to the previous plate")
+                   help="every etch mask aligns to the chrome keys, or each to the previous plate (default chrome)")
     p.add_argument("--etch-order", type=int, nargs="+", default=None, metavar="LAYER",
                    help="etch layers in process order, each once (default deepest first: 4 3 2 1 for 16 levels, "
                         "3 2 1 for 8, 6 4 3 2 1 for 32)")
-    p.add_argument("--resist", choices=["positive", "negative"], default="positive", help="resist tone")
+    p.add_argument("--resist", choices=["positive", "negative"], default="positive",
+                   help="resist tone (default positive: etch plates dark field, clear inside their polygons)")
     p.add_argument("--pattern-faces", choices=["lens", "scene"], default="lens",
-                   help="which way the etched face points when mounted (lens: the layout is the design mirrored in x)")
+                   help="which way the etched face points when mounted (default lens: the layout is the design "
+                        "mirrored in x)")
     p.add_argument("--no-klayout", action="store_true", help="skip the KLayout cross-check")
     p.add_argument("--force", action="store_true", help="replace an existing mask-set folder")
     p.set_defaults(func=run)
@@ -83,6 +90,7 @@ def run(args) -> int:
     opts = MaskOptions(name=args.name or design.task.replace("-", ""), oasis=args.oasis, die_m=args.die_mm * 1e-3,
                        **({} if args.die_chamfer_mm is None else {"die_chamfer_m": args.die_chamfer_mm * 1e-3}),
                        cd_m=None if args.cd_um is None else args.cd_um * 1e-6, vertex_cap=args.vertex_cap,
+                       substrate_thickness_m=args.substrate_mm * 1e-3,
                        align_chain=args.align_chain, resist=args.resist,
                        etch_order=None if args.etch_order is None else tuple(args.etch_order),
                        use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)

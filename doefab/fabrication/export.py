@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.diekey import DEFAULT_CHAMFER_MM, LEAST_CLEARANCE_MM, SECOND_CHAMFER, least_key_chamfer_mm
+from doefab.diekey import (DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM, LEAST_CLEARANCE_MM, SECOND_CHAMFER,
+                           least_key_chamfer_mm)
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
@@ -23,9 +24,11 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readme
-from doefab.fabrication.marks import CLEAR_MARGIN_NM, MarkSpec, key_site, mark_layout, nm_to_m, vernier_record
+from doefab.fabrication.marks import (CLEAR_MARGIN_NM, MarkSpec, clear_fields, key_site, mark_layout, mark_polygons,
+                                     nm_to_m, vernier_record)
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
-from doefab.fabrication.verify import verify_mask_set, width_space_report
+from doefab.fabrication.inspection import check_marks_clear, layer_widths, write_previews
+from doefab.fabrication.verify import verify_mask_set
 from doefab.io import OutputDir, atomic_write_json, atomic_write_text, mark_folder, plain_name, read_json, staging_dir
 from doefab.optics.camera import Camera, require_camera
 
@@ -42,6 +45,7 @@ class MaskOptions:
             the two chamfers on the coded half's corners (``doefab.diekey``; the holder's ``die_chamfer_mm``),
             metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a smaller die's side.
         cd_m: critical dimension (default: the pixel pitch).
+        substrate_thickness_m: the substrate's thickness, metres (the holder's ``die_thickness_mm``; 1 mm).
         vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
         align_chain: ``"chrome"`` (every etch mask aligns to the chrome keys; errors don't accumulate) or
             ``"sequential"`` (mask k aligns to the plate written before it).
@@ -61,6 +65,7 @@ class MaskOptions:
     die_m: float = 12e-3
     die_chamfer_m: float | None = None
     cd_m: float | None = None
+    substrate_thickness_m: float = DEFAULT_THICKNESS_MM * 1e-3
     vertex_cap: int = 4000
     align_chain: str = "chrome"
     etch_order: tuple | None = None
@@ -154,11 +159,13 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)
-    widths = _width_space(layout, n_levels, cd_nm, pitch_nm, origin_nm)
+    widths = layer_widths(layout, n_levels, cd_nm, pitch_nm, origin_nm)
     writer = GDSWriter(cell_name=opts.name.upper()[:32] or "DOE")
     layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
-    spec = _mark_spec(camera, opts, die_nm, cd_nm, extent_nm)
+    spec = _mark_spec(camera, opts, die_nm, cd_nm)
     align_to = _alignment(order, opts.align_chain)
+    check_marks_clear(layout, n_levels, clear_fields(mark_polygons(spec, align_to), spec.clear_margin_nm), pitch_nm,
+                      origin_nm)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
     with staging_dir(out) as stage:
@@ -189,7 +196,7 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
             report["layers"][str(lay)]["gds_bytes"] = 64 * nrect  # one BOUNDARY record set per rectangle
         report["file_bytes"] = {k: (stage / v).stat().st_size for k, v in files.items()}
         report["export_seconds"] = round(time.perf_counter() - t0, 3)
-        _previews(stage, layout, n_levels, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
+        write_previews(stage, layout, n_levels, camera.doe_pitch, mirrored=opts.pattern_faces == "lens")
         atomic_write_text(stage / "README.txt", fab_readme(manifest))
         atomic_write_json(stage / "report.json", report)
     return report
@@ -237,6 +244,7 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
         raise DoefabError(f"vertex_cap must be an integer in 5..8190 (GDSII allows 8190), got {opts.vertex_cap!r}")
     plain_name(opts.name, "mask-set name")
     for what, v, lo, hi in (("die size die_m", opts.die_m, 1e-3, 0.3),
+                            ("substrate thickness substrate_thickness_m", opts.substrate_thickness_m, 1e-4, 1e-2),
                             ("critical dimension cd_m", pitch if opts.cd_m is None else opts.cd_m, 1e-7, 1e-3)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
             raise DoefabError(f"{what} = {v!r} m is outside {lo:g}–{hi:g} m")
@@ -244,7 +252,7 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
     if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
         raise DoefabError(f"die_chamfer_m = {c!r} m must be a length ≥ 0: the holder's die_chamfer_mm, "
                           f"{DEFAULT_CHAMFER_MM:g} mm by default")
-    if 0 < c * 1e3 <= (least := least_key_chamfer_mm(LEAST_CLEARANCE_MM)):
+    if opts.die_chamfer_m is not None and 0 < c * 1e3 <= (least := least_key_chamfer_mm(LEAST_CLEARANCE_MM)):
         raise DoefabError(f"a die key chamfer of {c * 1e3:g} mm (die_chamfer_m) keys the die in no holder's pocket "
                           f"(even at the tightest {LEAST_CLEARANCE_MM:g} mm clearance a chamfer must exceed "
                           f"{least:.2f} mm): give the "
@@ -283,30 +291,11 @@ def _levels_of(n_levels, design_dir) -> int:
     return n_levels
 
 
-def _width_space(layout: np.ndarray, n_levels: int, cd_nm: int, pitch_nm: int, origin_nm: tuple) -> dict:
-    """Each etch layer's width/space report (``verify.width_space_report``); a CD wider than the pixel pitch that
-    the level map's features or spaces fall below is refused (the plates would carry what the stated CD cannot
-    write)."""
-    cd_px = max(1, int(math.ceil(cd_nm / pitch_nm - 1e-9)))
-    out = {str(etch_layer(b)): width_space_report(bit_plane(layout, b, n_levels), cd_px, pitch_nm * 1e-9,
-                                                  (origin_nm[0] * 1e-9, origin_nm[1] * 1e-9))
-           for b in range(mask_count(n_levels))}
-    narrow = {k: r["features_below_cd_px"] + r["spaces_below_cd_px"] for k, r in out.items()}
-    if any(narrow.values()):
-        worst = max(narrow, key=narrow.get)
-        raise DoefabError(f"critical dimension {cd_nm / 1e3:g} µm is wider than the {pitch_nm / 1e3:g} µm pixel "
-                          f"pitch and the level map has features or spaces narrower than it (layer {worst}: "
-                          f"{narrow[worst]} pixels): the plates would carry what that CD cannot write; give a CD of "
-                          f"at most the pitch (cd_m), or a design on a DOE pitch of at least the CD")
-    return out
-
-
-def _mark_spec(camera, opts: MaskOptions, die_nm: int, cd_nm: int, extent_nm: int) -> MarkSpec:
-    """The marks' geometry for ``opts``: the die, its key chamfer and side, the CD, the pixel grid they keep clear
-    of; windows for positive resist."""
+def _mark_spec(camera, opts: MaskOptions, die_nm: int, cd_nm: int) -> MarkSpec:
+    """The marks' geometry for ``opts``: the die, its key chamfer and side, the CD; windows for positive resist."""
     return MarkSpec(die_nm=die_nm, aperture_radius_nm=_nm(camera.aperture_diameter / 2, "aperture radius"),
                     cd_nm=cd_nm, chamfer_nm=_chamfer_nm(opts), coded_sign=1 if opts.pattern_faces == "lens" else -1,
-                    windows=opts.resist == "positive", grid_half_nm=extent_nm // 2)
+                    windows=opts.resist == "positive")
 
 
 def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
@@ -352,8 +341,8 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "database_unit_m": 1e-9, "user_unit_m": 1e-6,
         "layers": layers,
         "other_layers": [{"layer": k, "purpose": v} for k, v in LAYER_PURPOSES.items() if k != CHROME_LAYER],
-        "plates": {str(p): ([CHROME_LAYER] if p == 0 else [etch_layer(p - 1)]) + [f"{KEY_LAYER}/{p}", f"{VERNIER_LAYER}/{p}"]
-                   for p in range(n_masks + 1)},
+        "plates": {str(p): [f"{CHROME_LAYER if p == 0 else etch_layer(p - 1)}/0", f"{KEY_LAYER}/{p}",
+                            f"{VERNIER_LAYER}/{p}"] for p in range(n_masks + 1)},
         "process_order": [CHROME_LAYER] + list(order),
         "alignment_chain": {str(k): v for k, v in align_to.items()},
         "alignment_scheme": opts.align_chain,
@@ -370,6 +359,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
                          "toward the lens the layout column j holds design column N−1−j (coded half x > 0 in "
                          "the layout)") if opts.pattern_faces == "lens" else "layout column j = design column j",
         "die_m": nm_to_m(die_nm),
+        "substrate_thickness_m": round(opts.substrate_thickness_m, 12),
         "die_chamfer_m": nm_to_m(_chamfer_nm(opts)),
         "verniers": vernier_record(die_nm, cd_nm, align_to),
         "mark_clear_margin_m": nm_to_m(CLEAR_MARGIN_NM),
@@ -393,40 +383,3 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
         "levels_sha256_means": "SHA-256 of the design's level map (design.json), before any mirroring",
         "vertex_cap": opts.vertex_cap,
     }
-
-
-def _previews(stage: Path, lv: np.ndarray, n_levels: int, pitch: float, size: int = 1000,
-              mirrored: bool = False) -> None:
-    """PNG previews (Pillow; at most ``size`` px wide) of each etch layer and the composite, with a scale bar."""
-    from matplotlib import colormaps
-    from PIL import Image, ImageDraw
-
-    n = lv.shape[0]
-    view = ("layout view from the patterned face: the design MIRRORED in x (coded half on the right)" if mirrored
-            else "layout view from the patterned face: the design as seen from the scene (not mirrored)")
-    step = max(1, int(np.ceil(n / size)))
-    px_m = pitch * step  # metres per preview pixel
-    bar_m = 10 ** np.floor(np.log10(n * pitch / 4))  # a round length, about a quarter of the width
-
-    def save(name: str, rgb: np.ndarray, title: str) -> None:
-        img = Image.fromarray(rgb)
-        pad = Image.new("RGB", (img.width, img.height + 40), "white")
-        pad.paste(img, (0, 40))
-        draw = ImageDraw.Draw(pad)
-        draw.text((6, 4), title, fill="black")
-        draw.text((6, 20), view, fill="black")
-        bar_px = int(round(bar_m / px_m))
-        y = pad.height - 20
-        draw.rectangle([20, y, 20 + bar_px, y + 6], fill="red")
-        draw.text((20, y - 14), f"{bar_m * 1e3:g} mm", fill="red")
-        buf = io.BytesIO()
-        pad.save(buf, format="PNG")
-        (stage / name).write_bytes(buf.getvalue())
-
-    small = lv[::step, ::step]
-    for bit in range(mask_count(n_levels)):
-        g = (bit_plane(small, bit, n_levels) * 255).astype(np.uint8)
-        save(f"preview_layer{etch_layer(bit)}.png", np.repeat(g[..., None], 3, axis=2),
-             f"layer {etch_layer(bit)}: white = etched {1 << bit}*d deep ({pitch * 1e6:g} um pixels, 1:{step})")
-    rgb = (colormaps["viridis"](lv[::step, ::step] / (n_levels - 1))[..., :3] * 255).astype(np.uint8)
-    save("preview_composite.png", rgb, f"composite: level 0 (deepest, dark) ... {n_levels - 1} (unetched, yellow)")

@@ -80,22 +80,11 @@ def _spec(man: dict, n_masks: int) -> tuple[MarkSpec, dict[int, int]]:
     tone = next(iter(tones)) if len(tones) == 1 else None
     _need(legacy or tone in ("positive", "negative"), "layers[].resist_tone",
           f"of the etch layers ({sorted(map(repr, tones))}) is not one tone, positive or negative")
-    grid = 0 if legacy else _grid_half_nm(man)
     spec = MarkSpec(die_nm=int(round(die * 1e9)), aperture_radius_nm=int(round(ap / 2 * 1e9)), cd_nm=cd,
                     chamfer_nm=int(round(chamfer * 1e9)), coded_sign=1 if man.get("mirrored_x") else -1,
                     clear_margin_nm=int(round(margin * 1e9)), windows=legacy or tone == "positive",
-                    grid_half_nm=grid, legacy=legacy)
+                    legacy=legacy)
     return spec, {int(k): v for k, v in chain.items()}
-
-
-def _grid_half_nm(man: dict) -> int:
-    """Half the pixel grid's width (nm) from the manifest's ``shape`` and ``pitch_m`` (each checked)."""
-    shape, pitch = man.get("shape"), man.get("pitch_m")
-    _need(isinstance(shape, list) and len(shape) == 2 and all(isinstance(v, int) and v > 0 for v in shape),
-          "shape", f"= {shape!r} is not the level map's [rows, columns]")
-    _need(not isinstance(pitch, bool) and isinstance(pitch, (int, float)) and 1e-8 <= pitch <= 1e-2, "pitch_m",
-          f"= {pitch!r} is not a pixel pitch in metres")
-    return int(round(max(shape) * pitch * 1e9)) // 2
 
 
 def _check_key_sites(man: dict, spec: MarkSpec, n_masks: int) -> None:

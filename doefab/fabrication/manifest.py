@@ -148,6 +148,12 @@ def _clear_fields(man: dict) -> str:
             "silica.")
 
 
+def _thickness(man: dict) -> str:
+    """The README's words on the substrate's thickness (none in a set written before it was stated)."""
+    t = man.get("substrate_thickness_m")
+    return f", {t * 1e3:g} mm thick" if t else ""
+
+
 def _verniers(man: dict) -> str:
     """The README's words on reading the verniers, from the manifest (none in a set of format 1 or 2)."""
     v = man.get("verniers")
@@ -187,7 +193,8 @@ def fab_readme(man: dict) -> str:
         "",
         f"Files: {', '.join(man['files'].values())} ({formats}, 1 nm database unit, 1 µm user unit), "
         "manifest.json (machine-readable), preview_*.png, report.json (verification).",
-        f"Substrate: {man['material']['name']}; design wavelength {man['design_wavelength_m'] * 1e9:.0f} nm; "
+        f"Substrate: {man['material']['name']}{_thickness(man)}; design wavelength "
+        f"{man['design_wavelength_m'] * 1e9:.0f} nm; "
         f"{n_levels} levels, step d = {man['level_step_nm']} nm.",
         f"Pixel pitch {man['pitch_m'] * 1e6:g} µm, {man['shape'][0]} x {man['shape'][1]} pixels; die "
         f"{man['die_m'] * 1e3:g} mm; clear aperture {man['clear_aperture_diameter_m'] * 1e3:g} mm.",

@@ -61,7 +61,6 @@ class MarkSpec:
     # polygons, so a window is drawn over the keys; a clear-field plate (negative resist) is clear outside them,
     # and a drawn window would be chrome over the keys
     windows: bool = True
-    grid_half_nm: int = 0  # half the pixel grid's width: the marks' clear fields stay outside it (0: the aperture)
     # a set of format 1 or 2 as it was drawn: one 11-bar vernier per plate on a shared reference at the top edge,
     # 10 µm keys and 20 µm slits and 750 µm between ladders whatever the CD, placed clear of the aperture only
     legacy: bool = False
@@ -81,9 +80,11 @@ def key_site(spec: MarkSpec, plate: int) -> list[tuple[int, int]]:
 
 
 def _cross(cx, cy, layer, datatype, w=KEY_WIDTH_NM):
-    a = KEY_ARM_NM
-    return [_rect(cx - a, cy - w // 2, cx + a, cy + w // 2, layer, datatype),
-            _rect(cx - w // 2, cy - a, cx + w // 2, cy + a, layer, datatype)]
+    """A key cross as one 12-vertex polygon (two overlapping rectangles would be exposed twice where they cross on a
+    writer that does not merge shapes)."""
+    a, b = KEY_ARM_NM, w // 2
+    pts = [(a, b), (b, b), (b, a), (-b, a), (-b, b), (-a, b), (-a, -b), (-b, -b), (-b, -a), (b, -a), (b, -b), (a, -b)]
+    return [gdstk.Polygon([(cx + x, cy + y) for x, y in pts], layer, datatype)]
 
 
 def clear_fields(marks: list, margin_nm: int) -> list:
@@ -240,10 +241,9 @@ def _ladder(spec: MarkSpec, plate: int) -> list:
 
 
 def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
-    """(marks off the die, marks whose clear field reaches the clear aperture or the pixel grid's square) among
-    ``polys`` (the die outline aside). A clear field in the grid's corners would let the etch plates etch the
-    level map's pixels there (the chrome baffle masks them elsewhere) onto the marks."""
-    h, r, m, g = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm, spec.grid_half_nm
+    """(marks off the die, marks whose clear field reaches the clear aperture) among ``polys`` (the die outline
+    aside)."""
+    h, r, m = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm
     off_die = into_pattern = 0
     for poly in polys:
         if poly.layer == 100:
@@ -252,13 +252,13 @@ def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
         off_die += bool(x0 < -h or y0 < -h or x1 > h or y1 > h)
         # the clear field's nearest point to the aperture's centre
         dx, dy = max(x0 - m, -x1 - m, 0.0), max(y0 - m, -y1 - m, 0.0)
-        into_pattern += bool(dx * dx + dy * dy < r * r or (dx < g and dy < g))
+        into_pattern += bool(dx * dx + dy * dy < r * r)
     return off_die, into_pattern
 
 
 def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
     """The marks of :func:`mark_polygons`, every one (keys, windows, verniers, CD ladders) inside the die and clear
-    of the aperture and the pixel grid; else one error naming the smallest die (0.1 mm steps) that holds them."""
+    of the aperture; else one error naming the smallest die (0.1 mm steps) that holds them."""
     from dataclasses import replace
 
     from doefab.errors import DoefabError
@@ -271,23 +271,21 @@ def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
                  if not any(_misplaced(mark_polygons(replace(spec, die_nm=die), align_to),
                                        replace(spec, die_nm=die)))), None)
     fix = f"enlarge die_m to at least {need / 1e6:g} mm" if need else "use a smaller critical dimension"
-    grid = f" and a {2 * spec.grid_half_nm / 1e6:g} mm pixel grid" if spec.grid_half_nm else ""
     raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
-                      f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture{grid} ({off_die} off the "
-                      f"die, {into_pattern} inside the aperture or the grid): {fix}")
+                      f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
+                      f"{into_pattern} inside the aperture): {fix}")
 
 
 def smallest_die_m(aperture_diameter_m: float, extent_m: float, cd_m: float, n_masks: int,
                    floor_m: float = 12e-3) -> float:
     """The smallest square die in whole millimetres, at least ``floor_m`` (12 mm: the prototype's), that holds a
     pattern ``extent_m`` wide with a 1 mm margin and every mark of ``n_masks`` plates aligned to the chrome keys
-    clear of the aperture and the pattern (m). Example: ``smallest_die_m(8.64e-3, 8.64e-3, 5.4e-6, 4) == 0.012``."""
+    clear of the aperture (m). Example: ``smallest_die_m(8.64e-3, 8.64e-3, 5.4e-6, 4) == 0.012``."""
     radius_nm, cd_nm = int(round(aperture_diameter_m / 2 * 1e9)), max(1, int(round(cd_m * 1e9)))
-    grid_half_nm = int(round(extent_m / 2 * 1e9))
     align_to = {plate: 0 for plate in range(1, n_masks + 1)}
     die_mm = max(math.ceil(floor_m * 1e3 - 1e-9), math.ceil(extent_m * 1e3 + 2 - 1e-9))
     while die_mm < 300:
-        spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm, grid_half_nm=grid_half_nm)
+        spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm)
         if not any(_misplaced(mark_polygons(spec, align_to), spec)):
             return die_mm * 1e-3
         die_mm += 1

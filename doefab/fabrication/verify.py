@@ -29,9 +29,10 @@ from doefab.fabrication.layout_check import check_layout, expected_layout, liste
 from doefab.fabrication.layout_read import LayerPolygons, LayoutFile
 from doefab.io import read_json
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_problems, fab_readme, manifest_levels
+from doefab.fabrication.inspection import preview_names
 from doefab.fabrication.process import mask_count
 
-__all__ = ["verify_mask_set", "width_space_report", "preview_names"]
+__all__ = ["verify_mask_set"]
 
 
 def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int, shape: tuple[int, int], lay: int):
@@ -53,57 +54,6 @@ def _to_pixels(polys: LayerPolygons, origin_nm: tuple[int, int], pitch_nm: int, 
         raise CheckFailed(f"layer {lay}: a polygon vertex lies off the design grid (not an integer number of "
                           f"{pitch_nm} nm pixels); export the set again from its design")
     return np.stack([col // pitch_nm, row // pitch_nm], axis=1), idx
-
-
-def width_space_report(plane: np.ndarray, cd_px: int, pitch_m: float, origin_m: tuple[float, float],
-                       max_locations: int = 10) -> dict:
-    """Features (etched) and spaces (unetched) narrower than ``cd_px`` pixels along a row or a column, isolated
-    single pixels, and corner contacts: 2 × 2 pixel blocks whose etched pixels touch only at a corner (a
-    checkerboard pair), where a Euclidean width/space check finds a zero width or space (the corner may print
-    pinched or bridged), with the first ``max_locations`` of each in µm."""
-
-    def narrow(mask):
-        bad = np.zeros_like(mask)
-        for axis in (0, 1):
-            m = np.moveaxis(mask, axis, 1)
-            padded = np.pad(m, ((0, 0), (1, 1)))
-            d = np.diff(padded.astype(np.int8), axis=1)
-            r, s = np.nonzero(d == 1)
-            _, e = np.nonzero(d == -1)
-            short = (e - s) < cd_px
-            b = np.zeros_like(m)
-            for rr, ss, ee in zip(r[short], s[short], e[short]):
-                b[rr, ss:ee] = True
-            bad |= np.moveaxis(b, 1, axis)
-        return bad
-
-    p = plane.astype(bool)
-    pad = np.pad(p, 1, constant_values=False)
-    same = (pad[:-2, 1:-1] == p).astype(np.int8) + (pad[2:, 1:-1] == p) + (pad[1:-1, :-2] == p) + (pad[1:-1, 2:] == p)
-    isolated = p & (same == 0)
-    rows, cols = np.nonzero(isolated)
-    locs = [[round(origin_m[0] * 1e6 + (c + 0.5) * pitch_m * 1e6, 3), round(origin_m[1] * 1e6 - (r + 0.5) * pitch_m * 1e6, 3)]
-            for r, c in zip(rows[:max_locations], cols[:max_locations])]
-    out = {"isolated_single_pixels": int(isolated.sum()), "isolated_locations_um": locs}
-    a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, :-1], p[1:, 1:]  # each 2 × 2 block's four pixels
-    corner = (a & d & ~b & ~c) | (b & c & ~a & ~d)
-    rows, cols = np.nonzero(corner)  # the shared corner: right of and below the block's first pixel
-    out["corner_contacts"] = int(corner.sum())
-    out["corner_locations_um"] = [[round(origin_m[0] * 1e6 + (j + 1) * pitch_m * 1e6, 3),
-                                   round(origin_m[1] * 1e6 - (i + 1) * pitch_m * 1e6, 3)]
-                                  for i, j in zip(rows[:max_locations], cols[:max_locations])]
-    if cd_px > 1:
-        out["features_below_cd_px"] = int(narrow(p).sum())
-        out["spaces_below_cd_px"] = int(narrow(~p).sum())
-    else:
-        out["features_below_cd_px"] = 0
-        out["spaces_below_cd_px"] = 0
-    return out
-
-
-def preview_names(n_masks: int) -> tuple[str, ...]:
-    """The preview images a finished set of ``n_masks`` etch layers holds."""
-    return tuple(f"preview_layer{etch_layer(b)}.png" for b in range(n_masks)) + ("preview_composite.png",)
 
 
 def _check_manifest(man, mpath: Path) -> None:

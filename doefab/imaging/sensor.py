@@ -52,7 +52,9 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE, every_channel: bool = 
     src_lam, curves = response_curves(source)
     if lam.min() < src_lam[0] - 1e-12 or lam.max() > src_lam[-1] + 1e-12:
         hint = " (they look like nanometres: pass metres, e.g. 550e-9)" if lam.max() > 1 else ""
-        bands = f"{lam.min():g}–{lam.max():g} m" if hint else f"{lam.min() * 1e9:.4g}–{lam.max() * 1e9:.4g} nm"
+        out = lam[(lam < src_lam[0] - 1e-12) | (lam > src_lam[-1] + 1e-12)]
+        bands = (", ".join(f"{v:g}" for v in out) + " m") if hint else (", ".join(f"{v * 1e9:.4g}" for v in out)
+                                                                        + " nm")
         raise DoefabError(f"wavelengths {bands} lie outside the {response_label(source)} "
                           f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands "
                           f"within it, or give a response that covers them")

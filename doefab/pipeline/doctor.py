@@ -224,7 +224,8 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
             ("DOE pixels across the aperture", cam.doe_pixels, "px", f"at {cam.doe_pitch * 1e6:g} µm, "
              f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
             ("depth of field's near limit (2 px blur)", near, "m", f"far limit "
-             f"{'∞' if math.isinf(far) else f'{far:.3g} m: {far - near:.3g} m deep'} about the focus at "
+             f"{'∞' if math.isinf(far) else f'{far:.{_digits(near, far)}g} m: {far - near:.3g} m deep'} about the "
+             f"focus at "
              + ("infinity (focused at the near limit, the hyperfocal distance, it would reach from half of it to ∞)"
                 if inv_f == 0 else
                 f"{cam.focus_distance:g} m"))]
@@ -233,10 +234,16 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
     return [{"quantity": q, "value": float(v), "unit": u, "meaning": m} for q, v, u, m in rows]
 
 
+def _digits(near: float, far: float) -> int:
+    """Significant digits that tell ``far`` from ``near`` (3 at least): a macro lens's depth of field of 0.3 mm at
+    0.3 m needs 5 (0.30014 m, not 0.3 m)."""
+    return max(3, 2 + math.ceil(-math.log10((far - near) / far))) if far > near > 0 else 3
+
+
 def _field_rows(scene, cam) -> list[tuple]:
     """The field's half-angle the holder's hole in front of the DOE passes, and where it comes from (with a holder
     stage), and what the field's edge does to the DOE's phase (wherever the field is known)."""
-    from doefab.pipeline.system import scene_field_half_angle_deg
+    from doefab.pipeline.sceneholder import scene_field_half_angle_deg
 
     from holder_cad.params import HolderParams
 

@@ -277,6 +277,10 @@ def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None 
     what = "; ".join(f"a point at {distance_text(dz)} changes its phase by {v:.2f} rad between design pixels"
                      if k == "step" else f"optics.kernel_px {task.kernel_size} reaches beyond the alias-free field "
                      f"({2 * v - 1:.0f} px)" for k, v in bad)
+    if any(k == "alias" for k, _ in bad):  # nearer planes do not widen the field: a finer pitch that fixes both
+        bounds = [dcam.doe_pitch * v / (task.kernel_size / 2 + 0.5) for k, v in bad if k == "alias"]
+        bounds += [dcam.doe_pitch * SOURCE_PHASE_LIMIT / v for k, v in bad if k == "step"]
+        depth_fix = " or ".join(pitch_fix(cam, min(bounds) / factor))
     fix = " or ".join([grid_fix] + ([depth_fix] if depth_fix else []))
     return [f"{key} {factor}: the design grid ({cam.doe_pixels // factor} px of {dcam.doe_pitch * 1e6:.3g} µm) is "
             f"too coarse for the PSF routes ({what}): set {fix}"]

@@ -218,7 +218,8 @@ def load_scene(path: str | Path) -> Scene:
         problems += [f"unknown key holder.{k}" for k in bad]
         problem = None if bad else given_problem(hol)  # each value alone; the holder as a whole, with the DOE's
         if problem:                                      # die and aperture, is checked by ``system.resolve``
-            problems.append(f"holder: {problem}")
+            own = '; or leave "holder" out of stages (a holder of your own)' if "holder" in stages else ""
+            problems.append(f"holder: {problem}{own}")
     rec = raw.get("reconstruction", {})
     if "size_px" in rec and _typed(rec["size_px"], "int") and rec["size_px"] % 32:
         problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32")

@@ -16,9 +16,10 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import HOW_NOT_WHAT
-from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_die_chamfer_m, stage_design,
-                                    stage_holder, stage_masks, stage_reconstruction, stage_tolerance)
-from doefab.pipeline.system import resolve, scene_holder, scene_sensor
+from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_die, stage_design, stage_holder,
+                                    stage_masks, stage_reconstruction, stage_tolerance)
+from doefab.pipeline.sceneholder import scene_holder
+from doefab.pipeline.system import resolve, scene_sensor
 
 __all__ = ["STAGE_FUNCS", "STAGE_KIND", "run_stage", "stage_hash", "has_progress", "budget_digest", "code_sha256",
            "kept_note"]
@@ -101,7 +102,7 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
         parts = {s: _what(s, scene.raw.get(s)) for s in SECTION[name]}
     if name == "masks":  # the die the masks are laid out on (its side and its key) follows the holder's keys too
         parts["die_m"] = res.die_m
-        parts["die_chamfer_m"] = scene_die_chamfer_m(scene)
+        parts["die_chamfer_m"], parts["substrate_thickness_m"] = scene_die(scene)
     parts["task"] = scene.task
     parts["quick"] = quick
     parts["upstream"] = {u: done.get(u, {}).get("hash") for u in UPSTREAM[name]}

@@ -17,10 +17,11 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
-from doefab.pipeline.system import quick_sampling, resolve, scene_holder, scene_sensor
+from doefab.pipeline.sceneholder import scene_holder
+from doefab.pipeline.system import quick_sampling, resolve, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "design_arguments", "quick_sampling", "stage_design", "stage_masks",
-           "stage_holder", "stage_reconstruction", "stage_tolerance", "scene_die_chamfer_m", "repo_mask_set",
+           "stage_holder", "stage_reconstruction", "stage_tolerance", "scene_die", "repo_mask_set",
            "networks_trained_here", "shipped_sensor_differs", "QUICK", "quick_note"]
 
 #: the numbers ``doefab run --quick`` cuts (the stages read them, the report's ``quick_note`` says them): design
@@ -132,7 +133,8 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
 
     design_dir = out.parent / "design"
     fab = scene.fabrication
-    committed_set = repo_mask_set(res, scene_die_chamfer_m(scene))
+    chamfer, thickness = scene_die(scene)
+    committed_set = repo_mask_set(res, chamfer, thickness)
     if committed_set is not None and fab.get("pattern_faces", "lens") == "lens":
         t = time.perf_counter()
         copy_mask_set(committed_set, out)
@@ -143,7 +145,7 @@ def stage_masks(scene, res, out: Path, quick: bool) -> dict:
                 "mask_set": str(out)}
     d = Design.load(design_dir)
     opts = MaskOptions(name=d.task.replace("-", ""), oasis=bool(fab.get("oasis", False)), die_m=res.die_m,
-                       die_chamfer_m=scene_die_chamfer_m(scene),
+                       die_chamfer_m=chamfer, substrate_thickness_m=thickness,
                        pattern_faces=fab.get("pattern_faces", "lens"), use_klayout=not quick)
     # the export writes a fresh folder of its own beside the stage folder, then moves in (run_stage marks it again)
     tmp = out.parent / f".{out.name}.export"
@@ -172,10 +174,10 @@ def copy_mask_set(src: Path, out: Path) -> None:
         os.replace(tmp, dst)
 
 
-def repo_mask_set(res: ResolvedScene, die_chamfer_m: float) -> Path | None:
+def repo_mask_set(res: ResolvedScene, die_chamfer_m: float, thickness_m: float) -> Path | None:
     """The repository's committed mask set of a reused design (``masks/<design>``), when this is a checkout that
-    has it, its level map is the design's and its die (side and key, ``die_chamfer_m``) the scene's holder's; None
-    otherwise (an installed package exports the masks itself)."""
+    has it, its level map is the design's and its die (side, key ``die_chamfer_m`` and substrate ``thickness_m``)
+    the scene's holder's; None otherwise (an installed package exports the masks itself)."""
     if not res.reuse:
         return None
     folder = REPO / "masks" / res.settings["design_task"]
@@ -186,23 +188,25 @@ def repo_mask_set(res: ResolvedScene, die_chamfer_m: float) -> Path | None:
         man = read_json(folder / "manifest.json")
     except (DoefabError, OSError, ValueError):  # no mask set here (an installed package), or a damaged one
         return None
-    die = (round(man.get("die_m", 0.0) * 1e9), round(man.get("die_chamfer_m", 0.0) * 1e9))
-    return folder if same and die == (round(res.die_m * 1e9), round(die_chamfer_m * 1e9)) else None
+    die = tuple(round(man.get(k, 0.0) * 1e9) for k in ("die_m", "die_chamfer_m", "substrate_thickness_m"))
+    return folder if same and die == tuple(round(v * 1e9) for v in (res.die_m, die_chamfer_m, thickness_m)) else None
 
 
-def scene_die_chamfer_m(scene) -> float:
-    """The die key's larger chamfer (m) the scene's holder takes (``holder.die_chamfer_mm``), which the mask set's
-    dicing outline draws (``doefab.diekey``)."""
-    from doefab.diekey import DEFAULT_CHAMFER_MM
+def scene_die(scene) -> tuple[float, float]:
+    """(the die key's larger chamfer, the substrate's thickness), metres, that the scene's holder takes
+    (``holder.die_chamfer_mm``, ``holder.die_thickness_mm``): the mask set's dicing outline draws the first
+    (``doefab.diekey``) and its manifest states the second."""
+    from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
 
-    return float(scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)) * 1e-3
+    chamfer = scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)
+    return float(chamfer) * 1e-3, float(scene.holder.get("die_thickness_mm", DEFAULT_THICKNESS_MM)) * 1e-3
 
 
 def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.build import write_holder
     from holder_cad.params import HolderParams
 
-    params = HolderParams(**scene_holder(scene, getattr(res, "camera", None)))
+    params = HolderParams(**scene_holder(scene, res.camera))
     rep = write_holder(params, out, step=False if quick else None, renders=True)
     horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "

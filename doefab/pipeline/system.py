@@ -17,19 +17,19 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
-from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks,
+from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks, pitch_fix,
                                       design_grid_problems, distance_text, optimizer_checks, quick_sampling,
                                       sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks,
                                       grating_window_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
+from doefab.pipeline.sceneholder import holder_checks, scene_die_m
 from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
 
-__all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "scene_holder", "scene_die_m",
-           "scene_field_half_angle_deg", "quick_sampling", "design_camera", "is_custom_camera", "system_warnings",
-           "MAX_DOE_PIXELS"]
+__all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "quick_sampling", "design_camera",
+           "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS"]
 
 
 def is_custom_camera(scene: Scene, cam=None) -> bool:
@@ -93,93 +93,6 @@ def scene_camera(scene: Scene, problems: list | None = None):
     except DoefabError as exc:  # the camera's own checks (e.g. a sensor distance it cannot image at)
         problem(f"camera: {exc}")
         return base
-
-
-def scene_die_m(scene: Scene, cam) -> float:
-    """The die the scene's mask set is drawn on (m): the smallest whole-millimetre square, 12 mm at least, that
-    holds the DOE grid with a 1 mm margin and the marks of its masks (``fabrication.marks.smallest_die_m``) and
-    whose holder pocket holds the DOE's clear aperture (``holder_cad.derive.widest_aperture_mm``)."""
-    from doefab.fabrication.marks import smallest_die_m
-    from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
-
-    from holder_cad.derive import MAX_FIELD_HALF_ANGLE_DEG, seat_margin_mm, widest_aperture_mm
-    from holder_cad.params import HolderParams
-
-    n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
-    h = {k: scene.holder.get(k, getattr(HolderParams, k))
-         for k in ("aperture_margin_mm", "die_thickness_mm", "wall_mm")}
-    field = scene_field_half_angle_deg(scene, cam)
-    h["field_half_angle_deg"] = min(HolderParams.field_half_angle_deg if field is None else field,
-                                    MAX_FIELD_HALF_ANGLE_DEG)  # a wider field is refused (_holder_checks)
-    aperture_mm = cam.aperture_diameter * 1e3
-    holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, seat_margin_mm(**h))) + 1  # the least whole mm
-    need = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
-                          floor_m=max(12, holder_mm) * 1e-3)
-    given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}
-    if len(given) == 1 and None not in given and given.pop() * 1e-3 >= need - 1e-9:  # a larger square die, given
-        return scene.holder["die_width_mm"] * 1e-3
-    return need
-
-
-def scene_field_half_angle_deg(scene: Scene, cam) -> float | None:
-    """The field's half-angle (degrees) the holder's hole in front of the DOE must pass: the scene's
-    ``holder.field_half_angle_deg`` when given, else the sensor's, atan(``camera.sensor_diagonal_mm`` / 2 / the
-    sensor distance), to a thousandth of a degree, when that is given; None leaves the holder's default.
-
-    Example (a full-frame sensor 50 mm behind the lens): atan(21.63 / 50) → 23.4°."""
-    if "field_half_angle_deg" in scene.holder:
-        return scene.holder["field_half_angle_deg"]
-    diagonal_mm = scene.camera.get("sensor_diagonal_mm")
-    if diagonal_mm is None:
-        return None
-    return round(math.degrees(math.atan(diagonal_mm * 1e-3 / 2 / cam.sensor_distance)), 3)
-
-
-def scene_holder(scene: Scene, cam=None) -> dict:
-    """The holder's parameters (mm): the scene's ``[holder]`` keys over the DOE's own die and clear aperture and the
-    sensor's field (:func:`scene_field_half_angle_deg`), so every dimension not given follows from the thread, the
-    DOE and the camera (``holder_cad`` derives the rest)."""
-    cam = cam if cam is not None else scene_camera(scene, [])
-    die_mm = round(scene_die_m(scene, cam) * 1e3, 6)
-    field = scene_field_half_angle_deg(scene, cam)
-    return {"die_width_mm": die_mm, "die_height_mm": die_mm, "clear_aperture_mm": round(cam.aperture_diameter * 1e3, 6),
-            **({"field_half_angle_deg": field} if field is not None else {}), **scene.holder}
-
-
-def _holder_checks(scene: Scene, cam) -> list[str]:
-    """The holder the run would build, checked with the DOE's die and aperture (as the holder stage builds it)."""
-    if "holder" not in scene.stages:
-        return []
-    from holder_cad.derive import MAX_FIELD_HALF_ANGLE_DEG
-    from holder_cad.params import HolderError, HolderParams
-
-    params, out = scene_holder(scene, cam), []
-    die_mm, aperture_mm = scene_die_m(scene, cam) * 1e3, cam.aperture_diameter * 1e3
-    sides = [params["die_width_mm"], params["die_height_mm"]]
-    if sides[0] != sides[1] or sides[0] < die_mm - 1e-6:
-        out.append(f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a "
-                   f"square die of at least {die_mm:g} mm (the DOE grid, its marks and the holder's pocket): set both "
-                   f"to {max(die_mm, *sides):g}, or leave them out (they follow the DOE)")
-    widest = MAX_FIELD_HALF_ANGLE_DEG
-    if "field_half_angle_deg" not in scene.holder and params.get("field_half_angle_deg", 0.0) > widest:
-        out.append(f"camera.sensor_diagonal_mm {scene.camera['sensor_diagonal_mm']:g} at a sensor distance of "
-                   f"{cam.sensor_distance * 1e3:.4g} mm sees {params['field_half_angle_deg']:g}° off the axis, more "
-                   f"than the {widest:g}° the holder's flared hole prints without support: set "
-                   f"holder.field_half_angle_deg (at most {widest:g}; the field's corners beyond it are vignetted)")
-    if params["clear_aperture_mm"] < aperture_mm * (1 - 1e-6):
-        out.append(f"holder.clear_aperture_mm {params['clear_aperture_mm']:g} is smaller than the DOE's clear "
-                   f"aperture ({aperture_mm:.4g} mm): the holder would clip the DOE; leave it out (it follows the "
-                   f"DOE) or set it to {math.ceil(aperture_mm * 100) / 100:g} or more")
-    if out:
-        return out
-    try:
-        HolderParams(**params)
-    except (HolderError, DoefabError) as exc:
-        sensor = "field_half_angle_deg" not in scene.holder and "field_half_angle_deg" in params
-        why = (f" (its {params['field_half_angle_deg']:g}° follows from camera.sensor_diagonal_mm: set "
-               "holder.field_half_angle_deg)") if sensor and "field_half_angle" in str(exc) else ""
-        return [f"holder: {exc}{why}"]
-    return []
 
 
 def scene_sensor(scene: Scene, problems: list | None = None):
@@ -291,8 +204,10 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     lam_min = min(task.wavelengths(cam))
     alias = alias_free_px(cam, lam_min)
     if k / 2 + 0.5 > alias:
+        fixes = [f"optics.kernel_px ≤ {max(1, int(2 * alias - 1))}"] + pitch_fix(cam, cam.doe_pitch * alias /
+                                                                                (k / 2 + 0.5))
         out.append(f"optics.kernel_px {k} reaches beyond the DOE sampling's alias-free field ({2 * alias - 1:.0f} px "
-                   f"at {lam_min * 1e9:.0f} nm): lower kernel_px or camera.doe_pitch_um")
+                   f"at {lam_min * 1e9:.0f} nm): set {' or '.join(fixes)}")
     if isinstance(task, GratingTask):
         out += grating_window_checks(cam, task)
     elif task.fits_window(cam):
@@ -368,7 +283,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                          + stop_checks(cam, aperture)
                          + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg, task)
                          + design_factor_checks(scene, cam, task, factor, cfg)
-                         + _holder_checks(scene, cam))
+                         + holder_checks(scene, cam))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
@@ -382,14 +297,51 @@ def resolve(scene: Scene) -> ResolvedScene:
         sensor=sensor, die_m=scene_die_m(scene, cam),
         quick_sampling=quick_sampling(cam.doe_pixels, int(settings["sampling"]),
                                       lambda d: not design_grid_problems(cam, task, d)),
-        warnings=tuple(system_warnings(cam, task) + _sensor_warnings(scene, sensor)))
+        warnings=tuple(system_warnings(cam, task) + _sensor_warnings(scene, sensor, task, cam)
+                       + _depth_warnings(scene, cam, task)))
 
 
-def _sensor_warnings(scene: Scene, sensor) -> list[str]:
-    if not has(scene.task, "spectral") and "response" in scene.sensor and not sensor.has_default_response():
-        return [f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes are "
-                f"the camera's own RGB (only the noise applies)"]
-    return []
+def _sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
+    """A response an RGB task does not use; an RGB task's bands (its R, G and B channels) where the camera's
+    default colour response does not see them (a near-infrared design: the colour scenes do not hold it)."""
+    if has(scene.task, "spectral"):
+        return []
+    out = []
+    if "response" in scene.sensor and not sensor.has_default_response():
+        out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
+                   f"are the camera's own RGB (only the noise applies)")
+    from doefab.imaging.sensor import sensor_response
+
+    try:
+        sensor_response(task.wavelengths(cam))
+    except DoefabError as exc:
+        where = str(exc).split(": keep the bands")[0]
+        out.append(f"optics.wavelengths_nm: the {scene.task} task takes its bands as the camera's R, G and B "
+                   f"channels, and {where}: its colour scenes hold no light there")
+    return out
+
+
+def _depth_warnings(scene: Scene, cam, task) -> list[str]:
+    """A depth design whose planes barely change the plain half's blur (no depth cue: often millimetres typed into
+    a key in metres), and a default ring radius (the camera's defocus blur, ``defocus_ring_px``) capped to fit the
+    PSF window."""
+    from doefab.tasks.halfring import HalfRingTask
+
+    if not isinstance(task, HalfRingTask):
+        return []
+    near, far = min(task.depths(cam)), max(task.depths(cam))
+    r = cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
+    out = []
+    if r < 1:
+        out.append(f"optics.depths_m {near:g}–{far:g} m: the plain half's blur changes by {r:.2g} px across the "
+                   f"planes (D·s·|1/z_near − 1/z_far| / 2), so the captures carry almost no depth cue (depths are in "
+                   f"metres)")
+    if is_custom_camera(scene, cam) and "ring_max_px" not in scene.design and r > task.ring_max_px + 1e-9:
+        k = 2 * math.ceil(r + 2 + task.delta_px) + 1
+        out.append(f"design.ring_max_px: the camera's defocus blur at the nearest plane, {r:.1f} px, is capped to "
+                   f"{task.ring_max_px:g} px, the most the {task.kernel_size} px window holds: the ring no longer "
+                   f"follows the blur; set optics.kernel_px ≥ {k} to let it, or design.ring_max_px to choose")
+    return out
 
 
 def system_warnings(cam, task) -> list[str]:

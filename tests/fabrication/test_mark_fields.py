@@ -10,7 +10,7 @@ import pytest
 from pathlib import Path
 
 from doefab.fabrication.marks import MarkSpec, chrome_polygons, mark_polygons
-from doefab.fabrication.verify import width_space_report
+from doefab.fabrication.inspection import width_space_report
 
 
 def _area(polys) -> float:

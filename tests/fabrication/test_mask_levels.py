@@ -187,3 +187,21 @@ def test_min_feature_against_the_doe_pitch():
         check_min_feature(5.4e-6, 5.0)  # 5 m: someone meant µm
     with pytest.raises(DoefabError, match="positive"):
         check_min_feature(5.4e-6, -1e-6)
+
+
+def test_pixels_etched_under_a_marks_clear_field_are_refused(tmp_path):
+    """A 32-level set on a 12 mm die around an 8.64 mm grid: the fifth etch plate's keys sit 1.75 mm in from the
+    die's edges, inside the grid's corners (1.68 mm in), in clear fields the chrome leaves bare. A level map etched
+    everywhere would be etched onto them there: refused, naming the place. The same map unetched outside the clear
+    aperture (the chrome masks those pixels anyway) exports and verifies."""
+    cam = doefab.Camera.preset("depth")
+    n = cam.doe_pixels
+    lv = np.zeros((n, n), np.uint8)  # level 0: every mask etches every pixel
+    with pytest.raises(DoefabError, match=r"etches pixels under the alignment marks' clear field around "
+                                          r"\(-?4.25, -?4.25\) mm"):
+        export_masks(LevelMap(lv, cam, n_levels=32), tmp_path / "a", MaskOptions(use_klayout=False))
+    assert not (tmp_path / "a").exists()
+    y, x = (np.mgrid[:n, :n] + 0.5 - n / 2) * cam.doe_pitch
+    lv[np.hypot(x, y) > cam.aperture_diameter / 2] = 31
+    rep = export_masks(LevelMap(lv, cam, n_levels=32), tmp_path / "b", MaskOptions(use_klayout=False))
+    assert rep["levels_reproduced"]

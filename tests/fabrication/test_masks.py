@@ -234,3 +234,22 @@ def test_the_largest_die_exports_and_verifies(cam, tmp_path):
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     assert man["die_m"] == 0.3 and man["key_sites_m"]["0"][0] == [-0.14975, -0.14975]
     assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
+
+
+def test_no_mark_is_exposed_twice_and_the_substrate_is_stated(cam, tmp_path):
+    """Writers that do not merge shapes expose overlapping polygons twice: on every plate's mark layers (10, 11)
+    the polygons' summed area equals their union's (the key crosses are one polygon each). The substrate's
+    thickness, the holder's die thickness, is stated in the manifest and the fab README, and `plates` lists each
+    plate's layers alike as layer/datatype."""
+    lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, substrate_thickness_m=0.7e-3))
+    cell = gdstk.read_gds(str(tmp_path / "m" / "doe.gds")).top_level()[0]
+    for layer in (10, 11):
+        for plate in range(5):
+            polys = cell.get_polygons(layer=layer, datatype=plate)
+            union = gdstk.boolean(polys, [], "or")
+            summed, merged = sum(p.area() for p in polys), sum(p.area() for p in union)
+            assert summed == pytest.approx(merged, rel=1e-9), (layer, plate)
+    man = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    assert man["substrate_thickness_m"] == 0.7e-3 and "0.7 mm thick" in (tmp_path / "m" / "README.txt").read_text()
+    assert man["plates"]["0"] == ["5/0", "10/0", "11/0"] and man["plates"]["4"] == ["4/0", "10/4", "11/4"]

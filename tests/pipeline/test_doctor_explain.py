@@ -2,6 +2,7 @@
 (thin lens, Airy radius, first-order grating spots, N-BK7's index from SCHOTT's Sellmeier coefficients)."""
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -158,3 +159,21 @@ def test_a_plane_at_infinity_is_written_either_way(tmp_path, plane, accepted):
     else:
         with pytest.raises(DoefabError, match="optics.depths_m"):
             resolve(load_scene(path))
+
+
+def test_a_macro_lens_depth_of_field_is_told_with_the_digits_that_tell_its_limits_apart(tmp_path):
+    """A 100 mm f/2.8 macro lens at 0.3 m on 4.3 µm pixels: the depth of field (2 px blur) is
+    z_f ± ≈ 2p·z_f² / (D·s) ≈ 0.14 mm, so 3 digits would print both limits as 0.3 m; the far limit is printed with
+    the digits that tell it from the near one."""
+    p = tmp_path / "macro.toml"
+    p.write_text('task = "depth"\nstages = ["design"]\n[camera]\nfocal_length_mm = 100\nf_number = 2.8\n'
+                 'lens_f_number = 2.8\nfocus_distance_m = 0.3\nsensor_pitch_um = 4.3\ndoe_pitch_um = 20\n'
+                 '[optics]\ndepths_m = [0.299, 0.3, 0.301]\nkernel_px = 255\n')
+    res = resolve(load_scene(p))
+    row = next(r for r in explain(res) if r["quantity"].startswith("depth of field"))
+    s = 1 / (1 / 0.1 - 1 / 0.3)
+    d = 0.1 / 2.8
+    far = 1 / (1 / 0.3 - 2 * 4.3e-6 / (d * s))
+    assert row["value"] == pytest.approx(1 / (1 / 0.3 + 2 * 4.3e-6 / (d * s)), rel=1e-9)
+    shown = float(re.search(r"far limit ([\d.]+) m", row["meaning"])[1])
+    assert shown == pytest.approx(far, abs=5e-6) and shown != pytest.approx(0.3, abs=5e-6)

@@ -104,7 +104,7 @@ def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
     run builds takes that die and the DOE's clear aperture, and a thread too small for it is named by doctor."""
     from holder_cad.params import HolderParams
 
-    from doefab.pipeline.system import scene_holder
+    from doefab.pipeline.sceneholder import scene_holder
 
     p = tmp_path / "big.toml"
     p.write_text('task = "hdr"\nstages = ["design", "masks", "holder"]\n[camera]\nfocal_length_mm = 50.0\n'
@@ -112,7 +112,7 @@ def test_a_large_aperture_gets_a_die_and_holder_of_its_own(tmp_path):
     res = resolve(load_scene(p))
     aperture = res.camera.aperture_diameter
     assert 17.5e-3 < aperture < 18e-3 and res.die_m == pytest.approx(21e-3)
-    params = scene_holder(load_scene(p))
+    params = scene_holder(load_scene(p), res.camera)
     assert params["die_width_mm"] == 21.0 and params["clear_aperture_mm"] == pytest.approx(aperture * 1e3)
     HolderParams(**params)
     p.write_text(p.read_text().replace("thread_diameter_mm = 62", "thread_diameter_mm = 30.5"))
@@ -235,3 +235,89 @@ def test_a_plane_within_the_focal_length_is_named(tmp_path, near_m, inside):
         assert named == inside and (not inside or "1 problem(s)" in str(exc)), str(exc)
     else:
         assert not inside
+
+
+_PHONE = ('task = "depth"\nstages = ["design"]\n[camera]\nfocal_length_mm = 4.3\nf_number = 1.8\nlens_f_number = 1.8\n'
+          'focus_distance_m = 1.0\nsensor_pitch_um = 1.0\ndoe_pitch_um = {pitch}\n[optics]\n'
+          'depths_m = [{near}, 0.5, 1.0, 2.0, 4.0]\n[design]\nsampling = {sampling}\nparameterization = "radial"\n')
+
+
+@pytest.mark.parametrize("pitch, sampling", [(30.0, 2), (21.6, 2), (12.0, 4)])
+def test_every_fix_named_for_a_coarse_design_grid_passes(tmp_path, pitch, sampling):
+    """A 4.3 mm f/1.8 phone lens on 1 µm pixels whose design grid is too coarse twice over (the nearest plane's
+    phase step and the window beyond the alias-free field): each fix the refusal names, applied alone, passes
+    (a nearer-plane fix alone would leave the window beyond the field, and a pitch must fix both)."""
+    p = tmp_path / "s.toml"
+    p.write_text(_PHONE.format(pitch=pitch, near=0.3, sampling=sampling))
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(p))
+    msg = str(exc.value)
+    assert "alias-free field" in msg and "set " in msg, msg
+    fixes = msg.split(": set ")[-1].split(" or ")
+    assert len(fixes) >= 2, msg
+    for fix in fixes:
+        if fix.startswith("design.sampling = "):
+            kw = dict(pitch=pitch, near=0.3, sampling=int(fix.split("= ")[1].split()[0]))
+        elif fix.startswith("camera.doe_pitch_um ≤ "):
+            kw = dict(pitch=float(fix.split("≤ ")[1]), near=0.3, sampling=sampling)
+        else:
+            raise AssertionError(f"a fix this test does not know: {fix!r} ({msg})")
+        p.write_text(_PHONE.format(**kw))
+        resolve(load_scene(p))  # passes
+
+
+def test_a_window_beyond_the_alias_free_field_is_told_values_that_fix_it(tmp_path):
+    """The phone lens on 50 µm DOE pixels: a 63 px window reaches beyond the field the sampling leaves
+    (λ·s / (2·p) / pixel = 486 nm · 4.32 mm / 100 µm / 1 µm ≈ 21 px each way); the refusal names a window and a
+    pitch, and each, applied, clears that problem."""
+    p = tmp_path / "s.toml"
+    text = _PHONE.format(pitch=50.0, near=0.6, sampling=1)
+    p.write_text(text)
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(p))
+    m = re.search(r"alias-free field \((\d+) px at 486 nm\): set optics.kernel_px ≤ (\d+) or camera.doe_pitch_um ≤ "
+                  r"([\d.]+)", str(exc.value))
+    assert m, str(exc.value)
+    field = 486e-9 * 4.3e-3 / (1 - 4.3e-3) / (2 * 50e-6) / 1e-6  # px, s = f / (1 − f / z) at z = 1 m
+    assert int(m[1]) == round(2 * field - 1)
+    k = int(m[2]) - (int(m[2]) + 1) % 2  # the largest odd window within the bound
+    for fixed in (text.replace("[optics]\n", f"[optics]\nkernel_px = {k}\n"),
+                  text.replace("doe_pitch_um = 50.0", f"doe_pitch_um = {m[3]}")):
+        p.write_text(fixed)
+        try:
+            resolve(load_scene(p))
+        except DoefabError as left:
+            assert "alias-free field" not in str(left), str(left)
+
+
+def test_depth_planes_with_no_depth_cue_and_a_capped_ring_are_warned(tmp_path):
+    """Millimetres typed into depths_m (300, 500, 1000 m): the phone lens's plain-half blur changes by
+    D·s·|1/300 − 1/1000| / 2 / 1 µm ≈ 0.01 px across them, a warning that names metres. On the phone lens with
+    planes 0.3–4 m the defocus blur at 0.3 m is ≈ 17 px, which a 31 px window caps: warned, with the window that
+    holds it."""
+    p = tmp_path / "s.toml"
+    p.write_text(_PHONE.format(pitch=1.0, near=0.3, sampling=1).replace("depths_m = [0.3, 0.5, 1.0, 2.0, 4.0]",
+                                                                          "depths_m = [300.0, 500.0, 1000.0]"))
+    warnings = resolve(load_scene(p)).warnings
+    assert any("300–1000 m" in w and "no depth cue" in w and "metres" in w for w in warnings), warnings
+    p.write_text(_PHONE.format(pitch=1.0, near=0.3, sampling=1).replace("[optics]\n", "[optics]\nkernel_px = 31\n"))
+    res = resolve(load_scene(p))
+    cam = res.camera
+    r = cam.aperture_diameter * cam.sensor_distance * (1 / 0.3 - 1 / 4.0) / 2 / cam.sensor_pitch
+    capped = [w for w in res.warnings if w.startswith("design.ring_max_px")]
+    assert len(capped) == 1 and f"{r:.1f} px, is capped to 12 px" in capped[0], res.warnings
+    k = int(re.search(r"optics.kernel_px ≥ (\d+)", capped[0])[1])
+    p.write_text(_PHONE.format(pitch=1.0, near=0.3, sampling=1).replace("[optics]\n", f"[optics]\nkernel_px = {k}\n"))
+    assert not any(w.startswith("design.ring_max_px") for w in resolve(load_scene(p)).warnings)
+
+
+@pytest.mark.parametrize("bands, warned", [("[1000, 900, 800]", True), ("[650, 550, 450]", False)])
+def test_rgb_bands_a_colour_camera_does_not_see_are_warned(tmp_path, bands, warned):
+    """A depth design takes its three bands as the camera's R, G and B channels: bands in the near infrared, beyond
+    the default camera's measured 380–780 nm response, are warned; visible ones are not."""
+    p = tmp_path / "s.toml"
+    p.write_text(f'task = "depth"\nstages = ["design"]\n[optics]\nwavelengths_nm = {bands}\n')
+    notes = [w for w in resolve(load_scene(p)).warnings if w.startswith("optics.wavelengths_nm")]
+    assert bool(notes) == warned, notes
+    if warned:
+        assert "1000, 900, 800 nm lie outside" in notes[0] and "380–780 nm" in notes[0]

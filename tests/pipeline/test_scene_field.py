@@ -8,7 +8,8 @@ import pytest
 from doefab.errors import DoefabError
 from doefab.pipeline import stagerun
 from doefab.pipeline.scene import load_scene
-from doefab.pipeline.system import resolve, scene_holder
+from doefab.pipeline.sceneholder import scene_holder
+from doefab.pipeline.system import resolve
 
 
 def _scene(tmp_path, camera: str = "", holder: str = "", name: str = "s.toml"):

@@ -1,0 +1,98 @@
+"""The die and holder a scene asks for: the die its mask set is drawn on (``scene_die_m``), the field the holder's
+hole passes (``scene_field_half_angle_deg``), the holder's parameters with the DOE's die and aperture
+(``scene_holder``), and the checks of that holder before any work (``holder_checks``)."""
+
+from __future__ import annotations
+
+import math
+
+from doefab.errors import DoefabError
+from doefab.pipeline.scene import Scene
+
+__all__ = ["scene_die_m", "scene_field_half_angle_deg", "scene_holder", "holder_checks"]
+
+
+def scene_die_m(scene: Scene, cam) -> float:
+    """The die the scene's mask set is drawn on (m): the smallest whole-millimetre square, 12 mm at least, that
+    holds the DOE grid with a 1 mm margin and the marks of its masks (``fabrication.marks.smallest_die_m``) and
+    whose holder pocket holds the DOE's clear aperture (``holder_cad.derive.widest_aperture_mm``)."""
+    from doefab.fabrication.marks import smallest_die_m
+    from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
+
+    from holder_cad.derive import MAX_FIELD_HALF_ANGLE_DEG, seat_margin_mm, widest_aperture_mm
+    from holder_cad.params import HolderParams
+
+    n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
+    h = {k: scene.holder.get(k, getattr(HolderParams, k))
+         for k in ("aperture_margin_mm", "die_thickness_mm", "wall_mm")}
+    field = scene_field_half_angle_deg(scene, cam)
+    h["field_half_angle_deg"] = min(HolderParams.field_half_angle_deg if field is None else field,
+                                    MAX_FIELD_HALF_ANGLE_DEG)  # a wider field is refused (holder_checks)
+    aperture_mm = cam.aperture_diameter * 1e3
+    holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, seat_margin_mm(**h))) + 1  # the least whole mm
+    need = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
+                          floor_m=max(12, holder_mm) * 1e-3)
+    given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}
+    if len(given) == 1 and None not in given and given.pop() * 1e-3 >= need - 1e-9:  # a larger square die, given
+        return scene.holder["die_width_mm"] * 1e-3
+    return need
+
+
+def scene_field_half_angle_deg(scene: Scene, cam) -> float | None:
+    """The field's half-angle (degrees) the holder's hole in front of the DOE must pass: the scene's
+    ``holder.field_half_angle_deg`` when given, else the sensor's, atan(``camera.sensor_diagonal_mm`` / 2 / the
+    sensor distance), to a thousandth of a degree, when that is given; None leaves the holder's default.
+
+    Example (a full-frame sensor 50 mm behind the lens): atan(21.63 / 50) → 23.4°."""
+    if "field_half_angle_deg" in scene.holder:
+        return scene.holder["field_half_angle_deg"]
+    diagonal_mm = scene.camera.get("sensor_diagonal_mm")
+    if diagonal_mm is None:
+        return None
+    return round(math.degrees(math.atan(diagonal_mm * 1e-3 / 2 / cam.sensor_distance)), 3)
+
+
+def scene_holder(scene: Scene, cam) -> dict:
+    """The holder's parameters (mm): the scene's ``[holder]`` keys over the DOE's own die and clear aperture and the
+    sensor's field (:func:`scene_field_half_angle_deg`), so every dimension not given follows from the thread, the
+    DOE and the camera (``holder_cad`` derives the rest)."""
+    die_mm = round(scene_die_m(scene, cam) * 1e3, 6)
+    field = scene_field_half_angle_deg(scene, cam)
+    return {"die_width_mm": die_mm, "die_height_mm": die_mm, "clear_aperture_mm": round(cam.aperture_diameter * 1e3, 6),
+            **({"field_half_angle_deg": field} if field is not None else {}), **scene.holder}
+
+
+def holder_checks(scene: Scene, cam) -> list[str]:
+    """The holder the run would build, checked with the DOE's die and aperture (as the holder stage builds it)."""
+    if "holder" not in scene.stages:
+        return []
+    from holder_cad.derive import MAX_FIELD_HALF_ANGLE_DEG
+    from holder_cad.params import HolderError, HolderParams
+
+    params, out = scene_holder(scene, cam), []
+    die_mm, aperture_mm = scene_die_m(scene, cam) * 1e3, cam.aperture_diameter * 1e3
+    sides = [params["die_width_mm"], params["die_height_mm"]]
+    if sides[0] != sides[1] or sides[0] < die_mm - 1e-6:
+        out.append(f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a "
+                   f"square die of at least {die_mm:g} mm (the DOE grid, its marks and the holder's pocket): set both "
+                   f"to {max(die_mm, *sides):g}, or leave them out (they follow the DOE)")
+    widest = MAX_FIELD_HALF_ANGLE_DEG
+    if "field_half_angle_deg" not in scene.holder and params.get("field_half_angle_deg", 0.0) > widest:
+        out.append(f"camera.sensor_diagonal_mm {scene.camera['sensor_diagonal_mm']:g} at a sensor distance of "
+                   f"{cam.sensor_distance * 1e3:.4g} mm sees {params['field_half_angle_deg']:g}° off the axis, more "
+                   f"than the {widest:g}° the holder's flared hole prints without support: set "
+                   f"holder.field_half_angle_deg (at most {widest:g}; the field's corners beyond it are vignetted)")
+    if params["clear_aperture_mm"] < aperture_mm * (1 - 1e-6):
+        out.append(f"holder.clear_aperture_mm {params['clear_aperture_mm']:g} is smaller than the DOE's clear "
+                   f"aperture ({aperture_mm:.4g} mm): the holder would clip the DOE; leave it out (it follows the "
+                   f"DOE) or set it to {math.ceil(aperture_mm * 100) / 100:g} or more")
+    if out:
+        return out
+    try:
+        HolderParams(**params)
+    except (HolderError, DoefabError) as exc:
+        sensor = "field_half_angle_deg" not in scene.holder and "field_half_angle_deg" in params
+        why = (f" (its {params['field_half_angle_deg']:g}° follows from camera.sensor_diagonal_mm: set "
+               "holder.field_half_angle_deg)") if sensor and "field_half_angle" in str(exc) else ""
+        return [f"holder: {exc}{why}; or leave \"holder\" out of stages (a holder of your own)"]
+    return []
