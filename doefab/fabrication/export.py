@@ -24,8 +24,8 @@ from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES,
                                        VERNIER_LAYER, etch_bit, etch_layer)
 from doefab.fabrication.levels import levels_sha256
 from doefab.fabrication.manifest import MASK_SET_FORMAT, depth_fields, fab_readme
-from doefab.fabrication.marks import (CLEAR_MARGIN_NM, MarkSpec, clear_fields, key_site, mark_layout, mark_polygons,
-                                     nm_to_m, vernier_record)
+from doefab.fabrication.marks import (CLEAR_MARGIN_NM, MarkSpec, clear_boxes, key_site, mark_layout, mark_polygons,
+                                     nm_to_m, split_slits, vernier_record)
 from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.fabrication.inspection import check_marks_clear, layer_widths, write_previews
 from doefab.fabrication.verify import verify_mask_set
@@ -43,7 +43,7 @@ class MaskOptions:
         name: base name of the GDS/OASIS files.  oasis: also write OASIS (identical geometry).
         die_m: die (plate pattern) size, square, metres.  die_chamfer_m: the dicing outline's key, the larger of
             the two chamfers on the coded half's corners (``doefab.diekey``; the holder's ``die_chamfer_mm``),
-            metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a smaller die's side.
+            metres; 0: a square die; None: the holder's default, 2 mm, or a quarter of a die of 4 mm or less.
         cd_m: critical dimension (default: the pixel pitch).
         substrate_thickness_m: the substrate's thickness, metres (the holder's ``die_thickness_mm``; 1 mm).
         vertex_cap: maximum vertices per polygon (GDSII allows 8190; 4000 is conservative).
@@ -164,8 +164,8 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     layer_stats = _write_etch_layers(writer, layout, n_levels, pitch_nm, origin_nm)
     spec = _mark_spec(camera, opts, die_nm, cd_nm)
     align_to = _alignment(order, opts.align_chain)
-    check_marks_clear(layout, n_levels, clear_fields(mark_polygons(spec, align_to), spec.clear_margin_nm), pitch_nm,
-                      origin_nm)
+    bare = clear_boxes(mark_polygons(spec, align_to), spec.clear_margin_nm) + split_slits(spec)  # chrome-free glass
+    check_marks_clear(layout, n_levels, bare, pitch_nm, origin_nm)
     for points, layer, datatype in mark_layout(spec, align_to, opts.vertex_cap, CHROME_LAYER):
         writer.add_polygon(points, layer, datatype)
     with staging_dir(out) as stage:

@@ -83,21 +83,22 @@ def layer_widths(layout: np.ndarray, n_levels: int, cd_nm: int, pitch_nm: int, o
 
 
 def check_marks_clear(layout: np.ndarray, n_levels: int, fields: list, pitch_nm: int, origin_nm: tuple) -> None:
-    """Refuse a level map that etches pixels inside a mark's clear field (``marks.clear_fields``: there the chrome
-    plate leaves the glass bare, so the etch plates would etch those pixels onto the marks; everywhere else outside
-    the clear aperture the chrome masks them). ``layout``: the level map as drawn; ``origin_nm``: the layout
-    position of pixel (0, 0)'s top-left corner."""
+    """Refuse a level map that etches pixels inside ``fields``, rectangles of bare glass outside the clear aperture
+    (the marks' clear fields, ``marks.clear_boxes``, and the split-line slits): the etch plates would etch those
+    pixels onto the marks, or beside the slits (everywhere else outside the clear aperture the chrome masks them).
+    ``layout``: the level map as drawn; ``origin_nm``: the layout position of pixel (0, 0)'s top-left corner."""
     n = layout.shape[0]
     for f in fields:
         (x0, y0), (x1, y1) = f.bounding_box()
         c0, c1 = max(0, math.floor((x0 - origin_nm[0]) / pitch_nm)), min(n, math.ceil((x1 - origin_nm[0]) / pitch_nm))
         r0, r1 = max(0, math.floor((origin_nm[1] - y1) / pitch_nm)), min(n, math.ceil((origin_nm[1] - y0) / pitch_nm))
         if c0 < c1 and r0 < r1 and (layout[r0:r1, c0:c1] < n_levels - 1).any():
-            raise DoefabError(f"the level map etches pixels under the alignment marks' clear field around "
-                              f"({(x0 + x1) / 2e6:.2f}, {(y0 + y1) / 2e6:.2f}) mm in the layout, outside the clear "
-                              f"aperture (where the chrome masks every other pixel): the etch would damage the marks; "
-                              f"leave the map unetched (level {n_levels - 1}) outside the clear aperture, or use a "
-                              f"larger die (die_m), which moves the marks off the pixel grid")
+            raise DoefabError(f"the level map etches pixels in bare glass outside the clear aperture, round an "
+                              f"alignment mark or the split-line slits, around ({(x0 + x1) / 2e6:.2f}, "
+                              f"{(y0 + y1) / 2e6:.2f}) mm in the layout (where the chrome masks every other pixel): "
+                              f"the etch would damage the marks; "
+                              f"leave the map unetched (level {n_levels - 1}) outside the clear aperture, as doefab's "
+                              f"designs do")
 
 
 def preview_names(n_masks: int) -> tuple[str, ...]:

@@ -178,6 +178,7 @@ def _dicing(man: dict) -> str:
 def _windows(man: dict) -> str:
     """How an etch plate shows the keys it aligns to, for the set's resist tone (``marks.MarkSpec.windows``)."""
     negative = any(L.get("resist_tone") == "negative" for L in man["layers"] if L.get("purpose") == "etch")
+    negative = negative and man.get("format") not in ("doefab mask set 1", "doefab mask set 2")  # drew windows
     return ("is clear field, so the keys of the plate it aligns to show through clear glass" if negative else
             "opens a clear window over the keys of the plate it aligns to")
 

@@ -10,13 +10,14 @@ Scheme (all marks outside the clear aperture, in the four die corners):
 - Every etch plate m (m = 0..M−1, one per binary mask) carries (layer 10, datatype m+1) a clear window over the key
   sites of the layer it aligns to (for positive resist, whose etch plates are dark field; a clear-field plate for
   negative resist is clear there without one), plus its own cross at its own key site (so a later mask could
-  align to it); on layer 11, datatype m+1, a vernier (pitch p·(1 + 1/10) against the reference layer's pitch p
-  scale) and a CD ladder of lines at 1, 1.5, 2 and 3 × the critical dimension. The chrome plate's reference
-  vernier scale and ladder are on layer 11, datatype 0; its keys on layer 10, datatype 0.
+  align to it); on layer 11, datatype m+1, its CD ladder of lines at 1, 1.5, 2 and 3 × the critical dimension,
+  and its own x vernier (top edge) and y vernier (left edge), each a 21-bar scale of pitch p − 0.25 µm against a
+  reference scale of pitch p drawn on the plate it aligns to (``_vernier``). The chrome plate's ladder is on
+  layer 11, datatype 0; its keys on layer 10, datatype 0. Every mark is at least the CD wide.
 
-Each further plate's key sites sit one step further in and its CD ladder one step further along, so a set of
-more masks needs a larger die: :func:`check_mark_placement` refuses marks that fall off the die or into the clear
-aperture.
+Each further plate's key sites sit one step further in, its ladder and vernier sites one step further along, so a
+set of more masks needs a larger die: :func:`check_mark_placement` refuses marks that fall off the die, into the
+clear aperture or onto one another. A set of format 1 or 2 is drawn as it was (``MarkSpec.legacy``).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from doefab.diekey import die_outline
 
 __all__ = ["MarkSpec", "chrome_polygons", "clear_fields", "mark_polygons", "key_site", "check_mark_placement",
            "mark_layout", "smallest_die_m", "CLEAR_MARGIN_NM", "vernier_scale", "vernier_sites", "vernier_record",
-           "key_width", "nm_to_m"]
+           "key_width", "nm_to_m", "clear_boxes", "split_slits"]
 
 KEY_ARM_NM = 80_000
 KEY_WIDTH_NM = 10_000
@@ -79,10 +80,13 @@ def key_site(spec: MarkSpec, plate: int) -> list[tuple[int, int]]:
     return [(sx * c, sy * c) for sx in (-1, 1) for sy in (-1, 1)]
 
 
-def _cross(cx, cy, layer, datatype, w=KEY_WIDTH_NM):
+def _cross(cx, cy, layer, datatype, w=KEY_WIDTH_NM, legacy=False):
     """A key cross as one 12-vertex polygon (two overlapping rectangles would be exposed twice where they cross on a
-    writer that does not merge shapes)."""
+    writer that does not merge shapes); a set of format 1 or 2 drew the two rectangles (``legacy``)."""
     a, b = KEY_ARM_NM, w // 2
+    if legacy:
+        return [_rect(cx - a, cy - b, cx + a, cy + b, layer, datatype), _rect(cx - b, cy - a, cx + b, cy + a, layer,
+                                                                                datatype)]
     pts = [(a, b), (b, b), (b, a), (-b, a), (-b, b), (-a, b), (-a, -b), (-b, -b), (-b, -a), (b, -a), (b, -b), (a, -b)]
     return [gdstk.Polygon([(cx + x, cy + y) for x, y in pts], layer, datatype)]
 
@@ -93,10 +97,23 @@ def clear_fields(marks: list, margin_nm: int) -> list:
     The chrome plate leaves these bare, so its chrome keys, verniers and ladder stand in clear glass where an
     aligner and a microscope see them, and the etch plates' own crosses and ladders land on silica, not on chrome
     (which would mask their etch)."""
+    boxes = clear_boxes(marks, margin_nm)
+    return gdstk.boolean(boxes, [], "or") if boxes and margin_nm > 0 else []
+
+
+def clear_boxes(marks: list, margin_nm: int) -> list:
+    """Each mark's bounding box grown by ``margin_nm`` (the die outline aside), unmerged: the rectangles
+    :func:`clear_fields` merges."""
     m = margin_nm
-    boxes = [gdstk.rectangle((x0 - m, y0 - m), (x1 + m, y1 + m))
-             for (x0, y0), (x1, y1) in (poly.bounding_box() for poly in marks if poly.layer != 100)]
-    return gdstk.boolean(boxes, [], "or") if boxes and m > 0 else []
+    return [gdstk.rectangle((x0 - m, y0 - m), (x1 + m, y1 + m))
+            for (x0, y0), (x1, y1) in (poly.bounding_box() for poly in marks if poly.layer != 100)]
+
+
+def split_slits(spec: MarkSpec) -> list:
+    """The chrome plate's two clear slits on the y axis above and below the clear aperture, marking the split line."""
+    r, w, gap, length = spec.aperture_radius_nm, key_width(spec), 100_000, 600_000
+    return [gdstk.rectangle((-w, r + gap), (w, r + gap + length)),
+            gdstk.rectangle((-w, -r - gap - length), (w, -r - gap))]
 
 
 def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float = 5.0, marks: list = ()) -> list:
@@ -111,10 +128,8 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
     r = spec.aperture_radius_nm
     die = gdstk.rectangle((-h, -h), (h, h))
     disk = gdstk.ellipse((0, 0), r, tolerance=circle_tolerance_nm)
-    slit_w, gap, length = 2 * key_width(spec), 100_000, 600_000
-    slits = [gdstk.rectangle((-slit_w // 2, r + gap), (slit_w // 2, r + gap + length)),
-             gdstk.rectangle((-slit_w // 2, -r - gap - length), (slit_w // 2, -r - gap))]
-    out = gdstk.boolean(die, [disk, *slits, *clear_fields(list(marks), spec.clear_margin_nm)], "not", layer=layer,
+    bare = [disk, *split_slits(spec), *clear_fields(list(marks), spec.clear_margin_nm)]
+    out = gdstk.boolean(die, bare, "not", layer=layer,
                         datatype=0)
     return out
 
@@ -128,7 +143,7 @@ def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
     polys = []
     for plate in range(len(align_to) + 1):
         for cx, cy in key_site(spec, plate):
-            polys += _cross(cx, cy, 10, plate, key_width(spec))
+            polys += _cross(cx, cy, 10, plate, key_width(spec), spec.legacy)
         if plate > 0 and spec.windows:
             for cx, cy in key_site(spec, align_to[plate]):
                 w = WINDOW_NM // 2
@@ -240,9 +255,9 @@ def _ladder(spec: MarkSpec, plate: int) -> list:
     return out
 
 
-def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
-    """(marks off the die, marks whose clear field reaches the clear aperture) among ``polys`` (the die outline
-    aside)."""
+def _misplaced(polys: list, spec: MarkSpec, align_to: dict[int, int]) -> tuple[int, int, int]:
+    """(marks off the die, marks whose clear field reaches the clear aperture, overlaps between marks:
+    ``_overlaps``) among ``polys`` (the die outline aside)."""
     h, r, m = spec.die_nm // 2, spec.aperture_radius_nm, spec.clear_margin_nm
     off_die = into_pattern = 0
     for poly in polys:
@@ -253,7 +268,31 @@ def _misplaced(polys: list, spec: MarkSpec) -> tuple[int, int]:
         # the clear field's nearest point to the aperture's centre
         dx, dy = max(x0 - m, -x1 - m, 0.0), max(y0 - m, -y1 - m, 0.0)
         into_pattern += bool(dx * dx + dy * dy < r * r)
-    return off_die, into_pattern
+    return off_die, into_pattern, (0 if spec.legacy else _overlaps(polys, align_to))
+
+
+def _overlaps(polys: list, align_to: dict[int, int]) -> int:
+    """Overlaps between marks (a ladder or vernier drawn over a key, a window or another scale cannot be read):
+    pairs of plates whose marks overlap, and plates whose own marks do. A window over the keys of the plate it
+    aligns to, and windows over one another, are meant."""
+    marks, windows = {}, {}
+    for p in polys:
+        if p.layer == 100:
+            continue
+        (x0, y0), (x1, y1) = p.bounding_box()
+        window = p.layer == 10 and len(p.points) == 4 and round(x1 - x0) == round(y1 - y0) == WINDOW_NM
+        (windows if window else marks).setdefault(p.datatype, []).append(p)
+
+    def area(polys_a, polys_b=None) -> float:
+        both = gdstk.boolean(polys_a, polys_b or [], "and" if polys_b is not None else "or")
+        return sum(q.area() for q in both)
+    plates = sorted(marks)
+    n = sum(area(marks[a], marks[b]) > 0 for i, a in enumerate(plates) for b in plates[i + 1:])
+    n += sum(sum(q.area() for q in marks[a]) > area(marks[a]) * (1 + 1e-9) for a in plates)
+    for p, ws in windows.items():
+        others = [m for q, ms in marks.items() for m in ms if not (q == align_to[p] and m.layer == 10)]
+        n += bool(others) and area(ws, others) > 0
+    return n
 
 
 def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
@@ -264,16 +303,16 @@ def check_mark_placement(spec: MarkSpec, align_to: dict[int, int]) -> list:
     from doefab.errors import DoefabError
 
     polys = mark_polygons(spec, align_to)
-    off_die, into_pattern = _misplaced(polys, spec)
-    if not off_die and not into_pattern:
+    off_die, into_pattern, overlaps = _misplaced(polys, spec, align_to)
+    if not off_die and not into_pattern and not overlaps:
         return polys
     need = next((die for die in range(spec.die_nm, 300_000_001, 100_000)
                  if not any(_misplaced(mark_polygons(replace(spec, die_nm=die), align_to),
-                                       replace(spec, die_nm=die)))), None)
+                                       replace(spec, die_nm=die), align_to))), None)
     fix = f"enlarge die_m to at least {need / 1e6:g} mm" if need else "use a smaller critical dimension"
     raise DoefabError(f"the alignment marks of {len(align_to) + 1} plates do not fit a {spec.die_nm / 1e6:g} mm die "
                       f"around a {2 * spec.aperture_radius_nm / 1e6:g} mm clear aperture ({off_die} off the die, "
-                      f"{into_pattern} inside the aperture): {fix}")
+                      f"{into_pattern} inside the aperture, {overlaps} overlapping): {fix}")
 
 
 def smallest_die_m(aperture_diameter_m: float, extent_m: float, cd_m: float, n_masks: int,
@@ -286,7 +325,7 @@ def smallest_die_m(aperture_diameter_m: float, extent_m: float, cd_m: float, n_m
     die_mm = max(math.ceil(floor_m * 1e3 - 1e-9), math.ceil(extent_m * 1e3 + 2 - 1e-9))
     while die_mm < 300:
         spec = MarkSpec(die_mm * 1_000_000, radius_nm, cd_nm)
-        if not any(_misplaced(mark_polygons(spec, align_to), spec)):
+        if not any(_misplaced(mark_polygons(spec, align_to), spec, align_to)):
             return die_mm * 1e-3
         die_mm += 1
     return die_mm * 1e-3

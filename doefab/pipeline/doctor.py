@@ -58,7 +58,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     z, step = steepest_plane(cam, lam_min, depths)
     rows.append(_row(f"source phase step per pupil sample at the steepest plane's wavefront ({distance_text(z)})",
                      step, SOURCE_PHASE_LIMIT, "rad", step <= SOURCE_PHASE_LIMIT,
-                     phase_step_fix(cam, lam_min, z, step)))
+                     phase_step_fix(cam, lam_min, depths)))
     fft_bytes = spectral_fft_bytes(cam)
     rows.append(_row("spectral route FFT working memory (2× padded pupil, complex64, ~3 buffers)", fft_bytes,
                      FFT_BYTES_LIMIT, "bytes", fft_bytes <= FFT_BYTES_LIMIT,

@@ -193,25 +193,32 @@ def pitch_fix(cam, pitch_max: float) -> list[str]:
     return [f"camera.doe_pitch_um ≤ {um:.3g}"] if cam.aperture_diameter / (um * 1e-6) <= MAX_DOE_PIXELS else []
 
 
-def phase_step_fix(cam, lam_min: float, z: float, step: float, factor: int = 1) -> str:
-    """The scene keys that bring the source's phase step per pupil sample below the limit on ``cam``'s grid (a
-    design grid coarsened by ``factor``: the DOE pitch it suggests is divided by it), for the steepest plane at
-    ``z``: that plane nearer the focus (a nearest depth farther away, or a farthest depth nearer), or a finer DOE
-    pitch (the step is proportional to it). The step is the wavefront's slope at the pupil's edge a,
-    2π p / λ · |a / √(a² + z²) − a / √(a² + f²)| for a point at z with the focus at f."""
+def phase_step_fix(cam, lam_min: float, depths, factor: int = 1) -> str:
+    """The scene keys that bring the source's phase step per pupil sample below the limit at every plane of
+    ``depths`` on ``cam``'s grid (a design grid coarsened by ``factor``: the DOE pitch it suggests is divided by
+    it): the planes nearer the focus (a nearest depth farther away where a plane nearer than the focus is too steep,
+    and a farthest depth nearer where one beyond it is: both where both are), or a finer DOE pitch (the step is
+    proportional to it). The step is the wavefront's slope at the pupil's edge a,
+    2π p / λ · |a / √(a² + z²) − a / √(a² + f²)| for a point at z with the focus at f; "" where every plane passes."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
-    if step <= SOURCE_PHASE_LIMIT:
+    steps = {float(z): source_phase_step(cam, lam_min, z) for z in depths}
+    worst = max(steps.values())
+    if worst <= SOURCE_PHASE_LIMIT:
         return ""
     a, f = cam.aperture_diameter / 2, cam.focus_distance
     room = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch)  # the slope the limit allows
     focus = 0.0 if math.isinf(f) else a / math.hypot(a, f)
-    fixes = []
-    if z < f and (c := focus + room) < 1:
-        fixes.append(f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m (optics.depths_m)")
-    elif z > f and (c := focus - room) > 0:
-        fixes.append(f"a farthest depth ≤ {a * math.sqrt(1 / c**2 - 1) * 0.99:.3g} m (optics.depths_m)")
-    fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / step / factor)
+    steep = [z for z, v in steps.items() if v > SOURCE_PHASE_LIMIT]
+    bounds = []
+    if any(z < f for z in steep):
+        c = focus + room
+        bounds.append(f"a nearest depth ≥ {a * math.sqrt(1 / c**2 - 1) * 1.01:.3g} m" if c < 1 else None)
+    if any(z > f for z in steep):
+        c = focus - room
+        bounds.append(f"a farthest depth ≤ {a * math.sqrt(1 / c**2 - 1) * 0.99:.3g} m" if c > 0 else None)
+    fixes = [" and ".join(bounds) + " (optics.depths_m)"] if bounds and None not in bounds else []
+    fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / worst / factor)
     return " or ".join(fixes) or "depth planes nearer the focus distance"
 
 
@@ -260,8 +267,8 @@ def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None 
     factor = factor if factor >= 1 and cam.doe_pixels % factor == 0 else 1  # else ``sampling_checks`` says so
     dcam = design_camera(cam, factor)
     z, step = steepest_plane(cam, lam_min, task.depths(cam))
-    dz, dstep = steepest_plane(dcam, lam_min, task.depths(cam))
-    depth_fix = phase_step_fix(dcam, lam_min, dz, dstep, factor) if dstep > SOURCE_PHASE_LIMIT else ""
+    dz = steepest_plane(dcam, lam_min, task.depths(cam))[0]
+    depth_fix = phase_step_fix(dcam, lam_min, task.depths(cam), factor)
     if step > SOURCE_PHASE_LIMIT:
         return [f"optics.depths_m: a point at {distance_text(z)} changes its phase by {step:.2f} rad "
                 f"between DOE pixels at {lam_min * 1e9:.0f} nm, above the {SOURCE_PHASE_LIMIT:g} rad the PSF "

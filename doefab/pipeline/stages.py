@@ -13,12 +13,13 @@ import time
 from pathlib import Path
 
 from doefab.applications import has
+from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.sceneholder import scene_holder
-from doefab.pipeline.system import quick_sampling, resolve, scene_sensor
+from doefab.pipeline.system import quick_sampling, resolve, scene_camera, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "design_arguments", "quick_sampling", "stage_design", "stage_masks",
            "stage_holder", "stage_reconstruction", "stage_tolerance", "scene_die", "repo_mask_set",
@@ -188,7 +189,8 @@ def repo_mask_set(res: ResolvedScene, die_chamfer_m: float, thickness_m: float) 
         man = read_json(folder / "manifest.json")
     except (DoefabError, OSError, ValueError):  # no mask set here (an installed package), or a damaged one
         return None
-    die = tuple(round(man.get(k, 0.0) * 1e9) for k in ("die_m", "die_chamfer_m", "substrate_thickness_m"))
+    die = tuple(round(man.get(k, 0.0) * 1e9) for k in ("die_m", "die_chamfer_m"))
+    die += (round(man.get("substrate_thickness_m", DEFAULT_THICKNESS_MM * 1e-3) * 1e9),)  # older sets: 1 mm
     return folder if same and die == tuple(round(v * 1e9) for v in (res.die_m, die_chamfer_m, thickness_m)) else None
 
 
@@ -196,8 +198,6 @@ def scene_die(scene) -> tuple[float, float]:
     """(the die key's larger chamfer, the substrate's thickness), metres, that the scene's holder takes
     (``holder.die_chamfer_mm``, ``holder.die_thickness_mm``): the mask set's dicing outline draws the first
     (``doefab.diekey``) and its manifest states the second."""
-    from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
-
     chamfer = scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)
     return float(chamfer) * 1e-3, float(scene.holder.get("die_thickness_mm", DEFAULT_THICKNESS_MM)) * 1e-3
 
@@ -206,7 +206,7 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     from holder_cad.build import write_holder
     from holder_cad.params import HolderParams
 
-    params = HolderParams(**scene_holder(scene, res.camera))
+    params = HolderParams(**scene_holder(scene, res.camera if res is not None else scene_camera(scene)))
     rep = write_holder(params, out, step=False if quick else None, renders=True)
     horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "

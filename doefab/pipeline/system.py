@@ -90,7 +90,7 @@ def scene_camera(scene: Scene, problems: list | None = None):
                             lens_f_number=float(c.get("lens_f_number", base.lens_f_number)), material=material,
                             design_wavelength=fab["design_wavelength_nm"] * 1e-9 if "design_wavelength_nm" in fab
                             else base.design_wavelength)
-    except DoefabError as exc:  # the camera's own checks (e.g. a sensor distance it cannot image at)
+    except DoefabError as exc:  # the camera's own checks (e.g. a DOE grid smaller than the aperture)
         problem(f"camera: {exc}")
         return base
 
@@ -176,12 +176,16 @@ def _camera_variant(scene: Scene, keys: dict):
         return None
 
 
-def defocus_ring_px(cam, params: dict) -> float:
-    """The half aperture's geometric blur radius (sensor px) at the nearest plane when it is sharp at the
-    farthest: the radius a defocus-law ring needs there (D·s·|1/z_near − 1/z_far| / 2)."""
-    planes = params.get("planes_m") or (params.get("z_min", 1.0), params.get("z_max", 5.0))
+def depth_span_px(cam, planes) -> float:
+    """The half aperture's geometric blur radius (sensor px) at the nearest of ``planes`` (metres) when it is
+    sharp at the farthest, D·s·|1/z_near − 1/z_far| / 2: how much the planes' blurs differ."""
     near, far = min(planes), max(planes)
-    r = cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
+    return cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
+
+
+def defocus_ring_px(cam, params: dict) -> float:
+    """The radius a defocus-law ring needs at the nearest plane (``depth_span_px``), capped to the window."""
+    r = depth_span_px(cam, params.get("planes_m") or (params.get("z_min", 1.0), params.get("z_max", 5.0)))
     # within the window with the ring's half-width and 1 px (``HalfRingTask.pattern_reach_px``)
     return float(max(min(r, params.get("kernel_size", 63) // 2 - 2 - params.get("delta_px", 1.0)), 0.0))
 
@@ -310,14 +314,14 @@ def _sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
     if "response" in scene.sensor and not sensor.has_default_response():
         out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
                    f"are the camera's own RGB (only the noise applies)")
-    from doefab.imaging.sensor import sensor_response
+    from doefab.imaging.responses import DEFAULT_RESPONSE, response_curves, response_label
 
-    try:
-        sensor_response(task.wavelengths(cam))
-    except DoefabError as exc:
-        where = str(exc).split(": keep the bands")[0]
+    lam = response_curves(DEFAULT_RESPONSE)[0]
+    if outside := [w for w in task.wavelengths(cam) if not lam[0] - 1e-12 <= w <= lam[-1] + 1e-12]:
         out.append(f"optics.wavelengths_nm: the {scene.task} task takes its bands as the camera's R, G and B "
-                   f"channels, and {where}: its colour scenes hold no light there")
+                   f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside the "
+                   f"{response_label(DEFAULT_RESPONSE)} response's {lam[0] * 1e9:.0f}–{lam[-1] * 1e9:.0f} nm: its "
+                   f"colour scenes hold no light there")
     return out
 
 
@@ -330,15 +334,15 @@ def _depth_warnings(scene: Scene, cam, task) -> list[str]:
     if not isinstance(task, HalfRingTask):
         return []
     near, far = min(task.depths(cam)), max(task.depths(cam))
-    r = cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
-    out = []
+    r, out = depth_span_px(cam, task.depths(cam)), []
     if r < 1:
         out.append(f"optics.depths_m {near:g}–{far:g} m: the plain half's blur changes by {r:.2g} px across the "
                    f"planes (D·s·|1/z_near − 1/z_far| / 2), so the captures carry almost no depth cue (depths are in "
                    f"metres)")
     if is_custom_camera(scene, cam) and "ring_max_px" not in scene.design and r > task.ring_max_px + 1e-9:
         k = 2 * math.ceil(r + 2 + task.delta_px) + 1
-        out.append(f"design.ring_max_px: the camera's defocus blur at the nearest plane, {r:.1f} px, is capped to "
+        out.append(f"design.ring_max_px: the plain half's blur at the nearest plane when sharp at the farthest, "
+                   f"{r:.1f} px, is capped to "
                    f"{task.ring_max_px:g} px, the most the {task.kernel_size} px window holds: the ring no longer "
                    f"follows the blur; set optics.kernel_px ≥ {k} to let it, or design.ring_max_px to choose")
     return out

@@ -123,20 +123,24 @@ def test_each_plates_verniers_read_its_overlay(tmp_path, chain, shift_nm):
     assert len(seen) == 2 * len(ver["sites_m"])  # a site of its own for each plate and axis
 
 
-def test_a_set_of_format_2_verifies_as_it_was_drawn():
-    """A set written before format 3 (the committed sets' format until then): its expected layout is the one it
-    was drawn with — eleven 8 µm bars per plate at the top edge, no per-plate sites — not today's."""
+@pytest.mark.parametrize("name", ["format2_positive", "format2_negative"])
+def test_a_set_of_format_2_verifies_as_it_was_drawn(tmp_path, name):
+    """Sets written before format 3 (by the code of git 4c75425, kept in tests/fabrication/data: a 16-level
+    positive-resist set aligned to the chrome, an 8-level negative-resist set aligned in sequence) verify as they
+    were drawn: two-rectangle key crosses, windows on every etch plate, one 11-bar vernier per plate at the top
+    edge, the README's words. Drawn with today's marks instead, the same manifest does not match its GDS."""
     import json
+    import shutil
 
-    from doefab.fabrication.layout_check import expected_layout
+    from doefab.errors import DoefabError
+    from doefab.fabrication.verify import verify_mask_set
 
-    man = json.loads((Path(__file__).resolve().parents[2] / "masks" / "half-ring" / "manifest.json").read_text())
-    old = {k: v for k, v in man.items() if k != "verniers"} | {"format": "doefab mask set 2"}
-    drawn = expected_layout(old, 4)
-    for plate in range(5):
-        widths = sorted({int(np.ptp(p[:, 0])) for p in drawn[(11, plate)] if np.ptp(p[:, 1]) == 40_000})
-        assert widths == [8_000], (plate, widths)
-        assert sum(np.ptp(p[:, 1]) == 40_000 for p in drawn[(11, plate)]) == 11
-    new = expected_layout(man | {"format": "doefab mask set 3"}, 4) if "verniers" in man else None
-    if new is not None:
-        assert sum(np.ptp(p[:, 1]) == 40_000 for p in new[(11, 1)]) != 11
+    src = Path(__file__).resolve().parent / "data" / name
+    assert json.loads((src / "manifest.json").read_text())["format"] == "doefab mask set 2"
+    assert verify_mask_set(src, use_klayout=False)["levels_reproduced"]
+    today = tmp_path / name
+    shutil.copytree(src, today)
+    man = json.loads((today / "manifest.json").read_text())
+    (today / "manifest.json").write_text(json.dumps(man | {"format": "doefab mask set 3"}))
+    with pytest.raises(DoefabError):
+        verify_mask_set(today, use_klayout=False)

@@ -197,11 +197,46 @@ def test_pixels_etched_under_a_marks_clear_field_are_refused(tmp_path):
     cam = doefab.Camera.preset("depth")
     n = cam.doe_pixels
     lv = np.zeros((n, n), np.uint8)  # level 0: every mask etches every pixel
-    with pytest.raises(DoefabError, match=r"etches pixels under the alignment marks' clear field around "
-                                          r"\(-?4.25, -?4.25\) mm"):
+    with pytest.raises(DoefabError, match=r"etches pixels in bare glass outside the clear aperture, round an "
+                                          r"alignment mark or the split-line slits, around \(-?4.25, -?4.25\) mm"):
         export_masks(LevelMap(lv, cam, n_levels=32), tmp_path / "a", MaskOptions(use_klayout=False))
     assert not (tmp_path / "a").exists()
     y, x = (np.mgrid[:n, :n] + 0.5 - n / 2) * cam.doe_pitch
     lv[np.hypot(x, y) > cam.aperture_diameter / 2] = 31
     rep = export_masks(LevelMap(lv, cam, n_levels=32), tmp_path / "b", MaskOptions(use_klayout=False))
     assert rep["levels_reproduced"]
+
+
+def test_marks_of_different_plates_never_overlap(tmp_path):
+    """40 µm DOE pixels (a 40 µm CD: ladders 75 CD + 160 µm long) around a 2 mm aperture: on a 16.8 mm die the fifth
+    plate's ladder would run over the chrome plate's key in the far corner; the export refuses it, naming a die on
+    which, read back from the GDS, no plate's marks overlap another's (windows over the keys they show aside)."""
+    cam = doefab.Camera(aperture_diameter=2e-3, doe_pitch=40e-6, doe_pixels=50)
+    lv = np.full((50, 50), 15, np.uint8)
+    with pytest.raises(DoefabError, match=r"[1-9]\d* overlapping\): enlarge die_m to at least ([0-9.]+) mm") as exc:
+        export_masks(LevelMap(lv, cam), tmp_path / "a", MaskOptions(use_klayout=False, die_m=16.8e-3))
+    die = float(re.search(r"at least ([0-9.]+) mm", str(exc.value))[1])
+    export_masks(LevelMap(lv, cam), tmp_path / "b", MaskOptions(use_klayout=False, die_m=die * 1e-3))
+    cell = gdstk.read_gds(str(tmp_path / "b" / "doe.gds")).top_level()[0]
+
+    def marks(plate):  # µm; a window is a 260 µm square on layer 10
+        polys = cell.get_polygons(layer=10, datatype=plate) + cell.get_polygons(layer=11, datatype=plate)
+        return [p for p in polys if not (p.layer == 10 and abs(p.area() - 260.0**2) < 1e-3)]
+    for a in range(5):
+        for b in range(a + 1, 5):
+            assert sum(p.area() for p in gdstk.boolean(marks(a), marks(b), "and")) == 0, (a, b)
+
+
+def test_pixels_etched_beside_the_split_line_slits_are_refused(tmp_path):
+    """A 2.16 mm aperture on a 2.7 mm grid: the chrome's slits on the y axis start 0.1 mm beyond the aperture, inside
+    the grid. A column of etched pixels on the split line running the grid's full height would be etched there in
+    bare glass (round the slit's centre, 1.08 + 0.1 + 0.6 / 2 = 1.48 mm out): refused; the same column cut at the
+    clear aperture exports."""
+    cam = doefab.Camera(aperture_diameter=2.16e-3, doe_pitch=10.8e-6, doe_pixels=250)
+    lv = np.full((250, 250), 15, np.uint8)
+    lv[:, 124:126] = 0
+    with pytest.raises(DoefabError, match=r"in bare glass .* around \(0.00, -?1\.48\) mm"):
+        export_masks(LevelMap(lv, cam), tmp_path / "a", MaskOptions(use_klayout=False))
+    y = (np.arange(250) + 0.5 - 125) * 10.8e-6
+    lv[np.abs(y) > 1.08e-3 - 10.8e-6, 124:126] = 15
+    assert export_masks(LevelMap(lv, cam), tmp_path / "b", MaskOptions(use_klayout=False))["levels_reproduced"]

@@ -95,24 +95,25 @@ def test_a_chamfer_too_small_to_refuse_a_flipped_die_is_refused():
 
 
 def test_the_masks_default_key_on_a_small_die_is_one_the_holder_takes(tmp_path):
-    """A 6 mm die: the mask export's default key is the holder's 2 mm chamfer (it was a quarter of the die, 1.5 mm,
+    """A 7 mm die: the mask export's default key is the holder's 2 mm chamfer (it was a quarter of the die, 1.75 mm,
     which the holder refuses at its default clearance), and a chamfer no pocket can key (0.3 mm: at the tightest
-    0.05 mm clearance one needs more than ((1 + √2)·0.05 + 0.1)·√2 / 0.5 = 0.62 mm) is refused by the export. A chamfer of half the die is refused by the holder with the least chamfer
-    that keys it, or, where none below half the side does, with what else to change."""
+    0.05 mm clearance one needs more than ((1 + √2)·0.05 + 0.1)·√2 / 0.5 = 0.62 mm) is refused by the export. A
+    chamfer of half the die is refused by the holder with the least chamfer that keys it, or, where none below half
+    the side does, with what else to change."""
     from doefab.errors import DoefabError
 
     cam = doefab.Camera(aperture_diameter=2.16e-3, doe_pitch=10.8e-6, doe_pixels=200)
     lv = np.full((200, 200), 15, np.uint8)
-    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, die_m=6e-3))
+    export_masks(LevelMap(lv, cam), tmp_path / "m", MaskOptions(use_klayout=False, die_m=7e-3))
     man = json.loads((tmp_path / "m" / "manifest.json").read_text())
     assert man["die_chamfer_m"] == pytest.approx(2e-3)
     from doefab.diekey import die_outline as key_outline
 
-    assert _same(_outline_mm(tmp_path / "m" / "doe.gds"), key_outline(6.0, 6.0, 2.0))
+    assert _same(_outline_mm(tmp_path / "m" / "doe.gds"), key_outline(7.0, 7.0, 2.0))
     least = ((1 + np.sqrt(2)) * 0.05 + 0.1) * np.sqrt(2) / 0.5
     with pytest.raises(DoefabError, match=rf"keys the die in no holder's pocket .* exceed {least:.2f} mm"):
-        export_masks(LevelMap(lv, cam), tmp_path / "n", MaskOptions(use_klayout=False, die_m=6e-3, die_chamfer_m=3e-4))
-    with pytest.raises(HolderError, match=r"less than half the die's shorter side \(6 mm\): set die_chamfer_mm = 2$"):
-        HolderParams(die_width_mm=6.0, die_height_mm=6.0, clear_aperture_mm=2.16, die_chamfer_mm=3.0)
+        export_masks(LevelMap(lv, cam), tmp_path / "n", MaskOptions(use_klayout=False, die_m=7e-3, die_chamfer_m=3e-4))
+    with pytest.raises(HolderError, match=r"less than half the die's shorter side \(7 mm\): set die_chamfer_mm = 2$"):
+        HolderParams(die_width_mm=7.0, die_height_mm=7.0, clear_aperture_mm=2.16, die_chamfer_mm=3.5)
     with pytest.raises(HolderError, match=r"no chamfer below half the side keys it at clearance_mm 0.8"):
-        HolderParams(die_width_mm=6.0, die_height_mm=6.0, clear_aperture_mm=2.16, die_chamfer_mm=3.0, clearance_mm=0.8)
+        HolderParams(die_width_mm=7.0, die_height_mm=7.0, clear_aperture_mm=2.16, die_chamfer_mm=3.5, clearance_mm=0.8)

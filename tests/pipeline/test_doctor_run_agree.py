@@ -321,3 +321,26 @@ def test_rgb_bands_a_colour_camera_does_not_see_are_warned(tmp_path, bands, warn
     assert bool(notes) == warned, notes
     if warned:
         assert "1000, 900, 800 nm lie outside" in notes[0] and "380–780 nm" in notes[0]
+
+
+def test_planes_too_steep_on_both_sides_of_the_focus_are_told_both_bounds(tmp_path, monkeypatch):
+    """Focused at 0.6 m on 24 µm DOE pixels with planes at 0.3 m and 100 m: both wavefronts are too steep (about 2.4
+    rad per pixel each), so the depth fix must move both planes (a nearest and a farthest depth, together); it and
+    the pitch fix each pass doctor and the PSF route."""
+    monkeypatch.setattr(system, "window_blur_checks", lambda *args: [])
+    monkeypatch.setattr(psf_module, "_check_window", lambda *args: None)
+
+    def scene(depths, pitch=24.0):
+        p = tmp_path / "s.toml"
+        p.write_text(f'task = "depth"\nstages = ["design"]\n[camera]\nfocus_distance_m = 0.6\ndoe_pitch_um = {pitch}\n'
+                     f'[optics]\ndepths_m = {depths}\n[design]\nsampling = 1\n')
+        return load_scene(p)
+    with pytest.raises(DoefabError) as exc:
+        resolve(scene([0.3, 1.0, 100.0]))
+    m = re.search(r"a nearest depth ≥ ([\d.]+) m and a farthest depth ≤ ([\d.]+) m \(optics.depths_m\) or "
+                  r"camera.doe_pitch_um ≤ ([\d.]+)", str(exc.value))
+    assert m, str(exc.value)
+    near, far = float(m[1]), float(m[2])
+    assert 0.3 < near < 0.6 < far < 100
+    assert not _design_grids_accept(resolve(scene([near, 1.0, far])))
+    assert not _design_grids_accept(resolve(scene([0.3, 1.0, 100.0], float(m[3]))))
