@@ -255,9 +255,8 @@ def _check_options(opts: MaskOptions, n_levels: int, pitch: float) -> list[int]:
     if opts.die_chamfer_m is not None and 0 < c * 1e3 <= (least := least_key_chamfer_mm(LEAST_CLEARANCE_MM)):
         raise DoefabError(f"a die key chamfer of {c * 1e3:g} mm (die_chamfer_m) keys the die in no holder's pocket "
                           f"(even at the tightest {LEAST_CLEARANCE_MM:g} mm clearance a chamfer must exceed "
-                          f"{least:.2f} mm): give the "
-                          f"holder's die_chamfer_mm, {DEFAULT_CHAMFER_MM:g} mm by default, or 0 for an unkeyed "
-                          f"square die")
+                          f"{least:.2f} mm): give the holder's die_chamfer_mm, {DEFAULT_CHAMFER_MM:g} mm by "
+                          f"default, or 0 for an unkeyed square die")
     if not math.isfinite(opts.depth_tolerance) or not 0 < opts.depth_tolerance < 0.5:
         raise DoefabError(f"depth_tolerance {opts.depth_tolerance!r} must be a fraction in (0, 0.5)")
     return order

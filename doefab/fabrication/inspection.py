@@ -1,6 +1,7 @@
 """What a fab engineer inspects beside the geometry: the width/space report of each etch layer (features and spaces
-below the critical dimension, isolated single pixels, pixels that touch only at a corner) and the PNG previews of
-each etch layer and the composite, with a scale bar."""
+below the critical dimension, isolated single pixels, pixels that touch only at a corner; ``layer_widths`` refuses
+a CD the map cannot be written at), pixels the map would etch in bare glass outside the clear aperture
+(``check_marks_clear``), and the PNG previews of each etch layer and the composite, with a scale bar."""
 
 from __future__ import annotations
 

@@ -129,9 +129,7 @@ def chrome_polygons(spec: MarkSpec, layer: int = 5, circle_tolerance_nm: float =
     die = gdstk.rectangle((-h, -h), (h, h))
     disk = gdstk.ellipse((0, 0), r, tolerance=circle_tolerance_nm)
     bare = [disk, *split_slits(spec), *clear_fields(list(marks), spec.clear_margin_nm)]
-    out = gdstk.boolean(die, bare, "not", layer=layer,
-                        datatype=0)
-    return out
+    return gdstk.boolean(die, bare, "not", layer=layer, datatype=0)
 
 
 def mark_polygons(spec: MarkSpec, align_to: dict[int, int]) -> list:
