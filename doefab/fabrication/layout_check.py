@@ -21,6 +21,7 @@ import numpy as np
 from doefab.errors import CheckFailed, DoefabError
 from doefab.fabrication.layers import (CHROME_LAYER, KEY_LAYER, LAYER_PURPOSES, OUTLINE_LAYER, VERNIER_LAYER,
                                       etch_bit)
+from doefab.fabrication.manifest import drawn_before_3
 from doefab.fabrication.marks import MarkSpec, key_site, mark_layout, vernier_record
 
 __all__ = ["TOLERANCE_DBU", "DBU_NM", "expected_layout", "check_layout", "layout_problems", "stray_layers",
@@ -75,7 +76,7 @@ def _spec(man: dict, n_masks: int) -> tuple[MarkSpec, dict[int, int]]:
     margin = man.get("mark_clear_margin_m", 0.0)  # a set written before the marks had clear fields: none
     _need(not isinstance(margin, bool) and isinstance(margin, (int, float)) and 0 <= margin <= 1e-3,
           "mark_clear_margin_m", f"= {margin!r} is not a length in metres up to 1 mm")
-    legacy = man.get("format") in ("doefab mask set 1", "doefab mask set 2")  # drawn as it was (``MarkSpec.legacy``)
+    legacy = drawn_before_3(man)
     tones = {L.get("resist_tone") for L in man["layers"] if L.get("purpose") == "etch"}
     tone = next(iter(tones)) if len(tones) == 1 else None
     _need(legacy or tone in ("positive", "negative"), "layers[].resist_tone",

@@ -20,14 +20,21 @@ from doefab.fabrication.process import DEFAULT_LEVELS, check_levels, mask_count
 from doefab.io import read_json
 from doefab.optics.materials import Material
 
-__all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM", "MASK_SET_FORMAT"]
+__all__ = ["depth_fields", "depth_problems", "fab_readme", "manifest_levels", "DEPTH_TOLERANCE_NM", "MASK_SET_FORMAT",
+           "drawn_before_3"]
 
 _FORMATS = {"gds": "GDSII", "oasis": "OASIS"}  # the manifest's file keys, as a fab names the formats
 # the manifest's format: 2 adds the keyed die outline and the marks' clear fields, and the README words the files'
 # formats and the layout's view as a fab reads them; a set of format 1 keeps its README's words (it still verifies);
-# 3 gives each etch plate its own x and y verniers (``verniers``), marks at least the CD wide, marks clear of the
-# pixel grid and, for negative resist, no windows (a set of format 1 or 2 verifies as it was drawn)
+# 3 gives each etch plate its own x and y verniers (``verniers``), marks at least the CD wide, one-polygon key
+# crosses and, for negative resist, no windows (a set of format 1 or 2 verifies as it was drawn: ``drawn_before_3``)
 MASK_SET_FORMAT = "doefab mask set 3"
+
+
+def drawn_before_3(man: dict) -> bool:
+    """Whether the manifest ``man`` is of a set of format 1 or 2, whose marks are drawn and described as they were
+    then (``marks.MarkSpec.legacy``)."""
+    return man.get("format") in ("doefab mask set 1", "doefab mask set 2")
 
 # the manifest rounds depths to 0.001 nm; a field further than this from its re-derived value was edited
 DEPTH_TOLERANCE_NM = 0.002
@@ -178,7 +185,7 @@ def _dicing(man: dict) -> str:
 def _windows(man: dict) -> str:
     """How an etch plate shows the keys it aligns to, for the set's resist tone (``marks.MarkSpec.windows``)."""
     negative = any(L.get("resist_tone") == "negative" for L in man["layers"] if L.get("purpose") == "etch")
-    negative = negative and man.get("format") not in ("doefab mask set 1", "doefab mask set 2")  # drew windows
+    negative = negative and not drawn_before_3(man)  # such sets drew windows whatever the tone
     return ("is clear field, so the keys of the plate it aligns to show through clear glass" if negative else
             "opens a clear window over the keys of the plate it aligns to")
 

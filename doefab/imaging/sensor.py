@@ -21,8 +21,8 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.imaging.responses import DEFAULT_RESPONSE, is_named, response_curves, response_label, response_sha256
 
-__all__ = ["sensor_response", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE", "Sensor",
-           "sensor_from_record", "noise_fields", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
+__all__ = ["sensor_response", "bands_outside", "PoissonGaussian", "UniformNoise", "noise_model", "RESPONSE_SOURCE",
+           "Sensor", "sensor_from_record", "noise_fields", "DEFAULT_FULL_WELL_E", "DEFAULT_READ_NOISE_E", "FULL_WELL_RANGE_E",
            "READ_NOISE_RANGE_E", "MIN_CHANNEL_FRACTION"]
 
 DEFAULT_FULL_WELL_E = 25_000.0  # electrons per dual-pixel photodiode at capture value 1 (module docstring)
@@ -32,6 +32,22 @@ READ_NOISE_RANGE_E = (0.0, 1000.0)
 
 RESPONSE_SOURCE = ("Canon EOS 5D Mark II RGB sensitivities (rawtoaces), shipped by colour-science as "
                    "characterisation/datasets/rawtoaces/CANON_EOS_5DMark_II_RGB_Sensitivities.csv")
+
+
+def bands_outside(wavelengths, source=DEFAULT_RESPONSE) -> tuple[np.ndarray, str]:
+    """(the ``wavelengths`` (metres) outside ``source``'s measured response, that response's range in words).
+
+    Example: ``bands_outside([1000e-9])`` is ([1e-06], "the Canon EOS 5D Mark II response's 380–780 nm")."""
+    src_lam = response_curves(source)[0]
+    return _outside(np.asarray(wavelengths, np.float64).ravel(), src_lam), _range_words(source, src_lam)
+
+
+def _outside(lam: np.ndarray, src_lam: np.ndarray) -> np.ndarray:
+    return lam[(lam < src_lam[0] - 1e-12) | (lam > src_lam[-1] + 1e-12)]
+
+
+def _range_words(source, src_lam: np.ndarray) -> str:
+    return f"the {response_label(source)} response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm"
 
 
 def sensor_response(wavelengths, source=DEFAULT_RESPONSE, every_channel: bool = False) -> np.ndarray:
@@ -50,13 +66,11 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE, every_channel: bool = 
     if lam.size == 0 or not np.all(np.isfinite(lam)):
         raise DoefabError("wavelengths must be a non-empty list of finite numbers in metres")
     src_lam, curves = response_curves(source)
-    if lam.min() < src_lam[0] - 1e-12 or lam.max() > src_lam[-1] + 1e-12:
+    if (out := _outside(lam, src_lam)).size:
         hint = " (they look like nanometres: pass metres, e.g. 550e-9)" if lam.max() > 1 else ""
-        out = lam[(lam < src_lam[0] - 1e-12) | (lam > src_lam[-1] + 1e-12)]
         bands = (", ".join(f"{v:g}" for v in out) + " m") if hint else (", ".join(f"{v * 1e9:.4g}" for v in out)
                                                                         + " nm")
-        raise DoefabError(f"wavelengths {bands} lie outside the {response_label(source)} "
-                          f"response's {src_lam[0] * 1e9:.0f}–{src_lam[-1] * 1e9:.0f} nm{hint}: keep the bands "
+        raise DoefabError(f"wavelengths {bands} lie outside {_range_words(source, src_lam)}{hint}: keep the bands "
                           f"within it, or give a response that covers them")
     peak = curves.max(axis=1)  # > 0 for every channel (responses.py refuses a dark one)
     seen = np.stack([np.interp(lam, src_lam, c / p) for c, p in zip(curves, peak)])  # each channel ≤ 1: no overflow

@@ -1,6 +1,6 @@
-"""The die and holder a scene asks for: the die its mask set is drawn on (``scene_die_m``), the field the holder's
-hole passes (``scene_field_half_angle_deg``), the holder's parameters with the DOE's die and aperture
-(``scene_holder``), and the checks of that holder before any work (``holder_checks``)."""
+"""The die and holder a scene asks for: the die its mask set is drawn on (``scene_die_m``; its key and thickness,
+``scene_die``), the field the holder's hole passes (``scene_field_half_angle_deg``), the holder's parameters with
+the DOE's die and aperture (``scene_holder``), and the checks of that holder before any work (``holder_checks``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import Scene
 
-__all__ = ["scene_die_m", "scene_field_half_angle_deg", "scene_holder", "holder_checks"]
+__all__ = ["scene_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks"]
 
 
 def scene_die_m(scene: Scene, cam) -> float:
@@ -36,6 +36,16 @@ def scene_die_m(scene: Scene, cam) -> float:
     if len(given) == 1 and None not in given and given.pop() * 1e-3 >= need - 1e-9:  # a larger square die, given
         return scene.holder["die_width_mm"] * 1e-3
     return need
+
+
+def scene_die(scene) -> tuple[float, float]:
+    """(the die key's larger chamfer, the substrate's thickness), metres, that the scene's holder takes
+    (``holder.die_chamfer_mm``, ``holder.die_thickness_mm``): the mask set's dicing outline draws the first
+    (``doefab.diekey``) and its manifest states the second."""
+    from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
+
+    chamfer = scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)
+    return float(chamfer) * 1e-3, float(scene.holder.get("die_thickness_mm", DEFAULT_THICKNESS_MM)) * 1e-3
 
 
 def scene_field_half_angle_deg(scene: Scene, cam) -> float | None:

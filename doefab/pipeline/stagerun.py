@@ -16,8 +16,9 @@ from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, mark_folder, owned_by_doefab, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import HOW_NOT_WHAT
-from doefab.pipeline.stages import (_scene_budget, networks_trained_here, scene_die, stage_design, stage_holder,
-                                    stage_masks, stage_reconstruction, stage_tolerance)
+from doefab.pipeline.sceneholder import scene_die
+from doefab.pipeline.stages import (_scene_budget, networks_trained_here, stage_design, stage_holder, stage_masks,
+                                    stage_reconstruction, stage_tolerance)
 from doefab.pipeline.sceneholder import scene_holder
 from doefab.pipeline.system import resolve, scene_sensor
 

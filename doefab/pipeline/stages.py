@@ -13,17 +13,17 @@ import time
 from pathlib import Path
 
 from doefab.applications import has
-from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
+from doefab.diekey import DEFAULT_THICKNESS_MM
 from doefab.errors import DoefabError
 from doefab.io import MARKER, atomic_write_json, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
-from doefab.pipeline.sceneholder import scene_holder
+from doefab.pipeline.sceneholder import scene_die, scene_holder
 from doefab.pipeline.system import quick_sampling, resolve, scene_camera, scene_sensor
 
 __all__ = ["resolve", "REPO", "redesign_note", "design_arguments", "quick_sampling", "stage_design", "stage_masks",
-           "stage_holder", "stage_reconstruction", "stage_tolerance", "scene_die", "repo_mask_set",
-           "networks_trained_here", "shipped_sensor_differs", "QUICK", "quick_note"]
+           "stage_holder", "stage_reconstruction", "stage_tolerance", "repo_mask_set", "networks_trained_here",
+           "shipped_sensor_differs", "QUICK", "quick_note"]
 
 #: the numbers ``doefab run --quick`` cuts (the stages read them, the report's ``quick_note`` says them): design
 #: iterations at most, the networks' training minutes each and the fabricated parts their training captures draw,
@@ -192,14 +192,6 @@ def repo_mask_set(res: ResolvedScene, die_chamfer_m: float, thickness_m: float) 
     die = tuple(round(man.get(k, 0.0) * 1e9) for k in ("die_m", "die_chamfer_m"))
     die += (round(man.get("substrate_thickness_m", DEFAULT_THICKNESS_MM * 1e-3) * 1e9),)  # older sets: 1 mm
     return folder if same and die == tuple(round(v * 1e9) for v in (res.die_m, die_chamfer_m, thickness_m)) else None
-
-
-def scene_die(scene) -> tuple[float, float]:
-    """(the die key's larger chamfer, the substrate's thickness), metres, that the scene's holder takes
-    (``holder.die_chamfer_mm``, ``holder.die_thickness_mm``): the mask set's dicing outline draws the first
-    (``doefab.diekey``) and its manifest states the second."""
-    chamfer = scene.holder.get("die_chamfer_mm", DEFAULT_CHAMFER_MM)
-    return float(chamfer) * 1e-3, float(scene.holder.get("die_thickness_mm", DEFAULT_THICKNESS_MM)) * 1e-3
 
 
 def stage_holder(scene, res, out: Path, quick: bool) -> dict:

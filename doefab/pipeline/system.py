@@ -314,13 +314,12 @@ def _sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
     if "response" in scene.sensor and not sensor.has_default_response():
         out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
                    f"are the camera's own RGB (only the noise applies)")
-    from doefab.imaging.responses import DEFAULT_RESPONSE, response_curves, response_label
+    from doefab.imaging.sensor import bands_outside
 
-    lam = response_curves(DEFAULT_RESPONSE)[0]
-    if outside := [w for w in task.wavelengths(cam) if not lam[0] - 1e-12 <= w <= lam[-1] + 1e-12]:
+    outside, words = bands_outside(task.wavelengths(cam))
+    if outside.size:
         out.append(f"optics.wavelengths_nm: the {scene.task} task takes its bands as the camera's R, G and B "
-                   f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside the "
-                   f"{response_label(DEFAULT_RESPONSE)} response's {lam[0] * 1e9:.0f}–{lam[-1] * 1e9:.0f} nm: its "
+                   f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside {words}: its "
                    f"colour scenes hold no light there")
     return out
 
