@@ -82,7 +82,8 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
                 psf[prec] = plan(height).coded.double()
         diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
         rows.append(_row("float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
-                         diff <= 1e-3, "precision = float64 (doefab psf --precision float64)"))
+                         diff <= 1e-3, "the run computes in float32 only: compute this scene's PSFs "
+                         "with doefab psf --precision float64 (PSFPlan(precision='float64') in the API)"))
     from doefab.tolerance.errors import load_budget, sensor_errors
 
     sens = sensor_errors(load_budget(scene.budget_path() if scene.tolerance is not None else None))
