@@ -7,7 +7,7 @@ Examples:
 RECORDINGS.toml lists the point-source recordings ([[psf]]: half, view, depth_m, wavelength_nm or channels =
 "rgb", frames, dark) and the white-wall pairs ([[wall]]: half, coded_view, plain_view, dark); paths are relative
 to it. Every frame is checked before any work. Writes OUT/psf_pair.npz (the measured PSF pair: doefab.PSFPair.load;
-every command's --psf), OUT/crosstalk.json (per-column crosstalk ratios with standard errors, from the wall pairs:
+every command's --psf), OUT/crosstalk.json (with [[wall]] pairs: per-column crosstalk ratios with standard errors:
 doefab.DualPixelCrosstalk.load) and OUT/calibration.html (measured against nominal PSFs, residuals, encircled
 energy, the crosstalk profile, photons and signal-to-noise per recording).
 """

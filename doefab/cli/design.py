@@ -42,7 +42,7 @@ def register(sub) -> None:
                    help="pixel: one phase per DOE pixel; radial: a rotationally symmetric profile θ(r) (linear "
                         "interpolation between --knots radii)")
     p.add_argument("--knots", type=number(int, 2, 100_000, unit="knots"), default=None,
-                   help="radial knot count (default: one per DOE pixel along the radius)")
+                   help="radial knot count (default: one per design-grid pixel along the radius)")
     p.add_argument("--start", default=None, choices=["task", "lens"],
                    help="starting map: the task's own, or the thin lens that refocuses the coded half to the task's "
                         "farthest depth (default: task for pixel, lens for radial)")

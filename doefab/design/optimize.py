@@ -86,7 +86,7 @@ class DesignConfig:
                                       ("eval_every", 1, 10**9, True), ("knots", 0, 100_000, True)):
             number_in(name, getattr(self, name), lo, hi, integer, lo_open=name == "lr")
         if self.knots == 1:
-            raise DoefabError("knots must be 0 (one per DOE pixel along the radius) or at least 2")
+            raise DoefabError("knots must be 0 (one per design-grid pixel along the radius) or at least 2")
         check_levels(self.n_levels, "n_levels")
 
     def key(self) -> dict:

@@ -88,7 +88,8 @@ class RadialParam:
     interpolated to every DOE pixel's centre radius (pixels beyond R, outside the clear aperture, take the last
     knot). The profile is interpolated *unwrapped* and wrapped afterwards (``theta_to_height``), so a steep lens
     phase costs no interpolation error at its 2π jumps. Applied over the whole grid; only the coded half acts.
-    Default knot count: one per DOE pixel along the radius (N/2), which resolves any profile the pixel grid can.
+    Default knot count: one per pixel of ``camera``'s grid along the radius (N/2; the design grid when the design is
+    coarsened), which resolves any profile that grid can.
     """
 
     name = "radial"

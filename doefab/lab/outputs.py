@@ -5,8 +5,8 @@ target's folder, then ``os.replace``: a reader never sees half a file, and a fai
 result                 files
 =====================  =====================================================================================
 HDR radiance [3, H, W] OpenEXR (:func:`write_hdr_exr`): linear, half float, one ``RGB`` channel group, the
-                       radiance as reconstructed (1 = the sensor's clipping level through the plain half, up to
-                       2^8); a tone-mapped 8-bit PNG (:func:`write_tonemapped_png`, Reinhard's global operator)
+                       radiance as reconstructed (1 = the clipping level of a full exposure: the plain half clips at 2;
+                       up to 2^8); a tone-mapped 8-bit PNG (:func:`write_tonemapped_png`, Reinhard's global operator)
 spectra [C, H, W]      an ENVI cube (:func:`write_envi`, Spectral Python: float32, band-interleaved by line,
                        ``wavelength`` in nm, ``wavelength units = nm``; :func:`write_envi_rows` writes it row block
                        by row block); an sRGB preview (:func:`write_srgb_preview`, CIE 1931)

@@ -32,6 +32,11 @@ def _row(check, value, limit, unit, ok, fix="", at_least: bool = False):
             "margin": margin, "ok": bool(ok), "fix": "" if ok else fix}
 
 
+# the run computes in float32 only; a scene that needs float64 computes its PSFs outside it
+FLOAT64_FIX = ("the run computes in float32 only: compute this scene's PSFs with doefab psf --precision float64 "
+               "(PSFPlan(precision='float64') in the API)")
+
+
 def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = None) -> list[dict]:
     import torch
 
@@ -82,8 +87,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
                 psf[prec] = plan(height).coded.double()
         diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
         rows.append(_row("float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
-                         diff <= 1e-3, "the run computes in float32 only: compute this scene's PSFs "
-                         "with doefab psf --precision float64 (PSFPlan(precision='float64') in the API)"))
+                         diff <= 1e-3, FLOAT64_FIX))
     from doefab.tolerance.errors import load_budget, sensor_errors
 
     sens = sensor_errors(load_budget(scene.budget_path() if scene.tolerance is not None else None))

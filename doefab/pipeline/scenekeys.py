@@ -142,7 +142,7 @@ KEYS = (
     Key("design", "seed", "int", "", 0, 2**32 - 1, default="0", help="random seed"),
     Key("design", "parameterization", "choice", choices=("pixel", "radial"), default="the committed design's",
         help="free pixels, or a rotationally symmetric profile"),
-    Key("design", "knots", "int", "", 0, 100000, default="0", help="radial knots (0: one per DOE pixel)"),
+    Key("design", "knots", "int", "", 0, 100000, default="0", help="radial knots (0: one per design-grid pixel along the radius)"),
     Key("design", "ring_law", "choice", choices=("seed", "defocus"), default="the committed design's",
         help="depth: ring radius linear in depth (the paper's law, \"seed\") or in inverse depth (defocus)"),
     Key("design", "ring_max_px", "float", "px", 0.0, 2047.0, default="the camera's defocus blur",

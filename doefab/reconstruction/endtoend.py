@@ -2,15 +2,16 @@
 release): the loss is the network's depth error, and its gradient flows through the captures and the PSFs into
 the DOE's phase.
 
-Starting point: a task-loss design (its radial knots when it is a radial design, else its 16-level map as pixel
+Starting point: a task-loss design (its radial knots when it is a radial design, else its L-level map as pixel
 phases) and, optionally, a network already trained for it. Each step renders a batch of layered depth scenes
 with the current coded PSF (occlusion-aware layer compositing, ``doefab.imaging.captures.render_layers``, which
 is differentiable), adds sensor noise as a Gaussian with the Poisson–Gaussian variance (the reparameterised
 form, so gradients pass), and trains the network on L1 + gradient depth loss (the paper's Eq. 28). Every
 ``doe_every``-th step the PSF is recomputed *with* gradients and the DOE takes an Adam step too (quantization-
-aware: straight-through rounding to the 16 levels the masks will have); the other steps reuse the last PSF, since
-one PSF with gradients costs as much as many network steps on this CPU. The PSFs are computed on the design grid
-coarsened ``sampling`` times (as the design stage does); the finished DOE is re-evaluated on the full grid.
+aware: straight-through rounding to the design's L levels, as the masks make them); the other steps reuse the
+last PSF, since one PSF with gradients costs as much as many network steps on this CPU. The PSFs are computed on
+the design grid coarsened ``sampling`` times (as the design stage does); the finished DOE is re-evaluated on the
+full grid.
 Checkpoints every ``val_every`` steps; ``resume`` continues exactly. ``device`` says where the PSFs, the rendering
 and the network run; the scenes and the noise are drawn on the CPU (seeded), so a run takes the same steps on every
 device.
@@ -73,7 +74,7 @@ def _start_theta(design, param_name: str, dcam, sampling: int) -> tuple[torch.Te
         return torch.tensor(knots, dtype=torch.float32), param
     param = make_parameterization("pixel", dcam)
     n = dcam.doe_pixels
-    phase = np.exp(2j * np.pi * design.levels.astype(np.float64) / 16)  # level L = L/16 of a wave at λ_design
+    phase = np.exp(2j * np.pi * design.levels.astype(np.float64) / design.n_levels)  # level l: l/L of a wave
     phase = phase.reshape(n, sampling, n, sampling).mean(axis=(1, 3))
     return torch.from_numpy(np.angle(phase) / (2 * np.pi)).float(), param
 

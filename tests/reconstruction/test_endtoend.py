@@ -77,3 +77,20 @@ def test_rendered_depth_captures_carry_the_poisson_gaussian_variance():
     want = clean.numpy() / 400.0 + (8.0 / 400.0) ** 2
     inside = (clean.numpy() > 0.05) & (clean.numpy() < 0.9)  # not clipped at 0 or 1
     assert np.mean(resid[inside] ** 2) == pytest.approx(np.mean(want[inside]), rel=0.05)
+
+
+@pytest.mark.parametrize("n_levels", [8, 32])
+def test_a_pixel_start_reads_each_level_as_its_fraction_of_a_wave(tiny_camera, n_levels):
+    from doefab.design.design import Design
+    from doefab.reconstruction.endtoend import _start_theta
+
+    n = tiny_camera.doe_pixels
+    lv = np.zeros((n, n), np.uint8)
+    lv[: n // 2] = 3  # level 3 of L: 3/L of a wave at the design wavelength; level 0 none
+    d = Design(task="half-ring", task_params={}, camera=tiny_camera, wavelengths=(550e-9,), depths=(2.0,),
+               height=doefab.levels_to_height(lv, tiny_camera, n_levels), levels=lv, n_levels=n_levels,
+               metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
+    theta, _ = _start_theta(d, "pixel", tiny_camera, 1)
+    assert theta.shape == (n, n)
+    np.testing.assert_allclose(theta[: n // 2].numpy(), 3 / n_levels, atol=1e-6)
+    np.testing.assert_allclose(theta[n // 2:].numpy(), 0.0, atol=1e-6)
