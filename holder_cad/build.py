@@ -49,13 +49,21 @@ def _layout_for_print(manifolds: list, gap: float = 5.0) -> list:
     return out
 
 
-def _export_mesh(manifolds: list, path: Path, fmt: str) -> None:
+def _export_mesh(manifolds: list, path: Path, fmt: str, names: tuple[str, ...] = ()) -> None:
+    """The bodies laid out for print in one file: an STL of them all; a 3MF with one object per body, named by
+    ``names`` (a slicer lists and places them one by one)."""
     import trimesh
 
     from doefab.io import atomic_write_bytes
 
-    mesh = trimesh.util.concatenate([to_trimesh(m) for m in manifolds])
-    atomic_write_bytes(path, mesh.export(file_type=fmt))
+    meshes = [to_trimesh(m) for m in manifolds]
+    if fmt == "3mf" and names:
+        scene = trimesh.Scene()
+        for name, mesh in zip(names, meshes, strict=True):
+            scene.add_geometry(mesh, geom_name=name, node_name=name)
+        atomic_write_bytes(path, scene.export(file_type=fmt))
+        return
+    atomic_write_bytes(path, trimesh.util.concatenate(meshes).export(file_type=fmt))
 
 
 def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None, renders: bool = True) -> dict:
@@ -100,7 +108,7 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
     (out / "holder.FAILED.json").unlink(missing_ok=True)
     printed = _layout_for_print([parts["base"], parts["cartridge"]])
     _export_mesh(printed, out / "holder.stl", "stl")
-    _export_mesh(printed, out / "holder.3mf", "3mf")
+    _export_mesh(printed, out / "holder.3mf", "3mf", ("base", "cartridge"))
     _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")
     report["files"] = ["holder.stl", "holder.3mf", "coupon.stl"]
     if step is None:

@@ -16,7 +16,8 @@ import numpy as np
 from holder_cad.params import HolderParams, fit_bounds
 from holder_cad.recipe import die_outline, thread_points
 
-__all__ = ["wall_thickness", "overhang_area", "facet_sag_mm", "facet_tolerance_mm", "pocket_gap", "aperture_clear",
+__all__ = ["wall_thickness", "overhang_area", "facet_sag_mm", "facet_tolerance_mm", "pocket_gap", "pocket_wall",
+           "aperture_clear",
            "run_checks"]
 
 OVERHANG_LIMIT_DEG = 45.0
@@ -134,6 +135,28 @@ def pocket_gap(cartridge, p: HolderParams, z_mid: float) -> float:
     return lo
 
 
+def pocket_wall(cartridge, p: HolderParams, z_mid: float) -> float:
+    """Thinnest wall (mm) between the die pocket (the die outline offset by ``clearance_mm``, mitred, as built) and
+    the cartridge's outside in its section at height ``z_mid``: the ray-cast wall check samples faces and can
+    miss a pocket corner's nearest approach to the round outside."""
+    from manifold3d import CrossSection
+
+    polys = [np.asarray(q) for q in cartridge.slice(z_mid).to_polygons()]
+    if not polys:
+        return 0.0
+    area = [abs(float(np.dot(q[:, 0], np.roll(q[:, 1], 1)) - np.dot(q[:, 1], np.roll(q[:, 0], 1)))) for q in polys]
+    outside = CrossSection([polys[int(np.argmax(area))].tolist()])  # the section's outer contour, filled
+    pocket = CrossSection([die_outline(p).tolist()]).offset(p.clearance_mm, _join("Miter"))
+    lo, hi = 0.0, float(np.hypot(*polys[int(np.argmax(area))].T).max())  # no wall is thicker than the radius
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if (pocket.offset(mid, _join("Round"), circular_segments=256) - outside).area() > 1e-9:
+            hi = mid
+        else:
+            lo = mid
+    return lo
+
+
 def _join(name):
     from manifold3d import JoinType
 
@@ -200,8 +223,9 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
                  "min_wall_mm": round(wall, 3), "min_wall_at_mm": loc, "overhang_area_beyond_45deg_mm2": round(oh, 3),
                  "facet_sag_mm": round(sag, 4),
                  "bounding_box_mm": [round(float(x), 4) for x in m.bounding_box()]}
-        entry["ok"] = (entry["status"] == "NoError" and entry["watertight"] and entry["is_volume"]
-                       and wall >= p.wall_mm - tol and oh < OVERHANG_TOLERANCE_MM2)
+        entry["shape_ok"] = (entry["status"] == "NoError" and entry["watertight"] and entry["is_volume"]
+                             and wall >= p.wall_mm - tol and oh < OVERHANG_TOLERANCE_MM2)
+        entry["ok"] = entry["shape_ok"] and sag <= FACET_TOLERANCE_MAX_MM
         out["bodies"][name] = entry
         out["passed"] &= entry["ok"]
     out["total_bodies"] = n_bodies
@@ -213,6 +237,12 @@ def run_checks(parts: dict, assembly: list, p: HolderParams, expected_bodies: in
         z_mid = top - p.washer_recess_mm - p.die_thickness_mm / 2
         gap = pocket_gap(c, p, z_mid)
         out["die_to_pocket_gap_mm"] = round(gap, 4)
+        wall = pocket_wall(c, p, z_mid)
+        out["pocket_wall_mm"] = round(wall, 4)
+        if wall < p.wall_mm - 1e-3:
+            out["passed"] = False
+            out.setdefault("fit_failures", []).append(f"pocket_wall_mm = {wall:.3f} (needs ≥ {p.wall_mm}: a smaller "
+                                                      "die or a larger thread)")
         out["passed"] &= gap >= p.clearance_mm - 1e-3
         if gap < p.clearance_mm - 1e-3:
             out.setdefault("fit_failures", []).append(f"die_to_pocket_gap_mm = {gap:.3f} (needs ≥ {p.clearance_mm})")
@@ -254,14 +284,14 @@ def failing(checks: dict) -> list[str]:
     """Names (and values) of every failed check, for the one-line error."""
     out = []
     for name, b in checks.get("bodies", {}).items():
-        if not b.get("ok", True):
+        if not b.get("shape_ok", b.get("ok", True)):
             why = [k for k, bad in (("manifold status", b["status"] != "NoError"), ("not watertight", not b["watertight"]),
                                     ("not a volume", not b["is_volume"]),
                                     (f"min wall {b['min_wall_mm']} mm", True)) if bad]
             out.append(f"{name}: {', '.join(why[:2])}; overhang {b['overhang_area_beyond_45deg_mm2']} mm²")
-            if b.get("facet_sag_mm", 0.0) > FACET_TOLERANCE_MAX_MM:
-                out.append(f"{name}'s facets sit {b['facet_sag_mm']} mm inside its largest circle, its walls up to as "
-                           f"much thinner than designed (at most {FACET_TOLERANCE_MAX_MM} mm allowed): raise segments")
+        if b.get("facet_sag_mm", 0.0) > FACET_TOLERANCE_MAX_MM:
+            out.append(f"{name}'s facets sit {b['facet_sag_mm']} mm inside its largest circle, its walls up to as "
+                       f"much thinner than designed (at most {FACET_TOLERANCE_MAX_MM} mm allowed): raise segments")
     if checks.get("total_bodies") != checks.get("declared_bodies"):
         out.append(f"bodies {checks.get('total_bodies')} (declared {checks.get('declared_bodies')})")
     out += checks.get("fit_failures", [])

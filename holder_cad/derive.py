@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
-           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "least_thread_play_mm", "ISO_DEPTH",
+           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "FLANK_CLEARANCE_MM",
+           "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
            "flange_diameter_mm", "flange_height_mm", "max_flange_diameter_mm", "HEAD_GLASS_CLEARANCE_MM",
@@ -44,7 +45,8 @@ DERIVED = {
     "thread_depth_mm": "0.4 × thread_pitch_mm",
     "thread_length_mm": "2.5, or the least tenth of a mm more giving two turns of full tooth between the lead-in "
                         "and the flange's chamfer",
-    "thread_clearance_mm": "0.22 × thread_pitch_mm for the default tooth (its 45° flanks clear the ISO 60° groove)",
+    "thread_clearance_mm": "0.2165 × thread_pitch_mm + 0.075 for the default tooth (its 45° flanks clear the ISO 60° "
+                           "groove by 0.15 mm axially)",
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
@@ -166,11 +168,20 @@ def least_thread_play_mm(pitch_mm: float, depth_mm: float) -> float:
     return max(0.0, ISO_DEPTH * pitch_mm - (0.75 * pitch_mm - crest) / 2)
 
 
+# the axial clearance the printed tooth keeps from the lens's groove flanks where they meet (mm): a layer's edge
+# stands up to half a layer proud of a 45° flank (0.1 mm at each flank for 0.2 mm layers) and an FDM print is
+# good to about ±0.05 mm; a tooth with the least play alone (a few µm) binds once printed
+FLANK_CLEARANCE_MM = 0.15
+
+
 def thread_clearance_mm(pitch_mm: float, depth_mm: float) -> float:
-    """The printed thread's radial play (mm) in a filter thread of this pitch and tooth depth: 0.0035 × pitch more
-    than the least at which its 45° tooth clears the lens's 60° groove (``least_thread_play_mm``): 0.22 × pitch for
-    the 0.4 × pitch tooth, which leaves 0.32 × pitch, 59 % of the ISO basic depth (``ISO_DEPTH``), engaged."""
-    return round(least_thread_play_mm(pitch_mm, depth_mm) + 0.0035 * pitch_mm, 6)
+    """The printed thread's radial play (mm) in a filter thread of this pitch and tooth depth: the least at which
+    its 45° tooth clears the lens's 60° groove (``least_thread_play_mm``) plus half ``FLANK_CLEARANCE_MM`` (each
+    0.01 mm of radial play widens the 45° tooth's axial gap there by 0.02 mm): 0.2165 × pitch + 0.075 mm for the
+    0.4 × pitch tooth, which leaves 42 % of the ISO basic depth (``ISO_DEPTH``) engaged at M49 × 0.75.
+
+    Example: ``round(thread_clearance_mm(0.75, 0.3), 4)`` → 0.2372 (mm)."""
+    return round(least_thread_play_mm(pitch_mm, depth_mm) + FLANK_CLEARANCE_MM / 2, 6)
 
 
 def standard_depth_mm(pitch_mm: float) -> float:

@@ -47,9 +47,10 @@ class HolderParams:
             unvignetted: it flares toward the scene at this angle (24: the prototype's 50 mm lens on a full-frame
             sensor, atan(21.6 / 50) = 23.4°; at most 45°, the steepest overhang that prints without support).
         clearance_mm: fit clearance per side (die in pocket, cartridge in bore, sleeve on barrel).
-        thread_clearance_mm: the male thread's outer radius below the nominal (by default 0.22 × pitch): at least
-            0.2165 × pitch, for the printed 45° tooth to clear the lens's 60° groove, and at most what leaves a
-            quarter of the ISO basic depth (0.541 × pitch) engaged.
+        thread_clearance_mm: the male thread's outer radius below the nominal: at least 0.2165 × pitch, for the
+            printed 45° tooth to clear the lens's 60° groove, and at most what leaves a quarter of the ISO basic
+            depth (0.541 × pitch) engaged; by default 0.075 mm more than the least (0.15 mm axial clearance at
+            the flanks, ``derive.FLANK_CLEARANCE_MM``: a print's layer steps and tolerance).
         wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
         flange_diameter_mm: outer diameter of both flanges (by default the least that holds the lock screws).
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
@@ -205,7 +206,7 @@ class HolderParams:
         # the largest square die whose pocket and washer recesses fit this cartridge
         reach = self.screw_offset_mm - self.die_width_mm / 2  # pocket edge to screw axis
         room = self.cartridge_radius_mm - wall
-        half = min((room - c) / math.sqrt(2), math.sqrt(max(room ** 2 - rw ** 2, 0.0)) - reach - rw)
+        half = min(room / math.sqrt(2) - c, math.sqrt(max(room ** 2 - rw ** 2, 0.0)) - reach - rw)
         side = math.floor(20 * half) / 10
         holds = side - 2 * wall - 2 * self.aperture_margin_mm > self.clear_aperture_mm  # it still takes the DOE
         die = f", or use a die of at most {side:g} × {side:g} mm (die_width_mm, die_height_mm)" if holds else ""
@@ -288,11 +289,19 @@ class HolderParams:
         return self.washer_diameter_mm / 2 + self.clearance_mm
 
     @property
+    def pocket_corner_radius_mm(self) -> float:
+        """The die pocket's farthest point from the axis (mm): a square corner of the die outline offset by
+        ``clearance_mm`` with mitred corners (``recipe.offset_convex``), (w/2 + c, h/2 + c) — √2·c beyond the die's
+        corner, not c (the coded half's chamfered corners lie nearer)."""
+        c = self.clearance_mm
+        return math.hypot(self.die_width_mm / 2 + c, self.die_height_mm / 2 + c)
+
+    @property
     def cartridge_need_mm(self) -> float:
         """The cartridge radius (mm) that holds the die pocket and the washer recesses with wall_mm around them
         (a recess runs from the pocket to ``washer_recess_half_mm`` beyond its screw)."""
         rw = self.washer_recess_half_mm
-        return max(self.die_diagonal_mm / 2 + self.clearance_mm, math.hypot(self.screw_offset_mm + rw, rw)) + self.wall_mm
+        return max(self.pocket_corner_radius_mm, math.hypot(self.screw_offset_mm + rw, rw)) + self.wall_mm
 
     @property
     def cartridge_length_mm(self) -> float:

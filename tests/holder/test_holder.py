@@ -1,4 +1,6 @@
 import json
+import re
+import zipfile
 
 import numpy as np
 import pytest
@@ -28,6 +30,11 @@ def test_default_part_passes_every_check(tmp_path):
     assert saved["parameters"]["thread_diameter_mm"] == 49.0 and saved["units"] == "mm"
     for f in ("holder.stl", "holder.3mf", "coupon.stl"):
         assert (tmp_path / f).stat().st_size > 10_000
+    # the 3MF holds one named object per body, in millimetres: a slicer lists and places them one by one
+    model = zipfile.ZipFile(tmp_path / "holder.3mf").read("3D/3dmodel.model").decode()
+    assert re.search(r'<model[^>]*\bunit="millimeter"', model)
+    assert re.findall(r'<object[^>]*\bname="([^"]+)"', model) == ["base", "cartridge"]
+    assert len(re.findall(r"<item\b", model)) == 2
 
 
 @pytest.mark.parametrize("kw, need", [({}, 0.8), ({"screw_head_mm": 2.0}, 1.5),
@@ -110,9 +117,10 @@ def test_thread_geometry_is_the_filter_thread():
     sec = np.array(base.slice(1.0).to_polygons()[0])
     polys = base.slice(1.0).to_polygons()
     r_all = np.concatenate([np.hypot(*np.array(q).T) for q in polys])
-    assert r_all.max() == pytest.approx(49.0 / 2 - 0.22 * 0.75, abs=0.01)  # the thread's play: 0.22 × pitch
+    play = 0.2165 * 0.75 + 0.075  # the least for the 45° tooth in the 60° groove, and 0.15 mm axially at the flanks
+    assert r_all.max() == pytest.approx(49.0 / 2 - play, abs=0.01)
     sec = thread_section(p)
-    assert np.hypot(*sec.T).min() == pytest.approx(49.0 / 2 - 0.22 * 0.75 - 0.3, abs=1e-3)
+    assert np.hypot(*sec.T).min() == pytest.approx(49.0 / 2 - play - 0.3, abs=1e-3)
     # one pitch up, the section repeats (single-start thread, pitch 0.75 mm)
     a = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9).to_polygons(), key=len)).T), 3))
     b = sorted(np.round(np.hypot(*np.array(max(base.slice(0.9 + 0.75).to_polygons(), key=len)).T), 3))

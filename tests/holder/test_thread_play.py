@@ -29,9 +29,11 @@ def _groove_and_tooth(p: HolderParams) -> tuple[float, float, float]:
 def test_the_derived_play_clears_the_groove_and_engages(thread, depth):
     p = HolderParams(thread_diameter_mm=thread, thread_depth_mm=depth)  # 0.2 mm: a shallower tooth, a wider crest
     groove, tooth, depth = _groove_and_tooth(p)
-    assert tooth <= groove + 1e-9
+    # a printed tooth needs more than geometric clearance: its layers' edges stand up to half a layer (0.1 mm at
+    # 0.2 mm layers) proud of each 45° flank, and the print is good to about ±0.05 mm
+    assert groove - tooth >= 0.15 - 1e-9
     basic = 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm
-    assert depth >= 0.4 * basic  # 47–59 % of the basic depth engaged
+    assert depth >= 0.25 * basic  # 29–46 % of the basic depth engaged
 
 
 @pytest.mark.parametrize("play, words", [(0.10, "between 0.1625 and"), (0.40, "between 0.1625 and")])
@@ -39,5 +41,5 @@ def test_a_play_that_jams_or_barely_engages_is_refused(play, words):
     with pytest.raises(HolderError, match=f"thread_clearance_mm = {play:.3g} mm is outside.*{words}"):
         HolderParams(thread_clearance_mm=play)
     hp = HolderParams()
-    ok = HolderParams(thread_clearance_mm=0.25)  # the old default: loose, a third of the depth engaged
+    ok = HolderParams(thread_clearance_mm=0.25)  # looser: a third of the depth engaged
     assert _groove_and_tooth(ok)[1] < _groove_and_tooth(hp)[1]
