@@ -137,6 +137,21 @@ def _light(frames, dark, black: float, k: int) -> dict:
             "peak_snr": math.inf if noiseless else float(min(got.peak_snr)), "noise": got.noise}
 
 
+def _require_window_inside(nominal: np.ndarray, chief, shape, what: str, most: float = 1e-3) -> None:
+    """Refuse a recording whose K × K window round its chief ray reaches past the frame's edge where the design
+    puts more than ``most`` of its light: the window's missing pixels would be read as dark and the rest rescaled
+    to the half's share, a wrong PSF."""
+    k = nominal.shape[-1]
+    rows, cols = (np.arange(k) - k // 2 + int(np.rint(c)) for c in chief)
+    inside = ((rows >= 0) & (rows < shape[0]))[:, None] & ((cols >= 0) & (cols < shape[1]))[None, :]
+    lost = float(nominal[~inside].sum() / nominal.sum())
+    if lost > most:
+        raise DoefabError(f"{what}: the {k}×{k}-px PSF window round the chief ray (row {chief[0]:.1f}, column "
+                          f"{chief[1]:.1f}) reaches past the {shape[0]}×{shape[1]}-px frame, where {lost:.1%} of the "
+                          f"design's light falls: centre the point source in the frame, or record a larger window "
+                          f"(2K × 2K leaves room for its offset)")
+
+
 def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float) -> dict:
     """One recording registered, resampled and normalised: {(plane, band): PSF} of its half, the chief ray's
     position and shift from the frame's centre pixel (rows, columns), and its light (:func:`_light`)."""
@@ -150,6 +165,7 @@ def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float)
     chans = [signal if c is None else signal[..., c] for _, _, c in keys]
     chief = register(np.sum(chans, axis=0), np.sum(refs, axis=0))
     what = f"{r.name} ({r.frames[0]})"
+    _require_window_inside(np.sum(refs, axis=0), chief, signal.shape[:2], what)
     psfs = {(z, b): normalise(extract(ch, chief, k), float(ref.sum()), what)
             for (z, b, _), ch, ref in zip(keys, chans, refs)}
     centre = np.array(signal.shape[:2]) // 2

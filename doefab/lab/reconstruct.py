@@ -259,6 +259,11 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
     if not white > black >= 0:
         raise DoefabError(f"{path}: black level {black:g} DN must be ≥ 0 and below the white level {white:g} DN: "
                           f"give --black-level of the dark frames' mean (e.g. 0, or 2048 for many 14-bit raws)")
+    top = float(np.max(dn))
+    if white_level is not None and top > white * (1 + 1e-6):  # no sensor records beyond its clipping level
+        raise DoefabError(f"{path} holds values up to {top:g} DN, above --white-level {white:g} DN, which no pixel "
+                          f"can exceed: give the level at which the sensor clips (at least {top:g} DN; the file's "
+                          f"full scale when it holds the camera's numbers unscaled), or leave --white-level out")
     out = np.empty((3, *dn.shape[:2]), np.float32)
     for k in range(3):  # channel by channel: no full-size float64 temporary beyond the frame itself
         out[k] = np.clip((dn[..., k] - black) / (white - black), 0.0, 1.0)

@@ -192,3 +192,26 @@ def test_wall_crosstalk_within_three_standard_errors_which_match_the_noise():
     for est, alpha in ((se_a, a), (se_b, b)):
         analytic = sigma * np.sqrt((1 - alpha) ** 2 + alpha ** 2) / (wall * np.sqrt(rows))
         np.testing.assert_allclose(np.median(est / analytic), 1.0, atol=0.05)
+
+
+@pytest.mark.parametrize("cut", [30, 28])
+def test_a_psf_cut_by_the_frames_edge_is_refused_and_nothing_written(design_dir, tmp_path, cut):
+    """A point source recorded near the frame's edge: the kernel window round its chief ray reaches past the
+    frame, where the design puts light. It had been read as dark, the rest rescaled to the half's share."""
+    import tifffile
+
+    from doefab.lab.calibrate import calibrate
+    from doefab.lab.recordings import load_recordings
+
+    (tmp_path / "design").symlink_to(design_dir)
+    entries = [(h, h, z, b) for h in ("coded", "plain") for z in (0, 1) for b in (0, 1, 2)]
+    rec_file = _write(tmp_path, design_dir, entries)
+    for f in (tmp_path / "psf").glob("r0_*.tiff"):  # the first recording's chief ray 40 − cut px from the left edge
+        tifffile.imwrite(f, tifffile.imread(f)[:, cut:])
+    frame = rf"\[\[psf\]\] 1 .*31×31-px PSF window .*reaches past the 80×{80 - cut}-px frame"
+    with pytest.raises(DoefabError, match=frame):
+        calibrate(load_recordings(rec_file), tmp_path / "out")
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    for f in (tmp_path / "psf").glob("r0_*.tiff"):  # 4 px of margin more than the window needs: accepted
+        tifffile.imwrite(f, np.pad(tifffile.imread(f), ((0, 0), (cut - 40 + 15 + 5, 0)), mode="edge"))
+    calibrate(load_recordings(rec_file), tmp_path / "out2")

@@ -178,8 +178,13 @@ def test_read_capture_scales_by_the_files_full_scale_after_the_black_level(tmp_p
     want = np.clip((np.moveaxis(dn, -1, 0) - 1000) / (65535 - 1000), 0, 1)
     assert got.shape == (3, 32, 40) and got.dtype == np.float32
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
-    at_4095 = np.clip(np.moveaxis(dn, -1, 0) / 4095, 0, 1)  # a 12-bit camera's values in a 16-bit file
-    np.testing.assert_allclose(R.read_capture(tmp_path / "c.tiff", white_level=4095), at_4095, rtol=1e-6)
+    # values above the white level say it is wrong (no pixel records beyond its clip): refused, not clipped
+    with pytest.raises(DoefabError, match=r"c\.tiff holds values up to 655\d\d DN, above --white-level 4095 DN"):
+        R.read_capture(tmp_path / "c.tiff", white_level=4095)
+    twelve = dn % 4096  # a 12-bit camera's values in a 16-bit file
+    write_frame(tmp_path / "t.tiff", twelve)
+    at_4095 = np.moveaxis(twelve, -1, 0) / 4095
+    np.testing.assert_allclose(R.read_capture(tmp_path / "t.tiff", white_level=4095), at_4095, rtol=1e-6)
     write_frame(tmp_path / "m.tiff", dn[..., 0])
     with pytest.raises(DoefabError, match=r"m\.tiff is a monochrome frame .*colour"):
         R.read_capture(tmp_path / "m.tiff")
