@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from doefab.cli._args import add_device_arg
 
@@ -32,6 +33,11 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+# what doefab calibrate writes; --force removes an earlier run's that this run does not write (its crosstalk.json
+# beside a new PSF pair without [[wall]] pairs would read as this calibration's)
+CALIBRATE_FILES = frozenset({"psf_pair.npz", "crosstalk.json", "calibration.html"})
+
+
 def run(args) -> int:
     from doefab.cli._output import claim_output
     from doefab.lab.calibrate import measure_recordings, write_calibration
@@ -42,6 +48,9 @@ def run(args) -> int:
     cal = measure_recordings(rec, progress=True)  # every frame checked before anything is written
     out.create()
     summary = write_calibration(cal, out.path)
+    written = {Path(f).name for f in summary["files"]}
+    for name in CALIBRATE_FILES - written:  # an earlier calibration's (a folder of calibrate's own: claim_output)
+        (out.path / name).unlink(missing_ok=True)
     for row in summary["recordings"]:
         snr = "∞" if row["snr"] is None or math.isinf(row["snr"]) else f"{row['snr']:.3g}"
         photons = "" if row["photons"] is None else f", {row['photons']:.3g} photons"

@@ -164,6 +164,7 @@ def run(args) -> int:
     levels = dict(black_level=args.black_level, white_level=args.white_level, pixel_format=args.pixel_format)
     for c, u in pairs:  # every pair read and checked before anything is written
         load_views(c, u, camera, tile=tile, overlap=overlap, **levels)
+    earlier = _earlier_outputs(out.path) if out.existing else set()
     out.create()
     record = _record(args, rec, psf, camera, tile, overlap)
     for c, u in pairs:
@@ -176,5 +177,22 @@ def run(args) -> int:
                                 "files": [f.name for f in files]})
         print(f"{c.name} + {u.name}: wrote {', '.join(f.name for f in files)}")
     atomic_write_json(out.path / "reconstruct.json", record)
+    inputs = {Path(x).resolve() for pair in pairs for x in pair}
+    for name in earlier - {f for pair in record["pairs"] for f in pair["files"]}:
+        if (out.path / name).resolve() not in inputs:  # an earlier run's result this run did not write again
+            (out.path / name).unlink(missing_ok=True)
     print(f"wrote {out.path / 'reconstruct.json'}")
     return 0
+
+
+def _earlier_outputs(folder: Path) -> set[str]:
+    """The result files an earlier reconstruct wrote into ``folder`` (its reconstruct.json's pairs): with --force
+    they go unless this run writes them again, so the folder holds one run's results, as its record says."""
+    import json
+
+    try:
+        record = json.loads((folder / "reconstruct.json").read_text())
+        names = {str(f) for pair in record.get("pairs", []) for f in pair.get("files", [])}
+    except (OSError, ValueError, AttributeError, TypeError):
+        return set()
+    return {n for n in names if n and Path(n).name == n}  # plain names in the folder, nothing outside it

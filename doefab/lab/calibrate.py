@@ -178,6 +178,17 @@ def _wall_view(paths, dark, fmt: str, black: float) -> np.ndarray:
     return s if s.ndim == 2 else s.sum(axis=-1)  # colour walls: the channels' sum (the ratio is per photodiode)
 
 
+def _wall_pair_problems(rec: Recordings, by_half: dict, views: dict) -> None:
+    """Refuse wall pairs whose two halves' frames differ in size: the ratios are per sensor column."""
+    shapes = {h: v[0].shape for h, v in views.items()}
+    if shapes["plain"] != shapes["coded"]:
+        p, c = by_half["plain"], by_half["coded"]
+        raise DoefabError(f"{rec.path}: {p.name} (half = 'plain' open, {Path(p.plain_view[0]).name}) is "
+                          f"{shapes['plain'][1]}×{shapes['plain'][0]} px but {c.name} (half = 'coded' open, "
+                          f"{Path(c.plain_view[0]).name}) is {shapes['coded'][1]}×{shapes['coded'][0]} px: the "
+                          f"crosstalk is per sensor column, so record both walls at one frame size and position")
+
+
 def measure_walls(rec: Recordings) -> dict | None:
     """Per-column crosstalk from the ``[[wall]]`` pairs (None without any): both halves needed, one pair each."""
     if not rec.wall:
@@ -203,7 +214,21 @@ def measure_walls(rec: Recordings) -> dict | None:
                               f"no light once the dark is subtracted (both views summed, first "
                               f"{Path(w.coded_view[0]).name}); the ratios need every pixel lit: expose the white "
                               f"wall longer (about half full scale) and check that the dark frames are the wall's")
+    _wall_pair_problems(rec, by_half, views)
     a, b, sa, sb = wall_ratios(views["plain"], views["coded"])
+    for h, ratio, name in (("plain", a, "α_l→r"), ("coded", b, "α_r→l")):
+        if float(np.median(ratio)) > 0.5:  # most of the open half's light in the other view
+            w = by_half[h]
+            raise DoefabError(f"{rec.path}: {w.name} (half = {h!r} open) puts most of its light in the view its half "
+                              f"does not reach ({name} {float(np.median(ratio)):.3f} in the median column): its "
+                              f"coded_view and plain_view appear swapped ({Path(w.coded_view[0]).name}, "
+                              f"{Path(w.plain_view[0]).name}); the coded view is the right (DOE) one")
+    det = 1 - a - b
+    if float(det.min()) <= 0:
+        col = int(np.argmin(det))
+        raise DoefabError(f"{rec.path}: the [[wall]] pairs give no dual-pixel crosstalk at column {col} (α_l→r "
+                          f"{float(a[col]):.3f} + α_r→l {float(b[col]):.3f} ≥ 1): check that each wall's other half "
+                          f"was blocked and its dark frames are the wall's")
     return {"alpha_lr": a, "alpha_rl": b, "alpha_lr_se": sa, "alpha_rl_se": sb,
             "rows": int(views["plain"][0].shape[0])}
 

@@ -206,6 +206,12 @@ def psf_frame_problems(rec, r, kernel: int) -> list[str]:
                    f"for the source's offset)")
     if out:
         return out
+    zero = float(np.mean(dark.mean)) if dark is not None else float(rec.black_level)
+    if zero >= float(np.mean(m)):  # a point source adds light: a frame no brighter than its zero is another's
+        what = f"its dark frames' mean ({dark.first})" if dark is not None else "black_level"
+        return [f"{frames.first} ({r.name}): {what}, {zero:.4g} DN, is no darker than the frames' mean, "
+                f"{float(np.mean(m)):.4g} DN: record the darks at the frames' exposure, gain and bit depth (a "
+                f"16-bit dark under 8-bit frames reads 256 times too bright), or give the sensor's black_level"]
     try:
         return _light_problems(r, frames, measure_psf(frames, dark, rec.black_level, kernel), kernel)
     except DoefabError as exc:

@@ -55,6 +55,12 @@ def test_calibrate_writes_the_three_files(lab, tmp_path, capsys):
     # a second run into the same folder needs --force
     assert main(["calibrate", str(lab), "--out", str(out)]) == 2
     assert main(["calibrate", str(lab), "--out", str(out), "--force"]) == 0
+    # replaced by a calibration without [[wall]] pairs: the earlier crosstalk.json goes with it (left beside the
+    # new PSF pair it would read as this calibration's)
+    no_walls = lab.parent / "no_walls.toml"
+    no_walls.write_text(lab.read_text().split("[[wall]]")[0])
+    assert main(["calibrate", str(no_walls), "--out", str(out), "--force"]) == 0
+    assert {p.name for p in out.iterdir()} == {"psf_pair.npz", "calibration.html", ".doefab-output.json"}
 
 
 def test_a_bad_recording_exits_2_and_writes_nothing(lab, design_dir, one_clear_error, tmp_path_factory):

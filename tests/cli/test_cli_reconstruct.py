@@ -85,6 +85,16 @@ def test_hdr_and_spectra_write_their_formats(task, files, tmp_path, capsys):
                str(tmp_path / "u/x.tiff"), "--out", str(tmp_path / "o")])  # 96×128 px: one tile
     assert rc == 0, capsys.readouterr().err
     assert set(files) | {"reconstruct.json", ".doefab-output.json"} == {p.name for p in (tmp_path / "o").iterdir()}
+    # replaced (--force) by another capture's results: the earlier run's go, the folder holds what its record says
+    for name in ("c/y.tiff", "u/y.tiff"):
+        write_frame(tmp_path / name, rng.uniform(0, 65535, (96, 128, 3)))
+    rc = main(["reconstruct", "--task", task, "--coded", str(tmp_path / "c/y.tiff"), "--uncoded",
+               str(tmp_path / "u/y.tiff"), "--out", str(tmp_path / "o"), "--force"])
+    assert rc == 0, capsys.readouterr().err
+    want = {f.replace("x.", "y.") for f in files} | {"reconstruct.json", ".doefab-output.json"}
+    assert want == {p.name for p in (tmp_path / "o").iterdir()}
+    record = json.loads((tmp_path / "o" / "reconstruct.json").read_text())
+    assert [f for pair in record["pairs"] for f in pair["files"]] == [f.replace("x.", "y.") for f in files]
 
 
 def _pair(work, size=(96, 128), channels=3, name="x"):

@@ -215,3 +215,37 @@ def test_a_psf_cut_by_the_frames_edge_is_refused_and_nothing_written(design_dir,
     for f in (tmp_path / "psf").glob("r0_*.tiff"):  # 4 px of margin more than the window needs: accepted
         tifffile.imwrite(f, np.pad(tifffile.imread(f), ((0, 0), (cut - 40 + 15 + 5, 0)), mode="edge"))
     calibrate(load_recordings(rec_file), tmp_path / "out2")
+
+
+@pytest.mark.parametrize("fault", ["swapped", "sizes"])
+def test_wall_pairs_that_give_no_crosstalk_are_refused_before_any_psf_work(design_dir, tmp_path, fault):
+    """A [[wall]] whose coded_view and plain_view are swapped puts most of its open half's light in the view that
+    half does not reach; walls of two sizes have no common columns. Both are refused naming the table and the
+    fix, by the wall measurement (before the PSF recordings are worked on); a sound pair gives the sensor's
+    ratios."""
+    import tifffile
+
+    from doefab.lab.calibrate import measure_walls
+    from doefab.lab.recordings import load_recordings
+    from doefab.lab.simulate import write_lab_recordings
+
+    f = write_lab_recordings(tmp_path / "rec", design_dir, frames=2, dark_frames=1, wavelengths_m=[656e-9],
+                             depths_m=[5.0], crosstalk=(0.05, 0.04))
+    got = measure_walls(load_recordings(f))
+    assert abs(float(np.median(got["alpha_lr"])) - 0.05) < 0.01 and abs(float(np.median(got["alpha_rl"])) - 0.04) < 0.01
+    text = f.read_text()
+    if fault == "swapped":  # the plain-open wall's two views exchanged
+        text = text.replace('coded_view = ["wall/plain_open_coded', 'XX').replace(
+            'plain_view = ["wall/plain_open_plain', 'coded_view = ["wall/plain_open_plain').replace(
+            'XX', 'plain_view = ["wall/plain_open_coded')
+        f.write_text(text)
+        match = r"\[\[wall\]\] 2 \(half = 'plain' open\) puts most of its light .*appear swapped"
+    else:  # the coded-open wall recorded 20 columns narrower, with its own dark
+        for p in (tmp_path / "rec" / "wall").glob("coded_open_*.tiff"):
+            tifffile.imwrite(p, tifffile.imread(p)[:, 20:])
+        dark = tmp_path / "rec" / "wall" / "dark_0.tiff"
+        tifffile.imwrite(tmp_path / "rec" / "wall" / "narrow_dark.tiff", tifffile.imread(dark)[:, 20:])
+        f.write_text(text.replace('dark = ["wall/dark_0.tiff"]', 'dark = ["wall/narrow_dark.tiff"]', 1))
+        match = r"is 62×62 px but \[\[wall\]\] 1 \(half = 'coded' open.* is 42×62 px: .*one frame size"
+    with pytest.raises(DoefabError, match=match):
+        measure_walls(load_recordings(f))

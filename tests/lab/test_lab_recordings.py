@@ -149,8 +149,12 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     _frames(psf, "sat", _spot(photons=4e7), n=2)
     _frames(psf, "dim", _spot(photons=300.0), n=4)
     _frames(psf, "small", _spot(size=24, centre=(12, 12)), n=2)
+    _frames(psf, "hot", np.full((64, 64), 256.0 * 64), n=2)  # a 16-bit dark under frames saved 8-bit (÷ 256)
+    for i in range(4):
+        write_frame(psf / f"eight_{i}.tiff", np.rint((_spot() + 64) / 256))
     msg = _problems(lab, _psf("psf/cut") + _psf("psf/size") + _psf(dark='dark = ["psf/dark40_*.tiff"]')
-                    + _psf("psf/sat") + _psf("psf/dim") + _psf("psf/small", dark=""))
+                    + _psf("psf/sat") + _psf("psf/dim") + _psf("psf/small", dark="")
+                    + _psf("psf/eight", dark='dark = ["psf/hot_*.tiff"]'))
     assert "cut_0.tiff cannot be read as tiff" in msg and "cut_2.tiff is 64×60 px but" in msg
     assert "size_9.tiff is 60×64 px but" in msg and "must have the same size" in msg
     assert "dark40_0.tiff is 40×40 px but [[psf]] 3's frames" in msg and "record the dark frames at the frames' size" \
@@ -160,7 +164,10 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     assert f"dim_0.tiff ([[psf]] 5, 4 frames): too few photons for the {K}×{K}-px kernel" in msg
     assert f"needs ≥ {MIN_KERNEL_SNR:g}" in msg and "record more light" in msg
     assert f"small_0.tiff: [[psf]] 6's frames are 24×24 px, smaller than the design's {K}×{K}-px kernel" in msg
-    assert msg.count("\n  - ") == 8  # one per problem, every recording checked
+    assert "eight_0.tiff ([[psf]] 7): its dark frames' mean (" in msg
+    assert "hot_0.tiff), 1.645e+04 DN, is no darker" in msg
+    assert "too few photons" not in msg.split("eight_0.tiff")[1]  # not "record more light" for a negative signal
+    assert msg.count("\n  - ") == 9  # one per problem, every recording checked
 
 
 def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
@@ -257,9 +264,10 @@ def test_a_wall_left_unlit_names_its_files(lab):
     msg = str(got.value)
     assert "[[wall]] 2 (half = 'plain' open): 4096 of 4096 pixels get no light" in msg and "dim_0.tiff" in msg
     assert "expose the white wall longer" in msg
-    lit = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n'
-           '[[wall]]\nhalf = "plain"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n')
-    assert measure_walls(load_recordings(_write(lab, lit)))["alpha_lr"] == pytest.approx(0.5, abs=0.01)
+    _frames(lab / "w", "leak", np.full((64, 64), 300.0), n=2)  # the open half's light leaking into the other view
+    lit = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/leak_*.tiff"\n'
+           '[[wall]]\nhalf = "plain"\ncoded_view = "w/leak_*.tiff"\nplain_view = "w/lit_*.tiff"\n')
+    assert measure_walls(load_recordings(_write(lab, lit)))["alpha_lr"] == pytest.approx(300 / 3300, abs=0.01)
 
 
 def test_white_level_is_the_sensors_clip(lab):
