@@ -273,8 +273,10 @@ def _design_problems(rec: Recordings, wavelengths_m, depths_m) -> list[str]:
             out.append(f"{where} wavelength_nm = {r.wavelength_m * 1e9:g} is no band of the design (within "
                        f"{WAVELENGTH_TOL_M * 1e9:g} nm): record at one of {bands} nm")
         if plane_index(r.depth_m, depths_m) is None:
-            out.append(f"{where} depth_m = {r.depth_m:g} is no plane of the design (within {DEPTH_TOL:.0%}): place "
-                       f"the source at one of {planes} m")
+            mm = plane_index(r.depth_m / 1000, depths_m) is not None  # a distance written in millimetres
+            unit = f" (depth_m is in metres: {r.depth_m / 1000:g}?)" if mm else ""
+            out.append(f"{where} depth_m = {r.depth_m:g} is no plane of the design (within {DEPTH_TOL:.0%}){unit}: "
+                       f"place the source at one of {planes} m")
     return out
 
 

@@ -105,6 +105,11 @@ def _read(path: Path) -> dict:
     """The archive's arrays, or one error naming the file."""
     if not path.is_file():
         raise DoefabError(f"{path} not found: give the psf_pair.npz that doefab calibrate (or diagnose) wrote")
+    with open(path, "rb") as f:
+        head = f.read(64)
+    if not head.startswith(b"PK") and head.lstrip()[:1] in (b"{", b"["):  # a JSON file, not a numpy archive
+        raise DoefabError(f"{path} is a JSON file, not a PSF pair (.npz): give the psf_pair.npz that doefab "
+                          f"calibrate or diagnose wrote (a crosstalk.json goes to --crosstalk)")
     try:
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in _KEYS if k not in z.files]

@@ -101,3 +101,16 @@ def test_a_pickle_or_foreign_file_is_refused(tmp_path):
         PSFPair.load(tmp_path / "junk.npz")
     with pytest.raises(DoefabError, match="not found"):
         PSFPair.load(tmp_path / "missing.npz")
+
+
+def test_the_two_calibration_files_given_the_wrong_way_round_are_told_apart(tmp_path):
+    from doefab.imaging.crosstalk import save_crosstalk
+
+    w = 8
+    cross = save_crosstalk(tmp_path / "crosstalk.json", np.full(w, 0.05), np.full(w, 0.04), np.full(w, 1e-3),
+                           np.full(w, 1e-3))
+    np.savez(tmp_path / "psf_pair.npz", coded=np.zeros((1, 1, 3, 3)))
+    with pytest.raises(DoefabError, match=r"crosstalk\.json is a JSON file, not a PSF pair .*goes to --crosstalk"):
+        PSFPair.load(cross)
+    with pytest.raises(DoefabError, match=r"psf_pair\.npz is a numpy archive, not a crosstalk file .*goes to --psf"):
+        doefab.DualPixelCrosstalk.load(tmp_path / "psf_pair.npz")

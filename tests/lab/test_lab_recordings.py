@@ -186,11 +186,13 @@ def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
 def test_wavelengths_depths_and_channels_the_design_cannot_use(lab):
     _frames(lab / "psf", "rgb", np.stack([_spot()] * 3, axis=-1), n=2)
     body = (_psf(source="wavelength_nm = 552") + _psf(depth="2.05") + _psf(depth='"inf"')
-            + _psf("psf/rgb", source='channels = "rgb"', dark="") + _psf("psf/f", source='channels = "rgb"'))
+            + _psf("psf/rgb", source='channels = "rgb"', dark="") + _psf("psf/f", source='channels = "rgb"')
+            + _psf(depth="5000"))
     msg = _problems(lab, body, bands=(450e-9, 550e-9), planes=(2.0, 5.0))
     assert "[[psf]] 1 wavelength_nm = 552 is no band of the design (within 1 nm): record at one of 450, 550 nm" in msg
     assert "[[psf]] 2 depth_m = 2.05 is no plane of the design (within 1%): place the source at one of 2, 5 m" in msg
-    assert "[[psf]] 3 depth_m = inf is no plane" in msg
+    assert "[[psf]] 3 depth_m = inf is no plane" in msg and "depth_m = inf is no plane of the design (within 1%):" in msg
+    assert "[[psf]] 6 depth_m = 5000 is no plane of the design (within 1%) (depth_m is in metres: 5?): place" in msg
     assert "[[psf]] 4 channels = \"rgb\": one PSF per colour channel needs a 3-band design, this design has 2" in msg
     assert "f_0.tiff: [[psf]] 5 has channels = \"rgb\" but its frames are monochrome" in msg
     assert load_recordings(_write(lab, _psf("psf/rgb", source='channels = "rgb"', dark=""))) is not None
