@@ -22,7 +22,7 @@ from doefab.lab.measure import extract, normalise, photon_transfer, register, wa
 from doefab.lab.recordings import Recordings, band_index, check_recordings, plane_index, recordings_sha256
 
 __all__ = ["calibrate", "measure_recordings", "write_calibration", "Calibration", "psf_grid", "nominal_psfs",
-           "calibrate_recording", "measure_walls", "rgb_bands", "PSFGrid"]
+           "registration_size", "calibrate_recording", "measure_walls", "rgb_bands", "PSFGrid"]
 
 PAIR_HALF = {"coded": "coded", "plain": "uncoded"}  # a recording's half → the PSFPair's
 
@@ -89,6 +89,18 @@ def psf_grid(rec: Recordings, wavelengths_m, depths_m) -> PSFGrid:
     return PSFGrid(planes, bands, entries)
 
 
+def registration_size(design, grid: PSFGrid, kernel: int) -> int:
+    """The side (odd, pixels) of the nominal PSFs the registration matches: ``measure.register_size(kernel)``,
+    held inside the alias-free field at the grid's shortest wavelength (λ s / (2 · DOE pitch) from the chief ray),
+    and never below the kernel."""
+    from doefab.lab.measure import register_size
+
+    cam = design.camera
+    lam = min(design.wavelengths[b] for b in grid.bands)
+    most = int(2 * (lam * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch - 0.5))
+    return max(kernel, min(register_size(kernel), most - (most + 1) % 2))
+
+
 def nominal_psfs(design, grid: PSFGrid, kernel: int) -> dict:
     """{half: (planes, bands, K, K) float64} PSFs of the design's L-level part (no fab error) on its camera."""
     import torch
@@ -152,18 +164,22 @@ def _require_window_inside(nominal: np.ndarray, chief, shape, what: str, most: f
                           f"(2K × 2K leaves room for its offset)")
 
 
-def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float) -> dict:
+def calibrate_recording(r, grid: PSFGrid, nominal: tuple[dict, dict], fmt: str, black: float) -> dict:
     """One recording registered, resampled and normalised: {(plane, band): PSF} of its half, the chief ray's
-    position and shift from the frame's centre pixel (rows, columns), and its light (:func:`_light`)."""
+    position and shift from the frame's centre pixel (rows, columns), and its light (:func:`_light`).
+    ``nominal``: the nominal PSFs ({half: array}) on the kernel and on the registration's wider window
+    (:func:`registration_size`)."""
     half = PAIR_HALF[r.half]
     keys = [(z, b, c) for (h, z, b), (rr, c) in grid.entries.items() if rr is r and h == r.half]
+    nominal, wide = nominal
     refs = [nominal[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
     k = refs[0].shape[-1]
+    wide_refs = [wide[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
     frames = _read(r.frames, fmt)
     light = _light(frames, _read(r.dark, fmt) if r.dark else None, black, k)
     signal = light.pop("signal")
     chans = [signal if c is None else signal[..., c] for _, _, c in keys]
-    chief = register(np.sum(chans, axis=0), np.sum(refs, axis=0))
+    chief = register(np.sum(chans, axis=0), np.sum(wide_refs, axis=0), kernel=k)
     what = f"{r.name} ({r.frames[0]})"
     _require_window_inside(np.sum(refs, axis=0), chief, signal.shape[:2], what)
     psfs = {(z, b): normalise(extract(ch, chief, k), float(ref.sum()), what)
@@ -271,11 +287,13 @@ def measure_recordings(recordings: Recordings, progress: bool = False) -> Calibr
     check_recordings(recordings, design.wavelengths, design.depths, kernel)
     grid = psf_grid(recordings, design.wavelengths, design.depths)
     walls = measure_walls(recordings)
-    nominal = nominal_psfs(design, grid, kernel)
+    wide = nominal_psfs(design, grid, registration_size(design, grid, kernel))  # the registration's reference
+    c = (wide["coded"].shape[-1] - kernel) // 2
+    nominal = {h: np.ascontiguousarray(v[..., c:c + kernel, c:c + kernel]) for h, v in wide.items()}
     measured = {h: np.zeros_like(v) for h, v in nominal.items()}
     rows = []
     for r in recordings.psf:
-        m = calibrate_recording(r, grid, nominal, recordings.pixel_format, recordings.black_level)
+        m = calibrate_recording(r, grid, (nominal, wide), recordings.pixel_format, recordings.black_level)
         for (z, b), psf in m.pop("psfs").items():
             measured[PAIR_HALF[r.half]][grid.planes.index(z), grid.bands.index(b)] = psf
         rows.append({"recording": r.name, "half": r.half, "depth_m": r.depth_m, "channels": r.channels,

@@ -11,7 +11,7 @@ import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["window", "register", "extract", "normalise", "photon_transfer", "wall_ratios", "UPSAMPLE"]
+__all__ = ["window", "register", "register_size", "extract", "normalise", "photon_transfer", "wall_ratios", "UPSAMPLE"]
 
 UPSAMPLE = 100  # cross-correlation refined to 1/100 pixel
 _PAD = 8  # pixels of frame kept around a kernel while it is shifted (the Fourier shift's wrap stays outside)
@@ -30,27 +30,35 @@ def window(frame: np.ndarray, centre, size: int) -> np.ndarray:
     return out
 
 
-def register(frame: np.ndarray, nominal: np.ndarray, upsample: int = UPSAMPLE) -> np.ndarray:
+def register_size(k: int) -> int:
+    """The side (pixels) of the frame crop :func:`register` cross-correlates for a K-pixel kernel: K plus K//2
+    (at least 4) on each side."""
+    return k + 2 * max(k // 2, 4)
+
+
+def register(frame: np.ndarray, nominal: np.ndarray, upsample: int = UPSAMPLE, kernel: int | None = None) -> np.ndarray:
     """The chief ray's sub-pixel (row, column) in ``frame`` (a dark-subtracted recording, DN): where ``nominal``
-    (the design's K × K PSF, chief ray at (K//2, K//2)) fits it best.
+    (the design's PSF, chief ray on its centre pixel) fits it best.
 
     The brightest pixel of the frame (smoothed over 3 × 3 against a hot pixel) is taken as the nominal's
-    brightest, which places the chief ray to a pixel or so; then the frame is cropped around it (K plus K//2 on
-    each side) and cross-correlated with the nominal (``skimage.registration.phase_cross_correlation`` without
-    spectral whitening, refined ``upsample`` times): a part's PSF whose brightest lobe is not the design's is
-    still found within ±K/2 pixels."""
+    brightest, which places the chief ray to a pixel or so; then the frame is cropped around it
+    (``register_size(kernel)``: the kernel plus half of it on each side) and cross-correlated with the nominal
+    cropped or zero-padded to the same size (``skimage.registration.phase_cross_correlation`` without spectral
+    whitening, refined ``upsample`` times): a part's PSF whose brightest lobe is not the design's is still found
+    within ±K/2 pixels. Give ``nominal`` at least that size where the design puts light outside the kernel: a
+    K × K nominal lacks the tails the crop holds, and they pull the match (a quarter pixel for a streak with a
+    tenth of its light beyond K). ``kernel``: K (default: the nominal's size)."""
     from scipy.ndimage import uniform_filter
     from skimage.registration import phase_cross_correlation
 
-    k = nominal.shape[-1]
+    n = nominal.shape[-1]
+    k = n if kernel is None else int(kernel)
     peak = np.array(np.unravel_index(np.argmax(uniform_filter(frame, 3, mode="constant")), frame.shape))
     nom_peak = np.array(np.unravel_index(np.argmax(uniform_filter(nominal, 3, mode="constant")), nominal.shape))
-    coarse = peak - (nom_peak - k // 2)
-    margin = max(k // 2, 4)
-    size = k + 2 * margin
+    coarse = peak - (nom_peak - n // 2)
+    size = register_size(k)
     crop = window(frame, coarse, size)
-    ref = np.zeros((size, size))
-    ref[margin:margin + k, margin:margin + k] = nominal
+    ref = window(nominal, (n // 2, n // 2), size)
     shift, _, _ = phase_cross_correlation(ref, crop, upsample_factor=upsample, normalization=None)
     return coarse - np.asarray(shift, dtype=np.float64)
 

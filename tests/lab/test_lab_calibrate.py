@@ -250,3 +250,39 @@ def test_wall_pairs_that_give_no_crosstalk_are_refused_before_any_psf_work(desig
         match = r"is 62×62 px but \[\[wall\]\] 1 \(half = 'coded' open.* is 42×62 px: .*one frame size"
     with pytest.raises(DoefabError, match=match):
         measure_walls(load_recordings(f))
+
+
+def test_registration_is_unbiased_where_the_design_puts_light_beyond_the_kernel():
+    """A 64-pixel cut of the committed streak design (K = 63) puts a tenth of its coded light beyond the kernel,
+    on one side more than the other. A frame of the nominal part, chief ray on a known pixel, registers there to
+    1/50 px against the nominal on the registration's window; against the K × K nominal alone the tails the frame
+    holds pulled the match by a quarter pixel, and the diagnosis read that as fab errors."""
+    import dataclasses
+    from pathlib import Path
+
+    import torch
+
+    from doefab.design.design import Design
+    from doefab.lab.calibrate import PSFGrid, registration_size
+    from doefab.lab.measure import register
+
+    full = Design.load(Path(__file__).resolve().parents[2] / "masks" / "streak" / "design")
+    n, big = 64, full.camera.doe_pixels
+    lv = np.ascontiguousarray(full.levels[(big - n) // 2:(big + n) // 2, big // 8:big // 8 + n])
+    lv[:, n // 2:] = 15
+    cam = dataclasses.replace(full.camera, doe_pixels=n, aperture_diameter=n * full.camera.doe_pitch,
+                              sensor_distance=20e-3)
+    height = doefab.levels_to_height(lv, cam)
+
+    def coded(k):
+        with torch.no_grad():
+            return doefab.PSFPlan(cam, [full.wavelengths[0]], [full.depths[0]], k, halves=("coded",))(height) \
+                .coded[0, 0].double().numpy()
+
+    d = Design(task="streak", task_params={}, camera=cam, wavelengths=(full.wavelengths[0],), depths=full.depths[:1],
+               height=height, levels=lv, metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
+    wide = registration_size(d, PSFGrid(bands=[0], planes=[0], entries={}), 63)
+    frame = coded(127)  # chief ray on pixel (63, 63)
+    assert 1 - coded(63).sum() / frame.sum() > 0.05  # light beyond the kernel
+    assert np.abs(register(frame, coded(wide), kernel=63) - 63).max() < 0.02
+    assert np.abs(register(frame, coded(63)) - 63).max() > 0.1  # the K × K reference alone: biased
