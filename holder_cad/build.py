@@ -96,8 +96,8 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
     t_mesh = time.perf_counter() - t0
     coupon = {b.name: build_manifold(b, p.segments) for b in coupon_bodies(p)}
     coupon_checks = run_checks(coupon, [], p, expected_bodies=2)
-    report = {"units": "mm", "parameters": p.to_dict(), "derived": list(p.derived), "checks": checks,
-              "coupon_checks": coupon_checks,
+    report = {"units": "mm", "parameters": p.to_dict(), "derived": list(p.derived), "warnings": p.warnings,
+              "checks": checks, "coupon_checks": coupon_checks,
               "doe_to_lens_mm": checks["doe_to_lens_mm"], "mesh_seconds": round(t_mesh, 3), "files": []}
     if not (checks["passed"] and coupon_checks["passed"]):
         (out / "holder.json").unlink(missing_ok=True)

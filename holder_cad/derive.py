@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
-           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "FLANK_CLEARANCE_MM",
+           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "FLANK_CLEARANCE_MM", "thread_warnings",
+           "FILTER_PITCHES_MM",
            "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
@@ -146,6 +147,28 @@ def next_filter_thread_mm(diameter_mm: float) -> float:
     """The smallest common filter thread (mm) of at least ``diameter_mm`` (a step-up ring's size), or
     ``diameter_mm`` rounded up to half a millimetre beyond the list."""
     return next((d for d in COMMON_FILTER_THREADS_MM if d >= diameter_mm - _EPS), math.ceil(2 * diameter_mm) / 2)
+
+
+FILTER_PITCHES_MM = (0.5, 0.75, 1.0)  # the pitches photographic filter threads are cut with
+
+
+def thread_warnings(diameter_mm: float, pitch_mm: float) -> list[str]:
+    """What is unusual about a filter thread of this nominal diameter and pitch (mm): a size no common filter has,
+    a pitch no filter thread is cut with — likely a misread lens (each line names the nearest common ones).
+
+    Example: ``thread_warnings(49.3, 0.75)`` → one line naming 49 and 52 mm."""
+    out = []
+    if not any(abs(diameter_mm - d) < _EPS for d in COMMON_FILTER_THREADS_MM):
+        below = [d for d in COMMON_FILTER_THREADS_MM if d < diameter_mm]
+        above = [d for d in COMMON_FILTER_THREADS_MM if d > diameter_mm]
+        near = " and ".join(f"{d:g}" for d in (below[-1:] + above[:1]))
+        out.append(f"thread_diameter_mm {diameter_mm:g} is no common filter thread (nearest {near} mm): check "
+                   f"the size on the lens's front ring or cap; a custom thread is built as given")
+    if not any(abs(pitch_mm - q) < _EPS for q in FILTER_PITCHES_MM):
+        pitches = ", ".join(f"{q:g}" for q in FILTER_PITCHES_MM)
+        out.append(f"thread_pitch_mm {pitch_mm:g} is no filter-thread pitch ({pitches} mm): leave it out to "
+                   f"take the size's standard pitch, {standard_pitch_mm(diameter_mm):g} mm")
+    return out
 
 
 def standard_pitch_mm(thread_diameter_mm: float) -> float:

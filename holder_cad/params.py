@@ -289,6 +289,11 @@ class HolderParams:
         return self.washer_diameter_mm / 2 + self.clearance_mm
 
     @property
+    def warnings(self) -> list[str]:
+        """What is unusual but allowed (``derive.thread_warnings``: a thread size or pitch no filter has)."""
+        return derive.thread_warnings(self.thread_diameter_mm, self.thread_pitch_mm) if self.mount == "thread" else []
+
+    @property
     def pocket_corner_radius_mm(self) -> float:
         """The die pocket's farthest point from the axis (mm): a square corner of the die outline offset by
         ``clearance_mm`` with mitred corners (``recipe.offset_convex``), (w/2 + c, h/2 + c) — √2·c beyond the die's

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 
 from holder_cad.params import HolderError, HolderParams
 
@@ -66,6 +67,8 @@ def run(args) -> int:
     out.create()
     report = write_holder(p, out.path, step=False if args.no_step else None, renders=not args.no_renders)
     c = report["checks"]
+    for note in report["warnings"]:
+        print(f"warning: {note}", file=sys.stderr)
     print(json.dumps({"checks_passed": c["passed"], "bodies": {k: {kk: v[kk] for kk in ("volume_mm3", "min_wall_mm",
                       "overhang_area_beyond_45deg_mm2")} for k, v in c["bodies"].items()},
                       "die_to_pocket_gap_mm": c.get("die_to_pocket_gap_mm"),

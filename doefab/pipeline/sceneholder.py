@@ -9,7 +9,8 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import Scene
 
-__all__ = ["scene_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks"]
+__all__ = ["scene_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks",
+           "holder_warnings"]
 
 
 def scene_die_m(scene: Scene, cam) -> float:
@@ -70,6 +71,20 @@ def scene_holder(scene: Scene, cam) -> dict:
     field = scene_field_half_angle_deg(scene, cam)
     return {"die_width_mm": die_mm, "die_height_mm": die_mm, "clear_aperture_mm": round(cam.aperture_diameter * 1e3, 6),
             **({"field_half_angle_deg": field} if field is not None else {}), **scene.holder}
+
+
+def holder_warnings(scene: Scene, cam) -> list[str]:
+    """What is unusual about the holder the run would build (``HolderParams.warnings``: a thread size or pitch no
+    filter has), each naming its scene key; none when the holder stage is not run or its parameters are refused
+    (``holder_checks`` says why)."""
+    if "holder" not in scene.stages:
+        return []
+    from holder_cad.params import HolderError, HolderParams
+
+    try:
+        return [f"holder.{note}" for note in HolderParams(**scene_holder(scene, cam)).warnings]
+    except (HolderError, DoefabError):
+        return []
 
 
 def holder_checks(scene: Scene, cam) -> list[str]:

@@ -24,7 +24,7 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_came
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
-from doefab.pipeline.sceneholder import holder_checks, scene_die_m
+from doefab.pipeline.sceneholder import holder_checks, holder_warnings, scene_die_m
 from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
 
@@ -302,7 +302,7 @@ def resolve(scene: Scene) -> ResolvedScene:
         quick_sampling=quick_sampling(cam.doe_pixels, int(settings["sampling"]),
                                       lambda d: not design_grid_problems(cam, task, d)),
         warnings=tuple(system_warnings(cam, task) + _sensor_warnings(scene, sensor, task, cam)
-                       + _depth_warnings(scene, cam, task)))
+                       + _depth_warnings(scene, cam, task) + holder_warnings(scene, cam)))
 
 
 def _sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:

@@ -126,3 +126,32 @@ def test_replace_derives_again_what_was_not_given():
     q = p.replace(thread_diameter_mm=40.5)
     assert (q.thread_pitch_mm, q.flange_diameter_mm) == (0.5, HolderParams(thread_diameter_mm=40.5).flange_diameter_mm)
     assert HolderParams(flange_diameter_mm=60.0).replace(thread_diameter_mm=52.0).flange_diameter_mm == 60.0
+
+
+CUSTOM = "check the size on the lens's front ring or cap; a custom thread is built as given"
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({"thread_diameter_mm": 49.3}, ["thread_diameter_mm 49.3 is no common filter thread (nearest 49 and 52 mm): "
+                                    + CUSTOM]),
+    ({"thread_diameter_mm": 33.3}, ["thread_diameter_mm 33.3 is no common filter thread (nearest 30.5 and 34 mm): "
+                                    + CUSTOM]),
+    ({"thread_pitch_mm": 0.6}, ["thread_pitch_mm 0.6 is no filter-thread pitch (0.5, 0.75, 1 mm): leave it out to "
+                                "take the size's standard pitch, 0.75 mm"]),
+    ({"thread_diameter_mm": 52.0}, []), ({"thread_diameter_mm": 30.5, "thread_pitch_mm": 0.5}, []),
+    ({"mount": "slip", "thread_diameter_mm": 49.3}, []),  # no thread is cut
+])
+def test_a_thread_no_filter_has_is_built_and_warned(kw, words, tmp_path, capsys):
+    """Filter threads come in a few dozen sizes (ISO 1222-style 0.5 / 0.75 / 1.0 mm pitches): a size or pitch off
+    that list is most likely a misread lens. It is built as given, with a warning naming the nearest sizes."""
+    import json
+
+    from doefab.cli import main
+
+    p = HolderParams(**kw)
+    assert p.warnings == words
+    sets = [a for k, v in kw.items() for a in ("--set", f"{k}={v}")]
+    assert main(["holder", "--out", str(tmp_path / "h"), "--no-step", "--no-renders", *sets]) == 0
+    err = capsys.readouterr().err
+    assert [line[len("warning: "):] for line in err.splitlines() if line.startswith("warning: ")] == words
+    assert json.loads((tmp_path / "h" / "holder.json").read_text())["warnings"] == words

@@ -177,3 +177,16 @@ def test_a_macro_lens_depth_of_field_is_told_with_the_digits_that_tell_its_limit
     assert row["value"] == pytest.approx(1 / (1 / 0.3 + 2 * 4.3e-6 / (d * s)), rel=1e-9)
     shown = float(re.search(r"far limit ([\d.]+) m", row["meaning"])[1])
     assert shown == pytest.approx(far, abs=5e-6) and shown != pytest.approx(0.3, abs=5e-6)
+
+
+def test_a_scenes_holder_thread_no_filter_has_is_warned_with_its_key(tmp_path):
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    assert "thread_diameter_mm = 49.0" in text and resolve(load_scene(REPO / "scenes" / "hdr.toml")).warnings == ()
+    odd = tmp_path / "odd.toml"
+    odd.write_text(text.replace("thread_diameter_mm = 49.0", "thread_diameter_mm = 49.3"))
+    notes = resolve(load_scene(odd)).warnings
+    assert len(notes) == 1 and notes[0].startswith("holder.thread_diameter_mm 49.3 is no common filter thread")
+    assert "nearest 49 and 52 mm" in notes[0]
+    off = tmp_path / "no_holder.toml"  # no holder is built: nothing to warn of
+    off.write_text(odd.read_text().replace('"holder", ', ""))
+    assert resolve(load_scene(off)).warnings == ()
