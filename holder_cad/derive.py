@@ -78,32 +78,32 @@ def lead_in_mm(p) -> float:
 
 
 def groove_filled_mm(p) -> float:
-    """Height (mm) where the flange's 45° chamfer, which reaches the tooth's crest at the thread's end (the lens's
-    filter face), reaches the groove's bottom: ``thread_length_mm`` less ``thread_depth_mm``. Above it the
-    groove is partly filled; the turns counted as bearing end there (a margin: with the default play the lens's
-    tooth crest stops 0.08 × pitch short of the groove's bottom, so the filling reaches it 0.08 × pitch higher)."""
-    return p.thread_length_mm - p.thread_depth_mm
+    """Height (mm) where the flange's 45° chamfer, which reaches the lens's crest radius (``seat_radius_mm``) at
+    the thread's end (the lens's filter face), reaches the groove's bottom: ``thread_length_mm`` less the seat
+    radius's height over the root. Above it the groove is partly filled; the turns counted as bearing end there
+    (a margin: the filling stays inside the lens's crest radius below the thread's end)."""
+    return p.thread_length_mm - (p.seat_radius_mm - p.thread_root_radius_mm)
 
 
 def full_tooth_turns(p) -> float:
     """Turns of full tooth in a full groove, between the lead-in's top and the flange's chamfer: the turns that
-    bear in the lens's thread. Example: 2.35 for the default 2.5 mm thread of a 0.75 mm pitch
-    ((2.5 − 0.3 − 0.4375) / 0.75)."""
+    bear in the lens's thread. Example: 2.57 for the default 2.5 mm thread of a 0.75 mm pitch
+    ((2.5 − 0.1313 − 0.4375) / 0.75)."""
     return (groove_filled_mm(p) - lead_in_mm(p)) / p.thread_pitch_mm
 
 
 def length_for_turns_mm(p, turns: float) -> float:
     """The thread length (mm) that bears ``turns`` turns of full tooth (:func:`full_tooth_turns` inverted): the
-    turns, the lead-in and the tooth depth the flange's chamfer fills. Example: 2.9625 mm for two turns of a
-    1.0 mm pitch (2 + 0.5625 + 0.4)."""
-    return turns * p.thread_pitch_mm + lead_in_mm(p) + p.thread_depth_mm
+    turns, the lead-in and the height the flange's chamfer fills (its seat radius over the root). Example:
+    2.7125 mm for two turns of a 1.0 mm pitch (2 + 0.5625 + 0.15)."""
+    return turns * p.thread_pitch_mm + lead_in_mm(p) + (p.seat_radius_mm - p.thread_root_radius_mm)
 
 
 def thread_length_mm(p) -> float:
     """The derived thread length (mm): 2.5 mm, or the least tenth of a millimetre more that gives ``MIN_FULL_TURNS``
     turns of full tooth between the lead-in and the flange's chamfer (``p``'s pitch and tooth depth resolved).
 
-    Example: 2.5 mm for a 0.75 mm pitch; 3.0 mm for a 1.0 mm pitch (0.5625 mm lead-in, 2 mm, 0.4 mm chamfer)."""
+    Example: 2.5 mm for a 0.75 mm pitch; 2.8 mm for a 1.0 mm pitch (0.5625 mm lead-in, 2 mm, 0.15 mm chamfer)."""
     return max(_THREAD_LENGTH_MM, math.ceil(10 * length_for_turns_mm(p, MIN_FULL_TURNS) - 1e-6) / 10)
 
 
@@ -250,9 +250,9 @@ def flange_height_mm(p) -> float:
 def max_flange_diameter_mm(p, height_mm: float) -> float:
     """The largest whole-millimetre flange diameter (mm) whose :func:`min_flange_height_mm` is at most
     ``height_mm`` (a threaded base: its chamfer grows with the flange)."""
-    major, wall = p.thread_major_radius_mm, p.wall_mm
-    by_chamfer = height_mm - wall + major
-    by_pilots = 2 * (height_mm - PILOT_DEPTH_MM - p.pilot_hole_mm / 2 - wall * math.sqrt(2) + major) - p.bore_radius_mm
+    seat, wall = p.seat_radius_mm, p.wall_mm
+    by_chamfer = height_mm - wall + seat
+    by_pilots = 2 * (height_mm - PILOT_DEPTH_MM - p.pilot_hole_mm / 2 - wall * math.sqrt(2) + seat) - p.bore_radius_mm
     return float(math.floor(2 * min(by_chamfer, by_pilots) + _EPS))
 
 

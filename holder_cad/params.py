@@ -105,8 +105,8 @@ class HolderParams:
         self._check_given()
         self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
         self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
-        self._resolve("thread_length_mm", derive.thread_length_mm(self))
         self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm, self.thread_depth_mm))
+        self._resolve("thread_length_mm", derive.thread_length_mm(self))  # its chamfer's seat follows the play
         self._check_die_and_thread()
         self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))
         self._check_flange_diameter()
@@ -262,6 +262,14 @@ class HolderParams:
         return self.thread_major_radius_mm - (self.thread_diameter_mm - 2 * derive.ISO_DEPTH * self.thread_pitch_mm) / 2
 
     @property
+    def seat_radius_mm(self) -> float:
+        """Radius (mm) of the flange's 45° chamfer at the thread's end, the plane of the lens's filter face: the
+        female thread's minor radius, (D − 1.0825·P) / 2, where the chamfer meets the mouth's crest — so the base
+        seats there, not a tooth's engagement short of it (at most the printed thread's outer radius)."""
+        minor = (self.thread_diameter_mm - 2 * derive.ISO_DEPTH * self.thread_pitch_mm) / 2
+        return min(self.thread_major_radius_mm, minor)
+
+    @property
     def thread_root_radius_mm(self) -> float:
         """Root radius of the printed thread (mm), the major radius less ``thread_depth_mm``."""
         return self.thread_major_radius_mm - self.thread_depth_mm
@@ -355,8 +363,9 @@ class HolderParams:
 
     @property
     def chamfer_height_mm(self) -> float:
-        """Height of the flange's 45° chamfer (mm), from the thread to the flange's outer radius."""
-        return self.flange_diameter_mm / 2 - self.thread_major_radius_mm
+        """Height of the flange's 45° chamfer (mm) above the thread's end, from its seat radius to the flange's
+        outer radius."""
+        return self.flange_diameter_mm / 2 - self.seat_radius_mm
 
     @property
     def base_height_mm(self) -> float:
@@ -404,7 +413,7 @@ class HolderParams:
         45° chamfer, short of it (threaded base); the slip-fit plate is drilled through (its bottom)."""
         if self.mount == "thread":
             return (self.pilot_radius_mm + self.pilot_hole_mm / 2 + self.wall_mm * math.sqrt(2)
-                    - self.thread_major_radius_mm)
+                    - self.seat_radius_mm)
         return 0.0
 
     def replace(self, **changes) -> "HolderParams":

@@ -169,9 +169,10 @@ def _thread(p: HolderParams, body: Body) -> None:
 
 def _chamfer_foot(p: HolderParams) -> tuple[float, float]:
     """(radius, height) (mm) where the flange's 45° chamfer over the thread starts: just inside the thread's root,
-    so no face overhangs, and low enough that the cone reaches the crest at the thread's end."""
+    so no face overhangs, and high enough that the cone passes the lens's crest radius (``seat_radius_mm``) only at
+    the thread's end: the base screws in until the filter face meets that plane."""
     r0 = p.thread_root_radius_mm - 0.02
-    return r0, p.thread_length_mm - (p.thread_major_radius_mm - r0)
+    return r0, p.thread_length_mm - (p.seat_radius_mm - r0)
 
 
 def _threaded_ring(p: HolderParams, body: Body, r_outer: float, top: float) -> None:

@@ -56,15 +56,15 @@ def test_the_lens_side_end_stays_clear_of_the_glass():
     """The thread's tip, with the cartridge's end flush with it, turns 0.2 mm or more in front of the glass: a
     thread as long as the lens's glass is deep is refused, however deep the washers could sink; a slip-fit plate
     rests on the barrel's face, 3.5 mm in front of the glass, and sinks the washers just below its end."""
-    with pytest.raises(HolderError, match=r"lens_side_end_to_glass_mm .* set thread_length_mm between 2.3 and 3.3"):
+    with pytest.raises(HolderError, match=r"lens_side_end_to_glass_mm .* set thread_length_mm between 2.1 and 3.3"):
         HolderParams(thread_length_mm=3.4)
-    for t in (2.3, 3.3):  # both ends of the range named: two full turns of the 0.75 mm pitch, 0.2 mm from the glass
+    for t in (2.1, 3.3):  # both ends of the range named: two full turns of the 0.75 mm pitch, 0.2 mm from the glass
         HolderParams(thread_length_mm=t)
     # a glass too near the filter face for two full turns: no thread length works, and the message says so
-    for kw in ({"lens_face_to_glass_mm": 2.0}, {"thread_diameter_mm": 95.0, "lens_face_to_glass_mm": 3.0}):
+    for kw in ({"lens_face_to_glass_mm": 2.0}, {"thread_diameter_mm": 95.0, "lens_face_to_glass_mm": 2.9}):
         with pytest.raises(HolderError, match=r"lens_side_end_to_glass_mm .* leaves room for .*\(mount = \"slip\"\)"):
             HolderParams(**kw)
-    HolderParams(thread_diameter_mm=95.0, lens_face_to_glass_mm=3.2)
+    HolderParams(thread_diameter_mm=95.0, lens_face_to_glass_mm=3.0)  # its 2.8 mm thread, 0.2 mm from the glass
     slip = HolderParams(mount="slip")
     assert slip.washer_recess_mm == pytest.approx(0.3) and slip.doe_to_lens_mm == pytest.approx(3.5 + 0.3)
 

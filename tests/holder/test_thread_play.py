@@ -43,3 +43,28 @@ def test_a_play_that_jams_or_barely_engages_is_refused(play, words):
     hp = HolderParams()
     ok = HolderParams(thread_clearance_mm=0.25)  # looser: a third of the depth engaged
     assert _groove_and_tooth(ok)[1] < _groove_and_tooth(hp)[1]
+
+
+@pytest.mark.parametrize("thread", [30.5, 49.0, 95.0])
+def test_the_base_seats_on_the_filter_face(thread):
+    """Read on the base's mesh: below the thread's end (the lens's filter face) every section leaves a groove open
+    to inside the lens's crest radius (the ISO internal thread's minor radius D1/2), so the lens's crest passes; just
+    above it the flange's chamfer is wider than that radius. The base screws in until its flange meets the filter
+    face — the chamfer had met the crest a tooth's engagement (0.17–0.24 mm) short of it."""
+    import numpy as np
+
+    from holder_cad.build import build_parts
+
+    p = HolderParams(thread_diameter_mm=thread)
+    base = build_parts(p)["base"]
+    r1 = thread / 2 - 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm  # the internal thread's minor radius
+
+    def innermost(z):  # the smallest radius of the section's outer contour at height z (the bore left out)
+        pts = np.concatenate([np.asarray(q) for q in base.slice(z).to_polygons()])
+        r = np.hypot(pts[:, 0], pts[:, 1])
+        return float(r[r > p.bore_radius_mm + 0.5].min())
+
+    t = p.thread_length_mm
+    for z in np.linspace(t - 0.4, t - 0.005, 12):
+        assert innermost(z) <= r1 + 1e-3, z
+    assert innermost(t + 0.05) > r1
