@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from holder_cad import derive
 from holder_cad.checks import run_checks
 from holder_cad.mesh import build_manifold, to_trimesh
 from doefab.errors import CheckFailed
@@ -107,6 +108,12 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
                                f"{out / 'holder.FAILED.json'}; no printable file was written)")
     (out / "holder.FAILED.json").unlink(missing_ok=True)
     printed = _layout_for_print([parts["base"], parts["cartridge"]])
+    boxes = np.array([m.bounding_box() for m in printed])  # (xmin, ymin, zmin, xmax, ymax, zmax) per body
+    foot = report["print_footprint_mm"] = [round(float(v), 2) for v in boxes[:, 3:].max(0) - boxes[:, :3].min(0)]
+    if max(foot[:2]) > derive.COMMON_BED_MM:
+        report["warnings"].append(f"holder.stl lays the base and the cartridge side by side over {foot[0]:g} × "
+                                  f"{foot[1]:g} mm, more than a common {derive.COMMON_BED_MM:g} mm bed: print them "
+                                  f"one at a time (holder.3mf holds each as its own object)")
     _export_mesh(printed, out / "holder.stl", "stl")
     _export_mesh(printed, out / "holder.3mf", "3mf", ("base", "cartridge"))
     _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")

@@ -25,7 +25,7 @@ import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
            "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "FLANK_CLEARANCE_MM", "thread_warnings",
-           "FILTER_PITCHES_MM",
+           "FILTER_PITCHES_MM", "COMMON_BED_MM",
            "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
            "MAX_FIELD_HALF_ANGLE_DEG", "DIE_INDEX_MIN", "min_flange_diameter_mm", "min_flange_height_mm",
@@ -149,6 +149,7 @@ def next_filter_thread_mm(diameter_mm: float) -> float:
     return next((d for d in COMMON_FILTER_THREADS_MM if d >= diameter_mm - _EPS), math.ceil(2 * diameter_mm) / 2)
 
 
+COMMON_BED_MM = 220.0  # a common FDM printer's bed side (mm): a print layout wider than it is warned of
 FILTER_PITCHES_MM = (0.5, 0.75, 1.0)  # the pitches photographic filter threads are cut with
 
 

@@ -181,6 +181,30 @@ def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[st
     return out
 
 
+BORDER_PX = 3  # the frame's outer rows and columns whose median is the background far from the spot
+
+
+def _background_problem(r, frames: FrameSet, dark: FrameSet | None, black_level: float) -> str | None:
+    """The frame's border, far from the spot, once the darks (or black_level) are subtracted, should read zero
+    within its noise; a pedestal there (a black level left in, darks of other settings) adds to every pixel of the
+    kernel window and is read as light. Refused where the border's median lies more than 5 noise σ (the
+    border's own scatter, from its MAD) and 0.1 % of the peak above zero."""
+    s = frames.mean - (dark.mean if dark is not None else black_level)
+    mono = s if s.ndim == 2 else s.mean(axis=-1)
+    b = BORDER_PX
+    border = np.concatenate([mono[:b].ravel(), mono[-b:].ravel(), mono[b:-b, :b].ravel(), mono[b:-b, -b:].ravel()])
+    level = float(np.median(border))
+    sigma = 1.4826 * float(np.median(np.abs(border - level)))
+    peak = float(mono.max())
+    if level <= 5 * sigma or level <= 1e-3 * peak:
+        return None
+    what = "its dark frames are" if dark is not None else f"black_level ({black_level:g} DN) is"
+    return (f"{frames.first} ({r.name}): the frame's border, far from the spot, reads {level:.4g} DN above zero "
+            f"once {what} subtracted ({level / max(sigma, 1e-12):.3g} times its noise, {level / peak:.2%} of the "
+            f"peak): a pedestal that would be read as light in the whole kernel window: give dark frames recorded "
+            f"with the source off at the frames' exposure and gain, or the sensor's black_level")
+
+
 def psf_frame_problems(rec, r, kernel: int) -> list[str]:
     """Every problem of the ``Recordings`` ``rec``'s PSF recording ``r``, each naming the file and the fix."""
     out: list[str] = []
@@ -212,6 +236,9 @@ def psf_frame_problems(rec, r, kernel: int) -> list[str]:
         return [f"{frames.first} ({r.name}): {what}, {zero:.4g} DN, is no darker than the frames' mean, "
                 f"{float(np.mean(m)):.4g} DN: record the darks at the frames' exposure, gain and bit depth (a "
                 f"16-bit dark under 8-bit frames reads 256 times too bright), or give the sensor's black_level"]
+    floor = _background_problem(r, frames, dark, rec.black_level)
+    if floor:
+        return [floor]
     try:
         return _light_problems(r, frames, measure_psf(frames, dark, rec.black_level, kernel), kernel)
     except DoefabError as exc:

@@ -230,3 +230,17 @@ def test_the_largest_thread_passes_its_checks(tmp_path, segments):
     coarsest = 120 if segments == 128 else 256
     assert rep["checks"]["bodies"]["base"]["facet_sag_mm"] == pytest.approx(78.0 * (1 - np.cos(np.pi / coarsest)),
                                                                             abs=1e-4)
+
+
+def test_a_layout_wider_than_a_common_bed_is_warned(tmp_path):
+    """M127: base and cartridge side by side are wider than a 220 mm bed; the footprint stated is the STL's own
+    (read back with trimesh), and the warning says to print them one at a time. The default M49 layout fits."""
+    import trimesh
+
+    big = write_holder(HolderParams(thread_diameter_mm=127.0), tmp_path / "big", step=False, renders=False)
+    extents = trimesh.load(tmp_path / "big" / "holder.stl").extents
+    np.testing.assert_allclose(big["print_footprint_mm"], extents, atol=0.01)
+    assert extents[0] > 220 and any("more than a common 220 mm bed: print them one at a time" in w
+                                    for w in big["warnings"])
+    small = write_holder(HolderParams(), tmp_path / "small", step=False, renders=False)
+    assert max(small["print_footprint_mm"][:2]) < 220 and small["warnings"] == []

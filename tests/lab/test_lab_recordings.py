@@ -2,6 +2,7 @@
 with its file and its fix, all of them in one error; good recordings pass."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -152,9 +153,10 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     _frames(psf, "hot", np.full((64, 64), 256.0 * 64), n=2)  # a 16-bit dark under frames saved 8-bit (÷ 256)
     for i in range(4):
         write_frame(psf / f"eight_{i}.tiff", np.rint((_spot() + 64) / 256))
+    _frames(psf, "ped", _spot() + 60.0, n=2)  # 60 DN of pedestal more than the darks hold (a black level left in)
     msg = _problems(lab, _psf("psf/cut") + _psf("psf/size") + _psf(dark='dark = ["psf/dark40_*.tiff"]')
                     + _psf("psf/sat") + _psf("psf/dim") + _psf("psf/small", dark="")
-                    + _psf("psf/eight", dark='dark = ["psf/hot_*.tiff"]'))
+                    + _psf("psf/eight", dark='dark = ["psf/hot_*.tiff"]') + _psf("psf/ped"))
     assert "cut_0.tiff cannot be read as tiff" in msg and "cut_2.tiff is 64×60 px but" in msg
     assert "size_9.tiff is 60×64 px but" in msg and "must have the same size" in msg
     assert "dark40_0.tiff is 40×40 px but [[psf]] 3's frames" in msg and "record the dark frames at the frames' size" \
@@ -167,7 +169,9 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     assert "eight_0.tiff ([[psf]] 7): its dark frames' mean (" in msg
     assert "hot_0.tiff), 1.645e+04 DN, is no darker" in msg
     assert "too few photons" not in msg.split("eight_0.tiff")[1]  # not "record more light" for a negative signal
-    assert msg.count("\n  - ") == 9  # one per problem, every recording checked
+    assert re.search(r"ped_0\.tiff \(\[\[psf\]\] 8\): the frame's border, far from the spot, reads 60(\.5)? DN above "
+                     r"zero once its dark frames are subtracted", msg) and "recorded with the source off" in msg
+    assert msg.count("\n  - ") == 10  # one per problem, every recording checked
 
 
 def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
