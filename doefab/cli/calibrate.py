@@ -53,7 +53,8 @@ def run(args) -> int:
         (out.path / name).unlink(missing_ok=True)
     for row in summary["recordings"]:
         snr = "∞" if row["snr"] is None or math.isinf(row["snr"]) else f"{row['snr']:.3g}"
-        photons = "" if row["photons"] is None else f", {row['photons']:.3g} photons"
+        photons = ("" if row["photons"] is None else
+                   f", {row['photons']:.3g} ± {100 * row['photons_rel_se']:.0f} % photons")
         print(f"{row['recording']} ({row['half']}): signal {row['signal_dn']:.4g} DN{photons}, SNR {snr}")
     if "crosstalk" in summary:
         c = summary["crosstalk"]

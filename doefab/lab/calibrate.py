@@ -127,24 +127,35 @@ def _read(paths, fmt: str):
     return got
 
 
+MAX_PHOTONS_REL_SE = 0.5  # a photon count less certain than this (relative standard error) is not stated
+
+
 def _light(frames, dark, black: float, k: int) -> dict:
     """The recording's signal (DN) and signal-to-noise ratio in the kernel window around its peak
     (``doefab.lab.framechecks.measure_psf``, summed over channels) and its detected photons: per channel the
-    window's signal over the conversion gain that the frames' photon transfer gives (None with one frame, or
-    when the fit finds no shot noise)."""
+    window's signal over the conversion gain that the frames' photon transfer gives, with its relative standard
+    error (``measure.photon_transfer``; None with one frame, when the fit finds no shot noise, or when the error
+    exceeds ``MAX_PHOTONS_REL_SE``)."""
     from doefab.lab.framechecks import measure_psf
 
     got = measure_psf(frames, dark, black, k)
-    photons = 0.0
+    photons, var = 0.0, 0.0
     for c in range(len(got.total)):
         s = got.signal[got.window] if got.signal.ndim == 2 else got.signal[got.window][..., c]
         v = None if frames.var is None else (frames.var[got.window] if frames.var.ndim == 2
                                               else frames.var[got.window][..., c])
-        gain = None if v is None else photon_transfer(s, v)
-        photons = None if gain is None or photons is None else photons + got.total[c] / gain
+        fit = None if v is None else photon_transfer(s, v, frames.n)
+        if fit is None or photons is None:
+            photons = None
+            continue
+        n_c = got.total[c] / fit[0]
+        photons, var = photons + n_c, var + (n_c * fit[1] / fit[0]) ** 2  # each channel's gain fitted alone
+    rel = math.sqrt(var) / photons if photons else None
+    if rel is not None and rel > MAX_PHOTONS_REL_SE:  # the photon transfer too poorly determined to count
+        photons = rel = None
     noise = math.sqrt(sum((t / max(q, 1e-300)) ** 2 for t, q in zip(got.total, got.kernel_snr)))
     noiseless = noise <= 1e-100 * max(abs(float(sum(got.total))), 1.0)  # identical frames (a simulation)
-    return {"signal": got.signal, "signal_dn": float(sum(got.total)), "photons": photons,
+    return {"signal": got.signal, "signal_dn": float(sum(got.total)), "photons": photons, "photons_rel_se": rel,
             "snr": math.inf if noiseless else float(sum(got.total)) / noise,
             "peak_snr": math.inf if noiseless else float(min(got.peak_snr)), "noise": got.noise}
 

@@ -154,6 +154,13 @@ def _num(v, fmt: str = ".4g", none: str = "—") -> str:
     return none if v is None else format(v, fmt)
 
 
+def _photons(r: dict) -> str:
+    """The detected photons with their relative standard error, or why they are not stated."""
+    if r["photons"] is None:
+        return "— (one frame, no shot noise, or too few frames to fit the photon transfer within ±50 %)"
+    return f"{r['photons']:.3g} ± {100 * r['photons_rel_se']:.0f} %"
+
+
 def _recordings_table(rows: list[dict]) -> str:
     head = ["recording", "half", "depth", "band(s)", "frames / darks", "exposure (s)", "shift rows, columns (px)",
             "signal (DN)", "photons (detected)", "SNR of the kernel's sum", "peak SNR", "noise from"]
@@ -162,7 +169,7 @@ def _recordings_table(rows: list[dict]) -> str:
         band = "R, G, B" if r["channels"] == "rgb" else f"{r['wavelength_m'] * 1e9:.4g} nm"
         out.append([r["recording"], r["half"], _depth(r["depth_m"]), band, f"{r['frames']} / {r['darks']}",
                     _num(r["exposure_s"]), f"{r['shift_px'][0]:+.2f}, {r['shift_px'][1]:+.2f}",
-                    _num(r["signal_dn"]), _num(r["photons"], ".3g", "— (one frame or no shot noise)"),
+                    _num(r["signal_dn"]), _photons(r),
                     _num(r["snr"], ".3g"), _num(r["peak_snr"], ".3g"), r["noise"]])
     return _table(head, out)
 

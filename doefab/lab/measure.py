@@ -89,15 +89,29 @@ def normalise(psf: np.ndarray, share: float, what: str) -> np.ndarray:
     return p * (share / total)
 
 
-def photon_transfer(signal: np.ndarray, variance: np.ndarray) -> float | None:
+def photon_transfer(signal: np.ndarray, variance: np.ndarray, frames: int | None = None):
     """The conversion gain (DN per detected photon) from the photon-transfer relation ``variance = gain · signal
-    + read variance`` fitted by least squares over the pixels given (signal: dark-subtracted DN; variance: from
-    frame to frame, DN²); None when the fit finds no shot noise (a flat or too dim window)."""
+    + read variance``, the least-squares line's slope over the pixels given (signal: dark-subtracted DN; variance:
+    from frame to frame, DN²); None when the fit finds no shot noise (a flat or too dim window).
+
+    With ``frames`` (the number the variances came from): ``(gain, standard error)``, the error from each pixel's
+    sample variance scattering by √(2 / (frames − 1)) of its expected value (gain · signal + read variance): a
+    kernel window's slope rests on its few bright pixels, and from a few frames it scatters by tens of per cent.
+    (Weighting the fit by those variances would lean on the dim pixels, whose noisy means bias the slope low.)"""
     s, v = np.asarray(signal, np.float64).ravel(), np.asarray(variance, np.float64).ravel()
     if s.size < 3 or float(np.ptp(s)) <= 0:
         return None
-    gain, _ = np.polyfit(s, v, 1)
-    return float(gain) if np.isfinite(gain) and gain > 0 else None
+    gain, read2 = np.polyfit(s, v, 1)
+    if not (np.isfinite(gain) and gain > 0):
+        return None
+    if frames is None:
+        return float(gain)
+    if frames < 2:
+        return None
+    expected = np.maximum(gain * s + max(float(read2), 0.0), 0.0)
+    d = s - s.mean()
+    var_gain = float(np.sum(d * d * 2 * expected ** 2 / (frames - 1))) / float(np.sum(d * d)) ** 2
+    return float(gain), float(np.sqrt(var_gain))
 
 
 def wall_ratios(plain_open, coded_open) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
