@@ -7,7 +7,8 @@ import math
 from holder_cad import derive
 from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES, least_key_chamfer_mm
 
-__all__ = ["fit_bounds", "recess_chamfer_problem"]
+__all__ = ["fit_bounds", "recess_chamfer_problem", "die_too_large_problem", "flange_diameter_problem",
+           "flange_height_problem"]
 
 
 def _param_row(p, name: str) -> tuple:
@@ -118,3 +119,58 @@ def fit_bounds(p, doe_to_lens_mm: float | None = None) -> list[dict]:
         ]
     return [{"quantity": q, "value": float(v), "min": lo, "max": hi, "unit": u, "ok": bool(lo <= v <= hi), "fix": fix}
             for q, v, lo, hi, u, fix in rows]
+
+
+def die_too_large_problem(p) -> str:
+    """The refusal of a die the cartridge cannot hold, with a thread (or barrel) and a die that work."""
+    c, wall, rw, need = p.clearance_mm, p.wall_mm, p.washer_recess_half_mm, p.cartridge_need_mm
+    # the largest square die whose pocket and washer recesses fit this cartridge
+    reach = p.screw_offset_mm - p.die_width_mm / 2  # pocket edge to screw axis
+    room = p.cartridge_radius_mm - wall
+    half = min(room / math.sqrt(2) - c, math.sqrt(max(room ** 2 - rw ** 2, 0.0)) - reach - rw)
+    side = math.floor(20 * half) / 10
+    holds = side - 2 * wall - 2 * p.aperture_margin_mm > p.clear_aperture_mm  # it still takes the DOE
+    die = f", or use a die of at most {side:g} × {side:g} mm (die_width_mm, die_height_mm)" if holds else ""
+    what = (f"the die ({p.die_width_mm:g} × {p.die_height_mm:g} mm), its pocket and the washer recesses "
+            f"need a cartridge of radius {need:.2f} mm, this one has {p.cartridge_radius_mm:.2f} mm")
+    if p.mount == "slip":
+        barrel = math.ceil(2 * (need + c + wall + 3.0) * 2 - 1e-9) / 2
+        return f"{what}: set barrel_diameter_mm = {barrel:g} or more{die}"
+    thread = 2 * (need + 2 * c + wall + p.thread_depth_mm)
+    if "thread_depth_mm" in p.derived and "thread_pitch_mm" in p.derived:  # a larger thread's teeth
+        thread = 2 * (need + 2 * c + wall + derive.standard_depth_mm(derive.standard_pitch_mm(thread)))
+    thread = derive.next_filter_thread_mm(thread)
+    return (f"{what}: set thread_diameter_mm = {thread:g} or more (a step-up ring from the lens's "
+            f"{p.thread_diameter_mm:g} mm thread){die}")
+
+
+def flange_diameter_problem(p) -> str | None:
+    """A flange too narrow for the thread's bore (or the sleeve) and the lock screws, with the diameter that holds
+    them; None when it fits."""
+    least = derive.min_flange_diameter_mm(p)
+    if p.flange_diameter_mm >= least - 1e-9:
+        return None
+    what = (f"the {p.thread_diameter_mm:g} mm thread's bore" if p.mount == "thread" else
+            f"the sleeve over the {p.barrel_diameter_mm:g} mm barrel")
+    src = "thread" if p.mount == "thread" else "barrel"
+    return (f"flange_diameter_mm ({p.flange_diameter_mm:g}) is below {least:.2f} mm, the least that holds {what} "
+            f"and the lock-screw holes and slots with wall_mm ({p.wall_mm:g} mm) on both sides: set "
+            f"flange_diameter_mm = {derive.flange_diameter_mm(p):g}, or leave it out (it follows from the {src})")
+
+
+def flange_height_problem(p) -> str | None:
+    """A flange too low for its chamfer and pilot holes (or a derived one above the range), with the fix; None when
+    it fits."""
+    hi = PARAM_RANGES["flange_height_mm"][1]
+    if "flange_height_mm" in p.derived and p.flange_height_mm > hi:
+        return (f"flange_diameter_mm ({p.flange_diameter_mm:g}) needs a {p.flange_height_mm:g} mm flange height "
+                f"over its 45° chamfer, above the {hi:g} mm allowed: set flange_diameter_mm = "
+                f"{derive.max_flange_diameter_mm(p, hi):g} or less, or leave it out")
+    need = derive.min_flange_height_mm(p)
+    if p.flange_height_mm >= need - 1e-9:
+        return None
+    why = (f"the 45° chamfer ({p.chamfer_height_mm:.2f} mm) plus wall_mm and lock-screw pilot holes "
+           f"{derive.PILOT_DEPTH_MM:g} mm deep above it" if p.mount == "thread" else
+           f"lock-screw pilot holes {derive.PILOT_DEPTH_MM:g} mm deep")
+    return (f"flange_height_mm ({p.flange_height_mm:g}) is too low: {why} need {need:.2f} mm: set "
+            f"flange_height_mm = {derive.flange_height_mm(p):g}, or leave it out (it follows from the flange)")

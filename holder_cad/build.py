@@ -67,6 +67,22 @@ def _export_mesh(manifolds: list, path: Path, fmt: str, names: tuple[str, ...] =
     atomic_write_bytes(path, trimesh.util.concatenate(meshes).export(file_type=fmt))
 
 
+def _write_meshes(parts: dict, coupon: dict, out: Path, report: dict) -> None:
+    """The printable meshes laid out on the bed (holder.stl, holder.3mf, coupon.stl), the layout's footprint in
+    ``report`` and a warning where it is wider than a common bed."""
+    printed = _layout_for_print([parts["base"], parts["cartridge"]])
+    boxes = np.array([m.bounding_box() for m in printed])  # (xmin, ymin, zmin, xmax, ymax, zmax) per body
+    foot = report["print_footprint_mm"] = [round(float(v), 2) for v in boxes[:, 3:].max(0) - boxes[:, :3].min(0)]
+    if max(foot[:2]) > derive.COMMON_BED_MM:
+        report["warnings"].append(f"holder.stl lays the base and the cartridge side by side over {foot[0]:g} × "
+                                  f"{foot[1]:g} mm, more than a common {derive.COMMON_BED_MM:g} mm bed: print them "
+                                  f"one at a time (holder.3mf holds each as its own object)")
+    _export_mesh(printed, out / "holder.stl", "stl")
+    _export_mesh(printed, out / "holder.3mf", "3mf", ("base", "cartridge"))
+    _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")
+    report["files"] = ["holder.stl", "holder.3mf", "coupon.stl"]
+
+
 def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None, renders: bool = True) -> dict:
     """Build and check the holder; only a part that passes every check gets printable files.
 
@@ -107,17 +123,7 @@ def write_holder(p: HolderParams, out_dir: str | Path, step: bool | None = None,
         raise HolderCheckError(f"the holder fails its checks: {'; '.join(why) or 'see the report'} (full report: "
                                f"{out / 'holder.FAILED.json'}; no printable file was written)")
     (out / "holder.FAILED.json").unlink(missing_ok=True)
-    printed = _layout_for_print([parts["base"], parts["cartridge"]])
-    boxes = np.array([m.bounding_box() for m in printed])  # (xmin, ymin, zmin, xmax, ymax, zmax) per body
-    foot = report["print_footprint_mm"] = [round(float(v), 2) for v in boxes[:, 3:].max(0) - boxes[:, :3].min(0)]
-    if max(foot[:2]) > derive.COMMON_BED_MM:
-        report["warnings"].append(f"holder.stl lays the base and the cartridge side by side over {foot[0]:g} × "
-                                  f"{foot[1]:g} mm, more than a common {derive.COMMON_BED_MM:g} mm bed: print them "
-                                  f"one at a time (holder.3mf holds each as its own object)")
-    _export_mesh(printed, out / "holder.stl", "stl")
-    _export_mesh(printed, out / "holder.3mf", "3mf", ("base", "cartridge"))
-    _export_mesh(_layout_for_print(list(coupon.values())), out / "coupon.stl", "stl")
-    report["files"] = ["holder.stl", "holder.3mf", "coupon.stl"]
+    _write_meshes(parts, coupon, out, report)
     if step is None:
         try:
             import cadquery  # noqa: F401

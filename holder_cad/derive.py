@@ -7,7 +7,7 @@ that conflicts is refused by :class:`holder_cad.params.HolderParams` with the va
   up to 82 mm, 1.0 mm above (some lenses differ, e.g. M37 × 0.75: measure yours and set it).
 - ``thread_depth_mm``: 0.4 × the pitch (45° flanks leave 0.1 × pitch flats at crest and root).
 - ``thread_length_mm``: 2.5 mm, or the least tenth of a millimetre more that gives ``MIN_FULL_TURNS`` turns of
-  full tooth between the lead-in (``lead_in_mm``) and the flange's chamfer (3.0 mm for a 1.0 mm pitch).
+  full tooth between the lead-in (``lead_in_mm``) and the flange's chamfer (2.8 mm for a 1.0 mm pitch).
 - ``flange_diameter_mm``: the smallest whole millimetre that holds the thread (or sleeve) and the lock-screw
   holes and slots with ``wall_mm`` on both sides.
 - ``flange_height_mm``: threaded base: the smallest half millimetre above the 45° chamfer plus ``wall_mm``
@@ -192,9 +192,11 @@ def least_thread_play_mm(pitch_mm: float, depth_mm: float) -> float:
     return max(0.0, ISO_DEPTH * pitch_mm - (0.75 * pitch_mm - crest) / 2)
 
 
-# the axial clearance the printed tooth keeps from the lens's groove flanks where they meet (mm): a layer's edge
-# stands up to half a layer proud of a 45° flank (0.1 mm at each flank for 0.2 mm layers) and an FDM print is
-# good to about ±0.05 mm; a tooth with the least play alone (a few µm) binds once printed
+# the axial clearance the printed tooth keeps from the lens's groove flanks where they meet (mm), for the thread
+# printed at 0.1 mm layers: a layer's edge stands up to half a layer proud of each 45° flank (0.05 mm, both
+# flanks at once: 0.1 mm) and an FDM print is good to about ±0.05 mm; a tooth with the least play alone (a few
+# µm) binds once printed. 0.2 mm layers would need 0.25 mm, more than a 0.5 mm pitch keeps with a quarter of its
+# depth engaged
 FLANK_CLEARANCE_MM = 0.15
 
 

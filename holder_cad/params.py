@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
 from holder_cad import derive
-from holder_cad.bounds import fit_bounds, recess_chamfer_problem
+from holder_cad.bounds import (die_too_large_problem, fit_bounds, flange_diameter_problem, flange_height_problem,
+                               recess_chamfer_problem)
 from holder_cad.ranges import PARAM_RANGES, HolderError, given_problem, least_key_chamfer_mm
 
 __all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES", "given_problem"]
@@ -176,7 +177,7 @@ class HolderParams:
         if problem:
             raise HolderError(problem)
         if self.cartridge_need_mm > self.cartridge_radius_mm + 1e-9:
-            raise HolderError(self._die_too_large())
+            raise HolderError(die_too_large_problem(self))
 
     def _check_flare(self) -> None:
         """The hole in front of the DOE, flared toward the scene at ``field_half_angle_deg``, leaves wall_mm of the
@@ -200,54 +201,15 @@ class HolderParams:
         return (self._hole_radius(angle_deg, self.aperture_depth_mm) <= room + 1e-9
                 and self._flare_to_screws_mm(angle_deg) >= self.wall_mm - 1e-9)
 
-    def _die_too_large(self) -> str:
-        """The refusal of a die the cartridge cannot hold, with a thread (or barrel) and a die that work."""
-        c, wall, rw, need = self.clearance_mm, self.wall_mm, self.washer_recess_half_mm, self.cartridge_need_mm
-        # the largest square die whose pocket and washer recesses fit this cartridge
-        reach = self.screw_offset_mm - self.die_width_mm / 2  # pocket edge to screw axis
-        room = self.cartridge_radius_mm - wall
-        half = min(room / math.sqrt(2) - c, math.sqrt(max(room ** 2 - rw ** 2, 0.0)) - reach - rw)
-        side = math.floor(20 * half) / 10
-        holds = side - 2 * wall - 2 * self.aperture_margin_mm > self.clear_aperture_mm  # it still takes the DOE
-        die = f", or use a die of at most {side:g} × {side:g} mm (die_width_mm, die_height_mm)" if holds else ""
-        what = (f"the die ({self.die_width_mm:g} × {self.die_height_mm:g} mm), its pocket and the washer recesses "
-                f"need a cartridge of radius {need:.2f} mm, this one has {self.cartridge_radius_mm:.2f} mm")
-        if self.mount == "slip":
-            barrel = math.ceil(2 * (need + c + wall + 3.0) * 2 - 1e-9) / 2
-            return f"{what}: set barrel_diameter_mm = {barrel:g} or more{die}"
-        thread = 2 * (need + 2 * c + wall + self.thread_depth_mm)
-        if "thread_depth_mm" in self._derived and "thread_pitch_mm" in self._derived:  # a larger thread's teeth
-            thread = 2 * (need + 2 * c + wall + derive.standard_depth_mm(derive.standard_pitch_mm(thread)))
-        thread = derive.next_filter_thread_mm(thread)
-        return (f"{what}: set thread_diameter_mm = {thread:g} or more (a step-up ring from the lens's "
-                f"{self.thread_diameter_mm:g} mm thread){die}")
-
     def _check_flange_diameter(self) -> None:
-        least = derive.min_flange_diameter_mm(self)
-        if self.flange_diameter_mm < least - 1e-9:
-            what = (f"the {self.thread_diameter_mm:g} mm thread's bore" if self.mount == "thread" else
-                    f"the sleeve over the {self.barrel_diameter_mm:g} mm barrel")
-            src = "thread" if self.mount == "thread" else "barrel"
-            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm:g}) is below {least:.2f} mm, the least "
-                              f"that holds {what} and the lock-screw holes and slots with wall_mm "
-                              f"({self.wall_mm:g} mm) on both sides: set flange_diameter_mm = "
-                              f"{derive.flange_diameter_mm(self):g}, or leave it out (it follows from the {src})")
+        problem = flange_diameter_problem(self)
+        if problem:
+            raise HolderError(problem)
 
     def _check_flange_height(self) -> None:
-        hi = PARAM_RANGES["flange_height_mm"][1]
-        if "flange_height_mm" in self._derived and self.flange_height_mm > hi:
-            raise HolderError(f"flange_diameter_mm ({self.flange_diameter_mm:g}) needs a "
-                              f"{self.flange_height_mm:g} mm flange height over its 45° chamfer, above the "
-                              f"{hi:g} mm allowed: set flange_diameter_mm = "
-                              f"{derive.max_flange_diameter_mm(self, hi):g} or less, or leave it out")
-        need = derive.min_flange_height_mm(self)
-        if self.flange_height_mm < need - 1e-9:
-            why = (f"the 45° chamfer ({self.chamfer_height_mm:.2f} mm) plus wall_mm and lock-screw pilot holes "
-                   f"{derive.PILOT_DEPTH_MM:g} mm deep above it" if self.mount == "thread" else
-                   f"lock-screw pilot holes {derive.PILOT_DEPTH_MM:g} mm deep")
-            raise HolderError(f"flange_height_mm ({self.flange_height_mm:g}) is too low: {why} need {need:.2f} mm: "
-                              f"set flange_height_mm = {derive.flange_height_mm(self):g}, or leave it out (it "
-                              f"follows from the flange)")
+        problem = flange_height_problem(self)
+        if problem:
+            raise HolderError(problem)
 
     # ---- derived dimensions (mm) --------------------------------------------------------------
     @property

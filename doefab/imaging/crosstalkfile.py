@@ -69,7 +69,9 @@ def read_crosstalk(path) -> tuple[dict, dict]:
     path = Path(path)
     if not path.is_file():
         raise DoefabError(f"{path} not found: give the crosstalk.json that doefab calibrate wrote")
-    if path.read_bytes()[:2] == b"PK":  # a zip: a numpy .npz archive such as psf_pair.npz
+    with open(path, "rb") as f:
+        zipped = f.read(2) == b"PK"  # a zip: a numpy .npz archive such as psf_pair.npz
+    if zipped:
         raise DoefabError(f"{path} is a numpy archive, not a crosstalk file (JSON): give the crosstalk.json that "
                           f"doefab calibrate wrote (a psf_pair.npz goes to --psf)")
     try:

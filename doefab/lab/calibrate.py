@@ -175,14 +175,14 @@ def _require_window_inside(nominal: np.ndarray, chief, shape, what: str, most: f
                           f"(2K × 2K leaves room for its offset)")
 
 
-def calibrate_recording(r, grid: PSFGrid, nominal: tuple[dict, dict], fmt: str, black: float) -> dict:
+def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float, wide: dict | None = None) -> dict:
     """One recording registered, resampled and normalised: {(plane, band): PSF} of its half, the chief ray's
     position and shift from the frame's centre pixel (rows, columns), and its light (:func:`_light`).
-    ``nominal``: the nominal PSFs ({half: array}) on the kernel and on the registration's wider window
-    (:func:`registration_size`)."""
+    ``nominal``: the nominal PSFs ({half: (planes, bands, K, K)}); ``wide``: the same over the registration's
+    wider window (:func:`registration_size`; None: the kernel's, which lacks the tails beyond it)."""
     half = PAIR_HALF[r.half]
     keys = [(z, b, c) for (h, z, b), (rr, c) in grid.entries.items() if rr is r and h == r.half]
-    nominal, wide = nominal
+    wide = nominal if wide is None else wide
     refs = [nominal[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
     k = refs[0].shape[-1]
     wide_refs = [wide[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
@@ -304,7 +304,7 @@ def measure_recordings(recordings: Recordings, progress: bool = False) -> Calibr
     measured = {h: np.zeros_like(v) for h, v in nominal.items()}
     rows = []
     for r in recordings.psf:
-        m = calibrate_recording(r, grid, (nominal, wide), recordings.pixel_format, recordings.black_level)
+        m = calibrate_recording(r, grid, nominal, recordings.pixel_format, recordings.black_level, wide)
         for (z, b), psf in m.pop("psfs").items():
             measured[PAIR_HALF[r.half]][grid.planes.index(z), grid.bands.index(b)] = psf
         rows.append({"recording": r.name, "half": r.half, "depth_m": r.depth_m, "channels": r.channels,

@@ -186,9 +186,9 @@ BORDER_PX = 3  # the frame's outer rows and columns whose median is the backgrou
 
 def _background_problem(r, frames: FrameSet, dark: FrameSet | None, black_level: float) -> str | None:
     """The frame's border, far from the spot, once the darks (or black_level) are subtracted, should read zero
-    within its noise; a pedestal there (a black level left in, darks of other settings) adds to every pixel of the
-    kernel window and is read as light. Refused where the border's median lies more than 5 noise σ (the
-    border's own scatter, from its MAD) and 0.1 % of the peak above zero."""
+    within its noise; an offset there (a black level left in, darks of other settings, or too much subtracted)
+    adds to or takes from every pixel of the kernel window. Refused where the border's median lies more than
+    5 noise σ (the border's own scatter, from its MAD) and 0.1 % of the peak from zero, either way."""
     s = frames.mean - (dark.mean if dark is not None else black_level)
     mono = s if s.ndim == 2 else s.mean(axis=-1)
     b = BORDER_PX
@@ -196,13 +196,16 @@ def _background_problem(r, frames: FrameSet, dark: FrameSet | None, black_level:
     level = float(np.median(border))
     sigma = 1.4826 * float(np.median(np.abs(border - level)))
     peak = float(mono.max())
-    if level <= 5 * sigma or level <= 1e-3 * peak:
+    if abs(level) <= 5 * sigma or abs(level) <= 1e-3 * peak:
         return None
     what = "its dark frames are" if dark is not None else f"black_level ({black_level:g} DN) is"
-    return (f"{frames.first} ({r.name}): the frame's border, far from the spot, reads {level:.4g} DN above zero "
-            f"once {what} subtracted ({level / max(sigma, 1e-12):.3g} times its noise, {level / peak:.2%} of the "
-            f"peak): a pedestal that would be read as light in the whole kernel window: give dark frames recorded "
-            f"with the source off at the frames' exposure and gain, or the sensor's black_level")
+    side = "above" if level > 0 else "below"
+    read = "read as light" if level > 0 else "taken from the light"
+    return (f"{frames.first} ({r.name}): the frame's border, far from the spot, reads {abs(level):.4g} DN {side} "
+            f"zero once {what} subtracted ({abs(level) / max(sigma, 1e-12):.3g} times its noise, "
+            f"{abs(level) / peak:.2%} of the peak): an offset that would be {read} in the whole kernel window: "
+            f"give dark frames recorded with the source off at the frames' exposure and gain, or the sensor's "
+            f"black_level")
 
 
 def psf_frame_problems(rec, r, kernel: int) -> list[str]:

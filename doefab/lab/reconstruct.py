@@ -234,6 +234,9 @@ def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = D
     return out[0] if has(rec.task, "depth") else out
 
 
+MOST_ABOVE_WHITE = 0.01  # the share of a frame's values that may lie above --white-level (clipped to it)
+
+
 def read_capture(path, black_level: float | None = None, white_level: float | None = None,
                  pixel_format: str = "auto") -> np.ndarray:
     """One view of a capture as a [3, H, W] float32 array in [0, 1] (module docstring); refuses, naming the file
@@ -259,11 +262,13 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
     if not white > black >= 0:
         raise DoefabError(f"{path}: black level {black:g} DN must be ≥ 0 and below the white level {white:g} DN: "
                           f"give --black-level of the dark frames' mean (e.g. 0, or 2048 for many 14-bit raws)")
-    top = float(np.max(dn))
-    if white_level is not None and top > white * (1 + 1e-6):  # no sensor records beyond its clipping level
-        raise DoefabError(f"{path} holds values up to {top:g} DN, above --white-level {white:g} DN, which no pixel "
-                          f"can exceed: give the level at which the sensor clips (at least {top:g} DN; the file's "
-                          f"full scale when it holds the camera's numbers unscaled), or leave --white-level out")
+    above = float(np.mean(dn > white * (1 + 1e-6))) if white_level is not None else 0.0
+    if above > MOST_ABOVE_WHITE:  # a clip level (or a linearity limit below it) that much of the frame exceeds
+        raise DoefabError(f"{path}: {above:.1%} of its values lie above --white-level {white:g} DN (up to "
+                          f"{float(np.max(dn)):g} DN): the level at which the sensor clips, or a linearity limit "
+                          f"below it, leaves at most {MOST_ABOVE_WHITE:.0%} of a frame above it: give the sensor's "
+                          f"white level (the file's full scale when it holds the camera's numbers unscaled), or "
+                          f"leave --white-level out")
     out = np.empty((3, *dn.shape[:2]), np.float32)
     for k in range(3):  # channel by channel: no full-size float64 temporary beyond the frame itself
         out[k] = np.clip((dn[..., k] - black) / (white - black), 0.0, 1.0)

@@ -203,8 +203,11 @@ def stage_holder(scene, res, out: Path, quick: bool) -> dict:
     horizontal = getattr(res, "split", None) == "horizontal"  # res None: a holder without a resolved scene
     turn = ("; the sensor's dual-pixel split is horizontal: mount the die turned by 90° (index notches at 3 and "
             "9 o'clock) so the DOE's split line lies along the sensor's" if horizontal else "")
+    # the build's own warnings (a layout wider than a common bed); the thread's reach the run's warnings already
+    built = [w for w in rep["warnings"] if w not in params.warnings]
     return {"status": "ran", "why": "parametric part (0.5 s mesh path)" + ("; STEP skipped (quick)" if quick else "")
-            + turn, "doe_to_lens_mm": rep["doe_to_lens_mm"], "files": rep["files"]}
+            + turn + "".join(f"; warning: {w}" for w in built), "doe_to_lens_mm": rep["doe_to_lens_mm"],
+            "files": rep["files"]}
 
 
 def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:

@@ -98,8 +98,8 @@ def test_the_shipped_holder_keeps_its_thread_and_height():
     assert (p.thread_pitch_mm, p.thread_depth_mm, p.flange_height_mm) == (0.75, 0.3, 6.0)
     assert p.flange_diameter_mm == 56.0
     kept = HolderParams(thread_diameter_mm=52.0, flange_diameter_mm=60.0)  # scenes/my_camera.toml
-    # its chamfer seats on the lens's crest radius at the thread's end, 0.13 mm higher than where the printed
-    # crest meets it, so the 60 mm flange's chamfer plus wall_mm needs the next half millimetre
+    # its chamfer meets the lens's crest radius at the thread's end, 0.17 mm higher than it met the printed crest,
+    # and the lock-screw pilot holes above it (2 mm deep) need the next half millimetre: 6.08 mm → 6.5
     assert (kept.flange_diameter_mm, kept.flange_height_mm) == (60.0, 6.5) and "flange_diameter_mm" not in kept.derived
 
 

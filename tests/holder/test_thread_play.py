@@ -29,8 +29,8 @@ def _groove_and_tooth(p: HolderParams) -> tuple[float, float, float]:
 def test_the_derived_play_clears_the_groove_and_engages(thread, depth):
     p = HolderParams(thread_diameter_mm=thread, thread_depth_mm=depth)  # 0.2 mm: a shallower tooth, a wider crest
     groove, tooth, depth = _groove_and_tooth(p)
-    # a printed tooth needs more than geometric clearance: its layers' edges stand up to half a layer (0.1 mm at
-    # 0.2 mm layers) proud of each 45° flank, and the print is good to about ±0.05 mm
+    # a printed tooth needs more than geometric clearance: at 0.1 mm layers its layers' edges stand up to 0.05 mm
+    # proud of each 45° flank (both at once: 0.1 mm), and the print is good to about ±0.05 mm
     assert groove - tooth >= 0.15 - 1e-9
     basic = 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm
     assert depth >= 0.25 * basic  # 29–46 % of the basic depth engaged
@@ -50,7 +50,7 @@ def test_the_base_seats_on_the_filter_face(thread):
     """Read on the base's mesh: below the thread's end (the lens's filter face) every section leaves a groove open
     to inside the lens's crest radius (the ISO internal thread's minor radius D1/2), so the lens's crest passes; just
     above it the flange's chamfer is wider than that radius. The base screws in until its flange meets the filter
-    face — the chamfer had met the crest a tooth's engagement (0.17–0.24 mm) short of it."""
+    face — the chamfer had met the crest a tooth's engagement short of it (0.09, 0.17 and 0.25 mm here)."""
     import numpy as np
 
     from holder_cad.build import build_parts

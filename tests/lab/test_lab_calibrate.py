@@ -2,6 +2,7 @@
 the grid's refusals, photon transfer, and the white-wall crosstalk with its standard errors."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -252,7 +253,7 @@ def test_wall_pairs_that_give_no_crosstalk_are_refused_before_any_psf_work(desig
         measure_walls(load_recordings(f))
 
 
-def test_registration_is_unbiased_where_the_design_puts_light_beyond_the_kernel():
+def test_registration_is_unbiased_where_the_design_puts_light_beyond_the_kernel(tmp_path):
     """A 64-pixel cut of the committed streak design (K = 63) puts a tenth of its coded light beyond the kernel,
     on one side more than the other. A frame of the nominal part, chief ray on a known pixel, registers there to
     1/50 px against the nominal on the registration's window; against the K × K nominal alone the tails the frame
@@ -286,6 +287,17 @@ def test_registration_is_unbiased_where_the_design_puts_light_beyond_the_kernel(
     assert 1 - coded(63).sum() / frame.sum() > 0.05  # light beyond the kernel
     assert np.abs(register(frame, coded(wide), kernel=63) - 63).max() < 0.02
     assert np.abs(register(frame, coded(63)) - 63).max() > 0.1  # the K × K reference alone: biased
+    # through the calibration: recordings of the nominal part, its source on the axis, read at no shift
+    from doefab.lab.calibrate import measure_recordings
+    from doefab.lab.recordings import load_recordings
+    from doefab.lab.simulate import write_lab_recordings
+
+    d = dataclasses.replace(d, task="streak", task_params={**full.task_params, "kernel_size": 63, "arm_px": 21})
+    d.save(tmp_path / "design")
+    rec = write_lab_recordings(tmp_path / "rec", tmp_path / "design", supersample=1, frames=2, dark_frames=1,
+                               wall=False, photons=1e7, seed=0)
+    for row in measure_recordings(load_recordings(rec)).rows:
+        assert np.abs(row["shift_px"]).max() < 0.02, row["shift_px"]
 
 
 @pytest.mark.parametrize("frames", [2, 3, 8])
@@ -308,3 +320,24 @@ def test_the_photon_count_states_an_error_that_covers_the_truth(frames):
     z = np.array(z)
     assert 0.85 < z.std() < 1.15 and abs(np.mean(np.abs(z) < 2) - 0.95) < 0.04
     assert abs(np.median(counts) / 0.9e6 - 1) < 0.03
+
+
+def test_a_photon_count_less_certain_than_half_is_not_stated(monkeypatch):
+    """The count is the window's signal over the fitted gain, stated with the gain's relative error; a gain known
+    to worse than ±50 % gives no count (and the page says why) rather than a number off by a factor."""
+    import doefab.lab.calibrate as C
+    from doefab.lab.framechecks import FrameSet
+
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[:31, :31]
+    spot = 2e5 * np.exp(-((y - 15) ** 2 + (x - 15) ** 2) / 8.0)
+    f = np.stack([rng.poisson(spot) * 2.0 for _ in range(4)])
+    frames = FrameSet(f.mean(0), f.var(0, ddof=1), 4, Path("f.tiff"))
+    for se, stated in ((0.1, True), (0.6, False)):
+        monkeypatch.setattr(C, "photon_transfer", lambda s, v, n, se=se: (2.0, se * 2.0))
+        got = C._light(frames, None, 0.0, 31)
+        if stated:
+            assert got["photons"] == pytest.approx(f.mean(0).sum() / 2.0, rel=1e-6)
+            assert got["photons_rel_se"] == pytest.approx(se)
+        else:
+            assert got["photons"] is None and got["photons_rel_se"] is None

@@ -179,8 +179,12 @@ def test_read_capture_scales_by_the_files_full_scale_after_the_black_level(tmp_p
     assert got.shape == (3, 32, 40) and got.dtype == np.float32
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
     # values above the white level say it is wrong (no pixel records beyond its clip): refused, not clipped
-    with pytest.raises(DoefabError, match=r"c\.tiff holds values up to 655\d\d DN, above --white-level 4095 DN"):
+    with pytest.raises(DoefabError, match=r"c\.tiff: 9\d\.\d% of its values lie above --white-level 4095 DN"):
         R.read_capture(tmp_path / "c.tiff", white_level=4095)
+    few = dn % 4096
+    few[0, :3] = 60000  # a few hot values above a linearity limit: clipped to it, as asked
+    write_frame(tmp_path / "few.tiff", few)
+    assert float(R.read_capture(tmp_path / "few.tiff", white_level=4095).max()) == 1.0
     twelve = dn % 4096  # a 12-bit camera's values in a 16-bit file
     write_frame(tmp_path / "t.tiff", twelve)
     at_4095 = np.moveaxis(twelve, -1, 0) / 4095

@@ -154,9 +154,12 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     for i in range(4):
         write_frame(psf / f"eight_{i}.tiff", np.rint((_spot() + 64) / 256))
     _frames(psf, "ped", _spot() + 60.0, n=2)  # 60 DN of pedestal more than the darks hold (a black level left in)
+    _frames(psf, "over", _spot(photons=1e6), n=2)
+    _frames(psf, "hidark", np.full((64, 64), 60.0), n=2, seed=3)  # darks 60 DN above the frames' black level
     msg = _problems(lab, _psf("psf/cut") + _psf("psf/size") + _psf(dark='dark = ["psf/dark40_*.tiff"]')
                     + _psf("psf/sat") + _psf("psf/dim") + _psf("psf/small", dark="")
-                    + _psf("psf/eight", dark='dark = ["psf/hot_*.tiff"]') + _psf("psf/ped"))
+                    + _psf("psf/eight", dark='dark = ["psf/hot_*.tiff"]') + _psf("psf/ped")
+                    + _psf("psf/over", dark='dark = ["psf/hidark_*.tiff"]'))
     assert "cut_0.tiff cannot be read as tiff" in msg and "cut_2.tiff is 64×60 px but" in msg
     assert "size_9.tiff is 60×64 px but" in msg and "must have the same size" in msg
     assert "dark40_0.tiff is 40×40 px but [[psf]] 3's frames" in msg and "record the dark frames at the frames' size" \
@@ -171,7 +174,9 @@ def test_each_frame_problem_names_its_file_and_fix(lab):
     assert "too few photons" not in msg.split("eight_0.tiff")[1]  # not "record more light" for a negative signal
     assert re.search(r"ped_0\.tiff \(\[\[psf\]\] 8\): the frame's border, far from the spot, reads 60(\.5)? DN above "
                      r"zero once its dark frames are subtracted", msg) and "recorded with the source off" in msg
-    assert msg.count("\n  - ") == 10  # one per problem, every recording checked
+    assert re.search(r"over_0\.tiff \(\[\[psf\]\] 9\): the frame's border, far from the spot, reads 60(\.5)? DN below "
+                     r"zero .* taken from the light", msg)
+    assert msg.count("\n  - ") == 11  # one per problem, every recording checked
 
 
 def test_frames_that_state_no_clip_level_ask_for_white_level_once_a_set(lab):
@@ -195,7 +200,7 @@ def test_wavelengths_depths_and_channels_the_design_cannot_use(lab):
     msg = _problems(lab, body, bands=(450e-9, 550e-9), planes=(2.0, 5.0))
     assert "[[psf]] 1 wavelength_nm = 552 is no band of the design (within 1 nm): record at one of 450, 550 nm" in msg
     assert "[[psf]] 2 depth_m = 2.05 is no plane of the design (within 1%): place the source at one of 2, 5 m" in msg
-    assert "[[psf]] 3 depth_m = inf is no plane" in msg and "depth_m = inf is no plane of the design (within 1%):" in msg
+    assert "[[psf]] 3 depth_m = inf is no plane of the design (within 1%):" in msg  # no unit hint for inf
     assert "[[psf]] 6 depth_m = 5000 is no plane of the design (within 1%) (depth_m is in metres: 5?): place" in msg
     assert "[[psf]] 4 channels = \"rgb\": one PSF per colour channel needs a 3-band design, this design has 2" in msg
     assert "f_0.tiff: [[psf]] 5 has channels = \"rgb\" but its frames are monochrome" in msg

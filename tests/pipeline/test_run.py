@@ -196,3 +196,18 @@ def test_a_scene_process_killed_by_a_signal_is_named():
     rc, how = run_scene_process([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
     assert rc == 137 and "SIGKILL" in how and "memory" in how
     assert describe_status(2) == "failed (exit status 2)"
+
+
+def test_a_holder_wider_than_a_common_bed_is_warned_in_the_run(tmp_path, monkeypatch):
+    """An M127 holder's print layout (base and cartridge side by side) is wider than a 220 mm bed: the run's
+    holder stage says so (the build's own warning), and its thread size, a common one, warns of nothing."""
+    text = (REPO / "scenes" / "hdr.toml").read_text()
+    stages = next(ln for ln in text.splitlines() if ln.startswith("stages = "))
+    (tmp_path / "big.toml").write_text(text.replace(stages, 'stages = ["holder"]').replace(
+        "thread_diameter_mm = 49.0", "thread_diameter_mm = 127.0"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "big.toml", "--quick"]) == 0
+    r = json.loads((tmp_path / "out" / "run" / "big" / "run.json").read_text())
+    assert r["warnings"] == []
+    assert "warning: holder.stl lays the base and the cartridge side by side over 271 × 133 mm" in \
+        r["stages"]["holder"]["why"]
