@@ -121,3 +121,20 @@ def test_facets_coarser_than_the_tolerance_fail_on_their_own(tmp_path):
     # 48 facets on the default M49 holder's flange sit 0.06 mm inside it, every other check passing
     with pytest.raises(HolderCheckError, match=r"facets sit 0\.0\d+ mm inside .*: raise segments"):
         write_holder(HolderParams(segments=48), tmp_path, step=False, renders=False)
+
+
+def test_a_die_accepted_at_the_limit_builds_within_the_facets_error(tmp_path):
+    """A 30 × 29.27 mm die on M49 sits at the cartridge's limit: accepted (the cartridge measured as a circle),
+    it builds with its pocket wall short of wall_mm by no more than the 128-gon's facets (as the wall check
+    allows them), not refused after being accepted."""
+    import math
+
+    from holder_cad.build import write_holder
+    from holder_cad.checks import facet_tolerance_mm
+    from holder_cad.params import HolderParams
+
+    p = HolderParams(die_width_mm=30.0, die_height_mm=29.27)
+    rep = write_holder(p, tmp_path, step=False, renders=False)
+    wall = rep["checks"]["pocket_wall_mm"]
+    sag = p.cartridge_radius_mm * (1 - math.cos(math.pi / p.segments))  # the outside's facets, from the polygon
+    assert p.wall_mm - sag - 1e-3 <= wall < p.wall_mm and facet_tolerance_mm(sag) >= p.wall_mm - wall
