@@ -5,10 +5,48 @@ from __future__ import annotations
 import math
 
 from holder_cad import derive
-from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES, least_key_chamfer_mm
+from holder_cad.ranges import ENGAGED_MIN, PARAM_RANGES, HolderError, least_key_chamfer_mm
 
 __all__ = ["fit_bounds", "recess_chamfer_problem", "die_too_large_problem", "flange_diameter_problem",
-           "flange_height_problem"]
+           "flange_height_problem", "clear_aperture_problem", "then_problem"]
+
+_TRYING = [False]  # a fix being tried: its own refusals name their fixes without trying them in turn
+
+
+def then_problem(p, **changes) -> str | None:
+    """None when ``p`` with ``changes`` builds, else what it is refused for next (a fix is tried one level deep:
+    None too while another fix is being tried)."""
+    if _TRYING[0]:
+        return None
+    _TRYING[0] = True
+    try:
+        p.replace(**changes)
+        return None
+    except HolderError as exc:
+        return str(exc)
+    finally:
+        _TRYING[0] = False
+
+
+def clear_aperture_problem(p) -> str | None:
+    """A clear aperture and its margins that do not fit inside the die with a ledge, with the fixes that build
+    (each tried; where none does, each with what it is refused for next); None when it fits."""
+    side = min(p.die_width_mm, p.die_height_mm)
+    ledge = derive.widest_aperture_mm(side, p.seat_margin_mm)
+    if p.clear_aperture_mm < ledge:
+        return None
+    aperture = math.floor(100 * ledge - 1) / 100
+    die = math.ceil(p.clear_aperture_mm + side - ledge + 0.01)
+    fixes = {f"clear_aperture_mm = {aperture:g} or less": then_problem(p, clear_aperture_mm=aperture),
+             f"die_width_mm and die_height_mm to {die:g} or more": then_problem(p, die_width_mm=die,
+                                                                                 die_height_mm=die)}
+    good = [f for f, next_problem in fixes.items() if next_problem is None]
+    offer = good or [f"{f} (then: {next_problem})" for f, next_problem in fixes.items()]
+    if p.seat_margin_mm > p.aperture_margin_mm:
+        offer.append("a smaller field_half_angle_deg (the light of a wider field spreads more inside the die)")
+    return (f"clear_aperture_mm ({p.clear_aperture_mm:g}) + margins ({p.seat_margin_mm:.2f} mm round it where the "
+            f"die sits, for the field's light) does not fit inside the die ({p.die_width_mm:g} × "
+            f"{p.die_height_mm:g} mm) with a {derive.LEDGE_MM:g} mm ledge: set " + ", or ".join(offer))
 
 
 def _param_row(p, name: str) -> tuple:

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 from doefab.diekey import DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM
 from holder_cad import derive
-from holder_cad.bounds import (die_too_large_problem, fit_bounds, flange_diameter_problem, flange_height_problem,
-                               recess_chamfer_problem)
+from holder_cad.bounds import (clear_aperture_problem, die_too_large_problem, fit_bounds, flange_diameter_problem,
+                               flange_height_problem, recess_chamfer_problem, then_problem)
 from holder_cad.ranges import PARAM_RANGES, HolderError, given_problem, least_key_chamfer_mm
 
 __all__ = ["HolderParams", "HolderError", "fit_bounds", "PARAM_RANGES", "given_problem"]
@@ -142,16 +142,9 @@ class HolderParams:
             raise HolderError(f"wall_mm ({self.wall_mm:g}) is below nozzle_mm ({self.nozzle_mm:g}): a printer "
                               f"cannot make walls thinner than one line: set wall_mm = {self.nozzle_mm:g} or more")
         side = min(self.die_width_mm, self.die_height_mm)
-        ledge = derive.widest_aperture_mm(side, self.seat_margin_mm)
-        if self.clear_aperture_mm >= ledge:
-            raise HolderError(f"clear_aperture_mm ({self.clear_aperture_mm:g}) + margins ({self.seat_margin_mm:.2f} "
-                              f"mm round it where the die sits, for the field's light) does not fit inside the "
-                              f"die ({self.die_width_mm:g} × {self.die_height_mm:g} mm) with a {derive.LEDGE_MM:g} mm "
-                              f"ledge: set clear_aperture_mm = {math.floor(100 * ledge - 1) / 100:g} or less, or "
-                              f"die_width_mm and die_height_mm to "
-                              f"{math.ceil(self.clear_aperture_mm + side - ledge + 0.01):g} or more"
-                              + (", or a smaller field_half_angle_deg (the light of a wider field spreads more "
-                                 "inside the die)" if self.seat_margin_mm > self.aperture_margin_mm else ""))
+        problem = clear_aperture_problem(self)
+        if problem:
+            raise HolderError(problem)
         least = least_key_chamfer_mm(self.clearance_mm)
         if self.die_chamfer_mm >= 0.5 * side:
             good = math.ceil(10 * least + 1e-9) / 10  # the least chamfer that keys: within the half side, if any
@@ -171,8 +164,10 @@ class HolderParams:
         overlap = self.die_width_mm / 2 - (self.screw_offset_mm - self.washer_diameter_mm / 2)
         if overlap < 0.5:
             need = math.ceil(2 * (self.washer_diameter_mm / 2 + 0.5 - overlap) * 2 - 1e-9) / 2
+            then = then_problem(self, washer_diameter_mm=need)
             raise HolderError(f"the retention washers (washer_diameter_mm {self.washer_diameter_mm:g}) overlap the "
-                              f"die edge by {overlap:.2f} mm (< 0.5 mm): set washer_diameter_mm = {need:g} or more")
+                              f"die edge by {overlap:.2f} mm (< 0.5 mm): set washer_diameter_mm = {need:g} or more"
+                              + (f" (then: {then})" if then else ""))
         problem = recess_chamfer_problem(self)
         if problem:
             raise HolderError(problem)

@@ -157,3 +157,22 @@ def test_a_thread_no_filter_has_is_built_and_warned(kw, words, tmp_path, capsys)
     err = capsys.readouterr().err
     assert [line[len("warning: "):] for line in err.splitlines() if line.startswith("warning: ")] == words
     assert json.loads((tmp_path / "h" / "holder.json").read_text())["warnings"] == words
+
+
+def test_a_refusal_offers_fixes_that_build_or_says_what_follows():
+    """A 10 mm die: shrinking the clear aperture to fit it runs the washers' recesses into the keyed chamfer, so
+    only the die that builds is offered. A washer too small for a 31 mm die on M52: its fix then needs a larger
+    thread, which the refusal says at once; taking both builds."""
+    with pytest.raises(HolderError) as err:
+        HolderParams(die_width_mm=10.0, die_height_mm=10.0)
+    msg = str(err.value)
+    assert "set die_width_mm and die_height_mm to 12 or more" in msg and "clear_aperture_mm = 7.12" not in msg
+    with pytest.raises(HolderError):
+        HolderParams(die_width_mm=10.0, die_height_mm=10.0, clear_aperture_mm=7.12)  # the fix no longer offered
+    HolderParams(die_width_mm=12.0, die_height_mm=12.0)
+    kw = {"thread_diameter_mm": 52.0, "die_width_mm": 31.0, "die_height_mm": 31.0, "clearance_mm": 1.0,
+          "die_chamfer_mm": 7.2}
+    with pytest.raises(HolderError, match=r"set washer_diameter_mm = 7\.5 or more \(then: .*set thread_diameter_mm "
+                                          r"= 58 or more"):
+        HolderParams(**kw)
+    HolderParams(**{**kw, "washer_diameter_mm": 7.5, "thread_diameter_mm": 58.0})
