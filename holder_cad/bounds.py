@@ -57,8 +57,16 @@ def _param_row(p, name: str) -> tuple:
 def _play_fix(p) -> str:
     """What the thread's play must be: enough for the printed 45° tooth to clear the lens's 60° groove, little
     enough to leave ``ENGAGED_MIN`` of the basic thread depth engaged."""
-    lo = math.ceil(2000 * derive.least_thread_play_mm(p.thread_pitch_mm, p.thread_depth_mm)) / 2000
+    least = derive.least_thread_play_mm(p.thread_pitch_mm, p.thread_depth_mm)
+    lo = math.ceil(2000 * least) / 2000
     hi = math.floor(2000 * (1 - ENGAGED_MIN) * derive.ISO_DEPTH * p.thread_pitch_mm) / 2000
+    if "thread_clearance_mm" in p.derived:  # the play followed from the layer height: a finer layer keeps it
+        layer = math.floor(100 * (2 * (hi - least) - derive.PRINT_TOLERANCE_MM)) / 100
+        finer = (f"print the thread at layer_mm = {layer:g} or less (its flank clearance at {p.layer_mm:g} mm layers, "
+                 f"{derive.flank_clearance_mm(p.layer_mm):g} mm, leaves too little engaged), or "
+                 if layer >= PARAM_RANGES["layer_mm"][0] else "")
+        return (f"the printed thread's play must let its 45° tooth clear the lens's 60° groove and leave a quarter "
+                f"of the basic depth engaged: {finer}set thread_clearance_mm between {lo:g} and {hi:g}")
     return (f"the printed thread's play must let its 45° tooth clear the lens's 60° groove and leave a quarter of "
             f"the basic depth engaged: set thread_clearance_mm between {lo:g} and {hi:g}, or leave it out")
 

@@ -24,7 +24,8 @@ from __future__ import annotations
 import math
 
 __all__ = ["DERIVED", "COMMON_FILTER_THREADS_MM", "next_filter_thread_mm", "PILOT_DEPTH_MM", "SLIP_PLATE_MM",
-           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "FLANK_CLEARANCE_MM", "thread_warnings",
+           "standard_pitch_mm", "standard_depth_mm", "thread_clearance_mm", "flank_clearance_mm", "thread_warnings",
+           "PRINT_TOLERANCE_MM",
            "FILTER_PITCHES_MM", "COMMON_BED_MM",
            "least_thread_play_mm", "ISO_DEPTH",
            "widest_aperture_mm", "die_spread_mm", "seat_margin_mm", "LEDGE_MM", "RETENTION_DEPTH_MM",
@@ -192,22 +193,27 @@ def least_thread_play_mm(pitch_mm: float, depth_mm: float) -> float:
     return max(0.0, ISO_DEPTH * pitch_mm - (0.75 * pitch_mm - crest) / 2)
 
 
-# the axial clearance the printed tooth keeps from the lens's groove flanks where they meet (mm), for the thread
-# printed at 0.1 mm layers: a layer's edge stands up to half a layer proud of each 45° flank (0.05 mm, both
-# flanks at once: 0.1 mm) and an FDM print is good to about ±0.05 mm; a tooth with the least play alone (a few
-# µm) binds once printed. 0.2 mm layers would need 0.25 mm, more than a 0.5 mm pitch keeps with a quarter of its
-# depth engaged
-FLANK_CLEARANCE_MM = 0.15
+PRINT_TOLERANCE_MM = 0.05  # how true an FDM print's edges are (mm, either way)
 
 
-def thread_clearance_mm(pitch_mm: float, depth_mm: float) -> float:
-    """The printed thread's radial play (mm) in a filter thread of this pitch and tooth depth: the least at which
-    its 45° tooth clears the lens's 60° groove (``least_thread_play_mm``) plus half ``FLANK_CLEARANCE_MM`` (each
-    0.01 mm of radial play widens the 45° tooth's axial gap there by 0.02 mm): 0.2165 × pitch + 0.075 mm for the
-    0.4 × pitch tooth, which leaves 42 % of the ISO basic depth (``ISO_DEPTH``) engaged at M49 × 0.75.
+def flank_clearance_mm(layer_mm: float) -> float:
+    """The axial clearance (mm) the printed tooth keeps from the lens's groove flanks where they meet, printed at
+    ``layer_mm`` layers: a layer's edge stands up to half a layer proud of each 45° flank (both flanks at once: one
+    layer) plus ``PRINT_TOLERANCE_MM``; a tooth with the least play alone (a few µm) binds once printed.
+
+    Example: ``flank_clearance_mm(0.1)`` → 0.15 (mm)."""
+    return round(layer_mm + PRINT_TOLERANCE_MM, 6)
+
+
+def thread_clearance_mm(pitch_mm: float, depth_mm: float, layer_mm: float = 0.1) -> float:
+    """The printed thread's radial play (mm) in a filter thread of this pitch and tooth depth, printed at
+    ``layer_mm`` layers: the least at which its 45° tooth clears the lens's 60° groove (``least_thread_play_mm``)
+    plus half :func:`flank_clearance_mm` (each 0.01 mm of radial play widens the 45° tooth's axial gap there by
+    0.02 mm): 0.2165 × pitch + 0.075 mm for the 0.4 × pitch tooth at 0.1 mm layers, which leaves 42 % of the ISO
+    basic depth (``ISO_DEPTH``) engaged at M49 × 0.75.
 
     Example: ``round(thread_clearance_mm(0.75, 0.3), 4)`` → 0.2372 (mm)."""
-    return round(least_thread_play_mm(pitch_mm, depth_mm) + FLANK_CLEARANCE_MM / 2, 6)
+    return round(least_thread_play_mm(pitch_mm, depth_mm) + flank_clearance_mm(layer_mm) / 2, 6)
 
 
 def standard_depth_mm(pitch_mm: float) -> float:

@@ -51,8 +51,9 @@ class HolderParams:
         thread_clearance_mm: the male thread's outer radius below the nominal: at least 0.2165 × pitch, for the
             printed 45° tooth to clear the lens's 60° groove, and at most what leaves a quarter of the ISO basic
             depth (0.541 × pitch) engaged; by default 0.075 mm more than the least (0.15 mm axial clearance at
-            the flanks, ``derive.FLANK_CLEARANCE_MM``: a print's layer steps and tolerance).
-        wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.
+            the flanks at 0.1 mm layers, ``derive.flank_clearance_mm``: a print's layer steps and tolerance).
+        wall_mm: minimum wall (≥ the nozzle width).  nozzle_mm: printer nozzle width.  layer_mm: the layer height
+            the base's thread is printed at (its flank clearance follows: ``derive.flank_clearance_mm``).
         flange_diameter_mm: outer diameter of both flanges (by default the least that holds the lock screws).
         flange_height_mm: the base flange (by default the least over the chamfer and the pilot holes).
         cartridge_flange_mm: its flange's height.  screw_clearance_mm, pilot_hole_mm: M2 clearance, pilot hole ⌀.
@@ -89,6 +90,7 @@ class HolderParams:
     thread_clearance_mm: float | None = None
     wall_mm: float = 1.2
     nozzle_mm: float = 0.4
+    layer_mm: float = 0.1
     flange_diameter_mm: float | None = None
     flange_height_mm: float | None = None
     cartridge_flange_mm: float = 2.4
@@ -106,7 +108,8 @@ class HolderParams:
         self._check_given()
         self._resolve("thread_pitch_mm", derive.standard_pitch_mm(self.thread_diameter_mm))
         self._resolve("thread_depth_mm", derive.standard_depth_mm(self.thread_pitch_mm))
-        self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm, self.thread_depth_mm))
+        self._resolve("thread_clearance_mm", derive.thread_clearance_mm(self.thread_pitch_mm, self.thread_depth_mm,
+                                                                        self.layer_mm))
         self._resolve("thread_length_mm", derive.thread_length_mm(self))  # its chamfer's seat follows the play
         self._check_die_and_thread()
         self._resolve("flange_diameter_mm", derive.flange_diameter_mm(self))

@@ -42,6 +42,7 @@ PARAM_RANGES = {
     "thread_clearance_mm": (0.01, 0.5, "the printed thread's radial play in the lens's filter thread"),
     "wall_mm": (0.1, 10.0, "between one nozzle line and 10 mm"),
     "nozzle_mm": (0.1, 2.0, "a printer nozzle"),
+    "layer_mm": (0.02, 0.4, "a printer's layer height (the thread's, at least)"),
     "flange_diameter_mm": (20.0, 250.0, "fits a printer bed"),
     "flange_height_mm": (0.5, 50.0, "the base flange"),
     "cartridge_flange_mm": (0.5, 50.0, "the cartridge flange"),

@@ -68,3 +68,18 @@ def test_the_base_seats_on_the_filter_face(thread):
     for z in np.linspace(t - 0.4, t - 0.005, 12):
         assert innermost(z) <= r1 + 1e-3, z
     assert innermost(t + 0.05) > r1
+
+
+def test_coarser_layers_derive_more_flank_clearance_or_are_refused_with_one_that_works():
+    """Each layer's edge stands up to half a layer proud of a 45° flank, both flanks at once: the clearance the
+    groove keeps is the layer height plus the print's ±0.05 mm. At 0.2 mm layers M49 × 0.75 keeps 0.25 mm and still
+    engages a quarter of its basic depth; M30.5 × 0.5 cannot, and is refused with the coarsest layer that can."""
+    p = HolderParams(layer_mm=0.2)
+    groove, tooth, depth = _groove_and_tooth(p)
+    assert groove - tooth == pytest.approx(0.25, abs=1e-4)  # read from the section (float32 vertices)
+    assert depth >= 0.25 * 5 / 8 * math.sqrt(3) / 2 * p.thread_pitch_mm
+    with pytest.raises(HolderError, match=r"print the thread at layer_mm = 0\.13 or less"):
+        HolderParams(thread_diameter_mm=30.5, layer_mm=0.2)
+    fine = HolderParams(thread_diameter_mm=30.5, layer_mm=0.13)
+    groove, tooth, depth = _groove_and_tooth(fine)
+    assert groove - tooth >= 0.18 - 1e-6 and depth >= 0.25 * 5 / 8 * math.sqrt(3) / 2 * 0.5
