@@ -117,22 +117,25 @@ def _region_widths(faces: np.ndarray, v: np.ndarray, area: np.ndarray) -> np.nda
     return widths[label]
 
 
+def _largest_offset(clear, hi: float) -> float:
+    """The largest offset in [0, ``hi``] (mm, to 2^-40 of ``hi``) for which ``clear(offset)`` holds, bisected
+    (``clear`` holds at 0 and turns false once past the answer)."""
+    lo = 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if clear(mid) else (lo, mid)
+    return lo
+
+
 def pocket_gap(cartridge, p: HolderParams, z_mid: float) -> float:
     """Smallest gap (mm) between the die outline and the cartridge section at height ``z_mid``."""
     from manifold3d import CrossSection
 
     section = cartridge.slice(z_mid)
     die = CrossSection([die_outline(p).tolist()])
-    lo, hi = 0.0, 5.0
     if (die ^ section).area() > 1e-9:
         return 0.0
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        if (die.offset(mid, _join("Miter")) ^ section).area() > 1e-9:
-            hi = mid
-        else:
-            lo = mid
-    return lo
+    return _largest_offset(lambda d: (die.offset(d, _join("Miter")) ^ section).area() <= 1e-9, 5.0)
 
 
 def pocket_wall(cartridge, p: HolderParams, z_mid: float) -> float:
@@ -144,17 +147,11 @@ def pocket_wall(cartridge, p: HolderParams, z_mid: float) -> float:
     polys = [np.asarray(q) for q in cartridge.slice(z_mid).to_polygons()]
     if not polys:
         return 0.0
-    area = [abs(float(np.dot(q[:, 0], np.roll(q[:, 1], 1)) - np.dot(q[:, 1], np.roll(q[:, 0], 1)))) for q in polys]
-    outside = CrossSection([polys[int(np.argmax(area))].tolist()])  # the section's outer contour, filled
+    outer = max(polys, key=lambda q: float(np.hypot(*q.T).max()))  # the section's outer contour
+    outside = CrossSection([outer.tolist()])  # filled
     pocket = CrossSection([die_outline(p).tolist()]).offset(p.clearance_mm, _join("Miter"))
-    lo, hi = 0.0, float(np.hypot(*polys[int(np.argmax(area))].T).max())  # no wall is thicker than the radius
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        if (pocket.offset(mid, _join("Round"), circular_segments=256) - outside).area() > 1e-9:
-            hi = mid
-        else:
-            lo = mid
-    return lo
+    return _largest_offset(lambda d: (pocket.offset(d, _join("Round"), circular_segments=256) - outside).area() <= 1e-9,
+                           float(np.hypot(*outer.T).max()))  # no wall is thicker than the radius
 
 
 def _join(name):

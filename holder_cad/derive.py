@@ -47,8 +47,8 @@ DERIVED = {
     "thread_depth_mm": "0.4 × thread_pitch_mm",
     "thread_length_mm": "2.5, or the least tenth of a mm more giving two turns of full tooth between the lead-in "
                         "and the flange's chamfer",
-    "thread_clearance_mm": "0.2165 × thread_pitch_mm + 0.075 for the default tooth (its 45° flanks clear the ISO 60° "
-                           "groove by 0.15 mm axially)",
+    "thread_clearance_mm": "0.2165 × thread_pitch_mm + (layer_mm + 0.05) / 2 for the default tooth (its 45° flanks "
+                           "clear the ISO 60° groove by layer_mm + 0.05 axially: 0.075 and 0.15 mm at 0.1 mm layers)",
     "flange_diameter_mm": "the least whole mm holding the thread or sleeve and the lock screws with wall_mm",
     "flange_height_mm": f"thread: the least half mm over the chamfer plus wall_mm with {PILOT_DEPTH_MM:g} mm deep "
                         f"pilot holes; slip: {SLIP_PLATE_MM:g}",
@@ -83,7 +83,13 @@ def groove_filled_mm(p) -> float:
     the thread's end (the lens's filter face), reaches the groove's bottom: ``thread_length_mm`` less the seat
     radius's height over the root. Above it the groove is partly filled; the turns counted as bearing end there
     (a margin: the filling stays inside the lens's crest radius below the thread's end)."""
-    return p.thread_length_mm - (p.seat_radius_mm - p.thread_root_radius_mm)
+    return p.thread_length_mm - _chamfer_fill_mm(p)
+
+
+def _chamfer_fill_mm(p) -> float:
+    """How far below the thread's end (mm) the flange's 45° chamfer reaches the groove's bottom: its seat radius's
+    height over the root."""
+    return p.seat_radius_mm - p.thread_root_radius_mm
 
 
 def full_tooth_turns(p) -> float:
@@ -97,7 +103,7 @@ def length_for_turns_mm(p, turns: float) -> float:
     """The thread length (mm) that bears ``turns`` turns of full tooth (:func:`full_tooth_turns` inverted): the
     turns, the lead-in and the height the flange's chamfer fills (its seat radius over the root). Example:
     2.7125 mm for two turns of a 1.0 mm pitch (2 + 0.5625 + 0.15)."""
-    return turns * p.thread_pitch_mm + lead_in_mm(p) + (p.seat_radius_mm - p.thread_root_radius_mm)
+    return turns * p.thread_pitch_mm + lead_in_mm(p) + _chamfer_fill_mm(p)
 
 
 def thread_length_mm(p) -> float:

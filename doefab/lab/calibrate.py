@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
+from doefab.imaging.crossratios import check_pair
 from doefab.lab.measure import extract, normalise, photon_transfer, register, wall_ratios
 from doefab.lab.recordings import Recordings, band_index, check_recordings, plane_index, recordings_sha256
 
@@ -95,9 +96,8 @@ def registration_size(design, grid: PSFGrid, kernel: int) -> int:
     and never below the kernel."""
     from doefab.lab.measure import register_size
 
-    cam = design.camera
     lam = min(design.wavelengths[b] for b in grid.bands)
-    most = int(2 * (lam * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch - 0.5))
+    most = int(2 * (design.camera.alias_free_px(lam) - 0.5))
     return max(kernel, min(register_size(kernel), most - (most + 1) % 2))
 
 
@@ -250,12 +250,8 @@ def measure_walls(rec: Recordings) -> dict | None:
                               f"does not reach ({name} {float(np.median(ratio)):.3f} in the median column): its "
                               f"coded_view and plain_view appear swapped ({Path(w.coded_view[0]).name}, "
                               f"{Path(w.plain_view[0]).name}); the coded view is the right (DOE) one")
-    det = 1 - a - b
-    if float(det.min()) <= 0:
-        col = int(np.argmin(det))
-        raise DoefabError(f"{rec.path}: the [[wall]] pairs give no dual-pixel crosstalk at column {col} (α_l→r "
-                          f"{float(a[col]):.3f} + α_r→l {float(b[col]):.3f} ≥ 1): check that each wall's other half "
-                          f"was blocked and its dark frames are the wall's")
+    # the check crosstalk.json's writer makes, before the PSF work rather than after it
+    check_pair(a, b, f"{rec.path}: the [[wall]] pairs' alpha_lr, alpha_rl")
     return {"alpha_lr": a, "alpha_rl": b, "alpha_lr_se": sa, "alpha_rl_se": sb,
             "rows": int(views["plain"][0].shape[0])}
 

@@ -145,6 +145,13 @@ class Camera:
         Example: ``Camera(lens_f_number=8.0).lens_cuts_doe`` is True (a 6.2 mm pupil against the 8.64 mm DOE)."""
         return self.lens_pupil_diameter < self.aperture_diameter * (1 - STOP_TOLERANCE)
 
+    def alias_free_px(self, lam: float) -> float:
+        """Half-width of the alias-free field the DOE's sampling leaves at wavelength ``lam`` (metres), in sensor
+        pixels: λ·s / (2·DOE pitch) / sensor pitch; a window of k px fits where k/2 + 0.5 does not exceed it.
+
+        Example: ``Camera().alias_free_px(550e-9)`` is the half-field at 550 nm."""
+        return lam * self.sensor_distance / (2 * self.doe_pitch) / self.sensor_pitch
+
     def defocus_blur_px(self, depth: float) -> float:
         """Diameter of the geometric blur of a point at ``depth`` metres (``inf``: a plane wave), in sensor pixels:
         ``D·s·|1/z_focus − 1/z| / pitch``, with D the DOE aperture (thin lens, the DOE at the aperture, as the PSFs

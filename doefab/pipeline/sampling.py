@@ -27,8 +27,8 @@ MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory i
 
 def alias_free_px(cam, lam: float) -> float:
     """Half-width of the alias-free field the DOE's sampling leaves at wavelength ``lam`` (metres), in sensor
-    pixels: λ·s / (2·DOE pitch) / sensor pitch; a window of k px fits where k/2 + 0.5 does not exceed it."""
-    return lam * cam.sensor_distance / (2 * cam.doe_pitch) / cam.sensor_pitch
+    pixels (``Camera.alias_free_px``); a window of k px fits where k/2 + 0.5 does not exceed it."""
+    return cam.alias_free_px(lam)
 
 
 def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") -> list[str]:

@@ -279,6 +279,11 @@ def test_a_wall_left_unlit_names_its_files(lab):
     lit = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/leak_*.tiff"\n'
            '[[wall]]\nhalf = "plain"\ncoded_view = "w/leak_*.tiff"\nplain_view = "w/lit_*.tiff"\n')
     assert measure_walls(load_recordings(_write(lab, lit)))["alpha_lr"] == pytest.approx(300 / 3300, abs=0.01)
+    same = ('[[wall]]\nhalf = "coded"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n'
+            '[[wall]]\nhalf = "plain"\ncoded_view = "w/lit_*.tiff"\nplain_view = "w/lit_*.tiff"\n')
+    with pytest.raises(DoefabError, match=r"\[\[wall\]\] pairs' alpha_lr, alpha_rl = \(0\.5\d*, 0\.5\d*\) at column "
+                                          r"\d+ is no dual-pixel crosstalk"):  # the other half never blocked
+        measure_walls(load_recordings(_write(lab, same)))
 
 
 def test_white_level_is_the_sensors_clip(lab):
