@@ -5,17 +5,18 @@ tables' test scenes, rendered as ``doefab evaluate`` renders them (``doefab.tole
 value is the mean over those scenes. Per design the script writes the PSF-level yield (Wilson interval) beside
 the delivered-quality yield and mean with their two-level (parts, then scenes) bootstrap intervals
 (``doefab.tolerance.delivered``), and the variance components of the primary delivered metric: the part-to-part
-spread, the scene noise on one part's value, the scene set's offset common to all parts and the fewest scenes
-per part that put the scene noise below the spread (what ``netjudge.SCENES`` is chosen by).
+spread, the scene noise on one part's value, the F test of whether the parts differ at all, the scene set's offset
+common to all parts and the fewest scenes per part that put the scene noise below the spread (a point estimate).
 
 The published numbers (hours on 2 cores: each part is 8 scenes of 256² px through the network, depth parts also
 their PSFs at 65 planes; nothing else on the machine):
     .venv/bin/python benchmarks/delivered_yield.py --parts 24 --scenes 8 --size 256
 (the grating's parts take about 11 GB each: on a 23 GB machine judge it alone with ``--workers 1``; each part is
 seeded, so the worker count changes its numbers only by the float rounding of its PSFs' thread count)
-The scene-noise measurement behind ``netjudge.SCENES`` takes more scenes per part (the components do not
-depend on the count; more scenes measure them better):
+More scenes per part measure the components better (they do not depend on the count), e.g.
     .venv/bin/python benchmarks/delivered_yield.py --parts 12 --scenes 16 --size 256 --name delivered_scene_noise
+The intervals of a committed run, restated with this code's statistics from its stored components:
+    .venv/bin/python benchmarks/delivered_yield.py --restate --name delivered_yield_streak
 A toy run that checks the script (its numbers mean nothing; measured on 2 shared cores: streak 790 s, grating
 552 s, half-ring 522 s):
     .venv/bin/python benchmarks/delivered_yield.py --parts 3 --scenes 2 --size 64 --grid 1 --out /tmp/delivered_toy
@@ -62,15 +63,46 @@ def judge_design(design: str, parts: int, networks: dict, grid, seed: int, work:
             "delivered": delivered_summary(rows, nominal["network_scenes"], spec, task, seed)}
 
 
+def restate(path: Path) -> list[dict]:
+    """The records of a committed run with the statistics this code derives from them: the mean's t interval over
+    parts and scenes and the parts' F test (``doefab.tolerance.delivered``), from the mean squares the run's
+    variance components give back (a component the run clipped at 0 is taken at its largest value, the
+    interaction's, which widens the interval); the bootstrap's interval kept beside it as ``bootstrap_mean_ci95``."""
+    from doefab.tolerance.delivered import crossed_mean_stats, mean_interval
+
+    results = json.loads(path.read_text())
+    for r in results:
+        for d in r["delivered"].values():
+            c = d["components"]
+            p, s, rest = c["parts"], c["scenes"], c["interaction_sd"] ** 2
+            c.update(crossed_mean_stats(s * c["part_sd"] ** 2 + rest, p * c["scene_sd"] ** 2 + rest, rest, p, s))
+            d.setdefault("bootstrap_mean_ci95", d["mean_ci95"])
+            d["mean_ci95"] = mean_interval(d["mean"], c)
+    return results
+
+
+def _restate(stem: Path) -> None:
+    md = stem.with_suffix(".md").read_text().splitlines()
+    command = md[0].split("`")[1]
+    results = restate(stem.with_suffix(".json"))
+    table = markdown(results, command)
+    ends = next(i for i in range(3, len(md)) if not md[i].startswith("|"))  # the old table's end
+    kept = md[ends + 3:]  # the text after the table's own caption line
+    stem.with_suffix(".json").write_text(json.dumps(results, indent=1, default=str))
+    stem.with_suffix(".md").write_text("\n".join(table + ([""] + kept if kept else [])) + "\n")
+    print("\n".join(table))
+
+
 def markdown(results: list[dict], command: str) -> list[str]:
     from doefab.reconstruction.metrics import DISPLAY, metric_text
 
     lines = [f"Delivered-quality yield of the committed designs under the shipped budget (`{command}`): each part "
              "through its task's proposed network told the nominal PSF, on the reconstruction tables' test scenes; "
-             "intervals over parts and scenes (two-level bootstrap joined with the parts' Wilson interval).", "",
+             "intervals over parts and scenes (the mean's: Student's t of the crossed design; the yield's: two-level "
+             "bootstrap joined with the parts' Wilson interval).", "",
              "| design | PSF-level yield (Wilson 95 %) | delivered metric: error-free part | mean of the parts (95 %) | "
-             "delivered-quality yield (95 %) | part-to-part spread | scene noise on a part | common scene offset | "
-             "scenes needed | wall time (s) |", "|" + " --- |" * 10]
+             "delivered-quality yield (95 %) | part-to-part spread | scene noise on a part | parts differ (F test p) | "
+             "common scene offset | scenes needed | wall time (s) |", "|" + " --- |" * 11]
     for r in results:
         d, y = r["delivered"]["nominal_psf"], r["psf_yield"]
         task, m, c = r["task"], r["delivered"]["nominal_psf"]["metric"], d["components"]
@@ -81,12 +113,13 @@ def markdown(results: list[dict], command: str) -> list[str]:
             f"({metric_text(task, m, d['mean_ci95'][0], unit=False)}–{metric_text(task, m, d['mean_ci95'][1])}) | "
             + (f"{d['yield']:.2f} ({d['yield_ci95'][0]:.2f}–{d['yield_ci95'][1]:.2f})" if d["yield"] is not None
                else "no limit") + f" | {metric_text(task, m, c['part_sd'])} | {metric_text(task, m, c['part_noise_sd'])} "
-            f"({c['scenes']} scenes) | {metric_text(task, m, c['common_noise_sd'])} | {c['scenes_needed'] or '— (no spread)'} | "
-            f"{r['seconds']:.0f} |")
+            f"({c['scenes']} scenes) | {c['parts_differ_p']:.3f} | {metric_text(task, m, c['common_noise_sd'])} | "
+            f"{c['scenes_needed'] or '— (no spread)'} | {r['seconds']:.0f} |")
     j = results[0]["judge"]
     lines += ["", f"{results[0]['parts']} parts per design, each on {j['images']} {j['split']} scenes of {j['size']}² "
                   f"px. Scene noise on a part: the part × scene interaction over √scenes; scenes needed: the fewest "
-                  f"that put it below the part-to-part spread."]
+                  f"that put it below the part-to-part spread (a point estimate; where the F test's p exceeds 0.05 "
+                  f"these scenes do not resolve the spread, and the count has no upper bound)."]
     return lines
 
 
@@ -103,7 +136,12 @@ def main() -> None:
     p.add_argument("--workers", default="auto", help="worker processes (auto: one per core; the grating's parts need "
                    "about 11 GB each, so on a 23 GB machine: 1)")
     p.add_argument("--work", type=Path, default=ROOT / "out" / "delivered", help="the parts' samples (resumed)")
+    p.add_argument("--restate", action="store_true", help="judge nothing: rewrite OUT/NAME.{json,md} with the "
+                   "statistics this code derives from the run's stored variance components (the text after the "
+                   "table is kept)")
     a = p.parse_args()
+    if a.restate:
+        return _restate(a.out / a.name)
     from doefab.tolerance.netjudge import judge_settings
 
     networks = judge_settings({"images": a.scenes, "size": a.size, "split": "test"})  # refuses a bad value first

@@ -140,7 +140,8 @@ def summary_lines(res: dict) -> list[str]:
                            for k, d in v["metrics"].items())
             lines.append(f"- **Delivered, network given the {label.replace('_psf', ' PSF').replace('_', ' ')}**: {ms}; yield "
                          f"({spec_words(res, 'network', label) or 'no limit'}) "
-                         f"{v['yield']['value']:.2f} ({interval_text(v['yield']['ci95'], '.2f')}).")
+                         f"{v['yield']['value']:.2f} (Wilson interval over parts only "
+                         f"{interval_text(v['yield']['ci95'], '.2f')}).")
     lines += _delivered_lines(res) + _limits_lines(res)
     lines += [f"- **Warning:** {w}" for w in res.get("warnings", [])]
     used = res.get("budget", {}).get("defaults_used")
@@ -166,9 +167,12 @@ def _delivered_lines(res: dict) -> list[str]:
     if not math.isfinite(c["part_sd"]):
         noise = f"scene noise not measured (needs two parts and two scenes; {where})"
     else:
-        verdict = ("below it" if c["part_noise_sd"] < c["part_sd"] else
-                   f"NOT below it: judge each part on at least {c['scenes_needed']} scenes" if c["scenes_needed"] else
-                   "NOT below it: the parts do not differ measurably")
+        p = c.get("parts_differ_p", 0.0)
+        verdict = ("NOT below it: the parts do not differ measurably" if not c["scenes_needed"] else
+                   f"the spread is not resolved by these scenes (F test of the parts p = {p:.2f}): judge each part on "
+                   f"more scenes" if p > 0.05 else
+                   "below it (point estimates)" if c["part_noise_sd"] < c["part_sd"] else
+                   f"NOT below it: judge each part on at least {c['scenes_needed']} scenes (a point estimate)")
         noise = (f"scene noise on a part's {_name(task, m)} {metric_text(task, m, c['part_noise_sd'])} ({where}) "
                  f"against a part-to-part spread of {metric_text(task, m, c['part_sd'])}: {verdict}; the scene set's "
                  f"offset common to every part {metric_text(task, m, c['common_noise_sd'])}")
@@ -258,7 +262,10 @@ def body_lines(res: dict) -> list[str]:
 def _grid(res: dict) -> list[str]:
     g = res["grid"]
     if g.get("fixed"):
-        return ["## Simulation grid", "", f"Every error on the {g['monte_carlo_grid']}× grid (chosen by the user).", ""]
+        return ["## Simulation grid", "", f"Every error on the {g['monte_carlo_grid']}× grid (chosen by the user: "
+                f"`--grid`, or a scene's `tolerance.supersample`). The grid study, which checks each error's bound on "
+                f"the grid against the tolerance, did not run: `--grid auto` (a scene without `supersample`) runs it.",
+                ""]
     lines = ["## Simulation grid", "",
              f"Each grid-dependent error alone at one standard deviation of the budget on a {g['block_px']}² block of the design, on "
              f"grids 1×, 2×, 4× against {g['reference_grid']}× (bound on the PSF metric's error: twice the summed "

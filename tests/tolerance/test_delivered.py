@@ -113,8 +113,8 @@ def test_the_report_states_the_delivered_yield_its_interval_and_the_scene_noise_
     from doefab.tolerance.montecarlo import summarize
     from doefab.tolerance.reporttext import lead_text, summary_lines
 
-    def res_for(noise_sd):
-        x, _, b = _table(parts=10, scenes=4, part_sd=0.5, scene_sd=1.0, noise_sd=noise_sd, seed=8)
+    def res_for(noise_sd, parts=10):
+        x, _, b = _table(parts=parts, scenes=4, part_sd=0.5, scene_sd=1.0, noise_sd=noise_sd, seed=8)
         samples = [{"metric": 0.85, "worst": 0.8, "l1_to_nominal": 0.1,
                     "network": {"nominal_psf": {"psnr_highlight": float(r.mean())}},
                     "network_scenes": {"nominal_psf": {"psnr_highlight": list(r)}}} for r in x]
@@ -134,11 +134,16 @@ def test_the_report_states_the_delivered_yield_its_interval_and_the_scene_noise_
     assert f"{100 * d['yield']:.0f} % of the parts (95 % interval over parts and scenes {100 * lo:.0f}–{100 * hi:.0f} %)" in lead
     (line,) = [x for x in summary_lines(res) if x.startswith("- **Delivered-quality yield**")]
     assert f"{d['yield']:.2f}, 95 % interval {lo:.2f}–{hi:.2f} over parts and scenes" in line
-    assert "4 test scenes of 256² px per part" in line and ": below it;" in line
-    noisy, s = res_for(1.2)
+    assert "4 test scenes of 256² px per part" in line and ": below it (point estimates);" in line
+    noisy, s = res_for(1.2, parts=150)  # many parts resolve the spread that 4 scenes blur on each part
     (line,) = [x for x in summary_lines(noisy) if x.startswith("- **Delivered-quality yield**")]
-    needed = s["delivered"]["nominal_psf"]["components"]["scenes_needed"]
-    assert needed > 4 and f"NOT below it: judge each part on at least {needed} scenes" in line
+    c = s["delivered"]["nominal_psf"]["components"]
+    assert c["parts_differ_p"] < 0.05 and c["scenes_needed"] > 4
+    assert f"NOT below it: judge each part on at least {c['scenes_needed']} scenes (a point estimate)" in line
+    blurred, s = res_for(1.2)  # 10 parts on 4 scenes: the F test does not tell the parts apart
+    (line,) = [x for x in summary_lines(blurred) if x.startswith("- **Delivered-quality yield**")]
+    p = s["delivered"]["nominal_psf"]["components"]["parts_differ_p"]
+    assert p > 0.05 and f"not resolved by these scenes (F test of the parts p = {p:.2f})" in line
 
 
 def test_when_no_error_judged_through_the_network_costs_delivered_quality_the_psf_metric_says_what_limits():
@@ -241,3 +246,33 @@ def test_for_depth_a_resolved_mae_increase_limits_and_a_resolved_gain_does_not()
     limited = "\n".join(summary_lines(res)).split("Limited by")[1].split("\n")[0]
     assert limited.startswith("** (PSF metric; no error of the 2 judged through the network lowered the delivered "
                               "depth MAE by more than the scene noise")
+
+
+def test_the_mean_interval_covers_the_population_mean_as_often_as_it_says():
+    """Tables drawn from a crossed design whose scenes dominate (24 parts, 8 scenes, as the studies judge): the
+    t interval over parts and scenes holds the population mean in about 95 % of the draws; the percentile
+    bootstrap over the same 8 scenes in fewer."""
+    from doefab.tolerance.delivered import mean_interval
+
+    rng = np.random.default_rng(11)
+    hits = boot_hits = 0
+    n = 400
+    for i in range(n):
+        a, b = rng.normal(0, 0.4, 24), rng.normal(0, 12.0, 8)
+        x = 30.0 + a[:, None] + b[None, :] + rng.normal(0, 1.1, (24, 8))
+        lo, hi = mean_interval(float(x.mean()), variance_components(x))
+        hits += lo <= 30.0 <= hi
+        if i < 100:
+            bl, bh = bootstrap(x[:, :, None], None, draws=300, seed=i)["mean_ci95"]
+            boot_hits += bl <= 30.0 <= bh
+    assert 0.92 <= hits / n <= 0.98
+    assert boot_hits / 100 < hits / n - 0.03
+
+
+def test_the_f_test_tells_parts_that_differ_from_parts_that_do_not():
+    rng = np.random.default_rng(12)
+    same = [variance_components(_table(part_sd=0.0, scene_sd=3.0, noise_sd=1.0, seed=s)[0])["parts_differ_p"]
+            for s in range(200)]
+    assert 0.01 <= np.mean(np.asarray(same) < 0.05) <= 0.10  # about 5 % false alarms
+    differ = variance_components(_table(parts=24, part_sd=1.0, scene_sd=3.0, noise_sd=1.0, seed=int(rng.integers(99)))[0])
+    assert differ["parts_differ_p"] < 1e-6
