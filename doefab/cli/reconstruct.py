@@ -52,7 +52,8 @@ def register(sub) -> None:
     p.add_argument("--overlap", type=number(int, 32, 4096, unit="pixels; a multiple of 32"), default=None,
                    help="pixels shared by neighbouring tiles (default: the PSF kernel rounded up to a multiple of 32)")
     p.add_argument("--black-level", type=number(float, 0, 1e9, unit="DN"), default=None,
-                   help="digital number of black, subtracted (default: a raw file's own, else 0)")
+                   help="digital number of black, subtracted from every channel (default: a raw file's own, per "
+                        "channel, else 0)")
     p.add_argument("--white-level", type=number(float, 0, 1e9, lo_open=True, unit="DN"), default=None,
                    help="digital number of the sensor's clipping level (default: the file's full scale, e.g. 65535 "
                         "for 16 bits, a raw's white level)")
@@ -151,7 +152,8 @@ def run(args) -> int:
     from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.io import atomic_write_json
     from doefab.lab.outputs import write_result_rows
-    from doefab.lab.reconstruct import DEFAULT_TILE, default_overlap, iter_tiled, load_views, output_channels
+    from doefab.lab.reconstruct import (DEFAULT_TILE, capture_levels, default_overlap, iter_tiled, load_views,
+                                        output_channels)
     from doefab.reconstruction.loader import load_reconstructor
 
     pairs = _pairs(args)
@@ -172,8 +174,11 @@ def run(args) -> int:
         rows = iter_tiled(rec, coded, uncoded, tile, overlap, psf=psf, progress=True)
         files = write_result_rows(args.task, rows, (output_channels(rec), *coded.shape[1:]), out.path, c.stem,
                                   rec.pair.wavelengths, (min(rec.pair.depths), max(rec.pair.depths)))
+        used = {v: capture_levels(p, args.black_level, args.white_level, args.pixel_format) for v, p in
+                (("coded", c), ("uncoded", u))}
         record["pairs"].append({"coded": str(c), "coded_sha256": _sha256(c), "uncoded": str(u),
                                 "uncoded_sha256": _sha256(u), "size_px": [coded.shape[2], coded.shape[1]],
+                                "levels_dn": {v: {"black_rgb": b.tolist(), "white": w} for v, (b, w) in used.items()},
                                 "files": [f.name for f in files]})
         print(f"{c.name} + {u.name}: wrote {', '.join(f.name for f in files)}")
     atomic_write_json(out.path / "reconstruct.json", record)

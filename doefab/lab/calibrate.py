@@ -1,7 +1,8 @@
 """``doefab calibrate``: a fabricated part's own recordings → ``psf_pair.npz``, ``crosstalk.json``,
 ``calibration.html``.
 
-Each ``[[psf]]`` recording is averaged, its darks' mean (or the file's ``black_level``) subtracted, registered to
+Each ``[[psf]]`` recording is averaged, its darks' mean (or the file's ``black_level``, else a raw's own level per
+channel: ``framechecks.frame_black``) subtracted, registered to
 the design's nominal PSF of that half, band and plane (:func:`doefab.lab.measure.register`; the shift is the
 source's or the sensor's offset, not a fab error, and is reported), resampled onto the design's kernel with
 the chief ray on its centre pixel, and normalised to the nominal half's share of the light over that kernel.
@@ -186,8 +187,10 @@ def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float,
     refs = [nominal[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
     k = refs[0].shape[-1]
     wide_refs = [wide[half][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
+    from doefab.lab.framechecks import frame_black
+
     frames = _read(r.frames, fmt)
-    light = _light(frames, _read(r.dark, fmt) if r.dark else None, black, k)
+    light = _light(frames, _read(r.dark, fmt) if r.dark else None, frame_black(black, r.frames, fmt), k)
     signal = light.pop("signal")
     chans = [signal if c is None else signal[..., c] for _, _, c in keys]
     chief = register(np.sum(chans, axis=0), np.sum(wide_refs, axis=0), kernel=k)
@@ -201,7 +204,9 @@ def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float,
 
 
 def _wall_view(paths, dark, fmt: str, black: float) -> np.ndarray:
-    s = _read(paths, fmt).mean - (_read(dark, fmt).mean if dark else black)
+    from doefab.lab.framechecks import frame_black
+
+    s = _read(paths, fmt).mean - (_read(dark, fmt).mean if dark else frame_black(black, paths, fmt))
     return s if s.ndim == 2 else s.sum(axis=-1)  # colour walls: the channels' sum (the ratio is per photodiode)
 
 

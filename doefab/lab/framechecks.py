@@ -3,7 +3,8 @@ recording says, at least the kernel, not saturated, and enough light for the ker
 
 Enough light is judged on the signal-to-noise ratio, which needs no camera gain (digital numbers are not photons):
 
-- the signal is the frames' mean less the dark frames' mean (or the file's ``black_level`` without darks), in
+- the signal is the frames' mean less the dark frames' mean (without darks: the file's ``black_level``, else a raw's
+  own level for each of R, G, B, :func:`frame_black`), in
   the kernel-sized window around the brightest pixel (3 × 3 smoothed, so a hot pixel does not pick it);
 - its noise is measured from the frames themselves: the frame-to-frame variance of each pixel (two frames or more;
   shot, read and dark noise alike), divided by the number of frames, plus the dark mean's own; a single frame gets
@@ -14,6 +15,12 @@ Enough light is judged on the signal-to-noise ratio, which needs no camera gain 
   scale; the diagnosis compares PSFs at the per-cent level;
 - ``MIN_PEAK_SNR`` = 20: the brightest pixel over the median pixel noise of the window. The registration
   cross-correlates the PSF with the design's: at 20 the peak's 5 % noise keeps it well inside a pixel.
+- ``MAX_NOISE_FLOOR`` = 1 %: a PSF holds no negative light, so the calibration sets the window's negative pixels
+  (the background's noise) to zero before it normalises: each background pixel of noise σ then adds about 0.4 σ,
+  and over a K × K window that sum can exceed the sum's own noise (σ K) K-fold — at the kernel SNR of 100 a 95-px
+  window would gain 38 % of false light, and every pixel of the PSF would read that much too dim. The window's
+  expected clipped mass, Σ E[max(−pixel, 0)] over the window (each pixel normal about its measured signal with its
+  measured noise), must stay below this share of its light.
 """
 
 from __future__ import annotations
@@ -25,13 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from doefab.errors import DoefabError
-from doefab.lab.frames import read_frame, stated_white_level
+from doefab.lab.frames import frame_format, raw_black_level, raw_saturated, read_frame, stated_white_level
 
-__all__ = ["FrameSet", "PSFSignal", "read_set", "measure_psf", "psf_signal", "psf_frame_problems",
-           "wall_frame_problems", "MIN_KERNEL_SNR", "MIN_PEAK_SNR", "SATURATION"]
+__all__ = ["FrameSet", "PSFSignal", "read_set", "frame_black", "measure_psf", "psf_signal", "psf_frame_problems",
+           "wall_frame_problems", "MIN_KERNEL_SNR", "MIN_PEAK_SNR", "MAX_NOISE_FLOOR", "SATURATION"]
 
 MIN_KERNEL_SNR = 100.0
 MIN_PEAK_SNR = 20.0
+MAX_NOISE_FLOOR = 0.01
 SATURATION = 0.98  # a frame whose brightest pixel reaches this fraction of the file's full scale is clipped
 _MIN_BACKGROUND = 100  # pixels outside the window needed to measure one frame's noise from its background
 
@@ -78,7 +86,13 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
             except DoefabError as exc:  # no clip level known: saturation cannot be checked (said once a set)
                 problems.append(str(exc))
                 saturated_fix = None
-        if top is not None:
+        clipped = raw_saturated(p, SATURATION, pixel_format) if top is not None and white_level is None else None
+        if clipped is not None and clipped.any():  # a raw: its photosites, before the 2×2 binning averages them
+            problems.append(f"{p}: {int(clipped.sum())} of its binned pixels hold a photosite at {SATURATION:.0%} "
+                            f"or more of the raw's white level ({top:.6g} DN), so the peak is clipped (binned 2×2 "
+                            f"with its neighbours it reads lower): {saturated_fix} (keep every photosite below "
+                            f"{SATURATION:.0%} of it)")
+        elif top is not None:
             peak, what = float(f.max(initial=0.0)), "the file's full scale" if white_level is None else "white_level"
             if peak >= SATURATION * top:
                 problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of {what} "
@@ -98,7 +112,9 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
 class PSFSignal:
     """A PSF recording's light: ``signal`` (mean frame less the darks', DN), ``frames``, ``peak`` (row, column),
     ``window`` (row and column slices of the kernel window), per channel (one entry for monochrome frames) the
-    window's ``total`` (DN), ``kernel_snr`` and ``peak_snr``, and how the ``noise`` was measured."""
+    window's ``total`` (DN), ``kernel_snr`` and ``peak_snr``, how the ``noise`` was measured, and per channel the
+    ``noise_floor``: the light that setting the window's negative pixels to zero would add, over its total
+    (module docstring)."""
 
     signal: np.ndarray
     frames: int
@@ -108,6 +124,7 @@ class PSFSignal:
     kernel_snr: tuple
     peak_snr: tuple
     noise: str
+    noise_floor: tuple = ()
 
 
 def _noise(frames: FrameSet, dark: FrameSet | None, s: np.ndarray, window) -> tuple[np.ndarray, str]:
@@ -131,7 +148,23 @@ def _noise(frames: FrameSet, dark: FrameSet | None, s: np.ndarray, window) -> tu
     return var, how
 
 
-def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level: float, kernel: int) -> PSFSignal:
+def frame_black(black_level: float, paths, pixel_format: str):
+    """The level (DN) subtracted from frames that have no dark frames: the recordings file's ``black_level`` where
+    it gives one (> 0), else the level a raw file states for each of R, G, B (:func:`raw_black_level` of the
+    first of ``paths``: the channels' pedestals differ, e.g. 2046/2048/2051 DN), else 0.
+
+    Example: ``frame_black(0.0, ["psf/f_0.dng"], "auto")`` → ``array([512., 512., 512.])`` for a camera whose raw
+    states 512 DN."""
+    if black_level > 0 or not paths:
+        return float(black_level)
+    try:
+        level = raw_black_level(paths[0], pixel_format)
+    except DoefabError:
+        return 0.0  # unreadable: the frame checks name it
+    return level if level.any() else 0.0
+
+
+def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level, kernel: int) -> PSFSignal:
     """The light of a PSF recording in the ``kernel``-pixel window around its peak, and its signal-to-noise."""
     from scipy.ndimage import uniform_filter
 
@@ -143,13 +176,27 @@ def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level: float, ker
     window = (slice(r0, r0 + k), slice(c0, c0 + k))
     var, how = _noise(frames, dark, s, window)
     chans = [(s, var)] if s.ndim == 2 else [(s[..., c], var[..., c]) for c in range(3)]
-    total, ksnr, psnr = [], [], []
+    total, ksnr, psnr, floor = [], [], [], []
     for sc, vc in chans:
         win, vwin = sc[window], vc[window]
         total.append(float(win.sum()))
         ksnr.append(total[-1] / math.sqrt(max(float(vwin.sum()), 1e-300)))
         psnr.append(float(win.max()) / math.sqrt(max(float(np.median(vwin)), 1e-300)))
-    return PSFSignal(s, frames.n, (int(peak[0]), int(peak[1])), window, tuple(total), tuple(ksnr), tuple(psnr), how)
+        floor.append(_clipped_mass(win, vwin) / total[-1] if total[-1] > 0 else math.inf)
+    return PSFSignal(s, frames.n, (int(peak[0]), int(peak[1])), window, tuple(total), tuple(ksnr), tuple(psnr), how,
+                     tuple(floor))
+
+
+def _clipped_mass(mean: np.ndarray, var: np.ndarray) -> float:
+    """Σ E[max(−x, 0)] of pixels x normal about ``mean`` with variance ``var``: σ φ(μ/σ) − μ Φ(−μ/σ) each
+    (DN)."""
+    from scipy.special import erfc
+
+    sd = np.sqrt(np.maximum(var, 0.0))
+    ok = sd > 0
+    z = np.where(ok, mean / np.where(ok, sd, 1.0), 0.0)
+    each = sd * np.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) - mean * 0.5 * erfc(z / math.sqrt(2))
+    return float(np.sum(np.where(ok, each, np.maximum(-mean, 0.0))))
 
 
 def psf_signal(rec, r, kernel: int) -> PSFSignal:
@@ -160,23 +207,25 @@ def psf_signal(rec, r, kernel: int) -> PSFSignal:
     dark = read_set(r.dark, rec.pixel_format, problems) if r.dark else None
     if problems:
         raise DoefabError(problems[0])
-    return measure_psf(frames, dark, rec.black_level, kernel)
+    return measure_psf(frames, dark, frame_black(rec.black_level, r.frames, rec.pixel_format), kernel)
 
 
 def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[str]:
     out = []
     names = [""] if len(got.total) == 1 else [" (red)", " (green)", " (blue)"]
-    for name, total, ksnr, psnr in zip(names, got.total, got.kernel_snr, got.peak_snr):
-        if ksnr >= MIN_KERNEL_SNR and psnr >= MIN_PEAK_SNR:
+    for name, total, ksnr, psnr, floor in zip(names, got.total, got.kernel_snr, got.peak_snr, got.noise_floor):
+        if ksnr >= MIN_KERNEL_SNR and psnr >= MIN_PEAK_SNR and floor <= MAX_NOISE_FLOOR:
             continue
-        short = max(MIN_KERNEL_SNR / max(ksnr, 1e-9), MIN_PEAK_SNR / max(psnr, 1e-9))
+        short = max(MIN_KERNEL_SNR / max(ksnr, 1e-9), MIN_PEAK_SNR / max(psnr, 1e-9),
+                    max(floor, 0.0) / MAX_NOISE_FLOOR)  # the floor falls as 1/√frames, as the SNRs rise
         more = (f"or average more frames (about {math.ceil(frames.n * short ** 2)} at this exposure)" if short < 30
                 else "(the frames hold no PSF above the noise: check that the source is on and in the field of view, "
                      "and that the dark frames are of the same settings)")
         out.append(f"{frames.first} ({r.name}, {frames.n} frame{'s' * (frames.n > 1)}){name}: too few photons for "
                    f"the {kernel}×{kernel}-px kernel: the window's signal is {total:.4g} DN at a signal-to-noise "
-                   f"ratio of {ksnr:.3g} (peak {psnr:.3g}; noise from {got.noise}), the calibration needs ≥ "
-                   f"{MIN_KERNEL_SNR:g} (peak ≥ {MIN_PEAK_SNR:g}): record more light (a longer exposure or a "
+                   f"ratio of {ksnr:.3g} (peak {psnr:.3g}; noise from {got.noise}) and its noise, set to zero where "
+                   f"negative, would add {floor:.2%} of false light; the calibration needs ≥ {MIN_KERNEL_SNR:g} "
+                   f"(peak ≥ {MIN_PEAK_SNR:g}) and ≤ {MAX_NOISE_FLOOR:.0%}: record more light (a longer exposure or a "
                    f"brighter source, up to the saturation limit) {more}")
     return out
 
@@ -184,28 +233,34 @@ def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[st
 BORDER_PX = 3  # the frame's outer rows and columns whose median is the background far from the spot
 
 
-def _background_problem(r, frames: FrameSet, dark: FrameSet | None, black_level: float) -> str | None:
-    """The frame's border, far from the spot, once the darks (or black_level) are subtracted, should read zero
-    within its noise; an offset there (a black level left in, darks of other settings, or too much subtracted)
-    adds to or takes from every pixel of the kernel window. Refused where the border's median lies more than
-    5 noise σ (the border's own scatter, from its MAD) and 0.1 % of the peak from zero, either way."""
+def _background_problem(r, frames: FrameSet, dark: FrameSet | None, black_level) -> str | None:
+    """Each channel's frame border, far from the spot, once the darks (or black level) are subtracted, should read
+    zero within its noise; an offset there (a black level left in, darks of other settings, or too much
+    subtracted) adds to or takes from every pixel of the kernel window. Refused where a channel's border median
+    lies more than 5 noise σ (the border's own scatter, from its MAD) and 0.1 % of its peak from zero, either way
+    (channel by channel: offsets of opposite sign would cancel in their mean)."""
     s = frames.mean - (dark.mean if dark is not None else black_level)
-    mono = s if s.ndim == 2 else s.mean(axis=-1)
+    chans = [("", s)] if s.ndim == 2 else [(f" ({n})", s[..., c]) for c, n in enumerate(("red", "green", "blue"))]
     b = BORDER_PX
-    border = np.concatenate([mono[:b].ravel(), mono[-b:].ravel(), mono[b:-b, :b].ravel(), mono[b:-b, -b:].ravel()])
-    level = float(np.median(border))
-    sigma = 1.4826 * float(np.median(np.abs(border - level)))
-    peak = float(mono.max())
-    if abs(level) <= 5 * sigma or abs(level) <= 1e-3 * peak:
-        return None
-    what = "its dark frames are" if dark is not None else f"black_level ({black_level:g} DN) is"
-    side = "above" if level > 0 else "below"
-    read = "read as light" if level > 0 else "taken from the light"
-    return (f"{frames.first} ({r.name}): the frame's border, far from the spot, reads {abs(level):.4g} DN {side} "
-            f"zero once {what} subtracted ({abs(level) / max(sigma, 1e-12):.3g} times its noise, "
-            f"{abs(level) / peak:.2%} of the peak): an offset that would be {read} in the whole kernel window: "
-            f"give dark frames recorded with the source off at the frames' exposure and gain, or the sensor's "
-            f"black_level")
+    for name, mono in chans:
+        border = np.concatenate([mono[:b].ravel(), mono[-b:].ravel(), mono[b:-b, :b].ravel(),
+                                 mono[b:-b, -b:].ravel()])
+        level = float(np.median(border))
+        sigma = 1.4826 * float(np.median(np.abs(border - level)))
+        peak = float(mono.max())
+        if abs(level) <= 5 * sigma or abs(level) <= 1e-3 * abs(peak):
+            continue
+        black = np.atleast_1d(np.asarray(black_level, np.float64))
+        what = ("its dark frames are" if dark is not None else
+                f"the black level ({'/'.join(f'{v:g}' for v in black)} DN) is")
+        side = "above" if level > 0 else "below"
+        read = "read as light" if level > 0 else "taken from the light"
+        return (f"{frames.first} ({r.name}){name}: the frame's border, far from the spot, reads {abs(level):.4g} DN "
+                f"{side} zero once {what} subtracted ({abs(level) / max(sigma, 1e-12):.3g} times its noise, "
+                f"{abs(level) / max(abs(peak), 1e-300):.2%} of the peak): an offset that would be {read} in the "
+                f"whole kernel window: give dark frames recorded with the source off at the frames' exposure and "
+                f"gain, or the sensor's black_level")
+    return None
 
 
 def psf_frame_problems(rec, r, kernel: int) -> list[str]:
@@ -217,8 +272,11 @@ def psf_frame_problems(rec, r, kernel: int) -> list[str]:
         return out
     m = frames.mean
     if dark is not None and dark.mean.shape != m.shape:
+        raws = [frame_format(p, rec.pixel_format) == "raw" for p in (frames.first, dark.first)]
+        binned = (" (a raw frame is binned 2×2 to R, G, B at half its size: give the darks as raw files of the same "
+                  "camera too)" if raws[0] != raws[1] else "")
         out.append(f"{dark.first} is {_shape(dark.mean)} but {r.name}'s frames ({frames.first}) are {_shape(m)}: "
-                   f"record the dark frames at the frames' size and settings")
+                   f"record the dark frames at the frames' size and settings{binned}")
     if r.wavelength_m is not None and m.ndim == 3:
         out.append(f"{frames.first}: {r.name} is a narrow-band recording (wavelength_nm) but its frames are colour "
                    f"({_shape(m)}): give monochrome frames (a monochrome camera, or one channel saved as TIFF), or "
@@ -233,17 +291,19 @@ def psf_frame_problems(rec, r, kernel: int) -> list[str]:
                    f"for the source's offset)")
     if out:
         return out
-    zero = float(np.mean(dark.mean)) if dark is not None else float(rec.black_level)
+    black = frame_black(rec.black_level, r.frames, rec.pixel_format)
+    zero = float(np.mean(dark.mean)) if dark is not None else float(np.mean(black))
     if zero >= float(np.mean(m)):  # a point source adds light: a frame no brighter than its zero is another's
-        what = f"its dark frames' mean ({dark.first})" if dark is not None else "black_level"
+        what = (f"its dark frames' mean ({dark.first})" if dark is not None else
+                "black_level" if rec.black_level > 0 else "the raw's own black level")
         return [f"{frames.first} ({r.name}): {what}, {zero:.4g} DN, is no darker than the frames' mean, "
                 f"{float(np.mean(m)):.4g} DN: record the darks at the frames' exposure, gain and bit depth (a "
                 f"16-bit dark under 8-bit frames reads 256 times too bright), or give the sensor's black_level"]
-    floor = _background_problem(r, frames, dark, rec.black_level)
+    floor = _background_problem(r, frames, dark, black)
     if floor:
         return [floor]
     try:
-        return _light_problems(r, frames, measure_psf(frames, dark, rec.black_level, kernel), kernel)
+        return _light_problems(r, frames, measure_psf(frames, dark, black, kernel), kernel)
     except DoefabError as exc:
         return [f"{frames.first} ({r.name}): {exc}"]
 

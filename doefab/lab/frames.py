@@ -17,10 +17,12 @@ LibRaw (rawpy): its visible Bayer mosaic binned 2×2 into R, G (mean of the two 
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import io
 import math
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +31,7 @@ from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
 
 __all__ = ["PIXEL_FORMATS", "RAW_EXTENSIONS", "frame_format", "expand", "read_frame", "full_scale",
-           "stated_white_level", "raw_black_level", "bin_bayer", "mean_frames", "write_frame"]
+           "stated_white_level", "raw_black_level", "raw_saturated", "bin_bayer", "mean_frames", "write_frame"]
 
 PIXEL_FORMATS = ("auto", "npy", "png", "tiff", "raw")
 RAW_EXTENSIONS = (".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
@@ -128,10 +130,20 @@ def _read_png(path: Path) -> np.ndarray:
     return iio.imread(path, extension=".png")
 
 
+_DNG_TAGS = (50706,)  # DNGVersion
+_RAW_PHOTOMETRIC = (32803, 34892)  # CFA, LinearRaw
+
+
 def _read_tiff(path: Path) -> np.ndarray:
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        if any(t in page.tags for t in _DNG_TAGS) or any(
+                int(getattr(q, "photometric", 0)) in _RAW_PHOTOMETRIC for q in [page, *(page.pages or [])]):
+            raise DoefabError(f"{path} is a DNG (a camera raw in a TIFF container): read as a TIFF it gives its "
+                              f"preview or its undemosaiced mosaic without the raw's levels: set pixel_format to "
+                              f"\"raw\" (or \"auto\" with a .dng name)")
         series = tif.series[0]
         arr, axes = series.asarray(), series.axes
     if arr.ndim == 3 and axes.startswith("S"):  # planar samples (R, G, B planes)
@@ -146,31 +158,87 @@ def _read_tiff(path: Path) -> np.ndarray:
     return arr
 
 
-def _raw(path: Path):
+@contextlib.contextmanager
+def _libraw(path: Path):
+    """Open ``path`` with LibRaw, its messages on the C library's stderr kept out of the terminal (a damaged file
+    gets one error, ours, which quotes them); an error naming the file and the fix when it cannot be read."""
     import rawpy
 
+    with tempfile.TemporaryFile() as said, _stderr_to(said):
+        try:
+            with rawpy.imread(str(path)) as raw:
+                if raw.raw_type == rawpy.RawType.Flat:
+                    _ = raw.raw_image_visible  # unpacks the data: a truncated file fails here
+                yield raw
+        except DoefabError:
+            raise
+        except Exception as exc:  # LibRaw's errors have several types, their texts bytes
+            said.seek(0)
+            note = " ".join(said.read().decode("utf-8", "replace").split())
+            text = exc.args[0].decode("utf-8", "replace") if exc.args and isinstance(exc.args[0], bytes) else str(exc)
+            raise DoefabError(f"{path} cannot be read as raw (LibRaw: {text}{'; ' + note if note else ''}): check "
+                              f"that the file is a complete camera raw (a copy that ended early reads so), or set "
+                              f"pixel_format to the format it is in ({', '.join(PIXEL_FORMATS[1:])})") from None
+
+
+@contextlib.contextmanager
+def _stderr_to(fh):
+    """File descriptor 2 sent to ``fh`` for the block (LibRaw writes there from C)."""
+    import sys
+
     try:
-        return rawpy.imread(str(path))
-    except Exception as exc:  # LibRaw's errors have several types
-        raise _unreadable(path, "raw", exc) from None
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no stderr descriptor (an embedded interpreter): nothing to keep out
+        yield
+        return
+    try:
+        os.dup2(fh.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _raw_pattern(raw, path: Path) -> str:
+    import rawpy
+
+    if raw.raw_type != rawpy.RawType.Flat:
+        raise DoefabError(f"{path} is a linear (demosaiced) raw, not a Bayer mosaic (e.g. a ProRAW or linear DNG, "
+                          f"a scanner's raw): export its linear R, G, B as a 16-bit TIFF without white balance or "
+                          f"tone curve and read that, the sensor pitch of the design's camera being the file's pixel")
     colors = np.asarray(raw.raw_colors_visible)
     desc = raw.color_desc.decode("ascii", "replace")
     block = colors[:6, :6]
     periodic = block.shape == (6, 6) and np.array_equal(block, np.tile(block[:2, :2], (3, 3)))
     letters = "".join(desc[int(c)] for c in block[:2, :2].reshape(-1)) if periodic else ""
     if sorted(letters) != ["B", "G", "G", "R"]:
-        raise DoefabError(f"{path} is not a 2×2 Bayer (R, G, G, B) raw (colours {desc!r}, e.g. X-Trans or "
-                          f"Foveon): convert the frames to linear 16-bit TIFFs (e.g. `dcraw -4 -T -o 0`) and "
-                          f"read those")
+        raise DoefabError(f"{path} is not a 2×2 Bayer (R, G, G, B) raw: its colour filter repeats over more than 2×2 "
+                          f"pixels (e.g. X-Trans) or holds other colours: demosaic it to a linear 16-bit TIFF with "
+                          f"no white balance, scaling or rotation (e.g. `dcraw -4 -T -o 0 -r 1 1 1 1 -t 0`) and read "
+                          f"that; its pixels are then the photosites, not the 2×2 cells a Bayer raw is binned to, so "
+                          f"the design's camera must have the photosite pitch")
     return letters
 
 
 def _read_raw(path: Path) -> np.ndarray:
-    with _raw(path) as raw:
+    with _libraw(path) as raw:
         return bin_bayer(np.asarray(raw.raw_image_visible), _raw_pattern(raw, path))
+
+
+def raw_saturated(path: str | Path, fraction: float = 1.0, pixel_format: str = "auto") -> np.ndarray | None:
+    """(H/2, W/2, 3) bool: where a raw frame's 2×2 cell holds a photosite of that colour at or above ``fraction``
+    of its white level — a clipped photosite binned with an unclipped one reads below the clip level; None for a
+    file that is not a raw.
+
+    Example: ``raw_saturated("frame.dng", 0.98).any()`` is True when any photosite reaches 98 % of full scale."""
+    path = Path(path)
+    if frame_format(path, pixel_format) != "raw":
+        return None
+    with _libraw(path) as raw:
+        letters = _raw_pattern(raw, path)
+        hit = (np.asarray(raw.raw_image_visible) >= fraction * float(raw.white_level)).astype(np.float64)
+    return bin_bayer(hit, letters) > 0
 
 
 def raw_black_level(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
@@ -179,7 +247,7 @@ def raw_black_level(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
     path = Path(path)
     if frame_format(path, pixel_format) != "raw":
         return np.zeros(3)
-    with _raw(path) as raw:
+    with _libraw(path) as raw:
         letters = _raw_pattern(raw, path)
         per = np.asarray(raw.black_level_per_channel, dtype=np.float64)
         colors = np.asarray(raw.raw_colors_visible)[:2, :2].reshape(-1)
@@ -224,7 +292,7 @@ def full_scale(path: str | Path, pixel_format: str = "auto") -> float:
     path = Path(path)
     fmt = frame_format(path, pixel_format)
     if fmt == "raw":
-        with _raw(path) as raw:
+        with _libraw(path) as raw:
             return float(raw.white_level)
     if fmt == "png":
         return _int_scale(np.dtype(np.uint16), _png_header(path)[0])

@@ -80,7 +80,9 @@ def extract(frame: np.ndarray, chief, k: int) -> np.ndarray:
 
 def normalise(psf: np.ndarray, share: float, what: str) -> np.ndarray:
     """``psf`` (DN) as energy fractions summing to ``share``: negative values (the dark's noise, the resampling's
-    ringing) are set to 0 first, so a dark background adds about 0.4 σ per pixel (σ: its noise) to the sum."""
+    ringing) are set to 0 first, so a dark background adds about 0.4 σ per pixel (σ: its noise) to the sum and
+    every pixel reads that much too dim; the frame checks refuse a recording where that exceeds 1 % of its light
+    (``framechecks.MAX_NOISE_FLOOR``)."""
     p = np.clip(psf, 0.0, None)
     total = float(p.sum())
     if not np.isfinite(total) or total <= 0:

@@ -44,7 +44,8 @@ from doefab.applications import application, has
 from doefab.errors import DoefabError
 
 __all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
-           "iter_tiled", "reconstruct_tiled", "output_channels", "read_capture", "unmix_views", "load_views"]
+           "iter_tiled", "reconstruct_tiled", "output_channels", "capture_levels", "read_capture", "unmix_views",
+           "load_views"]
 
 MULTIPLE = 32  # the networks' sides are multiples of this (``reconstruction.networks.check_input``) ...
 MIN_SIDE = 64  # ... and at least this
@@ -237,14 +238,37 @@ def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = D
 MOST_ABOVE_WHITE = 0.01  # the share of a frame's values that may lie above --white-level (clipped to it)
 
 
+def capture_levels(path, black_level: float | None = None, white_level: float | None = None,
+                   pixel_format: str = "auto") -> tuple[np.ndarray, float]:
+    """(black [R, G, B], white) in DN that :func:`read_capture` scales ``path`` by: ``black_level`` for every
+    channel where given, else the raw's own level per channel (its channels' pedestals differ; 0 for other files);
+    ``white_level`` where given, else the file's stated white level; an error naming the fix when the file states
+    none or black is not below white.
+
+    Example: ``capture_levels("coded.dng")`` → ``(array([512., 512., 512.]), 65535.0)``."""
+    from doefab.lab.frames import raw_black_level, stated_white_level
+
+    white = (stated_white_level(path, pixel_format, "--white-level") if white_level is None
+             else float(white_level))
+    black = (np.asarray(raw_black_level(path, pixel_format), np.float64) if black_level is None
+             else np.full(3, float(black_level)))
+    if not (white > float(black.max()) and float(black.min()) >= 0):
+        raise DoefabError(f"{path}: black level {'/'.join(f'{b:g}' for b in black)} DN must be ≥ 0 and below the "
+                          f"white level {white:g} DN: give --black-level of the dark frames' mean (e.g. 0, or 2048 "
+                          f"for many 14-bit raws)")
+    return black, white
+
+
 def read_capture(path, black_level: float | None = None, white_level: float | None = None,
                  pixel_format: str = "auto") -> np.ndarray:
     """One view of a capture as a [3, H, W] float32 array in [0, 1] (module docstring); refuses, naming the file
-    and the fix, a frame that is not colour, one of fewer than 8 bits and one with no known white level.
+    and the fix, a frame that is not colour, one of fewer than 8 bits and one with no known white level. A raw
+    frame's binned pixel that holds a photosite at 98 % of its white level or more reads 1 (clipped) in that
+    channel: binned with an unclipped photosite it would read below the clip level.
 
-    ``black_level``, ``white_level``: digital numbers (None: the raw's own black level, else 0; the file's full
-    scale)."""
-    from doefab.lab.frames import raw_black_level, read_frame, stated_white_level
+    ``black_level``, ``white_level``: digital numbers (None: :func:`capture_levels`)."""
+    from doefab.lab.frames import raw_saturated, read_frame
+    from doefab.reconstruction.highlights import CLIPPED
 
     path = Path(path)
     dn = read_frame(path, pixel_format)
@@ -252,16 +276,11 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
         raise DoefabError(f"{path} is a monochrome frame ({dn.shape[1]}×{dn.shape[0]} px): the networks read colour "
                           f"captures (R, G, B): give the camera's colour frames (a 16-bit RGB TIFF, or the raw/DNG, "
                           f"which is binned to R, G, B)")
-    white = (stated_white_level(path, pixel_format, "--white-level") if white_level is None
-             else float(white_level))
+    black, white = capture_levels(path, black_level, white_level, pixel_format)
     if white_level is None and 1 < white < 2**MIN_BITS - 1:  # (1.0: a float file, normalised)
         raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks "
                           f"need captures of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or "
                           f"give the raw/DNG")
-    black = (float(np.mean(raw_black_level(path, pixel_format))) if black_level is None else float(black_level))
-    if not white > black >= 0:
-        raise DoefabError(f"{path}: black level {black:g} DN must be ≥ 0 and below the white level {white:g} DN: "
-                          f"give --black-level of the dark frames' mean (e.g. 0, or 2048 for many 14-bit raws)")
     above = float(np.mean(dn > white * (1 + 1e-6))) if white_level is not None else 0.0
     if above > MOST_ABOVE_WHITE:  # a clip level (or a linearity limit below it) that much of the frame exceeds
         raise DoefabError(f"{path}: {above:.1%} of its values lie above --white-level {white:g} DN (up to "
@@ -269,9 +288,12 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
                           f"below it, leaves at most {MOST_ABOVE_WHITE:.0%} of a frame above it: give the sensor's "
                           f"white level (the file's full scale when it holds the camera's numbers unscaled), or "
                           f"leave --white-level out")
+    clipped = raw_saturated(path, CLIPPED, pixel_format) if white_level is None else None
     out = np.empty((3, *dn.shape[:2]), np.float32)
     for k in range(3):  # channel by channel: no full-size float64 temporary beyond the frame itself
-        out[k] = np.clip((dn[..., k] - black) / (white - black), 0.0, 1.0)
+        out[k] = np.clip((dn[..., k] - black[k]) / (white - black[k]), 0.0, 1.0)
+        if clipped is not None:
+            out[k][clipped[..., k]] = 1.0
     return out
 
 
@@ -306,6 +328,12 @@ def load_views(coded_path, uncoded_path, crosstalk=None, black_level: float | No
     """The two views of one exposure, read (:func:`read_capture`), checked to be of one size (and, ``tile``
     given, one that the tiling takes: :func:`check_tiling`), and unmixed (:func:`unmix_views`) when
     ``crosstalk`` is given: ``(coded, uncoded)`` [3, H, W]."""
+    if black_level is None:  # one exposure: both views on one pedestal
+        b_c, b_u = (capture_levels(p, None, white_level, pixel_format)[0] for p in (coded_path, uncoded_path))
+        if not np.allclose(b_c, b_u):
+            raise DoefabError(f"{coded_path} and {uncoded_path} state different black levels "
+                              f"({'/'.join(f'{b:g}' for b in b_c)} and {'/'.join(f'{b:g}' for b in b_u)} DN): the two "
+                              f"views of one exposure share the sensor's: give them in one format, or --black-level")
     coded = read_capture(coded_path, black_level, white_level, pixel_format)
     uncoded = read_capture(uncoded_path, black_level, white_level, pixel_format)
     if coded.shape != uncoded.shape:

@@ -4,7 +4,7 @@ Schema (paths relative to the file; globs allowed; every key below, nothing else
 
     design = "path/to/design"      # the design folder (or a mask set holding design/); --design overrides it
     pixel_format = "auto"          # auto | npy | png | tiff | raw (doefab.lab.frames)
-    black_level = 0                # DN subtracted from frames that have no dark frames
+    black_level = 0                # DN subtracted from frames without dark frames (0: a raw's own, per channel)
     white_level = 4095             # optional: the DN where the sensor clips (default: the file's full scale)
     [[psf]]                        # one point-source recording
     half = "coded"                 # the aperture half that was open: coded | plain
@@ -293,30 +293,6 @@ def recording_problems(rec: Recordings, wavelengths_m, depths_m, kernel: int) ->
         out += psf_frame_problems(rec, r, int(kernel))
     for w in rec.wall:
         out += wall_frame_problems(rec, w)
-    return out + _raw_pedestal_problems(rec)
-
-
-def _raw_pedestal_problems(rec: Recordings) -> list[str]:
-    """Raw frames with neither dark frames nor a black level while their file states a pedestal: it would stay in
-    the signal (a flattened PSF, crosstalk ratios pulled toward 0.5)."""
-    from doefab.lab.frames import frame_format, raw_black_level
-
-    if rec.black_level > 0:
-        return []
-    out = []
-    for r in [*rec.psf, *rec.wall]:
-        frames = r.frames if hasattr(r, "frames") else [*r.coded_view, *r.plain_view]
-        raw = [p for p in frames if p.is_file() and frame_format(p, rec.pixel_format) == "raw"]
-        if r.dark or not raw:
-            continue
-        try:
-            level = float(max(raw_black_level(raw[0], rec.pixel_format)))
-        except DoefabError:
-            continue  # unreadable: reported by the frame checks
-        if level > 0:
-            out.append(f"{raw[0]} ({r.name}): a raw frame whose file states a black level of {level:g} DN, with no "
-                       f"dark frames and black_level = 0: record dark frames ({r.name}'s dark) or set "
-                       f"black_level = {level:g}")
     return out
 
 

@@ -43,13 +43,14 @@ from doefab.errors import DoefabError
 from doefab.imaging.captures import fft_length
 from doefab.reconstruction.wiener import psf_to_otf
 
-__all__ = ["solve_highlights", "highlight_support", "VIEWS"]
+__all__ = ["solve_highlights", "highlight_support", "VIEWS", "CLIPPED"]
 
 
 VIEWS = ("coded", "uncoded")
+CLIPPED = 0.98  # a capture at or above this fraction of full scale is taken as clipped
 
 
-def highlight_support(capture: torch.Tensor, clipped: float = 0.98, grow_px: int = 1) -> torch.Tensor:
+def highlight_support(capture: torch.Tensor, clipped: float = CLIPPED, grow_px: int = 1) -> torch.Tensor:
     """[B, 1, H, W] 1 where ``capture`` clips in any channel, grown by ``grow_px`` pixels."""
     s = (capture >= clipped).any(dim=1, keepdim=True).to(capture.dtype)
     return F.max_pool2d(s, 2 * grow_px + 1, 1, grow_px) if grow_px else s
@@ -57,7 +58,7 @@ def highlight_support(capture: torch.Tensor, clipped: float = 0.98, grow_px: int
 
 def solve_highlights(coded: torch.Tensor, uncoded: torch.Tensor, psf_coded: torch.Tensor,
                      psf_uncoded: torch.Tensor, iters: int = 40, views: tuple[str, ...] = VIEWS,
-                     clipped: float = 0.98, dtype: torch.dtype = torch.float32, bound_iters: int = 0,
+                     clipped: float = CLIPPED, dtype: torch.dtype = torch.float32, bound_iters: int = 0,
                      bound_rounds: int = 8) -> torch.Tensor:
     """[B, 3, H, W] least-squares radiance in [0, 2^8] (module docstring).
 

@@ -341,3 +341,37 @@ def test_a_photon_count_less_certain_than_half_is_not_stated(monkeypatch):
             assert got["photons_rel_se"] == pytest.approx(se)
         else:
             assert got["photons"] is None and got["photons_rel_se"] is None
+
+
+def test_the_expected_clipped_mass_is_that_of_drawn_noise():
+    """Σ E[max(−x, 0)] for pixels x ~ N(μ, σ²), against the mean of many draws (about 0.4 σ where μ = 0)."""
+    from doefab.lab.framechecks import _clipped_mass
+
+    rng = np.random.default_rng(3)
+    mean, var = np.array([0.0, 1.0, -2.0, 5.0, 0.0]), np.array([1.0, 4.0, 1.0, 1.0, 0.0])
+    draws = rng.normal(mean, np.sqrt(var), size=(400_000, 5))
+    assert _clipped_mass(mean, var) == pytest.approx(float(np.maximum(-draws, 0).mean(axis=0).sum()), rel=5e-3)
+    assert _clipped_mass(np.zeros(1), np.ones(1)) == pytest.approx(1 / math.sqrt(2 * math.pi))
+
+
+def test_a_recording_whose_clipped_noise_would_dim_the_psf_is_refused(design_dir, tmp_path):
+    """Read noise high enough that the window's negative pixels, set to zero, would add several per cent of false
+    light, while the kernel SNR still passes its 100: refused by the noise floor, naming the frames to average;
+    a quiet recording of the same light passes."""
+    from doefab.lab.framechecks import MAX_NOISE_FLOOR, MIN_KERNEL_SNR, psf_frame_problems, psf_signal
+    from doefab.lab.recordings import load_recordings
+    from doefab.lab.simulate import write_lab_recordings
+
+    def recorded(read_noise_e, where):
+        f = write_lab_recordings(tmp_path / where, design_dir, frames=4, dark_frames=4, wavelengths_m=[656e-9],
+                                 depths_m=[5.0], photons=1e6, read_noise_e=read_noise_e, wall=False)
+        rec = load_recordings(f)
+        return rec, rec.psf[0]
+
+    rec, r = recorded(250.0, "noisy")
+    got = psf_signal(rec, r, K)
+    assert min(got.kernel_snr) >= MIN_KERNEL_SNR and max(got.noise_floor) > 2 * MAX_NOISE_FLOOR
+    (problem,) = psf_frame_problems(rec, r, K)
+    assert "would add" in problem and "of false light" in problem and "average more frames" in problem
+    rec, r = recorded(2.0, "quiet")
+    assert psf_frame_problems(rec, r, K) == [] and max(psf_signal(rec, r, K).noise_floor) < MAX_NOISE_FLOOR

@@ -198,3 +198,20 @@ def test_write_frame_refuses_values_that_do_not_fit(tmp_path):
     with pytest.raises(DoefabError, match="0 … 255 DN"):
         write_frame(tmp_path / "x.png", np.full((3, 3), 300.0), bits=8)
     assert not (tmp_path / "x.png").exists()
+
+
+def test_a_dng_read_as_a_tiff_or_cut_short_gets_one_clear_error(tmp_path, capfd):
+    """A DNG is a TIFF container: read as a TIFF it would give the raw mosaic without its levels, so that is
+    refused naming the raw reader; a DNG that ends early is refused once, in our words (LibRaw's own message on
+    the C stderr goes into ours, not to the terminal)."""
+    m = np.full((64, 64), 1000, np.uint16)
+    path = _write_dng(tmp_path / "f.dng", m, "RGGB")
+    with pytest.raises(DoefabError, match=r"f\.dng is a DNG .* set pixel_format to \"raw\""):
+        read_frame(path, "tiff")
+    data = path.read_bytes()
+    (tmp_path / "cut.dng").write_bytes(data[: len(data) - 4000])
+    capfd.readouterr()
+    with pytest.raises(DoefabError, match=r"cut\.dng cannot be read as raw \(LibRaw: .*complete camera raw"):
+        read_frame(tmp_path / "cut.dng")
+    assert capfd.readouterr().err == ""
+    assert read_frame(path).shape == (32, 32, 3)  # the whole file reads

@@ -247,3 +247,31 @@ def test_default_overlap_is_the_kernel_rounded_up_to_32():
     assert R.default_overlap(SimpleNamespace(pair=SimpleNamespace(coded=np.zeros((1, 1, 191, 191))))) == 192
     psf = SimpleNamespace(coded=np.zeros((1, 3, 95, 95)))  # a measured pair of a larger kernel than the network's
     assert R.default_overlap(LocalNet(), psf) == 96
+
+
+def test_a_raw_capture_takes_each_channels_black_level_and_its_clipped_photosites(tmp_path):
+    """A GRBG raw whose sites sit on 60, 70, 80 and 90 DN (R 70, G 60 and 90, B 80): each channel is scaled from
+    its own black level; a single photosite at the white level marks its binned pixel clipped (1) in its channel,
+    though binned it reads below full scale; a TIFF paired with it states another black level and is refused."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_lab_frames import _write_dng
+
+    black = np.array([[60, 70], [80, 90]], np.float64)  # G R / B G
+    m = np.tile(black, (16, 16)) + 1000.0
+    m[5, 7] = 4095  # row 5, column 7: a green site (odd row, odd column) of binned pixel (2, 3)
+    path = _write_dng(tmp_path / "c.dng", m, "GRBG", black=(60, 70, 80, 90), white=4095)
+    got = R.read_capture(path)
+    want = [1000 / (4095 - 70), 1000 / (4095 - 75), 1000 / (4095 - 80)]  # R, mean of the greens, B
+    for k in range(3):
+        expected = np.full((16, 16), want[k], np.float32)
+        if k == 1:
+            expected[2, 3] = 1.0
+        np.testing.assert_allclose(got[k], expected, rtol=1e-6)
+    black_rgb, white = R.capture_levels(path)
+    assert black_rgb.tolist() == [70.0, 75.0, 80.0] and white == 4095.0
+    write_frame(tmp_path / "u.tiff", np.full((16, 16, 3), 1000.0))
+    with pytest.raises(DoefabError, match=r"state different black levels \(70/75/80 and 0/0/0 DN\)"):
+        R.load_views(path, tmp_path / "u.tiff")

@@ -241,23 +241,53 @@ def test_sha256_covers_every_frame(lab):
     assert recordings_sha256(rec) != first
 
 
-def test_raw_frames_without_darks_or_black_level_are_refused(tmp_path):
-    """A raw file's own pedestal must not stay in the signal: with no dark frames and black_level = 0 the recording
-    is refused, naming the file's black level as the fix; giving that black level clears the problem."""
+def _raw_spot(folder, name, pattern="RGGB", black=(2000, 2048, 2049, 2100), photons=2e5, n=2, clip=None):
+    """``n`` DNG frames (16-bit, white level 65535) of a grey spot binned to 64 × 64, each photosite on its own
+    black level (``black`` per site of the 2×2 cell, row by row), with read noise 2 DN; ``clip``: one green
+    photosite of the spot set to the white level."""
     from test_lab_frames import _write_dng
 
-    (tmp_path / "w").mkdir()
-    m = np.full((64, 64), 2000, np.uint16)
-    for v in ("c", "p"):
-        _write_dng(tmp_path / "w" / f"{v}_0.dng", m, "RGGB", black=(512,), white=16383)
-    wall = ('[[wall]]\nhalf = "coded"\ncoded_view = ["w/c_*.dng"]\nplain_view = ["w/p_*.dng"]\n')
-    (tmp_path / "rec.toml").write_text('black_level = 0\n' + wall)
+    rng = np.random.default_rng(5)
+    spot = np.kron(_spot(photons=photons), np.ones((2, 2)))
+    site = np.tile(np.asarray(black, np.float64).reshape(2, 2), (64, 64))
+    for i in range(n):
+        m = np.clip(np.rint(spot + site + rng.normal(0, 2.0, spot.shape)), 0, 65535)
+        if clip is not None:
+            m[clip] = 65535
+        _write_dng(folder / f"{name}_{i}.dng", m, pattern, black=black, white=65535)
+
+
+def test_raw_frames_without_darks_subtract_each_channels_own_black_level(tmp_path):
+    """A raw whose channels sit on 2000, 2048.5 and 2100 DN, with no dark frames and no black_level: each
+    channel's own level comes off (the border reads zero in all three, the spot's light is whole); one black_level
+    for all three (the green's) leaves red 48.5 DN below zero and blue 51.5 above — offsets whose mean over the
+    channels is 1 DN — and is refused for the red channel."""
+    (tmp_path / "psf").mkdir()
+    _raw_spot(tmp_path / "psf", "f")
+    body = _psf("psf/f", source='channels = "rgb"', dark="").replace("_*.tiff", "_*.dng")
+    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\n' + body)
+    rec = load_recordings(tmp_path / "rec.toml")
+    assert recording_problems(rec, BANDS, PLANES, K) == []
+    got = psf_signal(rec, rec.psf[0], K)
+    border = np.concatenate([got.signal[:3].reshape(-1, 3), got.signal[-3:].reshape(-1, 3)])
+    np.testing.assert_allclose(np.median(border, axis=0), 0.0, atol=1.0)
+    np.testing.assert_allclose(got.total, 2e5, rtol=0.02)  # every photosite of a cell saw the spot
+    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\nblack_level = 2048.5\n' + body)
     problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
-    raw = [p for p in problems if "black level of 512 DN" in p]
-    assert len(raw) == 1 and "black_level = 512" in raw[0] and "c_0.dng" in raw[0]
-    (tmp_path / "rec.toml").write_text('black_level = 512\n' + wall)
-    assert not [p for p in recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
-                if "black level of" in p]
+    assert len(problems) == 1
+    assert "(red): the frame's border, far from the spot, reads 48.5 DN below zero" in problems[0]
+
+
+def test_a_raw_photosite_at_its_white_level_is_clipped_though_its_binned_pixel_is_not(tmp_path):
+    """One green photosite of the spot at the white level: binned with the other green it reads about half of
+    full scale, yet the frame is refused as clipped, by its photosites."""
+    (tmp_path / "psf").mkdir()
+    _raw_spot(tmp_path / "psf", "f", clip=(61, 66))  # row 61, column 66: a green site of the RGGB cell (30, 33)
+    body = _psf("psf/f", source='channels = "rgb"', dark="").replace("_*.tiff", "_*.dng")
+    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\n' + body)
+    problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
+    assert any("f_0.dng: 1 of its binned pixels hold a photosite at 98% or more" in p for p in problems)
+    assert any("f_1.dng: 1 of its binned pixels" in p for p in problems)
 
 
 def test_a_wall_left_unlit_names_its_files(lab):
