@@ -67,7 +67,8 @@ def restate(path: Path) -> list[dict]:
     """The records of a committed run with the statistics this code derives from them: the mean's t interval over
     parts and scenes and the parts' F test (``doefab.tolerance.delivered``), from the mean squares the run's
     variance components give back (a component the run clipped at 0 is taken at its largest value, the
-    interaction's, which widens the interval); the bootstrap's interval kept beside it as ``bootstrap_mean_ci95``."""
+    interaction's, which widens the interval; the parts' F test is then unknown, None); the bootstrap's interval
+    kept beside it as ``bootstrap_mean_ci95``."""
     from doefab.tolerance.delivered import crossed_mean_stats, mean_interval
 
     results = json.loads(path.read_text())
@@ -76,6 +77,8 @@ def restate(path: Path) -> list[dict]:
             c = d["components"]
             p, s, rest = c["parts"], c["scenes"], c["interaction_sd"] ** 2
             c.update(crossed_mean_stats(s * c["part_sd"] ** 2 + rest, p * c["scene_sd"] ** 2 + rest, rest, p, s))
+            if c["part_sd"] == 0:  # the parts' mean square is unknown below the interaction's: p is only bounded
+                c["parts_differ_p"] = None
             d.setdefault("bootstrap_mean_ci95", d["mean_ci95"])
             d["mean_ci95"] = mean_interval(d["mean"], c)
     return results
@@ -91,6 +94,10 @@ def _restate(stem: Path) -> None:
     stem.with_suffix(".json").write_text(json.dumps(results, indent=1, default=str))
     stem.with_suffix(".md").write_text("\n".join(table + ([""] + kept if kept else [])) + "\n")
     print("\n".join(table))
+
+
+def _p_text(p) -> str:
+    return "—" if p is None else f"{p:.3f}"
 
 
 def markdown(results: list[dict], command: str) -> list[str]:
@@ -113,7 +120,7 @@ def markdown(results: list[dict], command: str) -> list[str]:
             f"({metric_text(task, m, d['mean_ci95'][0], unit=False)}–{metric_text(task, m, d['mean_ci95'][1])}) | "
             + (f"{d['yield']:.2f} ({d['yield_ci95'][0]:.2f}–{d['yield_ci95'][1]:.2f})" if d["yield"] is not None
                else "no limit") + f" | {metric_text(task, m, c['part_sd'])} | {metric_text(task, m, c['part_noise_sd'])} "
-            f"({c['scenes']} scenes) | {c['parts_differ_p']:.3f} | {metric_text(task, m, c['common_noise_sd'])} | "
+            f"({c['scenes']} scenes) | {_p_text(c.get('parts_differ_p'))} | {metric_text(task, m, c['common_noise_sd'])} | "
             f"{c['scenes_needed'] or '— (no spread)'} | {r['seconds']:.0f} |")
     j = results[0]["judge"]
     lines += ["", f"{results[0]['parts']} parts per design, each on {j['images']} {j['split']} scenes of {j['size']}² "

@@ -18,9 +18,9 @@ Enough light is judged on the signal-to-noise ratio, which needs no camera gain 
 - ``MAX_NOISE_FLOOR`` = 1 %: a PSF holds no negative light, so the calibration sets the window's negative pixels
   (the background's noise) to zero before it normalises: each background pixel of noise σ then adds about 0.4 σ,
   and over a K × K window that sum can exceed the sum's own noise (σ K) K-fold — at the kernel SNR of 100 a 95-px
-  window would gain 38 % of false light, and every pixel of the PSF would read that much too dim. The window's
-  expected clipped mass, Σ E[max(−pixel, 0)] over the window (each pixel normal about its measured signal with its
-  measured noise), must stay below this share of its light.
+  window would gain 38 % of false light, and every pixel of the PSF would read that much too dim. The light that
+  zeroing adds to the measured window, Σ max(−pixel, 0), must stay below this share of its total (it falls as
+  1/√frames, as the SNRs rise).
 """
 
 from __future__ import annotations
@@ -86,10 +86,11 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
             except DoefabError as exc:  # no clip level known: saturation cannot be checked (said once a set)
                 problems.append(str(exc))
                 saturated_fix = None
-        clipped = raw_saturated(p, SATURATION, pixel_format) if top is not None and white_level is None else None
+        clipped = raw_saturated(p, SATURATION, pixel_format, top) if top is not None else None
         if clipped is not None and clipped.any():  # a raw: its photosites, before the 2×2 binning averages them
+            what = "the raw's white level" if white_level is None else "white_level"
             problems.append(f"{p}: {int(clipped.sum())} of its binned pixels hold a photosite at {SATURATION:.0%} "
-                            f"or more of the raw's white level ({top:.6g} DN), so the peak is clipped (binned 2×2 "
+                            f"or more of {what} ({top:.6g} DN), so the peak is clipped (binned 2×2 "
                             f"with its neighbours it reads lower): {saturated_fix} (keep every photosite below "
                             f"{SATURATION:.0%} of it)")
         elif top is not None:
@@ -182,21 +183,9 @@ def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level, kernel: in
         total.append(float(win.sum()))
         ksnr.append(total[-1] / math.sqrt(max(float(vwin.sum()), 1e-300)))
         psnr.append(float(win.max()) / math.sqrt(max(float(np.median(vwin)), 1e-300)))
-        floor.append(_clipped_mass(win, vwin) / total[-1] if total[-1] > 0 else math.inf)
+        floor.append(float(np.maximum(-win, 0.0).sum()) / total[-1] if total[-1] > 0 else math.inf)
     return PSFSignal(s, frames.n, (int(peak[0]), int(peak[1])), window, tuple(total), tuple(ksnr), tuple(psnr), how,
                      tuple(floor))
-
-
-def _clipped_mass(mean: np.ndarray, var: np.ndarray) -> float:
-    """Σ E[max(−x, 0)] of pixels x normal about ``mean`` with variance ``var``: σ φ(μ/σ) − μ Φ(−μ/σ) each
-    (DN)."""
-    from scipy.special import erfc
-
-    sd = np.sqrt(np.maximum(var, 0.0))
-    ok = sd > 0
-    z = np.where(ok, mean / np.where(ok, sd, 1.0), 0.0)
-    each = sd * np.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) - mean * 0.5 * erfc(z / math.sqrt(2))
-    return float(np.sum(np.where(ok, each, np.maximum(-mean, 0.0))))
 
 
 def psf_signal(rec, r, kernel: int) -> PSFSignal:
@@ -216,9 +205,9 @@ def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[st
     for name, total, ksnr, psnr, floor in zip(names, got.total, got.kernel_snr, got.peak_snr, got.noise_floor):
         if ksnr >= MIN_KERNEL_SNR and psnr >= MIN_PEAK_SNR and floor <= MAX_NOISE_FLOOR:
             continue
-        short = max(MIN_KERNEL_SNR / max(ksnr, 1e-9), MIN_PEAK_SNR / max(psnr, 1e-9),
-                    max(floor, 0.0) / MAX_NOISE_FLOOR)  # the floor falls as 1/√frames, as the SNRs rise
-        more = (f"or average more frames (about {math.ceil(frames.n * short ** 2)} at this exposure)" if short < 30
+        dim = max(MIN_KERNEL_SNR / max(ksnr, 1e-9), MIN_PEAK_SNR / max(psnr, 1e-9))
+        short = max(dim, max(floor, 0.0) / MAX_NOISE_FLOOR)  # the floor falls as 1/√frames, as the SNRs rise
+        more = (f"or average more frames (about {math.ceil(frames.n * short ** 2)} at this exposure)" if dim < 30
                 else "(the frames hold no PSF above the noise: check that the source is on and in the field of view, "
                      "and that the dark frames are of the same settings)")
         out.append(f"{frames.first} ({r.name}, {frames.n} frame{'s' * (frames.n > 1)}){name}: too few photons for "

@@ -17,18 +17,17 @@ LibRaw (rawpy): its visible Bayer mosaic binned 2×2 into R, G (mean of the two 
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import io
 import math
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
+from doefab.lab.rawframes import bin_bayer, raw_data
 
 __all__ = ["PIXEL_FORMATS", "RAW_EXTENSIONS", "frame_format", "expand", "read_frame", "full_scale",
            "stated_white_level", "raw_black_level", "raw_saturated", "bin_bayer", "mean_frames", "write_frame"]
@@ -79,25 +78,6 @@ def expand(patterns: list[str] | str, base: Path, what: str) -> list[Path]:
                 seen.add(p)
                 out.append(p)
     return out
-
-
-def bin_bayer(mosaic: np.ndarray, pattern: str | np.ndarray) -> np.ndarray:
-    """A Bayer mosaic (H, W) binned 2×2 to (H//2, W//2, 3): R, G (the mean of the two greens), B.
-
-    ``pattern`` is the colour of each pixel of the top-left 2×2 cell, row by row (``"RGGB"``, ``"BGGR"``,
-    ``"GRBG"``, ``"GBRG"``, or a 2×2 array of those letters); an odd last row or column is dropped."""
-    cell = np.asarray(list(pattern) if isinstance(pattern, str) else pattern).reshape(-1)
-    letters = "".join(str(c).upper() for c in cell)
-    if len(letters) != 4 or sorted(letters) != ["B", "G", "G", "R"]:
-        raise DoefabError(f"Bayer pattern {letters!r} is not a 2×2 cell of one R, two G and one B: use e.g. "
-                          f"'RGGB', 'BGGR', 'GRBG' or 'GBRG'")
-    m = np.asarray(mosaic, dtype=np.float64)
-    if m.ndim != 2 or m.shape[0] < 2 or m.shape[1] < 2:
-        raise DoefabError(f"a Bayer mosaic must be a 2-D array of at least 2×2 pixels, got shape {m.shape}")
-    h, w = (m.shape[0] // 2) * 2, (m.shape[1] // 2) * 2
-    sub = [m[i:h:2, j:w:2] for i in (0, 1) for j in (0, 1)]  # the cell's four pixels, row by row
-    greens = [s for s, c in zip(sub, letters) if c == "G"]
-    return np.stack([sub[letters.index("R")], 0.5 * (greens[0] + greens[1]), sub[letters.index("B")]], axis=-1)
 
 
 def _unreadable(path, fmt: str, exc: BaseException) -> DoefabError:
@@ -158,87 +138,22 @@ def _read_tiff(path: Path) -> np.ndarray:
     return arr
 
 
-@contextlib.contextmanager
-def _libraw(path: Path):
-    """Open ``path`` with LibRaw, its messages on the C library's stderr kept out of the terminal (a damaged file
-    gets one error, ours, which quotes them); an error naming the file and the fix when it cannot be read."""
-    import rawpy
-
-    with tempfile.TemporaryFile() as said, _stderr_to(said):
-        try:
-            with rawpy.imread(str(path)) as raw:
-                if raw.raw_type == rawpy.RawType.Flat:
-                    _ = raw.raw_image_visible  # unpacks the data: a truncated file fails here
-                yield raw
-        except DoefabError:
-            raise
-        except Exception as exc:  # LibRaw's errors have several types, their texts bytes
-            said.seek(0)
-            note = " ".join(said.read().decode("utf-8", "replace").split())
-            text = exc.args[0].decode("utf-8", "replace") if exc.args and isinstance(exc.args[0], bytes) else str(exc)
-            raise DoefabError(f"{path} cannot be read as raw (LibRaw: {text}{'; ' + note if note else ''}): check "
-                              f"that the file is a complete camera raw (a copy that ended early reads so), or set "
-                              f"pixel_format to the format it is in ({', '.join(PIXEL_FORMATS[1:])})") from None
-
-
-@contextlib.contextmanager
-def _stderr_to(fh):
-    """File descriptor 2 sent to ``fh`` for the block (LibRaw writes there from C)."""
-    import sys
-
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError):  # no stderr descriptor (an embedded interpreter): nothing to keep out
-        yield
-        return
-    try:
-        os.dup2(fh.fileno(), 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-
-
-def _raw_pattern(raw, path: Path) -> str:
-    import rawpy
-
-    if raw.raw_type != rawpy.RawType.Flat:
-        raise DoefabError(f"{path} is a linear (demosaiced) raw, not a Bayer mosaic (e.g. a ProRAW or linear DNG, "
-                          f"a scanner's raw): export its linear R, G, B as a 16-bit TIFF without white balance or "
-                          f"tone curve and read that, the sensor pitch of the design's camera being the file's pixel")
-    colors = np.asarray(raw.raw_colors_visible)
-    desc = raw.color_desc.decode("ascii", "replace")
-    block = colors[:6, :6]
-    periodic = block.shape == (6, 6) and np.array_equal(block, np.tile(block[:2, :2], (3, 3)))
-    letters = "".join(desc[int(c)] for c in block[:2, :2].reshape(-1)) if periodic else ""
-    if sorted(letters) != ["B", "G", "G", "R"]:
-        raise DoefabError(f"{path} is not a 2×2 Bayer (R, G, G, B) raw: its colour filter repeats over more than 2×2 "
-                          f"pixels (e.g. X-Trans) or holds other colours: demosaic it to a linear 16-bit TIFF with "
-                          f"no white balance, scaling or rotation (e.g. `dcraw -4 -T -o 0 -r 1 1 1 1 -t 0`) and read "
-                          f"that; its pixels are then the photosites, not the 2×2 cells a Bayer raw is binned to, so "
-                          f"the design's camera must have the photosite pitch")
-    return letters
-
-
 def _read_raw(path: Path) -> np.ndarray:
-    with _libraw(path) as raw:
-        return bin_bayer(np.asarray(raw.raw_image_visible), _raw_pattern(raw, path))
+    return raw_data(path).binned
 
 
-def raw_saturated(path: str | Path, fraction: float = 1.0, pixel_format: str = "auto") -> np.ndarray | None:
+def raw_saturated(path: str | Path, fraction: float = 1.0, pixel_format: str = "auto",
+                  white: float | None = None) -> np.ndarray | None:
     """(H/2, W/2, 3) bool: where a raw frame's 2×2 cell holds a photosite of that colour at or above ``fraction``
-    of its white level — a clipped photosite binned with an unclipped one reads below the clip level; None for a
-    file that is not a raw.
+    of ``white`` (DN; None: the raw's own white level) — a clipped photosite binned with an unclipped one reads
+    below the clip level; None for a file that is not a raw.
 
     Example: ``raw_saturated("frame.dng", 0.98).any()`` is True when any photosite reaches 98 % of full scale."""
     path = Path(path)
     if frame_format(path, pixel_format) != "raw":
         return None
-    with _libraw(path) as raw:
-        letters = _raw_pattern(raw, path)
-        hit = (np.asarray(raw.raw_image_visible) >= fraction * float(raw.white_level)).astype(np.float64)
-    return bin_bayer(hit, letters) > 0
+    d = raw_data(path)
+    return d.peak >= fraction * (d.white if white is None else float(white))
 
 
 def raw_black_level(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
@@ -247,12 +162,7 @@ def raw_black_level(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
     path = Path(path)
     if frame_format(path, pixel_format) != "raw":
         return np.zeros(3)
-    with _libraw(path) as raw:
-        letters = _raw_pattern(raw, path)
-        per = np.asarray(raw.black_level_per_channel, dtype=np.float64)
-        colors = np.asarray(raw.raw_colors_visible)[:2, :2].reshape(-1)
-        cell = np.array([per[int(c)] for c in colors])
-    return bin_bayer(cell.reshape(2, 2), letters).reshape(3)
+    return raw_data(path).black.copy()
 
 
 def read_frame(path: str | Path, pixel_format: str = "auto") -> np.ndarray:
@@ -292,8 +202,7 @@ def full_scale(path: str | Path, pixel_format: str = "auto") -> float:
     path = Path(path)
     fmt = frame_format(path, pixel_format)
     if fmt == "raw":
-        with _libraw(path) as raw:
-            return float(raw.white_level)
+        return raw_data(path).white
     if fmt == "png":
         return _int_scale(np.dtype(np.uint16), _png_header(path)[0])
     bits = None

@@ -288,7 +288,7 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
                           f"below it, leaves at most {MOST_ABOVE_WHITE:.0%} of a frame above it: give the sensor's "
                           f"white level (the file's full scale when it holds the camera's numbers unscaled), or "
                           f"leave --white-level out")
-    clipped = raw_saturated(path, CLIPPED, pixel_format) if white_level is None else None
+    clipped = raw_saturated(path, CLIPPED, pixel_format, white)
     out = np.empty((3, *dn.shape[:2]), np.float32)
     for k in range(3):  # channel by channel: no full-size float64 temporary beyond the frame itself
         out[k] = np.clip((dn[..., k] - black[k]) / (white - black[k]), 0.0, 1.0)

@@ -343,15 +343,21 @@ def test_a_photon_count_less_certain_than_half_is_not_stated(monkeypatch):
             assert got["photons"] is None and got["photons_rel_se"] is None
 
 
-def test_the_expected_clipped_mass_is_that_of_drawn_noise():
-    """Σ E[max(−x, 0)] for pixels x ~ N(μ, σ²), against the mean of many draws (about 0.4 σ where μ = 0)."""
-    from doefab.lab.framechecks import _clipped_mass
+def test_the_noise_floor_is_the_half_normal_mean_of_the_background_noise():
+    """A compact spot of known light on a 95 × 95 window of background noise σ: zeroing the negative pixels adds
+    σ / √(2π) per background pixel (the half-normal's mean), so the floor reads 0.399 σ N / total."""
+    from pathlib import Path
 
-    rng = np.random.default_rng(3)
-    mean, var = np.array([0.0, 1.0, -2.0, 5.0, 0.0]), np.array([1.0, 4.0, 1.0, 1.0, 0.0])
-    draws = rng.normal(mean, np.sqrt(var), size=(400_000, 5))
-    assert _clipped_mass(mean, var) == pytest.approx(float(np.maximum(-draws, 0).mean(axis=0).sum()), rel=5e-3)
-    assert _clipped_mass(np.zeros(1), np.ones(1)) == pytest.approx(1 / math.sqrt(2 * math.pi))
+    from doefab.lab.framechecks import FrameSet, measure_psf
+
+    rng = np.random.default_rng(4)
+    k, sigma, total = 95, 3.0, 1e5
+    spot = np.zeros((200, 200))
+    spot[98:102, 98:102] = total / 16
+    mean = spot + rng.normal(0, sigma, spot.shape)
+    got = measure_psf(FrameSet(mean, np.full(spot.shape, 4 * sigma**2), 4, Path("f")), None, 0.0, k)
+    want = sigma / math.sqrt(2 * math.pi) * (k * k - 16) / total
+    assert got.noise_floor[0] == pytest.approx(want, rel=0.03)
 
 
 def test_a_recording_whose_clipped_noise_would_dim_the_psf_is_refused(design_dir, tmp_path):

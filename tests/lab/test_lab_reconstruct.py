@@ -270,6 +270,7 @@ def test_a_raw_capture_takes_each_channels_black_level_and_its_clipped_photosite
         if k == 1:
             expected[2, 3] = 1.0
         np.testing.assert_allclose(got[k], expected, rtol=1e-6)
+    assert R.read_capture(path, white_level=4095)[1, 2, 3] == 1.0  # a white level given: the same photosite test
     black_rgb, white = R.capture_levels(path)
     assert black_rgb.tolist() == [70.0, 75.0, 80.0] and white == 4095.0
     write_frame(tmp_path / "u.tiff", np.full((16, 16, 3), 1000.0))

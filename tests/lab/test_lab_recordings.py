@@ -288,6 +288,9 @@ def test_a_raw_photosite_at_its_white_level_is_clipped_though_its_binned_pixel_i
     problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
     assert any("f_0.dng: 1 of its binned pixels hold a photosite at 98% or more" in p for p in problems)
     assert any("f_1.dng: 1 of its binned pixels" in p for p in problems)
+    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\nwhite_level = 65535\n' + body)  # stated, the same
+    problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
+    assert any("f_0.dng: 1 of its binned pixels hold a photosite at 98% or more of white_level" in p for p in problems)
 
 
 def test_a_wall_left_unlit_names_its_files(lab):

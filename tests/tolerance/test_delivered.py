@@ -255,18 +255,27 @@ def test_the_mean_interval_covers_the_population_mean_as_often_as_it_says():
     from doefab.tolerance.delivered import mean_interval
 
     rng = np.random.default_rng(11)
-    hits = boot_hits = 0
     n = 400
-    for i in range(n):
-        a, b = rng.normal(0, 0.4, 24), rng.normal(0, 12.0, 8)
-        x = 30.0 + a[:, None] + b[None, :] + rng.normal(0, 1.1, (24, 8))
-        lo, hi = mean_interval(float(x.mean()), variance_components(x))
-        hits += lo <= 30.0 <= hi
-        if i < 100:
-            bl, bh = bootstrap(x[:, :, None], None, draws=300, seed=i)["mean_ci95"]
-            boot_hits += bl <= 30.0 <= bh
-    assert 0.92 <= hits / n <= 0.98
-    assert boot_hits / 100 < hits / n - 0.03
+
+    def coverage(parts, scenes, part_sd, scene_sd, noise_sd, boot=0):
+        hits = boot_hits = 0
+        for i in range(n):
+            a, b = rng.normal(0, part_sd, parts), rng.normal(0, scene_sd, scenes)
+            x = 30.0 + a[:, None] + b[None, :] + rng.normal(0, noise_sd, (parts, scenes))
+            lo, hi = mean_interval(float(x.mean()), variance_components(x))
+            hits += lo <= 30.0 <= hi
+            if i < boot:
+                bl, bh = bootstrap(x[:, :, None], None, draws=300, seed=i)["mean_ci95"]
+                boot_hits += bl <= 30.0 <= bh
+        return hits / n, boot_hits / max(boot, 1)
+
+    scenes_rule, boot = coverage(24, 8, 0.4, 12.0, 1.1, boot=100)
+    assert 0.92 <= scenes_rule <= 0.98 and boot < scenes_rule - 0.03
+    # parts dominating, parts and scenes alike on a small table: each term of the variance must be there
+    for parts, scenes, part_sd, scene_sd in ((24, 8, 1.0, 0.1), (6, 8, 1.0, 1.0)):
+        assert 0.92 <= coverage(parts, scenes, part_sd, scene_sd, 0.5)[0] <= 0.98
+    # the interaction alone: counted once (the floor at its own share makes the interval a little wide there)
+    assert 0.93 <= coverage(6, 4, 0.0, 0.0, 0.5)[0] <= 0.99
 
 
 def test_the_f_test_tells_parts_that_differ_from_parts_that_do_not():
