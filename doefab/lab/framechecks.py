@@ -212,8 +212,9 @@ def _light_problems(r, frames: FrameSet, got: PSFSignal, kernel: int) -> list[st
                      "and that the dark frames are of the same settings)")
         out.append(f"{frames.first} ({r.name}, {frames.n} frame{'s' * (frames.n > 1)}){name}: too few photons for "
                    f"the {kernel}×{kernel}-px kernel: the window's signal is {total:.4g} DN at a signal-to-noise "
-                   f"ratio of {ksnr:.3g} (peak {psnr:.3g}; noise from {got.noise}) and its noise, set to zero where "
-                   f"negative, would add {floor:.2%} of false light; the calibration needs ≥ {MIN_KERNEL_SNR:g} "
+                   f"ratio of {ksnr:.3g} (peak {psnr:.3g}; noise from {got.noise})"
+                   + (f" and its noise, set to zero where negative, would add {floor:.2%} of false light"
+                      if math.isfinite(floor) else "") + f"; the calibration needs ≥ {MIN_KERNEL_SNR:g} "
                    f"(peak ≥ {MIN_PEAK_SNR:g}) and ≤ {MAX_NOISE_FLOOR:.0%}: record more light (a longer exposure or a "
                    f"brighter source, up to the saturation limit) {more}")
     return out

@@ -52,12 +52,15 @@ class RawData(NamedTuple):
 def raw_data(path: Path) -> RawData:
     """:class:`RawData` of ``path``, read once for a few calls in a row (a frame's pixels, levels and clipped
     photosites are asked for one after another): cached by path, size and modification time."""
-    st = path.stat()
-    return _raw_cached(str(path), st.st_size, st.st_mtime_ns)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise DoefabError(f"{path} cannot be read ({exc.strerror or exc}): check the path") from None
+    return _raw_cached(str(path), st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
 @functools.lru_cache(maxsize=2)
-def _raw_cached(name: str, size: int, mtime_ns: int) -> RawData:
+def _raw_cached(name: str, inode: int, size: int, mtime_ns: int, ctime_ns: int) -> RawData:  # (ctime: no utime)
     path = Path(name)
     with _libraw(path) as raw:
         letters = _raw_pattern(raw, path)
@@ -66,7 +69,7 @@ def _raw_cached(name: str, size: int, mtime_ns: int) -> RawData:
         colors = np.array(raw.raw_colors_visible[:2, :2]).reshape(-1)
         white = float(raw.white_level)
     black = bin_bayer(np.array([per[int(c)] for c in colors]).reshape(2, 2), letters).reshape(3)
-    binned = bin_bayer(mosaic, letters)
+    binned = bin_bayer(mosaic, letters).astype(np.float32)  # exact: integers and their halves below 2^24
     h, w = binned.shape[:2]
     cell = [mosaic[i:2 * h:2, j:2 * w:2] for i in (0, 1) for j in (0, 1)]  # the cell's four sites, row by row
     peak = np.stack([np.maximum.reduce([x for x, c in zip(cell, letters) if c == colour]) for colour in "RGB"],
@@ -84,18 +87,23 @@ def _libraw(path: Path):
     import rawpy
 
     with tempfile.TemporaryFile() as said:
+        raw = None
         try:
             with _stderr_to(said):
                 raw = rawpy.imread(str(path))
                 if raw.raw_type == rawpy.RawType.Flat:
                     _ = raw.raw_image_visible  # unpacks the data: a truncated file fails here
         except Exception as exc:  # LibRaw's errors have several types, their texts bytes
+            from doefab.lab.frames import PIXEL_FORMATS
+
+            if raw is not None:
+                raw.close()
             said.seek(0)
             note = " ".join(said.read().decode("utf-8", "replace").split())
             text = exc.args[0].decode("utf-8", "replace") if exc.args and isinstance(exc.args[0], bytes) else str(exc)
             raise DoefabError(f"{path} cannot be read as raw (LibRaw: {text}{'; ' + note if note else ''}): check "
                               f"that the file is a complete camera raw (a copy that ended early reads so), or set "
-                              f"pixel_format to the format it is in") from None
+                              f"pixel_format to the format it is in ({', '.join(PIXEL_FORMATS[1:])})") from None
     with raw:
         yield raw
 

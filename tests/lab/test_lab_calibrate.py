@@ -360,6 +360,29 @@ def test_the_noise_floor_is_the_half_normal_mean_of_the_background_noise():
     assert got.noise_floor[0] == pytest.approx(want, rel=0.03)
 
 
+def test_a_recording_short_only_on_its_noise_floor_is_told_the_frames_to_average():
+    """Kernel SNR about 120 (passes) but a floor of about 32 %, 32 times the limit: the refusal names the frames to
+    average (4 × 32² ≈ 4100), not a missing PSF; a window with no light at all is told to check the source."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from doefab.lab.framechecks import FrameSet, _light_problems, measure_psf
+
+    rng = np.random.default_rng(1)
+    k, sigma = 95, 1.0
+    spot = np.zeros((200, 200))
+    spot[98:102, 98:102] = 1.2 * 100 * sigma * k / 16
+    frames = FrameSet(spot + rng.normal(0, sigma, spot.shape), np.full(spot.shape, 4 * sigma**2), 4, Path("f.tiff"))
+    got = measure_psf(frames, None, 0.0, k)
+    assert got.kernel_snr[0] > 100 and got.noise_floor[0] > 0.3
+    (text,) = _light_problems(SimpleNamespace(name="[[psf]] 1"), frames, got, k)
+    frames_needed = math.ceil(4 * (got.noise_floor[0] / 0.01) ** 2)
+    assert f"average more frames (about {frames_needed} at this exposure)" in text and "hold no PSF" not in text
+    dark = FrameSet(rng.normal(0, 1, (200, 200)) - 0.5, np.full((200, 200), 4.0), 4, Path("g.tiff"))
+    (text,) = _light_problems(SimpleNamespace(name="[[psf]] 2"), dark, measure_psf(dark, None, 0.0, k), k)
+    assert "the frames hold no PSF above the noise" in text and "inf" not in text
+
+
 def test_a_recording_whose_clipped_noise_would_dim_the_psf_is_refused(design_dir, tmp_path):
     """Read noise high enough that the window's negative pixels, set to zero, would add several per cent of false
     light, while the kernel SNR still passes its 100: refused by the noise floor, naming the frames to average;

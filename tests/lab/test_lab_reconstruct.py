@@ -271,6 +271,9 @@ def test_a_raw_capture_takes_each_channels_black_level_and_its_clipped_photosite
             expected[2, 3] = 1.0
         np.testing.assert_allclose(got[k], expected, rtol=1e-6)
     assert R.read_capture(path, white_level=4095)[1, 2, 3] == 1.0  # a white level given: the same photosite test
+    m[5, 7] = 3000  # below the raw's own white level, at a lower one given
+    lower = _write_dng(tmp_path / "l.dng", m, "GRBG", black=(60, 70, 80, 90), white=4095)
+    assert R.read_capture(lower)[1, 2, 3] < 1.0 and R.read_capture(lower, white_level=3000)[1, 2, 3] == 1.0
     black_rgb, white = R.capture_levels(path)
     assert black_rgb.tolist() == [70.0, 75.0, 80.0] and white == 4095.0
     write_frame(tmp_path / "u.tiff", np.full((16, 16, 3), 1000.0))

@@ -241,7 +241,8 @@ def test_sha256_covers_every_frame(lab):
     assert recordings_sha256(rec) != first
 
 
-def _raw_spot(folder, name, pattern="RGGB", black=(2000, 2048, 2049, 2100), photons=2e5, n=2, clip=None):
+def _raw_spot(folder, name, pattern="RGGB", black=(2000, 2048, 2049, 2100), photons=2e5, n=2, clip=None,
+              clip_dn=65535):
     """``n`` DNG frames (16-bit, white level 65535) of a grey spot binned to 64 × 64, each photosite on its own
     black level (``black`` per site of the 2×2 cell, row by row), with read noise 2 DN; ``clip``: one green
     photosite of the spot set to the white level."""
@@ -253,7 +254,7 @@ def _raw_spot(folder, name, pattern="RGGB", black=(2000, 2048, 2049, 2100), phot
     for i in range(n):
         m = np.clip(np.rint(spot + site + rng.normal(0, 2.0, spot.shape)), 0, 65535)
         if clip is not None:
-            m[clip] = 65535
+            m[clip] = clip_dn
         _write_dng(folder / f"{name}_{i}.dng", m, pattern, black=black, white=65535)
 
 
@@ -288,7 +289,10 @@ def test_a_raw_photosite_at_its_white_level_is_clipped_though_its_binned_pixel_i
     problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
     assert any("f_0.dng: 1 of its binned pixels hold a photosite at 98% or more" in p for p in problems)
     assert any("f_1.dng: 1 of its binned pixels" in p for p in problems)
-    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\nwhite_level = 65535\n' + body)  # stated, the same
+    _raw_spot(tmp_path / "psf", "f", clip=(61, 66), clip_dn=40000)  # below the raw's white level, above a stated one
+    assert not any("binned pixels" in p for p in recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS,
+                                                                    PLANES, K))
+    (tmp_path / "rec.toml").write_text('pixel_format = "auto"\nwhite_level = 40000\n' + body)
     problems = recording_problems(load_recordings(tmp_path / "rec.toml"), BANDS, PLANES, K)
     assert any("f_0.dng: 1 of its binned pixels hold a photosite at 98% or more of white_level" in p for p in problems)
 
