@@ -94,8 +94,6 @@ def _libraw(path: Path):
                 if raw.raw_type == rawpy.RawType.Flat:
                     _ = raw.raw_image_visible  # unpacks the data: a truncated file fails here
         except Exception as exc:  # LibRaw's errors have several types, their texts bytes
-            from doefab.lab.frames import PIXEL_FORMATS
-
             if raw is not None:
                 raw.close()
             said.seek(0)
@@ -103,7 +101,7 @@ def _libraw(path: Path):
             text = exc.args[0].decode("utf-8", "replace") if exc.args and isinstance(exc.args[0], bytes) else str(exc)
             raise DoefabError(f"{path} cannot be read as raw (LibRaw: {text}{'; ' + note if note else ''}): check "
                               f"that the file is a complete camera raw (a copy that ended early reads so), or set "
-                              f"pixel_format to the format it is in ({', '.join(PIXEL_FORMATS[1:])})") from None
+                              f"pixel_format to the format it is in") from None
     with raw:
         yield raw
 
