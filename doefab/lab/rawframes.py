@@ -51,7 +51,8 @@ class RawData(NamedTuple):
 
 def raw_data(path: Path) -> RawData:
     """:class:`RawData` of ``path``, read once for a few calls in a row (a frame's pixels, levels and clipped
-    photosites are asked for one after another): cached by path, size and modification time."""
+    photosites are asked for one after another): cached by path, inode, size, modification and change time (a
+    rewrite that keeps the size and sets the old modification time back still changes the change time)."""
     try:
         st = path.stat()
     except OSError as exc:
@@ -60,7 +61,7 @@ def raw_data(path: Path) -> RawData:
 
 
 @functools.lru_cache(maxsize=2)
-def _raw_cached(name: str, inode: int, size: int, mtime_ns: int, ctime_ns: int) -> RawData:  # (ctime: no utime)
+def _raw_cached(name: str, inode: int, size: int, mtime_ns: int, ctime_ns: int) -> RawData:
     path = Path(name)
     with _libraw(path) as raw:
         letters = _raw_pattern(raw, path)
