@@ -93,7 +93,7 @@ def read_set(paths, pixel_format: str, problems: list, saturated_fix: str | None
                             f"or more of {what} ({top:.6g} DN), so the peak is clipped (binned 2×2 "
                             f"with its neighbours it reads lower): {saturated_fix} (keep every photosite below "
                             f"{SATURATION:.0%} of it)")
-        elif top is not None:
+        elif top is not None and clipped is None:  # other files: their pixels are the sensor's
             peak, what = float(f.max(initial=0.0)), "the file's full scale" if white_level is None else "white_level"
             if peak >= SATURATION * top:
                 problems.append(f"{p}: its brightest pixel, {peak:.6g} DN, is {peak / top:.1%} of {what} "
