@@ -52,7 +52,7 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
     k = s["kernel_px"]
     rows = []
     lam_min = min(lams)
-    alias_half = lam_min * cam.sensor_distance / (2 * cam.doe_pitch)
+    alias_half = cam.alias_free_px(lam_min) * cam.sensor_pitch  # metres on the sensor
     half = (k / 2 + 0.5) * cam.sensor_pitch
     rows.append(_row("output window inside the alias-free field (shortest wavelength)", half, alias_half, "m",
                      half <= alias_half, " or ".join(
