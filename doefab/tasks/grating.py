@@ -13,15 +13,52 @@ from doefab.optics.camera import Camera
 from doefab.optics.elements import blazed_grating_height
 from doefab.tasks.base import HALF_LIGHT, Task
 
-__all__ = ["GratingTask", "grating_spot_px", "period_for_spread", "period_for_reach"]
+__all__ = ["GratingTask", "grating_spot_px", "mapping_error_px", "period_for_mapping", "period_for_spread",
+           "period_for_reach", "MAX_MAPPING_PX"]
+
+
+MAX_MAPPING_PX = 0.5  # how far (sensor px) the model may put a first order from where a rectilinear lens sends it
 
 
 def grating_spot_px(camera: Camera, wavelength: float, period: float) -> float:
-    """Sensor position (pixels from the axis, +x) of the first order: s·tan(asin(λ/Λ)) / p (Eq. 21 erratum).
+    """Sensor position (pixels from the axis, +x) where the PSF model puts the first order: s·λ/Λ / p.
 
-    ``period`` Λ in metres.
+    The model is Fraunhofer (a sensor position is linear in the direction sine), so the design's targets and metric
+    boxes sit here; a rectilinear lens sends the order to s·tan(asin(λ/Λ)) / p (Eq. 21 erratum), which
+    ``mapping_error_px`` compares. ``period`` Λ and ``wavelength`` in metres.
+
+    Example: 700 nm through a 86.4 µm period, the sensor 50 mm behind the lens on 5.4 µm pixels:
+    ``grating_spot_px(Camera(sensor_distance=0.05, sensor_pitch=5.4e-6), 700e-9, 86.4e-6)`` → 75.02 px.
     """
-    return camera.sensor_distance * math.tan(math.asin(wavelength / period)) / camera.sensor_pitch
+    return camera.sensor_distance * wavelength / period / camera.sensor_pitch
+
+
+def mapping_error_px(camera: Camera, wavelength: float, period: float) -> float:
+    """How far (sensor px) the model's first order (``grating_spot_px``, s·λ/Λ) lies from where a rectilinear lens
+    sends it, s·tan(asin(λ/Λ)): s·(tan θ − sin θ) / p, about s·(λ/Λ)³ / (2p).
+
+    Example: ``mapping_error_px(Camera(sensor_distance=0.05, sensor_pitch=5.4e-6), 700e-9, 86.4e-6)`` → 0.0025 px.
+    """
+    x = wavelength / period
+    return camera.sensor_distance * (math.tan(math.asin(x)) - x) / camera.sensor_pitch
+
+
+def period_for_mapping(camera: Camera, wavelength: float, max_px: float = MAX_MAPPING_PX) -> float:
+    """The shortest grating period Λ (m), to 0.01 µm, whose first order of ``wavelength`` (m) the model puts within
+    ``max_px`` sensor pixels of where the lens sends it (``mapping_error_px``, which falls as Λ grows).
+
+    Example: the sensor 16 mm behind the lens on 10 µm pixels keeps 700 nm within half a pixel at Λ ≥ 8.21 µm
+    (s·(λ/Λ)³/(2p) ≈ 0.5 px): ``period_for_mapping(Camera(sensor_distance=16e-3, sensor_pitch=10e-6), 700e-9)``.
+    """
+    from scipy.optimize import brentq
+
+    lo, hi = wavelength * (1 + 1e-9), wavelength * 1e6
+    exact = float(brentq(lambda period: mapping_error_px(camera, wavelength, period) - max_px, lo, hi,
+                         xtol=1e-15, rtol=1e-12))
+    um = math.ceil(exact * 1e8) / 100
+    while mapping_error_px(camera, wavelength, um * 1e-6) > max_px:
+        um = round(um + 0.01, 2)
+    return um * 1e-6
 
 
 def period_for_spread(camera: Camera, lam_min: float, lam_max: float, spread_px: float) -> float:
@@ -42,7 +79,7 @@ def period_for_spread(camera: Camera, lam_min: float, lam_max: float, spread_px:
 
 def period_for_reach(camera: Camera, lam_max: float, reach_px: float) -> float:
     """The shortest grating period Λ (m), to 0.01 µm, whose first order of ``lam_max`` (m) lands at most
-    ``reach_px`` sensor pixels off axis (``grating_spot_px``): λ / sin(atan(reach · p / s)) rounded up, and up
+    ``reach_px`` sensor pixels off axis (``grating_spot_px``): λ·s / (reach · p) rounded up, and up
     again while the rounded period, as a scene writes it in µm, lands beyond the reach; NaN for no reach.
 
     Example: with the sensor 16 mm behind the lens (``Camera(sensor_distance=16e-3, sensor_pitch=1.55e-6)``),
@@ -50,7 +87,7 @@ def period_for_reach(camera: Camera, lam_max: float, reach_px: float) -> float:
     """
     if reach_px <= 0:
         return math.nan
-    exact = lam_max / math.sin(math.atan(reach_px * camera.sensor_pitch / camera.sensor_distance))
+    exact = lam_max * camera.sensor_distance / (reach_px * camera.sensor_pitch)
     um = math.ceil(exact * 1e8) / 100
     while grating_spot_px(camera, lam_max, um * 1e-6) > reach_px:
         um = round(um + 0.01, 2)
@@ -101,6 +138,14 @@ class GratingTask(Task):
                               f"{lam * 1e9:g} nm (sin θ = λ / Λ needs Λ > λ): set period_m or period_pixels (a "
                               f"scene's design.grating_period_um) longer, e.g. {16 * camera.doe_pitch * 1e6:g} µm "
                               f"(16 DOE pixels)")
+        off = mapping_error_px(camera, lam, self.period_m)
+        if off > MAX_MAPPING_PX:
+            raise DoefabError(
+                f"GratingTask: a period of {self.period_m * 1e6:g} µm diffracts {lam * 1e9:g} nm so steeply that the "
+                f"PSF model (Fraunhofer, s·λ/Λ) puts its first order {off:.2f} px from where the lens sends it "
+                f"(s·tan(asin(λ/Λ))), more than the {MAX_MAPPING_PX:g} px the model holds: set period_m or "
+                f"period_pixels (a scene's design.grating_period_um) ≥ "
+                f"{period_for_mapping(camera, lam) * 1e6:g} µm")
 
     PATTERN_HINT = "a longer period_m (a scene's design.grating_period_um)"
 

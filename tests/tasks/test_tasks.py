@@ -1,6 +1,7 @@
 """Each task's target checked against its definition (independent arithmetic, not the code's numbers)."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -104,7 +105,7 @@ def test_a_pattern_past_the_window_is_refused_by_optimize_not_cut(tiny_camera):
     cam = doefab.Camera.preset("hyperspectral")
     g = GratingTask(kernel_size=121)
     g.bind(cam)
-    far = cam.sensor_distance * math.tan(math.asin(700e-9 / (16 * 5.4e-6))) / cam.sensor_pitch  # ~75 px
+    far = cam.sensor_distance * 700e-9 / (16 * 5.4e-6) / cam.sensor_pitch  # ~75 px, where the Fraunhofer model puts it
     assert g.pattern_reach_px(cam) == pytest.approx(far + 1 + 2, rel=1e-9)
     assert "kernel_size ≥" in g.window_problem(cam) and "period_m" in g.window_problem(cam)
     assert GratingTask(kernel_size=191).window_problem(cam) == ""
@@ -114,3 +115,37 @@ def test_a_pattern_past_the_window_is_refused_by_optimize_not_cut(tiny_camera):
     assert ring.pattern_reach_px(cam) == pytest.approx(40 + 1 + 1)
     assert "ring_max_px" in ring.window_problem(cam)
     assert HalfRingTask(kernel_size=63, ring_max_px=29.0).window_problem(cam) == ""
+
+
+def test_a_steep_gratings_targets_sit_where_the_model_puts_its_light_and_a_steeper_one_is_refused():
+    """A 4 µm period 2 mm in front of 7 µm pixels diffracts 550 nm by 7.9°: the Fraunhofer model puts its first
+    order at s·λ/Λ = 39.29 px, a rectilinear lens at s·tan(asin(λ/Λ)) = 39.66 px, and the two round to different
+    pixels. The task's target must be the pixel where the model's PSF of a blazed grating is brightest; at 650 nm
+    (0.63 px apart) the task refuses the period and names one that the model holds."""
+    from doefab.optics.psf import PSFPlan
+    from doefab.tasks.grating import GratingTask, mapping_error_px
+
+    cam = doefab.Camera(aperture_diameter=0.3e-3, doe_pitch=0.5e-6, doe_pixels=616, sensor_pitch=7e-6,
+                        sensor_distance=2e-3, focus_distance=math.inf)
+    period, lams, k = 8 * cam.doe_pitch, (500e-9, 550e-9, 600e-9), 101
+    s, p = cam.sensor_distance, cam.sensor_pitch
+    assert round(s * 550e-9 / period / p) != round(s * math.tan(math.asin(550e-9 / period)) / p)  # the case
+    x = (np.arange(cam.doe_pixels) - (cam.doe_pixels - 1) / 2) * cam.doe_pitch
+    two_pi = cam.design_wavelength / (float(cam.material.index(np.array([cam.design_wavelength]))[0]) - 1)
+    height = torch.from_numpy(two_pi * np.mod(np.meshgrid(x, -x)[0] / period, 1.0))
+    with torch.no_grad():
+        psf = PSFPlan(cam, list(lams), [cam.focus_distance], k, halves=("coded",))(height).coded[0].numpy()
+    task = GratingTask(kernel_size=k, period_m=period, wavelengths_m=lams)
+    task.bind(cam)
+    targets = task.targets(cam).numpy()[0]
+    for band in range(len(lams)):
+        assert np.argwhere(targets[band] > 0).tolist() == [list(np.unravel_index(psf[band].argmax(), (k, k)))]
+    # the mapping error against the small-angle series s·(x³/2 + 3x⁵/8) / p
+    xs = 650e-9 / period
+    assert mapping_error_px(cam, 650e-9, period) == pytest.approx(s * (xs**3 / 2 + 3 * xs**5 / 8) / p, rel=2e-3)
+    steep = GratingTask(kernel_size=k, period_m=period, wavelengths_m=(650e-9,))
+    with pytest.raises(DoefabError, match=r"0\.63 px .* ≥ (\d+\.\d+) µm") as err:
+        steep.bind(cam)
+    fix = float(re.search(r"≥ (\d+\.\d+) µm", str(err.value)).group(1)) * 1e-6
+    assert mapping_error_px(cam, 650e-9, fix) <= 0.5 < mapping_error_px(cam, 650e-9, fix - 0.01e-6)
+    GratingTask(kernel_size=k, period_m=fix, wavelengths_m=(650e-9,)).bind(cam)
