@@ -15,7 +15,7 @@ import torch
 from doefab.validate import number_in
 from doefab.optics.propagators.base import FocalSetup, check_window, gauss_legendre_pixel
 
-__all__ = ["MFTRoute", "fourier_matrix"]
+__all__ = ["MFTRoute", "auto_pixel_nodes", "fourier_matrix"]
 
 
 def fourier_matrix(out: np.ndarray, pupil: np.ndarray, wavelength: float, distance: float, pitch: float,
@@ -33,23 +33,42 @@ def fourier_matrix(out: np.ndarray, pupil: np.ndarray, wavelength: float, distan
     return torch.from_numpy(e).to(dtype)
 
 
+def auto_pixel_nodes(setup: FocalSetup) -> int:
+    """Gauss–Legendre nodes per pixel and axis that integrate the PSF over a pixel to about 1e-5 (relative L2):
+    2c + 3 rounded up, with c = p·W/(λ_min·s) the cycles per pixel of the intensity's highest frequency (W the
+    pupil grid's wider side, p the sensor pitch, s the sensor distance); at most 64.
+
+    Example: 3.45 µm pixels 16.3 mm behind a 5.7 mm pupil at 486 nm: c = 2.5, so 8 nodes (2 leave 49 % error)."""
+    import math
+
+    width = max(float(np.ptp(setup.x)), float(np.ptp(setup.y))) + setup.pitch
+    cycles = setup.sensor_pitch * width / (min(setup.wavelengths) * setup.sensor_distance)
+    return int(min(64, math.ceil(2 * cycles) + 3))
+
+
 class MFTRoute:
-    """Matrix Fourier transform onto Gauss–Legendre nodes (the default route).
+    """Matrix Fourier transform onto Gauss–Legendre nodes: an independent cross-check of the default route.
 
     Args:
-        pixel_nodes: quadrature nodes per sensor pixel and axis (1 = pixel-centre sampling only).
+        pixel_nodes: quadrature nodes per sensor pixel and axis (1 = pixel-centre sampling only); None (default):
+            as many as the window's finest fringes need (``auto_pixel_nodes``).
     """
 
     name = "mft"
 
-    def __init__(self, pixel_nodes: int = 2):
-        self.pixel_nodes = number_in("pixel_nodes", pixel_nodes, 1, 64, integer=True)
+    def __init__(self, pixel_nodes: int | None = None):
+        self.pixel_nodes = None if pixel_nodes is None else number_in("pixel_nodes", pixel_nodes, 1, 64,
+                                                                      integer=True)
 
     def check(self, setup: FocalSetup) -> None:
         check_window(setup, self.name)
 
+    def nodes_for(self, setup: FocalSetup) -> int:
+        """The node count per pixel and axis this route uses for ``setup``."""
+        return self.pixel_nodes if self.pixel_nodes is not None else auto_pixel_nodes(setup)
+
     def _nodes(self, setup: FocalSetup):
-        t, w = gauss_legendre_pixel(self.pixel_nodes)
+        t, w = gauss_legendre_pixel(self.nodes_for(setup))
         uc, vc = setup.pixel_centres()
         p = setup.sensor_pitch
         u = (uc[:, None] + p * t[None, :]).ravel()
@@ -65,16 +84,16 @@ class MFTRoute:
             ey = fourier_matrix(v, setup.y, lam, setup.sensor_distance, setup.pitch, setup.envelope, cdt)
             mats.append((ey, ex.transpose(0, 1).contiguous()))
         weights = torch.from_numpy(np.outer(w, w) * setup.sensor_pitch**2).to(setup.real_dtype)
-        return mats, weights
+        return mats, weights, len(w)
 
     def intensity(self, pupil: torch.Tensor, index: int, setup: FocalSetup, prepared,
                   scratch: dict | None = None) -> torch.Tensor:
-        mats, weights = prepared
+        mats, weights, n = prepared
         ey, ext = mats[index]
         lam = setup.wavelengths[index]
         scale = setup.pitch**2 / (lam * setup.sensor_distance)
         field = ey @ (pupil @ ext)  # (..., K n, K n)
         inten = (field.real**2 + field.imag**2) * scale**2
-        k, n = setup.kernel_size, self.pixel_nodes
+        k = setup.kernel_size
         inten = inten.reshape(*inten.shape[:-2], k, n, k, n)
         return torch.einsum("...iajb,ab->...ij", inten, weights)
