@@ -1,7 +1,8 @@
 """``doefab doctor``'s spectral-sampling row says, where the grating spreads the bands over fewer pixels than
 there are bands, the period that spreads them one per pixel (``tasks.grating.period_for_spread``). By hand: a
 phone camera (4.38 mm lens focused at 1 m, 1.4 µm pixels) keeps the template's 96 µm period, which it spreads
-400–700 nm over s·(tan θ700 − tan θ400) / p ≈ 9.8 px: 31 bands, 3.1 per pixel."""
+400–700 nm over s·(sin θ700 − sin θ400) / p ≈ 9.8 px (where the Fraunhofer model puts the first orders; a
+rectilinear lens's s·tan θ differs by 0.0002 px): 31 bands, 3.1 per pixel."""
 
 import math
 import re
@@ -20,11 +21,9 @@ PHONE = {"focal_length_mm": 4.38, "f_number": 1.73, "lens_f_number": 1.73, "focu
 
 
 def _spread_px(s: float, p: float, period: float, lo: float = 400e-9, hi: float = 700e-9) -> float:
-    """First orders' distance by the grating equation sin θ = λ / Λ, written out here."""
-    def x(lam):
-        sin = lam / period
-        return s * sin / math.sqrt(1 - sin * sin) / p
-    return x(hi) - x(lo)
+    """First orders' distance by the grating equation sin θ = λ / Λ, written out here: the model puts an order at
+    s·sin θ on the sensor."""
+    return s * (hi - lo) / period / p
 
 
 @pytest.mark.parametrize("spread", [5.0, 30.0, 120.0])
@@ -32,9 +31,7 @@ def test_the_period_spreads_the_band_over_the_pixels_asked(spread):
     cam = doefab.Camera(sensor_distance=4.4e-3, sensor_pitch=1.4e-6)
     period = period_for_spread(cam, 400e-9, 700e-9, spread)
     assert _spread_px(4.4e-3, 1.4e-6, period) == pytest.approx(spread, rel=1e-9)
-    small_angle = 4.4e-3 * 300e-9 / 1.4e-6 / spread  # Λ ≈ s Δλ / (p · spread) where λ ≪ Λ
-    assert period == pytest.approx(small_angle, rel=0.03 if spread < 50 else 0.2)
-    assert period > small_angle  # tan θ > sin θ: the exact spread needs a coarser period than the small angle's
+    assert period == pytest.approx(4.4e-3 * 300e-9 / 1.4e-6 / spread, rel=1e-9)  # Λ = s Δλ / (p · spread)
 
 
 def _scene(tmp_path, name="s.toml", design=""):
@@ -54,7 +51,7 @@ def test_a_coarse_spread_names_the_period_that_spreads_one_band_per_pixel(tmp_pa
     s = res.camera.sensor_distance
     value, meaning = _sampling(res)
     assert value == pytest.approx(300 / _spread_px(s, 1.4e-6, 96e-6), rel=1e-6)
-    assert "3.1 bands per pixel" in meaning and "7.9 DOE pixels per period" in meaning, meaning  # 31.43 / 4 µm
+    assert "3.1 bands per pixel" in meaning and "7.9 DOE pixels per period" in meaning, meaning  # 31.42 / 4 µm
     period_um = float(re.search(r"design\.grating_period_um = ([\d.]+)", meaning).group(1))
     kernel = int(re.search(r"optics\.kernel_px ≥ (\d+)", meaning).group(1))
     assert _spread_px(s, 1.4e-6, period_um * 1e-6) >= 30  # one band per pixel or better
@@ -103,12 +100,11 @@ def test_the_note_reads_the_bands_in_any_order(tmp_path):
                         + f"[optics]\nwavelengths_nm = [{', '.join(map(str, order))}]\n"
                         + "[design]\ngrating_period_um = 96.0\n")
         notes.append(re.search(r"design\.grating_period_um = [\d.]+", _sampling(resolve(load_scene(path)))[1]))
-    assert notes[0] and notes[1] and notes[0].group(0) == notes[1].group(0) == "design.grating_period_um = 31.43"
+    assert notes[0] and notes[1] and notes[0].group(0) == notes[1].group(0) == "design.grating_period_um = 31.42"
 
 
 def _far_px(s: float, p: float, period: float, lam: float = 700e-9) -> float:
-    sin = lam / period
-    return s * sin / math.sqrt(1 - sin * sin) / p
+    return s * lam / period / p  # s·sin θ, sin θ = λ / Λ
 
 
 WIDE = {"focal_length_mm": 16.0, "f_number": 4.0, "lens_f_number": 2.0, "sensor_pitch_um": 1.55, "doe_pitch_um": 2.0}
@@ -178,6 +174,7 @@ def test_a_period_without_a_first_order_is_refused_in_the_api_and_the_scene(tmp_
     cam = doefab.Camera(doe_pitch=2e-6, doe_pixels=4320)
     with pytest.raises(doefab.DoefabError, match="no first order at 700 nm"):
         GratingTask(period_m=0.6e-6).bind(cam)
-    GratingTask(period_m=0.71e-6).bind(cam)  # above the longest band: accepted
+    with pytest.raises(doefab.DoefabError, match="from where the lens sends it"):  # it has one, far off axis
+        GratingTask(period_m=0.71e-6).bind(cam)
     msg = _refusal(_wide(tmp_path, design="grating_period_um = 0.6\n"))
     assert "no first order at 700 nm" in msg and "design.grating_period_um" in msg, msg
