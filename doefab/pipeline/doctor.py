@@ -226,8 +226,7 @@ def explain(res: ResolvedScene, scene=None) -> list[dict]:
              "aperture stop: the DOE's diffraction over the gap is propagated"),
             ("diffraction limit (Airy radius)", airy, "sensor px", f"1.22 λ s / D at {lam * 1e9:.0f} nm; below 1 px "
              "the sensor, not diffraction, limits detail"),
-            ("DOE pixels across the aperture", cam.doe_pixels, "px", f"at {cam.doe_pitch * 1e6:g} µm, "
-             f"{cam.doe_pixels ** 2 / 1e6:.1f} M pixels in the design grid"),
+            ("DOE pixels across the aperture", cam.doe_pixels, "px", _grid_text(cam, int(res.settings["sampling"]))),
             ("depth of field's near limit (2 px blur)", near, "m", f"far limit "
              f"{'∞' if math.isinf(far) else f'{far:.{_digits(near, far)}g} m: {far - near:.3g} m deep'} about the "
              f"focus at "
@@ -342,6 +341,16 @@ def _finer_grating(cam, task, lams, spots) -> str:
     return (here + f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel "
             f"({period / cam.doe_pitch:.1f} DOE pixels per period; its first order at {hi * 1e9:.0f} nm lands "
             f"{far:.0f} px off axis, within optics.kernel_px ≥ {kernel})")
+
+
+def _grid_text(cam, sampling: int) -> str:
+    """The DOE grid in words: its pitch and pixel count, and the design grid ``sampling`` coarsens it to."""
+    n = cam.doe_pixels
+    text = f"at {cam.doe_pitch * 1e6:g} µm, {n ** 2:,} pixels"
+    if sampling > 1:
+        text += (f"; the design optimises on {n // sampling}² px of {cam.doe_pitch * sampling * 1e6:g} µm "
+                 f"(design.sampling {sampling}), upsampled to this grid when done")
+    return text
 
 
 def _task_rows(cam, task, lams) -> list[tuple]:

@@ -17,12 +17,13 @@ import math
 from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
-__all__ = ["MAX_DOE_PIXELS", "source_phase_step", "steepest_plane", "pitch_fix", "phase_step_fix", "quick_sampling",
+__all__ = ["MAX_DOE_PIXELS", "MIN_DOE_PIXELS", "few_pixels_fixes", "source_phase_step", "steepest_plane", "pitch_fix", "phase_step_fix", "quick_sampling",
            "design_camera", "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks",
            "nlopt_takes", "alias_free_px", "window_blur_checks", "grating_window_checks", "stop_checks",
            "distance_text", "grid_fixes", "aperture_key"]
 
 MAX_DOE_PIXELS = 8192  # a larger grid's PSFs do not fit this machine's memory in reasonable time
+MIN_DOE_PIXELS = 16  # a DOE fewer pixels across holds no pattern worth designing (nor a design grid coarsened)
 
 
 def alias_free_px(cam, lam: float) -> float:
@@ -159,6 +160,21 @@ def grid_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = 
     return f"camera.doe_pitch_um ≥ {_round3(aperture / MAX_DOE_PIXELS * 1e6, math.ceil):g} or {smaller}"
 
 
+def few_pixels_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = "f_number") -> str:
+    """What brings a DOE grid of ``aperture`` / ``pitch`` pixels (m, m) up to ``MIN_DOE_PIXELS``: a finer pitch,
+    or a larger aperture in the scene's own key (as ``grid_fixes``), each rounded to three digits on the side that
+    fits.
+
+    Example: ``few_pixels_fixes(0.25e-3, 100e-6, 16e-3)`` → ``"camera.doe_pitch_um ≤ 15.6 or camera.f_number ≤
+    10"``."""
+    least = MIN_DOE_PIXELS * pitch
+    if aperture_key == "aperture_diameter_mm":
+        larger = f"camera.aperture_diameter_mm ≥ {_round3(least * 1e3, math.ceil):g}"
+    else:
+        larger = f"camera.f_number ≤ {_round3(focal / least, math.floor):g}"
+    return f"camera.doe_pitch_um ≤ {_round3(aperture / MIN_DOE_PIXELS * 1e6, math.floor):g} or {larger}"
+
+
 def _round3(x: float, direction) -> float:
     """``x`` to three significant digits, rounded by ``direction`` (math.floor or math.ceil)."""
     step = 10.0 ** (math.floor(math.log10(x)) - 2)
@@ -225,9 +241,10 @@ def phase_step_fix(cam, lam_min: float, depths, factor: int = 1) -> str:
 def quick_sampling(doe_pixels: int, sampling: int, fits=None) -> int:
     """The design grid's coarsening under ``--quick``: of the factors up to 8 that divide the grid, are multiples
     of the scene's own ``sampling`` and pass ``fits(factor)`` (the PSF routes' sampling at that grid), the one
-    nearest 4 (the larger on a tie); the scene's own when none is. Example: ``quick_sampling(3200, 1) == 4``,
+    nearest 4 (the larger on a tie) that leaves at least ``MIN_DOE_PIXELS``; the scene's own when none is. Example: ``quick_sampling(3200, 1) == 4``,
     ``quick_sampling(2234, 1) == 2`` (2234 = 2 · 1117)."""
-    ok = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0 and (fits is None or fits(d))]
+    ok = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0
+          and doe_pixels // d >= MIN_DOE_PIXELS and (fits is None or fits(d))]
     return min(ok, key=lambda d: (abs(d - 4), -d)) if ok else sampling
 
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
-from doefab.pipeline.sampling import (MAX_DOE_PIXELS, alias_free_px, design_camera, design_factor_checks, pitch_fix,
-                                      design_grid_problems, distance_text, optimizer_checks, quick_sampling,
+from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels_fixes, alias_free_px, design_camera,
+                                      design_factor_checks, pitch_fix, design_grid_problems, distance_text, optimizer_checks, quick_sampling,
                                       sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks,
                                       grating_window_checks)
 from doefab.applications import application, band_problem, design_is, has
@@ -78,6 +78,11 @@ def scene_camera(scene: Scene, problems: list | None = None):
         problem(f"the DOE grid would be {pixels}² pixels ({aperture * 1e3:.2f} mm / {pitch * 1e6:g} µm): above "
                 f"{MAX_DOE_PIXELS}²; set {grid_fixes(aperture, pitch, focal, aperture_key(c))}")
         pixels, pitch = MAX_DOE_PIXELS, aperture / MAX_DOE_PIXELS  # stand-in grid for the other checks
+    elif pixels < MIN_DOE_PIXELS:
+        problem(f"the DOE grid would be {pixels} pixels across ({aperture * 1e3:.3g} mm / {pitch * 1e6:g} µm): "
+                f"below the {MIN_DOE_PIXELS} a pattern needs; set "
+                f"{few_pixels_fixes(aperture, pitch, focal, aperture_key(c))}")
+        pixels, pitch = MIN_DOE_PIXELS, aperture / MIN_DOE_PIXELS  # stand-in grid for the other checks
     try:
         material = material_by_name(fab["material"]) if "material" in fab else base.material
     except DoefabError as exc:

@@ -7,7 +7,7 @@ import re
 import pytest
 
 from doefab.errors import DoefabError
-from doefab.pipeline.sampling import MAX_DOE_PIXELS
+from doefab.pipeline.sampling import MAX_DOE_PIXELS, MIN_DOE_PIXELS, quick_sampling
 from doefab.pipeline.scene import load_scene
 from doefab.pipeline.system import resolve
 
@@ -44,3 +44,27 @@ def test_a_grid_above_the_limit_names_fixes_that_fit(tmp_path, aperture_key):
     other = "aperture_diameter_mm" if aperture_key == "f_number" else "f_number"
     assert f"camera.{other}" not in msg  # the fix is in the key the scene sets
     assert MAX_DOE_PIXELS * pitch_um * 1e-3 >= 200 / 2.8
+
+
+@pytest.mark.parametrize("aperture_key", ["f_number", "aperture_diameter_mm"])
+def test_a_grid_below_the_floor_is_one_problem_naming_fixes_that_fit(tmp_path, aperture_key):
+    """A 200 mm lens at f/64 has a 3.125 mm DOE aperture: 7.8 pixels of 400 µm, rounded up to an even 8. Refused
+    in the scene's words (not a Camera's internal limit), with fixes that reach ``MIN_DOE_PIXELS``: 3.125 mm / 16
+    = 195.3 µm rounded down, f/31.25 (200 mm / (16 × 400 µm)) rounded down and 6.4 mm."""
+    narrow = {"f_number": 64.0} if aperture_key == "f_number" else {"aperture_diameter_mm": 3.125}
+    msg = _problems(tmp_path, **narrow, doe_pitch_um=400.0)
+    assert "1 problem(s): the DOE grid would be 8 pixels across" in msg and "Camera." not in msg, msg
+    pitch_um = _fix(msg, "doe_pitch_um")
+    assert pitch_um == pytest.approx(195)
+    assert "the DOE grid" not in _problems(tmp_path, **narrow, doe_pitch_um=pitch_um)
+    larger = _fix(msg, aperture_key)
+    assert larger == pytest.approx(31.2 if aperture_key == "f_number" else 6.4)
+    assert "the DOE grid" not in _problems(tmp_path, **{aperture_key: larger}, doe_pitch_um=400.0)
+    assert MIN_DOE_PIXELS * pitch_um * 1e-3 <= 3.125
+
+
+def test_the_quick_grid_keeps_at_least_the_floor():
+    """``--quick`` coarsens a grid by the factor nearest 4 that divides it, never below ``MIN_DOE_PIXELS``."""
+    assert quick_sampling(3200, 1) == 4
+    assert quick_sampling(48, 1) == 3  # 48 / 4 = 12 < 16: the factor 3 leaves 16
+    assert quick_sampling(16, 1) == 1
