@@ -16,12 +16,12 @@ from contextlib import contextmanager
 
 from doefab.errors import DoefabError
 
-__all__ = ["DEVICE_WORDS", "ENV", "check_device", "resolve_device", "default_device", "using_device", "to_device",
+__all__ = ["DEVICE_WORDS", "ENV", "check_device", "device_syntax", "resolve_device", "default_device", "using_device", "to_device",
            "describe_device"]
 
 DEVICE_WORDS = ("auto", "cpu", "cuda", "cuda:N")
 ENV = "DOEFAB_DEVICE"  # the default device of this process and the worker processes it starts
-_SYNTAX = re.compile(r"^(auto|cpu|cuda)(:\d+)?$")
+_SYNTAX = re.compile(r"^(auto|cpu|cuda)(:(?:0|[1-9]\d*))?$")  # cuda:01 is no torch device
 _current: str | None = None  # set by ``using_device``
 
 
@@ -34,10 +34,10 @@ def _example(name: str, value: str) -> str:
     return f'{name}="{value}"'
 
 
-def check_device(device, name: str = "device") -> str:
-    """``device`` as a canonical string ("auto", "cpu", "cuda", "cuda:N"), or one ``DoefabError`` naming it and a
-    device that works on this machine. ``name``: how the user gave it ("--device", "scene" for the scene's key, or
-    the API argument's name), for the fix the message shows. "auto" is always accepted."""
+def device_syntax(device, name: str = "device") -> str:
+    """``device`` as a canonical string ("auto", "cpu", "cuda", "cuda:N") when it is written as one, whether or not
+    this machine has it (a scene written on a GPU workstation reads on a laptop, where ``--device`` overrides it),
+    or one ``DoefabError`` naming it (``name`` as in ``check_device``)."""
     import torch
 
     if isinstance(device, torch.device):
@@ -50,17 +50,29 @@ def check_device(device, name: str = "device") -> str:
     m = _SYNTAX.match(text)
     if m is None or (m.group(1) != "cuda" and m.group(2)):
         raise DoefabError(f"{who} is not a device: give auto, cpu, cuda or cuda:N (e.g. {_example(name, 'cpu')})")
-    if m.group(1) != "cuda":
+    return text
+
+
+def check_device(device, name: str = "device") -> str:
+    """``device`` as a canonical string ("auto", "cpu", "cuda", "cuda:N"), or one ``DoefabError`` naming it and a
+    device that works on this machine. ``name``: how the user gave it ("--device", "scene" for the scene's key, or
+    the API argument's name), for the fix the message shows. "auto" is always accepted."""
+    import torch
+
+    text = device_syntax(device, name)
+    if not text.startswith("cuda"):
         return text
+    who = f"{'the scene device' if name == 'scene' else name} {str(device)!r}"
+    flag = " in the scene, or --device cpu" if name == "scene" else ""  # the flag overrides the scene's key
     if not torch.cuda.is_available():
         raise DoefabError(f"{who}: torch {torch.__version__} sees no CUDA device on this machine: use "
-                          f"{_example(name, 'cpu')} (or auto), or install a CUDA build of torch "
+                          f"{_example(name, 'cpu')} (or auto){flag}, or install a CUDA build of torch "
                           f"(docs/guide/install.md)")
     count = torch.cuda.device_count()
-    if m.group(2) and int(m.group(2)[1:]) >= count:
+    if ":" in text and int(text.split(":")[1]) >= count:
         have = ", ".join(f"cuda:{i}" for i in range(count))
         raise DoefabError(f"{who}: torch sees {count} CUDA device{'s' if count != 1 else ''} ({have}): use an index "
-                          f"that exists, e.g. {_example(name, 'cuda:0')}, or {_example(name, 'cpu')}")
+                          f"that exists, e.g. {_example(name, 'cuda:0')}, or {_example(name, 'cpu')}{flag}")
     return text
 
 

@@ -5,6 +5,14 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+@pytest.fixture(autouse=True)
+def _cpu_unless_marked_cuda(request, monkeypatch):
+    """A test computes on the CPU, where ``device=None`` means the default, unless it is marked ``cuda`` (on a GPU
+    machine "auto" would otherwise move the networks of a test written for the CPU to the GPU)."""
+    if request.node.get_closest_marker("cuda") is None:
+        monkeypatch.setenv("DOEFAB_DEVICE", "cpu")
+
+
 @pytest.fixture(scope="session")
 def small_camera():
     """A small camera (1.08 mm aperture on a 200-pixel grid) that keeps optics tests fast."""

@@ -30,7 +30,7 @@ def two_gpus(monkeypatch):
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
 
 
-@pytest.mark.parametrize("value", ["gpu", "cuda:x", "cpu:0", "cuda:", "", 1, None])
+@pytest.mark.parametrize("value", ["gpu", "cuda:x", "cpu:0", "cuda:", "cuda:01", "", 1, None])  # torch refuses cuda:01
 def test_a_word_that_is_no_device_is_refused_with_the_fix(value):
     with pytest.raises(DoefabError) as exc:
         check_device(value, "device")
@@ -156,3 +156,11 @@ def test_each_local_dask_worker_starts_with_its_own_environment():
     finally:
         cluster.close()
     assert sorted(got.values()) == [("6", "1"), ("7", "1")]
+
+
+def test_a_remote_worker_is_told_the_kind_of_device_not_this_machines_gpu_number():
+    """Workers started one per GPU (``CUDA_VISIBLE_DEVICES=1 dask worker ...``) each see their GPU as cuda:0: the
+    submitting machine's ``cuda:1`` would be refused on every one of them."""
+    from doefab.tolerance.montecarlo import remote_worker_device
+
+    assert [remote_worker_device(d) for d in ("cuda:1", "cuda", "cpu", "auto")] == ["cuda", "cuda", "cpu", "auto"]

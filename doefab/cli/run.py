@@ -28,6 +28,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from pathlib import Path
 
+    from doefab._devices import check_device
     from doefab.errors import DoefabError
     from doefab.io import OutputDir
     from doefab.pipeline.run import prepare_scene, run_scene
@@ -41,6 +42,8 @@ def run(args) -> int:
     shared_output_folders(scenes)
     runs = []
     for sc in scenes:  # every check of every scene before the first folder is created
+        if args.device is None and sc.device is not None:
+            check_device(sc.device, "scene")  # a GPU the scene names that this machine lacks (--device overrides it)
         od = OutputDir(Path("out/run") / sc.path.stem if args.out is None else args.out, "run", replace=True)
         runs.append((sc, od, prepare_scene(sc, od.path, tuple(args.force))))
     if len(runs) > 1:

@@ -12,7 +12,7 @@ from functools import partial
 from typing import Callable, NamedTuple
 
 from doefab.applications import APPLICATIONS, has
-from doefab._devices import DEVICE_WORDS, check_device
+from doefab._devices import DEVICE_WORDS, device_syntax
 from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
 from doefab.optics.camera import PRESETS
@@ -87,7 +87,7 @@ KEYS = (
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
     Key("", "stages", "list", choices=STAGES, item="choice", default="all",
         help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
-    Key("", "device", "choice", choices=DEVICE_WORDS, resolve=partial(check_device, name="scene"), default="auto",
+    Key("", "device", "choice", choices=DEVICE_WORDS, resolve=partial(device_syntax, name="scene"), default="auto",
         help="where torch computes (design, networks, tolerance): auto (a CUDA GPU when torch sees one, else the "
              "CPU), cpu, cuda or cuda:N (GPU N); doefab run --device overrides it"),
     Key("camera", "preset", "choice", choices=tuple(PRESETS), default="the task's",

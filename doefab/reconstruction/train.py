@@ -1,4 +1,6 @@
-"""Train a reconstruction network for a design on this machine's CPU (or a GPU, ``device``), with exact resume.
+"""Train a reconstruction network for a design on this machine's CPU (or a GPU, ``device``), with exact resume on
+the CPU (on a GPU a resumed run continues from its checkpoint, not necessarily bit for bit: cuDNN's backward passes
+may be nondeterministic).
 
 Every step draws its batch from the training split by sample index (``step · batch + b``), so a resumed run
 sees exactly the batches an uninterrupted one would. ``conditions`` ({"train": ..., "val": ...}, e.g.
@@ -93,10 +95,12 @@ def arch_for_design(task: str, pair, sensor=None) -> dict:
 
 
 def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4) -> dict:
-    """Mean of the task's metrics over a batch (model in eval mode, no gradients; each chunk on ``psf``'s device)."""
+    """Mean of the task's metrics over a batch (model in eval mode, no gradients; each chunk and ``psf`` on the
+    model's device, ``psf``'s where the model holds no tensors)."""
     model.eval()
     rows = []
-    dev = psf.device
+    dev = next(iter(model.parameters()), next(iter(model.buffers()), psf)).device
+    psf = psf.to(dev)
     with torch.no_grad():
         for i in range(0, coded.shape[0], chunk):
             pred = model(coded[i:i + chunk].to(dev), uncoded[i:i + chunk].to(dev), psf)

@@ -227,7 +227,7 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         from doefab._devices import default_device
 
         client = Client(scheduler)
-        client.run(_set_default_device, default_device())  # the device asked for, on each worker's own GPUs
+        client.run(_set_default_device, remote_worker_device(default_device()))
     try:
         futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
@@ -238,6 +238,13 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def remote_worker_device(text: str) -> str:
+    """The device a ``tcp://`` scheduler's workers are told for this machine's ``text``: its kind alone ("cuda" for
+    "cuda:1"), so each worker computes on the GPU it was started with (``CUDA_VISIBLE_DEVICES``), which this
+    machine's GPU numbers do not name. Example: ``remote_worker_device("cuda:1") == "cuda"``."""
+    return text.split(":")[0]
 
 
 def _set_default_device(text: str) -> None:

@@ -74,7 +74,8 @@ class NetworkJudge:
         if of_design(d.task) is None:
             raise DoefabError(f"no reconstruction network for design task {d.task!r}")
         self.task = of_design(d.task).name
-        self.rec = load_reconstructor(self.task, "proposed", weights_dir, design=psf_judge.design_dir)
+        self.rec = load_reconstructor(self.task, "proposed", weights_dir, design=psf_judge.design_dir,
+                                      device=psf_judge.device)  # the network where the part's PSFs are
         if self.rec.design_sha256 != levels_sha256(d.levels):
             raise DoefabError("the network was trained for another design than this one: network-level judgement "
                               "needs weights trained for it (doefab train --design ...)")

@@ -43,8 +43,33 @@ def test_a_scene_naming_a_gpu_this_machine_lacks_is_refused_before_any_work(cmd,
         (tmp / "s.toml").write_text('device = "cuda:1"\n' + HDR.read_text())
         scene = ["psf", "--scene"] if cmd == "psf" else [cmd]
         return [*scene, tmp / "s.toml"] + (["--out", tmp / "o"] if cmd != "doctor" else [])
-    line = one_clear_error(build, 2, "device: 'cuda:1': torch")
-    assert 'device = "cpu"' in line and "sees no CUDA device" in line
+    line = one_clear_error(build, 2, "the scene device 'cuda:1': torch")
+    assert 'device = "cpu"' in line and "or --device cpu" in line and "sees no CUDA device" in line
+
+
+@pytest.mark.parametrize("cmd", ["doctor", "psf"])
+def test_the_flag_overrides_a_scene_device_this_machine_lacks(cmd, tmp_path, monkeypatch):
+    """A scene written on a GPU workstation (``device = "cuda:1"``) runs on a laptop with ``--device cpu``: the key
+    is checked as a device word when the scene loads, and against this machine only where it is used."""
+    import doefab
+    from doefab._devices import default_device
+    from doefab.cli import main
+    from doefab.errors import DoefabError
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    seen = []
+
+    def plan(*args, **kwargs):
+        seen.append(default_device())
+        raise DoefabError("stopped here")
+
+    monkeypatch.setattr(doefab, "PSFPlan", plan)
+    monkeypatch.setattr("doefab.optics.psf.PSFPlan", plan)
+    (tmp_path / "s.toml").write_text('device = "cuda:1"\n' + HDR.read_text())
+    args = (["psf", "--scene", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o")] if cmd == "psf"
+            else ["doctor", str(tmp_path / "s.toml"), "--no-timing"])
+    assert main([*args, "--device", "cpu"]) == 2  # stopped at the first PSF, past the device
+    assert seen and set(seen) == {"cpu"}
 
 
 def test_psf_computes_on_the_scene_device_key_unless_the_flag_names_one(tmp_path, monkeypatch):

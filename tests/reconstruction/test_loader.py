@@ -135,7 +135,7 @@ def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_
     msds = colour.MSDS_CAMERA_SENSITIVITIES["Nikon 5100 (NPL)"]
     bands_nm = np.asarray(rec.pair.wavelengths) * 1e9
     t = np.stack([np.interp(bands_nm, msds.wavelengths, msds.values[:, k]) for k in range(3)])
-    assert np.allclose(rec.model.response.numpy(), t / t.sum(axis=1).max(), atol=1e-6)
+    assert np.allclose(rec.model.response.cpu().numpy(), t / t.sum(axis=1).max(), atol=1e-6)
     evaluate_mod.evaluate("hyperspectral", tmp_path / "ev", images=1, size=64, weights_dir=tmp_path / "w",
                           progress=False, variants=("proposed",), split="val", sensor=nikon)
     assert {split for split, _, _ in seen} == {"train", "val"} and len(seen) >= 3  # val, a step, the evaluation
@@ -147,7 +147,7 @@ def test_networks_trained_for_another_camera_carry_its_response_and_are_refused_
     with pytest.raises(DoefabError, match="full_well_e 8000"):
         load_reconstructor("hyperspectral", "proposed", tmp_path / "w", sensor=Sensor("Nikon D5100"))
     anyway = load_reconstructor("hyperspectral", "proposed", tmp_path / "w", other_design=True, sensor=Sensor())
-    assert anyway.meta["other_sensor"] and not np.allclose(anyway.model.response.numpy(),
+    assert anyway.meta["other_sensor"] and not np.allclose(anyway.model.response.cpu().numpy(),
                                                            Sensor().rgb(rec.pair.wavelengths))
 
 
