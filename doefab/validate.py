@@ -145,7 +145,7 @@ def heights(name: str, values) -> None:
     top = float(np.abs(a).max(initial=0.0))
     if top > 1e-3:
         raise DoefabError(f"{name} holds heights up to {top:g} m: heights are in metres (a DOE step is ~1e-7 m)"
-                          f"{metres_hint(top, 0.0, 1e-3)}")
+                          f"{metres_hint(top, 1e-7, 1e-3)}")  # a relief's top: 0.1 µm (λ/4 steps) to 1 mm
 
 
 def sensor_position(name: str, value) -> tuple[float, float]:

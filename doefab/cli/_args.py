@@ -46,18 +46,19 @@ def number(kind=float, lo=None, hi=None, lo_open: bool = False, unit: str = "", 
 
 
 def wavelength_nm(text: str) -> float:
-    """A wavelength in nanometres (100–20000 nm); a value that looks like metres gets the unit hint."""
+    """A wavelength in nanometres (100–20000 nm); a value in m, mm or µm gets the unit hint (0.55: "0.55 µm is
+    550 nm: write 550")."""
     try:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expects a wavelength in nm, got {text!r}") from None
     if not math.isfinite(v) or v <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive wavelength in nm, got {text!r}")
-    if v < 1.0:
-        raise argparse.ArgumentTypeError(f"{text} looks like metres: this flag takes nanometres "
-                                         f"(write {v * 1e9:.4g}, not {text})")
     if not 100 <= v <= 20000:
-        raise argparse.ArgumentTypeError(f"{text} nm is outside 100–20000 nm (the flag takes nanometres)")
+        from doefab.validate import unit_hint
+
+        raise argparse.ArgumentTypeError(f"{text} nm is outside 100–20000 nm: the flag takes nanometres"
+                                         f"{unit_hint(v, 100, 20000, 'nm')}")
     return v
 
 

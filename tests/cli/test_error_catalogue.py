@@ -96,7 +96,9 @@ def _npy(tmp, arr, name="h.npy"):
 CASES = [
     # ---- psf: flags
     ("psf-wavelength-in-metres", lambda f, t: ["psf", "--wavelengths-nm", "5.5e-7", "--out", str(t / "o")], 2,
-     "looks like metres"),
+     "5.5e-07 m is 550 nm: write 550"),
+    ("psf-wavelength-in-micrometres", lambda f, t: ["psf", "--wavelengths-nm", "0.55", "--out", str(t / "o")], 2,
+     "0.55 µm is 550 nm: write 550"),
     ("psf-negative-wavelength", lambda f, t: ["psf", "--wavelengths-nm", "-5", "--out", str(t / "o")], 2, "--wavelengths-nm"),
     ("psf-nan-wavelength", lambda f, t: ["psf", "--wavelengths-nm", "nan", "--out", str(t / "o")], 2, "--wavelengths-nm"),
     ("psf-wavelength-out-of-range", lambda f, t: ["psf", "--wavelengths-nm", "55", "--out", str(t / "o")], 2, "100–20000 nm"),
@@ -115,7 +117,9 @@ CASES = [
     ("psf-height-nan", lambda f, t: ["psf", "--height", str(_npy(t, np.full((1600, 1600), np.nan))), "--out",
                                      str(t / "o")], 2, "NaN"),
     ("psf-height-in-nm", lambda f, t: ["psf", "--height", str(_npy(t, np.full((1600, 1600), 500.0))), "--out",
-                                       str(t / "o")], 2, "metres"),
+                                       str(t / "o")], 2, "500 nm is 5e-07 m"),
+    ("psf-height-in-um", lambda f, t: ["psf", "--height", str(_npy(t, np.full((1600, 1600), 1.743))), "--out",
+                                       str(t / "o")], 2, "1.743 µm is 1.743e-06 m"),
     ("psf-point-too-near", lambda f, t: ["psf", "--depths-m", "0.005", "--kernel", "31", "--out", str(t / "o")], 2,
      "--pupil-oversample"),
     ("psf-out-is-file", lambda f, t: ["psf", "--out", str(_file(t))], 2, "existing file"),
