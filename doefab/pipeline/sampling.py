@@ -287,11 +287,15 @@ def design_factor_checks(scene: Scene, cam, task, factor: int, cfg: dict | None 
     dz = steepest_plane(dcam, lam_min, task.depths(cam))[0]
     depth_fix = phase_step_fix(dcam, lam_min, task.depths(cam), factor)
     if step > SOURCE_PHASE_LIMIT:
+        if factor > 1:  # the fix above is the design grid's; the full grid alone asks less
+            full_fix = phase_step_fix(cam, lam_min, task.depths(cam))
+            depth_fix = (f"{depth_fix} (for the design grid, {cam.doe_pixels // factor} px at design.sampling "
+                         f"{factor}), or design.sampling = 1 with {full_fix}")
         return [f"optics.depths_m: a point at {distance_text(z)} changes its phase by {step:.2f} rad "
                 f"between DOE pixels at {lam_min * 1e9:.0f} nm, above the {SOURCE_PHASE_LIMIT:g} rad the PSF "
                 f"routes sample: set {depth_fix}"]
     bad = design_grid_problems(cam, task, factor)
-    if not bad:
+    if not bad or factor == 1:  # the design grid is the DOE grid, whose own checks name what it lacks
         return []
     fits = [d for d in range(1, factor) if cam.doe_pixels % d == 0 and not design_grid_problems(cam, task, d)]
     taken = [d for d in fits if nlopt_takes(scene, cam, cfg or {}, d)]

@@ -114,16 +114,10 @@ def scene_sensor(scene: Scene, problems: list | None = None):
         return Sensor()
 
 
-def _networks(scene: Scene) -> bool:
-    """Whether the scene's networks see captures of its own system: a reconstruction stage whose weights are trained
-    for it or evaluated on it (``weights_mode(...).any_system``); the shipped networks of another design skip it."""
-    return "reconstruction" in scene.stages and weights_mode(scene.reconstruction.get("weights")).any_system
-
-
 def _sensor_checks(scene: Scene, sensor, task, cam) -> list[str]:
-    """The response must cover a spectral task's bands where captures are simulated for networks (``_networks``; a
-    design and its masks take the bands alone)."""
-    if not has(scene.task, "spectral") or not _networks(scene):
+    """The response must cover a spectral task's bands where a reconstruction stage is asked for (a design and its
+    masks take the bands alone)."""
+    if not has(scene.task, "spectral") or "reconstruction" not in scene.stages:
         return []
     try:
         sensor.rgb(task.wavelengths(cam))
@@ -243,12 +237,12 @@ def _checks(scene: Scene, cam, task) -> list[str]:
             round(z, 9) for z in task.depths(cam)]:
         out.append(f"optics.depths_m {scene.optics['depths_m']}: the {scene.task} design works at one plane, the "
                    f"focus distance, {distance_text(cam.focus_distance)}: set camera.focus_distance_m or drop depths_m")
-    networks = _networks(scene)
+    networks = "reconstruction" in scene.stages and weights_mode(scene.reconstruction.get("weights")).any_system
     if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # else skipped on another design
         out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
                    f"bands alone")
-    if networks and has(scene.task, "spectral") and not all(400e-9 - 1e-12 <= w <= 700e-9 + 1e-12
-                                                            for w in task.wavelengths(cam)):
+    if "reconstruction" in scene.stages and has(scene.task, "spectral") and not all(
+            400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
         out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
                    " keep the bands within it, or leave \"reconstruction\" out of stages to design for these bands "
                    "alone")

@@ -344,3 +344,43 @@ def test_planes_too_steep_on_both_sides_of_the_focus_are_told_both_bounds(tmp_pa
     assert 0.3 < near < 0.6 < far < 100
     assert not _design_grids_accept(resolve(scene([near, 1.0, far])))
     assert not _design_grids_accept(resolve(scene([0.3, 1.0, 100.0], float(m[3]))))
+
+
+def test_a_steep_plane_on_a_coarsened_design_grid_names_the_fix_for_each_grid(tmp_path, monkeypatch):
+    """85 mm f/1.4 focused at 3 m on 10 µm DOE pixels, a plane at 1 m: 2.6 rad per DOE pixel on the full grid, four
+    times that on the design grid of design.sampling 4. The message gives the design grid's depth bound (saying
+    so) and the full grid's with design.sampling = 1; each passes doctor and the PSF route on its grids."""
+    monkeypatch.setattr(system, "window_blur_checks", lambda *args: [])
+    monkeypatch.setattr(psf_module, "_check_window", lambda *args: None)
+
+    def scene(near, sampling):
+        p = tmp_path / "s.toml"
+        p.write_text(f'task = "depth"\nstages = ["design"]\n[camera]\nfocal_length_mm = 85.0\nf_number = 1.4\n'
+                     f'lens_f_number = 1.4\nfocus_distance_m = 3.0\ndoe_pitch_um = 10.0\nsensor_pitch_um = 5.9\n'
+                     f'[optics]\ndepths_m = [{near}, 3.0]\n[design]\nsampling = {sampling}\n')
+        return load_scene(p)
+    with pytest.raises(DoefabError) as exc:
+        resolve(scene(1.0, 4))
+    msg = str(exc.value)
+    m = re.search(r"a nearest depth ≥ ([\d.]+) m \(optics.depths_m\)[^,]* \(for the design grid, \d+ px at "
+                  r"design.sampling 4\), or design.sampling = 1 with a nearest depth ≥ ([\d.]+) m", msg)
+    assert m, msg
+    coarse, full = float(m[1]), float(m[2])
+    assert 1.0 < full < coarse < 3.0
+    assert not _design_grids_accept(resolve(scene(coarse, 4)))
+    assert not _design_grids_accept(resolve(scene(full, 1)))
+    with pytest.raises(DoefabError):
+        resolve(scene(full, 4))  # the full grid's bound is not enough for the design grid's
+
+
+def test_a_window_beyond_the_full_grids_field_is_one_problem_not_a_second_telling_the_sampling_it_has(tmp_path):
+    """60 µm DOE pixels leave a 74 px alias-free field at 486 nm (λ·s / (2·b) / p): a 95 px window is refused once,
+    by the DOE grid's own check, not again as a design grid of design.sampling 1 told to set design.sampling = 1."""
+    p = tmp_path / "s.toml"
+    p.write_text('task = "hdr"\nstages = ["design"]\n[camera]\ndoe_pitch_um = 60.0\n[optics]\nkernel_px = 95\n'
+                 '[design]\nsampling = 1\n')
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(p))
+    msg = str(exc.value)
+    assert "1 problem(s): optics.kernel_px 95 reaches beyond the DOE sampling's alias-free field (74 px" in msg, msg
+    assert "design.sampling = 1" not in msg

@@ -183,14 +183,14 @@ def test_a_period_without_a_first_order_is_refused_in_the_api_and_the_scene(tmp_
 @pytest.mark.parametrize("stages", [["design", "masks"], ["design", "reconstruction"]])
 def test_a_near_infrared_grating_is_designed_and_refused_only_where_its_networks_would_need_scenes(tmp_path, stages):
     """800–1000 nm through a 25 mm lens: the design and its masks take the bands alone; the hyperspectral scenes
-    (400–700 nm) and the camera's default RGB response (380–780 nm) bound the bands only where networks see this
-    system's captures (weights trained for it)."""
+    (400–700 nm) and the camera's default RGB response (380–780 nm) bound the bands only where a reconstruction
+    stage is asked for."""
     path = tmp_path / "nir.toml"
-    path.write_text(f'task = "hyperspectral"\nstages = {stages!r}\n[camera]\nfocal_length_mm = 25.0\nf_number = 4.0\n'
+    listed = ", ".join(f'"{s}"' for s in stages)
+    path.write_text(f'task = "hyperspectral"\nstages = [{listed}]\n[camera]\nfocal_length_mm = 25.0\nf_number = 4.0\n'
                     'lens_f_number = 2.0\nfocus_distance_m = 5.0\nsensor_pitch_um = 5.0\ndoe_pitch_um = 4.0\n'
                     '[optics]\nwavelengths_nm = [800, 900, 1000]\n[design]\ngrating_period_um = 64.0\n'
-                    '[fabrication]\nmaterial = "fused silica"\ndesign_wavelength_nm = 900\n'.replace("'", '"')
-                    + ('[reconstruction]\nweights = "train"\n' if "reconstruction" in stages else ""))
+                    '[fabrication]\nmaterial = "fused silica"\ndesign_wavelength_nm = 900\n')
     scene = load_scene(path)
     if "reconstruction" not in stages:
         assert resolve(scene).task.wavelengths(resolve(scene).camera) == pytest.approx((800e-9, 900e-9, 1000e-9))
