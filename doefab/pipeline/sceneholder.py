@@ -9,21 +9,34 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import Scene
 
-__all__ = ["scene_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks",
+__all__ = ["scene_die_m", "least_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks", "die_checks",
            "holder_warnings"]
 
 
 def scene_die_m(scene: Scene, cam) -> float:
-    """The die the scene's mask set is drawn on (m): the smallest whole-millimetre square, 12 mm at least, that
-    holds the DOE grid with a 1 mm margin and the marks of its masks (``fabrication.marks.smallest_die_m``) and
-    whose holder pocket holds the DOE's clear aperture (``holder_cad.derive.widest_aperture_mm``)."""
+    """The die the scene's mask set is drawn on (m): the square ``holder.die_width_mm`` = ``die_height_mm`` the scene
+    gives where it is at least ``least_die_m``, else the smallest whole-millimetre square, 12 mm (the prototype's) at
+    least, that ``least_die_m`` allows.
+
+    Example: the prototype's 8.64 mm DOE on 5.4 µm pixels is drawn on a 12 mm die (11 mm would hold it)."""
     from doefab.fabrication.marks import smallest_die_m
-    from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
+
+    least = least_die_m(scene, cam)
+    given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}
+    if len(given) == 1 and None not in given and given.pop() * 1e-3 >= least - 1e-9:  # a square die, given
+        return scene.holder["die_width_mm"] * 1e-3
+    return max(least, smallest_die_m(*_die_args(scene, cam), floor_m=12e-3))
+
+
+def least_die_m(scene: Scene, cam) -> float:
+    """The smallest whole-millimetre square die (m) that holds the DOE grid with a 1 mm margin and the marks of its
+    masks (``fabrication.marks.smallest_die_m``) and whose holder pocket holds the DOE's clear aperture
+    (``holder_cad.derive.widest_aperture_mm``)."""
+    from doefab.fabrication.marks import smallest_die_m
 
     from holder_cad.derive import MAX_FIELD_HALF_ANGLE_DEG, seat_margin_mm, widest_aperture_mm
     from holder_cad.params import HolderParams
 
-    n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
     h = {k: scene.holder.get(k, getattr(HolderParams, k))
          for k in ("aperture_margin_mm", "die_thickness_mm", "wall_mm")}
     field = scene_field_half_angle_deg(scene, cam)
@@ -31,12 +44,15 @@ def scene_die_m(scene: Scene, cam) -> float:
                                     MAX_FIELD_HALF_ANGLE_DEG)  # a wider field is refused (holder_checks)
     aperture_mm = cam.aperture_diameter * 1e3
     holder_mm = math.floor(aperture_mm - widest_aperture_mm(0.0, seat_margin_mm(**h))) + 1  # the least whole mm
-    need = smallest_die_m(cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks,
-                          floor_m=max(12, holder_mm) * 1e-3)
-    given = {scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")}
-    if len(given) == 1 and None not in given and given.pop() * 1e-3 >= need - 1e-9:  # a larger square die, given
-        return scene.holder["die_width_mm"] * 1e-3
-    return need
+    return smallest_die_m(*_die_args(scene, cam), floor_m=holder_mm * 1e-3)
+
+
+def _die_args(scene: Scene, cam) -> tuple:
+    """``smallest_die_m``'s aperture, pattern extent, CD (m) and mask count for the scene's DOE."""
+    from doefab.fabrication.process import DEFAULT_LEVELS, mask_count
+
+    n_masks = mask_count(int(scene.fabrication.get("n_levels", DEFAULT_LEVELS)))
+    return cam.aperture_diameter, cam.doe_pixels * cam.doe_pitch, cam.doe_pitch, n_masks
 
 
 def scene_die(scene) -> tuple[float, float]:
@@ -87,6 +103,26 @@ def holder_warnings(scene: Scene, cam) -> list[str]:
         return []
 
 
+def die_checks(scene: Scene, cam) -> list[str]:
+    """A die the scene gives (``holder.die_width_mm``, ``die_height_mm``) for its mask set without a holder stage
+    (``holder_checks`` checks it with the holder): square and at least ``least_die_m``."""
+    given = [scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")]
+    if "masks" not in scene.stages or "holder" in scene.stages or given == [None, None]:
+        return []
+    default = scene_die_m(scene, cam) * 1e3
+    return _die_problem(scene, cam, [default if v is None else v for v in given])
+
+
+def _die_problem(scene: Scene, cam, sides: list) -> list[str]:
+    least_mm = least_die_m(scene, cam) * 1e3
+    if sides[0] == sides[1] and sides[0] >= least_mm - 1e-6:
+        return []
+    return [f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a square "
+            f"die of at least {least_mm:g} mm (the DOE grid with a 1 mm margin, its marks and the holder's pocket): "
+            f"set both to {max(least_mm, *sides):g}, or leave them out (they follow the DOE: "
+            f"{scene_die_m(scene, cam) * 1e3:g} mm)"]
+
+
 def holder_checks(scene: Scene, cam) -> list[str]:
     """The holder the run would build, checked with the DOE's die and aperture (as the holder stage builds it)."""
     if "holder" not in scene.stages:
@@ -95,12 +131,8 @@ def holder_checks(scene: Scene, cam) -> list[str]:
     from holder_cad.params import HolderError, HolderParams
 
     params, out = scene_holder(scene, cam), []
-    die_mm, aperture_mm = scene_die_m(scene, cam) * 1e3, cam.aperture_diameter * 1e3
-    sides = [params["die_width_mm"], params["die_height_mm"]]
-    if sides[0] != sides[1] or sides[0] < die_mm - 1e-6:
-        out.append(f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a "
-                   f"square die of at least {die_mm:g} mm (the DOE grid, its marks and the holder's pocket): set both "
-                   f"to {max(die_mm, *sides):g}, or leave them out (they follow the DOE)")
+    aperture_mm = cam.aperture_diameter * 1e3
+    out += _die_problem(scene, cam, [params["die_width_mm"], params["die_height_mm"]])
     widest = MAX_FIELD_HALF_ANGLE_DEG
     if "field_half_angle_deg" not in scene.holder and params.get("field_half_angle_deg", 0.0) > widest:
         out.append(f"camera.sensor_diagonal_mm {scene.camera['sensor_diagonal_mm']:g} at a sensor distance of "

@@ -24,7 +24,7 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
-from doefab.pipeline.sceneholder import holder_checks, holder_warnings, scene_die_m
+from doefab.pipeline.sceneholder import die_checks, holder_checks, holder_warnings, scene_die_m
 from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
 
@@ -294,7 +294,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                          + stop_checks(cam, aperture)
                          + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg, task)
                          + design_factor_checks(scene, cam, task, factor, cfg)
-                         + holder_checks(scene, cam))
+                         + holder_checks(scene, cam) + die_checks(scene, cam))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)

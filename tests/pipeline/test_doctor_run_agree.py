@@ -384,3 +384,19 @@ def test_a_window_beyond_the_full_grids_field_is_one_problem_not_a_second_tellin
     msg = str(exc.value)
     assert "1 problem(s): optics.kernel_px 95 reaches beyond the DOE sampling's alias-free field (74 px" in msg, msg
     assert "design.sampling = 1" not in msg
+
+
+def test_a_small_doe_takes_a_die_smaller_than_the_prototypes_down_to_what_it_needs(tmp_path):
+    """A 16 mm f/2.8 lens: a 5.71 mm DOE. Its marks need 5.72 + 2 mm (8 mm), the holder's pocket 5.71 + 3 mm (9 mm):
+    a scene may ask for a 9 mm die (the default stays the prototype's 12 mm), not for 8 mm."""
+    base = ('task = "hdr"\nstages = ["design", "masks"]\n[camera]\nfocal_length_mm = 16.0\nf_number = 2.8\n'
+            'lens_f_number = 2.8\nsensor_pitch_um = 3.45\ndoe_pitch_um = 4.0\n[holder]\n')
+    p = tmp_path / "s.toml"
+    p.write_text(base)
+    assert resolve(load_scene(p)).die_m == pytest.approx(12e-3)
+    p.write_text(base + "die_width_mm = 9\ndie_height_mm = 9\n")
+    assert resolve(load_scene(p)).die_m == pytest.approx(9e-3)
+    for stages in ('"masks"]', '"masks", "holder"]'):  # the mask set alone, and with the holder's checks
+        p.write_text((base + "die_width_mm = 8\ndie_height_mm = 8\n").replace('"masks"]', stages))
+        with pytest.raises(DoefabError, match=r"square die of at least 9 mm .*set both to 9.*follow the DOE: 12 mm"):
+            resolve(load_scene(p))
