@@ -18,6 +18,14 @@ def _depths(cam) -> tuple:
     return cam.focus_distance, math.inf, 2.0
 
 
+def _grating_window(cam) -> int:
+    """The window (px) that holds the test grating's (16 DOE pixels a period) first order of the demo's longest
+    band with its metric box and margin (``GratingTask.window_px``)."""
+    from doefab.tasks.grating import GratingTask, grating_spot_px
+
+    return GratingTask().window_px(grating_spot_px(cam, max(RGB_M), 16 * cam.doe_pitch))
+
+
 def register(sub) -> None:
     p = sub.add_parser("demo", help="plot the default camera's coded and uncoded PSFs",
                        description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -26,9 +34,10 @@ def register(sub) -> None:
     from doefab.optics.camera import Camera
 
     cam = Camera()
-    low = cam.window_for_blur(_depths(cam))
+    low = max(cam.window_for_blur(_depths(cam)), _grating_window(cam))
     p.add_argument("--kernel", type=number(int, low, 511, unit="sensor pixels"), default=255,
-                   help=f"PSF window K (sensor pixels; ≥ {low}: the plain half's blur at 2 m with 2 px of room)")
+                   help=f"PSF window K (sensor pixels; ≥ {low}: the plain half's blur at 2 m with 2 px of room and "
+                        f"the test grating's first orders with their metric boxes)")
     add_device_arg(p)
     p.set_defaults(func=run)
 

@@ -30,6 +30,8 @@ class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpF
 
 
 def register(sub) -> None:
+    from doefab.pipeline.scenekeys import keys_of
+
     p = sub.add_parser("psf", help="compute the split-aperture PSFs of a height map",
                        description=__doc__, formatter_class=_Help)
     p.add_argument("--height", help="height map .npy in metres, (N, N) of the camera's DOE grid (default: blank DOE)")
@@ -44,8 +46,10 @@ def register(sub) -> None:
                    help="wavelengths (nm; default: the scene's or design's, else 656 589 486)")
     p.add_argument("--depths-m", type=depth_m, nargs="+", default=None,
                    help="point depths (m; inf ok; default: the scene's or design's, else inf)")
-    p.add_argument("--kernel", type=number(int, 1, 8191, unit="sensor pixels"), default=None,
-                   help="PSF window K (sensor pixels; default: the scene's or design's, else 255)")
+    window = keys_of("optics")["kernel_px"]  # the scene key's range, in one place
+    p.add_argument("--kernel", type=number(int, int(window.lo), int(window.hi), unit="sensor pixels"), default=None,
+                   help=f"PSF window K (sensor pixels, {window.lo:g}–{window.hi:g}; default: the scene's or design's, "
+                        f"else 255)")
     p.add_argument("--pupil-oversample", type=number(int, 1, 8, unit="pupil samples per DOE pixel"), default=1,
                    help="pupil samples per DOE pixel (near points or large windows need more)")
     p.add_argument("--route", default="spectral", choices=["spectral", "mft", "fft", "asm"], help="propagation route")

@@ -108,7 +108,7 @@ CASES = [
     ("psf-text-kernel", lambda f, t: ["psf", "--kernel", "big", "--out", str(t / "o")], 2, "expects an integer"),
     ("psf-bad-preset", lambda f, t: ["psf", "--preset", "imax", "--out", str(t / "o")], 2, "--preset"),
     ("psf-bad-route", lambda f, t: ["psf", "--route", "magic", "--out", str(t / "o")], 2, "--route"),
-    ("psf-aliasing-window", lambda f, t: ["psf", "--kernel", "8000", "--out", str(t / "o")], 2, "--pupil-oversample"),
+    ("psf-aliasing-window", lambda f, t: ["psf", "--kernel", "1001", "--out", str(t / "o")], 2, "--pupil-oversample"),
     # ---- psf: files
     ("psf-missing-height", lambda f, t: ["psf", "--height", str(t / "nope.npy"), "--out", str(t / "o")], 2, "not found"),
     ("psf-height-wrong-shape", lambda f, t: ["psf", "--height", str(_npy(t, np.zeros((10, 10)))), "--out", str(t / "o")],
