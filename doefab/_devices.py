@@ -16,7 +16,8 @@ from contextlib import contextmanager
 
 from doefab.errors import DoefabError
 
-__all__ = ["DEVICE_WORDS", "ENV", "check_device", "device_syntax", "resolve_device", "default_device", "using_device", "to_device",
+__all__ = ["DEVICE_WORDS", "ENV", "check_device", "device_syntax",
+           "resolve_device", "default_device", "using_device", "to_device",
            "describe_device"]
 
 DEVICE_WORDS = ("auto", "cpu", "cuda", "cuda:N")

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 __all__ = ["die_outline", "DEFAULT_CHAMFER_MM", "DEFAULT_THICKNESS_MM", "SECOND_CHAMFER", "KEY_PROUD_MM",
-           "LEAST_CLEARANCE_MM", "least_key_chamfer_mm"]
+           "LEAST_CLEARANCE_MM", "least_key_chamfer_mm", "chamfer_problem"]
 
 DEFAULT_CHAMFER_MM = 2.0  # the larger chamfer's leg (mm)
 DEFAULT_THICKNESS_MM = 1.0  # the die's substrate thickness (mm): the mask set's substrate, the holder's pocket depth
@@ -40,6 +40,15 @@ def die_outline(width: float, height: float, chamfer: float, coded_sign: int = 1
     if coded_sign < 0:  # the mirror image, still counter-clockwise
         pts = pts[::-1] * [-1.0, 1.0]
     return pts
+
+
+def chamfer_problem(die_mm: float, chamfer_mm: float) -> str:
+    """Why a die key's larger chamfer ``chamfer_mm`` cannot be cut on a square die of ``die_mm`` (it must stay below
+    half the die), or ''. Example: ``chamfer_problem(6, 3.5)`` names 1.5 mm (a quarter of the die)."""
+    if chamfer_mm < die_mm / 2:
+        return ""
+    return (f"die chamfer {chamfer_mm:g} mm must be below half the die ({die_mm / 2:g} mm): give a smaller one, e.g. "
+            f"{die_mm / 4:g} mm")
 
 
 def least_key_chamfer_mm(clearance_mm: float) -> float:

@@ -5,12 +5,19 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+_MACHINE_DEVICE = os.environ.get("DOEFAB_DEVICE")
+os.environ["DOEFAB_DEVICE"] = "cpu"  # tests and their shared fixtures compute on the CPU, where device=None ...
+
+
 @pytest.fixture(autouse=True)
-def _cpu_unless_marked_cuda(request, monkeypatch):
-    """A test computes on the CPU, where ``device=None`` means the default, unless it is marked ``cuda`` (on a GPU
-    machine "auto" would otherwise move the networks of a test written for the CPU to the GPU)."""
-    if request.node.get_closest_marker("cuda") is None:
-        monkeypatch.setenv("DOEFAB_DEVICE", "cpu")
+def _machine_device_when_marked_cuda(request, monkeypatch):
+    """... unless a test is marked ``cuda``: it sees the machine's own default (on a GPU machine "auto" would
+    otherwise move the networks of a test written for the CPU, or of a module's fixture, to the GPU)."""
+    if request.node.get_closest_marker("cuda") is not None:
+        if _MACHINE_DEVICE is None:
+            monkeypatch.delenv("DOEFAB_DEVICE", raising=False)
+        else:
+            monkeypatch.setenv("DOEFAB_DEVICE", _MACHINE_DEVICE)
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,7 @@
 """The same numbers on every device: each computation on a device against the same computation on the CPU.
 
-Each case runs twice: ``device=None`` (auto: the CPU on a machine without CUDA, where it must equal
-``device="cpu"`` bit for bit — the CPU results are unchanged) and ``device="cuda"`` (marked ``cuda``: ``pytest -m
+Each case runs twice: ``device=None`` (the default device, which tests not marked ``cuda`` pin to the CPU through
+``$DOEFAB_DEVICE``: it must equal ``device="cpu"`` bit for bit — the CPU results are unchanged) and ``device="cuda"`` (marked ``cuda``: ``pytest -m
 cuda tests/`` runs these alone), which must agree with the CPU to float32 rounding and is skipped, with the reason,
 where torch sees no CUDA device. What leaves the API is on the CPU (numpy, or a tensor on its input's device).
 """

@@ -11,6 +11,7 @@ import numpy as np
 from doefab.cli._args import add_device_arg, number
 
 RGB_M = (656e-9, 589e-9, 486e-9)
+GRATING_PERIOD_PX = 16  # the test grating's period, DOE pixels
 
 
 def _depths(cam) -> tuple:
@@ -19,11 +20,11 @@ def _depths(cam) -> tuple:
 
 
 def _grating_window(cam) -> int:
-    """The window (px) that holds the test grating's (16 DOE pixels a period) first order of the demo's longest
+    """The window (px) that holds the test grating's (``GRATING_PERIOD_PX``) first order of the demo's longest
     band with its metric box and margin (``GratingTask.window_px``)."""
     from doefab.tasks.grating import GratingTask, grating_spot_px
 
-    return GratingTask().window_px(grating_spot_px(cam, max(RGB_M), 16 * cam.doe_pitch))
+    return GratingTask().window_px(grating_spot_px(cam, max(RGB_M), GRATING_PERIOD_PX * cam.doe_pitch))
 
 
 def register(sub) -> None:
@@ -57,7 +58,7 @@ def run(args) -> int:
     depths = _depths(cam)
     designs = {
         "blank": doefab.blank_height(cam),
-        "grating16": doefab.quantize_height(doefab.blazed_grating_height(cam, 16), cam),
+        "grating16": doefab.quantize_height(doefab.blazed_grating_height(cam, GRATING_PERIOD_PX), cam),
     }
     plan = doefab.PSFPlan(cam, RGB_M, depths, args.kernel)
     out = claim.create()

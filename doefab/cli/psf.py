@@ -48,8 +48,8 @@ def register(sub) -> None:
                    help="point depths (m; inf ok; default: the scene's or design's, else inf)")
     window = keys_of("optics")["kernel_px"]  # the scene key's range, in one place
     p.add_argument("--kernel", type=number(int, int(window.lo), int(window.hi), unit="sensor pixels"), default=None,
-                   help=f"PSF window K (sensor pixels, {window.lo:g}–{window.hi:g}; default: the scene's or design's, "
-                        f"else 255)")
+                   help=f"PSF window K (sensor pixels, {window.lo:g}–{window.hi:g}; default: the scene's or "
+                        f"design's, else 255)")
     p.add_argument("--pupil-oversample", type=number(int, 1, 8, unit="pupil samples per DOE pixel"), default=1,
                    help="pupil samples per DOE pixel (near points or large windows need more)")
     p.add_argument("--route", default="spectral", choices=["spectral", "mft", "fft", "asm"], help="propagation route")

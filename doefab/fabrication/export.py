@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.diekey import (DEFAULT_CHAMFER_MM, DEFAULT_THICKNESS_MM, LEAST_CLEARANCE_MM, SECOND_CHAMFER,
-                           least_key_chamfer_mm)
+                           chamfer_problem, least_key_chamfer_mm)
 from doefab.errors import DoefabError
 from doefab.fabrication.bitplanes import bit_plane, plane_rectangles, validate_levels
 from doefab.fabrication.gdsii import GDSWriter
@@ -153,9 +153,9 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
                           f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
-    if _chamfer_m(opts) >= opts.die_m / 2:
-        raise DoefabError(f"die_chamfer_m = {_chamfer_m(opts):g} m must be below half the die ({opts.die_m / 2:g} "
-                          f"m): give a smaller one (the holder's die_chamfer_mm), e.g. {opts.die_m / 4:g} m")
+    if chamfer_problem(opts.die_m * 1e3, _chamfer_m(opts) * 1e3):
+        raise DoefabError(f"die_chamfer_m = {_chamfer_m(opts):g} m: "
+                          f"{chamfer_problem(opts.die_m * 1e3, _chamfer_m(opts) * 1e3)} (the holder's die_chamfer_mm)")
     out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)

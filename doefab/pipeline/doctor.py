@@ -319,7 +319,7 @@ def _finer_grating(cam, task, lams, spots) -> str:
     where that window would leave the DOE sampling's alias-free field or the key's range, that no period does."""
     from doefab.pipeline.sampling import alias_free_px
     from doefab.pipeline.scenekeys import keys_of
-    from doefab.tasks.grating import grating_spot_px, period_for_spread
+    from doefab.tasks.grating import MAX_MAPPING_PX, grating_spot_px, period_for_mapping, period_for_spread
 
     n, lo, hi = len(lams), min(lams), max(lams)  # the scene's list in any order
     per_px = (n - 1) / max(abs(spots[1] - spots[0]), 1e-9)
@@ -338,6 +338,12 @@ def _finer_grating(cam, task, lams, spots) -> str:
                 f"put the first order at {hi * 1e9:.0f} nm {far:.0f} px off axis, needing a {kernel} px window; "
                 f"the alias-free field at {lo * 1e9:.0f} nm is {2 * field - 1:.0f} px): list fewer bands in "
                 f"optics.wavelengths_nm, or a finer camera.doe_pitch_um")
+    steep = period_for_mapping(cam, hi)
+    if period < steep:  # the period that spreads them so far diffracts too steeply for the model
+        return (here + f"no grating period spreads them one per pixel within the model ({period * 1e6:g} µm would; "
+                f"below {steep * 1e6:g} µm the model puts the first order at {hi * 1e9:.0f} nm more than "
+                f"{MAX_MAPPING_PX:g} px from the lens's): list fewer bands in optics.wavelengths_nm, or a longer "
+                f"lens or finer sensor pixels")
     return (here + f"design.grating_period_um = {period * 1e6:g} spreads them one per pixel "
             f"({period / cam.doe_pitch:.1f} DOE pixels per period; its first order at {hi * 1e9:.0f} nm lands "
             f"{far:.0f} px off axis, within optics.kernel_px ≥ {kernel})")

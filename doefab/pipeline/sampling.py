@@ -17,7 +17,8 @@ import math
 from doefab.optics.camera import BLUR_ROOM_PX, window_reach
 from doefab.pipeline.scene import Scene
 
-__all__ = ["MAX_DOE_PIXELS", "MIN_DOE_PIXELS", "few_pixels_fixes", "source_phase_step", "steepest_plane", "pitch_fix", "phase_step_fix", "quick_sampling",
+__all__ = ["MAX_DOE_PIXELS", "MIN_DOE_PIXELS", "few_pixels_fixes",
+           "source_phase_step", "steepest_plane", "pitch_fix", "phase_step_fix", "quick_sampling",
            "design_camera", "design_grid_problems", "design_factor_checks", "sampling_checks", "optimizer_checks",
            "nlopt_takes", "alias_free_px", "window_blur_checks", "grating_window_checks", "stop_checks",
            "distance_text", "grid_fixes", "aperture_key"]
@@ -241,7 +242,8 @@ def phase_step_fix(cam, lam_min: float, depths, factor: int = 1) -> str:
 def quick_sampling(doe_pixels: int, sampling: int, fits=None) -> int:
     """The design grid's coarsening under ``--quick``: of the factors up to 8 that divide the grid, are multiples
     of the scene's own ``sampling`` and pass ``fits(factor)`` (the PSF routes' sampling at that grid), the one
-    nearest 4 (the larger on a tie) that leaves at least ``MIN_DOE_PIXELS``; the scene's own when none is. Example: ``quick_sampling(3200, 1) == 4``,
+    nearest 4 (the larger on a tie) that leaves at least ``MIN_DOE_PIXELS``; the scene's own when none
+    is. Example: ``quick_sampling(3200, 1) == 4``,
     ``quick_sampling(2234, 1) == 2`` (2234 = 2 · 1117)."""
     ok = [d for d in range(sampling, 9) if doe_pixels % d == 0 and d % sampling == 0
           and doe_pixels // d >= MIN_DOE_PIXELS and (fits is None or fits(d))]
@@ -360,9 +362,15 @@ def optimizer_checks(scene: Scene, cam, cfg: dict, task) -> list[str]:
 
 def sampling_checks(scene: Scene, cam, cfg: dict) -> list[str]:
     """The design grid's coarsening (the scene's ``design.sampling``, else the committed design's) must divide
-    the DOE grid: ``doefab run`` would stop at the design stage otherwise (``--quick`` picks a factor that fits)."""
+    the DOE grid and leave at least ``MIN_DOE_PIXELS``: ``doefab run`` would stop at the design stage otherwise
+    (``--quick`` picks a factor that fits)."""
     from doefab.design.optimize import sampling_problem
 
     key = "design.sampling" if "sampling" in scene.design else "design.sampling (the committed design's)"
-    problem = sampling_problem(cam.doe_pixels, int(scene.design.get("sampling", cfg.get("sampling", 1))), key)
+    factor = int(scene.design.get("sampling", cfg.get("sampling", 1)))
+    problem = sampling_problem(cam.doe_pixels, factor, key)
+    if problem is None and factor > 1 and cam.doe_pixels // factor < MIN_DOE_PIXELS:
+        fits = [d for d in range(1, factor) if cam.doe_pixels % d == 0 and cam.doe_pixels // d >= MIN_DOE_PIXELS]
+        problem = (f"{key} {factor} leaves a design grid of {cam.doe_pixels // factor} px, below the "
+                   f"{MIN_DOE_PIXELS} a pattern needs: use {' or '.join(map(str, fits))}")
     return [problem] if problem else []

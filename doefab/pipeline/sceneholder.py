@@ -9,7 +9,8 @@ import math
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import Scene
 
-__all__ = ["scene_die_m", "least_die_m", "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks", "die_checks",
+__all__ = ["scene_die_m", "least_die_m",
+           "scene_die", "scene_field_half_angle_deg", "scene_holder", "holder_checks", "die_checks",
            "holder_warnings"]
 
 
@@ -104,23 +105,46 @@ def holder_warnings(scene: Scene, cam) -> list[str]:
 
 
 def die_checks(scene: Scene, cam) -> list[str]:
-    """A die the scene gives (``holder.die_width_mm``, ``die_height_mm``) for its mask set without a holder stage
-    (``holder_checks`` checks it with the holder): square and at least ``least_die_m``."""
-    given = [scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")]
-    if "masks" not in scene.stages or "holder" in scene.stages or given == [None, None]:
+    """The die of a mask set without a holder stage (``holder_checks`` checks it with the holder): a given one
+    square and at least ``least_die_m``, and the die key's chamfer below half of it."""
+    if "masks" not in scene.stages or "holder" in scene.stages:
         return []
     default = scene_die_m(scene, cam) * 1e3
+    given = [scene.holder.get("die_width_mm"), scene.holder.get("die_height_mm")]
     return _die_problem(scene, cam, [default if v is None else v for v in given])
 
 
 def _die_problem(scene: Scene, cam, sides: list) -> list[str]:
+    """A given die that is not square or smaller than the mask set needs (with a holder stage: the least square die
+    the holder also takes), and a die key's chamfer (``holder.die_chamfer_mm``) too large for the die."""
     least_mm = least_die_m(scene, cam) * 1e3
-    if sides[0] == sides[1] and sides[0] >= least_mm - 1e-6:
-        return []
-    return [f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a square "
-            f"die of at least {least_mm:g} mm (the DOE grid with a 1 mm margin, its marks and the holder's pocket): "
-            f"set both to {max(least_mm, *sides):g}, or leave them out (they follow the DOE: "
-            f"{scene_die_m(scene, cam) * 1e3:g} mm)"]
+    if "holder" in scene.stages:
+        least_mm = _holder_least_die_mm(scene, cam, least_mm)
+    if sides[0] != sides[1] or sides[0] < least_mm - 1e-6:
+        return [f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a square "
+                f"die of at least {least_mm:g} mm (the DOE grid with a 1 mm margin, its marks and the holder's "
+                f"{'pocket and washers' if 'holder' in scene.stages else 'pocket'}): set both to "
+                f"{max(least_mm, *sides):g}, or leave them out (they follow the DOE: "
+                f"{scene_die_m(scene, cam) * 1e3:g} mm)"]
+    from doefab.diekey import chamfer_problem
+
+    problem = chamfer_problem(min(sides), scene_die(scene)[0] * 1e3)
+    return [f"holder.die_chamfer_mm: {problem}"] if problem else []
+
+
+def _holder_least_die_mm(scene: Scene, cam, least_mm: float) -> float:
+    """The least whole-millimetre square die, from ``least_mm``, that the scene's holder takes (its washers reach
+    over the die); ``least_mm`` where none within 40 mm does (the holder's own check then says why)."""
+    from holder_cad.params import HolderError, HolderParams
+
+    params = scene_holder(scene, cam)
+    for die in range(math.ceil(least_mm - 1e-6), math.ceil(least_mm - 1e-6) + 40):
+        try:
+            HolderParams(**{**params, "die_width_mm": float(die), "die_height_mm": float(die)})
+            return float(die)
+        except (HolderError, DoefabError):
+            continue
+    return least_mm
 
 
 def holder_checks(scene: Scene, cam) -> list[str]:

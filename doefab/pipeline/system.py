@@ -17,9 +17,10 @@ from __future__ import annotations
 import math
 
 from doefab.errors import DoefabError
-from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels_fixes, alias_free_px, design_camera,
-                                      design_factor_checks, pitch_fix, design_grid_problems, distance_text, optimizer_checks, quick_sampling,
-                                      sampling_checks, aperture_key, grid_fixes, stop_checks, window_blur_checks,
+from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels_fixes, alias_free_px,
+                                      design_camera, design_factor_checks, pitch_fix, design_grid_problems,
+                                      distance_text, optimizer_checks, quick_sampling, sampling_checks,
+                                      aperture_key, grid_fixes, stop_checks, window_blur_checks,
                                       grating_window_checks)
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene

@@ -91,3 +91,23 @@ def test_psf_computes_on_the_scene_device_key_unless_the_flag_names_one(tmp_path
     for flags in ([], ["--device", "cpu"]):
         assert main(["psf", "--scene", str(tmp_path / "s.toml"), *flags, "--out", str(tmp_path / "o")]) == 2
     assert seen == ["auto", "cpu"]  # the scene's key, then the flag over it
+
+
+def test_run_with_the_flag_passes_a_scene_device_this_machine_lacks(tmp_path, monkeypatch):
+    """``doefab run`` checks a scene's device before any folder is made, unless ``--device`` overrides it."""
+    from doefab.cli import main
+    from doefab.errors import DoefabError
+    from doefab.pipeline import run as run_mod
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    reached = []
+
+    def prepare(*args, **kwargs):
+        reached.append(True)
+        raise DoefabError("stopped here")
+
+    monkeypatch.setattr(run_mod, "prepare_scene", prepare)
+    (tmp_path / "s.toml").write_text('device = "cuda:1"\n' + HDR.read_text())
+    argv = ["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o")]
+    assert main(argv) == 2 and not reached  # refused at the device
+    assert main([*argv, "--device", "cpu"]) == 2 and reached  # past it, stopped at the scene's checks

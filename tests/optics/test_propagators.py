@@ -236,24 +236,39 @@ def test_a_route_of_the_users_own_without_scratch_still_computes_psfs(small_came
     assert scratch_kwargs(type("Builtin", (), {"intensity": max})()) == {}  # max has no readable signature
 
 
-def test_the_mft_routes_default_node_count_follows_the_fringes_per_pixel(small_camera, random_doe):
-    """With 2.6 fringe cycles per pixel (10.8 µm pixels, 1.08 mm pupil, 450 nm, 10 mm) two nodes per pixel leave
-    the PSF several per cent off; the default takes as many as the fringes need and agrees with the spectral
-    route (whose pixel integral is analytic) as closely as 8 nodes do on the fixture's camera."""
+def test_the_mft_routes_default_node_count_follows_the_fringes_per_pixel(small_camera):
+    """With 2.6 fringe cycles per pixel (10.8 µm pixels, 1.08 mm pupil, 450 nm, 10 mm) two or four nodes per pixel
+    leave the blank aperture's PSF several per cent off; the default takes as many as the fringes need and agrees
+    with the spectral route, whose pixel integral is exact without a DOE."""
     from dataclasses import replace
 
     from doefab.optics.propagators.mft import auto_pixel_nodes
 
     cam = replace(small_camera, sensor_pitch=10.8e-6)
     kw = dict(kernel_size=21, precision="float64", halves=("coded", "uncoded"))
-    spectral = doefab.split_aperture_psf(random_doe, cam, [450e-9], [cam.focus_distance], **kw)
-    auto = doefab.split_aperture_psf(random_doe, cam, [450e-9], [cam.focus_distance], route="mft", **kw)
-    two = doefab.split_aperture_psf(random_doe, cam, [450e-9], [cam.focus_distance], route="mft", pixel_nodes=2,
-                                    **kw)
+    spectral = doefab.split_aperture_psf(None, cam, [450e-9], [cam.focus_distance], **kw)
+    auto = doefab.split_aperture_psf(None, cam, [450e-9], [cam.focus_distance], route="mft", **kw)
+    for few in (2, 4):
+        mft = doefab.split_aperture_psf(None, cam, [450e-9], [cam.focus_distance], route="mft", pixel_nodes=few, **kw)
+        assert all(_rel(mft[half], spectral[half]) > 1e-2 for half in ("coded", "uncoded"))
     for half in ("coded", "uncoded"):
-        assert _rel(two[half], spectral[half]) > 1e-2
-        assert _rel(auto[half], spectral[half]) < 2e-4
+        assert _rel(auto[half], spectral[half]) < 1e-6
     setup = FocalSetup(x=np.arange(200) * 5.4e-6, y=np.arange(200) * 5.4e-6, pitch=5.4e-6, envelope=False,
                        wavelengths=(450e-9,),
                        sensor_distance=10e-3, sensor_pitch=10.8e-6, kernel_size=21)
     assert auto_pixel_nodes(setup) == math.ceil(2 * 10.8e-6 * 1.08e-3 / (450e-9 * 10e-3)) + 3  # 2c + 3: 9
+
+
+def test_the_mft_route_refuses_fringes_beyond_its_node_cap_and_matrices_beyond_its_memory(small_camera):
+    """200 µm pixels 10 mm behind a 1.08 mm pupil at 450 nm: c = 200e-6 · 1.08e-3 / (450e-9 · 10e-3) = 48 cycles per
+    pixel would need 99 nodes, beyond the 64 the route takes; and a 100-byte budget refuses the matrices."""
+    from dataclasses import replace
+
+    from doefab.optics.propagators.mft import MFTRoute
+
+    coarse = replace(small_camera, sensor_pitch=200e-6)
+    with pytest.raises(SamplingError, match=r"\[mft\] the PSF has more than 30.5 fringe cycles per sensor pixel"):
+        doefab.split_aperture_psf(None, coarse, [450e-9], [coarse.focus_distance], kernel_size=3, route="mft")
+    with pytest.raises(SamplingError, match=r"\[mft\] the Fourier matrices of 1 band\(s\), a 21 px window and 6 nodes"):
+        doefab.split_aperture_psf(None, small_camera, [450e-9], [small_camera.focus_distance], kernel_size=21,
+                                  route=MFTRoute(max_bytes=100))

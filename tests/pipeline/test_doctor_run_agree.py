@@ -388,15 +388,31 @@ def test_a_window_beyond_the_full_grids_field_is_one_problem_not_a_second_tellin
 
 def test_a_small_doe_takes_a_die_smaller_than_the_prototypes_down_to_what_it_needs(tmp_path):
     """A 16 mm f/2.8 lens: a 5.71 mm DOE. Its marks need 5.72 + 2 mm (8 mm), the holder's pocket 5.71 + 3 mm (9 mm):
-    a scene may ask for a 9 mm die (the default stays the prototype's 12 mm), not for 8 mm."""
+    a mask set may be drawn on a 9 mm die (the default stays the prototype's 12 mm), not on 8 mm; with a holder
+    stage the least die is the one whose washers the holder takes too, and that one passes; a die key's chamfer
+    must stay below half the die."""
     base = ('task = "hdr"\nstages = ["design", "masks"]\n[camera]\nfocal_length_mm = 16.0\nf_number = 2.8\n'
-            'lens_f_number = 2.8\nsensor_pitch_um = 3.45\ndoe_pitch_um = 4.0\n[holder]\n')
+            'lens_f_number = 2.8\nsensor_pitch_um = 3.45\ndoe_pitch_um = 4.0\n[holder]\nthread_diameter_mm = 40.5\n')
     p = tmp_path / "s.toml"
     p.write_text(base)
     assert resolve(load_scene(p)).die_m == pytest.approx(12e-3)
     p.write_text(base + "die_width_mm = 9\ndie_height_mm = 9\n")
     assert resolve(load_scene(p)).die_m == pytest.approx(9e-3)
-    for stages in ('"masks"]', '"masks", "holder"]'):  # the mask set alone, and with the holder's checks
-        p.write_text((base + "die_width_mm = 8\ndie_height_mm = 8\n").replace('"masks"]', stages))
-        with pytest.raises(DoefabError, match=r"square die of at least 9 mm .*set both to 9.*follow the DOE: 12 mm"):
+    p.write_text(base + "die_width_mm = 8\ndie_height_mm = 8\n")
+    with pytest.raises(DoefabError, match=r"square die of at least 9 mm .*set both to 9.*follow the DOE: 12 mm"):
+        resolve(load_scene(p))
+    p.write_text(base + "die_width_mm = 9\ndie_height_mm = 9\ndie_chamfer_mm = 4.5\n")
+    with pytest.raises(DoefabError, match=r"holder.die_chamfer_mm: die chamfer 4.5 mm must be below half the die"):
+        resolve(load_scene(p))
+    holder = base.replace('"masks"]', '"masks", "holder"]')
+    p.write_text(holder + "die_width_mm = 8\ndie_height_mm = 8\n")
+    with pytest.raises(DoefabError) as exc:
+        resolve(load_scene(p))
+    least = int(re.search(r"square die of at least (\d+) mm", str(exc.value))[1])
+    assert least >= 9
+    p.write_text(holder + f"die_width_mm = {least}\ndie_height_mm = {least}\n")
+    assert resolve(load_scene(p)).die_m == pytest.approx(least * 1e-3)
+    if least > 9:
+        p.write_text(holder + f"die_width_mm = {least - 1}\ndie_height_mm = {least - 1}\n")
+        with pytest.raises(DoefabError):
             resolve(load_scene(p))

@@ -198,3 +198,24 @@ def test_a_near_infrared_grating_is_designed_and_refused_only_where_its_networks
     msg = _refusal(scene)
     assert "known on 400–700 nm" in msg and "leave \"reconstruction\" out of stages" in msg, msg
     assert "380–780 nm" in msg, msg
+
+
+def test_no_period_is_named_where_the_one_that_spreads_the_bands_diffracts_beyond_the_model(tmp_path):
+    """A 5 mm lens on 10 µm pixels (s/p ≈ 500): spreading 400–700 nm over 30 px needs Λ = s·300 nm/(30 p) ≈ 5 µm,
+    where s·(tan θ − sin θ)/p at 700 nm is 0.7 px, beyond the 0.5 px the model holds: the note names no period, and
+    that period is indeed refused."""
+    path = tmp_path / "s.toml"
+    path.write_text('task = "hyperspectral"\nstages = ["design"]\n[camera]\nfocal_length_mm = 5.0\nf_number = 2.8\n'
+                    'lens_f_number = 2.8\nfocus_distance_m = 5.0\nsensor_pitch_um = 10.0\ndoe_pitch_um = 1.0\n'
+                    '[optics]\nkernel_px = 191\n[design]\ngrating_period_um = 40.0\n')
+    res = resolve(load_scene(path))
+    _, meaning = _sampling(res)
+    assert "no grating period spreads them one per pixel within the model" in meaning, meaning
+    assert "design.grating_period_um =" not in meaning
+    s, p = res.camera.sensor_distance, 10e-6
+    spread = s * 300e-9 / (30 * p)
+    x = 700e-9 / spread
+    assert s * (x / math.sqrt(1 - x * x) - x) / p > 0.5
+    path.write_text(path.read_text().replace("grating_period_um = 40.0", f"grating_period_um = {spread * 1e6:.2f}"))
+    with pytest.raises(doefab.DoefabError, match="from where the lens sends it"):
+        resolve(load_scene(path))

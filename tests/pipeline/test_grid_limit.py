@@ -68,3 +68,20 @@ def test_the_quick_grid_keeps_at_least_the_floor():
     assert quick_sampling(3200, 1) == 4
     assert quick_sampling(48, 1) == 3  # 48 / 4 = 12 < 16: the factor 3 leaves 16
     assert quick_sampling(16, 1) == 1
+
+
+def test_an_explicit_sampling_that_leaves_a_design_grid_below_the_floor_names_the_factors_that_do_not(tmp_path):
+    """A 16 mm lens at f/10 on 40 µm DOE pixels: 1.6 mm / 40 µm = 40 pixels; design.sampling 4 leaves 10 (refused,
+    naming 1 and 2, which leave 40 and 20), 2 passes this check."""
+    p = tmp_path / "s.toml"
+    text = ('task = "hdr"\nstages = ["design"]\n[camera]\nfocal_length_mm = 16.0\nf_number = 10.0\n'
+            'lens_f_number = 2.8\nsensor_pitch_um = 3.45\ndoe_pitch_um = 40.0\n[design]\nsampling = {}\n')
+    p.write_text(text.format(4))
+    with pytest.raises(DoefabError, match=r"design.sampling 4 leaves a design grid of 10 px, below the 16 a pattern "
+                                          r"needs: use 1 or 2"):
+        resolve(load_scene(p))
+    p.write_text(text.format(2))
+    try:
+        resolve(load_scene(p))
+    except DoefabError as exc:
+        assert "leaves a design grid" not in str(exc)
