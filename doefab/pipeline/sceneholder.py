@@ -19,7 +19,7 @@ def scene_die_m(scene: Scene, cam) -> float:
     gives where it is at least ``least_die_m``, else the smallest whole-millimetre square, 12 mm (the prototype's) at
     least, that ``least_die_m`` allows.
 
-    Example: the prototype's 8.64 mm DOE on 5.4 µm pixels is drawn on a 12 mm die (11 mm would hold it)."""
+    Example: the prototype's 8.64 mm DOE is drawn on a 12 mm die (its marks alone fit 11 mm, its pocket needs 12)."""
     from doefab.fabrication.marks import smallest_die_m
 
     least = least_die_m(scene, cam)
