@@ -116,10 +116,11 @@ def die_checks(scene: Scene, cam) -> list[str]:
 
 def _die_problem(scene: Scene, cam, sides: list) -> list[str]:
     """A given die that is not square or smaller than the mask set needs (with a holder stage: the least square die
-    the holder also takes), and a die key's chamfer (``holder.die_chamfer_mm``) too large for the die."""
+    the holder also takes; a die that follows the DOE is left to the holder's own check, which names what else it
+    lacks), and a die key's chamfer (``holder.die_chamfer_mm``) too large for the die."""
     least_mm = least_die_m(scene, cam) * 1e3
-    if "holder" in scene.stages:
-        least_mm = _holder_least_die_mm(scene, cam, least_mm)
+    if "holder" in scene.stages and {"die_width_mm", "die_height_mm"} & set(scene.holder):
+        least_mm = _holder_least_die_mm(scene, cam, least_mm)  # a die the scene gives: the one the holder takes
     if sides[0] != sides[1] or sides[0] < least_mm - 1e-6:
         return [f"holder.die_width_mm {sides[0]:g} and die_height_mm {sides[1]:g}: the mask set is drawn on a square "
                 f"die of at least {least_mm:g} mm (the DOE grid with a 1 mm margin, its marks and the holder's "
