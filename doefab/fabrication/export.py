@@ -153,9 +153,9 @@ def export_masks(design, out_dir: str | Path, options: MaskOptions | None = None
     if die_nm < extent_nm + 2 * 1_000_000:
         raise DoefabError(f"die {opts.die_m * 1e3:g} mm leaves no 1 mm margin around the {extent_nm / 1e6:g} mm "
                           f"pattern for marks: the die must be at least {extent_nm / 1e6 + 2:g} mm (enlarge die_m)")
-    if chamfer_problem(opts.die_m * 1e3, _chamfer_m(opts) * 1e3):
-        raise DoefabError(f"die_chamfer_m = {_chamfer_m(opts):g} m: "
-                          f"{chamfer_problem(opts.die_m * 1e3, _chamfer_m(opts) * 1e3)} (the holder's die_chamfer_mm)")
+    chamfer = chamfer_problem(opts.die_m * 1e3, _chamfer_m(opts) * 1e3)
+    if chamfer:
+        raise DoefabError(f"die_chamfer_m = {_chamfer_m(opts):g} m: {chamfer} (the holder's die_chamfer_mm)")
     out = OutputDir(out_dir, "masks", replace=force).path
     origin_nm = (-(extent_nm // 2), extent_nm // 2)  # top-left corner of pixel (0, 0)
     layout = layout_levels(lv, opts.pattern_faces)

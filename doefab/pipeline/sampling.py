@@ -153,12 +153,7 @@ def grid_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = 
 
     Example: ``grid_fixes(71.43e-3, 4e-6, 0.2)`` → ``"camera.doe_pitch_um ≥ 8.72 or camera.f_number ≥ 6.11"``.
     """
-    widest = MAX_DOE_PIXELS * pitch
-    if aperture_key == "aperture_diameter_mm":
-        smaller = f"camera.aperture_diameter_mm ≤ {_round3(widest * 1e3, math.floor):g}"
-    else:
-        smaller = f"camera.f_number ≥ {_round3(focal / widest, math.ceil):g}"
-    return f"camera.doe_pitch_um ≥ {_round3(aperture / MAX_DOE_PIXELS * 1e6, math.ceil):g} or {smaller}"
+    return _count_fixes(aperture, pitch, focal, aperture_key, MAX_DOE_PIXELS, fewer=True)
 
 
 def few_pixels_fixes(aperture: float, pitch: float, focal: float, aperture_key: str = "f_number") -> str:
@@ -168,12 +163,20 @@ def few_pixels_fixes(aperture: float, pitch: float, focal: float, aperture_key: 
 
     Example: ``few_pixels_fixes(0.25e-3, 100e-6, 16e-3)`` → ``"camera.doe_pitch_um ≤ 15.6 or camera.f_number ≤
     10"``."""
-    least = MIN_DOE_PIXELS * pitch
+    return _count_fixes(aperture, pitch, focal, aperture_key, MIN_DOE_PIXELS, fewer=False)
+
+
+def _count_fixes(aperture: float, pitch: float, focal: float, aperture_key: str, pixels: int, fewer: bool) -> str:
+    """The pitch, and the aperture in ``aperture_key``, that bring ``aperture`` / ``pitch`` to ``pixels`` DOE pixels
+    (at most where ``fewer``, else at least), each rounded to three digits on the side that fits."""
+    side = pixels * pitch  # the aperture the grid holds at this pitch
+    up, down = (math.ceil, math.floor) if fewer else (math.floor, math.ceil)  # pitch and f-number; diameter
+    pitch_cmp, diameter_cmp = ("≥", "≤") if fewer else ("≤", "≥")
     if aperture_key == "aperture_diameter_mm":
-        larger = f"camera.aperture_diameter_mm ≥ {_round3(least * 1e3, math.ceil):g}"
+        change = f"camera.aperture_diameter_mm {diameter_cmp} {_round3(side * 1e3, down):g}"
     else:
-        larger = f"camera.f_number ≤ {_round3(focal / least, math.floor):g}"
-    return f"camera.doe_pitch_um ≤ {_round3(aperture / MIN_DOE_PIXELS * 1e6, math.floor):g} or {larger}"
+        change = f"camera.f_number {pitch_cmp} {_round3(focal / side, up):g}"
+    return f"camera.doe_pitch_um {pitch_cmp} {_round3(aperture / pixels * 1e6, up):g} or {change}"
 
 
 def _round3(x: float, direction) -> float:
