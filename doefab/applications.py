@@ -183,13 +183,20 @@ def band_problem(name: str, wavelengths_m) -> str | None:
 
     Example: ``band_problem("depth", [656e-9, 589e-9, 486e-9])`` → None; ``band_problem("depth", [1064e-9])`` →
     ``"the depth network takes the camera's RGB captures, one PSF per colour channel: it needs three bands …,
-    got [1064]"``."""
+    got [1064]: design it for three such bands"``; ``band_problem("hyperspectral", [550e-9])`` → ``"… at least
+    two distinct bands …"``."""
     nm = [round(float(w) * 1e9, 3) for w in wavelengths_m]
-    if has(name, "spectral") or (len(nm) == 3 and nm[0] > nm[1] > nm[2]):
-        return None
     got = ", ".join(f"{w:g}" for w in nm)
+    if has(name, "spectral"):  # any bands, but a spectrum's angle (its metric) needs two or more distinct ones
+        if len(set(nm)) >= 2:
+            return None
+        return (f"the {name} network recovers a spectrum and scores it by its angle, which needs at least two "
+                f"distinct bands, got [{got}]: design it for two or more bands")
+    if len(nm) == 3 and nm[0] > nm[1] > nm[2]:
+        return None
     return (f"the {name} network takes the camera's RGB captures, one PSF per colour channel: it needs three bands "
-            f"in nm, longest first (red, green, blue; e.g. [656, 589, 486]), got [{got}]")
+            f"in nm, longest first (red, green, blue; e.g. [656, 589, 486]), got [{got}]: design it for three such "
+            f"bands")
 
 
 class View(Mapping):

@@ -146,11 +146,14 @@ def main(argv: list[str] | None = None) -> int:
         fix = "; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)" if full else ""
         status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}{fix}"
     except MemoryError:
-        status, message = EXIT_USAGE, "error: out of memory: use a smaller kernel, grid or fewer wavelengths"
+        status, message = EXIT_USAGE, _out_of_memory(args)
     except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback on request
         error = exc
-        status, message = EXIT_INTERNAL, (f"internal error: {exc.__class__.__name__}: {exc} (rerun with "
-                                          f"--debug for the traceback, and please report it)")
+        if _is_out_of_memory(exc):  # torch's allocators (CPU and CUDA) raise a RuntimeError
+            status, message = EXIT_USAGE, _out_of_memory(args)
+        else:
+            status, message = EXIT_INTERNAL, (f"internal error: {exc.__class__.__name__}: {exc} (rerun with "
+                                              f"--debug for the traceback, and please report it)")
     finally:
         if status != EXIT_OK:
             _discard_outputs(args)
@@ -160,6 +163,18 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exception(error)
     print(f"{prog}: {_one_line(message)}", file=sys.stderr)
     return status
+
+
+def _is_out_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` is an allocator's refusal (torch's CPU "can't allocate memory", CUDA "out of memory")."""
+    text = str(exc)
+    return isinstance(exc, RuntimeError) and ("can't allocate memory" in text or "out of memory" in text)
+
+
+def _out_of_memory(args) -> str:
+    """The out-of-memory error, with the command's own fix (``args.memory_hint``) where it set one."""
+    hint = getattr(args, "memory_hint", None) or "use a smaller kernel, grid or fewer wavelengths"
+    return f"error: out of memory: {hint}"
 
 
 def _refuse_empty_values(parser, args) -> None:

@@ -12,7 +12,8 @@ def check_resume(out: OutputDir) -> None:
 
     ckpt = out.path / "checkpoint.pt"
     if not ckpt.is_file():
-        raise DoefabError(f"--resume: {ckpt} does not exist: run without --resume first")
+        raise DoefabError(f"--resume: {ckpt} does not exist, so there is nothing to continue: start afresh with "
+                          f"--force instead of --resume")
     read_checkpoint(ckpt)
 
 

@@ -65,6 +65,7 @@ def run(args) -> int:
     from doefab.reconstruction.weights import weights_target
 
     training_crop(args.task, args.crop)  # train() resolves it again; checked here before any output is claimed
+    args.memory_hint = "lower --batch or --crop (each step holds its batch's scenes and activations)"
     if args.resume and args.force:
         raise DoefabError("--resume continues a run and --force starts one afresh: give one of them")
     args.out = f"out/train/{args.task}_{args.variant}" if args.out is None else args.out
@@ -76,6 +77,8 @@ def run(args) -> int:
     design = task_design_arg(args, need_weights_dir=False)
     sensor = sensor_arg(args, design)
     weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)  # before any work
+    if args.force:  # the earlier run's files go, so neither a resume nor a reader mixes the two runs
+        _clear_run(out.path, args.task, args.variant, args.weights_dir is None)
     out.create()
     from doefab.tolerance.conditions import for_splits
 
@@ -88,6 +91,21 @@ def run(args) -> int:
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_path']} and its .json")
     return 0
+
+
+def _clear_run(folder, task: str, variant: str, weights_here: bool) -> None:
+    """Remove an earlier training run's files from its folder (``--force``): its checkpoint (and a checkpoint
+    write a kill left half done), history, warm-start record and, where this run writes its weights there, its
+    weights (doefab's own: ``weights_target`` has refused anything else)."""
+    from doefab.reconstruction.weights import history_path, weights_paths
+
+    old = [folder / n for n in ("checkpoint.pt", "history.csv", "warm_start.json")]
+    old += list(folder.glob(".checkpoint.pt.*"))
+    if weights_here:
+        old += [*weights_paths(task, variant, folder), history_path(task, variant, folder)]
+    for f in old:
+        if f.is_file():
+            f.unlink()
 
 
 def _command_line() -> str:

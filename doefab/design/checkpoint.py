@@ -28,10 +28,23 @@ def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
     saved = {k: v for k, v in saved.items() if k not in ignore}
     config = {k: v for k, v in config.items() if k not in ignore}
     if saved != config:
-        diff = {k: (saved.get(k), config.get(k)) for k in set(saved) | set(config) if saved.get(k) != config.get(k)}
-        raise DoefabError(f"checkpoint {path} was made with other settings {diff} (saved, asked): resume with the "
-                          f"same settings or start a new --out folder")
+        diff = "; ".join(f"{k}: {a!r} there, {b!r} now" for k, a, b in _differences(saved, config))
+        raise DoefabError(f"checkpoint {path} was made with other settings ({diff}): resume with the same settings "
+                          f"or start a new --out folder")
     return state
+
+
+def _differences(saved, asked, prefix: str = "") -> list[tuple]:
+    """(key path, saved value, asked value) for each leaf that differs between two settings dicts."""
+    if not (isinstance(saved, dict) and isinstance(asked, dict)):
+        return [(prefix or "settings", saved, asked)]
+    out = []
+    for k in sorted(set(saved) | set(asked), key=str):
+        a, b = saved.get(k), asked.get(k)
+        if a != b:
+            name = str(k) if prefix in ("", "config") else f"{prefix}.{k}"
+            out += _differences(a, b, name) if isinstance(a, dict) and isinstance(b, dict) else [(name, a, b)]
+    return out
 
 
 def read_checkpoint(path: str | Path) -> dict:
@@ -41,14 +54,16 @@ def read_checkpoint(path: str | Path) -> dict:
 
 def _read(path: Path) -> tuple[dict, dict]:
     if not path.is_file():
-        raise DoefabError(f"no checkpoint at {path}: run without --resume first")
+        raise DoefabError(f"no checkpoint at {path}: nothing to continue; start afresh with --force instead of "
+                          f"--resume")
     try:
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
         raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
-                          f"delete it and start again without --resume") from None
+                          f"start afresh with --force instead of --resume (it replaces the folder)") from None
     if not isinstance(state, dict) or "config" not in state:
-        raise DoefabError(f"checkpoint {path} lacks doefab fields; delete it and start again without --resume")
+        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh with --force instead of --resume "
+                          f"(it replaces the folder)")
     try:
         saved = json.loads(state["config"])
         theta = state.get("theta")  # a design's (or an end-to-end run's) parameters, when the run has any
@@ -61,5 +76,5 @@ def _read(path: Path) -> tuple[dict, dict]:
         ok = False
     if not ok:
         raise DoefabError(f"checkpoint {path} has missing or invalid fields (config, theta, step, elapsed, history, "
-                          f"generator); delete it and start again without --resume")
+                          f"generator); start afresh with --force instead of --resume (it replaces the folder)")
     return state, saved

@@ -207,15 +207,8 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
                           f"({', '.join(f'{x * 1e9:.0f}' for x in lams[:6])}{'…' if len(lams) > 6 else ''} nm): "
                           f"compute the pair for the scene's bands")
     t = _response(response, c, top)
-    masks = None
-    if depth_map is not None:
-        dm = _check_array("depth_map", depth_map, 2)
-        if tuple(dm.shape) != (h, w):
-            raise DoefabError(f"depth_map has shape {tuple(dm.shape)}, the scene ({h}, {w})")
-        if bool((dm <= 0).any()):
-            raise DoefabError("depth_map must hold depths > 0 in metres")
-        masks = plane_masks(dm.to(dev), pair.depths)
-    elif len(pair.depths) != 1:
+    masks = None if depth_map is None else _depth_masks(depth_map, pair, (h, w), dev)
+    if depth_map is None and len(pair.depths) != 1:
         raise DoefabError(f"the PSF pair has {len(pair.depths)} depth planes: pass depth_map (metres) or a pair "
                           f"computed for one depth")
     noise_obj = noise_model(noise)
@@ -229,6 +222,24 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
             views.append(rgb.double().cpu().numpy())
     out = [v.astype(np.float32) for v in _camera(crosstalk).record(views[0], views[1], noise_obj, rng)]
     return _labelled(out[0], pair, torch_in), _labelled(out[1], pair, torch_in)
+
+
+def _depth_masks(depth_map, pair, shape: tuple, dev) -> torch.Tensor:
+    """The per-plane masks of ``depth_map`` (metres, ``shape``), refused unless it holds depths > 0 within the
+    pair's planes (beyond them no PSF says how the scene blurs)."""
+    dm = _check_array("depth_map", depth_map, 2)
+    if tuple(dm.shape) != shape:
+        raise DoefabError(f"depth_map has shape {tuple(dm.shape)}, the scene {shape}")
+    if bool((dm <= 0).any()):
+        raise DoefabError("depth_map must hold depths > 0 in metres")
+    near, far = min(pair.depths), max(pair.depths)
+    lo, hi = float(dm.min()), float(dm.max())
+    if len(pair.depths) > 1 and (lo < near * (1 - 1e-6) or hi > far * (1 + 1e-6)):
+        raise DoefabError(f"depth_map spans {lo:.4g}–{hi:.4g} m, beyond the PSF pair's planes ({near:.4g}–{far:.4g} "
+                          f"m), where no PSF says how the scene blurs: clip it to the planes "
+                          f"(depth_map.clip({near:.4g}, {far:.4g})) or compute the pair for planes that span it "
+                          f"(depths are in metres)")
+    return plane_masks(dm.to(dev), pair.depths)
 
 
 def _response(response, c: int, top: float) -> torch.Tensor | None:

@@ -25,6 +25,8 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
+from doefab.pipeline.systemnotes import (band_warnings, depth_span_px, depth_warnings, sensor_warnings,
+                                         system_warnings)
 from doefab.pipeline.sceneholder import die_checks, holder_checks, holder_warnings, scene_die_m
 from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
@@ -162,7 +164,7 @@ def scene_task(scene: Scene, committed, cam):
             params[name] = d[key] if scale is None else d[key] * scale
     if "grating_period_um" in d:
         params["period_m"] = d["grating_period_um"] * 1e-6
-    if design_is(dname, "depth") and is_custom_camera(scene, cam) and "ring_max_px" not in d:
+    if design_is(dname, "depth") and ring_from_blur(scene, cam, params.get("planes_m") or own.depths(cam)):
         params["ring_max_px"] = defocus_ring_px(cam, params)
     try:
         task = get_task(dname, **params)
@@ -173,6 +175,16 @@ def scene_task(scene: Scene, committed, cam):
     return task
 
 
+PAPER_RING_FAR_M = 5.0  # the paper's ring law, 25 − 5·z px, draws no ring at or beyond 5 m
+
+
+def ring_from_blur(scene: Scene, cam, planes) -> bool:
+    """Whether a depth scene's ring at the nearest plane is the camera's defocus blur (``defocus_ring_px``): no
+    ``design.ring_max_px`` and a camera of its own, or planes (metres) from ``PAPER_RING_FAR_M`` on, where the
+    paper's law for its prototype would leave every ring a point."""
+    return "ring_max_px" not in scene.design and (is_custom_camera(scene, cam) or min(planes) >= PAPER_RING_FAR_M)
+
+
 def _camera_variant(scene: Scene, keys: dict):
     """The camera the scene builds with ``keys`` of its camera table changed, or None where it refuses them."""
     import dataclasses
@@ -181,13 +193,6 @@ def _camera_variant(scene: Scene, keys: dict):
         return scene_camera(dataclasses.replace(scene, camera={**scene.camera, **keys}))
     except DoefabError:
         return None
-
-
-def depth_span_px(cam, planes) -> float:
-    """The half aperture's geometric blur radius (sensor px) at the nearest of ``planes`` (metres) when it is
-    sharp at the farthest, D·s·|1/z_near − 1/z_far| / 2: how much the planes' blurs differ."""
-    near, far = min(planes), max(planes)
-    return cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
 
 
 def defocus_ring_px(cam, params: dict) -> float:
@@ -233,6 +238,11 @@ def _checks(scene: Scene, cam, task) -> list[str]:
                    f"or lower design.ring_max_px or design.ring_width_px")
     else:  # a task of another application
         out.append(f"optics.kernel_px {k}: {task.window_problem(cam)}")
+    if isinstance(task, HalfRingTask) and len(flat := [z for z in task.depths(cam) if task.radius_px(z) <= 1e-9]) > 1:
+        out.append(f"the half-ring's radius is 0 px at {len(flat)} planes ({', '.join(f'{z:g}' for z in flat)} "
+                   f"m): its PSF cannot tell them apart; set design.ring_max_px (the half aperture's blur at the "
+                   f"nearest plane is {depth_span_px(cam, task.depths(cam)):.1f} px) or design.ring_law = "
+                   f"\"defocus\", or keep the planes nearer")
     planes = [distance_or_inf(z) for z in scene.optics.get("depths_m", [])]
     if planes and not isinstance(task, HalfRingTask) and [round(z, 9) for z in planes] != [
             round(z, 9) for z in task.depths(cam)]:
@@ -242,6 +252,13 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     if networks and (bands := band_problem(scene.task, task.wavelengths(cam))):  # else skipped on another design
         out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
                    f"bands alone")
+    mode = weights_mode(scene.reconstruction.get("weights"))
+    if networks and mode.any_system and not mode.trains and not out:
+        from doefab.reconstruction.loader import shipped_fit_problem
+
+        if fit := shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam)):
+            out.append(f"reconstruction.weights = \"{mode.name}\": {fit}: set reconstruction.weights = \"train\" "
+                       f"to train networks for this design, or leave \"reconstruction\" out of stages")
     if "reconstruction" in scene.stages and has(scene.task, "spectral") and not all(
             400e-9 - 1e-12 <= w <= 700e-9 + 1e-12 for w in task.wavelengths(cam)):
         out.append("optics.wavelengths_nm: the hyperspectral scenes' reflectances and lights are known on 400–700 nm;"
@@ -309,61 +326,9 @@ def resolve(scene: Scene) -> ResolvedScene:
         sensor=sensor, die_m=scene_die_m(scene, cam),
         quick_sampling=quick_sampling(cam.doe_pixels, int(settings["sampling"]),
                                       lambda d: not design_grid_problems(cam, task, d)),
-        warnings=tuple(system_warnings(cam, task) + _sensor_warnings(scene, sensor, task, cam)
-                       + _depth_warnings(scene, cam, task) + holder_warnings(scene, cam)))
-
-
-def _sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
-    """A response an RGB task does not use; an RGB task's bands (its R, G and B channels) where the camera's
-    default colour response does not see them (a near-infrared design: the colour scenes do not hold it)."""
-    if has(scene.task, "spectral"):
-        return []
-    out = []
-    if "response" in scene.sensor and not sensor.has_default_response():
-        out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
-                   f"are the camera's own RGB (only the noise applies)")
-    from doefab.imaging.sensor import bands_outside
-
-    outside, words = bands_outside(task.wavelengths(cam))
-    if outside.size:
-        out.append(f"optics.wavelengths_nm: the {scene.task} task takes its bands as the camera's R, G and B "
-                   f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside {words}: its "
-                   f"colour scenes hold no light there")
-    return out
-
-
-def _depth_warnings(scene: Scene, cam, task) -> list[str]:
-    """A depth design whose planes barely change the plain half's blur (no depth cue: often millimetres typed into
-    a key in metres), and a default ring radius (the camera's defocus blur, ``defocus_ring_px``) capped to fit the
-    PSF window."""
-    from doefab.tasks.halfring import HalfRingTask
-
-    if not isinstance(task, HalfRingTask):
-        return []
-    near, far = min(task.depths(cam)), max(task.depths(cam))
-    r, out = depth_span_px(cam, task.depths(cam)), []
-    if r < 1:
-        out.append(f"optics.depths_m {near:g}–{far:g} m: the plain half's blur changes by {r:.2g} px across the "
-                   f"planes (D·s·|1/z_near − 1/z_far| / 2), so the captures carry almost no depth cue (depths are in "
-                   f"metres)")
-    if is_custom_camera(scene, cam) and "ring_max_px" not in scene.design and r > task.ring_max_px + 1e-9:
-        k = 2 * math.ceil(r + 2 + task.delta_px) + 1
-        out.append(f"design.ring_max_px: the plain half's blur at the nearest plane when sharp at the farthest, "
-                   f"{r:.1f} px, is capped to "
-                   f"{task.ring_max_px:g} px, the most the {task.kernel_size} px window holds: the ring no longer "
-                   f"follows the blur; set optics.kernel_px ≥ {k} to let it, or design.ring_max_px to choose")
-    return out
-
-
-def system_warnings(cam, task) -> list[str]:
-    """What works but deserves the user's eye: bands or the design wavelength outside the range the
-    substrate's published dispersion was fitted on (the index there is an extrapolation)."""
-    from doefab.optics.materials import fit_range_warning
-
-    notes = [fit_range_warning(cam.material, task.wavelengths(cam))]
-    design = fit_range_warning(cam.material, [cam.design_wavelength])
-    notes.append(f"design wavelength {design}" if design else None)
-    return [n for n in notes if n]
+        warnings=tuple(system_warnings(cam, task) + sensor_warnings(scene, sensor, task, cam)
+                       + depth_warnings(scene, cam, task, ring_from_blur(scene, cam, task.depths(cam)))
+                       + band_warnings(scene, cam, task) + holder_warnings(scene, cam)))
 
 
 def _stop(cam) -> str:

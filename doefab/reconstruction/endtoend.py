@@ -210,6 +210,8 @@ class _JointRun:
         """The fine-tuned design (``out/design``) and network (``out/weights``); returns the design."""
         from doefab.design.optimize import design_from_theta
         from doefab.fabrication.levels import levels_sha256
+        from doefab.reconstruction.data import split_components, split_digest
+        from doefab.reconstruction.train import run_provenance
         from doefab.reconstruction.weights import write_weights
 
         new = design_from_theta(self.design, self.theta.detach(), self.pname, self.sampling, history=[],
@@ -217,8 +219,10 @@ class _JointRun:
         new.save(out / "design")
         write_weights(out / "weights", "depth", "proposed", self.net,
                       {"design": "end-to-end", "design_levels_sha256": levels_sha256(new.levels), "arch": self.arch,
-                       "training": {"end_to_end": config, "steps": record["steps"], "wall_time_s": round(wall, 1)},
-                       **self.sensor.entry(False)},
+                       "training": {"end_to_end": config, "steps": record["steps"], "wall_time_s": round(wall, 1),
+                                    **run_provenance(self.device)},
+                       **self.sensor.entry(False),
+                       "splits_sha256": split_digest("depth"), "splits_components": split_components("depth")},
                       (out / "history.csv").read_bytes())
         return new
 

@@ -6,18 +6,20 @@ PSF; ``doefab evaluate``'s default) or the nominal model's own captures (None). 
 pair (``conditions.measured``) or through ``capture_psf`` (a model fitted to it, say; alone: the networks told
 their nominal pair).
 
-Splits (``SPLITS``): ``val`` for every choice made along the way, ``test`` for the published tables (every read of
-it is listed in ``benchmarks/results/test_split_reads.md``) and ``final``, the final test set, made after every
-earlier read and read only when asked for by name; each read of it appends a line to ``final_split_reads.md``
-in the output folder (``FINAL_LEDGER``); ``real``, the measured-data validation set (``realdata``: scenes made of
-measured data doefab did not make, never trained on), under the same conditions.
+Splits (``SPLITS``): ``val`` for every choice made along the way, ``test`` for the published tables (every
+committed read of it is listed in ``benchmarks/results/test_split_reads.md``; a user's read is not logged) and
+``final``, the final test set, made after every earlier read and read only when asked for by name; each read of
+it appends a line to ``final_split_reads.md`` in the output folder (``FINAL_LEDGER``) before its first scene is
+scored; ``real``, the measured-data validation set (``realdata``: scenes made of measured data doefab did not
+make, never trained on), under the same conditions.
 
 An evaluation runs torch on one thread (``THREADS``; restored after): a reduction split over threads adds in
 another order, and the HDR solve's iterations carry that difference to tenths of a dB, so a table is reproducible
 to its printed digits only at a fixed thread count.
 
 ``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "seed", "conditions", "images",
-"size_px", "threads", "versions": {library: version}, "code", "parts_sha256", "rows": {variant: means},
+"size_px", "threads", "versions": {library: version}, "code", "parts_sha256", "rows": {variant: means}, "units":
+{metric: its unit, "1" for a ratio},
 "by_light": {"in-library" | "out-of-library": {variant: means}}, "weights": {variant: {"sha256", "steps", ...,
 "splits"}}, "per_image": {"light", "rows": {variant: [metrics of each scene]}}, "psf": {"told",
 "captured_through"}}``; the light groups for hyperspectral; ``psf`` with a given pair: each pair's file,
@@ -41,6 +43,7 @@ from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_co
 from doefab.reconstruction.loader import load_reconstructor
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.networks import VARIANTS
+from doefab.reconstruction.provenance import code_version, library_versions
 from doefab.reconstruction.partfinetune import check_capture, fit_to_network, pair_record
 from doefab.reconstruction.specs import make_batch, psf_pair
 
@@ -49,7 +52,6 @@ __all__ = ["evaluate", "SPLITS", "THREADS", "FINAL_LEDGER", "one_thread", "libra
 SPLITS = ("val", "test", "final", "real")
 THREADS = 1
 FINAL_LEDGER = "final_split_reads.md"
-LIBRARIES = ("torch", "numpy", "scipy", "scikit-image", "colour-science")
 
 
 def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, weights_dir=None,
@@ -80,18 +82,25 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
         from doefab.reconstruction.realdata import check_side
 
         check_side(task, size, next(iter(recs.values())).pair.coded.shape[-1] // 2)
+    components = split_components(task)
+    weights = {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}
+    cond = conditions.describe() if conditions is not None else {"name": "clean"}
+    if split == "final":  # logged before a scene is scored: an interrupted or failed read is a read too
+        out.mkdir(parents=True, exist_ok=True)
+        _log_final_read(out / FINAL_LEDGER, {"task": task, "images": images, "size_px": size, "conditions": cond,
+                                             "code": code_version(), "weights": weights})
     with one_thread():
         rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress, told,
                                       capture_psf if capture_psf is not None else psf)
-    components = split_components(task)
     result = {"task": task, "split": split, "images": images, "seed": SPLIT_SEEDS[split], "size_px": size,
-              "conditions": conditions.describe() if conditions is not None else {"name": "clean"},
+              "conditions": cond,
               "parts_sha256": _parts_sha256(conditions),
               "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
               else "default (Poisson–Gaussian)", **sensor.entry(has(task, "spectral")),
               "threads": THREADS, "versions": library_versions(), "code": code_version(),
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
-              "weights": {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}}
+              "units": {m.name: m.unit or "1" for m in application(task).metrics},  # "1": a ratio
+              "weights": weights}
     if psf is not None or capture_psf is not None:
         result["psf"] = psf_records or {
             "told": "the design's nominal pair" if psf is None else pair_record(psf),
@@ -105,8 +114,6 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "metrics.json", result)
     _figure(out / "examples.png", task, split, *example)
-    if split == "final":
-        _log_final_read(out / FINAL_LEDGER, result)
     return result
 
 
@@ -152,41 +159,6 @@ def one_thread():
         yield
     finally:
         torch.set_num_threads(before)
-
-
-def library_versions() -> dict:
-    """{name: installed version} of the libraries an evaluation's numbers depend on (``LIBRARIES``) and Python."""
-    import platform
-    from importlib import metadata
-
-    found = {"python": platform.python_version()}
-    for name in LIBRARIES:
-        try:
-            found[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            found[name] = "not installed"
-    return found
-
-
-def code_version() -> str:
-    """The git commit of the doefab source tree that runs (with "with uncommitted changes" when its tracked files
-    differ from it), or doefab's version when it is not a git checkout."""
-    import subprocess
-
-    import doefab
-
-    root = Path(__file__).resolve().parents[2]
-    if (root / ".git").exists():
-        try:
-            git = ["git", "-C", str(root)]
-            head = subprocess.run(git + ["rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, timeout=30)
-            dirty = subprocess.run(git + ["status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                                   text=True, timeout=60)
-            if head.returncode == 0:
-                return f"git {head.stdout.strip()}" + (" with uncommitted changes" if dirty.stdout.strip() else "")
-        except (OSError, subprocess.SubprocessError):
-            pass
-    return f"doefab {doefab.__version__} (not a git checkout)"
 
 
 def _parts_sha256(cond) -> str | None:

@@ -26,7 +26,7 @@ from doefab.reconstruction.specs import design_dir, get_spec, psf_pair
 from doefab.reconstruction.train import model_inputs
 from doefab.reconstruction.weights import WEIGHTS_FORMAT, is_shipped, renamed_state, weights_paths
 
-__all__ = ["load_reconstructor", "Reconstructor", "weights_record"]
+__all__ = ["load_reconstructor", "Reconstructor", "weights_record", "arch_clash", "shipped_fit_problem"]
 
 
 class Reconstructor:
@@ -195,14 +195,9 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     if foreign:
         from doefab.reconstruction.train import arch_for_design
 
-        need = arch_for_design(task, pair)
-        if not meta["arch"].get("cost_volume"):  # only the cost volume has one channel per plane
-            need.pop("planes", None)
-        clash = {k: v for k, v in need.items() if k != "max_depth_m" and meta["arch"].get(k, _DEFAULT_ARCH.get(k)) != v}
-        if clash:
-            raise DoefabError(f"{pt}: trained for another design whose {', '.join(clash)} differ from {design}'s "
-                              f"({'; '.join(f'{k}: {v}' for k, v in clash.items())}): they cannot take its PSFs; "
-                              f"{_retrain(task, variant, weights_dir, design)}")
+        if clash := arch_clash(meta["arch"], arch_for_design(task, pair)):
+            raise DoefabError(f"{pt}: trained for another design, whose networks cannot take {design}'s PSFs "
+                              f"({'; '.join(clash)}); {_retrain(task, variant, weights_dir, design)}")
         meta = {**meta, "other_design": True}
     meta = _check_sensor(meta, sensor, other_design, pt, who)
     try:
@@ -212,6 +207,55 @@ def load_reconstructor(task: str, variant: str = "proposed", weights_dir: str | 
     except Exception as exc:  # noqa: BLE001 - unpickling, zip or key errors all mean an unusable file
         _refuse(pt, f"torch cannot load it ({exc.__class__.__name__})", *who)
     return Reconstructor(task, variant, model, pair, sha, meta, device)
+
+
+def arch_clash(arch: dict, need: dict) -> list[str]:
+    """What of ``need`` (``train.arch_for_design``: a design's planes, depth range, bands) a network built as
+    ``arch`` cannot take, one phrase each (empty: it takes them): another count of planes for a cost volume (one
+    channel each), a farthest plane beyond the depths it outputs, other bands.
+
+    Example: ``arch_clash({"cost_volume": True, "planes": 17, "max_depth_m": 6.0}, {"planes": 17, "max_depth_m":
+    36.0})`` → ``["max_depth_m: it outputs depths up to 6 m, the design's farthest plane lies at 30 m"]``."""
+    out = []
+    for k, v in need.items():
+        have = arch.get(k, _DEFAULT_ARCH.get(k))
+        if k == "planes" and not arch.get("cost_volume"):
+            continue  # only the cost volume has one channel per plane
+        if k == "max_depth_m":
+            if have is not None and v / 1.2 > float(have) + 1e-9:
+                out.append(f"max_depth_m: it outputs depths up to {float(have):g} m, the design's farthest plane lies "
+                           f"at {v / 1.2:g} m")
+        elif have != v:
+            text = _bands if k == "wavelengths_m" else str
+            out.append(f"{k}: {text(have)} for the network, {text(v)} for the design")
+    return out
+
+
+def _bands(lams) -> str:
+    """A record's bands for a message (None: the hyperspectral scenes' own)."""
+    if lams is None:
+        from doefab.reconstruction.data import HS_WAVELENGTHS_M
+
+        lams = HS_WAVELENGTHS_M
+    nm = [float(w) * 1e9 for w in lams]
+    return f"{len(nm)} band(s) {min(nm):.4g}–{max(nm):.4g} nm"
+
+
+def shipped_fit_problem(task: str, wavelengths, depths) -> str:
+    """Why the shipped ``task`` networks cannot take a design on ``wavelengths`` and ``depths`` (metres), told its
+    PSFs (``load_reconstructor(other_design=True)``), or "" when they can: what a scene with
+    ``reconstruction.weights = "shipped-anyway"`` is checked by before its design is computed.
+
+    Example: ``shipped_fit_problem("depth", [656e-9, 589e-9, 486e-9], [3.0, 30.0])`` names the proposed
+    network's 17 planes and its 6 m reach."""
+    from doefab.reconstruction.train import arch_for_bands
+
+    need = arch_for_bands(task, wavelengths, depths)
+    for variant in VARIANTS:
+        pt, meta, _ = _read_weights(task, variant, None, None)
+        if clash := arch_clash(meta["arch"], need):
+            return f"the shipped {task} {variant} network cannot take this design's PSFs ({'; '.join(clash)})"
+    return ""
 
 
 def weights_record(task: str, variant: str = "proposed", weights_dir: str | Path | None = None,
@@ -249,15 +293,18 @@ def _read_weights(task: str, variant: str, weights_dir, design) -> tuple[Path, d
     who = (task, variant, weights_dir, design)
     if not pt.is_file() or not meta_path.is_file():
         _refuse(pt, "no weights (or no metadata record beside them)", *who)
+    # a record training would not recognise as its own it never overwrites: the fix moves the files away first
+    away = "" if weights_dir is None else f" (training never replaces a record it cannot read: move it and {pt.name} " \
+                                           f"out of {weights_dir} first)"
     try:
         meta = read_json(meta_path)
     except (ValueError, UnicodeDecodeError):
-        _refuse(meta_path, "the metadata record is not valid JSON", *who)
+        _refuse(meta_path, "the metadata record is not valid JSON" + away, *who)
     need = ("format", "task", "variant", "design_levels_sha256", "arch", "weights_sha256")
     if not isinstance(meta, dict) or any(k not in meta for k in need) or meta.get("format") != WEIGHTS_FORMAT:
-        _refuse(meta_path, f"the metadata record lacks {list(need)}", *who)
+        _refuse(meta_path, f"the metadata record lacks {list(need)}" + away, *who)
     if (meta["task"], meta["variant"]) != (task, variant):
-        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}", *who)
+        _refuse(meta_path, f"the record is for {meta['task']}/{meta['variant']}" + away, *who)
     data = pt.read_bytes()
     if hashlib.sha256(data).hexdigest() != meta["weights_sha256"]:
         _refuse(pt, "the file's SHA-256 differs from its metadata record (changed or corrupt)", *who)

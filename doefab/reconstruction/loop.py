@@ -30,8 +30,9 @@ LR_FLOOR = 0.05
 
 
 def lr_factor(schedule: str, fraction: float) -> float:
-    """Learning-rate multiplier after ``fraction`` of the wall-time budget: 1 throughout for ``"constant"``;
-    for ``"cosine"`` from 1 down to ``LR_FLOOR`` along half a cosine, and ``LR_FLOOR`` past the budget."""
+    """Learning-rate multiplier after ``fraction`` of the run (its steps, or its wall-time budget): 1 throughout
+    for ``"constant"``; for ``"cosine"`` from 1 down to ``LR_FLOOR`` along half a cosine, and ``LR_FLOOR`` past the
+    budget."""
     if schedule == "constant":
         return 1.0
     if schedule != "cosine":
@@ -45,7 +46,9 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
              states: dict, optimizers: list, schedule: str = "cosine", metric: str = "metric", val_every: int = 50,
              resume: bool = False, progress: bool = True, desc: str = "train", max_steps: int | None = None,
              tensors: dict | None = None, validate_first: bool = False) -> tuple[int, list, float]:
-    """Train until ``minutes`` of wall time (or ``max_steps``) pass; returns (steps, history, seconds).
+    """Train until ``minutes`` of wall time (or ``max_steps``) pass; returns (steps, history, seconds). The learning
+    rate's ``schedule`` runs over ``max_steps`` where given (a run, and a resumed one, then repeat bit for bit at a
+    fixed thread count), else over the time budget.
 
     ``step_fn(step) → loss`` takes one step (its optimisers' rates are already set); ``validate() → metric``;
     ``states``: {name: object with state_dict/load_state_dict} (modules and optimisers) to checkpoint;
@@ -58,6 +61,8 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
+    for stale in out.glob(".checkpoint.pt.*"):  # a checkpoint write a kill left half done (never the checkpoint)
+        stale.unlink()
     tensors = tensors or {}
     step, elapsed, history = 0, 0.0, []
     if resume:
@@ -68,7 +73,7 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
             for name, t in tensors.items():
                 t.copy_(state[name])
         step, elapsed, history = int(state["step"]), float(state["elapsed"]), [list(r) for r in state["history"]]
-    budget = minutes * 60.0
+    budget, start = minutes * 60.0, step
     t0 = time.perf_counter() - elapsed
 
     def save(step_now: int) -> None:
@@ -82,13 +87,14 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
 
     if validate_first and not history:
         history.append([0, 0.0, float("nan"), validate()])
-    bar = _bar(progress, budget, elapsed, desc)
+    bar = _bar(progress, budget, elapsed, desc, max_steps, step)
     last = history[-1][3] if history else float("nan")
     validated = validate_first or step >= val_every  # the bar shows a dash until the metric exists
     try:
         while time.perf_counter() - t0 < budget and (max_steps is None or step < max_steps):
-            done = (time.perf_counter() - t0) / budget  # the schedule follows whichever budget binds first
-            f = lr_factor(schedule, max(done, step / max_steps) if max_steps else done)
+            # the schedule follows the steps when they are counted (the same rates, so the same weights, every run
+            # and on resume; the clock then only stops a run early), else the time budget
+            f = lr_factor(schedule, step / max_steps if max_steps else (time.perf_counter() - t0) / budget)
             for opt, base in optimizers:
                 for group in opt.param_groups:
                     group["lr"] = base * f
@@ -103,22 +109,28 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
             if step % val_every == 0:
                 save(step)
             if bar is not None:
-                bar.n = int(min(time.perf_counter() - t0, budget))
+                bar.n = step if max_steps else int(min(time.perf_counter() - t0, budget))
                 bar.set_postfix(step=step, loss=f"{loss:.4f}", **{metric: f"{last:.4g}" if validated else "–"})
                 bar.refresh()
     finally:
         if bar is not None:
             bar.close()
+    if resume and step == start and history and history[-1][0] == step:
+        return step, history, elapsed  # a finished run resumed: its last row is this state's validation already
     final = validate()
     history.append([step, round(time.perf_counter() - t0, 2), history[-1][2] if history else float("nan"), final])
     save(step)
     return step, history, time.perf_counter() - t0
 
 
-def _bar(progress: bool, budget: float, elapsed: float, desc: str):
+def _bar(progress: bool, budget: float, elapsed: float, desc: str, max_steps: int | None = None, step: int = 0):
+    """The run's progress bar: its steps when they are counted, else the time budget's seconds."""
     if not progress:
         return None
     from tqdm import tqdm
+
+    if max_steps:
+        return tqdm(total=max_steps, initial=min(step, max_steps), desc=desc, unit="step")
 
     # the bar counts the time budget's seconds: no rate ("s/s"), the steps and metrics as its postfix
     return tqdm(total=int(budget), initial=int(min(elapsed, budget)), desc=desc, unit="s",

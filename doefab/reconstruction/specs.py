@@ -69,9 +69,9 @@ def check_design_task(task: str, design_task: str, where, flag: str = "task", wa
 
 def check_bands(task: str, wavelengths, where) -> None:
     """Refuse a design at ``where`` on bands (metres) that ``task``'s networks cannot take
-    (``applications.band_problem``: an RGB application's three, longest first)."""
+    (``applications.band_problem``: an RGB application's three, longest first; a spectral one's two or more)."""
     if problem := band_problem(task, wavelengths):
-        raise DoefabError(f"{where}: {problem}: design it for three such bands (a scene's optics.wavelengths_nm)")
+        raise DoefabError(f"{where}: {problem} (a scene's optics.wavelengths_nm)")
 
 
 def design_dir(task: str) -> Path:

@@ -78,14 +78,22 @@ def arch_for_design(task: str, pair, sensor=None) -> dict:
     """The architecture entries a design fixes: the depth planes (one cost-volume channel each) and the depth
     range (outputs up to 1.2× the farthest plane); a spectral design's bands (one output each) and, for a
     ``sensor`` whose response is not the default camera's, that response on the bands (its inverses are built
-    from it)."""
+    from it). ``pair``: the design's ``PSFPair`` (its ``wavelengths`` and ``depths``, metres)."""
+    return arch_for_bands(task, pair.wavelengths, pair.depths, sensor)
+
+
+def arch_for_bands(task: str, wavelengths, depths, sensor=None) -> dict:
+    """``arch_for_design`` from a design's bands and planes (metres) alone, before any PSF is computed.
+
+    Example: ``arch_for_bands("depth", [656e-9, 589e-9, 486e-9], [1.0, 2.0, 5.0])`` →
+    ``{"planes": 3, "max_depth_m": 6.0}``."""
     if has(task, "depth"):
-        far = max(z for z in pair.depths if np.isfinite(z))
-        return {"planes": len(pair.depths), "max_depth_m": round(1.2 * far, 6)}
+        far = max(z for z in depths if np.isfinite(z))
+        return {"planes": len(depths), "max_depth_m": round(1.2 * far, 6)}
     if has(task, "spectral"):
         from doefab.reconstruction.data import HS_WAVELENGTHS_M
 
-        lams = [float(w) for w in pair.wavelengths]
+        lams = [float(w) for w in wavelengths]
         same = len(lams) == len(HS_WAVELENGTHS_M) and np.allclose(lams, HS_WAVELENGTHS_M, rtol=0, atol=1e-12)
         out = {} if same else {"wavelengths_m": lams}
         if sensor is not None and not sensor.has_default_response():
@@ -134,7 +142,19 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop(task, crop)
     sensor = sensor or Sensor()
-    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
+    threads_before = torch.get_num_threads()
+    torch.set_num_threads(max(1, min(2, threads_before)))  # restored after (the record names the count)
+    try:
+        return _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr,
+                      weights_dir, arch, progress, command, max_steps, design, schedule, conditions, warm_start, sensor,
+                      dev, spec)
+    finally:
+        torch.set_num_threads(threads_before)
+
+
+def _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr, weights_dir, arch,
+           progress, command, max_steps, design, schedule, conditions, warm_start, sensor, dev, spec) -> dict:
+    """``train``'s run once its arguments are checked and torch's threads set."""
     arch = arch or default_arch(task, variant)
     out = Path(out_dir)
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
@@ -161,11 +181,21 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
                       "from": f"the design's {_design_levels(task, design)}-level level map (levels.npy)"},
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
-                           "conditions": config["conditions"] or "clean", "warm_start": warm},
+                           "conditions": config["conditions"] or "clean", "warm_start": warm,
+                           **run_provenance(dev)},
               "validation": {"images": val_images, "crop_px": crop, **final},
               **sensor.entry(has(task, "spectral")),
               "splits_sha256": split_digest(task), "splits_components": split_components(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
+
+
+def run_provenance(device) -> dict:
+    """What a training run's weights depend on beyond its settings: torch's thread count (the sums add in another
+    order on more threads), the device, the code and the libraries' versions."""
+    from doefab.reconstruction.provenance import code_version, library_versions
+
+    return {"threads": torch.get_num_threads(), "device": str(device), "code": code_version(),
+            "versions": library_versions()}
 
 
 def fit_network(task: str, model, psf, pair, sensor: tuple, conditions, out: Path, config: dict, minutes: float, *,

@@ -54,12 +54,28 @@ def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_
                           f"the shipped networks (or give another folder)")
     if target.exists() and not target.is_dir():
         raise DoefabError(f"--weights-dir {target} is a file: give a folder")
+    _check_writable(target)
     if task is not None and variant is not None:
         foreign = foreign_weights_files(target, task, variant)
         if foreign:
             raise DoefabError(f"{', '.join(map(str, foreign))}: not written by doefab (no doefab weights record "
                               f"beside it), so never replaced: move it away or give another --weights-dir")
     return target
+
+
+def _check_writable(target: Path) -> None:
+    """Refuse a weights folder that cannot be made or written (a parent that is a file, a read-only place) before
+    any training, not when the weights are written at its end."""
+    import os
+
+    here = target.absolute()
+    while not here.exists():
+        here = here.parent
+    if not here.is_dir():
+        raise DoefabError(f"--weights-dir {target}: {here} is a file, so the folder cannot be made: give another")
+    if not os.access(here, os.W_OK | os.X_OK):
+        raise DoefabError(f"--weights-dir {target}: {here} is not writable (read-only or another user's): give a "
+                          f"folder you can write")
 
 
 def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[Path]:

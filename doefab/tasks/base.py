@@ -68,15 +68,21 @@ class Task:
             if getattr(self, name) is not None:
                 number_in(name, getattr(self, name), lo, hi, integer, unit)
         if self.wavelengths_m is not None:
+            from doefab.errors import DoefabError
             from doefab.validate import wavelengths
 
             self.wavelengths_m = wavelengths(self.wavelengths_m)
+            if twice := sorted({w for i, w in enumerate(self.wavelengths_m) if w in self.wavelengths_m[:i]}):
+                raise DoefabError(f"wavelengths_m holds {', '.join(f'{w * 1e9:g} nm' for w in twice)} more than once: "
+                                  f"list each band once")
 
     def bind(self, camera: Camera) -> None:
         """Fix physical (metre) parameters from the camera the design is for, before any resampling."""
 
     # what shrinks the pattern instead of widening the window, for ``window_problem``'s message
     PATTERN_HINT = ""
+    # the field holding the metric's half-width about its target (sensor px) and its scene key; None: no such width
+    METRIC_WIDTH = None  # (field, scene key) in the tasks that have one
 
     def pattern_reach_px(self, camera: Camera) -> float:
         """How far from the window's centre the task's target and metric pixels reach on ``camera``, with the
@@ -93,16 +99,16 @@ class Task:
         return self.pattern_reach_px(camera) <= self.kernel_size // 2 + 1e-9
 
     def window_for_pattern(self, camera: Camera) -> int:
-        """The smallest odd window (sensor px) that holds the pattern with 1 px of room: 2·⌈reach + 1⌉ + 1.
+        """The smallest odd window (sensor px) that holds the pattern (``fits_window``): 2·⌈reach⌉ + 1.
 
-        Example: ``StreakTask(arm_px=60).window_for_pattern(cam)`` → 127 (a 62 px reach)."""
-        return 2 * math.ceil(self.pattern_reach_px(camera) + 1) + 1
+        Example: ``StreakTask(arm_px=60).window_for_pattern(cam)`` → 125 (a 62 px reach)."""
+        return 2 * math.ceil(self.pattern_reach_px(camera) - 1e-9) + 1
 
     def window_problem(self, camera: Camera) -> str:
         """"" where the task's pattern fits its window on ``camera`` (``pattern_reach_px``), else what to change:
         a pattern past the window's edge would be cut from the targets and metric the design optimises.
 
-        Example: ``StreakTask(arm_px=60).window_problem(cam)`` names kernel_size ≥ 127 (its window: 95 px)."""
+        Example: ``StreakTask(arm_px=60).window_problem(cam)`` names kernel_size ≥ 125 (its window: 95 px)."""
         if self.fits_window(camera):
             return ""
         reach, half = self.pattern_reach_px(camera), self.kernel_size // 2

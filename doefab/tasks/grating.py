@@ -120,6 +120,14 @@ class GratingTask(Task):
     RANGES = {**Task.RANGES, "period_pixels": (2, 1e6, False, "DOE pixels"), "period_m": (1e-7, 1e-2, False, "m"),
               "n_bands": (1, 1000, True, "bands"), "box_px": (0, 64, True, "sensor pixels")}
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.wavelengths_m is not None:  # the bands given: n_bands is their count, or left at its default
+            if self.n_bands not in (len(self.wavelengths_m), type(self).n_bands):
+                raise DoefabError(f"GratingTask: n_bands {self.n_bands} disagrees with the {len(self.wavelengths_m)} "
+                                  f"wavelengths_m given: give the bands, or their count, not both")
+            self.n_bands = len(self.wavelengths_m)
+
     def wavelengths(self, camera: Camera) -> tuple[float, ...]:
         if self.wavelengths_m:
             return tuple(self.wavelengths_m)
@@ -148,6 +156,7 @@ class GratingTask(Task):
                 f"{period_for_mapping(camera, lam) * 1e6:g} µm")
 
     PATTERN_HINT = "a longer period_m (a scene's design.grating_period_um)"
+    METRIC_WIDTH = ("box_px", "design.grating_box_px")  # the metric's half-width (sensor px): field, scene key
 
     def first_order_px(self, camera: Camera) -> float:
         """How far off axis (sensor px) the farthest band's first order lands (``grating_spot_px``)."""
@@ -158,9 +167,9 @@ class GratingTask(Task):
         return self.first_order_px(camera) + self.box_px + 2
 
     def window_px(self, far_px: float) -> int:
-        """The odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
-        margin: what ``optics.kernel_px`` must reach."""
-        return 2 * math.ceil(far_px + self.box_px + 3) + 1
+        """The least odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
+        margin (``pattern_reach_px``, ``fits_window``): what ``optics.kernel_px`` must reach."""
+        return 2 * math.ceil(far_px + self.box_px + 2 - 1e-9) + 1
 
     def period(self, camera: Camera) -> float:
         """Grating period Λ in metres."""

@@ -76,6 +76,9 @@ class HalfRingTask(Task):
             if len(planes) < 2 or not all(0 < z < float("inf") for z in planes):
                 raise DoefabError(f"planes_m must hold at least two depths in metres, all finite (a depth design's "
                                   f"planes are at finite distances, no \"inf\"), got {self.planes_m!r}")
+            if len(set(planes)) != len(planes):
+                raise DoefabError(f"planes_m holds {sorted({z for i, z in enumerate(planes) if z in planes[:i]})} m "
+                                  f"more than once: list each depth plane once")
             self.planes_m = tuple(sorted(planes))
             self.z_min, self.z_max = self.planes_m[0], self.planes_m[-1]
         if not self.z_min < self.z_max:
@@ -86,6 +89,7 @@ class HalfRingTask(Task):
             raise DoefabError(f"unknown ring law {self.ring_law!r}: choose one of {self.RING_LAWS}")
 
     PATTERN_HINT = "a smaller ring_max_px (a scene's design.ring_max_px)"
+    METRIC_WIDTH = ("delta_px", "design.ring_width_px")  # the metric's half-width (sensor px): field, scene key
 
     def pattern_reach_px(self, camera: Camera) -> float:
         """The largest ring, its metric's half-width and 1 px (``Task.pattern_reach_px``)."""

@@ -37,6 +37,7 @@ class StreakTask(Task):
     RANGES = {**Task.RANGES, "arm_px": (1, 2047, True, "sensor pixels"), "band_px": (0, 64, True, "sensor pixels")}
 
     PATTERN_HINT = "lower arm_px (a scene's design.streak_arm_px)"
+    METRIC_WIDTH = ("band_px", "design.streak_band_px")  # the metric's half-width (sensor px): field, scene key
 
     def pattern_reach_px(self, camera: Camera) -> float:
         """The arms, the metric's band and 1 px (``Task.pattern_reach_px``)."""

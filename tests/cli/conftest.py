@@ -21,7 +21,7 @@ def fixtures(tmp_path_factory):
     cam = doefab.Camera(aperture_diameter=0.5e-3, doe_pitch=5.4e-6, doe_pixels=100, sensor_pitch=5.4e-6,
                         sensor_distance=50e-3, focus_distance=5.0)
     lv = np.random.default_rng(0).integers(0, 16, (100, 100)).astype(np.uint8)
-    d = Design(task="grating", task_params={}, camera=cam, wavelengths=(550e-9,), depths=(5.0,),
+    d = Design(task="grating", task_params={}, camera=cam, wavelengths=(550e-9, 600e-9), depths=(5.0,),
                height=doefab.levels_to_height(lv, cam), levels=lv,
                metrics={"name": "m", "continuous": 0.5, "quantized": 0.5, "continuous_worst": 0.4,
                         "quantized_worst": 0.4})

@@ -350,3 +350,19 @@ def test_a_pixel_saturated_in_the_raw_capture_stays_saturated_after_the_unmix(a,
     np.testing.assert_allclose(c[:, 0, 0], 0.3, atol=1e-12)  # unclipped pixels unmix exactly
     naive_l, naive_r = doefab.unmix_crosstalk(np.ones(3), np.ones(3), a, b)  # the unmix alone, both clipped
     assert (min(naive_l.min(), naive_r.min()) < 0.98) == (a != b)  # the case the check guards against does arise
+
+
+def test_depths_beyond_the_pairs_planes_are_refused():
+    """A depth map at 30 m, or at 0.5 mm (millimetres typed as metres), through planes at 1 and 5 m would be
+    rendered at the nearest plane: refused, naming the span; depths on the planes and between them pass."""
+    k = 9
+    psf = np.stack([_blob_psf(k, 1.5, 1.0)[None], _blob_psf(k, 1.0, 1.0)[None]])  # planes: 1 m, 5 m
+    pair = _pair(psf, psf, (550e-9,), (1.0, 5.0))
+    scene = np.full((1, 16, 16), 0.2, np.float32)
+    for bad in (30.0, 0.0005):
+        with pytest.raises(doefab.DoefabError, match=r"spans .* beyond the PSF pair's planes \(1–5 m\)"):
+            doefab.simulate_captures(scene, pair, depth_map=np.full((16, 16), bad, np.float32),
+                                     response=np.ones((3, 1)), noise="none")
+    ok = np.linspace(1.0, 5.0, 256, dtype=np.float32).reshape(16, 16)
+    coded, _ = doefab.simulate_captures(scene, pair, depth_map=ok, response=np.ones((3, 1)), noise="none")
+    assert np.isfinite(coded).all()

@@ -126,8 +126,8 @@ def _refusal(scene) -> str:
 
 def test_a_first_order_beyond_the_window_names_the_shortest_period_that_brings_it_inside(tmp_path):
     """The default 32 µm period puts 700 nm ~227 px off axis, beyond the 191 px window (which holds 95 − 1 − 2 =
-    92 px with the metric box and its margin): the refusal names the wider window (2·⌈227 + 1 + 3⌉ + 1) and the
-    shortest period whose 700 nm order lands within it, to 0.01 µm; that period passes, 0.01 µm less does not."""
+    92 px with the metric box and its margin): the refusal names the least window that holds it (2·⌈227 + 1 + 2⌉ + 1)
+    and the shortest period whose 700 nm order lands within it, to 0.01 µm; that period passes, 0.01 µm less does not."""
     msg = _refusal(_wide(tmp_path))
     found = re.search(r"lands (\d+) px off axis: raise kernel_px to ≥ (\d+), or keep it and set "
                       r"design\.grating_period_um ≥ ([\d.]+) \(µm\)", msg)
@@ -135,9 +135,9 @@ def test_a_first_order_beyond_the_window_names_the_shortest_period_that_brings_i
     period_um = float(found.group(3))
     s = resolve(_wide(tmp_path, design=f"grating_period_um = {period_um}\n")).camera.sensor_distance
     far = _far_px(s, 1.55e-6, 32e-6)
-    assert int(found.group(1)) == round(far) and int(found.group(2)) == 2 * math.ceil(far + 4) + 1
+    assert int(found.group(1)) == round(far) and int(found.group(2)) == 2 * math.ceil(far + 3) + 1
     assert _far_px(s, 1.55e-6, period_um * 1e-6) <= 92 < _far_px(s, 1.55e-6, (period_um - 0.01) * 1e-6)
-    assert (found.group(1), found.group(2), found.group(3)) == ("227", "463", "78.8")  # the guide's example
+    assert (found.group(1), found.group(2), found.group(3)) == ("227", "461", "78.8")  # the guide's example
     assert "first order lands 92 px off axis" in _refusal(_wide(tmp_path, design=f"grating_period_um = "
                                                                                  f"{period_um - 0.01:.2f}\n"))
 

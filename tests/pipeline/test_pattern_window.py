@@ -44,13 +44,14 @@ def test_doctor_and_optimize_refuse_the_same_patterns(tmp_path, task, design, pa
 
 
 def test_a_grating_past_its_window_is_refused_by_optimize_naming_the_window():
-    """The hyperspectral preset's 700 nm first order lands s·tan(asin(λ/Λ))/p ≈ 75 px off axis at Λ = 16 × 5.4 µm:
-    a 121 px window (60 px) cannot hold it with its 1 px box and 2 px; kernel_size ≥ 2·⌈far + 3 + 1⌉ + 1."""
+    """The hyperspectral preset's 700 nm first order lands s·λ/Λ/p ≈ 75 px off axis at Λ = 16 × 5.4 µm (where the
+    Fraunhofer model puts it): a 121 px window (60 px) cannot hold it with its 1 px box and 2 px; the least window
+    that does is 2·⌈far + 3⌉ + 1."""
     from doefab.tasks.grating import GratingTask
 
     cam = doefab.Camera.preset("hyperspectral")
-    far = cam.sensor_distance * math.tan(math.asin(700e-9 / (16 * 5.4e-6))) / cam.sensor_pitch
-    with pytest.raises(DoefabError, match=f"kernel_size ≥ {2 * math.ceil(far + 4) + 1} or a longer period_m"):
+    far = cam.sensor_distance * 700e-9 / (16 * 5.4e-6) / cam.sensor_pitch
+    with pytest.raises(DoefabError, match=f"kernel_size ≥ {2 * math.ceil(far + 3) + 1} or a longer period_m"):
         doefab.optimize(GratingTask(kernel_size=121), iterations=1, camera=cam, progress=False)
 
 

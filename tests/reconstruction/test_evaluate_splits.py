@@ -105,6 +105,20 @@ def test_each_read_of_the_final_split_is_logged_in_the_output_folder(tmp_path):
             in line
 
 
+def test_a_read_of_the_final_split_that_fails_while_scoring_is_logged_too(tmp_path, monkeypatch):
+    """The ledger line is written before any scene is scored: a read that fails (or is interrupted) after it has
+    seen final scenes still counts."""
+    def broken(*args, **kwargs):
+        raise RuntimeError("interrupted while scoring")
+
+    monkeypatch.setattr(ev, "_score", broken)
+    with pytest.raises(RuntimeError):
+        ev.evaluate("hdr", tmp_path / "f", split="final", **QUICK)
+    lines = (tmp_path / "f" / ev.FINAL_LEDGER).read_text().splitlines()
+    assert len(lines) == 3 and "| hdr | 1 scenes of 64² px, clean captures; uncoded_only (weights " in lines[2]
+    assert not (tmp_path / "f" / "metrics.json").exists()
+
+
 def test_an_evaluation_does_not_depend_on_the_threads_torch_was_given(tmp_path):
     """The same evaluation with torch set to 2 threads and to 1 beforehand: the same numbers to the last bit, the
     thread count restored, the evaluation's threads, library versions and weights' SHA-256 recorded."""

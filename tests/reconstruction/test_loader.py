@@ -230,3 +230,19 @@ def test_the_weights_record_is_checked_against_a_design_before_any_psf(tmp_path,
     with pytest.raises(DoefabError, match="another sensor"):  # the shipped network is the default sensor's
         loader.weights_record("hdr", design=committed, sensor=Sensor(read_noise_e=20.0))
     assert loader.weights_record("hdr", sensor=Sensor())["task"] == "hdr"  # None: the committed design
+
+
+def test_an_unreadable_record_in_a_users_folder_names_moving_it_first(tmp_path, capsys):
+    """Training never replaces a weights record it cannot read as its own, so the loader's fix for one says to
+    move the files away before retraining; ``doefab train`` into that folder refuses exactly those files."""
+    import shutil
+
+    from doefab.reconstruction.loader import load_reconstructor
+    from doefab.reconstruction.weights import WEIGHTS_DIR, foreign_weights_files
+
+    shutil.copy(WEIGHTS_DIR / "hdr_uncoded_only.pt", tmp_path / "hdr_uncoded_only.pt")
+    (tmp_path / "hdr_uncoded_only.json").write_text("{not json")
+    with pytest.raises(DoefabError, match=r"not valid JSON \(training never replaces a record it cannot read: move "
+                                          r"it and hdr_uncoded_only\.pt out of"):
+        load_reconstructor("hdr", "uncoded_only", weights_dir=tmp_path)
+    assert foreign_weights_files(tmp_path, "hdr", "uncoded_only")  # what train refuses to replace

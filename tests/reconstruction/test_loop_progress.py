@@ -1,5 +1,10 @@
-"""The training bar a user watches: the validation metric shows as a dash until the first validation (never
-"nan"), then its value; the bar counts the time budget's seconds without a rate in "s/s"."""
+"""The training loop a user runs: the bar's validation metric shows as a dash until the first validation (never
+"nan"), then its value; the bar counts the steps when they are counted, else the time budget's seconds, without a
+rate in "s/s". With counted steps the learning rate follows the steps alone (a run repeats bit for bit however slow
+its validation); a finished run resumed adds no row; a checkpoint write a kill left half done is cleared."""
+
+import math
+import time
 
 import torch
 
@@ -33,3 +38,75 @@ def test_a_validation_that_returns_nan_shows_as_nan(tmp_path, capsys):
              metric="mae", val_every=1, max_steps=2, desc="train test")
     err = capsys.readouterr().err
     assert "mae=nan" in err and "mae=–" not in err
+
+
+def _quadratic():
+    w = torch.nn.Parameter(torch.zeros(()))
+    opt = torch.optim.SGD([w], lr=0.1)
+    rates = []
+
+    def step(i):
+        rates.append(opt.param_groups[0]["lr"])
+        opt.zero_grad()
+        loss = (w - 1.0) ** 2
+        loss.backward()
+        opt.step()
+        return float(loss.detach())
+
+    return w, opt, rates, step
+
+
+def test_with_counted_steps_the_rate_follows_the_steps_alone(tmp_path):
+    """A slow first validation (as fine-tuning makes) must not move the rates: step i's is the cosine's at i / N,
+    0.5 (1 + cos(π i / N)) above the floor, written out here; the same weights twice."""
+    from doefab.reconstruction.loop import LR_FLOOR
+
+    finals = []
+    for run in ("a", "b"):
+        w, opt, rates, step = _quadratic()
+
+        def slow_validation():
+            time.sleep(0.05)
+            return 0.0
+
+        run_loop(tmp_path / run, {"case": "rate"}, 0.05, step, slow_validation, {"w": opt}, [(opt, 0.1)],
+                 val_every=100, max_steps=5, progress=False, validate_first=True)
+        want = [0.1 * (LR_FLOOR + (1 - LR_FLOOR) * 0.5 * (1 + math.cos(math.pi * i / 5))) for i in range(5)]
+        assert rates == want
+        finals.append(float(w.detach()))
+    assert finals[0] == finals[1]
+
+
+def test_the_bar_counts_steps_when_they_are_counted(tmp_path, capsys):
+    w, opt, rates, step = _quadratic()
+    run_loop(tmp_path, {"case": "steps"}, 30.0, step, lambda: 0.5, {"w": opt}, [(opt, 0.1)], val_every=2,
+             max_steps=4, desc="train test")
+    err = capsys.readouterr().err
+    assert "4/4" in err and "1800" not in err  # the steps, not the 30 min budget's seconds
+
+
+def test_a_finished_run_resumed_adds_no_row_and_a_half_written_checkpoint_is_cleared(tmp_path):
+    w, opt, rates, step = _quadratic()
+    args = (tmp_path, {"case": "again"}, 1.0, step, lambda: 0.25, {"w": opt}, [(opt, 0.1)])
+    steps, history, _ = run_loop(*args, val_every=2, max_steps=4, progress=False)
+    csv = (tmp_path / "history.csv").read_text()
+    stale = tmp_path / ".checkpoint.pt.abc123"
+    stale.write_bytes(b"half a checkpoint")
+    again, history2, _ = run_loop(*args, val_every=2, max_steps=4, progress=False, resume=True)
+    assert again == steps == 4 and len(history2) == len(history) and history2[-1] == history[-1]
+    assert (tmp_path / "history.csv").read_text() == csv and not stale.exists()
+
+
+def test_a_resume_with_other_settings_names_each_one_that_differs(tmp_path):
+    import pytest
+
+    from doefab.errors import DoefabError
+
+    w, opt, rates, step = _quadratic()
+    config = {"batch": 4, "lr": 1e-3, "arch": {"width": 16, "planes": 17}}
+    run_loop(tmp_path, config, 1.0, step, lambda: 0.0, {"w": opt}, [(opt, 0.1)], max_steps=2, val_every=1,
+             progress=False)
+    other = {"batch": 2, "lr": 1e-3, "arch": {"width": 8, "planes": 17}}
+    with pytest.raises(DoefabError, match=r"other settings \(arch\.width: 16 there, 8 now; batch: 4 there, 2 now\)"):
+        run_loop(tmp_path, other, 1.0, step, lambda: 0.0, {"w": opt}, [(opt, 0.1)], max_steps=4, val_every=1,
+                 progress=False, resume=True)

@@ -65,6 +65,25 @@ def test_training_crop_defaults_to_the_tasks(tmp_path):
     assert meta["training"]["crop_px"] == 128 and meta["validation"]["crop_px"] == 128
 
 
+def test_a_training_record_names_its_threads_device_code_and_libraries_and_the_threads_are_restored(tmp_path):
+    """The weights' last bits follow torch's thread count: the record names the count the run trained on (at
+    most 2), and the caller's count is back afterwards."""
+    from doefab.reconstruction.provenance import library_versions
+
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(3)
+        meta = train("hdr", "uncoded_only", minutes=1, out_dir=tmp_path / "run", weights_dir=tmp_path / "w",
+                     crop=64, val_images=1, val_every=1000, progress=False, max_steps=1,
+                     arch={"features": 1, "width": 4, "highlight_iters": 1, "bound_iters": 0})
+        assert torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
+    t = meta["training"]
+    assert t["threads"] == 2 and t["device"] == "cpu" and t["versions"] == library_versions()
+    assert t["code"].startswith(("git ", "doefab "))
+
+
 @pytest.mark.parametrize("flag, want", [([], None), (["--crop", "160"], 160)])
 def test_train_at_the_command_line_leaves_the_crop_to_the_task_unless_given(tmp_path, monkeypatch, flag, want):
     import doefab.reconstruction.train as train_mod

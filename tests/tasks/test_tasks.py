@@ -90,13 +90,14 @@ def test_window_loss_weighs_the_worst_entry():
 def test_a_pattern_past_the_window_is_refused_by_optimize_not_cut(tiny_camera):
     """A target drawn past the window's edge would be silently cut (its arm, first order or ring outside the PSF):
     ``optimize`` refuses it, naming the window that holds it. Reaches written out: a streak's arm + band + 1 px
-    (arm 20, band 1 in a 31 px window: 22 > 15; kernel ≥ 2·23 + 1 = 47); a grating's farthest first order
-    s·tan(asin(λ/Λ))/p + box + 2; a ring's largest radius + half-width + 1."""
+    (arm 20, band 1 in a 31 px window: 22 > 15; kernel ≥ 2·22 + 1 = 45, the least window that holds it); a
+    grating's farthest first order s·λ/Λ/p + box + 2; a ring's largest radius + half-width + 1. The window each
+    names holds its pattern, and the next smaller odd one does not."""
     from doefab.tasks.grating import GratingTask
     from doefab.tasks.halfring import HalfRingTask
     from doefab.tasks.streak import StreakTask
 
-    with pytest.raises(DoefabError, match=r"reaches 22\.0 px .* 31 px window's 15: set kernel_size ≥ 47 or lower "
+    with pytest.raises(DoefabError, match=r"reaches 22\.0 px .* 31 px window's 15: set kernel_size ≥ 45 or lower "
                                           r"arm_px"):
         doefab.optimize(StreakTask(kernel_size=31, arm_px=20), iterations=1, camera=tiny_camera, progress=False)
     assert StreakTask(kernel_size=31, arm_px=13).window_problem(tiny_camera) == ""  # 15: the edge fits
@@ -115,6 +116,17 @@ def test_a_pattern_past_the_window_is_refused_by_optimize_not_cut(tiny_camera):
     assert ring.pattern_reach_px(cam) == pytest.approx(40 + 1 + 1)
     assert "ring_max_px" in ring.window_problem(cam)
     assert HalfRingTask(kernel_size=63, ring_max_px=29.0).window_problem(cam) == ""
+
+    for make, c in ((lambda k: StreakTask(kernel_size=k, arm_px=20), tiny_camera),
+                    (lambda k: GratingTask(kernel_size=k), doefab.Camera.preset("hyperspectral")),
+                    (lambda k: HalfRingTask(kernel_size=k, ring_max_px=40.0), cam),
+                    (lambda k: HalfRingTask(kernel_size=k, ring_max_px=40.5), cam)):
+        t = make(31)
+        t.bind(c)
+        need = t.window_for_pattern(c)
+        assert make(need).fits_window(c) and not make(need - 2).fits_window(c)
+        if isinstance(t, GratingTask):
+            assert t.window_px(t.first_order_px(c)) == need
 
 
 def test_a_steep_gratings_targets_sit_where_the_model_puts_its_light_and_a_steeper_one_is_refused():

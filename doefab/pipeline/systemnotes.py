@@ -1,0 +1,131 @@
+"""What a scene's system gets warned about (it works, but deserves the user's eye), and the depth planes' blur span
+that the scene checks share: bands or a design wavelength where the substrate's dispersion is extrapolated or far
+from the bands, a diffraction blur wider than the task's metric, an RGB task's bands outside the camera's colours,
+depth planes with no depth cue, a default ring capped by its window. Each function returns its warnings, one
+string each, naming the key and what to do."""
+
+from __future__ import annotations
+
+import math
+
+from doefab.applications import has
+from doefab.pipeline.scene import Scene
+
+__all__ = ["depth_span_px", "system_warnings", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M"]
+
+DATA_STEP_M = 10e-9  # the hyperspectral scenes' measured spectra: every 10 nm (``reconstruction.bands``)
+
+
+def depth_span_px(cam, planes) -> float:
+    """The half aperture's geometric blur radius (sensor px) at the nearest of ``planes`` (metres) when it is
+    sharp at the farthest, D·s·|1/z_near − 1/z_far| / 2: how much the planes' blurs differ."""
+    near, far = min(planes), max(planes)
+    return cam.aperture_diameter * cam.sensor_distance * abs(1 / near - 1 / far) / 2 / cam.sensor_pitch
+
+
+def system_warnings(cam, task) -> list[str]:
+    """What works but deserves the user's eye: bands or the design wavelength outside the range the
+    substrate's published dispersion was fitted on (the index there is an extrapolation)."""
+    from doefab.optics.materials import fit_range_warning
+
+    notes = [fit_range_warning(cam.material, task.wavelengths(cam))]
+    design = fit_range_warning(cam.material, [cam.design_wavelength])
+    notes.append(f"design wavelength {design}" if design else None)
+    notes.append(_design_wavelength_note(cam, task.wavelengths(cam)))
+    notes.append(_diffraction_note(cam, task))
+    return [n for n in notes if n]
+
+
+def _diffraction_note(cam, task) -> str | None:
+    """A diffraction blur wider than the task's metric (``Task.METRIC_WIDTH``): no relief concentrates light into
+    a target narrower than the Airy core, 1.22 λ s / D at the longest band (None where it fits, within 1 px)."""
+    if task.METRIC_WIDTH is None:
+        return None
+    attr, key = task.METRIC_WIDTH
+    half, lam = float(getattr(task, attr)), max(task.wavelengths(cam))
+    airy = 1.22 * lam * cam.sensor_distance / cam.aperture_diameter / cam.sensor_pitch
+    if airy <= half + 1:
+        return None
+    return (f"the diffraction blur's Airy radius, {airy:.1f} px at {lam * 1e9:g} nm (1.22 λ s / D), is wider than the "
+            f"{task.name} metric's ±{half:g} px ({key}): little of any PSF falls within it, so the design scores low; "
+            f"set a lower camera.f_number, coarser camera.sensor_pitch_um or a wider {key}")
+
+def _design_wavelength_note(cam, lams) -> str | None:
+    """A design wavelength outside the bands: the relief's full depth, 2π there, delays the band farthest from it
+    by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves, far from one full wave (None inside the bands)."""
+    lam_d, lo, hi = cam.design_wavelength, min(lams), max(lams)
+    if lo - 1e-12 <= lam_d <= hi + 1e-12:
+        return None
+    far = hi if lam_d < lo else lo
+    n_d, n_far = float(cam.material.index(lam_d)), float(cam.material.index(far))
+    waves = lam_d * (n_far - 1) / (far * (n_d - 1))
+    return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} lies outside the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
+            f"the relief's full depth, one wave at {lam_d * 1e9:g} nm, delays {far * 1e9:g} nm by {waves:.2f} waves; "
+            f"set it within the bands (e.g. {far * 1e9:g})")
+
+
+def sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
+    """A response an RGB task does not use; an RGB task's bands (its R, G and B channels) where the camera's
+    default colour response does not see them (a near-infrared design: the colour scenes do not hold it)."""
+    if has(scene.task, "spectral"):
+        return []
+    out = []
+    if "response" in scene.sensor and not sensor.has_default_response():
+        out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
+                   f"are the camera's own RGB (only the noise applies)")
+    from doefab.imaging.sensor import bands_outside
+
+    outside, words = bands_outside(task.wavelengths(cam))
+    if outside.size:
+        out.append(f"optics.wavelengths_nm: the {scene.task} task takes its bands as the camera's R, G and B "
+                   f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside {words}: its "
+                   f"colour scenes hold no light there")
+    return out
+
+
+def depth_warnings(scene: Scene, cam, task, from_blur: bool) -> list[str]:
+    """A depth design whose planes barely change the plain half's blur (no depth cue: often millimetres typed into
+    a key in metres), and a default ring radius (the camera's defocus blur, ``defocus_ring_px``) capped to fit the
+    PSF window. ``from_blur``: the ring was set from the blur (``system.ring_from_blur``)."""
+    from doefab.tasks.halfring import HalfRingTask
+
+    if not isinstance(task, HalfRingTask):
+        return []
+    near, far = min(task.depths(cam)), max(task.depths(cam))
+    r, out = depth_span_px(cam, task.depths(cam)), []
+    if r < 1:
+        out.append(f"optics.depths_m {near:g}–{far:g} m: the plain half's blur changes by {r:.2g} px across the "
+                   f"planes (D·s·|1/z_near − 1/z_far| / 2), so the captures carry almost no depth cue (depths are in "
+                   f"metres)")
+    if from_blur and r > task.ring_max_px + 1e-9:
+        k = 2 * math.ceil(r + 2 + task.delta_px) + 1
+        out.append(f"design.ring_max_px: the plain half's blur at the nearest plane when sharp at the farthest, "
+                   f"{r:.1f} px, is capped to "
+                   f"{task.ring_max_px:g} px, the most the {task.kernel_size} px window holds: the ring no longer "
+                   f"follows the blur; set optics.kernel_px ≥ {k} to let it, or design.ring_max_px to choose")
+    return out
+
+
+def band_warnings(scene: Scene, cam, task) -> list[str]:
+    """A grating's bands as the model takes them: each band one wavelength, its first order one spot. Bands whose
+    first orders lie more than 1.5 px apart leave a real spectrum's light between them unmodelled (the captures are
+    the bands' spots alone); with a reconstruction stage, bands closer than the scenes' measured 10 nm are
+    interpolated between measured ones and carry nothing of their own."""
+    from doefab.tasks.grating import GratingTask, grating_spot_px
+
+    if not isinstance(task, GratingTask) or len(lams := sorted(task.wavelengths(cam))) < 2:
+        return []
+    out = []
+    spots = [grating_spot_px(cam, lam, task.period(cam)) for lam in lams]
+    gap = max(abs(b - a) for a, b in zip(spots, spots[1:]))
+    if gap > 1.5:
+        out.append(f"optics.wavelengths_nm: adjacent bands' first orders lie up to {gap:.1f} px apart, and the model "
+                   f"takes each band as one wavelength: light between the bands (any real spectrum's) is not in the "
+                   f"simulated captures; list bands about 1 px apart (here about "
+                   f"{abs(spots[-1] - spots[0]) + 1:.0f} across the range) to model a continuous spectrum")
+    step = min(b - a for a, b in zip(lams, lams[1:]))
+    if "reconstruction" in scene.stages and step < DATA_STEP_M - 1e-12:
+        out.append(f"optics.wavelengths_nm: bands {step * 1e9:.3g} nm apart, finer than the hyperspectral scenes' "
+                   f"measured spectra ({DATA_STEP_M * 1e9:g} nm): the bands between measured ones are interpolated "
+                   f"and carry no information of their own")
+    return out
