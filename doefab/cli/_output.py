@@ -17,6 +17,18 @@ def check_resume(out: OutputDir) -> None:
     read_checkpoint(ckpt)
 
 
+def clear_earlier_run(out: OutputDir, force: bool, extra=()) -> None:
+    """``--force``: remove the earlier run's checkpoint (and a checkpoint write a kill left half done), its history
+    and ``extra`` files from the run folder before any work, so neither a later ``--resume`` nor a reader mixes the
+    two runs (the folder is doefab's: ``claim_output`` checked its marker)."""
+    if not force or not out.path.is_dir():
+        return
+    old = [out.path / "checkpoint.pt", out.path / "history.csv", *extra, *out.path.glob(".checkpoint.pt.*")]
+    for f in old:
+        if f.is_file():
+            f.unlink()
+
+
 def claim_output(args, kind: str, replace: bool, keep_on_failure=None, replace_flag: str = "--force") -> OutputDir:
     """Validate ``args.out`` for a ``kind`` output and register it so a failed run removes what it created."""
     out = OutputDir(args.out, kind, replace=replace, replace_flag=replace_flag)

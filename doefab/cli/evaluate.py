@@ -78,7 +78,10 @@ def run(args) -> int:
     told, told_rec = read_psf_arg(args.psf, "--psf")
     capture, capture_rec = read_psf_arg(args.capture_psf, "--capture-psf")
     camera = read_crosstalk_arg(args, told is not None or capture is not None)
-    out = claim_output(args, "evaluate", replace=args.force)  # --out checked before the networks' PSFs
+    out = claim_output(args, "evaluate", replace=args.force,  # --out checked before the networks' PSFs
+                       keep_on_failure=lambda: (args.outdir.path / FINAL_LEDGER).is_file())  # a read is a read
+    if args.split == "final":
+        args.resume_hint = f"this read of the final test set is logged in {out.path / FINAL_LEDGER}, which is kept"
     for v in variants:  # a bad weights file, or one for another sensor, or a pair they cannot take: refused first
         rec = load_reconstructor(args.task, v, args.weights_dir, design, sensor=sensor)
     check_psf_args(args.task, rec.pair, told, capture)

@@ -7,15 +7,17 @@ nominal model's own captures.
 
 Writes the weights and their metadata record (<task>_<variant>.pt/.json) into OUT, or into --weights-dir;
 the shipped weights in doefab/weights/ are replaced only with --replace-shipped. OUT/checkpoint.pt and
-OUT/history.csv are written while running.
-Interrupted runs keep the checkpoint: rerun the same command with --resume (it may raise --minutes; with the
-cosine schedule a larger budget stretches the decay, so the learning rate rises again).
+OUT/history.csv are written every 50 steps (at each validation) and at the end.
+Interrupted runs keep the last checkpoint: rerun the same command with --resume (it may raise --minutes; with the
+cosine schedule over the time budget, without --steps, a larger budget stretches the decay, so the learning rate
+rises again; with --steps the schedule runs over the steps).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from doefab.applications import APPLICATIONS
 from doefab.cli._args import add_device_arg, add_sensor_args, number
@@ -30,8 +32,9 @@ def register(sub) -> None:
     p.add_argument("--minutes", type=number(float, 0, 1440, lo_open=True, unit="minutes of wall time"), default=10.0,
                    help="training budget in minutes of wall time")
     p.add_argument("--steps", type=number(int, 1, 10**7, unit="steps"), default=None,
-                   help="stop after this many steps if --minutes has not run out (a budget a loaded machine cannot "
-                        "shrink: for comparisons)")
+                   help="train this many steps, the learning rate's schedule over them (a budget a loaded machine "
+                        "cannot shrink, the same weights every run: for comparisons); --minutes still stops the run "
+                        "early, and the record and output say so")
     p.add_argument("--out", default=None, help="run folder for checkpoint.pt and history.csv "
                                                "(default out/train/<task>_<variant>)")
     p.add_argument("--weights-dir", default=None, help="where to write the weights (default: OUT)")
@@ -43,7 +46,8 @@ def register(sub) -> None:
                    help="training crop side in pixels (default: the task's: 96; depth 128)")
     p.add_argument("--lr", type=number(float, 0, 1, lo_open=True), default=1e-3, help="Adam learning rate at the start")
     p.add_argument("--schedule", default="cosine", choices=["cosine", "constant"],
-                   help="learning rate over the wall-time budget: cosine decay to 5 %% of --lr, or constant")
+                   help="learning rate over the run (--steps, else the wall-time budget): cosine decay to 5 %% of "
+                        "--lr, or constant")
     p.add_argument("--design", default=None,
                    help="train for this design folder (or mask set) instead of the committed one")
     p.add_argument("--clean", action="store_true",
@@ -58,11 +62,11 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from doefab.cli._args import sensor_arg, task_design_arg
-    from doefab.cli._output import check_resume, claim_output
+    from doefab.cli._output import check_resume, claim_output, clear_earlier_run
     from doefab.errors import DoefabError
     from doefab.reconstruction.specs import training_crop
     from doefab.reconstruction.train import train
-    from doefab.reconstruction.weights import weights_target
+    from doefab.reconstruction.weights import history_path, weights_paths, weights_target
 
     training_crop(args.task, args.crop)  # train() resolves it again; checked here before any output is claimed
     args.memory_hint = "lower --batch or --crop (each step holds its batch's scenes and activations)"
@@ -76,9 +80,10 @@ def run(args) -> int:
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     design = task_design_arg(args, need_weights_dir=False)
     sensor = sensor_arg(args, design)
-    weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)  # before any work
-    if args.force:  # the earlier run's files go, so neither a resume nor a reader mixes the two runs
-        _clear_run(out.path, args.task, args.variant, args.weights_dir is None)
+    target = weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)
+    clear_earlier_run(out, args.force, [out.path / "warm_start.json"] + (  # and its weights where these go there
+        [*weights_paths(args.task, args.variant, out.path), history_path(args.task, args.variant, out.path)]
+        if Path(target).resolve() == out.path.resolve() else []))
     out.create()
     from doefab.tolerance.conditions import for_splits
 
@@ -88,24 +93,11 @@ def run(args) -> int:
                  schedule=args.schedule, replace_shipped=args.replace_shipped, command=_command_line(),
                  conditions=cond, max_steps=args.steps, sensor=sensor)
     v = {k: round(x, 4) for k, x in meta["validation"].items() if isinstance(x, float)}
+    if meta["training"].get("stopped"):
+        print(f"note: {meta['training']['stopped']}")
     print(f"{args.task} {args.variant}: {meta['training']['steps']} steps in {meta['training']['wall_time_s']:.0f} s; "
           f"validation {v}; wrote {meta['weights_path']} and its .json")
     return 0
-
-
-def _clear_run(folder, task: str, variant: str, weights_here: bool) -> None:
-    """Remove an earlier training run's files from its folder (``--force``): its checkpoint (and a checkpoint
-    write a kill left half done), history, warm-start record and, where this run writes its weights there, its
-    weights (doefab's own: ``weights_target`` has refused anything else)."""
-    from doefab.reconstruction.weights import history_path, weights_paths
-
-    old = [folder / n for n in ("checkpoint.pt", "history.csv", "warm_start.json")]
-    old += list(folder.glob(".checkpoint.pt.*"))
-    if weights_here:
-        old += [*weights_paths(task, variant, folder), history_path(task, variant, folder)]
-    for f in old:
-        if f.is_file():
-            f.unlink()
 
 
 def _command_line() -> str:

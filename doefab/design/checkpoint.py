@@ -54,16 +54,17 @@ def read_checkpoint(path: str | Path) -> dict:
 
 def _read(path: Path) -> tuple[dict, dict]:
     if not path.is_file():
-        raise DoefabError(f"no checkpoint at {path}: nothing to continue; start afresh with --force instead of "
-                          f"--resume")
+        raise DoefabError(f"no checkpoint at {path}: nothing to continue; start afresh (--force instead of "
+                          f"--resume at the command line)")
     try:
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
         raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
-                          f"start afresh with --force instead of --resume (it replaces the folder)") from None
+                          f"start afresh (--force instead of --resume at the command line, which clears the earlier "
+                          f"run)") from None
     if not isinstance(state, dict) or "config" not in state:
-        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh with --force instead of --resume "
-                          f"(it replaces the folder)")
+        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh (--force instead of --resume "
+                          f"at the command line, which clears the earlier run)")
     try:
         saved = json.loads(state["config"])
         theta = state.get("theta")  # a design's (or an end-to-end run's) parameters, when the run has any
@@ -76,5 +77,6 @@ def _read(path: Path) -> tuple[dict, dict]:
         ok = False
     if not ok:
         raise DoefabError(f"checkpoint {path} has missing or invalid fields (config, theta, step, elapsed, history, "
-                          f"generator); start afresh with --force instead of --resume (it replaces the folder)")
+                          f"generator); start afresh (--force instead of --resume at the command line, which clears "
+                          f"the earlier run)")
     return state, saved

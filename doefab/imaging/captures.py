@@ -161,7 +161,8 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
     Args:
         scene: [C, H, W] linear radiance ≥ 0, C = the pair's wavelengths.
         pair: a :class:`doefab.PSFPair` with both halves.
-        depth_map: [H, W] metres (> 0) to split the scene into the pair's depth planes (with occlusion);
+        depth_map: [H, W] metres (> 0, within the pair's nearest and farthest planes) to split the scene into the
+            pair's depth planes (with occlusion);
             None for a pair of one depth.
         response: [3, C] RGB response for spectral scenes (``doefab.sensor_response(pair.wavelengths)``);
             None for RGB scenes (C = 3).

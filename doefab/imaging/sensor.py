@@ -169,7 +169,7 @@ class Sensor:
         if self.read_noise_e >= self.full_well_e:
             raise DoefabError(f"read_noise_e {self.read_noise_e:g} electrons rms reaches full_well_e "
                               f"{self.full_well_e:g} electrons: such a sensor records no signal above its noise "
-                              f"(a dynamic range below 0 stops); check the two values (a camera's read noise is "
+                              f"(a dynamic range of 0 stops or less); check the two values (a camera's read noise is "
                               f"a few electrons, its full well thousands)")
         if not is_named(self.response):
             response_curves(self.response)  # a missing or malformed CSV is refused here, before any work

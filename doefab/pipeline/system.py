@@ -253,10 +253,14 @@ def _checks(scene: Scene, cam, task) -> list[str]:
         out.append(f"optics.wavelengths_nm: {bands}; or leave \"reconstruction\" out of stages to design for these "
                    f"bands alone")
     mode = weights_mode(scene.reconstruction.get("weights"))
-    if networks and mode.any_system and not mode.trains and not out:
+    if networks and mode.any_system and not mode.trains and not bands:  # (bands: the problem above says it)
         from doefab.reconstruction.loader import shipped_fit_problem
 
-        if fit := shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam)):
+        try:
+            fit = shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam))
+        except DoefabError as exc:  # the shipped weights themselves unreadable: one more problem in the list
+            fit = str(exc)
+        if fit:
             out.append(f"reconstruction.weights = \"{mode.name}\": {fit}: set reconstruction.weights = \"train\" "
                        f"to train networks for this design, or leave \"reconstruction\" out of stages")
     if "reconstruction" in scene.stages and has(scene.task, "spectral") and not all(
@@ -265,6 +269,21 @@ def _checks(scene: Scene, cam, task) -> list[str]:
                    " keep the bands within it, or leave \"reconstruction\" out of stages to design for these bands "
                    "alone")
     return out
+
+
+def _skipped_networks(scene: Scene, cam, task, differ: list) -> list[str]:
+    """A warning where the reconstruction stage will be skipped: the shipped networks (``reconstruction.weights``
+    "shipped") on a design that differs from the committed one in ``differ``."""
+    if (not differ or "reconstruction" not in scene.stages
+            or weights_mode(scene.reconstruction.get("weights")).any_system):
+        return []
+    from doefab.reconstruction.loader import shipped_fit_problem
+
+    anyway = "" if shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam)) else (
+        " (or \"shipped-anyway\" to evaluate the shipped ones on its captures)")
+    return [f"reconstruction: the shipped networks are trained for the committed design and this scene's differs "
+            f"({', '.join(differ)}), so the reconstruction stage will be skipped: set reconstruction.weights = "
+            f"\"train\" to train networks for it{anyway}"]
 
 
 def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
@@ -319,6 +338,7 @@ def resolve(scene: Scene) -> ResolvedScene:
     ctask = scene_task(Scene(path=scene.path, task=scene.task, stages=()), committed, committed.camera)
     committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})
     differ = sorted(k for k in settings if settings[k] != committed_settings.get(k))
+    skipped = _skipped_networks(scene, cam, task, differ)  # what stage_reconstruction will say, said before the run
     return ResolvedScene(
         settings=settings, camera=cam, task=task, committed_dir=cdir, committed=committed,
         committed_settings=committed_settings, reuse=not differ, differ=tuple(differ),
@@ -328,7 +348,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                                       lambda d: not design_grid_problems(cam, task, d)),
         warnings=tuple(system_warnings(cam, task) + sensor_warnings(scene, sensor, task, cam)
                        + depth_warnings(scene, cam, task, ring_from_blur(scene, cam, task.depths(cam)))
-                       + band_warnings(scene, cam, task) + holder_warnings(scene, cam)))
+                       + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)))
 
 
 def _stop(cam) -> str:

@@ -46,22 +46,24 @@ def _diffraction_note(cam, task) -> str | None:
     airy = 1.22 * lam * cam.sensor_distance / cam.aperture_diameter / cam.sensor_pitch
     if airy <= half + 1:
         return None
-    return (f"the diffraction blur's Airy radius, {airy:.1f} px at {lam * 1e9:g} nm (1.22 λ s / D), is wider than the "
+    return (f"the diffraction blur's Airy radius, {airy:.1f} px at {lam * 1e9:g} nm (1.22 λ s / D, along the split; "
+            f"across it the half aperture's is twice that), is wider than the "
             f"{task.name} metric's ±{half:g} px ({key}): little of any PSF falls within it, so the design scores low; "
             f"set a lower camera.f_number, coarser camera.sensor_pitch_um or a wider {key}")
 
 def _design_wavelength_note(cam, lams) -> str | None:
-    """A design wavelength outside the bands: the relief's full depth, 2π there, delays the band farthest from it
-    by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves, far from one full wave (None inside the bands)."""
+    """A design wavelength below every band: the relief's full depth, 2π there, delays the longest band by
+    λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves, short of the full wave a relief needs to reach every phase (None
+    otherwise: above the bands the relief is deeper than a wave, which costs nothing but depth)."""
     lam_d, lo, hi = cam.design_wavelength, min(lams), max(lams)
-    if lo - 1e-12 <= lam_d <= hi + 1e-12:
+    if lam_d >= lo - 1e-12:
         return None
-    far = hi if lam_d < lo else lo
-    n_d, n_far = float(cam.material.index(lam_d)), float(cam.material.index(far))
-    waves = lam_d * (n_far - 1) / (far * (n_d - 1))
-    return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} lies outside the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
-            f"the relief's full depth, one wave at {lam_d * 1e9:g} nm, delays {far * 1e9:g} nm by {waves:.2f} waves; "
-            f"set it within the bands (e.g. {far * 1e9:g})")
+    n_d, n_hi = float(cam.material.index(lam_d)), float(cam.material.index(hi))
+    waves = lam_d * (n_hi - 1) / (hi * (n_d - 1))
+    return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} lies below the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
+            f"the relief's full depth, one wave at {lam_d * 1e9:g} nm, delays {hi * 1e9:g} nm by {waves:.2f} waves, "
+            f"so the relief cannot reach every phase there; set it to the longest band ({hi * 1e9:g}), which gives "
+            f"every band at least one wave")
 
 
 def sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
@@ -107,14 +109,15 @@ def depth_warnings(scene: Scene, cam, task, from_blur: bool) -> list[str]:
 
 
 def band_warnings(scene: Scene, cam, task) -> list[str]:
-    """A grating's bands as the model takes them: each band one wavelength, its first order one spot. Bands whose
-    first orders lie more than 1.5 px apart leave a real spectrum's light between them unmodelled (the captures are
-    the bands' spots alone); with a reconstruction stage, bands closer than the scenes' measured 10 nm are
-    interpolated between measured ones and carry nothing of their own."""
+    """A grating's bands as a reconstruction stage's captures take them (each band one wavelength, its first order
+    one spot): bands whose first orders lie more than 1.5 px apart leave a real spectrum's light between them out of
+    the captures; bands closer than the scenes' measured 10 nm are interpolated between measured ones and carry
+    nothing of their own."""
     from doefab.tasks.grating import GratingTask, grating_spot_px
 
-    if not isinstance(task, GratingTask) or len(lams := sorted(task.wavelengths(cam))) < 2:
-        return []
+    if not isinstance(task, GratingTask) or "reconstruction" not in scene.stages or len(
+            lams := sorted(task.wavelengths(cam))) < 2:
+        return []  # a design alone scores each band at its own wavelength: its captures are simulated for networks
     out = []
     spots = [grating_spot_px(cam, lam, task.period(cam)) for lam in lams]
     gap = max(abs(b - a) for a, b in zip(spots, spots[1:]))
@@ -124,7 +127,7 @@ def band_warnings(scene: Scene, cam, task) -> list[str]:
                    f"simulated captures; list bands about 1 px apart (here about "
                    f"{abs(spots[-1] - spots[0]) + 1:.0f} across the range) to model a continuous spectrum")
     step = min(b - a for a, b in zip(lams, lams[1:]))
-    if "reconstruction" in scene.stages and step < DATA_STEP_M - 1e-12:
+    if step < DATA_STEP_M - 1e-12:
         out.append(f"optics.wavelengths_nm: bands {step * 1e9:.3g} nm apart, finer than the hyperspectral scenes' "
                    f"measured spectra ({DATA_STEP_M * 1e9:g} nm): the bands between measured ones are interpolated "
                    f"and carry no information of their own")

@@ -27,6 +27,7 @@ import torch
 
 from doefab.applications import design_is
 from doefab.errors import DoefabError
+from doefab.reconstruction.loop import training_threads
 
 __all__ = ["finetune_end_to_end", "render_depth_batch"]
 
@@ -79,6 +80,7 @@ def _start_theta(design, param_name: str, dcam, sampling: int) -> tuple[torch.Te
     return torch.from_numpy(np.angle(phase) / (2 * np.pi)).float(), param
 
 
+@training_threads
 def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=None, doe_every: int = 4,
                         lr_doe: float = 0.01, lr_net: float = 2e-4, batch: int = 4, crop: int | None = None,
                         seed: int = 0,
@@ -111,7 +113,6 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
         raise DoefabError(f"end-to-end fine-tuning is for depth (half-ring) designs, got a {design.task} design")
     if design.camera.doe_pixels % sampling:
         raise DoefabError(f"sampling {sampling} must divide the DOE grid ({design.camera.doe_pixels} px)")
-    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     pname = parameterization or ("radial" if design.extra.get("config", {}).get("parameterization") == "radial"
                                  else "pixel")
     run = _JointRun(design, design_dir, pname, sampling, weights_dir, sensor, seed, lr_doe, lr_net, dev)

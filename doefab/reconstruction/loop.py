@@ -23,10 +23,27 @@ import torch
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_text
 
-__all__ = ["run_loop", "lr_factor", "SCHEDULES", "LR_FLOOR"]
+__all__ = ["run_loop", "lr_factor", "SCHEDULES", "LR_FLOOR", "training_threads"]
 
 SCHEDULES = ("cosine", "constant")
 LR_FLOOR = 0.05
+
+
+def training_threads(fn):
+    """Run ``fn`` (a training entry point) with torch on at most 2 threads (the count its record names, on which its
+    weights' last bits depend) and give the caller its own thread count back afterwards."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapped(*args, **kwargs):
+        before = torch.get_num_threads()
+        torch.set_num_threads(max(1, min(2, before)))
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            torch.set_num_threads(before)
+
+    return wrapped
 
 
 def lr_factor(schedule: str, fraction: float) -> float:
@@ -56,7 +73,7 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     checkpointed and restored in place; ``validate_first``: a fresh run's history opens with the metric before
     any step (step 0).
     """
-    from doefab.design.checkpoint import load_checkpoint, save_checkpoint
+    from doefab.design.checkpoint import save_checkpoint
 
     lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     out.mkdir(parents=True, exist_ok=True)
@@ -64,20 +81,13 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     for stale in out.glob(".checkpoint.pt.*"):  # a checkpoint write a kill left half done (never the checkpoint)
         stale.unlink()
     tensors = tensors or {}
-    step, elapsed, history = 0, 0.0, []
-    if resume:
-        state = load_checkpoint(ckpt, {"config": config}, ignore=())  # same settings or a clear refusal
-        for name, obj in states.items():
-            obj.load_state_dict(state[name])
-        with torch.no_grad():
-            for name, t in tensors.items():
-                t.copy_(state[name])
-        step, elapsed, history = int(state["step"]), float(state["elapsed"]), [list(r) for r in state["history"]]
+    step, elapsed, history, finished = _resumed(ckpt, config, states, tensors) if resume else (0, 0.0, [], False)
     budget, start = minutes * 60.0, step
     t0 = time.perf_counter() - elapsed
 
-    def save(step_now: int) -> None:
+    def save(step_now: int, done: bool = False) -> None:
         save_checkpoint(ckpt, {"config": json.dumps({"config": config}, sort_keys=True), "step": step_now,
+                               "finished": done,
                                "elapsed": float(time.perf_counter() - t0), "history": history,
                                "generator": torch.get_rng_state(),
                                **{k: v.state_dict() for k, v in states.items()},
@@ -115,12 +125,28 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     finally:
         if bar is not None:
             bar.close()
-    if resume and step == start and history and history[-1][0] == step:
+    if finished and step == start:
         return step, history, elapsed  # a finished run resumed: its last row is this state's validation already
     final = validate()
     history.append([step, round(time.perf_counter() - t0, 2), history[-1][2] if history else float("nan"), final])
-    save(step)
+    save(step, done=True)
     return step, history, time.perf_counter() - t0
+
+
+def _resumed(ckpt: Path, config: dict, states: dict, tensors: dict) -> tuple[int, float, list, bool]:
+    """(step, elapsed seconds, history, finished) of a checkpoint made with the same ``config`` (else a clear
+    refusal), its ``states`` and ``tensors`` restored in place; finished: saved at the end of its run, after the
+    last validation."""
+    from doefab.design.checkpoint import load_checkpoint
+
+    state = load_checkpoint(ckpt, {"config": config}, ignore=())
+    for name, obj in states.items():
+        obj.load_state_dict(state[name])
+    with torch.no_grad():
+        for name, t in tensors.items():
+            t.copy_(state[name])
+    return (int(state["step"]), float(state["elapsed"]), [list(r) for r in state["history"]],
+            bool(state.get("finished", False)))
 
 
 def _bar(progress: bool, budget: float, elapsed: float, desc: str, max_steps: int | None = None, step: int = 0):

@@ -21,6 +21,7 @@ import torch
 from doefab.applications import has
 from doefab.errors import DoefabError
 from doefab.optics.psf import PSFPair, describe_bands
+from doefab.reconstruction.loop import training_threads
 from doefab.validate import distance_record
 
 __all__ = ["fit_to_network", "check_capture", "pair_record", "finetune_on_pair"]
@@ -86,6 +87,7 @@ def _tensor_sha256(pair: PSFPair) -> str:
     return h.hexdigest()
 
 
+@training_threads
 def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *, capture_pair: PSFPair | None = None,
                      conditions: dict | None = None, weights_dir=None, design=None, lr: float = 2e-4, batch: int = 4,
                      crop: int | None = None, val_images: int = 8, val_every: int = 20, seed: int = 0,
@@ -107,7 +109,7 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.models import build_model
     from doefab.reconstruction.specs import get_spec, training_crop
-    from doefab.reconstruction.train import fit_network, model_inputs, sensor_response_for
+    from doefab.reconstruction.train import fit_network, model_inputs, run_provenance, sensor_response_for
     from doefab.reconstruction.weights import weights_target, write_weights
 
     if not 0 < minutes <= 24 * 60:
@@ -119,7 +121,6 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
     told = fit_to_network(pair, start.pair, task)
     render = capture_pair if capture_pair is not None else pair
     check_capture(render, start.pair, "capture_pair")
-    torch.set_num_threads(max(1, min(2, torch.get_num_threads())))
     torch.manual_seed(seed)
     model = build_model(task, "proposed", start.meta["arch"])
     model.load_state_dict(start.model.state_dict())  # the warm start (a resumed run's checkpoint replaces it)
@@ -138,6 +139,7 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
                                               desc=f"finetune {task} on the PSF pair", max_steps=max_steps,
                                               validate_first=True)
     meta = _record(start.meta, config, records, steps, wall, minutes, command, val_images, crop, final)
+    meta["training"].update(run_provenance(dev))
     written = write_weights(target, task, "proposed", model, meta, (out / "history.csv").read_bytes())
     return {"steps": steps, "wall_time_s": round(wall, 1), "metric": spec.metric, "val_start": history[0][3],
             "val_end": final[spec.metric], "weights": written["weights_path"]}

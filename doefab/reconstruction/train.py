@@ -24,7 +24,7 @@ from doefab.applications import has
 from doefab._devices import resolve_device
 from doefab.errors import DoefabError
 from doefab.reconstruction.data import split_components, split_digest
-from doefab.reconstruction.loop import run_loop
+from doefab.reconstruction.loop import run_loop, training_threads
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
 from doefab.reconstruction.models import build_model, default_arch, loss_fn
 from doefab.reconstruction.specs import get_spec, make_batch, psf_pair, training_crop
@@ -142,19 +142,14 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop(task, crop)
     sensor = sensor or Sensor()
-    threads_before = torch.get_num_threads()
-    torch.set_num_threads(max(1, min(2, threads_before)))  # restored after (the record names the count)
-    try:
-        return _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr,
-                      weights_dir, arch, progress, command, max_steps, design, schedule, conditions, warm_start, sensor,
-                      dev, spec)
-    finally:
-        torch.set_num_threads(threads_before)
+    return _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr, weights_dir,
+                  arch, progress, command, max_steps, design, schedule, conditions, warm_start, sensor, dev, spec)
 
 
+@training_threads
 def _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr, weights_dir, arch,
            progress, command, max_steps, design, schedule, conditions, warm_start, sensor, dev, spec) -> dict:
-    """``train``'s run once its arguments are checked and torch's threads set."""
+    """``train``'s run once its arguments are checked, torch on at most 2 threads (``loop.training_threads``)."""
     arch = arch or default_arch(task, variant)
     out = Path(out_dir)
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,
@@ -182,11 +177,20 @@ def _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_image
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm,
-                           **run_provenance(dev)},
+                           **_stopped(steps, max_steps, minutes), **run_provenance(dev)},
               "validation": {"images": val_images, "crop_px": crop, **final},
               **sensor.entry(has(task, "spectral")),
               "splits_sha256": split_digest(task), "splits_components": split_components(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
+
+
+def _stopped(steps: int, max_steps: int | None, minutes: float) -> dict:
+    """{"stopped": why} where the time budget ended a run of counted steps before its last one (its schedule then
+    had not finished its decay); {} otherwise."""
+    if max_steps is None or steps >= max_steps:
+        return {}
+    return {"stopped": f"the {minutes:g} min budget ended the run at step {steps} of {max_steps}, before its learning "
+                       f"rate's schedule finished (raise --minutes to train all the steps)"}
 
 
 def run_provenance(device) -> dict:

@@ -62,14 +62,14 @@ def test_an_even_window_reaches_one_pixel_less_and_the_coded_half_is_checked_too
 def test_doefab_demo_takes_only_windows_that_hold_its_planes_blur_and_its_gratings_orders(tmp_path, capsys):
     """The demo's planes (5 m, infinity, 2 m on the default camera): the 2 m point blurs into a 12 px half disc,
     which a 29 px window holds (2 px of room); its test grating (16 DOE pixels of 5.4 µm, 50 mm before 5.4 µm
-    pixels) sends 656 nm s·λ/Λ/p = 70.3 px off axis, which with the 3 × 3 box and 2 px needs 2·⌈74.3⌉ + 1 = 151."""
+    pixels) sends 656 nm s·λ/Λ/p = 70.3 px off axis, which with the 3 × 3 box and 2 px needs 2·⌈73.3⌉ + 1 = 149."""
     assert doefab.Camera().window_for_blur([5.0, float("inf"), 2.0]) == 29
     far = 0.05 * 656e-9 / (16 * 5.4e-6) / 5.4e-6
-    assert 2 * math.ceil(far + 1 + 3) + 1 == 151
-    for k in ("27", "149"):
+    assert 2 * math.ceil(far + 1 + 2) + 1 == 149
+    for k in ("27", "147"):
         with pytest.raises(SystemExit):
             main(["demo", "--kernel", k, "--out", str(tmp_path / "d")])
-        assert "≥ 151" in capsys.readouterr().err
+        assert "≥ 149" in capsys.readouterr().err
 
 
 def test_doefab_psf_refuses_the_cut_window_before_any_output(tmp_path, capsys):

@@ -109,6 +109,14 @@ def test_the_preset_depth_camera_beyond_the_papers_ring_takes_its_defocus_blur(t
     blur = cam.aperture_diameter * cam.sensor_distance * (1 / 6 - 1 / 30) / 2 / cam.sensor_pitch
     assert res.task.radius_px(6.0) == pytest.approx(blur, rel=1e-9) and blur > 3
     assert res.task.radius_px(10.0) > 0.5
+    # from 5 m exactly the blur; just nearer the paper's law, whose ring there is 25 − 5·4.9 = 0.5 px
+    at5 = resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n[camera]\npreset = "depth"\n[optics]\n'
+                                   'depths_m = [5.0, 10.0]\n'))
+    assert at5.task.radius_px(5.0) == pytest.approx(
+        cam.aperture_diameter * cam.sensor_distance * (1 / 5 - 1 / 10) / 2 / cam.sensor_pitch, rel=1e-9)
+    near = resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n[camera]\npreset = "depth"\n[optics]\n'
+                                    'depths_m = [4.9, 10.0]\n'))
+    assert near.task.radius_px(4.9) == pytest.approx(0.5)
     # within the paper's range its law stays: 25 − 5·1 px at 1 m
     res = resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n[camera]\npreset = "depth"\n[optics]\n'
                                    'depths_m = [1.0, 3.0]\n'))
@@ -138,6 +146,9 @@ def test_a_design_wavelength_outside_the_bands_is_warned_with_its_delay(tmp_path
     res = resolve(_scene(tmp_path, 'task = "hyperspectral"\nstages = ["design"]\n[camera]\npreset = '
                                    '"hyperspectral"\n'))
     assert not [w for w in res.warnings if "design_wavelength_nm" in w]  # 550 nm within 400–700 nm
+    res = resolve(_scene(tmp_path, 'task = "hyperspectral"\nstages = ["design"]\n[camera]\npreset = '
+                                   '"hyperspectral"\n[optics]\nwavelengths_nm = [450, 500, 530]\n'))
+    assert not [w for w in res.warnings if "design_wavelength_nm" in w]  # above the bands: a deeper relief
 
 
 def test_a_diffraction_blur_wider_than_the_metric_is_warned(tmp_path):
@@ -168,12 +179,15 @@ def test_the_api_refuses_repeated_bands_and_planes_and_a_band_count_that_disagre
 
 
 def test_a_gratings_bands_are_warned_where_the_model_leaves_light_out_or_the_data_hold_none(tmp_path):
-    """8 bands over 450–650 nm on the hyperspectral camera: their first orders (s·λ/Λ/p, computed here) lie about
-    3 px apart, and the model takes each band as one wavelength; 61 bands 5 nm apart with a reconstruction stage
+    """8 bands over 450–650 nm on the hyperspectral camera with a reconstruction stage: their first orders
+    (s·λ/Λ/p, computed here) lie about 3 px apart, and the captures take each band as one wavelength; 61 bands 5 nm apart with a reconstruction stage
     are finer than the scenes' measured 10 nm spectra. The shipped 31 bands of 10 nm (~1.1 px apart) get neither."""
     head = 'task = "hyperspectral"\nstages = ["design"STAGES]\n[camera]\npreset = "hyperspectral"\n[optics]\n'
-    res = resolve(_scene(tmp_path, head.replace("STAGES", "") + "wavelengths_nm = [450, 478.57, 507.14, 535.71, "
-                                                              "564.29, 592.86, 621.43, 650]\n"))
+    bands = "wavelengths_nm = [450, 478.57, 507.14, 535.71, 564.29, 592.86, 621.43, 650]\n"
+    assert not [w for w in resolve(_scene(tmp_path, head.replace("STAGES", "") + bands)).warnings
+                if "first orders lie" in w]  # a design alone scores each band at its own wavelength
+    res = resolve(_scene(tmp_path, head.replace("STAGES", ', "reconstruction"') + bands
+                         + '[reconstruction]\nweights = "train"\n'))
     cam = res.camera
     gap = cam.sensor_distance * 28.57e-9 / res.task.period(cam) / cam.sensor_pitch
     note = [w for w in res.warnings if "first orders lie" in w]
@@ -184,3 +198,18 @@ def test_a_gratings_bands_are_warned_where_the_model_leaves_light_out_or_the_dat
     assert [w for w in res.warnings if "bands 5 nm apart, finer than" in w]
     res = resolve(_scene(tmp_path, head.replace("STAGES", ', "reconstruction"')))
     assert not [w for w in res.warnings if "first orders lie" in w or "finer than" in w]
+
+
+def test_a_scene_whose_reconstruction_stage_will_be_skipped_is_told_so_before_the_run(tmp_path):
+    """The shipped networks fit only the committed design: a scene that changes the design and keeps
+    ``weights = "shipped"`` hears before the run that the stage will be skipped, with ``shipped-anyway`` offered
+    only where the shipped networks can take the design."""
+    def warned(text):
+        return [w for w in resolve(_scene(tmp_path, text)).warnings if "will be skipped" in w]
+
+    assert "shipped-anyway" in warned('task = "hdr"\nstages = ["design", "reconstruction"]\n[design]\n'
+                                      'streak_arm_px = 30\n')[0]
+    far = warned(DEPTH + "[optics]\ndepths_m = [3.0, 5.0, 10.0, 30.0]\n")
+    assert len(far) == 1 and "shipped-anyway" not in far[0] and 'weights = "train"' in far[0]
+    assert not warned('task = "hdr"\nstages = ["design", "reconstruction"]\n')  # the committed design
+    assert not warned('task = "hdr"\nstages = ["design"]\n[design]\nstreak_arm_px = 30\n')  # no such stage

@@ -110,3 +110,27 @@ def test_a_resume_with_other_settings_names_each_one_that_differs(tmp_path):
     with pytest.raises(DoefabError, match=r"other settings \(arch\.width: 16 there, 8 now; batch: 4 there, 2 now\)"):
         run_loop(tmp_path, other, 1.0, step, lambda: 0.0, {"w": opt}, [(opt, 0.1)], max_steps=4, val_every=1,
                  progress=False, resume=True)
+
+
+def test_a_run_killed_after_its_last_step_but_before_its_final_validation_gets_it_on_resume(tmp_path):
+    """The checkpoint saved at the last step (step 4, val_every 2) is not a finished run: killed before the final
+    validation, a resume adds that row (only a run saved as finished is returned as it is)."""
+    import pytest
+
+    w, opt, rates, step = _quadratic()
+    calls = []
+
+    def validate():
+        calls.append(1)
+        if len(calls) == 3:  # steps 2 and 4, then the final validation: killed there
+            raise KeyboardInterrupt
+        return 0.5
+
+    args = (tmp_path, {"case": "killed"}, 1.0, step, validate, {"w": opt}, [(opt, 0.1)])
+    with pytest.raises(KeyboardInterrupt):
+        run_loop(*args, val_every=2, max_steps=4, progress=False)
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    assert saved["step"] == 4 and not saved["finished"] and len(saved["history"]) == 4
+    steps, history, _ = run_loop(*args, val_every=2, max_steps=4, progress=False, resume=True)
+    assert steps == 4 and len(history) == 5 and history[-1][3] == 0.5
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["finished"]

@@ -80,8 +80,17 @@ def test_a_training_record_names_its_threads_device_code_and_libraries_and_the_t
     finally:
         torch.set_num_threads(before)
     t = meta["training"]
-    assert t["threads"] == 2 and t["device"] == "cpu" and t["versions"] == library_versions()
-    assert t["code"].startswith(("git ", "doefab "))
+    assert t["threads"] == 2 and t["device"] == "cpu" and t["versions"]["torch"] == torch.__version__
+    assert set(t["versions"]) == set(library_versions()) and t["code"].startswith(("git ", "doefab "))
+    assert "stopped" not in t  # its one step ran
+
+
+def test_a_run_of_counted_steps_that_the_clock_stops_says_so(tmp_path):
+    meta = train("hdr", "uncoded_only", minutes=0.01, out_dir=tmp_path / "run", weights_dir=tmp_path / "w",
+                 crop=64, val_images=1, val_every=1000, progress=False, max_steps=100000,
+                 arch={"features": 1, "width": 4, "highlight_iters": 1, "bound_iters": 0})
+    steps = meta["training"]["steps"]
+    assert steps < 100000 and f"ended the run at step {steps} of 100000" in meta["training"]["stopped"]
 
 
 @pytest.mark.parametrize("flag, want", [([], None), (["--crop", "160"], 160)])
