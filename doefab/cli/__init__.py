@@ -131,8 +131,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         status, what = ((EXIT_TERMINATED, "terminated (SIGTERM)") if isinstance(exc, Terminated)
                         else (EXIT_INTERRUPTED, "interrupted"))
-        hint = getattr(args, "resume_hint", None)
-        message = what + "; " + (hint if hint and not _will_discard(args) else "nothing was kept")
+        hint, keep = getattr(args, "resume_hint", None), getattr(args, "keep_on_failure", None)
+        kept = not _will_discard(args) and (keep is None or keep())  # the hint only where its file is there
+        message = what + "; " + (hint if hint and kept else "nothing was kept")
     except CheckFailed as exc:
         error = exc
         status, message = EXIT_CHECK, f"check failed: {exc}"

@@ -57,7 +57,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
-    from doefab.cli._output import check_resume, claim_output, clear_earlier_run
+    from doefab.cli._output import check_resume, claim_output
     from doefab.tasks import get_task
 
     task = get_task(args.task)
@@ -72,7 +72,6 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    clear_earlier_run(out, args.force)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
                 "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.n_levels}

@@ -47,7 +47,8 @@ def register(sub) -> None:
     p.add_argument("--minutes", type=number(float, 0, 1440, lo_open=True, unit="minutes of wall time"), default=20.0,
                    help="wall-time budget")
     p.add_argument("--steps", type=number(int, 1, 10**7, unit="steps"), default=None,
-                   help="stop after this many steps (default: when --minutes are spent)")
+                   help="train this many steps, the learning rate's schedule over them (default: until --minutes "
+                        "are spent, the schedule over that time); --minutes still stops the run early")
     p.add_argument("--doe-every", type=number(int, 1, 1000, unit="steps"), default=None,
                    help="end to end: the DOE takes a step every this many network steps (default 4)")
     p.add_argument("--lr-doe", type=number(float, 0, 1, lo_open=True, unit="waves per step"), default=None,
@@ -70,7 +71,7 @@ E2E_DEFAULTS = {"doe_every": 4, "lr_doe": 0.01, "sampling": 2}
 
 def run(args) -> int:
     from doefab.cli._args import design_folder, sensor_arg
-    from doefab.cli._output import check_resume, claim_output, clear_earlier_run
+    from doefab.cli._output import check_resume, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
     from doefab.reconstruction.specs import check_bands
@@ -101,7 +102,6 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    clear_earlier_run(out, args.force)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     out.create()
     res = finetune_end_to_end(d, out.path, minutes=args.minutes, weights_dir=args.weights_dir,
@@ -117,7 +117,7 @@ def run(args) -> int:
 def _run_on_pair(args) -> int:
     """``--psf``: the task's proposed network fine-tuned alone on the pair (``partfinetune.finetune_on_pair``)."""
     from doefab.cli._args import sensor_arg, task_design_arg
-    from doefab.cli._output import check_resume, claim_output, clear_earlier_run
+    from doefab.cli._output import check_resume, claim_output
     from doefab.cli.evaluate import check_psf_args, read_crosstalk_arg, read_psf_arg
     from doefab.errors import DoefabError
     from doefab.reconstruction.loader import load_reconstructor
@@ -142,7 +142,6 @@ def _run_on_pair(args) -> int:
         check_resume(out)
     start = load_reconstructor(args.task, "proposed", args.weights_dir, design, sensor=sensor)
     check_psf_args(args.task, start.pair, pair, None)
-    clear_earlier_run(out, args.force)
     args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
     out.create()
     from doefab.tolerance.conditions import measured

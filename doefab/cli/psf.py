@@ -95,7 +95,7 @@ def _source(args):
 
         scene = load_scene(args.scene)
         rs = resolve(scene)  # every problem doefab run would refuse, before any work
-        notes = list(rs.warnings)
+        notes = [n for n in rs.warnings if n not in rs.stage_warnings]  # the optical system's, not the run's
         cam, height, what, device = rs.camera, None, f"the scene {args.scene}", scene.device
         lams, depths, kernel = rs.task.wavelengths(cam), rs.task.depths(cam), rs.task.kernel_size
     else:

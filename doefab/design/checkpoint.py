@@ -11,7 +11,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_bytes
 
-__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint"]
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "clear_checkpoint"]
 
 
 def save_checkpoint(path: str | Path, state: dict) -> None:
@@ -19,6 +19,16 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
     buf = io.BytesIO()
     torch.save(state, buf)
     atomic_write_bytes(path, buf.getvalue())
+
+
+def clear_checkpoint(folder: str | Path) -> None:
+    """Remove an earlier run's ``checkpoint.pt`` and ``history.csv`` (and a checkpoint write a kill left half done)
+    from ``folder`` as a fresh run starts there, after everything that could refuse it: a later resume continues
+    this run, never the earlier one."""
+    folder = Path(folder)
+    for f in [folder / "checkpoint.pt", folder / "history.csv", *folder.glob(".checkpoint.pt.*")]:
+        if f.is_file():
+            f.unlink()
 
 
 def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
@@ -54,17 +64,17 @@ def read_checkpoint(path: str | Path) -> dict:
 
 def _read(path: Path) -> tuple[dict, dict]:
     if not path.is_file():
-        raise DoefabError(f"no checkpoint at {path}: nothing to continue; start afresh (--force instead of "
-                          f"--resume at the command line)")
+        raise DoefabError(f"no checkpoint at {path}: nothing to continue: start afresh, without "
+                          f"resuming")
     try:
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
         raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
-                          f"start afresh (--force instead of --resume at the command line, which clears the earlier "
-                          f"run)") from None
+                          f"start afresh, without resuming (a fresh run "
+                          f"replaces the checkpoint)") from None
     if not isinstance(state, dict) or "config" not in state:
-        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh (--force instead of --resume "
-                          f"at the command line, which clears the earlier run)")
+        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh, without resuming (a "
+                          f"fresh run replaces the checkpoint)")
     try:
         saved = json.loads(state["config"])
         theta = state.get("theta")  # a design's (or an end-to-end run's) parameters, when the run has any
@@ -77,6 +87,6 @@ def _read(path: Path) -> tuple[dict, dict]:
         ok = False
     if not ok:
         raise DoefabError(f"checkpoint {path} has missing or invalid fields (config, theta, step, elapsed, history, "
-                          f"generator); start afresh (--force instead of --resume at the command line, which clears "
-                          f"the earlier run)")
+                          f"generator); start afresh, without resuming (a fresh run replaces the "
+                          f"checkpoint)")
     return state, saved

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from doefab._devices import resolve_device
-from doefab.design.checkpoint import load_checkpoint, save_checkpoint
+from doefab.design.checkpoint import clear_checkpoint, load_checkpoint, save_checkpoint
 from doefab.design.design import Design
 from doefab.design.finish import coded_mask, finalize_levels, finish_design, plain_level
 from doefab.design.nloptrun import check_nlopt_size, run_nlopt
@@ -149,6 +149,8 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
     run = prepare_run(task, iterations, optimizer, seed, camera, out_dir, device, **settings)
     if resume:
         run.resume()
+    elif out_dir is not None:
+        clear_checkpoint(out_dir)  # a fresh run: an earlier run's checkpoint there must not be resumed later
     return run.run(progress)
 
 

@@ -27,6 +27,8 @@ class ResolvedScene:
     preset.  split: the aperture split ("vertical" or "horizontal").  stop: where the aperture stop lies
     (``tolerance.mounted.stop_case``).  sensor: the scene's ``Sensor``.  die_m: the die's side (m).
     quick_sampling: the coarser grid factor of ``--quick``.  warnings: what works but deserves the user's eye.
+    stage_warnings: those of them about the run's stages rather than the optical system (a reconstruction stage
+    that will be skipped): ``doefab psf --scene`` leaves them out.
 
     Example::
 
@@ -52,6 +54,7 @@ class ResolvedScene:
     die_m: float
     quick_sampling: int | None
     warnings: tuple = field(default_factory=tuple)
+    stage_warnings: tuple = field(default_factory=tuple)
 
     def design_key(self) -> dict:
         """What the design stage's result depends on: the settings, and for a reused design the committed level

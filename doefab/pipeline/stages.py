@@ -19,7 +19,7 @@ from doefab.io import MARKER, atomic_write_json, read_json
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scenekeys import WEIGHTS_MODES, weights_mode
 from doefab.pipeline.sceneholder import scene_die, scene_holder
-from doefab.pipeline.system import quick_sampling, resolve, scene_camera, scene_sensor
+from doefab.pipeline.system import quick_sampling, resolve, scene_camera, scene_sensor, shipped_sensor_differs
 
 __all__ = ["resolve", "REPO", "redesign_note", "design_arguments", "quick_sampling", "stage_design", "stage_masks",
            "stage_holder", "stage_reconstruction", "stage_tolerance", "repo_mask_set", "networks_trained_here",
@@ -268,20 +268,6 @@ def stage_reconstruction(scene, res, out: Path, quick: bool) -> dict:
                          f"nominal PSF) and recorded by this camera's sensor ({_sensor_text(sensor, task)})",
             "rows": r["rows"], "by_light": r.get("by_light"), "weights": mode.name, "split": r["split"],
             "design_levels_sha256": _design_sha(out.parent / "design")}
-
-
-def shipped_sensor_differs(task: str, sensor) -> list[str]:
-    """What of ``sensor`` (None: the default) the shipped ``task`` networks were not trained for (empty: nothing)."""
-    if sensor is None:
-        return []
-    from doefab.reconstruction.weights import weights_paths
-
-    try:
-        meta = read_json(weights_paths(task, "proposed")[1])
-    except (OSError, ValueError):
-        meta = {}
-    return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
-                               spectral=has(task, "spectral"))
 
 
 def networks_trained_here(scene, res, root: Path) -> tuple[Path | None, str]:

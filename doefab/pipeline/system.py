@@ -32,7 +32,7 @@ from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
 
 __all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sensor", "quick_sampling", "design_camera",
-           "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS"]
+           "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS", "shipped_sensor_differs"]
 
 
 def is_custom_camera(scene: Scene, cam=None) -> bool:
@@ -271,19 +271,44 @@ def _checks(scene: Scene, cam, task) -> list[str]:
     return out
 
 
-def _skipped_networks(scene: Scene, cam, task, differ: list) -> list[str]:
+def shipped_sensor_differs(task: str, sensor) -> list[str]:
+    """What of ``sensor`` (None: the default) the shipped ``task`` networks were not trained for (empty: nothing)."""
+    if sensor is None:
+        return []
+    from doefab.io import read_json
+    from doefab.reconstruction.weights import weights_paths
+
+    try:
+        meta = read_json(weights_paths(task, "proposed")[1])
+    except (OSError, ValueError):
+        meta = {}
+    return sensor.differs_from(meta.get("sensor") if isinstance(meta, dict) else None,
+                               spectral=has(task, "spectral"))
+
+
+def _skipped_networks(scene: Scene, cam, task, differ: list, sensor) -> list[str]:
     """A warning where the reconstruction stage will be skipped: the shipped networks (``reconstruction.weights``
-    "shipped") on a design that differs from the committed one in ``differ``."""
-    if (not differ or "reconstruction" not in scene.stages
+    "shipped") on a design that differs from the committed one in ``differ``, or for another sensor; naming the
+    choice that doctor would pass."""
+    other = shipped_sensor_differs(scene.task, sensor)
+    if ((not differ and not other) or "reconstruction" not in scene.stages
             or weights_mode(scene.reconstruction.get("weights")).any_system):
         return []
+    why = (f"this scene's design differs ({', '.join(differ)})" if differ else "") + (" and " if differ and other
+                                                                                       else "")
+    why += f"its sensor differs ({'; '.join(other)})" if other else ""
+    head = (f"reconstruction: the shipped networks are trained for the committed design and the default sensor, and "
+            f"{why}, so the reconstruction stage will be skipped")
+    if bands := band_problem(scene.task, task.wavelengths(cam)):
+        return [f"{head}; no network takes these bands ({bands}): leave \"reconstruction\" out of stages"]
     from doefab.reconstruction.loader import shipped_fit_problem
 
-    anyway = "" if shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam)) else (
-        " (or \"shipped-anyway\" to evaluate the shipped ones on its captures)")
-    return [f"reconstruction: the shipped networks are trained for the committed design and this scene's differs "
-            f"({', '.join(differ)}), so the reconstruction stage will be skipped: set reconstruction.weights = "
-            f"\"train\" to train networks for it{anyway}"]
+    try:
+        fits = not shipped_fit_problem(scene.task, task.wavelengths(cam), task.depths(cam))
+    except DoefabError:
+        fits = False
+    anyway = " (or \"shipped-anyway\" to evaluate the shipped ones on its captures)" if fits else ""
+    return [f"{head}: set reconstruction.weights = \"train\" to train networks for it{anyway}"]
 
 
 def _settings(dname, cam, task, design: dict, cfg: dict, committed, fab: dict) -> dict:
@@ -338,7 +363,7 @@ def resolve(scene: Scene) -> ResolvedScene:
     ctask = scene_task(Scene(path=scene.path, task=scene.task, stages=()), committed, committed.camera)
     committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})
     differ = sorted(k for k in settings if settings[k] != committed_settings.get(k))
-    skipped = _skipped_networks(scene, cam, task, differ)  # what stage_reconstruction will say, said before the run
+    skipped = _skipped_networks(scene, cam, task, differ, sensor)  # stage_reconstruction's skip, said before
     return ResolvedScene(
         settings=settings, camera=cam, task=task, committed_dir=cdir, committed=committed,
         committed_settings=committed_settings, reuse=not differ, differ=tuple(differ),
@@ -348,7 +373,8 @@ def resolve(scene: Scene) -> ResolvedScene:
                                       lambda d: not design_grid_problems(cam, task, d)),
         warnings=tuple(system_warnings(cam, task) + sensor_warnings(scene, sensor, task, cam)
                        + depth_warnings(scene, cam, task, ring_from_blur(scene, cam, task.depths(cam)))
-                       + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)))
+                       + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)),
+        stage_warnings=tuple(skipped))
 
 
 def _stop(cam) -> str:

@@ -11,8 +11,10 @@ import math
 from doefab.applications import has
 from doefab.pipeline.scene import Scene
 
-__all__ = ["depth_span_px", "system_warnings", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M"]
+__all__ = ["depth_span_px", "system_warnings", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M",
+           "MIN_WAVES"]
 
+MIN_WAVES = 0.75  # the least of a wave the relief's full depth may give the longest band without a warning
 DATA_STEP_M = 10e-9  # the hyperspectral scenes' measured spectra: every 10 nm (``reconstruction.bands``)
 
 
@@ -52,18 +54,18 @@ def _diffraction_note(cam, task) -> str | None:
             f"set a lower camera.f_number, coarser camera.sensor_pitch_um or a wider {key}")
 
 def _design_wavelength_note(cam, lams) -> str | None:
-    """A design wavelength below every band: the relief's full depth, 2π there, delays the longest band by
-    λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves, short of the full wave a relief needs to reach every phase (None
-    otherwise: above the bands the relief is deeper than a wave, which costs nothing but depth)."""
+    """A design wavelength too short for the longest band: the relief's full depth, 2π there, delays the longest
+    band by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves; below ``MIN_WAVES`` (the paper's 550 nm design gives 700 nm
+    0.78) the relief reaches too little of that band's phase (None otherwise)."""
     lam_d, lo, hi = cam.design_wavelength, min(lams), max(lams)
-    if lam_d >= lo - 1e-12:
-        return None
     n_d, n_hi = float(cam.material.index(lam_d)), float(cam.material.index(hi))
     waves = lam_d * (n_hi - 1) / (hi * (n_d - 1))
-    return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} lies below the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
+    if waves >= MIN_WAVES:
+        return None
+    return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} is short for the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
             f"the relief's full depth, one wave at {lam_d * 1e9:g} nm, delays {hi * 1e9:g} nm by {waves:.2f} waves, "
-            f"so the relief cannot reach every phase there; set it to the longest band ({hi * 1e9:g}), which gives "
-            f"every band at least one wave")
+            f"so the relief reaches little of that band's phase; set it nearer the longest band (at {hi * 1e9:g} "
+            f"every band gets at least one wave)")
 
 
 def sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:

@@ -73,13 +73,15 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     checkpointed and restored in place; ``validate_first``: a fresh run's history opens with the metric before
     any step (step 0).
     """
-    from doefab.design.checkpoint import save_checkpoint
+    from doefab.design.checkpoint import clear_checkpoint, save_checkpoint
 
     lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
     for stale in out.glob(".checkpoint.pt.*"):  # a checkpoint write a kill left half done (never the checkpoint)
         stale.unlink()
+    if not resume:
+        clear_checkpoint(out)  # a fresh run: an earlier run's checkpoint there must not be resumed later
     tensors = tensors or {}
     step, elapsed, history, finished = _resumed(ckpt, config, states, tensors) if resume else (0, 0.0, [], False)
     budget, start = minutes * 60.0, step

@@ -109,7 +109,8 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
     from doefab.reconstruction.loader import load_reconstructor
     from doefab.reconstruction.models import build_model
     from doefab.reconstruction.specs import get_spec, training_crop
-    from doefab.reconstruction.train import fit_network, model_inputs, run_provenance, sensor_response_for
+    from doefab.reconstruction.train import (fit_network, model_inputs, run_provenance, sensor_response_for,
+                                               stopped_note)
     from doefab.reconstruction.weights import weights_target, write_weights
 
     if not 0 < minutes <= 24 * 60:
@@ -139,7 +140,7 @@ def finetune_on_pair(task: str, pair: PSFPair, out_dir, minutes: float = 5.0, *,
                                               desc=f"finetune {task} on the PSF pair", max_steps=max_steps,
                                               validate_first=True)
     meta = _record(start.meta, config, records, steps, wall, minutes, command, val_images, crop, final)
-    meta["training"].update(run_provenance(dev))
+    meta["training"].update(**stopped_note(steps, max_steps, minutes), **run_provenance(dev))
     written = write_weights(target, task, "proposed", model, meta, (out / "history.csv").read_bytes())
     return {"steps": steps, "wall_time_s": round(wall, 1), "metric": spec.metric, "val_start": history[0][3],
             "val_end": final[spec.metric], "weights": written["weights_path"]}

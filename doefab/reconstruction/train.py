@@ -177,20 +177,20 @@ def _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_image
               "training": {"command": command, "seed": seed, "steps": steps, "batch": batch, "crop_px": crop, "lr": lr,
                            "schedule": schedule, "wall_time_s": round(wall, 1), "minutes_budget": minutes,
                            "conditions": config["conditions"] or "clean", "warm_start": warm,
-                           **_stopped(steps, max_steps, minutes), **run_provenance(dev)},
+                           **stopped_note(steps, max_steps, minutes), **run_provenance(dev)},
               "validation": {"images": val_images, "crop_px": crop, **final},
               **sensor.entry(has(task, "spectral")),
               "splits_sha256": split_digest(task), "splits_components": split_components(task)}
     return write_weights(weights_dir, task, variant, model, record, (out / "history.csv").read_bytes())
 
 
-def _stopped(steps: int, max_steps: int | None, minutes: float) -> dict:
-    """{"stopped": why} where the time budget ended a run of counted steps before its last one (its schedule then
-    had not finished its decay); {} otherwise."""
+def stopped_note(steps: int, max_steps: int | None, minutes: float) -> dict:
+    """{"stopped": why} where the time budget ended a run of counted steps before its last one (a cosine schedule
+    then had not finished its decay); {} otherwise."""
     if max_steps is None or steps >= max_steps:
         return {}
-    return {"stopped": f"the {minutes:g} min budget ended the run at step {steps} of {max_steps}, before its learning "
-                       f"rate's schedule finished (raise --minutes to train all the steps)"}
+    return {"stopped": f"the {minutes:g} min time budget ended the run at step {steps} of {max_steps} (raise the "
+                       f"budget, --minutes, to train all the steps)"}
 
 
 def run_provenance(device) -> dict:

@@ -102,20 +102,3 @@ def test_running_out_of_memory_in_training_names_the_batch_and_crop(tmp_path, ca
     rc, _, err = run_cli(["train", "--task", "hdr", "--minutes", "0.1", "--clean", "--out", tmp_path / "tr"], capsys)
     assert rc == 2 and "out of memory: lower --batch or --crop" in err and "internal error" not in err
 
-
-def test_force_clears_an_earlier_design_or_finetune_runs_checkpoint_too(tmp_path):
-    """``doefab design`` and ``doefab finetune`` take the same helper: with --force the old checkpoint, history and
-    half-written checkpoint go (a later --resume would otherwise continue the old run); without it nothing goes,
-    and the run's other files stay."""
-    from doefab.cli._output import clear_earlier_run
-    from doefab.io import OutputDir, mark_folder
-
-    run = tmp_path / "design_run"
-    run.mkdir()
-    mark_folder(run, "design")
-    for name in ("checkpoint.pt", "history.csv", ".checkpoint.pt.k9", "levels.npy"):
-        (run / name).write_bytes(b"old")
-    clear_earlier_run(OutputDir(run, "design", replace=True), False)
-    assert (run / "checkpoint.pt").exists()
-    clear_earlier_run(OutputDir(run, "design", replace=True), True)
-    assert sorted(p.name for p in run.iterdir() if not p.name.startswith(".doefab")) == ["levels.npy"]

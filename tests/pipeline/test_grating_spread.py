@@ -127,7 +127,8 @@ def _refusal(scene) -> str:
 def test_a_first_order_beyond_the_window_names_the_shortest_period_that_brings_it_inside(tmp_path):
     """The default 32 µm period puts 700 nm ~227 px off axis, beyond the 191 px window (which holds 95 − 1 − 2 =
     92 px with the metric box and its margin): the refusal names the least window that holds it (2·⌈227 + 1 + 2⌉ + 1)
-    and the shortest period whose 700 nm order lands within it, to 0.01 µm; that period passes, 0.01 µm less does not."""
+    and the shortest period whose 700 nm order lands within it, to 0.01 µm; that period passes, 0.01 µm less does
+    not."""
     msg = _refusal(_wide(tmp_path))
     found = re.search(r"lands (\d+) px off axis: raise kernel_px to ≥ (\d+), or keep it and set "
                       r"design\.grating_period_um ≥ ([\d.]+) \(µm\)", msg)

@@ -180,8 +180,9 @@ def test_the_api_refuses_repeated_bands_and_planes_and_a_band_count_that_disagre
 
 def test_a_gratings_bands_are_warned_where_the_model_leaves_light_out_or_the_data_hold_none(tmp_path):
     """8 bands over 450–650 nm on the hyperspectral camera with a reconstruction stage: their first orders
-    (s·λ/Λ/p, computed here) lie about 3 px apart, and the captures take each band as one wavelength; 61 bands 5 nm apart with a reconstruction stage
-    are finer than the scenes' measured 10 nm spectra. The shipped 31 bands of 10 nm (~1.1 px apart) get neither."""
+    (s·λ/Λ/p, computed here) lie about 3 px apart, and the captures take each band as one wavelength; 61 bands
+    5 nm apart with a reconstruction stage are finer than the scenes' measured 10 nm spectra. The shipped 31 bands
+    of 10 nm (~1.1 px apart) get neither."""
     head = 'task = "hyperspectral"\nstages = ["design"STAGES]\n[camera]\npreset = "hyperspectral"\n[optics]\n'
     bands = "wavelengths_nm = [450, 478.57, 507.14, 535.71, 564.29, 592.86, 621.43, 650]\n"
     assert not [w for w in resolve(_scene(tmp_path, head.replace("STAGES", "") + bands)).warnings

@@ -134,3 +134,22 @@ def test_a_run_killed_after_its_last_step_but_before_its_final_validation_gets_i
     steps, history, _ = run_loop(*args, val_every=2, max_steps=4, progress=False, resume=True)
     assert steps == 4 and len(history) == 5 and history[-1][3] == 0.5
     assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["finished"]
+
+
+def test_a_fresh_run_clears_an_earlier_runs_checkpoint_before_its_first_step(tmp_path):
+    """A fresh run (no resume) in a folder that holds an earlier run's checkpoint and history: interrupted at its
+    first step, nothing of the earlier run is left for a later --resume to continue (fine-tuning and training take
+    this loop; ``doefab design`` clears the same way, ``design.checkpoint.clear_checkpoint``)."""
+    import pytest
+
+    for name in ("checkpoint.pt", "history.csv", "levels.npy"):
+        (tmp_path / name).write_bytes(b"earlier run")
+    w, opt, rates, step = _quadratic()
+
+    def interrupted(i):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_loop(tmp_path, {"case": "fresh"}, 1.0, interrupted, lambda: 0.0, {"w": opt}, [(opt, 0.1)], max_steps=2,
+                 progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["levels.npy"]
