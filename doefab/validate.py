@@ -178,6 +178,13 @@ def depths(values: Iterable[float]) -> tuple[float, ...]:
     return tuple(out)
 
 
+def repeated(values) -> list:
+    """The values that occur more than once in ``values``, each once, sorted.
+
+    Example: ``repeated([2.0, 1.0, 2.0, 3.0, 1.0])`` → ``[1.0, 2.0]``."""
+    return sorted({v for i, v in enumerate(values) if v in values[:i]})
+
+
 def _as_tuple(name: str, values) -> tuple:
     full_precision(name, values)
     if isinstance(values, (int, float)):

@@ -23,8 +23,10 @@ def clear_earlier_run(out: OutputDir, force: bool, extra=()) -> None:
     two runs (the folder is doefab's: ``claim_output`` checked its marker)."""
     if not force or not out.path.is_dir():
         return
-    old = [out.path / "checkpoint.pt", out.path / "history.csv", *extra, *out.path.glob(".checkpoint.pt.*")]
-    for f in old:
+    from doefab.design.checkpoint import clear_checkpoint
+
+    clear_checkpoint(out.path)
+    for f in extra:
         if f.is_file():
             f.unlink()
 

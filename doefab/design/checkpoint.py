@@ -21,12 +21,13 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def clear_checkpoint(folder: str | Path) -> None:
-    """Remove an earlier run's ``checkpoint.pt`` and ``history.csv`` (and a checkpoint write a kill left half done)
-    from ``folder`` as a fresh run starts there, after everything that could refuse it: a later resume continues
-    this run, never the earlier one."""
+def clear_checkpoint(folder: str | Path, keep: bool = False) -> None:
+    """Remove a checkpoint write a kill left half done from ``folder`` and, unless ``keep`` (a resumed run), the
+    earlier run's ``checkpoint.pt`` and ``history.csv``: as a fresh run starts there, after everything that could
+    refuse it, so that a later resume continues this run, never the earlier one."""
     folder = Path(folder)
-    for f in [folder / "checkpoint.pt", folder / "history.csv", *folder.glob(".checkpoint.pt.*")]:
+    old = [*folder.glob(".checkpoint.pt.*")] + ([] if keep else [folder / "checkpoint.pt", folder / "history.csv"])
+    for f in old:
         if f.is_file():
             f.unlink()
 

@@ -53,6 +53,7 @@ def _diffraction_note(cam, task) -> str | None:
             f"{task.name} metric's ±{half:g} px ({key}): little of any PSF falls within it, so the design scores low; "
             f"set a lower camera.f_number, coarser camera.sensor_pitch_um or a wider {key}")
 
+
 def _design_wavelength_note(cam, lams) -> str | None:
     """A design wavelength too short for the longest band: the relief's full depth, 2π there, delays the longest
     band by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves; below ``MIN_WAVES`` (the paper's 550 nm design gives 700 nm

@@ -29,7 +29,6 @@ error map).
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 from pathlib import Path
 
@@ -42,6 +41,7 @@ from doefab.io import atomic_write_json, atomic_write_text
 from doefab.reconstruction.data import CONTENT_COMPONENTS, SPLIT_SEEDS, split_components, split_digest, split_digest_v1
 from doefab.reconstruction.loader import load_reconstructor
 from doefab.reconstruction.metrics import mean_metrics, metrics_for
+from doefab.reconstruction.loop import torch_threads
 from doefab.reconstruction.networks import VARIANTS
 from doefab.reconstruction.provenance import code_version, library_versions
 from doefab.reconstruction.partfinetune import check_capture, fit_to_network, pair_record
@@ -85,10 +85,11 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
     components = split_components(task)
     weights = {v: _weights_entry(r.meta, task, components) for v, r in recs.items()}
     cond = conditions.describe() if conditions is not None else {"name": "clean"}
+    code = code_version()  # two git calls: once for the ledger and the result
     if split == "final":  # logged before a scene is scored: an interrupted or failed read is a read too
         out.mkdir(parents=True, exist_ok=True)
         _log_final_read(out / FINAL_LEDGER, {"task": task, "images": images, "size_px": size, "conditions": cond,
-                                             "code": code_version(), "weights": weights})
+                                             "code": code, "weights": weights})
     with one_thread():
         rows, kinds, example = _score(task, split, images, size, recs, design, sensor, conditions, progress, told,
                                       capture_psf if capture_psf is not None else psf)
@@ -97,7 +98,7 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               "parts_sha256": _parts_sha256(conditions),
               "noise": f"Poisson–Gaussian, {sensor.describe(with_response=False)}" if sensor.entry(False)
               else "default (Poisson–Gaussian)", **sensor.entry(has(task, "spectral")),
-              "threads": THREADS, "versions": library_versions(), "code": code_version(),
+              "threads": THREADS, "versions": library_versions(), "code": code,
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
               # "1": dimensionless (a ratio, or HDR radiance relative to the plain capture's clipping level)
               "units": {m.name: m.unit or "1" for m in application(task).metrics},
@@ -151,15 +152,10 @@ def _score(task, split, images, size, recs, design, sensor, cond, progress, told
     return rows, kinds, example
 
 
-@contextlib.contextmanager
 def one_thread():
-    """torch on ``THREADS`` thread(s) inside the block, its earlier thread count restored after."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(THREADS)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
+    """torch on ``THREADS`` thread(s) inside the block, its earlier thread count restored after
+    (``loop.torch_threads``)."""
+    return torch_threads(THREADS)
 
 
 def _parts_sha256(cond) -> str | None:

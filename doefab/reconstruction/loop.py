@@ -12,6 +12,7 @@ history and torch's random state; they are written atomically and loaded with ``
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -23,10 +24,21 @@ import torch
 from doefab.errors import DoefabError
 from doefab.io import atomic_write_text
 
-__all__ = ["run_loop", "lr_factor", "SCHEDULES", "LR_FLOOR", "training_threads"]
+__all__ = ["run_loop", "lr_factor", "SCHEDULES", "LR_FLOOR", "training_threads", "torch_threads"]
 
 SCHEDULES = ("cosine", "constant")
 LR_FLOOR = 0.05
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """torch on ``n`` thread(s) inside the block, the caller's thread count restored after."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def training_threads(fn):
@@ -36,12 +48,8 @@ def training_threads(fn):
 
     @functools.wraps(fn)
     def wrapped(*args, **kwargs):
-        before = torch.get_num_threads()
-        torch.set_num_threads(max(1, min(2, before)))
-        try:
+        with torch_threads(max(1, min(2, torch.get_num_threads()))):
             return fn(*args, **kwargs)
-        finally:
-            torch.set_num_threads(before)
 
     return wrapped
 
@@ -78,10 +86,7 @@ def run_loop(out: Path, config: dict, minutes: float, step_fn: Callable[[int], f
     lr_factor(schedule, 0.0)  # an unknown schedule fails before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / "checkpoint.pt"
-    for stale in out.glob(".checkpoint.pt.*"):  # a checkpoint write a kill left half done (never the checkpoint)
-        stale.unlink()
-    if not resume:
-        clear_checkpoint(out)  # a fresh run: an earlier run's checkpoint there must not be resumed later
+    clear_checkpoint(out, keep=resume)  # a fresh run: an earlier run's checkpoint there must not be resumed later
     tensors = tensors or {}
     step, elapsed, history, finished = _resumed(ckpt, config, states, tensors) if resume else (0, 0.0, [], False)
     budget, start = minutes * 60.0, step

@@ -118,6 +118,7 @@ def evaluate_batch(task: str, model, coded, uncoded, target, psf, chunk: int = 4
     return mean_metrics(rows)
 
 
+@training_threads
 def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: str | Path = "out/train",
           resume: bool = False, seed: int = 0, batch: int = 4, crop: int | None = None, val_images: int = 8,
           val_every: int = 50, lr: float = 1e-3, weights_dir: str | Path | None = None, arch: dict | None = None,
@@ -142,14 +143,6 @@ def train(task: str, variant: str = "proposed", minutes: float = 10.0, out_dir: 
         raise DoefabError(f"minutes must be in (0, 1440], got {minutes!r}")
     crop = training_crop(task, crop)
     sensor = sensor or Sensor()
-    return _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr, weights_dir,
-                  arch, progress, command, max_steps, design, schedule, conditions, warm_start, sensor, dev, spec)
-
-
-@training_threads
-def _train(task, variant, minutes, out_dir, resume, seed, batch, crop, val_images, val_every, lr, weights_dir, arch,
-           progress, command, max_steps, design, schedule, conditions, warm_start, sensor, dev, spec) -> dict:
-    """``train``'s run once its arguments are checked, torch on at most 2 threads (``loop.training_threads``)."""
     arch = arch or default_arch(task, variant)
     out = Path(out_dir)
     config = {"task": task, "variant": variant, "seed": seed, "batch": batch, "crop": crop, "lr": lr, "arch": arch,

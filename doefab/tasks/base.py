@@ -18,7 +18,7 @@ import torch
 
 from doefab.optics.camera import Camera
 
-__all__ = ["Task", "HALF_LIGHT", "RGB_WAVELENGTHS", "masked_fraction", "softmin"]
+__all__ = ["Task", "HALF_LIGHT", "RGB_WAVELENGTHS", "masked_fraction", "softmin", "least_window"]
 
 HALF_LIGHT = 0.5
 RGB_WAVELENGTHS = (656e-9, 589e-9, 486e-9)
@@ -32,6 +32,14 @@ def masked_fraction(psf: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 def softmin(x: torch.Tensor, temperature: float = 0.02) -> torch.Tensor:
     """Smooth minimum of a 1-D tensor (→ min as temperature → 0)."""
     return -temperature * torch.logsumexp(-x / temperature, dim=0) + temperature * math.log(x.numel())
+
+
+def least_window(reach_px: float) -> int:
+    """The least odd PSF window (sensor px) whose half, ``kernel_size // 2``, holds a pattern reaching ``reach_px``
+    from its centre (to 1e-9 px of rounding, as ``Task.fits_window``).
+
+    Example: ``least_window(62.0)`` → 125; ``least_window(62.3)`` → 127."""
+    return 2 * math.ceil(reach_px - 1e-9) + 1
 
 
 @dataclass
@@ -69,10 +77,10 @@ class Task:
                 number_in(name, getattr(self, name), lo, hi, integer, unit)
         if self.wavelengths_m is not None:
             from doefab.errors import DoefabError
-            from doefab.validate import wavelengths
+            from doefab.validate import repeated, wavelengths
 
             self.wavelengths_m = wavelengths(self.wavelengths_m)
-            if twice := sorted({w for i, w in enumerate(self.wavelengths_m) if w in self.wavelengths_m[:i]}):
+            if twice := repeated(self.wavelengths_m):
                 raise DoefabError(f"wavelengths_m holds {', '.join(f'{w * 1e9:g} nm' for w in twice)} more than once: "
                                   f"list each band once")
 
@@ -102,7 +110,7 @@ class Task:
         """The smallest odd window (sensor px) that holds the pattern (``fits_window``): 2·⌈reach⌉ + 1.
 
         Example: ``StreakTask(arm_px=60).window_for_pattern(cam)`` → 125 (a 62 px reach)."""
-        return 2 * math.ceil(self.pattern_reach_px(camera) - 1e-9) + 1
+        return least_window(self.pattern_reach_px(camera))
 
     def window_problem(self, camera: Camera) -> str:
         """"" where the task's pattern fits its window on ``camera`` (``pattern_reach_px``), else what to change:

@@ -11,7 +11,7 @@ import torch
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera
 from doefab.optics.elements import blazed_grating_height
-from doefab.tasks.base import HALF_LIGHT, Task
+from doefab.tasks.base import HALF_LIGHT, Task, least_window
 
 __all__ = ["GratingTask", "grating_spot_px", "mapping_error_px", "period_for_mapping", "period_for_spread",
            "period_for_reach", "MAX_MAPPING_PX"]
@@ -169,7 +169,7 @@ class GratingTask(Task):
     def window_px(self, far_px: float) -> int:
         """The least odd PSF window (px) that holds a first order ``far_px`` off axis with its metric box and a 2 px
         margin (``pattern_reach_px``, ``fits_window``): what ``optics.kernel_px`` must reach."""
-        return 2 * math.ceil(far_px + self.box_px + 2 - 1e-9) + 1
+        return least_window(far_px + self.box_px + 2)
 
     def period(self, camera: Camera) -> float:
         """Grating period Λ in metres."""

@@ -70,15 +70,14 @@ class HalfRingTask(Task):
 
         super().__post_init__()
         if self.planes_m is not None:
-            from doefab.validate import depths
+            from doefab.validate import depths, repeated
 
             planes = depths(self.planes_m)
             if len(planes) < 2 or not all(0 < z < float("inf") for z in planes):
                 raise DoefabError(f"planes_m must hold at least two depths in metres, all finite (a depth design's "
                                   f"planes are at finite distances, no \"inf\"), got {self.planes_m!r}")
-            if len(set(planes)) != len(planes):
-                raise DoefabError(f"planes_m holds {sorted({z for i, z in enumerate(planes) if z in planes[:i]})} m "
-                                  f"more than once: list each depth plane once")
+            if twice := repeated(planes):
+                raise DoefabError(f"planes_m holds {twice} m more than once: list each depth plane once")
             self.planes_m = tuple(sorted(planes))
             self.z_min, self.z_max = self.planes_m[0], self.planes_m[-1]
         if not self.z_min < self.z_max:
