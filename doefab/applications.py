@@ -34,13 +34,15 @@ class Metric(NamedTuple):
     """A metric an application's reconstructions are scored by. name: the key its metric function returns.
     label: how reports name it.  unit: as printed ("dB", "m", "rad"; "" for a ratio or for HDR radiance, which is
     relative).  higher_is_better: its direction.  span: (lo, hi) the values it can take, in ``unit`` (the range
-    of a tolerance budget's absolute limit on it)."""
+    of a tolerance budget's absolute limit on it).  scale: what a unitless value is relative to, where it is
+    not a plain ratio (records write it beside the unit)."""
 
     name: str
     label: str
     unit: str
     higher_is_better: bool
     span: tuple[float, float]
+    scale: str = ""
 
 
 @dataclass(frozen=True)
@@ -103,14 +105,15 @@ class Application:
 
 
 _PSNR = (0.0, 100.0)  # dB
+_CLIP = "radiance in units of the plain capture's clipping level"
 APPLICATIONS = {a.name: a for a in (
     Application("hdr", "streak", "psnr_highlight", "dB", True,
                 "high dynamic range from one exposure: a streak PSF spreads clipped highlights", camera_preset="hdr",
                 network="doefab.reconstruction.hdrnet", highlights=True,
                 metrics=(Metric("psnr_highlight", "highlight PSNR", "dB", True, _PSNR),
                          Metric("psnr", "PSNR", "dB", True, _PSNR),
-                         Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK)),
-                         Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK))),
+                         Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK), _CLIP),
+                         Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK), _CLIP)),
                 metric_function="doefab.reconstruction.metrics:hdr_metrics", kernel=95, out_channels=3,
                 image_unit="log(1 + radiance) / log(257)", error_unit="radiance",
                 scene_function="doefab.reconstruction.specs:hdr_scene"),

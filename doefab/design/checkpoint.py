@@ -22,11 +22,12 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
 
 
 def clear_checkpoint(folder: str | Path, keep: bool = False) -> None:
-    """Remove a checkpoint write a kill left half done from ``folder`` and, unless ``keep`` (a resumed run), the
-    earlier run's ``checkpoint.pt`` and ``history.csv``: as a fresh run starts there, after everything that could
-    refuse it, so that a later resume continues this run, never the earlier one."""
+    """Remove the checkpoint and history writes a kill left half done from ``folder`` and, unless ``keep`` (a resumed
+    run), the earlier run's ``checkpoint.pt`` and ``history.csv``: as a fresh run starts there, after everything that
+    could refuse it, so that a later resume continues this run, never the earlier one."""
     folder = Path(folder)
-    old = [*folder.glob(".checkpoint.pt.*")] + ([] if keep else [folder / "checkpoint.pt", folder / "history.csv"])
+    names = ("checkpoint.pt", "history.csv")
+    old = [f for n in names for f in folder.glob(f".{n}.*")] + ([] if keep else [folder / n for n in names])
     for f in old:
         if f.is_file():
             f.unlink()

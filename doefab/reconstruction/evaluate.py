@@ -19,7 +19,7 @@ to its printed digits only at a fixed thread count.
 
 ``evaluate(task, out_dir)`` writes ``metrics.json`` (``{"task", "split", "seed", "conditions", "images",
 "size_px", "threads", "versions": {library: version}, "code", "parts_sha256", "rows": {variant: means}, "units":
-{metric: its unit, "1" where dimensionless},
+{metric: its unit, "1" where dimensionless}, "scales": {metric: what it is relative to, where not a plain ratio},
 "by_light": {"in-library" | "out-of-library": {variant: means}}, "weights": {variant: {"sha256", "steps", ...,
 "splits"}}, "per_image": {"light", "rows": {variant: [metrics of each scene]}}, "psf": {"told",
 "captured_through"}}``; the light groups for hyperspectral; ``psf`` with a given pair: each pair's file,
@@ -100,8 +100,9 @@ def evaluate(task: str, out_dir: str | Path, images: int = 16, size: int = 256, 
               else "default (Poisson–Gaussian)", **sensor.entry(has(task, "spectral")),
               "threads": THREADS, "versions": library_versions(), "code": code,
               "rows": {v: mean_metrics(rs) for v, rs in rows.items()},
-              # "1": dimensionless (a ratio, or HDR radiance relative to the plain capture's clipping level)
+              # "1": dimensionless; "scales" says what a value that is not a plain ratio is relative to
               "units": {m.name: m.unit or "1" for m in application(task).metrics},
+              "scales": {m.name: m.scale for m in application(task).metrics if m.scale},
               "weights": weights}
     if psf is not None or capture_psf is not None:
         result["psf"] = psf_records or {

@@ -47,6 +47,7 @@ def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_
         if weights_dir is not None and not is_shipped(weights_dir):
             raise DoefabError(f"--replace-shipped writes to {WEIGHTS_DIR}; --weights-dir {weights_dir} names "
                               f"another folder: give one of them")
+        _check_writable(WEIGHTS_DIR, "--replace-shipped")
         return WEIGHTS_DIR
     target = Path(out_dir if weights_dir is None else weights_dir)
     if is_shipped(target):
@@ -63,19 +64,19 @@ def weights_target(weights_dir: str | Path | None, out_dir: str | Path, replace_
     return target
 
 
-def _check_writable(target: Path) -> None:
-    """Refuse a weights folder that cannot be made or written (a parent that is a file, a read-only place) before
-    any training, not when the weights are written at its end."""
+def _check_writable(target: Path, flag: str = "--weights-dir") -> None:
+    """Refuse a weights folder that cannot be made or written (a parent that is a file, a read-only place: an
+    installed package's own folder too) before any training, not when the weights are written at its end."""
     import os
 
     here = target.absolute()
     while not here.exists():
         here = here.parent
     if not here.is_dir():
-        raise DoefabError(f"--weights-dir {target}: {here} is a file, so the folder cannot be made: give another")
+        raise DoefabError(f"{flag} {target}: {here} is a file, so the folder cannot be made: give another")
     if not os.access(here, os.W_OK | os.X_OK):
-        raise DoefabError(f"--weights-dir {target}: {here} is not writable (read-only or another user's): give a "
-                          f"folder you can write")
+        raise DoefabError(f"{flag} {target}: {here} is not writable (read-only or another user's): give a "
+                          f"--weights-dir you can write")
 
 
 def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[Path]:

@@ -138,6 +138,7 @@ def test_an_evaluation_does_not_depend_on_the_threads_torch_was_given(tmp_path):
     saved = json.loads((tmp_path / "2" / "metrics.json").read_text())
     assert saved["threads"] == 1
     assert saved["units"] == {"psnr_highlight": "dB", "psnr": "dB", "rmse_highlight": "1", "rmse": "1"}
+    assert set(saved["scales"]) == {"rmse_highlight", "rmse"} and "clipping level" in saved["scales"]["rmse"]
     assert {"python", "torch", "numpy", "scipy", "scikit-image"} <= set(saved["versions"])
     assert saved["versions"]["torch"].split("+")[0] == torch.__version__.split("+")[0]
     pt, _ = weights_paths("hdr", "uncoded_only")

@@ -92,9 +92,11 @@ def test_a_finished_run_resumed_adds_no_row_and_a_half_written_checkpoint_is_cle
     csv = (tmp_path / "history.csv").read_text()
     stale = tmp_path / ".checkpoint.pt.abc123"
     stale.write_bytes(b"half a checkpoint")
+    stale_rows = tmp_path / ".history.csv.k9"
+    stale_rows.write_text("step,loss\n")
     again, history2, _ = run_loop(*args, val_every=2, max_steps=4, progress=False, resume=True)
     assert again == steps == 4 and len(history2) == len(history) and history2[-1] == history[-1]
-    assert (tmp_path / "history.csv").read_text() == csv and not stale.exists()
+    assert (tmp_path / "history.csv").read_text() == csv and not stale.exists() and not stale_rows.exists()
 
 
 def test_a_resume_with_other_settings_names_each_one_that_differs(tmp_path):
