@@ -24,13 +24,31 @@ def save_checkpoint(path: str | Path, state: dict) -> None:
 def clear_checkpoint(folder: str | Path, keep: bool = False) -> None:
     """Remove the checkpoint and history writes a kill left half done from ``folder`` and, unless ``keep`` (a resumed
     run), the earlier run's ``checkpoint.pt`` and ``history.csv``: as a fresh run starts there, after everything that
-    could refuse it, so that a later resume continues this run, never the earlier one."""
+    could refuse it, so that a later resume continues this run, never the earlier one. A ``checkpoint.pt`` or
+    ``history.csv`` there that doefab did not write is refused (a DoefabError), never removed or written over."""
     folder = Path(folder)
     names = ("checkpoint.pt", "history.csv")
+    foreign = [folder / n for n in names if (folder / n).is_file() and not _written_by_doefab(folder / n)]
+    if foreign:
+        raise DoefabError(f"{', '.join(map(str, foreign))}: not written by doefab, so never removed or replaced: "
+                          f"move it away or give another folder for the run")
     old = [f for n in names for f in folder.glob(f".{n}.*")] + ([] if keep else [folder / n for n in names])
     for f in old:
         if f.is_file():
             f.unlink()
+
+
+def _written_by_doefab(path: Path) -> bool:
+    """Whether a run's ``checkpoint.pt`` (a torch file of a dict with a JSON ``config``) or ``history.csv`` (a
+    doefab header: ``step,wall_time_s,...``) is doefab's."""
+    if path.suffix == ".csv":
+        with open(path, "rb") as f:
+            return f.readline().startswith(b"step,wall_time_s,")
+    try:
+        state = torch.load(path, weights_only=True, map_location="cpu")
+    except Exception:  # noqa: BLE001 - a file torch cannot read is not a doefab checkpoint
+        return False
+    return isinstance(state, dict) and isinstance(state.get("config"), str)
 
 
 def load_checkpoint(path: str | Path, config: dict, ignore: tuple = ()) -> dict:
@@ -71,12 +89,11 @@ def _read(path: Path) -> tuple[dict, dict]:
     try:
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
-        raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}); "
-                          f"start afresh, without resuming (a fresh run "
-                          f"replaces the checkpoint)") from None
-    if not isinstance(state, dict) or "config" not in state:
-        raise DoefabError(f"checkpoint {path} lacks doefab fields; start afresh, without resuming (a "
-                          f"fresh run replaces the checkpoint)")
+        raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}): "
+                          f"move it away, or give another folder, and start afresh, without resuming") from None
+    if not isinstance(state, dict) or not isinstance(state.get("config"), str):
+        raise DoefabError(f"checkpoint {path} lacks doefab fields (not a doefab checkpoint): move it away, or give "
+                          f"another folder, and start afresh, without resuming")
     try:
         saved = json.loads(state["config"])
         theta = state.get("theta")  # a design's (or an end-to-end run's) parameters, when the run has any

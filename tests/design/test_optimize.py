@@ -85,6 +85,28 @@ def test_resume_refuses_other_settings_and_corrupt_checkpoint(tiny_camera, tiny_
         doefab.optimize("streak", iterations=2, resume=True, **kw)
 
 
+def test_a_fresh_run_never_removes_or_replaces_a_users_checkpoint_or_history(tiny_camera, tiny_streak, tmp_path):
+    """out_dir may be a folder of the user's: a checkpoint.pt or history.csv there that doefab did not write is
+    refused, and stays as it was; doefab's own from an earlier run is cleared."""
+    import torch
+
+    kw = dict(camera=tiny_camera, progress=False, task_params=tiny_streak, out_dir=tmp_path, checkpoint_every=2)
+    torch.save({"weights": torch.zeros(2)}, tmp_path / "theirs.pt")  # the user's own torch file, no doefab config
+    mine = {"checkpoint.pt": (tmp_path / "theirs.pt").read_bytes(), "history.csv": b"epoch,loss\n1,0.5\n"}
+    for name, data in mine.items():
+        for f in mine:
+            (tmp_path / f).unlink(missing_ok=True)
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(DoefabError, match=f"{name}: not written by doefab, so never removed or replaced"):
+            doefab.optimize("streak", iterations=2, **kw)
+        assert (tmp_path / name).read_bytes() == data
+    (tmp_path / "history.csv").unlink()
+    doefab.optimize("streak", iterations=2, **kw)  # writes doefab's own checkpoint.pt
+    (tmp_path / "history.csv").write_bytes(b"step,wall_time_s,loss,metric\n")  # an earlier run's history
+    doefab.optimize("streak", iterations=2, **kw)  # both doefab's: cleared, no refusal
+    assert not (tmp_path / "history.csv").exists() and (tmp_path / "checkpoint.pt").is_file()
+
+
 def test_bad_optimizer_inputs(tiny_camera):
     with pytest.raises(DoefabError, match="unknown task"):
         doefab.optimize("wobble", iterations=2, camera=tiny_camera)

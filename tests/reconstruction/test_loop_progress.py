@@ -144,9 +144,11 @@ def test_a_fresh_run_clears_an_earlier_runs_checkpoint_before_its_first_step(tmp
     this loop; ``doefab design`` clears the same way, ``design.checkpoint.clear_checkpoint``)."""
     import pytest
 
-    for name in ("checkpoint.pt", "history.csv", "levels.npy"):
-        (tmp_path / name).write_bytes(b"earlier run")
     w, opt, rates, step = _quadratic()
+    run_loop(tmp_path, {"case": "earlier"}, 1.0, step, lambda: 0.0, {"w": opt}, [(opt, 0.1)], max_steps=2,
+             val_every=1, progress=False)
+    (tmp_path / "levels.npy").write_bytes(b"earlier run")
+    assert {"checkpoint.pt", "history.csv"} <= {p.name for p in tmp_path.iterdir()}
 
     def interrupted(i):
         raise KeyboardInterrupt
