@@ -187,6 +187,9 @@ def repeated(values) -> list:
 
 def _as_tuple(name: str, values) -> tuple:
     full_precision(name, values)
+    if getattr(values, "requires_grad", False):
+        raise DoefabError(f"{name} is a tensor that requires grad: the PSF is differentiable in the height maps "
+                          f"only; pass plain numbers (e.g. {name}.detach())")
     if isinstance(values, (int, float)):
         values = [values]
     try:

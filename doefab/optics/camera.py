@@ -11,7 +11,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from doefab.validate import distance_or_inf, distance_record, metres_hint
+from doefab.validate import distance_or_inf, distance_record, full_precision, metres_hint
 from doefab.errors import DoefabError
 from doefab.optics.materials import FUSED_SILICA, Material
 
@@ -47,6 +47,18 @@ def require_camera(camera, what: str = "camera") -> "Camera":
             else "doefab.Camera.preset(name) or doefab.Camera(...)")
     raise DoefabError(f"{what} must be a doefab.Camera, got {type(camera).__name__} {camera!r:.60}: make one with "
                       f"{hint}")
+
+
+def _plain_numbers(cam) -> None:
+    """NumPy scalars (float32, float64, integers) given for the camera's numbers become Python numbers, as if typed:
+    a camera compares and hashes by value. Half precision is refused (``validate.full_precision``)."""
+    import numbers
+
+    for f in dataclasses.fields(cam):
+        v = getattr(cam, f.name)
+        if isinstance(v, numbers.Real) and not isinstance(v, (bool, int, float)) and hasattr(v, "dtype"):
+            full_precision(f"Camera.{f.name}", v)
+            object.__setattr__(cam, f.name, int(v) if isinstance(v, numbers.Integral) else float(v))
 
 
 @dataclass(frozen=True)
@@ -86,6 +98,7 @@ class Camera:
     lens_f_number: float = 1.8
 
     def __post_init__(self) -> None:
+        _plain_numbers(self)
         record_number({"lens_f_number": self.lens_f_number}, "lens_f_number", 0.5, 64.0, "", where="Camera")
         for name in ("aperture_diameter", "doe_pitch", "sensor_pitch", "sensor_distance", "design_wavelength"):
             v = getattr(self, name)

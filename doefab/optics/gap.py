@@ -77,6 +77,12 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     wavelength = wavelength_m("wavelength", wavelength)
     depth = depths([depth])[0]
     n = camera.doe_pixels
+    if not isinstance(height, torch.Tensor):
+        try:
+            height = torch.as_tensor(np.asarray(height, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise DoefabError(f"height must be a ({n}, {n}) array of heights in metres, got {type(height).__name__}") \
+                from None
     if tuple(height.shape) != (n, n):
         raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
     heights("height", height)

@@ -67,10 +67,18 @@ class Material:
                               f"(0.068 for fused silica), not metres")
 
     def index(self, wavelength_m):
-        """Refractive index at ``wavelength_m`` (metres; scalar or array) -> same shape, float64."""
+        """Refractive index at ``wavelength_m`` (metres, 100 nm – 20 µm; scalar or array) -> same shape, float64.
+
+        Example: ``FUSED_SILICA.index(550e-9)`` → 1.45991 (``index(550)``, nanometres, is refused)."""
+        from doefab.validate import wavelength_m as checked
+
         lam_um = np.asarray(wavelength_m, dtype=np.float64) * 1e6
         if np.any(~np.isfinite(lam_um)) or np.any(lam_um <= 0):
             raise DoefabError(f"wavelength must be positive and finite in metres, got {wavelength_m!r}")
+        lam = np.asarray(wavelength_m, dtype=np.float64).ravel()
+        out = lam[(lam < 100e-9) | (lam > 20e-6)]
+        if out.size:
+            checked("wavelength", float(out[0]))  # refuses the first out of range, with its unit hint
         l2 = lam_um**2
         n2 = 1.0 + sum(bi * l2 / (l2 - ci**2) for bi, ci in zip(self.b, self.c_um))
         return np.sqrt(n2)

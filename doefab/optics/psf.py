@@ -182,7 +182,8 @@ class PSFPlan:
         kernel_size: K, output window K × K sensor pixels (odd K makes the blank coded PSF the exact mirror
             of the uncoded one).
         halves: which PSFs to compute, a subset of ``("coded", "uncoded")``; ``"full"`` adds the whole
-            aperture as one coherent pupil (a conventional camera; used for reference checks).
+            aperture as one coherent pupil (the pair's DOE on x < 0, ``height_right`` or flat on x > 0; blank: a
+            conventional camera; used for reference checks).
         route: ``"spectral"`` (default), ``"mft"``, ``"fft"`` or ``"asm"``, or a Route object.
         pupil_oversample: pupil samples per DOE pixel and axis (heights are held per DOE pixel).
         precision: ``"float32"`` (default) or ``"float64"``.
@@ -269,9 +270,7 @@ class PSFPlan:
             h = height.to(self.device)[geo.rows, geo.cols]
             if geo.oversample > 1:
                 h = h.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
-        # a flat plate is smooth; only a structured DOE has flat pixels whose far field is an envelope
-        envelope = h is not None and bool((h.detach().max() - h.detach().min()) > 0)
-        setup, prepared = self._prepared(half, envelope)
+        setup, prepared = self._prepared(half, h is not None and _structured(h, cov))
         kw = scratch_kwargs(self.route)  # the route's buffers, reused over the wavelengths (none under a gradient)
         out = []
         for i in wl:
@@ -296,11 +295,13 @@ class PSFPlan:
             for half in halves:
                 geo, cov, opd, _, _ = self._halves[half]
                 t = torch.stack([tf[geo.rows, geo.cols] for tf in t_full])
+                hd = doe[geo.rows, geo.cols]
                 if geo.oversample > 1:
                     t = t.repeat_interleave(geo.oversample, -2).repeat_interleave(geo.oversample, -1)
-                # the coded half is a pixelated DOE (pixel envelope, as at gap 0); the plain half sees the
-                # DOE's diffracted light as a smooth field, as its gap-0 PSF does
-                setup, prepared = self._prepared(half, half != "uncoded")
+                    hd = hd.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
+                # the coded half is a pixelated DOE (pixel envelope, as at gap 0, and like it none for a flat
+                # plate); the plain half sees the DOE's diffracted light as a smooth field, as its gap-0 PSF does
+                setup, prepared = self._prepared(half, half != "uncoded" and _structured(hd, cov))
                 pupil = torch.polar(cov.expand_as(t.real), self._k[i] * opd) * t
                 per_half[half].append(self.route.intensity(pupil, i, setup, prepared, **kw) / geo.full_area)
         return {h: torch.stack(v, dim=1) for h, v in per_half.items()}
@@ -326,10 +327,31 @@ class PSFPlan:
             if check_gap(gap) > 0 and h is not None:
                 got = self.gap_psfs(h.to(self.device), gap)
         if got is None:
-            got = {half: self.half_psf(half, hr if half == "uncoded" else h) for half in self.halves}
+            maps = {"coded": h, "uncoded": hr, "full": _whole_map(h, hr, self.camera)}
+            got = {half: self.half_psf(half, maps[half]) for half in self.halves}
         got = to_device(got, back)
         return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths, self.camera.sensor_pitch,
                        got.get("full"), self.camera)
+
+
+def _whole_map(h, hr, camera: Camera):
+    """The ``"full"`` pupil's map: the pair's system as one coherent pupil, ``h`` where a DOE pixel's centre lies
+    in the coded half (x ≤ 0: an odd grid's column on the split line too) and ``hr`` (None: flat) elsewhere."""
+    if h is None and hr is None:
+        return None
+    like = h if h is not None else hr
+    centres = (torch.arange(camera.doe_pixels, device=like.device) - (camera.doe_pixels - 1) / 2)
+    left = (centres <= 0)[None, :]
+    return torch.where(left, h if h is not None else 0.0, hr if hr is not None else 0.0)
+
+
+def _structured(h: torch.Tensor, cov: torch.Tensor) -> bool:
+    """Whether the heights ``h`` vary over the pupil samples that pass light (coverage ``cov`` > 0): only a
+    structured DOE has flat pixels whose far field carries the pixel envelope; a flat plate is smooth, whatever
+    the map holds outside the clear aperture. (The PSF is therefore not continuous at an exactly flat map: any
+    structure switches the envelope on.)"""
+    seen = h.detach()[(cov > 0).to(h.device)]
+    return seen.numel() > 0 and bool(seen.max() > seen.min())
 
 
 def split_aperture_psf(height, camera: Camera, wavelengths, depths, kernel_size: int = 255,

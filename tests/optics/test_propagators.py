@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import doefab
-from doefab.errors import SamplingError
+from doefab.errors import DoefabError, SamplingError
 from doefab.optics.propagators.base import FocalSetup
 
 
@@ -88,14 +88,19 @@ def test_fft_refuses_oversized_padding():
         doefab.PSFPlan(doefab.Camera(), [700e-9], [math.inf], 63, route="fft", oversample=64)
 
 
-def test_angular_spectrum_gaussian_beam():
-    """Band-limited ASM against the analytic Gaussian beam (waist 40 µm, 4 mm, 633 nm)."""
+@pytest.mark.parametrize("form", ["complex tensor", "real tensor", "real array"])
+def test_angular_spectrum_gaussian_beam(form):
+    """Band-limited ASM against the analytic Gaussian beam (waist 40 µm, 4 mm, 633 nm); a real amplitude, as a
+    tensor or an array, propagates as the complex field it is."""
     lam, w0, z, b, n = 633e-9, 40e-6, 4e-3, 1e-6, 512
     c = (np.arange(n) - n / 2) * b
     xx, yy = np.meshgrid(c, c)
     r2 = xx**2 + yy**2
-    field = torch.from_numpy(np.exp(-r2 / w0**2).astype(np.complex128))
-    out = doefab.angular_spectrum(field, b, lam, z).numpy()
+    amplitude = np.exp(-r2 / w0**2)
+    given = {"complex tensor": torch.from_numpy(amplitude.astype(np.complex128)),
+             "real tensor": torch.from_numpy(amplitude), "real array": amplitude}[form]
+    field = torch.from_numpy(amplitude.astype(np.complex128))
+    out = doefab.angular_spectrum(given, b, lam, z).numpy()
     k = 2 * math.pi / lam
     zr = math.pi * w0**2 / lam
     q = z - 1j * zr  # complex beam parameter at the waist is -i z_R
@@ -105,7 +110,9 @@ def test_angular_spectrum_gaussian_beam():
     assert np.sum(np.abs(out) ** 2) == pytest.approx(np.sum(np.abs(field.numpy()) ** 2), rel=1e-6)
 
 
-def test_angular_spectrum_refuses_long_distance():
+def test_angular_spectrum_refuses_long_distance_and_a_field_that_is_not_one():
+    with pytest.raises(DoefabError, match=r"field must be a \(\.\.\., Ny, Nx\) complex or real array"):
+        doefab.angular_spectrum(torch.ones(128), 1e-6, 500e-9, 1e-3)
     field = torch.ones(128, 128, dtype=torch.complex128)
     with pytest.raises(SamplingError, match="transfer-function aliasing"):
         doefab.angular_spectrum(field * torch.exp(1j * torch.linspace(0, 300, 128))[None, :], 1e-6, 500e-9, 0.5)
@@ -272,3 +279,24 @@ def test_the_mft_route_refuses_fringes_beyond_its_node_cap_and_matrices_beyond_i
     with pytest.raises(SamplingError, match=r"\[mft\] the Fourier matrices of 1 band\(s\), a 21 px window and 6 nodes"):
         doefab.split_aperture_psf(None, small_camera, [450e-9], [small_camera.focus_distance], kernel_size=21,
                                   route=MFTRoute(max_bytes=100))
+
+
+def test_the_full_pupil_is_the_pairs_system_as_one_pupil():
+    """``"full"``: the coded half carries ``height`` (only its x < 0 half acts, as for the pair) and the plain half
+    ``height_right``, one coherent pupil: near the axis its intensity lies between |√I_u − √I_c|² and
+    (√I_u + √I_c)² of the two halves' PSFs (1 µm pixels sample the 14 µm lobes almost at points)."""
+    cam = doefab.Camera(aperture_diameter=0.2e-3, doe_pitch=1e-6, doe_pixels=200, sensor_pitch=1e-6,
+                        sensor_distance=5e-3, focus_distance=1.0)
+    kw = dict(kernel_size=81, precision="float64", halves=("coded", "uncoded", "full"))
+    h = doefab.blazed_grating_height(cam, 20, n_levels=4)  # first order 138 px off axis, out of the window
+    left = h.copy()
+    left[:, 100:] = 0.0
+    whole = doefab.split_aperture_psf(h, cam, [550e-9], [cam.focus_distance], **kw)
+    half = doefab.split_aperture_psf(left, cam, [550e-9], [cam.focus_distance], **kw)
+    assert np.array_equal(whole.full.numpy(), half.full.numpy())
+    box = (0, 0, slice(36, 45), slice(36, 45))
+    iu, ic, full = (np.sqrt(whole[k][box].numpy()) for k in ("uncoded", "coded", "full"))
+    assert np.all(full >= (iu - ic) * 0.99) and np.all(full <= (iu + ic) * 1.01)
+    right = doefab.split_aperture_psf(None, cam, [550e-9], [cam.focus_distance], h_right=h, **kw)
+    iu, ic, full = (np.sqrt(right[k][box].numpy()) for k in ("uncoded", "coded", "full"))
+    assert np.all(full >= (ic - iu) * 0.99) and np.all(full <= (iu + ic) * 1.01)  # the grating on x > 0 now

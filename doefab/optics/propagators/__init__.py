@@ -22,4 +22,11 @@ def make_route(route, **options) -> Route:
         cls = {"spectral": SpectralRoute, "mft": MFTRoute, "fft": FFTRoute, "asm": ASMRoute}[route]
     except KeyError:
         raise DoefabError(f"unknown propagation route {route!r}: choose one of {ROUTES}") from None
+    import inspect
+
+    takes = [p for p in inspect.signature(cls).parameters if p not in ("self", "args", "kwargs")]
+    other = sorted(set(options) - set(takes))
+    if other:
+        raise DoefabError(f"the {route!r} route takes no option {', '.join(other)}: "
+                          + (f"its options are {', '.join(takes)}" if takes else "it takes no options"))
     return cls(**options)

@@ -15,7 +15,7 @@ import scipy.fft
 import torch
 
 from doefab.validate import length_m, number_in, wavelength_m
-from doefab.errors import SamplingError
+from doefab.errors import DoefabError, SamplingError
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, pixel_integration_matrix
 
 __all__ = ["angular_spectrum", "asm_band_limit", "ASMRoute"]
@@ -32,7 +32,8 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
     """Propagate a sampled complex field over ``distance`` with the band-limited angular spectrum.
 
     Args:
-        field: (..., Ny, Nx) complex field on a grid of pitch ``pitch`` (metres).
+        field: (..., Ny, Nx) field on a grid of pitch ``pitch`` (metres): a tensor or array, complex or real (an
+            amplitude; propagated as the complex field it is).
         wavelength: metres.  distance: metres (may be negative to propagate backwards).
         pad: the grid is zero-padded to ``pad`` times its size (linear, not circular, convolution).
         check: refuse when more than ``max_cut`` of the field's energy lies beyond the band limit or
@@ -44,6 +45,10 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
     wavelength = wavelength_m("wavelength", wavelength)
     distance = number_in("distance", distance, -1e3, 1e3, unit="m")
     pad = number_in("pad", pad, 1, 64)  # a padding factor (the grid grows to pad × its size)
+    field = field if isinstance(field, torch.Tensor) else torch.as_tensor(np.asarray(field))
+    if field.ndim < 2 or not (field.is_complex() or field.is_floating_point()):
+        raise DoefabError(f"angular_spectrum: field must be a (..., Ny, Nx) complex or real array of numbers, got "
+                          f"shape {tuple(field.shape)} of {field.dtype}")
     ny, nx = field.shape[-2:]
     n = scipy.fft.next_fast_len(int(pad * max(ny, nx)))
     spec = torch.fft.fft2(field, s=(n, n))
@@ -62,7 +67,7 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
                 f"{lim:.4g} cycles/m for z = {distance:g} m on this grid (limit {max_cut:.1%}). Fix: a larger "
                 f"padding (pad > {pad}), a shorter distance, or a Fourier-transform route for long distances.")
     h = np.where(keep, np.exp(2j * np.pi * distance * np.sqrt(np.maximum(arg, 0.0))), 0.0)
-    h = torch.from_numpy(h).to(field.device, field.dtype)
+    h = torch.from_numpy(h).to(spec.device, spec.dtype)  # complex even where the field given was real
     out = torch.fft.ifft2(spec * h)
     return out[..., :ny, :nx]
 
