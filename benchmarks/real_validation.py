@@ -179,7 +179,7 @@ def spread_lines(runs: dict, seeds: dict) -> list[str]:
                      f"{np.mean(vals):.4g} | {np.std(vals, ddof=1):.3g} |")
         if base:
             notes.append(f"The {task} seeds were scored at {base['code']} under the budget {base['budget_sha256']}, "
-                         f"beside the shipped network's {vals[0]:.4g} in the same run; at this code and budget "
+                         f"beside the shipped network's {vals[0]:.4g} in the same run; at the table's code and budget "
                          f"({runs[task]['real']['conditions'].get('budget_sha256')}) the shipped network scores "
                          f"{runs[task]['real']['rows']['proposed'][key]:.4g} (the table above).")
     if len(lines) == 4:
@@ -303,6 +303,18 @@ def sources_lines() -> list[str]:
     return lines + [""]
 
 
+def budget_lines(runs: dict) -> list[str]:
+    """Which tolerance budgets the table's measured rows were captured under, beside the one doefab ships now."""
+    from doefab.tolerance.conditions import budget_sha256
+
+    used = sorted({runs[t]["real"]["conditions"].get("budget_sha256") for t in runs if "real" in runs[t]} - {None})
+    now = budget_sha256()
+    if used == [now]:
+        return [f"Every measured row was captured under the shipped tolerance budget ({now}).", ""]
+    return [f"The measured rows were captured under the budget {', '.join(used)}; the shipped budget is now {now} "
+            f"(`doefab/tolerance/budget.toml` changed since; the results page says how).", ""]
+
+
 def markdown(runs: dict, test_depth: dict | None, seeds: dict | None = None, command: str = "", note: str = "") -> str:
     lines = ["# Shipped networks on measured data", "",
              f"Produced by `{command}`.{note}",
@@ -311,6 +323,7 @@ def markdown(runs: dict, test_depth: dict | None, seeds: dict | None = None, com
     for task in KEYS:
         if task in runs:
             lines += task_lines(task, runs[task], test_depth if task == "depth" else None)
+    lines += budget_lines(runs)
     lines += ["## Shipping rule", "", RULE, ""] + spread_lines(runs, seeds or {})
     lines += ["| date | task | candidate | compared | decision |",
               "| --- | --- | --- | --- | --- |"] + [f"| {' | '.join(d)} |" for d in DECISIONS] + [""]

@@ -74,14 +74,18 @@ def main() -> None:
             raise SystemExit(f"the main job failed (exit status {proc.returncode})")
     peak_gib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20  # KiB on Linux
     rows = ["| scene | " + " | ".join(STAGES) + " | scene total (s) |", "| --- " * (len(STAGES) + 2) + "|"]
+    inside = 0.0
     for s in SCENES:
         rec = json.loads((runs / s / "run.json").read_text())
         cells = [f"{rec['stages'][st]['seconds']:.0f}" if st in rec["stages"] else "—" for st in STAGES]
         rows.append(f"| {s} | " + " | ".join(cells) + f" | {rec['seconds']:.0f} |")
+        inside += rec["seconds"]
     text = (f"The main job{' with --quick' if quick else ''} from an empty cache (`.venv/bin/python "
             f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
             f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
-            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min); the largest "
+            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min), of it "
+            f"{total - inside:.0f} s outside the scenes' own totals (each scene runs in a process of its own: "
+            f"starting Python and doefab, checking its scene file); the largest "
             f"resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (the machine's memory in use "
             f"above what it was before, sampled every second): {job_gib:.1f} GiB.\n")
     from doefab.io import atomic_write_text
