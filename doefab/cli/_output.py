@@ -17,6 +17,13 @@ def check_resume(out: OutputDir) -> None:
     read_checkpoint(ckpt)
 
 
+def resume_hint(kept: str, force: bool) -> str:
+    """What an interrupted run prints: ``kept`` (what stays) and how to continue, which for a ``--force`` run is
+    the command with ``--resume`` in its place (repeated as it was, ``--force`` would start afresh again)."""
+    how = "with --resume in place of --force" if force else "with --resume"
+    return f"{kept}: rerun the same command {how} to continue"
+
+
 def clear_earlier_run(out: OutputDir, force: bool, extra=()) -> None:
     """``--force``: remove the earlier run's checkpoint (and a checkpoint write a kill left half done), its history
     and ``extra`` files and folders from the run folder before any work, so neither a later ``--resume`` nor a

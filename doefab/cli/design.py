@@ -57,7 +57,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
-    from doefab.cli._output import check_resume, claim_output
+    from doefab.cli._output import check_resume, claim_output, clear_earlier_run, resume_hint
     from doefab.tasks import get_task
 
     task = get_task(args.task)
@@ -72,7 +72,7 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
+    args.resume_hint = resume_hint(f"the checkpoint in {out.path} is kept", args.force)
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
                 "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.n_levels}
     if args.lr is not None:
@@ -91,6 +91,10 @@ def run(args) -> int:
         params["loss_kind"] = args.loss
     if params:
         settings["task_params"] = params
+    # --force: the earlier design's files go first (design.json too), so an interrupted run leaves no complete-looking
+    # design of the old settings beside its checkpoint
+    clear_earlier_run(out, args.force, [out.path / f for f in ("design.json", "levels.npy", "height.npy")]
+                      + sorted(out.path.glob("*.png")))
     out.create()
     design = doefab.optimize(args.task, iterations=args.iterations, optimizer=args.optimizer, seed=args.seed,
                              out_dir=out.path, resume=args.resume, **settings)

@@ -38,7 +38,9 @@ def run(args) -> int:
     scenes = [load_scene(s) for s in args.scene]  # every scene validated before any work
     if args.out is not None and len(scenes) > 1:
         raise DoefabError("--out names one folder: give one scene, or leave --out out (out/run/<scene name>)")
-    args.resume_hint = "finished stages are kept: rerun the same command to continue"
+    args.resume_hint = ("finished stages are kept: rerun the same command to continue" if not args.force else
+                        "finished stages are kept: rerun the command without --force to continue (with it, the "
+                        "forced stages start afresh again)")
     shared_output_folders(scenes)
     runs = []
     for sc in scenes:  # every check of every scene before the first folder is created

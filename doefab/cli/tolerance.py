@@ -100,9 +100,10 @@ def _check_network(design_task: str, ddir, weights_dir) -> None:
 
 def run(args) -> int:
     import shutil
+    from pathlib import Path
 
     from doefab.cli._args import design_folder
-    from doefab.cli._output import claim_output
+    from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
     from doefab.tolerance.report import STEPS, run_study
@@ -123,12 +124,16 @@ def run(args) -> int:
     if both:
         raise DoefabError(both)
     check_reachable(args.scheduler, "--scheduler")
+    if args.resume and not any((Path(args.out) / f).exists() for f in ("samples.jsonl", STEPS)):
+        raise DoefabError(f"--resume: {args.out} holds no tolerance study to continue (no samples.jsonl, no "
+                          f"{STEPS}/): start one without --resume")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in ("samples.jsonl", STEPS)))
-    args.resume_hint = f"finished samples are kept in {out.path}: rerun the same command with --resume"
+    args.resume_hint = resume_hint(f"finished samples are kept in {out.path}", args.force)
     out.create()
-    if args.force:  # a fresh study: no saved parts, no finished steps
-        (out.path / "samples.jsonl").unlink(missing_ok=True)
+    if args.force:  # a fresh study: no saved parts, no finished steps, no results of the earlier one
+        for f in ["samples.jsonl", "tolerance.json", "report.md", *(p.name for p in out.path.glob("*.png"))]:
+            (out.path / f).unlink(missing_ok=True)
         shutil.rmtree(out.path / STEPS, ignore_errors=True)
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,

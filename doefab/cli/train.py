@@ -62,7 +62,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from doefab.cli._args import sensor_arg, task_design_arg
-    from doefab.cli._output import check_resume, claim_output, clear_earlier_run
+    from doefab.cli._output import check_resume, claim_output, clear_earlier_run, resume_hint
     from doefab.errors import DoefabError
     from doefab.reconstruction.specs import training_crop
     from doefab.reconstruction.train import train
@@ -77,7 +77,7 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    args.resume_hint = f"the checkpoint in {out.path} is kept: rerun the same command with --resume to continue"
+    args.resume_hint = resume_hint(f"the checkpoint in {out.path} is kept", args.force)
     design = task_design_arg(args, need_weights_dir=False)
     sensor = sensor_arg(args, design)
     target = weights_target(args.weights_dir, out.path, args.replace_shipped, design, args.task, args.variant)

@@ -222,9 +222,10 @@ class DesignRun:
         if tuple(state["theta"].shape) != tuple(theta.shape):
             raise DoefabError(f"checkpoint {ckpt} holds a {tuple(state['theta'].shape)} design, this run a "
                               f"{tuple(theta.shape)} one: start a new --out folder")
-        if int(state["step"]) > cfg.iterations:
-            raise DoefabError(f"checkpoint {ckpt} is at step {int(state['step'])}, beyond --iterations "
-                              f"{cfg.iterations}: resume with at least that many iterations")
+        before = json.loads(state["config"]).get("iterations")
+        if isinstance(before, int) and cfg.iterations < before:  # its quantization-aware steps would not all run
+            raise DoefabError(f"checkpoint {ckpt} is of a run of {before} iterations: a resume may raise "
+                              f"--iterations, not lower it (to {cfg.iterations}); start afresh for a shorter run")
         with torch.no_grad():
             theta.copy_(state["theta"])
         if self.adam is not None and "adam" in state:

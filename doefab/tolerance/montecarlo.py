@@ -20,6 +20,7 @@ import json
 import math
 import os
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -30,20 +31,23 @@ from doefab.io import atomic_write_text, from_json_ready, json_text, read_json
 from doefab.tolerance.errors import budget_values, sample_errors
 from doefab.tolerance.schedulers import parse_scheduler
 
-__all__ = ["monte_carlo", "run_identity", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
+__all__ = ["monte_carlo", "run_identity", "check_resumable", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
            "interval_text"]
 
 
 def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, weights_dir=None,
                  chain: dict | None = None) -> dict:
     """What a samples.jsonl must have been written for to be resumed: the design (level map, camera, bands,
-    planes, levels), the budget, seed, grid, the mask set's alignment chain and, through networks, the network's
-    weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
+    planes, levels), the budget, seed, grid, the mask set's alignment chain, the source of the code that computes a
+    part (``conditions.model_sources_sha256``: parts of another version are not mixed in) and, through networks, the
+    network's weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
     b = budget_values(budget)
     system = {"camera": design.camera.to_dict(), "wavelengths_m": list(design.wavelengths), "n_levels": design.n_levels,
               "depths_m": [z if math.isfinite(z) else "inf" for z in design.depths]}
+    from doefab.tolerance.conditions import model_sources_sha256
+
     out = {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),
-           "design_system_sha256": _digest(system),
+           "design_system_sha256": _digest(system), "part_model_sha256": model_sources_sha256(),
            "budget_sha256": _digest(b), "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf",
            "alignment_chain": {str(k): int(v) for k, v in sorted((chain or {}).items())}}
     if networks:
@@ -78,19 +82,35 @@ def _levels_sha(levels) -> str:
     return levels_sha256(levels)
 
 
+def check_resumable(out_dir, design, budget: dict, seed: int, grid, networks, weights_dir=None,
+                    chain: dict | None = None) -> None:
+    """Before any step of a study: a ``samples.jsonl`` in ``out_dir`` must have been written for this study (its
+    grid too, unless ``grid`` is "auto" and not known yet), else a DoefabError names what differs — so a refused
+    resume has judged nothing and changed nothing of the earlier study."""
+    log = Path(out_dir) / "samples.jsonl"
+    if log.is_file():
+        identity = run_identity(design, budget, seed, 0 if grid == "auto" else int(grid), networks, weights_dir, chain)
+        _check_header(log, log.read_text().splitlines(), identity, partial=grid == "auto")
+
+
+def _check_header(log: Path, lines: list[str], identity: dict, partial: bool = False) -> None:
+    try:
+        head = from_json_ready(json.loads(lines[0]))["run"] if lines else None
+    except (ValueError, KeyError, TypeError):
+        head = None
+    keys = [k for k in identity if not (partial and k == "grid")]
+    if head is None or (not partial and head != identity) or any(head.get(k) != identity[k] for k in keys):
+        diff = sorted(k for k in keys if head is None or head.get(k) != identity[k])
+        raise DoefabError(f"{log} was written for another run (differs in {', '.join(diff) or 'its header'}): "
+                          f"use a new --out, or --force to start again")
+
+
 def _read_log(log: Path, identity: dict) -> dict:
     done: dict = {}
     if not log.is_file():
         return done
     lines = log.read_text().splitlines()
-    try:
-        head = from_json_ready(json.loads(lines[0]))["run"] if lines else None
-    except (ValueError, KeyError, TypeError):
-        head = None
-    if head != identity:
-        diff = sorted(k for k in identity if head is None or head.get(k) != identity[k])
-        raise DoefabError(f"{log} was written for another run (differs in {', '.join(diff) or 'its header'}): "
-                          f"use a new --out, or --force to start again")
+    _check_header(log, lines, identity)
     for line in lines[1:]:
         try:
             r = from_json_ready(json.loads(line))
@@ -98,6 +118,17 @@ def _read_log(log: Path, identity: dict) -> dict:
         except (ValueError, KeyError):
             continue  # a line cut by an interruption: recomputed
     return done
+
+
+def _drop_cut_line(log: Path) -> None:
+    """Cut a last line an interruption left without its newline (``_read_log`` skips it: the part is recomputed),
+    so the next row starts a line of its own and the file stays JSON lines."""
+    if not log.is_file():
+        return
+    data = log.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with open(log, "r+b") as fh:
+            fh.truncate(data.rfind(b"\n") + 1)
 
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
@@ -128,6 +159,7 @@ def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int
     judge = judge_for(design_dir, supersample)
     identity = run_identity(judge.design, budget, seed, supersample, networks, weights_dir, judge.chain)
     done = _read_log(log, identity)
+    _drop_cut_line(log)
     if not log.is_file():
         atomic_write_text(log, json_text({"run": identity}, indent=None) + "\n")  # never a cut header
     children = np.random.SeedSequence(seed).spawn(n)
@@ -221,23 +253,41 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         raise DoefabError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     cluster = None
     if nw is not None:
+        from doefab.tolerance.daskplugin import IgnoreCtrlC
+
         cluster = _local_cluster(LocalCluster, worker_envs(nw))
         client = Client(cluster)
+        client.register_plugin(IgnoreCtrlC())  # Ctrl-C stops this process, which closes its workers quietly
     else:
         from doefab._devices import default_device
 
         client = Client(scheduler)
-        client.run(_set_default_device, remote_worker_device(default_device()))
     try:
+        if nw is None:
+            _check_worker_code(client)
+            client.run(_set_default_device, remote_worker_device(default_device()))
+        study = uuid.uuid4().hex[:12]  # this study's own keys: a shared scheduler never answers another's part
         futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
-                              key=f"doefab-sample-{i}", retries=2, pure=False): i for i in todo}
+                              key=f"doefab-sample-{study}-{i}", retries=2, pure=False): i for i in todo}
         for f in as_completed(futs):
             record(futs[f], f.result())
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _check_worker_code(client) -> None:
+    """Refuse a ``tcp://`` scheduler whose workers compute parts with other code than this process (another doefab
+    version or a modified copy): their parts would be mixed into this study without a sign."""
+    from doefab.tolerance.conditions import model_sources_sha256
+
+    here = model_sources_sha256()
+    other = sorted(w for w, d in client.run(model_sources_sha256).items() if d != here)
+    if other:
+        raise DoefabError(f"the scheduler's workers {', '.join(other)} run another version of doefab's part model "
+                          f"than this process: start them from the same doefab (same version and files)")
 
 
 def remote_worker_device(text: str) -> str:

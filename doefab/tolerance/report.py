@@ -47,6 +47,10 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
 
     out = Path(out)
     judge = study.judge_for(str(design_dir), 1)
+    if samples > 0:  # a resume of another study is refused before any step is judged or replaced
+        from doefab.tolerance.montecarlo import check_resumable
+
+        check_resumable(out, judge.design, budget, seed, grid, networks, weights_dir, judge.chain)
     task = getattr(of_design(judge.design.task), "name", judge.design.task)
     spec = budget.get("spec", {})
     res: dict = {"design": str(design_dir), "task": task, "seed": seed, "stop": stop_case(judge.fine),

@@ -36,3 +36,34 @@ def test_a_bug_is_one_line_exit_1_and_debug_shows_the_traceback(tmp_path, capsys
     assert not (tmp_path / "d").exists()
     assert main(["design", "--task", "streak", "--out", str(tmp_path / "d"), "--debug"]) == 1
     assert "Traceback" in capsys.readouterr().err
+
+
+def test_an_interrupted_force_run_leaves_no_earlier_result_and_says_to_resume_in_place_of_force(tmp_path, capsys,
+                                                                                                monkeypatch):
+    """design --force: the earlier design's files go before the run, so an interrupt leaves only the new run's
+    checkpoint (no design.json of the old settings that masks would be made from); the hint names --resume in
+    place of --force (repeating --force would start afresh again)."""
+    import torch
+
+    def interrupted(*a, out_dir=None, **k):
+        torch.save({"config": "{}"}, out_dir / "checkpoint.pt")  # a doefab checkpoint's header
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(doefab, "optimize", interrupted)
+    out = tmp_path / "d"
+    assert main(["design", "--task", "streak", "--out", str(out)]) == 130
+    capsys.readouterr()
+    for f in ("design.json", "levels.npy", "height.npy", "levels.png"):  # as a finished earlier run left them
+        (out / f).write_bytes(b"earlier")
+    assert main(["design", "--task", "streak", "--out", str(out), "--force"]) == 130
+    err = capsys.readouterr().err
+    assert "rerun the same command with --resume in place of --force to continue" in err
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["checkpoint.pt"]
+
+
+def test_tolerance_resume_of_a_folder_without_a_study_is_refused(tmp_path, capsys):
+    from doefab.reconstruction.specs import design_dir
+
+    rc = main(["tolerance", "--design", str(design_dir("hdr")), "--out", str(tmp_path / "typo"), "--resume"])
+    assert rc == 2 and "holds no tolerance study to continue" in capsys.readouterr().err
+    assert not (tmp_path / "typo").exists()

@@ -122,3 +122,12 @@ def test_stratified_batch_sees_every_depth(tiny_camera):
     d = doefab.optimize("half-ring", iterations=2, camera=tiny_camera, progress=False, batch=-1,
                         task_params={"z_step": 1.0})
     assert len(d.history) == 2 and len(d.depths) == 5
+
+
+def test_a_resume_may_raise_the_iterations_not_lower_them(tiny_camera, tiny_streak, tmp_path):
+    """Fewer iterations on resume would skip the quantization-aware steps the run was set up for."""
+    kw = dict(camera=tiny_camera, progress=False, task_params=tiny_streak, out_dir=tmp_path, checkpoint_every=1)
+    doefab.optimize("streak", iterations=4, **kw)
+    with pytest.raises(DoefabError, match="a resume may raise --iterations, not lower it \\(to 3\\)"):
+        doefab.optimize("streak", iterations=3, resume=True, **kw)
+    assert doefab.optimize("streak", iterations=5, resume=True, **kw).levels is not None

@@ -138,3 +138,23 @@ def test_a_users_file_inside_a_subfolder_doefab_writes_is_kept(tmp_path, monkeyp
     assert not (root / "masks" / "old_only").exists()  # doefab's own folder, emptied by the rerun, is gone
     rec = json.loads((root / "masks" / "stage.json").read_text())
     assert "design/my_note.txt" not in rec["files"] and "design/levels.npy" in rec["files"]
+
+
+def test_an_interrupted_rerun_leaves_no_summary_of_the_earlier_run(tmp_path, monkeypatch):
+    """run.json and the top-level report are written at a run's end: a rerun interrupted in a stage leaves none of
+    the earlier run's (which would call the stage done, with the old numbers)."""
+    from doefab.pipeline import stagerun
+
+    scene = load_scene(_holder_scene(tmp_path))
+    out = tmp_path / "out"
+    run_scene(scene, out, quick=True, progress=False)
+    assert (out / "run.json").is_file()
+    (out / "report.md").write_text("an earlier run's report")
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(stagerun.STAGE_FUNCS, "holder", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_scene(scene, out, force=("holder",), quick=True, progress=False)
+    assert not (out / "run.json").exists() and not (out / "report.md").exists()

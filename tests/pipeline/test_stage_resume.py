@@ -127,6 +127,11 @@ def test_the_design_hash_follows_the_fabrication_and_the_tolerance_hash_its_netw
     assert stagerun.stage_hash(a, "design", {}, False) == stagerun.stage_hash(same, "design", {}, False)
     one, two = {"reconstruction": {"hash": "1"}}, {"reconstruction": {"hash": "2"}}
     assert stagerun.stage_hash(a, "tolerance", one, False) != stagerun.stage_hash(a, "tolerance", two, False)
+    # the scene size the network judge reads each part at, also in a run without a reconstruction stage
+    assert "size_px = 256" in text
+    (tmp_path / "small.toml").write_text(text.replace("size_px = 256", "size_px = 128"))
+    small = load_scene(tmp_path / "small.toml")
+    assert stagerun.stage_hash(a, "tolerance", {}, False) != stagerun.stage_hash(small, "tolerance", {}, False)
     # a wider aperture margin in the holder's pocket needs a larger die: the masks change, the design does not
     (tmp_path / "margin.toml").write_text(text.replace("[holder]\n", "[holder]\naperture_margin_mm = 3.0\n"))
     margin = load_scene(tmp_path / "margin.toml")

@@ -61,6 +61,8 @@ def test_interrupted_study_resumes(design_dir, tmp_path):
     (part / "samples.jsonl").write_text("\n".join(lines[:2]) + "\n" + lines[2][:20])  # killed mid-write
     again = montecarlo.monte_carlo(design_dir, budget, 4, part, seed=1, progress=False)
     assert [r["metric"] for r in again] == [r["metric"] for r in full]
+    rows = [json.loads(line) for line in (part / "samples.jsonl").read_text().splitlines()]  # JSON lines still
+    assert sorted(r["index"] for r in rows[1:]) == [0, 1, 2, 3]  # the cut line gone, no row glued to it
 
 
 def test_the_part_log_is_strict_json_and_a_nan_metric_resumes_as_nan(design_dir, tmp_path, monkeypatch):
@@ -718,3 +720,63 @@ def test_a_metric_or_change_that_is_not_a_number_prints_a_dash():
     got = delta_text("hdr", {"psnr": float("nan"), "psnr_highlight": -1.234}, {"psnr": 0.4, "psnr_highlight": 0.5})
     assert got == "PSNR —, highlight PSNR -1.23 ± 0.5 dB"
     assert delta_text("hdr", {"psnr": float("nan")}, names=False) == "—"
+
+
+def test_studies_sharing_a_dask_scheduler_keep_their_own_parts_and_its_workers_run_this_code(tmp_path,
+                                                                                               monkeypatch):
+    """Two studies on one ``tcp://`` scheduler submit their parts under keys of their own (equal keys would be
+    answered with the other study's parts); workers computing parts with other code are refused before any."""
+    pytest.importorskip("dask.distributed")
+    import dask.distributed as dd
+
+    from doefab.tolerance.conditions import model_sources_sha256
+
+    keys, digest = [], {"tcp://w1": model_sources_sha256()}
+
+    class Done:
+        def __init__(self, value):
+            self.value = value
+
+        def result(self):
+            return self.value
+
+    class FakeClient:
+        def __init__(self, address):
+            pass
+
+        def run(self, fn, *args):
+            return digest if fn is model_sources_sha256 else {}
+
+        def submit(self, fn, *args, key, **kw):
+            keys.append(key)
+            return Done({"metric": 0.5})
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(dd, "Client", FakeClient)
+    monkeypatch.setattr(dd, "as_completed", lambda futs: list(futs))
+    errs = {i: PartErrors() for i in range(3)}
+    got = []
+    for _ in range(2):
+        montecarlo._run_dask("tcp://127.0.0.1:1", "d", 1, [0, 1, 2], errs, lambda i, r: got.append(i))
+    assert got == [0, 1, 2, 0, 1, 2] and len(set(keys)) == 6  # no key of one study is the other's
+    digest["tcp://w2"] = "0" * 64
+    with pytest.raises(doefab.DoefabError, match="workers tcp://w2 run another version of doefab's part model"):
+        montecarlo._run_dask("tcp://127.0.0.1:1", "d", 1, [0], errs, lambda i, r: None)
+    assert len(keys) == 6  # refused before any part was submitted
+
+
+def test_a_resume_of_another_study_is_refused_before_its_steps_are_judged_or_replaced(design_dir, tmp_path):
+    """run_study reads samples.jsonl's header first: a changed budget is refused with the finished grid study and
+    tornado of the earlier study as they were."""
+    from doefab.tolerance.report import STEPS, run_study
+
+    budget = load_budget()
+    run_study(design_dir, budget, tmp_path, samples=2, seed=1, grid=1, progress=False)
+    steps = {p.name: p.read_bytes() for p in (tmp_path / STEPS).iterdir()}
+    other = {**budget, "overlay": {**budget["overlay"], "shift_sigma_um": 1.0}}
+    for g in (1, "auto"):
+        with pytest.raises(doefab.DoefabError, match="written for another run.*budget_sha256"):
+            run_study(design_dir, other, tmp_path, samples=2, seed=1, grid=g, progress=False)
+    assert {p.name: p.read_bytes() for p in (tmp_path / STEPS).iterdir()} == steps
