@@ -62,8 +62,8 @@ def markdown(runs: dict, images: int) -> str:
         + ", ".join(f"{n} ×{c}" for n, c in counts.most_common()) + ").", "",
         "Per measured scene, the mean δ<1.25 of its crops: " + ", ".join(
             f"{n} {v:.3f}" for n, v in sorted(scene.items(), key=lambda kv: kv[1])) +
-        f". Weighted equally the {len(scene)} read {equal:.3f}, a gap of {equal - float(np.mean(test)):+.3f}; the scene "
-        f"means' standard deviation is {spread:.3f}, so the measured side's standard error with "
+        f". Weighted equally the {len(scene)} read {equal:.3f}, a gap of {equal - float(np.mean(test)):+.3f}; "
+        f"the scene means' standard deviation is {spread:.3f}, so the measured side's standard error with "
         f"{len(scene)} scenes stays near {spread / np.sqrt(len(scene)):.3f} however many crops are drawn.", ""])
 
 

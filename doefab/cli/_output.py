@@ -26,19 +26,15 @@ def resume_hint(kept: str, force: bool) -> str:
 
 def clear_earlier_run(out: OutputDir, force: bool, extra=()) -> None:
     """``--force``: remove the earlier run's checkpoint (and a checkpoint write a kill left half done), its history
-    and ``extra`` files and folders from the run folder before any work, so neither a later ``--resume`` nor a
-    reader mixes the two runs (the folder is doefab's: ``claim_output`` checked its marker)."""
+    and ``extra`` files from the run folder before any work, so neither a later ``--resume`` nor a reader mixes the
+    two runs (the folder is doefab's: ``claim_output`` checked its marker)."""
     if not force or not out.path.is_dir():
         return
-    import shutil
-
     from doefab.design.checkpoint import clear_checkpoint
 
     clear_checkpoint(out.path)
     for f in extra:
-        if f.is_dir() and not f.is_symlink():
-            shutil.rmtree(f)
-        elif f.is_file():
+        if f.is_file():
             f.unlink()
 
 

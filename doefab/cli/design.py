@@ -57,7 +57,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
-    from doefab.cli._output import check_resume, claim_output, clear_earlier_run, resume_hint
+    from doefab.cli._output import check_resume, claim_output, resume_hint
+    from doefab.design.design import DESIGN_FILES
     from doefab.tasks import get_task
 
     task = get_task(args.task)
@@ -91,13 +92,12 @@ def run(args) -> int:
         params["loss_kind"] = args.loss
     if params:
         settings["task_params"] = params
-    # --force: the earlier design's files go first (design.json too), so an interrupted run leaves no complete-looking
-    # design of the old settings beside its checkpoint
-    clear_earlier_run(out, args.force, [out.path / f for f in ("design.json", "levels.npy", "height.npy")]
-                      + sorted(out.path.glob("*.png")))
     out.create()
+    # --force: the earlier design's files go as the run starts, after every check (design.json too), so an
+    # interrupted run leaves no complete-looking design of the old settings beside its checkpoint
     design = doefab.optimize(args.task, iterations=args.iterations, optimizer=args.optimizer, seed=args.seed,
-                             out_dir=out.path, resume=args.resume, **settings)
+                             out_dir=out.path, resume=args.resume, replace=DESIGN_FILES if args.force else (),
+                             **settings)
     design.save(out.path)
     m = design.metrics
     stop = design.extra.get("stop_reason")

@@ -106,7 +106,7 @@ def run(args) -> int:
     from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
-    from doefab.tolerance.report import STEPS, run_study
+    from doefab.tolerance.report import RESULT_FILES, STEPS, run_study
     from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
     ddir, design = design_folder(args.design)  # validated before any output exists
@@ -132,7 +132,7 @@ def run(args) -> int:
     args.resume_hint = resume_hint(f"finished samples are kept in {out.path}", args.force)
     out.create()
     if args.force:  # a fresh study: no saved parts, no finished steps, no results of the earlier one
-        for f in ["samples.jsonl", "tolerance.json", "report.md", *(p.name for p in out.path.glob("*.png"))]:
+        for f in ("samples.jsonl", *RESULT_FILES):
             (out.path / f).unlink(missing_ok=True)
         shutil.rmtree(out.path / STEPS, ignore_errors=True)
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,

@@ -25,9 +25,11 @@ from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
 from doefab.optics.camera import Camera, require_camera
 
-__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of", "designs_inside_hint"]
+__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of", "designs_inside_hint", "DESIGN_FILES"]
 
 FORMAT_VERSION = 1
+# what ``Design.save`` writes into its folder (design.json last); an earlier design's go before a fresh run
+DESIGN_FILES = ("design.json", "levels.npy", "height.npy", "levels.png", "psf_target_vs_design.png", "history.csv")
 
 
 def _versions() -> dict:

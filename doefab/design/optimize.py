@@ -120,7 +120,7 @@ def design_camera(camera: Camera, sampling: int) -> Camera:
 
 def optimize(task="streak", iterations: int | None = None, optimizer: str = "adam", seed: int = 0,
              camera: Camera | None = None, out_dir: str | Path | None = None, resume: bool = False,
-             progress: bool = True, device=None, **settings) -> Design:
+             progress: bool = True, device=None, replace: tuple = (), **settings) -> Design:
     """Optimise a task's coded height map and return the quantized design.
 
     Args:
@@ -131,6 +131,8 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         camera: defaults to the task's preset camera.
         out_dir: folder for ``checkpoint.pt`` and ``history.csv`` while running (None: no checkpoints).
         resume: continue from ``out_dir/checkpoint.pt``.
+        replace: names of an earlier run's files in ``out_dir`` (a finished design's, ``design.DESIGN_FILES``)
+            removed as a fresh run starts there, after every check (``doefab design --force``).
         device: where the PSFs and gradients are computed ("auto", "cpu", "cuda", "cuda:N"; None: the current
             default, ``doefab._devices.default_device``). The random batches are drawn on the CPU, so a seed gives
             the same steps on every device (the numbers agree to float32 rounding).
@@ -151,6 +153,8 @@ def optimize(task="streak", iterations: int | None = None, optimizer: str = "ada
         run.resume()
     elif out_dir is not None:
         clear_checkpoint(out_dir)  # a fresh run: an earlier run's checkpoint there must not be resumed later
+        for name in replace:  # and its results, so an interrupt leaves nothing complete-looking of that run
+            (Path(out_dir) / name).unlink(missing_ok=True)
     return run.run(progress)
 
 

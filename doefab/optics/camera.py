@@ -50,13 +50,14 @@ def require_camera(camera, what: str = "camera") -> "Camera":
 
 
 def _plain_numbers(cam) -> None:
-    """NumPy scalars (float32, float64, integers) given for the camera's numbers become Python numbers, as if typed:
-    a camera compares and hashes by value. Half precision is refused (``validate.full_precision``)."""
+    """NumPy scalars (float64, float32 with the value it rounded to, integers) given for the camera's numbers become
+    Python numbers: a camera compares, hashes and prints by value. Half precision is refused
+    (``validate.full_precision``)."""
     import numbers
 
     for f in dataclasses.fields(cam):
         v = getattr(cam, f.name)
-        if isinstance(v, numbers.Real) and not isinstance(v, (bool, int, float)) and hasattr(v, "dtype"):
+        if isinstance(v, numbers.Real) and type(v) not in (bool, int, float) and hasattr(v, "dtype"):
             full_precision(f"Camera.{f.name}", v)
             object.__setattr__(cam, f.name, int(v) if isinstance(v, numbers.Integral) else float(v))
 

@@ -28,7 +28,7 @@ import math
 import numpy as np
 import torch
 
-from doefab.validate import depths, heights, wavelength_m
+from doefab.validate import depths, full_precision, heights, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera, require_camera
 from doefab.optics.propagators.asm import angular_spectrum
@@ -78,6 +78,7 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     depth = depths([depth])[0]
     n = camera.doe_pixels
     if not isinstance(height, torch.Tensor):
+        full_precision("height", height)  # before the widening below
         try:
             height = torch.as_tensor(np.asarray(height, dtype=np.float64))
         except (TypeError, ValueError):

@@ -327,7 +327,9 @@ class PSFPlan:
             if check_gap(gap) > 0 and h is not None:
                 got = self.gap_psfs(h.to(self.device), gap)
         if got is None:
-            maps = {"coded": h, "uncoded": hr, "full": _whole_map(h, hr, self.camera)}
+            maps = {"coded": h, "uncoded": hr}
+            if "full" in self.halves:
+                maps["full"] = _whole_map(*(None if m is None else m.to(self.device) for m in (h, hr)), self.camera)
             got = {half: self.half_psf(half, maps[half]) for half in self.halves}
         got = to_device(got, back)
         return PSFPair(got.get("coded"), got.get("uncoded"), self.wavelengths, self.depths, self.camera.sensor_pitch,
@@ -336,7 +338,8 @@ class PSFPlan:
 
 def _whole_map(h, hr, camera: Camera):
     """The ``"full"`` pupil's map: the pair's system as one coherent pupil, ``h`` where a DOE pixel's centre lies
-    in the coded half (x ≤ 0: an odd grid's column on the split line too) and ``hr`` (None: flat) elsewhere."""
+    in the coded half (x ≤ 0) and ``hr`` (None: flat) elsewhere. On an odd grid the column on the split line takes
+    ``h`` whole (the pair gives its right half ``hr``)."""
     if h is None and hr is None:
         return None
     like = h if h is not None else hr

@@ -75,8 +75,8 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
     if progress:
         for note in res.warnings:
             print(f"[doefab run] warning: {note}", flush=True)
-    for f in SUMMARY_FILES:  # the earlier run's summary goes now: an interrupted run leaves none to mislead
-        (out / f).unlink(missing_ok=True)
+    for f in SUMMARY_FILES[:1] + (SUMMARY_FILES[1:] if "report" in scene.stages else ()):
+        (out / f).unlink(missing_ok=True)  # the earlier run's summary goes now: an interrupted run leaves none
     done: dict = {}
     for name in STAGES[:-1]:
         if name not in scene.stages:

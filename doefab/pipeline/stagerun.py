@@ -93,7 +93,8 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
     their scene sections (the masks also their die's side, which the holder's keys set); the task, --quick, its
     upstream stages' hashes, for the holder the source of ``holder_cad`` that builds it and, for the stages that
     draw fabricated parts from it, the tolerance budget's content (not only its file name); for the tolerance
-    stage the scene size its network judge reads (``reconstruction.size_px``) and, in the run in ``root``, the
+    stage the scene size its network judge reads (``reconstruction.size_px``, where not the default 256; --quick
+    sets its own) and, in the run in ``root``, the
     networks it judges through (``networks_trained_here``: those its
     reconstruction stage trained, also when this run did not run that stage)."""
     if name in ("design", "masks", "holder") and res is None:
@@ -119,8 +120,9 @@ def stage_hash(scene, name: str, done: dict, quick: bool, res: ResolvedScene | N
         parts["budget"] = budget_digest(scene)
         if scene.raw.get("sensor"):  # by content (a CSV's curves), and only when it is not the default sensor
             parts.update(scene_sensor(scene).entry(has(scene.task, "spectral")))
-    if name == "tolerance":  # the scene size a network judge reads each part at (the reconstruction table's)
-        parts["judge_size_px"] = int((scene.raw.get("reconstruction") or {}).get("size_px", 256))
+    size = int((scene.raw.get("reconstruction") or {}).get("size_px", 256))
+    if name == "tolerance" and size != 256 and not quick:  # the scene size a network judge reads each part at
+        parts["judge_size_px"] = size  # (only when not the default: earlier runs' hashes stand)
     if name == "tolerance" and root is not None:
         own, _ = networks_trained_here(scene, res if res is not None else resolve(scene), Path(root))
         if own is not None:  # (none: the hash is as without ``root``)

@@ -75,8 +75,9 @@ def _check_writable(target: Path, flag: str = "--weights-dir") -> None:
     if not here.is_dir():
         raise DoefabError(f"{flag} {target}: {here} is a file, so the folder cannot be made: give another")
     if not os.access(here, os.W_OK | os.X_OK):
-        raise DoefabError(f"{flag} {target}: {here} is not writable (read-only or another user's): give a "
-                          f"--weights-dir you can write")
+        fix = "give a folder you can write" if flag == "--weights-dir" else \
+            f"drop {flag} and give a --weights-dir you can write"
+        raise DoefabError(f"{flag} {target}: {here} is not writable (read-only or another user's): {fix}")
 
 
 def foreign_weights_files(folder: str | Path, task: str, variant: str) -> list[Path]:

@@ -31,8 +31,8 @@ from doefab.io import atomic_write_text, from_json_ready, json_text, read_json
 from doefab.tolerance.errors import budget_values, sample_errors
 from doefab.tolerance.schedulers import parse_scheduler
 
-__all__ = ["monte_carlo", "run_identity", "check_resumable", "summarize", "wilson", "mean_ci", "keep_freed_memory", "auto_workers",
-           "interval_text"]
+__all__ = ["monte_carlo", "run_identity", "check_resumable", "summarize", "wilson", "mean_ci", "keep_freed_memory",
+           "auto_workers", "interval_text"]
 
 
 def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, weights_dir=None,
@@ -101,7 +101,8 @@ def _check_header(log: Path, lines: list[str], identity: dict, partial: bool = F
     keys = [k for k in identity if not (partial and k == "grid")]
     if head is None or (not partial and head != identity) or any(head.get(k) != identity[k] for k in keys):
         diff = sorted(k for k in keys if head is None or head.get(k) != identity[k])
-        raise DoefabError(f"{log} was written for another run (differs in {', '.join(diff) or 'its header'}): "
+        code = "; another version of doefab's part model wrote it" if "part_model_sha256" in diff else ""
+        raise DoefabError(f"{log} was written for another run (differs in {', '.join(diff) or 'its header'}{code}): "
                           f"use a new --out, or --force to start again")
 
 
@@ -127,8 +128,15 @@ def _drop_cut_line(log: Path) -> None:
         return
     data = log.read_bytes()
     if data and not data.endswith(b"\n"):
-        with open(log, "r+b") as fh:
-            fh.truncate(data.rfind(b"\n") + 1)
+        last = data[data.rfind(b"\n") + 1:]
+        try:
+            json.loads(last)  # whole, only its newline lost: kept (``_read_log`` counted it done)
+        except ValueError:
+            with open(log, "r+b") as fh:
+                fh.truncate(len(data) - len(last))
+            return
+        with open(log, "ab") as fh:
+            fh.write(b"\n")
 
 
 def monte_carlo(design_dir, budget: dict, n: int, out_dir: str | Path, seed: int = 0, supersample: int = 1,
@@ -284,7 +292,10 @@ def _check_worker_code(client) -> None:
     from doefab.tolerance.conditions import model_sources_sha256
 
     here = model_sources_sha256()
-    other = sorted(w for w, d in client.run(model_sources_sha256).items() if d != here)
+    try:
+        other = sorted(w for w, d in client.run(model_sources_sha256).items() if d != here)
+    except (ImportError, AttributeError):  # a doefab without the digest: an older version
+        other = ["(some)"]
     if other:
         raise DoefabError(f"the scheduler's workers {', '.join(other)} run another version of doefab's part model "
                           f"than this process: start them from the same doefab (same version and files)")

@@ -181,6 +181,9 @@ def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
 
 
 STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
+# what a finished study writes beside samples.jsonl and steps/ (``run_study``, ``_figures``)
+RESULT_FILES = ("tolerance.json", "report.md", "tornado.png", "sweeps.png", "quantization.png", "yield_vs_n.png",
+                "delivered.png")
 
 
 def _step_key(judge, budget, grid, networks, weights_dir, network_top) -> dict:

@@ -40,25 +40,32 @@ def test_a_bug_is_one_line_exit_1_and_debug_shows_the_traceback(tmp_path, capsys
 
 def test_an_interrupted_force_run_leaves_no_earlier_result_and_says_to_resume_in_place_of_force(tmp_path, capsys,
                                                                                                 monkeypatch):
-    """design --force: the earlier design's files go before the run, so an interrupt leaves only the new run's
-    checkpoint (no design.json of the old settings that masks would be made from); the hint names --resume in
-    place of --force (repeating --force would start afresh again)."""
+    """design --force: the earlier design's files go as the run starts, after every check (a refused --force
+    run keeps them), so an interrupt leaves only the new run's checkpoint (no design.json of the old settings that
+    masks would be made from) and a user's own file; the hint names --resume in place of --force (repeating
+    --force would start afresh again)."""
     import torch
 
-    def interrupted(*a, out_dir=None, **k):
-        torch.save({"config": "{}"}, out_dir / "checkpoint.pt")  # a doefab checkpoint's header
+    from doefab.design.optimize import DesignRun
+
+    def interrupted(self, progress=True):
+        torch.save({"config": "{}"}, self.ckpt)  # a doefab checkpoint's header
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(doefab, "optimize", interrupted)
-    out = tmp_path / "d"
-    assert main(["design", "--task", "streak", "--out", str(out)]) == 130
+    monkeypatch.setattr(DesignRun, "run", interrupted)
+    out, argv = tmp_path / "d", ["design", "--task", "streak", "--sampling", "16", "--iterations", "2"]
+    assert main([*argv, "--out", str(out)]) == 130
     capsys.readouterr()
-    for f in ("design.json", "levels.npy", "height.npy", "levels.png"):  # as a finished earlier run left them
+    earlier = ("design.json", "levels.npy", "height.npy", "levels.png", "psf_target_vs_design.png")
+    for f in (*earlier, "my_photo.png"):  # as a finished earlier run left them, and a file of the user's
         (out / f).write_bytes(b"earlier")
-    assert main(["design", "--task", "streak", "--out", str(out), "--force"]) == 130
+    assert main([*argv, "--optimizer", "mma", "--sampling", "1", "--out", str(out), "--force"]) == 2  # refused
+    assert all((out / f).read_bytes() == b"earlier" for f in earlier)
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--force"]) == 130
     err = capsys.readouterr().err
     assert "rerun the same command with --resume in place of --force to continue" in err
-    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["checkpoint.pt"]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["checkpoint.pt", "my_photo.png"]
 
 
 def test_tolerance_resume_of_a_folder_without_a_study_is_refused(tmp_path, capsys):

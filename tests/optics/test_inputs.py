@@ -117,9 +117,9 @@ def test_fabricated_height_gives_the_unit_error(tiny_camera):
 def test_options_wavelength_tensors_and_units_each_get_their_own_error(cam):
     """A mistyped route option names the route and what it takes; a wavelength tensor under autograd says the PSF
     is differentiable in the heights only; a material's index refuses nanometres; a gap model takes a numpy map."""
-    with pytest.raises(DoefabError, match="'mft' route takes no option pixelnodes: its options are pixel_nodes"):
+    with pytest.raises(DoefabError, match=r"unknown option pixelnodes: .* the 'mft' route's \(pixel_nodes, max"):
         doefab.split_aperture_psf(None, cam, [550e-9], [1.0], route="mft", pixelnodes=3)
-    with pytest.raises(DoefabError, match="'spectral' route takes no option pixel_nodes: it takes no options"):
+    with pytest.raises(DoefabError, match=r"unknown option pixel_nodes: .* the 'spectral' route's \(it has none\)"):
         doefab.split_aperture_psf(None, cam, [550e-9], [1.0], pixel_nodes=3)
     with pytest.raises(DoefabError, match="requires grad: the PSF is differentiable in the height maps only"):
         doefab.split_aperture_psf(None, cam, torch.tensor([550e-9], requires_grad=True), [1.0])
@@ -133,6 +133,6 @@ def test_options_wavelength_tensors_and_units_each_get_their_own_error(cam):
 def test_numpy_scalars_make_the_same_camera_as_python_numbers():
     a = doefab.Camera(doe_pitch=np.float64(5.4e-6), doe_pixels=np.int64(1600), sensor_distance=np.float32(0.05))
     b = doefab.Camera(doe_pitch=5.4e-6, doe_pixels=1600, sensor_distance=float(np.float32(0.05)))
-    assert a == b and hash(a) == hash(b) and type(a.doe_pixels) is int
+    assert a == b and hash(a) == hash(b) and type(a.doe_pixels) is int and type(a.doe_pitch) is float
     with pytest.raises(DoefabError, match="half precision"):
         doefab.Camera(doe_pitch=np.float16(5.4e-6))

@@ -33,5 +33,5 @@ def test_replace_shipped_is_refused_before_training_where_the_package_folder_is_
     assert weights.weights_target(None, tmp_path, replace_shipped=True) == shipped
     real = os.access
     monkeypatch.setattr(os, "access", lambda p, mode: False if os.path.samefile(p, shipped) else real(p, mode))
-    with pytest.raises(DoefabError, match=r"--replace-shipped .*weights: .* is not writable .* --weights-dir"):
+    with pytest.raises(DoefabError, match=r"--replace-shipped .*weights: .* is not writable .*: drop --replace-shipped and give a --weights-dir"):
         weights.weights_target(None, tmp_path, replace_shipped=True)

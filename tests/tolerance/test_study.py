@@ -780,3 +780,34 @@ def test_a_resume_of_another_study_is_refused_before_its_steps_are_judged_or_rep
         with pytest.raises(doefab.DoefabError, match="written for another run.*budget_sha256"):
             run_study(design_dir, other, tmp_path, samples=2, seed=1, grid=g, progress=False)
     assert {p.name: p.read_bytes() for p in (tmp_path / STEPS).iterdir()} == steps
+
+
+def test_a_last_row_that_lost_only_its_newline_is_kept(design_dir, tmp_path):
+    budget = load_budget()
+    full = montecarlo.monte_carlo(design_dir, budget, 3, tmp_path / "r", seed=1, progress=False)
+    log = tmp_path / "r" / "samples.jsonl"
+    log.write_text(log.read_text().rstrip("\n"))  # killed between a row and its newline
+    again = montecarlo.monte_carlo(design_dir, budget, 3, tmp_path / "r", seed=1, progress=False)
+    rows = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [r["index"] for r in rows[1:]] == [0, 1, 2] and [r["metric"] for r in again] == [r["metric"] for r in full]
+
+
+def test_tolerance_force_removes_the_earlier_results_and_keeps_a_users_file(design_dir, tmp_path, monkeypatch):
+    """--force starts afresh: an interrupted forced study leaves no tolerance.json or report of the earlier one
+    (which would read as its result), while a file of the user's in the folder stays."""
+    import doefab.tolerance.report as report
+
+    out = tmp_path / "t"
+    argv = ["tolerance", "--design", str(design_dir), "--samples", "2", "--grid", "1", "--out", str(out)]
+    assert main(argv) == 0
+    assert {"tolerance.json", "report.md", "tornado.png"} <= {p.name for p in out.iterdir()}
+    (out / "my_notes.png").write_bytes(b"mine")
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "run_study", interrupted)
+    assert main(argv + ["--force"]) == 130
+    left = {p.name for p in out.iterdir()}
+    assert not left & {"tolerance.json", "report.md", "tornado.png", "samples.jsonl", "steps"}, left
+    assert (out / "my_notes.png").read_bytes() == b"mine"

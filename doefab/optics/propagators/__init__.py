@@ -27,6 +27,6 @@ def make_route(route, **options) -> Route:
     takes = [p for p in inspect.signature(cls).parameters if p not in ("self", "args", "kwargs")]
     other = sorted(set(options) - set(takes))
     if other:
-        raise DoefabError(f"the {route!r} route takes no option {', '.join(other)}: "
-                          + (f"its options are {', '.join(takes)}" if takes else "it takes no options"))
+        raise DoefabError(f"unknown option {', '.join(other)}: not one of the PSF functions' (PSFPlan) nor of the "
+                          f"{route!r} route's " + (f"({', '.join(takes)})" if takes else "(it has none)"))
     return cls(**options)

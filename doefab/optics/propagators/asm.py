@@ -46,6 +46,8 @@ def angular_spectrum(field: torch.Tensor, pitch: float, wavelength: float, dista
     distance = number_in("distance", distance, -1e3, 1e3, unit="m")
     pad = number_in("pad", pad, 1, 64)  # a padding factor (the grid grows to pad × its size)
     field = field if isinstance(field, torch.Tensor) else torch.as_tensor(np.asarray(field))
+    if field.dtype in (torch.uint8, torch.int8, torch.int16, torch.int32, torch.int64):
+        field = field.to(torch.float64)  # an integer amplitude mask
     if field.ndim < 2 or not (field.is_complex() or field.is_floating_point()):
         raise DoefabError(f"angular_spectrum: field must be a (..., Ny, Nx) complex or real array of numbers, got "
                           f"shape {tuple(field.shape)} of {field.dtype}")
