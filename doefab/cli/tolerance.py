@@ -124,11 +124,12 @@ def run(args) -> int:
     if both:
         raise DoefabError(both)
     check_reachable(args.scheduler, "--scheduler")
-    if args.resume and not any((Path(args.out) / f).exists() for f in ("samples.jsonl", STEPS)):
+    saved = ("samples.jsonl", STEPS)  # a study's progress, which --resume continues and a failed run keeps
+    if args.resume and not any((Path(args.out) / f).exists() for f in saved):
         raise DoefabError(f"--resume: {args.out} holds no tolerance study to continue (no samples.jsonl, no "
                           f"{STEPS}/): start one without --resume")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
-                       keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in ("samples.jsonl", STEPS)))
+                       keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in saved))
     args.resume_hint = resume_hint(f"finished samples are kept in {out.path}", args.force)
     out.create()
     if args.force:  # a fresh study: no saved parts, no finished steps, no results of the earlier one

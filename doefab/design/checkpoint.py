@@ -48,6 +48,11 @@ def _written_by_doefab(path: Path) -> bool:
         state = torch.load(path, weights_only=True, map_location="cpu")
     except Exception:  # noqa: BLE001 - a file torch cannot read is not a doefab checkpoint
         return False
+    return _doefab_header(state)
+
+
+def _doefab_header(state) -> bool:
+    """A loaded checkpoint is doefab's: a dict whose ``config`` is the JSON of its run's settings."""
     return isinstance(state, dict) and isinstance(state.get("config"), str)
 
 
@@ -91,7 +96,7 @@ def _read(path: Path) -> tuple[dict, dict]:
     except Exception as exc:  # noqa: BLE001 - any unpickling/zip error means a corrupt file
         raise DoefabError(f"checkpoint {path} is corrupt or not a doefab checkpoint ({exc.__class__.__name__}): "
                           f"move it away, or give another folder, and start afresh, without resuming") from None
-    if not isinstance(state, dict) or not isinstance(state.get("config"), str):
+    if not _doefab_header(state):
         raise DoefabError(f"checkpoint {path} lacks doefab fields (not a doefab checkpoint): move it away, or give "
                           f"another folder, and start afresh, without resuming")
     try:

@@ -1,14 +1,15 @@
-"""Reference height maps: blank DOE and blazed gratings (full aperture grid, metres)."""
+"""Height maps: the reference ones (blank DOE, blazed gratings; full aperture grid, metres), and a given one
+validated as a tensor (``as_height_tensor``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from doefab.validate import number_in, wavelength_m
+from doefab.validate import full_precision, heights, number_in, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera, require_camera
 
-__all__ = ["blank_height", "blazed_grating_height"]
+__all__ = ["blank_height", "blazed_grating_height", "as_height_tensor"]
 
 
 def blank_height(camera: Camera) -> np.ndarray:
@@ -48,3 +49,32 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
         frac = np.mod(-frac, 1.0)
     row = frac * h2pi
     return np.tile(row, (camera.doe_pixels, 1))
+
+
+def as_height_tensor(height, camera: Camera, name: str = "height", dtype=None):
+    """Validate a height map (metres, shape (N, N) of the camera's DOE grid) and return it as a tensor.
+
+    Tensors keep their autograd graph; numpy arrays are converted. ``dtype``: the tensor's (None: float32).
+    """
+    import torch
+
+    n = camera.doe_pixels
+    full_precision(name, height)  # before any conversion: float16 heights are already rounded
+    if isinstance(height, torch.Tensor):
+        t = height
+    else:
+        try:
+            arr = np.asarray(height)
+        except Exception:  # noqa: BLE001 - anything that is not array-like
+            raise DoefabError(f"{name} must be an (N, N) array of heights in metres") from None
+        if arr.dtype.kind not in "fiu":
+            raise DoefabError(f"{name} must be a real numeric array of heights in metres, got dtype {arr.dtype}")
+        t = torch.from_numpy(np.ascontiguousarray(arr, dtype=np.float64))
+    if t.is_complex() or not (t.is_floating_point() or t.dtype in (torch.int32, torch.int64, torch.uint8)):
+        raise DoefabError(f"{name} must hold real heights in metres, got dtype {t.dtype}")
+    if tuple(t.shape) != (n, n):
+        raise DoefabError(
+            f"{name} has shape {tuple(t.shape)} but the camera's DOE grid is ({n}, {n}); resample it or set "
+            f"Camera.doe_pixels")
+    heights(name, t)
+    return t.to(torch.float32 if dtype is None else dtype)

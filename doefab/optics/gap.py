@@ -28,9 +28,10 @@ import math
 import numpy as np
 import torch
 
-from doefab.validate import depths, full_precision, heights, wavelength_m
+from doefab.validate import depths, wavelength_m
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera, require_camera
+from doefab.optics.elements import as_height_tensor
 from doefab.optics.propagators.asm import angular_spectrum
 from doefab.optics.pupil import pupil_half, source_path_difference
 
@@ -66,7 +67,7 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
 
     Args:
         height: (N, N) heights in metres on the camera's DOE grid (both halves: the plain half is the
-            phase reference; ``doefab.as_height_tensor`` validates).
+            phase reference; a tensor or array, validated by ``elements.as_height_tensor``).
         wavelength: metres.  depth: on-axis source distance in metres (``inf`` = plane wave).
         gap: DOE-to-aperture-plane distance, metres (0 ≤ gap ≤ 5 cm).
         pad: zero-padding factor of the angular spectrum grid. Default: just enough that light diffracted at
@@ -76,22 +77,11 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
     camera, g = require_camera(camera), check_gap(gap)
     wavelength = wavelength_m("wavelength", wavelength)
     depth = depths([depth])[0]
-    n = camera.doe_pixels
-    if not isinstance(height, torch.Tensor):
-        full_precision("height", height)  # before the widening below
-        try:
-            height = torch.as_tensor(np.asarray(height, dtype=np.float64))
-        except (TypeError, ValueError):
-            raise DoefabError(f"height must be a ({n}, {n}) array of heights in metres, got {type(height).__name__}") \
-                from None
-    if tuple(height.shape) != (n, n):
-        raise DoefabError(f"height must be ({n}, {n}) on the camera's DOE grid, got {tuple(height.shape)}")
-    heights("height", height)
-    real = height.dtype if height.is_floating_point() else torch.float64
+    keep = isinstance(height, torch.Tensor) and height.is_floating_point()  # its dtype (and graph) kept
+    h = as_height_tensor(height, camera, "height", height.dtype if keep else torch.float64)
     k = 2 * math.pi / wavelength
     dn = float(camera.material.index(wavelength)) - 1.0
     _, plain, _ = _baffle(camera)
-    h = height.to(real)
     h_ref = h[torch.from_numpy(plain).to(h.device)].mean() if plain.any() else h.new_zeros(())
     phase = (k * dn) * (h - h_ref)
     return gap_field(torch.polar(torch.ones_like(phase), phase), camera, wavelength, depth, g, pad)

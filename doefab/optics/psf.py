@@ -19,6 +19,7 @@ from doefab import validate as _validate
 from doefab._devices import resolve_device, to_device
 from doefab.errors import DoefabError
 from doefab.optics.camera import Camera, require_camera, window_reach
+from doefab.optics.elements import as_height_tensor
 from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
@@ -113,33 +114,6 @@ def _shown(value) -> str:
     if hasattr(value, "name"):
         return str(value.name)
     return f"{value:g} m" if isinstance(value, float) and value < 1 else f"{value:g}"
-
-
-def as_height_tensor(height, camera: Camera, name: str = "height", dtype=torch.float32) -> torch.Tensor:
-    """Validate a height map (metres, shape (N, N) of the camera's DOE grid) and return it as a tensor.
-
-    Tensors keep their autograd graph; numpy arrays are converted.
-    """
-    n = camera.doe_pixels
-    _validate.full_precision(name, height)  # before any conversion: float16 heights are already rounded
-    if isinstance(height, torch.Tensor):
-        t = height
-    else:
-        try:
-            arr = np.asarray(height)
-        except Exception:  # noqa: BLE001 - anything that is not array-like
-            raise DoefabError(f"{name} must be an (N, N) array of heights in metres") from None
-        if arr.dtype.kind not in "fiu":
-            raise DoefabError(f"{name} must be a real numeric array of heights in metres, got dtype {arr.dtype}")
-        t = torch.from_numpy(np.ascontiguousarray(arr, dtype=np.float64))
-    if t.is_complex() or not (t.is_floating_point() or t.dtype in (torch.int32, torch.int64, torch.uint8)):
-        raise DoefabError(f"{name} must hold real heights in metres, got dtype {t.dtype}")
-    if tuple(t.shape) != (n, n):
-        raise DoefabError(
-            f"{name} has shape {tuple(t.shape)} but the camera's DOE grid is ({n}, {n}); resample it or set "
-            f"Camera.doe_pixels")
-    _validate.heights(name, t)
-    return t.to(dtype)
 
 
 def _check_window(camera: Camera, depths, k: int) -> None:
@@ -267,9 +241,7 @@ class PSFPlan:
         wl = range(len(self.wavelengths)) if wavelength_indices is None else list(wavelength_indices)
         h = None
         if height is not None:
-            h = height.to(self.device)[geo.rows, geo.cols]
-            if geo.oversample > 1:
-                h = h.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
+            h = _on_samples(height.to(self.device)[geo.rows, geo.cols], geo.oversample)
         setup, prepared = self._prepared(half, h is not None and _structured(h, cov))
         kw = scratch_kwargs(self.route)  # the route's buffers, reused over the wavelengths (none under a gradient)
         out = []
@@ -294,11 +266,8 @@ class PSFPlan:
             t_full = [gap_transmittance(doe, self.camera, lam, self.depths[j], gap) for j in didx]
             for half in halves:
                 geo, cov, opd, _, _ = self._halves[half]
-                t = torch.stack([tf[geo.rows, geo.cols] for tf in t_full])
-                hd = doe[geo.rows, geo.cols]
-                if geo.oversample > 1:
-                    t = t.repeat_interleave(geo.oversample, -2).repeat_interleave(geo.oversample, -1)
-                    hd = hd.repeat_interleave(geo.oversample, 0).repeat_interleave(geo.oversample, 1)
+                t = _on_samples(torch.stack([tf[geo.rows, geo.cols] for tf in t_full]), geo.oversample)
+                hd = _on_samples(doe[geo.rows, geo.cols], geo.oversample)
                 # the coded half is a pixelated DOE (pixel envelope, as at gap 0, and like it none for a flat
                 # plate); the plain half sees the DOE's diffracted light as a smooth field, as its gap-0 PSF does
                 setup, prepared = self._prepared(half, half != "uncoded" and _structured(hd, cov))
@@ -346,6 +315,11 @@ def _whole_map(h, hr, camera: Camera):
     centres = (torch.arange(camera.doe_pixels, device=like.device) - (camera.doe_pixels - 1) / 2)
     left = (centres <= 0)[None, :]
     return torch.where(left, h if h is not None else 0.0, hr if hr is not None else 0.0)
+
+
+def _on_samples(x: torch.Tensor, q: int) -> torch.Tensor:
+    """A map (or a stack of maps) held per DOE pixel, on a half's pupil samples: each pixel repeated q × q."""
+    return x if q == 1 else x.repeat_interleave(q, -2).repeat_interleave(q, -1)
 
 
 def _structured(h: torch.Tensor, cov: torch.Tensor) -> bool:

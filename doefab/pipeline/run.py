@@ -18,7 +18,7 @@ from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, kept_note, run_sta
 from doefab.pipeline.stages import resolve
 from doefab.tolerance.schedulers import check_reachable
 
-SUMMARY_FILES = ("run.json", "report.md", "report.html")  # a scene run's top-level summary, written at its end
+REPORT_FILES = ("report.md", "report.html")  # the report stage's, at the run folder's top with run.json
 
 __all__ = ["run_scene", "prepare_scene", "foreign_stage_folders"]
 
@@ -75,8 +75,9 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
     if progress:
         for note in res.warnings:
             print(f"[doefab run] warning: {note}", flush=True)
-    for f in SUMMARY_FILES[:1] + (SUMMARY_FILES[1:] if "report" in scene.stages else ()):
-        (out / f).unlink(missing_ok=True)  # the earlier run's summary goes now: an interrupted run leaves none
+    # the earlier run's summary (written at a run's end) goes now: an interrupted run leaves none to mislead
+    for f in ("run.json", *(REPORT_FILES if "report" in scene.stages else ())):
+        (out / f).unlink(missing_ok=True)
     done: dict = {}
     for name in STAGES[:-1]:
         if name not in scene.stages:
