@@ -19,8 +19,9 @@ from doefab.pipeline.knobs import BENCHMARK, REPO, knob_plots
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.stagerun import kept_note
 
-__all__ = ["write_report", "SECTIONS", "html_text", "deepest_preview", "system_table", "REPO"]
+__all__ = ["write_report", "REPORT_FILES", "SECTIONS", "html_text", "deepest_preview", "system_table", "REPO"]
 
+REPORT_FILES = ("report.md", "report.html")  # at the run folder's top, beside run.json
 SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", "Tolerance", "Error against run time")
 
 
@@ -49,8 +50,9 @@ def write_report(out: Path, scene, done: dict, res: ResolvedScene, quick: bool =
               for sec, items in blocks]
     images = [it[1] for _, items in blocks for it in items if it[0] == "img"]
     md, body = _render(blocks)
-    atomic_write_text(out / "report.md", "\n".join([f"# doefab report — {scene.path.name}", ""] + md) + "\n")
-    atomic_write_text(out / "report.html", _page(scene.path.name, body))
+    md_file, html_file = REPORT_FILES
+    atomic_write_text(out / md_file, "\n".join([f"# doefab report — {scene.path.name}", ""] + md) + "\n")
+    atomic_write_text(out / html_file, _page(scene.path.name, body))
     atomic_write_text(out / "report_files" / "images.json", json.dumps(images))
     return {"images": images, "sections": [b[0] for b in blocks]}
 

@@ -18,8 +18,6 @@ from doefab.pipeline.stagerun import STAGE_FUNCS, STAGE_KIND, kept_note, run_sta
 from doefab.pipeline.stages import resolve
 from doefab.tolerance.schedulers import check_reachable
 
-REPORT_FILES = ("report.md", "report.html")  # the report stage's, at the run folder's top with run.json
-
 __all__ = ["run_scene", "prepare_scene", "foreign_stage_folders"]
 
 
@@ -76,6 +74,8 @@ def _run_locked(scene: Scene, out: Path, res: ResolvedScene, force: tuple, quick
         for note in res.warnings:
             print(f"[doefab run] warning: {note}", flush=True)
     # the earlier run's summary (written at a run's end) goes now: an interrupted run leaves none to mislead
+    from doefab.pipeline.report import REPORT_FILES
+
     for f in ("run.json", *(REPORT_FILES if "report" in scene.stages else ())):
         (out / f).unlink(missing_ok=True)
     done: dict = {}
