@@ -316,11 +316,15 @@ def read_toml(path: str | Path, what: str) -> dict:
     p = Path(path)
     if p.is_dir():
         raise DoefabError(f"{what} {p} is a folder: give the path of a TOML file")
+    if p.exists() and not p.is_file():
+        raise DoefabError(f"{what} {p} is not a regular file: give the path of a TOML file")
     if not p.is_file():
         raise DoefabError(f"{what} {p} not found")
     try:
         return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark (some editors write one)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError:
+        raise DoefabError(f"{what} {p} is not UTF-8 text, as a TOML file is: give a TOML file, saved as UTF-8") from None
+    except tomllib.TOMLDecodeError as exc:
         raise DoefabError(f"{p} is not valid TOML ({exc})") from None
 
 

@@ -70,8 +70,10 @@ def _csv_curves(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths in metres, [3, L]) of a ``wavelength_nm, R, G, B`` CSV, or one error naming the fix."""
     if not path.is_file():
         names = ", ".join(f'"{n}"' for n in RESPONSES)
+        near = [n for n in RESPONSES if n.lower() == path.name.strip().lower()]
+        fix = f'write "{near[0]}" (a camera\'s name as listed)' if near else _FIX
         raise DoefabError(f"camera response {str(path)!r} is neither a known camera ({names}) nor an existing CSV "
-                          f"file: {_FIX}")
+                          f"file: {fix}")
     lines, data = _csv_rows(path)
     lam_nm, curves = data[:, 0], data[:, 1:].T
     for unit, top, factor in (("metres", 1e-3, 1e9), ("micrometres", 3.0, 1e3)):

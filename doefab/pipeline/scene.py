@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from doefab.validate import distance_or_inf, metres_hint, unit_hint
-from doefab.applications import APPLICATIONS, View
+from doefab.applications import APPLICATIONS, View, has
 from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_value, values_text
@@ -23,6 +23,7 @@ from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_
 __all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
 
 TASK_DESIGN = View(lambda a: a.design_task)  # a view of the registry (read on every lookup), for callers
+SECTIONS = ("camera", "sensor", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance")
 # keys that set the same quantity: a scene gives at most one of each group
 SAME_QUANTITY = ((("focal_length_mm", "sensor_distance_mm", "sensor_distance_m"), "the lens-to-sensor distance"),
                  (("aperture_diameter_mm", "f_number"), "the DOE's aperture"))
@@ -45,18 +46,16 @@ class Scene:
     device: str | None = None  # the scene's device key (None: not given, the default device)
 
     def budget_path(self) -> Path | None:
-        """The tolerance budget file: None for the shipped default, else relative to the scene file or as given."""
+        """The tolerance budget file: None for the shipped default, else relative to the scene file (or absolute)."""
         b = (self.tolerance or {}).get("budget", "default")
         return None if b == "default" else _budget_file(self.path, b)
 
     def response_path(self) -> str:
-        """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or as given)."""
+        """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or absolute)."""
         from doefab.imaging.responses import DEFAULT_RESPONSE, is_named
 
         r = self.sensor.get("response", DEFAULT_RESPONSE)
-        if is_named(r):
-            return r
-        return str(self.path.parent / r) if (self.path.parent / r).is_file() else r
+        return r if is_named(r) else str(scene_relative(self.path, r))
 
     def section(self, name: str) -> dict:
         return self.raw.get(name, {}) if name else {k: v for k, v in self.raw.items() if not isinstance(v, dict)}
@@ -88,12 +87,11 @@ def _value_problem(where: str, v, key) -> str | None:
             except DoefabError as exc:
                 return f"{where}: {exc}"
             return None
-        return None if v in key.choices else f"{where} {v!r} is not one of {', '.join(map(str, key.choices))}"
+        return choice_problem(where, v, key.choices)
     if key.inf and distance_or_inf(v) == math.inf:  # inf, or "inf"
         return None
     if not _typed(v, key.kind):
-        what = "a number" + (" or inf" if key.inf else "") if key.kind == "float" else key.kind
-        return f"{where} must be {what}, got {v!r}"
+        return _type_problem(where, v, key)
     if key.resolve is not None:
         try:
             key.resolve(v)
@@ -103,6 +101,42 @@ def _value_problem(where: str, v, key) -> str | None:
         if not math.isfinite(v) or not key.lo <= v <= key.hi:
             return f"{where} = {v} is outside {key.lo:g}–{key.hi:g} {key.unit}{_hint(v, key)}".rstrip()
     return None
+
+
+_KIND_WORDS = {"float": "a number", "int": "a whole number", "str": "text in quotes", "bool": "true or false"}
+
+
+def _type_problem(where: str, v, key) -> str:
+    """A value of the wrong type: what the key takes, and the line to write where the value is a number in quotes
+    or with its unit (``"35 mm"``: the unit is in the key's name)."""
+    what = _KIND_WORDS.get(key.kind, key.kind) + (" or inf" if key.inf else "")
+    text = f"{where} must be {what}, got {v!r}"
+    if key.kind in ("float", "int") and isinstance(v, str):
+        number = v.strip().split(" ")[0]
+        try:
+            x = float(number)
+        except ValueError:
+            return text
+        if key.kind == "float" or x.is_integer():
+            unit = f" (the unit, {key.unit}, is in the key's name)" if key.unit else ""
+            return text + f": write {where.split('.')[-1]} = {number} without quotes{unit}"
+    if key.kind == "int" and isinstance(v, float) and v.is_integer():
+        return text + f": write {int(v)}"
+    return text
+
+
+def choice_problem(where: str, v, choices) -> str | None:
+    """The problem with a choice key's value (None: it is one of ``choices``, of the same type: 8.0 is not 8),
+    naming the choice meant where only case or spaces differ."""
+    if any(v == c and type(v) is type(c) for c in choices):
+        return None
+    listed = ", ".join(map(str, choices))
+    if v is None:
+        return f"{where} is missing: add {where} = {toml_value(choices[0])} (one of {listed})"
+    near = [c for c in choices if str(c).lower() == str(v).strip().lower() or (v == c and not isinstance(v, bool))]
+    if near and (isinstance(v, str) or not isinstance(near[0], str)):
+        return f"{where} {v!r} is not one of {listed}: write {where.split('.')[-1]} = {toml_value(near[0])}"
+    return f"{where} {v!r} is not one of {listed}"
 
 
 def _bad_item(x, key) -> bool:
@@ -156,10 +190,12 @@ def _schema_problems(raw: dict) -> list[str]:
     """Unknown sections and keys, values of the wrong type, choice or range (``scenekeys.KEYS``), keys that set
     the same quantity twice."""
     problems = []
-    sections = {"camera", "sensor", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance"}
+    task = raw.get("task") if isinstance(raw.get("task"), str) else None
     for key, val in raw.items():
-        if isinstance(val, dict):
-            if key not in sections:
+        if key in SECTIONS and not isinstance(val, dict):
+            problems.append(_not_table(key, val))
+        elif isinstance(val, dict):
+            if key not in SECTIONS:
                 problems.append(f"unknown section [{key}]")
             elif key != "holder":
                 known = keys_of(key)
@@ -168,6 +204,8 @@ def _schema_problems(raw: dict) -> list[str]:
                         problems.append(_renamed(key, k, v, val))
                     elif k not in known:
                         problems.append(f"unknown key {key}.{k}")
+                    elif known[k].only and task in APPLICATIONS and not has(task, known[k].only):
+                        problems.append(_other_task(f"{key}.{k}", known[k].only, task))
                     else:
                         problems.append(_value_problem(f"{key}.{k}", v, known[k]))
         elif key not in keys_of(""):
@@ -180,6 +218,21 @@ def _schema_problems(raw: dict) -> list[str]:
         if len(given) > 1:
             problems.append(f"{' and '.join(given)} both set {what}: keep one of them")
     return [p for p in problems if p]
+
+
+def _not_table(section: str, value) -> str:
+    """A known section given as a value, or as an array of tables (``[[holder]]``)."""
+    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+        return f"[[{section}]] is an array of tables: write [{section}] once, with its keys under it"
+    return (f"{section} = {value!r}: [{section}] is a table: write [{section}] on a line of its own, with its keys "
+            f"under it")
+
+
+def _other_task(where: str, prop: str, task: str) -> str:
+    """A key of another application's scenes (``Key.only``): which tasks take it."""
+    takers = [n for n in APPLICATIONS if has(n, prop)]
+    return (f"{where} applies to task = {' or '.join(map(repr, takers))} only (this scene's task is {task!r}): "
+            f"delete it")
 
 
 def _stage_problems(stages: tuple) -> list[str]:
@@ -196,18 +249,17 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene file; every problem (unknown key, wrong type or unit, impossible value) in one message."""
     p = Path(path)
     raw = read_toml(p, "scene file")
+    if not raw:
+        raise DoefabError(f"scene file {p} holds no keys: `doefab scene new --task TASK --out FILE` writes one with "
+                          f"every key to edit")
     problems = _schema_problems(raw)
     task = raw.get("task")
-    if task not in APPLICATIONS:
-        problems.append(f"task must be one of {sorted(APPLICATIONS)}, got {task!r}")
+    problems += [p for p in [choice_problem("task", task, tuple(APPLICATIONS))] if p]
     stages = raw.get("stages", STAGES)
     stages = tuple(stages) if isinstance(stages, list) else STAGES  # not a list: named by the schema check
     problems += _stage_problems(stages)
-    cam = raw.get("camera", {})
-    opt = raw.get("optics", {})
-    des = raw.get("design", {})
-    fab = raw.get("fabrication", {})
-    hol = raw.get("holder", {})
+    cam, opt, des, fab, hol, rec, sen = (_table(raw, s) for s in ("camera", "optics", "design", "fabrication",
+                                                                    "holder", "reconstruction", "sensor"))
     if hol:
         import dataclasses
 
@@ -220,11 +272,10 @@ def load_scene(path: str | Path) -> Scene:
         if problem:                                      # die and aperture, is checked by ``system.resolve``
             own = '; or leave "holder" out of stages (a holder of your own)' if "holder" in stages else ""
             problems.append(f"holder: {problem}{own}")
-    rec = raw.get("reconstruction", {})
     if "size_px" in rec and _typed(rec["size_px"], "int") and rec["size_px"] % 32:
         problems.append(f"reconstruction.size_px = {rec['size_px']} must be a multiple of 32")
-    tol = raw.get("tolerance")
-    if isinstance(tol, dict):
+    tol = raw.get("tolerance") if isinstance(raw.get("tolerance"), dict) else None
+    if tol is not None:
         problems += _budget_problems(p, tol.get("budget", "default"))
         from doefab.tolerance.schedulers import runner_conflict
 
@@ -233,12 +284,25 @@ def load_scene(path: str | Path) -> Scene:
     if problems:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
-                 reconstruction=rec, tolerance=tol, sensor=raw.get("sensor", {}), raw=raw, device=raw.get("device"))
+                 reconstruction=rec, tolerance=tol, sensor=sen, raw=raw, device=raw.get("device"))
+
+
+def _table(raw: dict, section: str) -> dict:
+    """A section of the file ({} where it is missing, or not a table: ``_not_table`` names that)."""
+    v = raw.get(section, {})
+    return v if isinstance(v, dict) else {}
+
+
+def scene_relative(scene_path: Path, given: str) -> Path:
+    """A path a scene file names: relative to the scene file's folder (wherever the command runs), or absolute.
+
+    Example: ``scene_relative(Path("scenes/a.toml"), "b.toml")`` → ``Path("scenes/b.toml")``."""
+    return scene_path.parent / Path(given).expanduser()
 
 
 def _budget_file(scene_path: Path, budget: str) -> Path:
-    """A budget path relative to the scene file (or as given)."""
-    return scene_path.parent / budget if (scene_path.parent / budget).is_file() else Path(budget)
+    """A budget path relative to the scene file (or absolute)."""
+    return scene_relative(scene_path, budget)
 
 
 def _budget_problems(scene_path: Path, budget) -> list[str]:
@@ -249,8 +313,11 @@ def _budget_problems(scene_path: Path, budget) -> list[str]:
     if budget == "default" or not isinstance(budget, str):
         return []  # the shipped budget; a value of another type is named by the schema check
     path = _budget_file(scene_path, budget)
+    if path.is_dir():
+        return [f"tolerance.budget {budget!r}: {path} is a folder: give a budget TOML file (or default)"]
     if not path.is_file():
-        return [f"tolerance.budget {budget!r}: no such file (give default or a TOML path)"]
+        return [f"tolerance.budget {budget!r}: no file at {path} (a path relative to the scene file, or absolute; or "
+                f"default)"]
     try:
         return [f"tolerance.budget {budget}: {q}" for q in budget_problems(path)]
     except DoefabError as exc:  # not TOML

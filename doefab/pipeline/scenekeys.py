@@ -12,6 +12,7 @@ from functools import partial
 from typing import Callable, NamedTuple
 
 from doefab.applications import APPLICATIONS, has
+from doefab.errors import DoefabError
 from doefab._devices import DEVICE_WORDS, device_syntax
 from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, FULL_WELL_RANGE_E, READ_NOISE_RANGE_E
@@ -80,13 +81,21 @@ class Key:
     item: str = ""
     resolve: Callable | None = None
     inf: bool = False  # a float key (or a list key's float items) that also takes inf (TOML's inf, or "inf")
+    only: str = ""  # the application property (``applications.PROPERTIES``) a scene needs for this key, or ""
+
+
+def _knots(n: int) -> int:
+    """``design.knots``: 0 or at least 2 (one knot makes no profile)."""
+    if n == 1:
+        raise DoefabError("1 knot makes no profile: give 0 (one per design-grid pixel along the radius) or at least 2")
+    return n
 
 
 KEYS = (
     Key("", "task", "choice", choices=tuple(APPLICATIONS), default="required",
         help="what the camera adds: HDR (streak DOE), 31-band spectra (grating), depth (half-ring)"),
     Key("", "stages", "list", choices=STAGES, item="choice", default="all",
-        help="stages to run, in order: design, masks, holder, reconstruction, tolerance, report"),
+        help="stages to run (always in this order): design, masks, holder, reconstruction, tolerance, report"),
     Key("", "device", "choice", choices=DEVICE_WORDS, resolve=partial(device_syntax, name="scene"), default="auto",
         help="where torch computes (design, networks, tolerance): auto (a CUDA GPU when torch sees one, else the "
              "CPU), cpu, cuda or cuda:N (GPU N); doefab run --device overrides it"),
@@ -142,20 +151,28 @@ KEYS = (
     Key("design", "seed", "int", "", 0, 2**32 - 1, default="0", help="random seed"),
     Key("design", "parameterization", "choice", choices=("pixel", "radial"), default="the committed design's",
         help="free pixels, or a rotationally symmetric profile"),
-    Key("design", "knots", "int", "", 0, 100000, default="0",
-        help="radial knots (0: one per design-grid pixel along the radius)"),
+    Key("design", "knots", "int", "", 0, 100000, default="0", resolve=_knots,
+        help="radial knots (0: one per design-grid pixel along the radius; else at least 2); parameterization "
+             "radial only"),
     Key("design", "ring_law", "choice", choices=("seed", "defocus"), default="the committed design's",
+        only="depth",
         help="depth: ring radius linear in depth (the paper's law, \"seed\") or in inverse depth (defocus)"),
     Key("design", "ring_max_px", "float", "px", 0.0, 2047.0, default="the camera's defocus blur",
+        only="depth",
         help="depth: ring radius at the nearest plane"),
     Key("design", "ring_width_px", "float", "px", 0.01, 100.0, default="1",
+        only="depth",
         help="depth: half-width of the ring the target and metric count (sensor pixels either side of the arc)"),
-    Key("design", "streak_arm_px", "int", "px", 1, 2047, default="40", help="HDR: length of the streak's arms"),
+    Key("design", "streak_arm_px", "int", "px", 1, 2047, default="40", only="highlights",
+        help="HDR: length of the streak's arms"),
     Key("design", "streak_band_px", "int", "px", 0, 64, default="1",
+        only="highlights",
         help="HDR: half-width of the band around the arms the metric counts"),
     Key("design", "grating_period_um", "float", "µm", 0.5, 1e4, default="16 DOE pixels",
+        only="spectral",
         help="spectra: grating period"),
     Key("design", "grating_box_px", "int", "px", 0, 64, default="1",
+        only="spectral",
         help="spectra: half-width of each band's metric box at its first order"),
     Key("fabrication", "n_levels", "choice", choices=LEVEL_CHOICES, default=str(DEFAULT_LEVELS),
         help="the number of etch levels L: log2 L binary masks"),

@@ -23,6 +23,7 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels
                                       aperture_key, grid_fixes, stop_checks, window_blur_checks,
                                       grating_window_checks)
 from doefab.applications import application, band_problem, design_is, has
+from doefab.pipeline.designkeys import design_key_problems, design_key_warnings
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene
 from doefab.pipeline.systemnotes import (band_warnings, depth_span_px, depth_warnings, sensor_warnings,
@@ -35,14 +36,14 @@ __all__ = ["resolve", "ResolvedScene", "scene_camera", "scene_task", "scene_sens
            "is_custom_camera", "system_warnings", "MAX_DOE_PIXELS", "shipped_sensor_differs"]
 
 
-def is_custom_camera(scene: Scene, cam=None) -> bool:
+def is_custom_camera(scene: Scene, cam=None, fields: tuple | None = None) -> bool:
     """Whether the scene's camera (``cam``: it, already built) differs from its preset (a key equal to the
-    preset's value changes nothing)."""
+    preset's value changes nothing); ``fields``: only in these ``Camera.to_dict`` entries."""
     from doefab.optics.camera import Camera
 
-    base = Camera.preset(scene.camera.get("preset", application(scene.task).camera_preset))
-    cam = cam if cam is not None else scene_camera(scene, [])  # its problems are resolve's to report
-    return cam.to_dict() != base.to_dict()
+    base = Camera.preset(scene.camera.get("preset", application(scene.task).camera_preset)).to_dict()
+    cam = (cam if cam is not None else scene_camera(scene, [])).to_dict()  # its problems are resolve's to report
+    return any(cam[f] != base[f] for f in (fields or cam))
 
 
 def scene_camera(scene: Scene, problems: list | None = None):
@@ -182,7 +183,13 @@ def ring_from_blur(scene: Scene, cam, planes) -> bool:
     """Whether a depth scene's ring at the nearest plane is the camera's defocus blur (``defocus_ring_px``): no
     ``design.ring_max_px`` and a camera of its own, or planes (metres) from ``PAPER_RING_FAR_M`` on, where the
     paper's law for its prototype would leave every ring a point."""
-    return "ring_max_px" not in scene.design and (is_custom_camera(scene, cam) or min(planes) >= PAPER_RING_FAR_M)
+    return "ring_max_px" not in scene.design and (is_custom_camera(scene, cam, BLUR_FIELDS)
+                                                  or min(planes) >= PAPER_RING_FAR_M)
+
+
+# what sets the plain half's defocus blur (D·s·|1/z_focus − 1/z| / 2, in sensor pixels): the substrate, the design
+# wavelength and the lens's own f-number do not
+BLUR_FIELDS = ("aperture_diameter_m", "sensor_distance_m", "focus_distance_m", "sensor_pitch_m")
 
 
 def _camera_variant(scene: Scene, keys: dict):
@@ -356,7 +363,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                          + stop_checks(cam, aperture)
                          + sampling_checks(scene, cam, cfg) + optimizer_checks(scene, cam, cfg, task)
                          + design_factor_checks(scene, cam, task, factor, cfg)
-                         + holder_checks(scene, cam) + die_checks(scene, cam))
+                         + holder_checks(scene, cam) + die_checks(scene, cam) + design_key_problems(scene, cfg))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
@@ -373,7 +380,8 @@ def resolve(scene: Scene) -> ResolvedScene:
                                       lambda d: not design_grid_problems(cam, task, d)),
         warnings=tuple(system_warnings(cam, task) + sensor_warnings(scene, sensor, task, cam)
                        + depth_warnings(scene, cam, task, ring_from_blur(scene, cam, task.depths(cam)))
-                       + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)),
+                       + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)
+                       + design_key_warnings(scene, cfg, task)),
         stage_warnings=tuple(skipped))
 
 

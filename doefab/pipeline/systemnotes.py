@@ -15,6 +15,7 @@ __all__ = ["depth_span_px", "system_warnings", "sensor_warnings", "depth_warning
            "MIN_WAVES"]
 
 MIN_WAVES = 0.75  # the least of a wave the relief's full depth may give the longest band without a warning
+MAX_WAVES = 2.0  # the most waves it may give the shortest band (the paper's 550 nm design gives 400 nm 1.4)
 DATA_STEP_M = 10e-9  # the hyperspectral scenes' measured spectra: every 10 nm (``reconstruction.bands``)
 
 
@@ -55,12 +56,19 @@ def _diffraction_note(cam, task) -> str | None:
 
 
 def _design_wavelength_note(cam, lams) -> str | None:
-    """A design wavelength too short for the longest band: the relief's full depth, 2π there, delays the longest
-    band by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves; below ``MIN_WAVES`` (the paper's 550 nm design gives 700 nm
-    0.78) the relief reaches too little of that band's phase (None otherwise)."""
+    """A design wavelength too short for the longest band or too long for the shortest: the relief's full depth, 2π
+    there, delays a band λ by λ_d (n(λ) − 1) / (λ (n(λ_d) − 1)) waves; below ``MIN_WAVES`` at the longest (the
+    paper's 550 nm design gives 700 nm 0.78) the relief reaches too little of that band's phase, above ``MAX_WAVES``
+    at the shortest it wraps it several times (None otherwise)."""
     lam_d, lo, hi = cam.design_wavelength, min(lams), max(lams)
     n_d, n_hi = float(cam.material.index(lam_d)), float(cam.material.index(hi))
     waves = lam_d * (n_hi - 1) / (hi * (n_d - 1))
+    most = lam_d * (float(cam.material.index(lo)) - 1) / (lo * (n_d - 1))
+    if most > MAX_WAVES:
+        return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} is long for the bands ({lo * 1e9:g}–{hi * 1e9:g} "
+                f"nm): the relief's full depth, one wave at {lam_d * 1e9:g} nm, delays {lo * 1e9:g} nm by {most:.2f} "
+                f"waves, so each etch level steps the short bands' phase by more than a wave's share and the etch is "
+                f"deeper than the bands need; set it within the bands (nm)")
     if waves >= MIN_WAVES:
         return None
     return (f"fabrication.design_wavelength_nm {lam_d * 1e9:g} is short for the bands ({lo * 1e9:g}–{hi * 1e9:g} nm): "
@@ -124,6 +132,11 @@ def band_warnings(scene: Scene, cam, task) -> list[str]:
     out = []
     spots = [grating_spot_px(cam, lam, task.period(cam)) for lam in lams]
     gap = max(abs(b - a) for a, b in zip(spots, spots[1:]))
+    close = min(abs(b - a) for a, b in zip(spots, spots[1:]))
+    if close < 1 / 1.5:
+        out.append(f"optics.wavelengths_nm: adjacent bands' first orders lie {close:.2g} px apart, up to "
+                   f"{1 / close:.1f} bands per sensor pixel: the coded capture cannot tell them apart; a shorter "
+                   f"design.grating_period_um spreads them (doctor names the period that gives one per pixel)")
     if gap > 1.5:
         out.append(f"optics.wavelengths_nm: adjacent bands' first orders lie up to {gap:.1f} px apart, and the model "
                    f"takes each band as one wavelength: light between the bands (any real spectrum's) is not in the "

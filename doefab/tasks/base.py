@@ -91,6 +91,8 @@ class Task:
     PATTERN_HINT = ""
     # the field holding the metric's half-width about its target (sensor px) and its scene key; None: no such width
     METRIC_WIDTH = None  # (field, scene key) in the tasks that have one
+    # whether a rotationally symmetric relief (the radial parameterisation) can form the target on the coded half
+    RADIAL_TARGET = False
 
     def pattern_reach_px(self, camera: Camera) -> float:
         """How far from the window's centre the task's target and metric pixels reach on ``camera``, with the

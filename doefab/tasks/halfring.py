@@ -89,6 +89,7 @@ class HalfRingTask(Task):
 
     PATTERN_HINT = "a smaller ring_max_px (a scene's design.ring_max_px)"
     METRIC_WIDTH = ("delta_px", "design.ring_width_px")  # the metric's half-width (sensor px): field, scene key
+    RADIAL_TARGET = True  # half rings about the axis: a radial profile on the half aperture forms them
 
     def pattern_reach_px(self, camera: Camera) -> float:
         """The largest ring, its metric's half-width and 1 px (``Task.pattern_reach_px``)."""

@@ -410,7 +410,7 @@ def _resume_folder(t, kind, content: bytes | None):
 
 
 SCENE_FILE = {"missing": (_missing, "not found"), "folder": (_a_folder, "is a folder"),
-              "empty": (_empty_file, "task must be one of"), "corrupt": (_corrupt_file, "not valid TOML")}
+              "empty": (_empty_file, "holds no keys"), "corrupt": (_corrupt_file, "not UTF-8 text")}
 DESIGN_DIR = {"missing": (lambda f, t: _missing(t), "design.json is missing"),
               "file": (lambda f, t: _corrupt_file(t), "is a file, not a design folder"),
               "empty": (lambda f, t: _empty_folder(t), "design.json is missing"),
@@ -464,7 +464,7 @@ def _file_cases():
                                                                         t / "o"], 2, needle,
                                       id=f"{cmd[0]} --sensor-response-{kind}"))
     budget = {"missing": (_missing, "not found"), "folder": (_a_folder, "is a folder"),
-              "corrupt": (_corrupt_file, "not valid TOML")}  # an empty budget: rows 4–6 of issue 21 (defaults)
+              "corrupt": (_corrupt_file, "not UTF-8 text")}  # an empty budget: rows 4–6 of issue 21 (defaults)
     for kind, (make, needle) in budget.items():
         cases.append(pytest.param(lambda f, t, make=make: ["tolerance", "--design", f / "design", "--budget",
                                                            make(t), "--out", t / "o"], 2, needle,

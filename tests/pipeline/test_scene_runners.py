@@ -25,7 +25,7 @@ def _scene(tmp_path, extra: str, name: str = "hdr.toml"):
 
 @pytest.mark.parametrize("extra, words", [('scheduler = "local:0"', "tolerance.scheduler: 'local:0': local:N"),
                                           ('scheduler = "mars"', "tolerance.scheduler: 'mars' is not a Dask"),
-                                          ("scheduler = 4", "tolerance.scheduler must be str"),
+                                          ("scheduler = 4", "tolerance.scheduler must be text in quotes"),
                                           ("workers = 0", "tolerance.workers = 0 is outside 1–64"),
                                           ('workers = 2\nscheduler = "local:2"', "both say where the parts run")])
 def test_a_bad_runner_is_refused_with_the_scene(tmp_path, extra, words):
