@@ -132,7 +132,7 @@ APPLICATIONS = {a.name: a for a in (
                 metrics=(Metric("mae", "depth MAE", "m", False, (0.0, 1000.0)),
                          Metric("rmse", "depth RMSE", "m", False, (0.0, 1000.0)),
                          Metric("delta125", "pixels within 25 % of the depth (δ<1.25)", "", True, (0.0, 1.0)),
-                         Metric("log10", "mean |log10| depth error", "", False, (0.0, 10.0))),
+                         Metric("log10", "mean absolute log10 depth error", "", False, (0.0, 10.0))),
                 metric_function="doefab.reconstruction.metrics:depth_metrics", kernel=95, out_channels=1,
                 # crop 128: better than 96 on validation scenes, 160 no better (benchmarks/results/
                 # depth_training_crop.md); a cost volume with a 95-pixel PSF needs room

@@ -147,6 +147,12 @@ class Design:
             **({"extra": self.extra} if self.extra else {}),
         }
 
+    def write_level_image(self, folder: str | Path) -> Path:
+        """``levels.png`` in ``folder``: the level map as a 16-bit image (level × 65536 / L), to look at."""
+        path = Path(folder) / "levels.png"
+        _write_png16(path, self.levels.astype(np.uint16) * (65536 // self.n_levels))
+        return path
+
     def save(self, path: str | Path) -> Path:
         """Write the design folder (each file atomically; ``design.json`` last)."""
         out = Path(path)
@@ -155,7 +161,7 @@ class Design:
             buf = io.BytesIO()
             np.save(buf, arr)
             atomic_write_bytes(out / name, buf.getvalue())
-        _write_png16(out / "levels.png", self.levels.astype(np.uint16) * (65536 // self.n_levels))
+        self.write_level_image(out)
         if self.history:
             lines = ["step,wall_time_s,loss,metric"] + [",".join(f"{v:.6g}" if isinstance(v, float) else str(v)
                                                                 for v in row) for row in self.history]

@@ -26,9 +26,10 @@ SECTIONS = ("Summary", "Stages", "Design", "Masks", "Holder", "Reconstruction", 
 
 
 def html_text(text: str) -> str:
-    """Markdown-style inline text as HTML: escaped, with `code` spans rendered as <code> and **strong** ones as
-    <strong>."""
+    """Markdown-style inline text as HTML: escaped, with `code` spans rendered as <code>, **strong** ones as
+    <strong> and [links](relative/path) as <a>."""
     text = re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
+    text = re.sub(r"\[([^\]]+)\]\(([^)\s]+)\)", r'<a href="\2">\1</a>', text)
     return re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", text)
 
 
@@ -96,10 +97,10 @@ def _stage_blocks(out: Path, scene, done: dict) -> list[tuple[str, list]]:
                                   ("img", "design/psf_target_vs_design.png",
                                    "PSFs against their targets, log scale (log10 of the light per pixel, 6 decades "
                                    "below each panel's peak)"),
-                                  ("img", "design/levels.png", "quantized height map")]))
+                                  ("img", "design/height_map.png", "quantized height map")]))
     mk = done.get("masks")
     if mk and mk.get("status") != "skipped":
-        blocks.append(("Masks", [("p", f"Mask set: `{out / 'masks'}`. {mk.get('why', '')}"),
+        blocks.append(("Masks", [("p", f"Mask set: [masks/](masks/). {mk.get('why', '')}"),
                                  ("img", "masks/preview_composite.png", "composite of the etch layers (layout view)"),
                                  ("img", f"masks/{deepest_preview(out / 'masks')}", "the deepest etch layer")]))
     ho = done.get("holder")
@@ -190,27 +191,37 @@ def _render(blocks) -> tuple[list[str], list[str]]:
             elif it[0] == "ul":
                 md += [f"- {x}" for x in it[1]] + [""]
                 body.append("<ul>" + "".join(f"<li>{html_text(x)}</li>" for x in it[1]) + "</ul>")
-            elif it[0] == "img":
-                md += [f"![{it[2]}]({it[1]})", ""]
+            elif it[0] == "img":  # the caption under the figure too: renderers show no alt text
+                md += [f"![{it[2].replace('`', '')}]({it[1]})", "", f"*{it[2]}*", ""]
                 body.append(f'<figure><img src="{html.escape(it[1])}" alt="{html.escape(it[2].replace("`", ""))}">'
                             f"<figcaption>{html_text(it[2])}</figcaption></figure>")
             else:
                 rows = it[1]
-                md += ["| " + " | ".join(rows[0]) + " |", "|" + " --- |" * len(rows[0])]
-                md += ["| " + " | ".join(map(str, r)) + " |" for r in rows[1:]] + [""]
-                body.append("<table><tr>" + "".join(f"<th>{html.escape(str(c))}</th>" for c in rows[0]) + "</tr>"
+                md += ["| " + " | ".join(map(_cell, rows[0])) + " |", "|" + " --- |" * len(rows[0])]
+                md += ["| " + " | ".join(map(_cell, r)) + " |" for r in rows[1:]] + [""]
+                body.append("<table><thead><tr>" + "".join(f"<th>{html.escape(str(c))}</th>" for c in rows[0])
+                            + "</tr></thead><tbody>"  # a header row printing repeats on each page
                             + "".join("<tr>" + "".join(f"<td>{html_text(str(c))}</td>" for c in r) + "</tr>"
-                                      for r in rows[1:]) + "</table>")
+                                      for r in rows[1:]) + "</tbody></table>")
         body.append("</section>")
     return md, body
 
 
+def _cell(value) -> str:
+    """A Markdown table cell: a ``|`` of its text escaped (it would split the cell)."""
+    return str(value).replace("|", "\\|")
+
+
 def _page(name: str, body: list[str]) -> str:
-    return ("<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>doefab report</title><style>"
+    return ("<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+            "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            f"<title>doefab report — {html.escape(name)}</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}"
             "img{max-width:100%;height:auto;border:1px solid #ddd}figure{margin:1em 0}"
             "figcaption{font-size:.85em;color:#555}table{border-collapse:collapse;margin:1em 0;font-size:.9em}"
-            "td,th{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}</style></head><body>"
+            "td,th{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}"
+            "table{display:block;overflow-x:auto}figure,tr{break-inside:avoid}"
+            "@media print{table{display:table}}</style></head><body>"
             f"<h1>doefab report — {html.escape(name)}</h1>" + "".join(body) +
             # after loading, the page records which images failed (a browser check reads it from the DOM)
             "<script>window.addEventListener('load',function(){var b=[],im=document.images;"

@@ -116,12 +116,13 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
         info = {"status": "ran", "why": f"settings differ from the committed design in {', '.join(res.differ)}"
                 + (f" (quick: {iters} iterations on a {sampling}× coarser grid)" if quick else "")}
     d = Design.load(out)
+    d.write_level_image(out)  # a reused design's too (the repository keeps its levels.npy only)
     task = res.task
     plan = doefab.PSFPlan(d.camera, d.wavelengths, d.depths, task.kernel_size, halves=("coded",))
     with torch.no_grad():
         psf = plan(doefab.levels_to_height(d.levels, d.camera, d.n_levels)).coded.numpy()
     design_psf_figure(out / "psf_target_vs_design.png", d, psf, task.targets(d.camera).numpy())  # log scale
-    plot_height(out / "levels.png", doefab.levels_to_height(d.levels, d.camera, d.n_levels), d.camera.doe_pitch,
+    plot_height(out / "height_map.png", doefab.levels_to_height(d.levels, d.camera, d.n_levels), d.camera.doe_pitch,
                 f"{d.n_levels}-level height map")
     info["metric"] = d.metrics
     return info

@@ -26,11 +26,17 @@ def _files(out: Path, done: dict) -> list[str]:
     if mk.get("mask_set"):
         folder = out / "masks"  # the run's own copy (the recorded path is where the run was: folders move)
         layouts = sorted(p.name for p in folder.glob("*.gds")) + sorted(p.name for p in folder.glob("*.oas"))
-        items.append(f"to the fab: {folder}/ ({', '.join(layouts + ['manifest.json', 'README.txt'])})")
+        items.append(f"to the fab: {_links('masks', layouts + ['manifest.json', 'README.txt'])}")
     ho = done.get("holder") or {}
     if ho.get("files"):
-        items.append(f"to the printer: {out / 'holder'}/ ({', '.join(ho['files'])})")
+        items.append(f"to the printer: {_links('holder', ho['files'])}")
     return items
+
+
+def _links(folder: str, names: list[str]) -> str:
+    """A folder of the run and its files as links relative to the report (which sits at the run folder's top, so
+    they hold wherever the folder is copied)."""
+    return f"[{folder}/]({folder}/) (" + ", ".join(f"[{n}]({folder}/{n})" for n in names) + ")"
 
 
 def summary_items(out: Path, done: dict, task: str) -> list[tuple]:

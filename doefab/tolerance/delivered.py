@@ -159,12 +159,13 @@ def delivered_summary(samples: list[dict], nominal_scenes: dict, spec: dict, tas
     over the parts and the yield against ``spec`` (relative limits against the error-free part on the same
     scenes, ``nominal_scenes[label]``: {metric: [value per scene]}), and its variance components. ``mean_ci95`` is
     the crossed design's t interval (:func:`mean_interval`; the two-level bootstrap's where the scenes define no
-    components), ``bootstrap_mean_ci95`` the bootstrap's beside it. ``yield_ci95`` is the hull of the two-level
+    components), within the values the metric can take (``Metric.span``: with two scenes a depth MAE's t interval
+    reached below 0 m), ``bootstrap_mean_ci95`` the bootstrap's beside it. ``yield_ci95`` is the hull of the two-level
     bootstrap's and the parts' Wilson interval: resampled parts cannot fail when every part passed, Wilson's stays
     honest there; with a few scenes the bootstrap's scene share reads narrow (:func:`mean_interval`). Empty without
     per-scene values."""
     from doefab.tolerance.montecarlo import wilson
-    from doefab.tolerance.spec import PRIMARY, spec_limits
+    from doefab.tolerance.spec import PRIMARY, SPAN, spec_limits
 
     if not samples or "network_scenes" not in samples[0] or task not in PRIMARY:
         return {}
@@ -186,8 +187,9 @@ def delivered_summary(samples: list[dict], nominal_scenes: dict, spec: dict, tas
         w = wilson(k, len(samples))
         comps = variance_components(x[:, :, primary])
         t_ci = mean_interval(b["mean"], comps)
+        lo, hi = SPAN[task].get(PRIMARY[task], (-math.inf, math.inf))  # a few scenes' t reaches past what it can be
         out[label] = {"metric": PRIMARY[task], "mean": b["mean"],
-                      "mean_ci95": t_ci if math.isfinite(t_ci[0]) else b["mean_ci95"],
+                      "mean_ci95": [max(t_ci[0], lo), min(t_ci[1], hi)] if math.isfinite(t_ci[0]) else b["mean_ci95"],
                       "bootstrap_mean_ci95": b["mean_ci95"], "yield": b["yield"],
                       "yield_ci95": [min(w[0], b["yield_ci95"][0]), max(w[1], b["yield_ci95"][1])],
                       "bootstrap_yield_ci95": b["yield_ci95"], "wilson_ci95": list(w), "draws": b["draws"],

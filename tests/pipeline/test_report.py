@@ -285,3 +285,15 @@ def test_the_files_to_send_name_the_run_folder_where_it_is_now(tmp_path):
     assert f"to the fab: {out / 'masks'}/ (grating.gds, manifest.json, README.txt)" in items
     assert f"to the printer: {out / 'holder'}/ (holder.stl)" in items
     assert not any("old_place" in i for i in items)
+
+
+def test_markdown_tables_keep_their_columns_and_figures_their_captions():
+    """A cell holding ``|`` (a metric named with absolute bars) split its row: the depth report's reconstruction
+    table rendered as a paragraph. Captions were alt text only, which renderers do not show."""
+    from doefab.pipeline.report import _render
+
+    rows = [["a", "b |x| c", "d"], ["1", "mean |log10| error", "3"]]
+    md, _ = _render([("S", [("table", rows), ("img", "f.png", "a `code` caption, not this run")])])
+    table = [ln for ln in md if ln.startswith("|")]
+    assert all(len(re.split(r"(?<!\\)\|", ln)) == 5 for ln in table), table  # 3 cells between 4 bars
+    assert "*a `code` caption, not this run*" in md and "![a code caption, not this run](f.png)" in md

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from PIL import Image
 
 from doefab.cli import main
 from doefab.errors import DoefabError
@@ -111,7 +112,10 @@ def test_quick_run_end_to_end(quick_run):
     masks = out / "masks"
     assert (masks / "streak.gds").read_bytes() == (REPO / "masks" / "streak" / "streak.gds").read_bytes()
     assert (masks / "manifest.json").is_file() and (masks / "design" / "levels.npy").is_file()
-    assert f"to the fab: {masks}/" in summary and str(REPO / "masks") not in summary
+    assert 'to the fab: <a href="masks/">masks/</a> (<a href="masks/streak.gds">streak.gds</a>' in summary
+    assert str(REPO / "masks") not in summary and str(out) not in summary  # links hold where the folder is copied
+    assert (out / "design" / "height_map.png").is_file()
+    assert Image.open(out / "design" / "levels.png").mode.startswith("I")  # the 16-bit level map, not the plot
     assert (masks / "verification.json").is_file()
 
 

@@ -285,3 +285,18 @@ def test_the_f_test_tells_parts_that_differ_from_parts_that_do_not():
     assert 0.01 <= np.mean(np.asarray(same) < 0.05) <= 0.10  # about 5 % false alarms
     differ = variance_components(_table(parts=24, part_sd=1.0, scene_sd=3.0, noise_sd=1.0, seed=int(rng.integers(99)))[0])
     assert differ["parts_differ_p"] < 1e-6
+
+
+def test_a_few_scenes_interval_stays_within_what_the_metric_can_take():
+    """Two scenes give the t interval of the mean under one degree of freedom: a depth MAE's reached below 0 m
+    (a report printed −1.397–2.035 m). It is cut at the metric's span (``Metric.span``)."""
+    from doefab.tolerance.delivered import mean_interval
+
+    rng = np.random.default_rng(3)
+    rows = [[0.05 + rng.normal(0, 0.01), 0.60 + rng.normal(0, 0.01)] for _ in range(6)]
+    samples = [{"network_scenes": {"nominal_psf": {"mae": r, "delta125": [0.9, 0.6]}}} for r in rows]
+    got = delivered_summary(samples, {"nominal_psf": {"mae": [0.05, 0.6], "delta125": [0.9, 0.6]}}, {}, "depth")
+    d = got["nominal_psf"]
+    assert d["metric"] == "mae"
+    assert mean_interval(d["mean"], d["components"])[0] < 0  # what the t interval alone gives
+    assert d["mean_ci95"][0] == 0.0 and d["mean_ci95"][1] > d["mean"]
