@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import sys
 from pathlib import Path
 
 from doefab.applications import APPLICATIONS
@@ -135,7 +136,10 @@ def _psf(args, rec):
 
 
 def _record(args, rec, psf, camera, tile: int, overlap: int) -> dict:
-    """reconstruct.json without its pairs: the network, PSF, crosstalk, tiling, levels and library versions."""
+    """reconstruct.json without its pairs: the network, PSF, crosstalk, tiling, levels, library versions and torch's
+    thread count."""
+    import torch
+
     return {"task": args.task, "variant": args.variant,
             "weights": {"folder": str(args.weights_dir or "shipped"), "sha256": rec.meta["weights_sha256"],
                         "design_levels_sha256": rec.design_sha256},
@@ -144,6 +148,7 @@ def _record(args, rec, psf, camera, tile: int, overlap: int) -> dict:
             "crosstalk": None if camera is None else {"file": str(args.crosstalk), "sha256": _sha256(args.crosstalk)},
             "tile_px": tile, "overlap_px": overlap, "black_level_dn": args.black_level,
             "white_level_dn": args.white_level, "pixel_format": args.pixel_format, "versions": _versions(),
+            "torch_threads": torch.get_num_threads(),  # HDR's highlight solve rounds differently with another count
             "pairs": []}
 
 
@@ -153,7 +158,7 @@ def run(args) -> int:
     from doefab.io import atomic_write_json
     from doefab.lab.outputs import write_result_rows
     from doefab.lab.reconstruct import (DEFAULT_TILE, capture_levels, default_overlap, iter_tiled, load_views,
-                                        output_channels)
+                                        output_channels, small_frame_note)
     from doefab.reconstruction.loader import load_reconstructor
 
     pairs = _pairs(args)
@@ -171,7 +176,11 @@ def run(args) -> int:
     record = _record(args, rec, psf, camera, tile, overlap)
     for c, u in pairs:
         coded, uncoded = load_views(c, u, camera, **levels)
-        rows = iter_tiled(rec, coded, uncoded, tile, overlap, psf=psf, progress=True)
+        info: dict = {}
+        notes = [n for n in [small_frame_note(rec, coded.shape[1:], psf)] if n]
+        for note in notes:
+            print(f"doefab reconstruct: warning: {c.name}: {note}", file=sys.stderr, flush=True)
+        rows = iter_tiled(rec, coded, uncoded, tile, overlap, psf=psf, progress=True, info=info)
         files = write_result_rows(args.task, rows, (output_channels(rec), *coded.shape[1:]), out.path, c.stem,
                                   rec.pair.wavelengths, (min(rec.pair.depths), max(rec.pair.depths)))
         used = {v: capture_levels(p, args.black_level, args.white_level, args.pixel_format) for v, p in
@@ -179,7 +188,7 @@ def run(args) -> int:
         record["pairs"].append({"coded": str(c), "coded_sha256": _sha256(c), "uncoded": str(u),
                                 "uncoded_sha256": _sha256(u), "size_px": [coded.shape[2], coded.shape[1]],
                                 "levels_dn": {v: {"black_rgb": b.tolist(), "white": w} for v, (b, w) in used.items()},
-                                "files": [f.name for f in files]})
+                                "files": [f.name for f in files], **info, "warnings": notes})
         print(f"{c.name} + {u.name}: wrote {', '.join(f.name for f in files)}")
     atomic_write_json(out.path / "reconstruct.json", record)
     inputs = {Path(x).resolve() for pair in pairs for x in pair}

@@ -45,7 +45,7 @@ from doefab.errors import DoefabError
 
 __all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
            "iter_tiled", "reconstruct_tiled", "output_channels", "capture_levels", "read_capture", "unmix_views",
-           "load_views"]
+           "load_views", "small_frame_note"]
 
 MULTIPLE = 32  # the networks' sides are multiples of this (``reconstruction.networks.check_input``) ...
 MIN_SIDE = 64  # ... and at least this
@@ -156,9 +156,10 @@ _LIGHT_SIDE = 256  # the proposed spectral network's light comes from the centra
 
 
 @contextmanager
-def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int]):
+def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int], info: dict | None = None):
     """The proposed hyperspectral network's light, estimated once from the centre of the whole extended image
-    (the pixels the whole-image network would use) and fixed for every tile (``SpectralNet.light``)."""
+    (the pixels the whole-image network would use) and fixed for every tile (``SpectralNet.light``); ``info``
+    given, its ``"light"`` becomes {library illuminant: weight} of the estimate (weights of at least 0.01)."""
     model = rec.model
     if not has(rec.task, "spectral") or rec.variant != "proposed" or getattr(model, "inverses", None) is None:
         yield
@@ -177,6 +178,10 @@ def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int]):
     else:
         w = torch.nn.functional.one_hot(search_illuminant(*args)[0], model.inverses.shape[0]).float()
     model.light = w.to(rec.device)
+    if info is not None:
+        from doefab.reconstruction.illuminant import illuminant_names
+
+        info["light"] = {n: round(float(x), 3) for n, x in zip(illuminant_names(), w[0].tolist()) if x >= 0.01}
     try:
         yield
     finally:
@@ -184,7 +189,7 @@ def _scene_light(rec, coded, uncoded, psf, padded: tuple[int, int]):
 
 
 def iter_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = DEFAULT_TILE, overlap: int | None = None,
-               psf=None, progress: bool = False):
+               psf=None, progress: bool = False, info: dict | None = None):
     """Yield ``(row, block)``: the result of rows ``row`` … ``row + len`` of the image, [C, rows, W] float32 (C:
     :func:`output_channels`), top to bottom, each as soon as no later tile reaches it (module docstring). The
     spectral network's light stays fixed until the generator is exhausted or closed.
@@ -193,6 +198,8 @@ def iter_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = DEFAULT_
         rec: a ``doefab.reconstruction.loader.Reconstructor``.  coded, uncoded: [3, H, W] float captures in [0, 1].
         tile, overlap: pixels, multiples of 32 (overlap None: :func:`default_overlap`).  psf: a PSF pair the
             network is conditioned on instead of its own (a measured part's).  progress: a tqdm bar over tiles.
+        info: a dict that receives what the reconstruction estimated of the scene: the proposed hyperspectral
+            network's light (``"light"``: {library illuminant: weight}, from the image's central 256² px).
     """
     from tqdm.auto import tqdm
 
@@ -207,7 +214,7 @@ def iter_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = DEFAULT_
     col_w = [blend_window(tw, overlap, i == 0, i == len(cols) - 1).astype(np.float32) for i in range(len(cols))]
     acc = np.zeros((ch, th, wp), np.float32)  # the band of rows [row, row + th): weighted sums ...
     wsum = np.zeros((th, wp), np.float32)  # ... and their weights
-    with _scene_light(rec, coded, uncoded, psf, (hp, wp)), \
+    with _scene_light(rec, coded, uncoded, psf, (hp, wp), info), \
             tqdm(total=len(rows) * len(cols), desc=f"{rec.task} tiles", unit="tile", disable=not progress) as bar:
         for i, r in enumerate(rows):
             row_w = blend_window(th, overlap, i == 0, i == len(rows) - 1).astype(np.float32)
@@ -235,6 +242,20 @@ def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = D
     return out[0] if has(rec.task, "depth") else out
 
 
+def small_frame_note(rec, size_hw: tuple[int, int], psf=None) -> str | None:
+    """A frame whose shorter side is below the PSF window the network reads (the measured ``psf``'s where given):
+    the light the DOE spreads past the frame's edges is missing from its captures. None where it is not.
+
+    Example: ``small_frame_note(load_reconstructor("hyperspectral"), (96, 96))`` names the 191 px window."""
+    k = int((psf if psf is not None else rec.pair).coded.shape[-1])
+    h, w = size_hw
+    if min(h, w) >= k:
+        return None
+    return (f"the frame is {w}×{h} px, under the {k} px PSF window the {rec.task} network reads: light the DOE "
+            f"spreads past the frame's edges is missing from the captures, so the result is less reliable, the more "
+            f"so the smaller the frame; capture (or crop) at least {k} px on each side")
+
+
 MOST_ABOVE_WHITE = 0.01  # the share of a frame's values that may lie above --white-level (clipped to it)
 
 
@@ -259,6 +280,28 @@ def capture_levels(path, black_level: float | None = None, white_level: float | 
     return black, white
 
 
+FAR_BELOW_BLACK = 0.05  # a value this share of the range below black is no noise about it: a wrong black level
+
+
+def _check_scale(path, dn, black, white: float, white_level) -> None:
+    """Refuse a 16-bit file whose values stay within 14 bits (a 12- or 14-bit camera's numbers, unscaled, read 16×
+    or 4× too dark and clip nowhere) unless ``--white-level`` says its scale, and a frame of which more than
+    ``MOST_ABOVE_WHITE`` lies far below black (``FAR_BELOW_BLACK``)."""
+    top = float(np.max(dn))
+    if white_level is None and white == 2**16 - 1 and 0 < top <= 2**14 - 1:  # (a frame of zeros has no scale)
+        bits = 12 if top <= 2**12 - 1 else 14
+        raise DoefabError(f"{path}: its largest value is {top:g} DN of the 16-bit file's 65535: a {bits}-bit camera's "
+                          f"numbers in a 16-bit file read {2 ** (16 - bits)}× too dark and clip nowhere: give "
+                          f"--white-level {2 ** bits - 1} (or the camera's white level; --white-level 65535 where the "
+                          f"frame is 16-bit and this dark)")
+    low = float(np.mean(dn < float(np.min(black)) - FAR_BELOW_BLACK * (white - float(np.max(black)))))
+    if low > MOST_ABOVE_WHITE:
+        raise DoefabError(f"{path}: {low:.1%} of its values lie more than {FAR_BELOW_BLACK:.0%} of the range below "
+                          f"the black level {float(np.min(black)):g} (down to {float(np.min(dn)):g}): no sensor noise "
+                          f"reaches that far; give --black-level of the dark frames' mean (for a float file already "
+                          f"black-subtracted, 0)")
+
+
 def read_capture(path, black_level: float | None = None, white_level: float | None = None,
                  pixel_format: str = "auto") -> np.ndarray:
     """One view of a capture as a [3, H, W] float32 array in [0, 1] (module docstring); refuses, naming the file
@@ -281,6 +324,7 @@ def read_capture(path, black_level: float | None = None, white_level: float | No
         raise DoefabError(f"{path} holds {math.log2(white + 1):.0f}-bit values (full scale {white:g}): the networks "
                           f"need captures of at least {MIN_BITS} bits: save the camera's frames as 16-bit TIFFs or "
                           f"give the raw/DNG")
+    _check_scale(path, dn, black, white, white_level)
     above = float(np.mean(dn > white * (1 + 1e-6))) if white_level is not None else 0.0
     if above > MOST_ABOVE_WHITE:  # a clip level (or a linearity limit below it) that much of the frame exceeds
         raise DoefabError(f"{path}: {above:.1%} of its values lie above --white-level {white:g} DN (up to "

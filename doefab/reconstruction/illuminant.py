@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from doefab.errors import DoefabError
 from doefab.imaging.captures import convolve_valid
 
-__all__ = ["illuminant_library", "illuminant_inverses", "search_illuminant", "write_illuminant_library",
+__all__ = ["illuminant_library", "illuminant_names", "illuminant_inverses", "search_illuminant", "write_illuminant_library",
            "LIBRARY_PATH", "candidate_predictions", "mix_illuminants"]
 
 LIBRARY_PATH = Path(__file__).resolve().parents[1] / "weights" / "illuminants.csv"
@@ -77,6 +77,11 @@ def _read_library(path: str) -> tuple[tuple[str, ...], np.ndarray]:
 def illuminant_library(path: str | Path = LIBRARY_PATH) -> np.ndarray:
     """[J, 31] measured illuminants on 400–700 nm (10 nm), each normalised to peak 1: the shipped library."""
     return _read_library(str(path))[1].copy()
+
+
+def illuminant_names(path: str | Path = LIBRARY_PATH) -> tuple[str, ...]:
+    """The shipped library's illuminant names, in the order of ``illuminant_library``'s rows (e.g. "D65")."""
+    return _read_library(str(path))[0]
 
 
 def illuminant_inverses(response: np.ndarray, library: np.ndarray, smooth: float = 1e-3,

@@ -7,10 +7,12 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 import doefab
 from doefab.cli import main
 from doefab.lab.frames import write_frame
+from doefab.reconstruction.illuminant import illuminant_names
 
 
 @pytest.fixture(scope="module")
@@ -83,8 +85,17 @@ def test_hdr_and_spectra_write_their_formats(task, files, tmp_path, capsys):
         write_frame(tmp_path / name, rng.uniform(0, 65535, (96, 128, 3)))
     rc = main(["reconstruct", "--task", task, "--coded", str(tmp_path / "c/x.tiff"), "--uncoded",
                str(tmp_path / "u/x.tiff"), "--out", str(tmp_path / "o")])  # 96×128 px: one tile
-    assert rc == 0, capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert rc == 0, err
     assert set(files) | {"reconstruct.json", ".doefab-output.json"} == {p.name for p in (tmp_path / "o").iterdir()}
+    first = json.loads((tmp_path / "o" / "reconstruct.json").read_text())
+    assert first["torch_threads"] == torch.get_num_threads()
+    pair = first["pairs"][0]
+    if task == "hyperspectral":  # the light the spectra were formed under, and a frame under the 191 px window
+        assert set(pair["light"]) <= set(illuminant_names()) and sum(pair["light"].values()) == pytest.approx(1, 0.05)
+        assert "x.tiff: the frame is 128×96 px, under the 191 px PSF window" in err and pair["warnings"]
+    else:  # 96 px holds the HDR network's 95 px window
+        assert "light" not in pair and pair["warnings"] == [] and "warning" not in err
     # replaced (--force) by another capture's results: the earlier run's go, the folder holds what its record says
     for name in ("c/y.tiff", "u/y.tiff"):
         write_frame(tmp_path / name, rng.uniform(0, 65535, (96, 128, 3)))
@@ -100,13 +111,13 @@ def test_hdr_and_spectra_write_their_formats(task, files, tmp_path, capsys):
 def _pair(work, size=(96, 128), channels=3, name="x"):
     shape = (*size, channels) if channels == 3 else size
     for folder in ("c", "u"):
-        write_frame(work / folder / f"{name}.tiff", np.full(shape, 1000.0))
+        write_frame(work / folder / f"{name}.tiff", np.full(shape, 30000.0))
     return ["--coded", work / "c" / f"{name}.tiff", "--uncoded", work / "u" / f"{name}.tiff"]
 
 
 def _two_sizes(work):
     args = _pair(work)
-    write_frame(work / "u" / "x.tiff", np.full((96, 96, 3), 1000.0))
+    write_frame(work / "u" / "x.tiff", np.full((96, 96, 3), 30000.0))
     return args
 
 

@@ -279,3 +279,30 @@ def test_a_raw_capture_takes_each_channels_black_level_and_its_clipped_photosite
     write_frame(tmp_path / "u.tiff", np.full((16, 16, 3), 1000.0))
     with pytest.raises(DoefabError, match=r"state different black levels \(70/75/80 and 0/0/0 DN\)"):
         R.load_views(path, tmp_path / "u.tiff")
+
+
+@pytest.mark.parametrize("top, bits", [(4095, 12), (16000, 14)])
+def test_a_12_or_14_bit_frame_in_a_16_bit_file_needs_its_white_level(tmp_path, top, bits):
+    """Unscaled, such a frame read 16× (4×) too dark and clipped nowhere; with --white-level it reads its scale."""
+    frame = np.linspace(0, top, 64 * 64 * 3).reshape(64, 64, 3)
+    write_frame(tmp_path / "c.tiff", frame)
+    with pytest.raises(DoefabError, match=f"a {bits}-bit camera's numbers in a 16-bit file read .* --white-level "
+                                          f"{2 ** bits - 1}"):
+        R.read_capture(tmp_path / "c.tiff")
+    assert R.read_capture(tmp_path / "c.tiff", white_level=top).max() == pytest.approx(1.0)
+    write_frame(tmp_path / "bright.tiff", frame * 65535 / top)  # a 16-bit frame that fills its range
+    assert R.read_capture(tmp_path / "bright.tiff").max() == pytest.approx(1.0)
+
+
+def test_a_frame_far_below_its_black_level_is_refused(tmp_path):
+    """Values far below black (a wrong black level) were clipped to 0 silently; noise about black is kept."""
+    frame = np.full((64, 64, 3), 0.4, np.float32)
+    import tifffile
+
+    frame[:8] = -0.5  # 12.5 % of the frame half the range below black (a float file: black 0, white 1)
+    tifffile.imwrite(tmp_path / "far.tiff", frame, photometric="rgb")
+    with pytest.raises(DoefabError, match=r"12\.5% of its values lie more than 5% of the range below the black"):
+        R.read_capture(tmp_path / "far.tiff")
+    frame[:8] = -0.01  # read noise about black
+    tifffile.imwrite(tmp_path / "noise.tiff", frame, photometric="rgb")
+    assert R.read_capture(tmp_path / "noise.tiff").min() == 0.0
