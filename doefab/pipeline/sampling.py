@@ -62,7 +62,8 @@ def window_blur_checks(cam, task, variant=None, aperture_key: str = "f_number") 
 
 def grating_window_checks(cam, task) -> list[str]:
     """A grating's first order of every band must land in the PSF window with its metric box and 2 px (the design's
-    target and metric sit there; a period without a first order is refused before, by ``GratingTask.bind``). The
+    target and metric sit there; a period without a first order is refused before, by ``GratingTask.bind``, and a
+    period not shorter than the coded half, where no first order separates from the zeroth, here first). The
     fixes: the window that holds it, and the shortest ``design.grating_period_um`` that brings it inside the
     window the scene has (``tasks.grating.period_for_reach``), where that period is within the key's range and the
     bands stay at most 1.5 per sensor pixel apart (``doctor``'s spectral sampling note)."""
@@ -70,6 +71,11 @@ def grating_window_checks(cam, task) -> list[str]:
     from doefab.tasks.grating import grating_spot_px, period_for_reach
 
     k, lams = task.kernel_size, task.wavelengths(cam)
+    half = cam.aperture_diameter / 2  # the coded half's width across the split
+    if task.period(cam) >= half:
+        return [f"design.grating_period_um {task.period(cam) * 1e6:g} is not shorter than the coded half ({half * 1e6:g} "
+                f"µm across): less than one period fits, so no first order separates from the zeroth; set it "
+                f"shorter, e.g. {16 * cam.doe_pitch * 1e6:g} (16 DOE pixels)"]
     if task.fits_window(cam):
         return []
     longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)

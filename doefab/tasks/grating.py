@@ -146,12 +146,6 @@ class GratingTask(Task):
                               f"{lam * 1e9:g} nm (sin θ = λ / Λ needs Λ > λ): set period_m or period_pixels (a "
                               f"scene's design.grating_period_um) longer, e.g. {16 * camera.doe_pitch * 1e6:g} µm "
                               f"(16 DOE pixels)")
-        half = camera.aperture_diameter / 2  # the coded half's width across the split
-        if self.period_m >= half:
-            raise DoefabError(f"GratingTask: a period of {self.period_m * 1e6:g} µm is not shorter than the coded half "
-                              f"({half * 1e6:g} µm across): less than one period fits, so no first order separates "
-                              f"from the zeroth; set period_m or period_pixels (a scene's design.grating_period_um) "
-                              f"shorter, e.g. {16 * camera.doe_pitch * 1e6:g} µm (16 DOE pixels)")
         off = mapping_error_px(camera, lam, self.period_m)
         if off > MAX_MAPPING_PX:
             raise DoefabError(
