@@ -39,7 +39,7 @@ def write_report(out: Path, scene, done: dict, res: ResolvedScene, quick: bool =
     from doefab.pipeline.stages import quick_note
     from doefab.pipeline.summary import summary_items
 
-    first = [("p", quick_note())] if quick else []
+    first = [("p", quick_note(done))] if quick else []
     blocks = [("Summary", first + summary_items(out, done, scene.task)), ("Stages", _stage_items(scene, done, res))]
     blocks += _stage_blocks(out, scene, done)
     blocks.append(("Error against run time", [("p", "Each knob's error against its run time, with the chosen setting "

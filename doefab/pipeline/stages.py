@@ -48,16 +48,26 @@ def _design_run(settings: dict, quick: bool, quick_factor: int | None = None) ->
     return iters, sampling
 
 
-def quick_note() -> str:
-    """What the report of a ``--quick`` run says first: what the flag cut (``QUICK``) and that its numbers show
-    every stage running, not what the design or its parts deliver."""
-    q = QUICK
-    return (f"**A quick run** (`doefab run --quick`): a new design at most {q['design_iterations']} iterations, on a "
-            f"coarser grid where a factor divides the DOE grid; networks trained here {60 * q['train_minutes']:.0f} s "
-            f"each; the reconstruction table and each judged part on {q['images']} scenes of {q['size_px']}² px; "
-            f"{q['parts']} Monte Carlo parts; no quantization study, STEP file or KLayout mask check. It shows that "
-            f"every stage runs on this scene; its numbers are not what the design or its parts deliver: run without "
-            f"--quick for those.")
+def quick_note(done: dict | None = None) -> str:
+    """What the report of a ``--quick`` run says first: what the flag cut (``QUICK``) in the stages that ran
+    (``done``: the run's stage records; None: every cut) and that its numbers show every stage running, not what
+    the design or its parts deliver."""
+    q, done = QUICK, done if done is not None else {"design": {"status": "ran"},
+                                                     "reconstruction": {"weights": "train"}, "tolerance": {}}
+    cuts = []
+    if (done.get("design") or {}).get("status") == "ran":
+        cuts.append(f"a new design at most {q['design_iterations']} iterations, on a coarser grid where a factor "
+                    f"divides the DOE grid")
+    rec = done.get("reconstruction") or {}
+    if rec.get("weights") in WEIGHTS_MODES and weights_mode(rec["weights"]).trains:
+        cuts.append(f"networks trained here {60 * q['train_minutes']:.0f} s each")
+    if rec or "tolerance" in done:
+        cuts.append(f"the reconstruction table and each judged part on {q['images']} scenes of {q['size_px']}² px")
+    if "tolerance" in done:
+        cuts.append(f"{q['parts']} Monte Carlo parts; no quantization study")
+    cuts.append("no STEP file or KLayout mask check")
+    return (f"**A quick run** (`doefab run --quick`): {'; '.join(cuts)}. It shows that every stage runs on this "
+            f"scene; its numbers are not what the design or its parts deliver: run without --quick for those.")
 
 
 def design_arguments(res: ResolvedScene, quick: bool = False) -> dict:

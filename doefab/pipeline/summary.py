@@ -69,7 +69,7 @@ def _untoleranced_lead(done: dict, task: str, studied: bool) -> str:
 
 def tolerance_items(out: Path) -> list[tuple]:
     """The Tolerance section's tables and figures from tolerance/tolerance.json."""
-    from doefab.tolerance.reporttext import NOISE_NOTE, delta_text
+    from doefab.tolerance.reporttext import NOISE_NOTE, delta_text, signed_change
 
     tol = _tolerance(out)
     if tol is None:
@@ -89,7 +89,7 @@ def tolerance_items(out: Path) -> list[tuple]:
         ci = r.get("network_delta_ci95", {})
         cells = [delta_text(tol["task"], d[lab], ci.get(lab)) if lab in d else "not judged through the network"
                  for lab in ("nominal_psf", "measured_psf")]
-        rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", f"{r['delta']:+.4f}", *cells])
+        rows.append([f"{r['error']} ({r['value']:.3g} {r['unit']})", signed_change(r['delta']), *cells])
     items.append(("table", rows))
     if any("network_delta_ci95" in r for r in tol.get("tornado", [])):
         items.append(("p", NOISE_NOTE))

@@ -100,9 +100,9 @@ def distribution_plot(path: Path, values: dict, unit: str, name: str, limit: flo
     for label, v in values.items():
         ax.hist(np.asarray(v, float), bins=min(20, max(5, len(v) // 2)), alpha=0.5,
                 label=f"network given the {label.replace('_psf', ' PSF').replace('_', ' ')}")
-    ax.axvline(nominal, color="grey", ls=":", label=f"nominal part {nominal:.3g}")
+    ax.axvline(nominal, color="grey", ls=":", label=f"nominal part {nominal:.4g}")
     if limit is not None:
-        ax.axvline(limit, color="red", ls="--", label=f"spec {limit:.3g}")
+        ax.axvline(limit, color="red", ls="--", label=f"spec {limit:.4g}")
     ax.set_xlabel(f"{name} ({unit})" if unit else name)
     ax.set_ylabel("parts")
     ax.legend(fontsize=7)

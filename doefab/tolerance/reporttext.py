@@ -58,15 +58,37 @@ def _unit(task: str, metric: str) -> str:
     return DISPLAY.get(task, {}).get(metric, (metric, ""))[1]
 
 
+def signed_change(x: float, digits: int = 4) -> str:
+    """A change with its sign, a change that rounds to zero as +0 (no "-0.0000").
+
+    Example: ``signed_change(-4e-6)`` → ``"+0.0000"``; ``signed_change(-0.0123)`` → ``"-0.0123"``."""
+    return f"{x if round(x, digits) != 0 else 0.0:+.{digits}f}"
+
+
 def spec_words(res: dict, level: str, label: str = "nominal_psf") -> str | None:
     """The spec's limits at ``level`` in words with units, e.g. "highlight PSNR ≥ 28.90 dB" (None: no limit)."""
     from doefab.tolerance.spec import spec_limits
 
     task = res["task"]
     nominal = res["nominal"]["psf"] if level == "psf" else res["nominal"].get("network", {}).get(label, {})
-    limits = spec_limits(res.get("budget", {}).get("spec", {}), task, level, nominal)
+    table = res.get("budget", {}).get("spec", {})
+    limits = spec_limits(table, task, level, nominal)
     return ", ".join(f"PSF metric {op} {v:.3f}" if m == "psf_metric" else
-                     f"{_name(task, m)} {op} {metric_text(task, m, v)}" for _, m, v, op in limits) or None
+                     f"{_name(task, m)} {op} {metric_text(task, m, v)}" + _relative(task, table, k, m, nominal)
+                     for k, m, v, op in limits) or None
+
+
+def _relative(task: str, spec: dict, key: str, metric: str, nominal: dict) -> str:
+    """How a limit relative to the error-free part was set, e.g. " (1.00 dB below the error-free part's 29.35 dB)";
+    '' for an absolute one."""
+    from doefab.tolerance.spec import relative_kind
+
+    kind = relative_kind(task, key)
+    if kind is None:
+        return ""
+    way = "below" if kind == "loss" else "above"
+    return (f" ({metric_text(task, metric, float(spec[task][key]))} {way} the error-free part's "
+            f"{metric_text(task, metric, float(nominal[metric]))})")
 
 
 def lead_text(res: dict) -> str | None:
@@ -295,7 +317,8 @@ def _tornado(res: dict) -> list[str]:
              + (" delivered change, network told the nominal PSF | told the part's measured PSF |" if net else ""),
              "| --- | --- | --- | --- | --- |" + (" --- | --- |" if net else "")]
     for r in res["tornado"]:
-        row = f"| {r['error']} | {r['value']:.3g} {r['unit']} | {r['grid']}× | {r['metric']:.4f} | {r['delta']:+.4f} |"
+        row = (f"| {r['error']} | {r['value']:.3g} {r['unit']} | {r['grid']}× | {r['metric']:.4f} | "
+               f"{signed_change(r['delta'])} |")
         if net:
             d = r.get("network_delta")
             ci = r.get("network_delta_ci95", {})

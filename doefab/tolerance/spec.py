@@ -23,7 +23,7 @@ from doefab.applications import View, application
 from doefab.errors import DoefabError
 
 __all__ = ["DELIVERED", "SPAN", "PSF_METRIC_SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys",
-           "limit_range", "check_spec", "meets", "nominal_failures", "limits_text", "spec_limits"]
+           "limit_range", "check_spec", "meets", "relative_kind", "nominal_failures", "limits_text", "spec_limits"]
 
 # views of the application registry's Metric rows (``doefab.applications``, read on every lookup): the delivered
 # metrics per task, name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and
@@ -120,6 +120,15 @@ def spec_limits(spec: dict, task: str, level: str, nominal: dict) -> list[tuple[
         else:
             out.append((k, metric, v, "≥" if kind == "min" else "≤"))
     return out
+
+
+def relative_kind(task: str, key: str) -> str | None:
+    """"loss" or "increase" where the spec key ``key`` of ``task`` sets a limit relative to the error-free part
+    (e.g. ``psnr_highlight_db_loss_max``), None for an absolute one.
+
+    Example: ``relative_kind("hdr", "psnr_highlight_db_loss_max")`` → ``"loss"``."""
+    kind = _key_parts(task).get(key, (None, None))[1]
+    return kind if kind in ("loss", "increase") else None
 
 
 def meets(values: dict, spec: dict, task: str, level: str, nominal: dict) -> bool:

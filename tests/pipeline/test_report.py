@@ -273,7 +273,7 @@ def test_the_tornado_table_gives_each_delivered_change_its_scene_noise(tmp_path)
 
 def test_the_files_to_send_name_the_run_folder_where_it_is_now(tmp_path):
     """A run folder that was moved (or copied) after its masks stage names its own masks and holder folders, not
-    the paths recorded where the run was."""
+    the paths recorded where the run was: as links relative to the report, which hold wherever the folder goes."""
     from doefab.pipeline.summary import summary_items
 
     out = tmp_path / "moved_run"
@@ -282,9 +282,10 @@ def test_the_files_to_send_name_the_run_folder_where_it_is_now(tmp_path):
     done = {"masks": {"status": "ran", "mask_set": str(tmp_path / "old_place" / "masks")},
             "holder": {"status": "ran", "files": ["holder.stl"]}}
     items = summary_items(out, done, "hyperspectral")[1][1]
-    assert f"to the fab: {out / 'masks'}/ (grating.gds, manifest.json, README.txt)" in items
-    assert f"to the printer: {out / 'holder'}/ (holder.stl)" in items
-    assert not any("old_place" in i for i in items)
+    assert ("to the fab: [masks/](masks/) ([grating.gds](masks/grating.gds), [manifest.json](masks/manifest.json), "
+            "[README.txt](masks/README.txt))") in items  # links relative to the report, which sits beside them
+    assert "to the printer: [holder/](holder/) ([holder.stl](holder/holder.stl))" in items
+    assert not any("old_place" in i or str(tmp_path) in i for i in items)
 
 
 def test_markdown_tables_keep_their_columns_and_figures_their_captions():

@@ -14,6 +14,7 @@ from PIL import Image
 from doefab.cli import main
 from doefab.errors import DoefabError
 from doefab.pipeline.scene import load_scene
+from doefab.pipeline.stages import quick_note
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -104,7 +105,9 @@ def test_quick_run_end_to_end(quick_run):
     note = summary[:summary.index("</p>")]
     judge = tol["network_judge"]
     assert "A quick run" in note and "are not what the design or its parts deliver" in note
-    assert "at most 10 iterations" in note and "networks trained here 12 s each" in note
+    # ... of what it cut in the stages that ran: the committed design and the shipped networks were reused here
+    assert "a new design" not in note and "networks trained here" not in note
+    assert "at most 10 iterations" in quick_note() and "networks trained here 12 s each" in quick_note()
     assert f"{len(tol['samples'])} Monte Carlo parts" in note
     assert f"{judge['images']} scenes of {judge['size']}² px" in note
     assert "A quick run" not in summary[len(note):]

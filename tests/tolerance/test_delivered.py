@@ -300,3 +300,20 @@ def test_a_few_scenes_interval_stays_within_what_the_metric_can_take():
     assert d["metric"] == "mae"
     assert mean_interval(d["mean"], d["components"])[0] < 0  # what the t interval alone gives
     assert d["mean_ci95"][0] == 0.0 and d["mean_ci95"][1] > d["mean"]
+
+
+def test_a_relative_spec_is_said_as_what_it_is_relative_to():
+    """The report printed "≥ 28.35 dB" and "≥ 28.36 dB" for one spec, 1 dB below each label's error-free part,
+    without saying so; an absolute limit stays a bare number."""
+    from doefab.tolerance.reporttext import spec_words
+
+    res = {"task": "hdr", "budget": {"spec": {"hdr": {"psnr_highlight_db_loss_max": 1.0, "psf_metric_min": 0.8}}},
+           "nominal": {"psf": {"psf_metric": 0.87}, "network": {"nominal_psf": {"psnr_highlight": 29.35}}}}
+    assert spec_words(res, "network") == "highlight PSNR ≥ 28.35 dB (1.00 dB below the error-free part's 29.35 dB)"
+    assert spec_words(res, "psf") == "PSF metric ≥ 0.800"
+
+
+def test_a_change_that_rounds_to_zero_has_no_minus_sign():
+    from doefab.tolerance.reporttext import signed_change
+
+    assert signed_change(-4e-6) == "+0.0000" and signed_change(-0.0123) == "-0.0123" and signed_change(0.5) == "+0.5000"
