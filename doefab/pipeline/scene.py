@@ -20,7 +20,7 @@ from doefab.errors import DoefabError
 from doefab.io import read_toml
 from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_value, values_text
 
-__all__ = ["Scene", "load_scene", "TASK_DESIGN", "STAGES"]
+__all__ = ["Scene", "load_scene", "check_scene", "TASK_DESIGN", "STAGES"]
 
 TASK_DESIGN = View(lambda a: a.design_task)  # a view of the registry (read on every lookup), for callers
 SECTIONS = ("camera", "sensor", "optics", "design", "fabrication", "holder", "reconstruction", "tolerance")
@@ -285,6 +285,22 @@ def load_scene(path: str | Path) -> Scene:
         raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
                  reconstruction=rec, tolerance=tol, sensor=sen, raw=raw, device=raw.get("device"))
+
+
+def check_scene(scene: Scene) -> None:
+    """A ``Scene`` built in code checked as ``load_scene`` checks a file (every key's type, unit, range and choice,
+    keys of another task, the stages): one DoefabError listing the problems, none for a scene ``load_scene`` made.
+
+    Example: ``check_scene(Scene(path=Path("my.toml"), task="hdr", stages=STAGES, camera={"focal_lenght_mm": 35}))``
+    raises "unknown key camera.focal_lenght_mm"."""
+    raw = {"task": scene.task, "stages": list(scene.stages),
+           **{name: getattr(scene, name) for name in SECTIONS if getattr(scene, name)}}
+    if scene.device is not None:
+        raw["device"] = scene.device
+    problems = _schema_problems(raw) + [p for p in [choice_problem("task", scene.task, tuple(APPLICATIONS))] if p]
+    problems += _stage_problems(tuple(scene.stages))
+    if problems:
+        raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
 
 
 def _table(raw: dict, section: str) -> dict:

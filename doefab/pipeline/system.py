@@ -25,7 +25,7 @@ from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels
 from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.designkeys import design_key_problems, design_key_warnings
 from doefab.pipeline.resolved import ResolvedScene
-from doefab.pipeline.scene import Scene
+from doefab.pipeline.scene import Scene, check_scene
 from doefab.pipeline.systemnotes import (band_warnings, depth_span_px, depth_warnings, sensor_warnings,
                                          system_warnings)
 from doefab.pipeline.sceneholder import die_checks, holder_checks, holder_warnings, scene_die_m
@@ -343,6 +343,7 @@ def resolve(scene: Scene) -> ResolvedScene:
     from doefab.design.committed import committed_dir
     from doefab.design.design import Design
 
+    check_scene(scene)  # a Scene built in code, as a file would be
     dname = application(scene.task).design_task
     cdir = committed_dir(dname)
     committed = Design.load(cdir)

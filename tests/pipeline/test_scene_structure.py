@@ -120,3 +120,22 @@ def test_a_budget_path_is_relative_to_the_scene_wherever_the_command_runs(tmp_pa
         load_scene(_scene(scenes, text))
     assert load_scene(_scene(scenes, '[tolerance]\nbudget = "../elsewhere/b.toml"')).budget_path().resolve() == (
         tmp_path / "elsewhere" / "b.toml")
+
+
+@pytest.mark.parametrize("fields, needle", [
+    ({"camera": {"focal_lenght_mm": 35.0}}, "unknown key camera.focal_lenght_mm"),
+    ({"camera": {"focal_length_mm": "35"}}, "camera.focal_length_mm must be a number"),
+    ({"stages": ("bogus",)}, "stages holds 'bogus'"),
+    ({"tolerance": {"samples": -5}}, "tolerance.samples = -5 is outside"),
+])
+def test_a_scene_built_in_code_is_checked_as_a_file_is(tmp_path, fields, needle):
+    """``resolve`` (and so ``prepare_scene`` and ``run_scene``) took a hand-built Scene unchecked: a typo was
+    ignored, a string focal length was a TypeError."""
+    from pathlib import Path
+
+    from doefab.pipeline.scene import STAGES, Scene
+
+    scene = Scene(**{"path": Path(tmp_path / "code.toml"), "task": "hdr", "stages": STAGES, **fields})
+    with pytest.raises(DoefabError) as exc:
+        resolve(scene)
+    assert needle in str(exc.value), str(exc.value)
