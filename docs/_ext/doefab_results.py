@@ -103,6 +103,7 @@ MEASUREMENTS = (
     Measurement("pair_reuse", "benchmarks/pair_reuse.py", (R + "pair_reuse.md",)),
     Measurement("depth_gap", "benchmarks/depth_gap.py", (R + "depth_gap.md",)),
     Measurement("depth_planes", "benchmarks/depth_planes.py", (R + "depth_planes.md",)),
+    Measurement("hdr_highlight_bias", "benchmarks/hdr_highlight_bias.py", (R + "hdr_highlight_bias.md",)),
     Measurement("judge_rounding", "benchmarks/judge_rounding.py", (R + "judge_rounding.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),
     Measurement("diagnose_memory", "benchmarks/diagnose_memory.py", (R + "diagnose_memory.md",)),
