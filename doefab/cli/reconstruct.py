@@ -57,7 +57,8 @@ def register(sub) -> None:
                         "channel, else 0)")
     p.add_argument("--white-level", type=number(float, 0, 1e9, lo_open=True, unit="DN"), default=None,
                    help="digital number of the sensor's clipping level (default: the file's full scale, e.g. 65535 "
-                        "for 16 bits, a raw's white level)")
+                        "for 16 bits, a raw's white level; needed for a 16-bit file whose values stay within 14 "
+                        "bits, e.g. 4095 for 12-bit data)")
     p.add_argument("--pixel-format", default="auto", choices=["auto", "npy", "png", "tiff", "raw"],
                    help="how to read the files (auto: by extension)")
     p.add_argument("--out", required=True, help="output folder")

@@ -4,7 +4,9 @@ task's network in overlapping tiles, so that what the network computes at once d
 **Captures.** :func:`read_capture` reads a frame with :func:`doefab.lab.frames.read_frame` and scales it to
 [0, 1]: ``(DN − black) / (white − black)``, ``white`` the file's full scale (:func:`doefab.lab.frames.full_scale`:
 ``2**bits − 1``, a raw's white level) unless given, ``black`` the raw's own black level (0 for other files) unless
-given; values outside [0, 1] are clipped (noise below black, nothing above white). The networks read colour
+given; values outside [0, 1] are clipped (noise below black, nothing above white), and a frame far below black
+(a wrong black level) or a 16-bit file whose values stay within 14 bits (a 12- or 14-bit camera's numbers, its
+scale unstated) is refused (:func:`read_capture`). The networks read colour
 captures (3 channels) quantised to at least 8 bits. :func:`unmix_views` undoes the dual-pixel crosstalk with a
 calibration's per-column ratios (``crosstalk.json``; the coded capture is the right view, the plain one the left,
 :mod:`doefab.imaging.crosstalk`); a photodiode that saturated stays saturated, as in the camera model's pipeline.
@@ -289,11 +291,10 @@ def _check_scale(path, dn, black, white: float, white_level) -> None:
     ``MOST_ABOVE_WHITE`` lies far below black (``FAR_BELOW_BLACK``)."""
     top = float(np.max(dn))
     if white_level is None and white == 2**16 - 1 and 0 < top <= 2**14 - 1:  # (a frame of zeros has no scale)
-        bits = 12 if top <= 2**12 - 1 else 14
-        raise DoefabError(f"{path}: its largest value is {top:g} DN of the 16-bit file's 65535: a {bits}-bit camera's "
-                          f"numbers in a 16-bit file read {2 ** (16 - bits)}× too dark and clip nowhere: give "
-                          f"--white-level {2 ** bits - 1} (or the camera's white level; --white-level 65535 where the "
-                          f"frame is 16-bit and this dark)")
+        raise DoefabError(f"{path}: its values stay within 14 bits (largest {top:g} DN of the 16-bit file's 65535): "
+                          f"a 12- or 14-bit camera's numbers in a 16-bit file read 16× or 4× too dark and clip "
+                          f"nowhere: give --white-level, the camera's white level (4095 for 12-bit data, 16383 for "
+                          f"14-bit; 65535 where the frame is 16-bit and this dark)")
     low = float(np.mean(dn < float(np.min(black)) - FAR_BELOW_BLACK * (white - float(np.max(black)))))
     if low > MOST_ABOVE_WHITE:
         raise DoefabError(f"{path}: {low:.1%} of its values lie more than {FAR_BELOW_BLACK:.0%} of the range below "

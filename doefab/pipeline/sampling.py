@@ -73,9 +73,10 @@ def grating_window_checks(cam, task) -> list[str]:
     k, lams = task.kernel_size, task.wavelengths(cam)
     half = cam.aperture_diameter / 2  # the coded half's width across the split
     if task.period(cam) >= half:
-        return [f"design.grating_period_um {task.period(cam) * 1e6:g} is not shorter than the coded half ({half * 1e6:g} "
-                f"µm across): less than one period fits, so no first order separates from the zeroth; set it "
-                f"shorter, e.g. {16 * cam.doe_pitch * 1e6:g} (16 DOE pixels)"]
+        fit = min(16 * cam.doe_pitch, half / 4)  # several periods across the half
+        return [f"the grating period {task.period(cam) * 1e6:g} µm (design.grating_period_um) is not shorter than "
+                f"the coded half ({half * 1e6:g} µm across): less than one period fits, so no first order separates "
+                f"from the zeroth; set design.grating_period_um shorter, e.g. {fit * 1e6:.3g}"]
     if task.fits_window(cam):
         return []
     longer = period_for_reach(cam, max(lams), k // 2 - task.box_px - 2)

@@ -112,14 +112,17 @@ def _type_problem(where: str, v, key) -> str:
     what = _KIND_WORDS.get(key.kind, key.kind) + (" or inf" if key.inf else "")
     text = f"{where} must be {what}, got {v!r}"
     if key.kind in ("float", "int") and isinstance(v, str):
-        number = v.strip().split(" ")[0]
+        number, _, unit = v.strip().partition(" ")
         try:
             x = float(number)
         except ValueError:
             return text
-        if key.kind == "float" or x.is_integer():
-            unit = f" (the unit, {key.unit}, is in the key's name)" if key.unit else ""
-            return text + f": write {where.split('.')[-1]} = {number} without quotes{unit}"
+        same = unit.strip() in ("", key.unit, key.unit.replace("µ", "u"))
+        if math.isfinite(x) and same and (key.kind == "float" or x.is_integer()):
+            named = f" (the unit, {key.unit}, is in the key's name)" if key.unit else ""
+            return text + f": write {where.split('.')[-1]} = {number} without quotes{named}"
+        if key.unit and not same:
+            return text + f": write the number in {key.unit}, without quotes (the unit is in the key's name)"
     if key.kind == "int" and isinstance(v, float) and v.is_integer():
         return text + f": write {int(v)}"
     return text
@@ -194,7 +197,7 @@ def _schema_problems(raw: dict) -> list[str]:
     for key, val in raw.items():
         if key in SECTIONS and not isinstance(val, dict):
             problems.append(_not_table(key, val))
-        elif isinstance(val, dict):
+        elif isinstance(val, dict) and key not in keys_of(""):  # (a top-level key's table: its check names it)
             if key not in SECTIONS:
                 problems.append(f"unknown section [{key}]")
             elif key != "holder":

@@ -280,8 +280,8 @@ def template(task: str) -> str:
              "default."]
     section = ""
     for k in KEYS:
-        if k.name in ("preset", "sensor_distance_m"):
-            continue
+        if k.name in ("preset", "sensor_distance_m") or (k.only and not has(task, k.only)):
+            continue  # (a key of another task's scenes is refused in this one)
         if k.section != section:
             section = k.section
             lines += ["", f"[{section}]"]

@@ -52,20 +52,24 @@ def quick_note(done: dict | None = None) -> str:
     """What the report of a ``--quick`` run says first: what the flag cut (``QUICK``) in the stages that ran
     (``done``: the run's stage records; None: every cut) and that its numbers show every stage running, not what
     the design or its parts deliver."""
-    q, done = QUICK, done if done is not None else {"design": {"status": "ran"},
-                                                     "reconstruction": {"weights": "train"}, "tolerance": {}}
+    q = QUICK
+    done = done if done is not None else {s: {"status": "ran", "weights": "train"} for s in
+                                          ("design", "masks", "holder", "reconstruction", "tolerance")}
+    ran = {name for name, rec in done.items() if (rec or {}).get("status") != "skipped"}  # reused or kept: ran
     cuts = []
     if (done.get("design") or {}).get("status") == "ran":
         cuts.append(f"a new design at most {q['design_iterations']} iterations, on a coarser grid where a factor "
                     f"divides the DOE grid")
     rec = done.get("reconstruction") or {}
-    if rec.get("weights") in WEIGHTS_MODES and weights_mode(rec["weights"]).trains:
+    if "reconstruction" in ran and rec.get("weights") in WEIGHTS_MODES and weights_mode(rec["weights"]).trains:
         cuts.append(f"networks trained here {60 * q['train_minutes']:.0f} s each")
-    if rec or "tolerance" in done:
-        cuts.append(f"the reconstruction table and each judged part on {q['images']} scenes of {q['size_px']}² px")
-    if "tolerance" in done:
+    judged = [w for w, s in (("the reconstruction table", "reconstruction"), ("each judged part", "tolerance"))
+              if s in ran]
+    if judged:
+        cuts.append(f"{' and '.join(judged)} on {q['images']} scenes of {q['size_px']}² px")
+    if "tolerance" in ran:
         cuts.append(f"{q['parts']} Monte Carlo parts; no quantization study")
-    cuts.append("no STEP file or KLayout mask check")
+    cuts += [c for c, s in (("no STEP file", "holder"), ("no KLayout mask check", "masks")) if s in ran]
     return (f"**A quick run** (`doefab run --quick`): {'; '.join(cuts)}. It shows that every stage runs on this "
             f"scene; its numbers are not what the design or its parts deliver: run without --quick for those.")
 

@@ -41,7 +41,8 @@ def check_input(x: torch.Tensor, name: str) -> None:
     if h % 32 or w % 32 or h < 64 or w < 64:
         raise DoefabError(f"{name} is {h}×{w} (H×W): image sides must be multiples of 32 and at least 64: crop, or "
                           f"pad by edge replication (np.pad(x, ((0, 0), (0, ph), (0, pw)), mode=\"edge\")) and crop "
-                          f"the result back, or use doefab.lab.reconstruct.reconstruct_tiled, which takes any size")
+                          f"the result back, or use doefab.lab.reconstruct.reconstruct_tiled, which takes any size of "
+                          f"at least 64 px")
 
 
 def conv_block(cin, cout):

@@ -67,28 +67,15 @@ def signed_change(x: float, digits: int = 4) -> str:
 
 def spec_words(res: dict, level: str, label: str = "nominal_psf") -> str | None:
     """The spec's limits at ``level`` in words with units, e.g. "highlight PSNR ≥ 28.90 dB" (None: no limit)."""
-    from doefab.tolerance.spec import spec_limits
+    from doefab.tolerance.spec import relative_words, spec_limits
 
     task = res["task"]
     nominal = res["nominal"]["psf"] if level == "psf" else res["nominal"].get("network", {}).get(label, {})
     table = res.get("budget", {}).get("spec", {})
     limits = spec_limits(table, task, level, nominal)
     return ", ".join(f"PSF metric {op} {v:.3f}" if m == "psf_metric" else
-                     f"{_name(task, m)} {op} {metric_text(task, m, v)}" + _relative(task, table, k, m, nominal)
+                     f"{_name(task, m)} {op} {metric_text(task, m, v)}" + relative_words(task, table, k, m, nominal)
                      for k, m, v, op in limits) or None
-
-
-def _relative(task: str, spec: dict, key: str, metric: str, nominal: dict) -> str:
-    """How a limit relative to the error-free part was set, e.g. " (1.00 dB below the error-free part's 29.35 dB)";
-    '' for an absolute one."""
-    from doefab.tolerance.spec import relative_kind
-
-    kind = relative_kind(task, key)
-    if kind is None:
-        return ""
-    way = "below" if kind == "loss" else "above"
-    return (f" ({metric_text(task, metric, float(spec[task][key]))} {way} the error-free part's "
-            f"{metric_text(task, metric, float(nominal[metric]))})")
 
 
 def lead_text(res: dict) -> str | None:

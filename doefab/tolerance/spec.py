@@ -23,7 +23,7 @@ from doefab.applications import View, application
 from doefab.errors import DoefabError
 
 __all__ = ["DELIVERED", "SPAN", "PSF_METRIC_SPAN", "TASK_OF_DESIGN", "PRIMARY", "delivered_loss", "spec_keys",
-           "limit_range", "check_spec", "meets", "relative_kind", "nominal_failures", "limits_text", "spec_limits"]
+           "limit_range", "check_spec", "meets", "relative_kind", "relative_words", "nominal_failures", "limits_text", "spec_limits"]
 
 # views of the application registry's Metric rows (``doefab.applications``, read on every lookup): the delivered
 # metrics per task, name → (unit as spec keys spell it, better: "+" higher is better, "-" lower is better), and
@@ -129,6 +129,19 @@ def relative_kind(task: str, key: str) -> str | None:
     Example: ``relative_kind("hdr", "psnr_highlight_db_loss_max")`` → ``"loss"``."""
     kind = _key_parts(task).get(key, (None, None))[1]
     return kind if kind in ("loss", "increase") else None
+
+
+def relative_words(task: str, spec: dict, key: str, metric: str, nominal: dict) -> str:
+    """How a limit relative to the error-free part was set, e.g. " (1.00 dB below the error-free part's 29.35 dB)";
+    '' for an absolute one (``spec``: the budget's spec tables, by task)."""
+    from doefab.reconstruction.metrics import metric_text
+
+    kind = relative_kind(task, key)
+    if kind is None:
+        return ""
+    way = "below" if kind == "loss" else "above"
+    return (f" ({metric_text(task, metric, float(spec[task][key]))} {way} the error-free part's "
+            f"{metric_text(task, metric, float(nominal[metric]))})")
 
 
 def meets(values: dict, spec: dict, task: str, level: str, nominal: dict) -> bool:

@@ -27,6 +27,8 @@ def _refused(path) -> str:
     ("reconstruction = 5", "[reconstruction] is a table"),
     ("tolerance = \"default\"", "[tolerance] is a table"),
     ('[camera]\nfocal_length_mm = "35.0 mm"', "write focal_length_mm = 35.0 without quotes (the unit, mm"),
+    ('[camera]\nfocal_length_mm = "3.5 cm"', "write the number in mm, without quotes"),
+    ("[optics]\nkernel_px = 191.0", "must be a whole number, got 191.0: write 191"),
     ('[optics]\nkernel_px = "191"', "must be a whole number, got '191': write kernel_px = 191 without quotes"),
     ("[fabrication]\nn_levels = 8.0", "write n_levels = 8"),
     ('[fabrication]\npattern_faces = "LENS"', 'write pattern_faces = "lens"'),
@@ -80,7 +82,8 @@ def test_a_radial_profile_for_a_target_it_cannot_form_is_warned_of(tmp_path):
 def test_a_grating_period_as_wide_as_the_coded_half_is_refused(tmp_path):
     """No first order separates from the zeroth where not one period fits across the coded half (8.64 mm / 2)."""
     msg = _refused(_scene(tmp_path, "[design]\ngrating_period_um = 9000.0", task="hyperspectral"))
-    assert "design.grating_period_um 9000 is not shorter than the coded half (4320 µm across)" in msg, msg
+    assert "the grating period 9000 µm (design.grating_period_um) is not shorter than the coded half (4320 µm across)" in msg
+    assert "set design.grating_period_um shorter, e.g. 86.4" in msg, msg
 
 
 def test_bands_closer_than_a_pixel_apart_are_warned_of(tmp_path):
@@ -139,3 +142,20 @@ def test_a_scene_built_in_code_is_checked_as_a_file_is(tmp_path, fields, needle)
     with pytest.raises(DoefabError) as exc:
         resolve(scene)
     assert needle in str(exc.value), str(exc.value)
+
+
+def test_a_quick_runs_note_names_the_cuts_of_the_stages_that_ran():
+    from doefab.pipeline.stages import quick_note
+
+    every = quick_note()
+    assert "a new design" in every and "networks trained here" in every and "Monte Carlo parts" in every
+    assert "no STEP file" in every and "no KLayout mask check" in every
+    design_only = quick_note({"design": {"status": "ran"}, "tolerance": {"status": "skipped"},
+                              "reconstruction": {"status": "skipped", "weights": "train"}})
+    assert "a new design" in design_only
+    for cut in ("networks trained", "Monte Carlo", "scenes of", "STEP", "KLayout"):
+        assert cut not in design_only, (cut, design_only)
+    shipped = quick_note({"design": {"status": "reused"}, "reconstruction": {"status": "reused", "weights": "shipped"},
+                          "masks": {"status": "reused"}})
+    assert "a new design" not in shipped and "networks trained" not in shipped
+    assert "the reconstruction table on" in shipped and "each judged part" not in shipped and "KLayout" in shipped

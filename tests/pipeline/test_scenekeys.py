@@ -7,6 +7,7 @@ import pytest
 
 from doefab.cli import main
 from doefab.pipeline.scene import load_scene
+from doefab.applications import has
 from doefab.pipeline.scenekeys import KEYS, key_table_markdown, template
 
 
@@ -25,13 +26,15 @@ def test_template_is_a_valid_scene_for_another_camera(task, tmp_path):
     assert res.custom_camera and not res.reuse
 
 
-def test_template_names_every_key_with_its_unit():
-    text = template("hdr")
+@pytest.mark.parametrize("task", ["hdr", "hyperspectral", "depth"])
+def test_template_names_every_key_of_its_task_with_its_unit(task):
+    """Every key the task's scenes take, and none of another task's (``load_scene`` refuses those)."""
+    text = template(task)
     raw = tomllib.loads(text)
     for k in KEYS:
         if not k.section or k.name in ("preset", "sensor_distance_m"):
             continue
-        assert f"{k.name} = " in text, k.name
+        assert (f"{k.name} = " in text) == (not k.only or has(task, k.only)), k.name
     assert raw["camera"]["focal_length_mm"] == 35.0
     table = key_table_markdown()
     assert all(f"`{k.section}.{k.name}`" in table for k in KEYS if k.section)
@@ -91,7 +94,8 @@ def test_every_key_prints_its_unit_and_range(k):
         assert f"{lo}–{hi}" in cell and (k.unit or "no unit") in cell, cell
     if k.kind == "list":
         assert cell.startswith("a list, each item") and "none twice" in cell, cell
-    notes = [line for task in ("hdr", "depth") for line in template(task).splitlines() if line.startswith("# ")]
+    notes = [line for task in ("hdr", "hyperspectral", "depth") for line in template(task).splitlines()
+             if line.startswith("# ")]
     if k.name not in ("preset", "sensor_distance_m"):
         assert any(line.startswith(f"# {k.help} ({cell}; default {k.default})") for line in notes), k.name
     assert not any("(;" in line for line in notes)
