@@ -81,8 +81,8 @@ def test_a_radial_profile_for_a_target_it_cannot_form_is_warned_of(tmp_path):
 
 def test_a_grating_period_as_wide_as_the_coded_half_is_refused(tmp_path):
     """No first order separates from the zeroth where not one period fits across the coded half (8.64 mm / 2)."""
-    msg = _refused(_scene(tmp_path, "[design]\ngrating_period_um = 9000.0", task="hyperspectral"))
-    assert "the grating period 9000 µm (design.grating_period_um) is not shorter than the coded half (4320 µm across)" in msg
+    msg = _refused(_scene(tmp_path, "[design]\ngrating_period_um = 6000.0", task="hyperspectral"))  # D/2 < 6 mm < D
+    assert "the grating period 6000 µm (design.grating_period_um) is not shorter than the coded half (4320 µm across)" in msg
     assert "set design.grating_period_um shorter, e.g. 86.4" in msg, msg
 
 
