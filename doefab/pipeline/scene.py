@@ -48,7 +48,7 @@ class Scene:
     def budget_path(self) -> Path | None:
         """The tolerance budget file: None for the shipped default, else relative to the scene file (or absolute)."""
         b = (self.tolerance or {}).get("budget", "default")
-        return None if b == "default" else _budget_file(self.path, b)
+        return None if b == "default" else scene_relative(self.path, b)
 
     def response_path(self) -> str:
         """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or absolute)."""
@@ -238,6 +238,12 @@ def _other_task(where: str, prop: str, task: str) -> str:
             f"delete it")
 
 
+def _key_problems(raw: dict, stages: tuple) -> list[str]:
+    """Every key's problems (``_schema_problems``), the task's and the stages' (``_stage_problems``)."""
+    task = choice_problem("task", raw.get("task"), tuple(APPLICATIONS))
+    return _schema_problems(raw) + ([task] if task else []) + _stage_problems(stages)
+
+
 def _stage_problems(stages: tuple) -> list[str]:
     """Stages listed without the design stage they need."""
     problems = []
@@ -255,12 +261,10 @@ def load_scene(path: str | Path) -> Scene:
     if not raw:
         raise DoefabError(f"scene file {p} holds no keys: `doefab scene new --task TASK --out FILE` writes one with "
                           f"every key to edit")
-    problems = _schema_problems(raw)
     task = raw.get("task")
-    problems += [p for p in [choice_problem("task", task, tuple(APPLICATIONS))] if p]
     stages = raw.get("stages", STAGES)
     stages = tuple(stages) if isinstance(stages, list) else STAGES  # not a list: named by the schema check
-    problems += _stage_problems(stages)
+    problems = _key_problems(raw, stages)
     cam, opt, des, fab, hol, rec, sen = (_table(raw, s) for s in ("camera", "optics", "design", "fabrication",
                                                                     "holder", "reconstruction", "sensor"))
     if hol:
@@ -300,8 +304,7 @@ def check_scene(scene: Scene) -> None:
            **{name: getattr(scene, name) for name in SECTIONS if getattr(scene, name)}}
     if scene.device is not None:
         raw["device"] = scene.device
-    problems = _schema_problems(raw) + [p for p in [choice_problem("task", scene.task, tuple(APPLICATIONS))] if p]
-    problems += _stage_problems(tuple(scene.stages))
+    problems = _key_problems(raw, tuple(scene.stages))
     if problems:
         raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
 
@@ -319,11 +322,6 @@ def scene_relative(scene_path: Path, given: str) -> Path:
     return scene_path.parent / Path(given).expanduser()
 
 
-def _budget_file(scene_path: Path, budget: str) -> Path:
-    """A budget path relative to the scene file (or absolute)."""
-    return scene_relative(scene_path, budget)
-
-
 def _budget_problems(scene_path: Path, budget) -> list[str]:
     """The problems of the tolerance budget a scene names (every key's range, the spec's limits), each named
     ``tolerance.budget FILE: ...``: a bad budget is refused with the scene, before any stage runs."""
@@ -331,7 +329,7 @@ def _budget_problems(scene_path: Path, budget) -> list[str]:
 
     if budget == "default" or not isinstance(budget, str):
         return []  # the shipped budget; a value of another type is named by the schema check
-    path = _budget_file(scene_path, budget)
+    path = scene_relative(scene_path, budget)
     if path.is_dir():
         return [f"tolerance.budget {budget!r}: {path} is a folder: give a budget TOML file (or default)"]
     if not path.is_file():
