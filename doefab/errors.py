@@ -7,7 +7,7 @@ built but failed its own checks or verification) 3.
 
 from __future__ import annotations
 
-__all__ = ["DoefabError", "SamplingError", "CheckFailed"]
+__all__ = ["DoefabError", "SamplingError", "CheckFailed", "problems_error"]
 
 
 class DoefabError(ValueError):
@@ -21,3 +21,13 @@ class SamplingError(DoefabError):
 class CheckFailed(DoefabError):
     """Something was built or read but fails its checks (a mask set that does not verify, a holder that does
     not pass); the message names the failing quantity."""
+
+
+def problems_error(where: object, problems: list[str]) -> DoefabError:
+    """One error for every problem found in one input: a single problem on its line, several one to a line.
+
+    Example: ``problems_error("my.toml", ["unknown key camera.x", "optics.kernel_px = 4 must be odd"])`` reads
+    ``my.toml: 2 problems:`` followed by each problem on its own indented line."""
+    if len(problems) == 1:
+        return DoefabError(f"{where}: 1 problem: {problems[0]}")
+    return DoefabError(f"{where}: {len(problems)} problems:\n" + "\n".join(f"  - {p}" for p in problems))

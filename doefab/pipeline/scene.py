@@ -16,7 +16,7 @@ from pathlib import Path
 
 from doefab.validate import distance_or_inf, metres_hint, unit_hint
 from doefab.applications import APPLICATIONS, View, has
-from doefab.errors import DoefabError
+from doefab.errors import DoefabError, problems_error
 from doefab.io import read_toml
 from doefab.pipeline.scenekeys import RENAMED, STAGES, item_text, keys_of, toml_value, values_text
 
@@ -289,7 +289,7 @@ def load_scene(path: str | Path) -> Scene:
         both = runner_conflict(tol.get("workers"), tol.get("scheduler"), ("tolerance.workers", "tolerance.scheduler"))
         problems += [both] if both else []
     if problems:
-        raise DoefabError(f"{p}: {len(problems)} problem(s): " + "; ".join(problems))
+        raise problems_error(p, problems)
     return Scene(path=p, task=task, stages=stages, camera=cam, optics=opt, design=des, fabrication=fab, holder=hol,
                  reconstruction=rec, tolerance=tol, sensor=sen, raw=raw, device=raw.get("device"))
 
@@ -306,7 +306,7 @@ def check_scene(scene: Scene) -> None:
         raw["device"] = scene.device
     problems = _key_problems(raw, tuple(scene.stages))
     if problems:
-        raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
+        raise problems_error(scene.path, problems)
 
 
 def _table(raw: dict, section: str) -> dict:
@@ -332,6 +332,8 @@ def _budget_problems(scene_path: Path, budget) -> list[str]:
     path = scene_relative(scene_path, budget)
     if path.is_dir():
         return [f"tolerance.budget {budget!r}: {path} is a folder: give a budget TOML file (or default)"]
+    if not path.is_file() and budget.strip().lower() == "default":
+        return [f"tolerance.budget {budget!r}: write budget = \"default\" (lower case) for the shipped budget"]
     if not path.is_file():
         return [f"tolerance.budget {budget!r}: no file at {path} (a path relative to the scene file, or absolute; or "
                 f"default)"]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from doefab.errors import DoefabError
+from doefab.errors import DoefabError, problems_error
 from doefab.pipeline.sampling import (MAX_DOE_PIXELS, MIN_DOE_PIXELS, few_pixels_fixes, alias_free_px,
                                       design_camera, design_factor_checks, pitch_fix, design_grid_problems,
                                       distance_text, optimizer_checks, quick_sampling, sampling_checks,
@@ -366,7 +366,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                          + design_factor_checks(scene, cam, task, factor, cfg)
                          + holder_checks(scene, cam) + die_checks(scene, cam) + design_key_problems(scene, cfg))
     if problems:
-        raise DoefabError(f"{scene.path}: {len(problems)} problem(s): " + "; ".join(problems))
+        raise problems_error(scene.path, problems)
     settings = _settings(dname, cam, task, scene.design, cfg, committed, scene.fabrication)
     ctask = scene_task(Scene(path=scene.path, task=scene.task, stages=()), committed, committed.camera)
     committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})

@@ -36,7 +36,18 @@ def system_warnings(cam, task) -> list[str]:
     notes.append(f"design wavelength {design}" if design else None)
     notes.append(_design_wavelength_note(cam, task.wavelengths(cam)))
     notes.append(_diffraction_note(cam, task))
+    notes.append(_far_focus_note(cam))
     return [n for n in notes if n]
+
+
+def _far_focus_note(cam) -> str | None:
+    """A focus distance of 100 m or more where a point at infinity blurs by under half a pixel: the same focus as
+    inf, and most often millimetres typed as metres (None otherwise)."""
+    z = cam.focus_distance
+    if math.isinf(z) or z < 100.0 or cam.defocus_blur_px(math.inf) >= 0.5:
+        return None
+    return (f"camera.focus_distance_m = {z:g} m: a point at infinity blurs by {cam.defocus_blur_px(math.inf):.2g} px, "
+            f"so this is the focus of inf; if you meant {z:g} mm, write focus_distance_m = {z / 1e3:g}")
 
 
 def _diffraction_note(cam, task) -> str | None:

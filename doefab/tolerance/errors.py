@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.errors import DoefabError
+from doefab.errors import DoefabError, problems_error
 from doefab.imaging.sensor import DEFAULT_FULL_WELL_E, DEFAULT_READ_NOISE_E, PoissonGaussian
 from doefab.io import read_toml
 from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, nominal_gap, sensor_errors,
@@ -84,7 +84,7 @@ def load_budget(path: str | Path | None = None) -> dict:
     data = read_toml(p, "budget file")
     problems = _problems(data)
     if problems:
-        raise DoefabError(f"{p}: " + "; ".join(problems))
+        raise problems_error(p, problems)
     if is_shipped_budget(path):
         return {**data, "defaults_used": []}
     base = read_toml(DEFAULT_BUDGET, "default budget")

@@ -111,7 +111,7 @@ def test_wavelengths_in_metres_get_one_message_with_the_hint(tmp_path):
     with pytest.raises(DoefabError) as exc:
         load_scene(p)
     msg = str(exc.value)
-    assert "1 problem(s)" in msg and msg.count("optics.wavelengths_nm") == 1 and "write 656" in msg
+    assert "1 problem" in msg and msg.count("optics.wavelengths_nm") == 1 and "write 656" in msg
 
 
 def test_sigterm_cleans_up_like_ctrl_c(tmp_path):

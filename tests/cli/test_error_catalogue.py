@@ -256,7 +256,7 @@ CASES = [
     # ---- run / doctor / tolerance
     ("run-missing-scene", lambda f, t: ["run", str(t / "nope.toml"), "--out", str(t / "o")], 2, "not found"),
     ("run-bad-scene", lambda f, t: ["run", str(_text(t, "s.toml", 'task = "hdr"\n[optics]\ndepths_m = [-1]\n'
-                                                     'kernel_px = 4\n')), "--out", str(t / "o")], 2, "2 problem(s)"),
+                                                     'kernel_px = 4\n')), "--out", str(t / "o")], 2, "2 problems:"),
     ("run-not-toml", lambda f, t: ["run", str(_text(t, "s.toml", "task = ")), "--out", str(t / "o")], 2,
      "not valid TOML"),
     ("run-bad-force", lambda f, t: ["run", str(REPO / "scenes" / "hdr.toml"), "--force", "paint", "--out", str(t / "o")], 2, "paint"),

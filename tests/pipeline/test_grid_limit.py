@@ -53,7 +53,7 @@ def test_a_grid_below_the_floor_is_one_problem_naming_fixes_that_fit(tmp_path, a
     = 195.3 µm rounded down, f/31.25 (200 mm / (16 × 400 µm)) rounded down and 6.4 mm."""
     narrow = {"f_number": 64.0} if aperture_key == "f_number" else {"aperture_diameter_mm": 3.125}
     msg = _problems(tmp_path, **narrow, doe_pitch_um=400.0)
-    assert "1 problem(s): the DOE grid would be 8 pixels across" in msg and "Camera." not in msg, msg
+    assert "1 problem: the DOE grid would be 8 pixels across" in msg and "Camera." not in msg, msg
     pitch_um = _fix(msg, "doe_pitch_um")
     assert pitch_um == pytest.approx(195)
     assert "the DOE grid" not in _problems(tmp_path, **narrow, doe_pitch_um=pitch_um)

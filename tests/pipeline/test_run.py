@@ -43,7 +43,7 @@ def test_the_systems_physics_problems_are_listed_together(tmp_path):
     with pytest.raises(DoefabError) as exc:
         resolve(load_scene(p))
     msg = str(exc.value)
-    assert int(msg.split(" problem(s)")[0].rsplit(" ", 1)[1]) >= 3  # and what follows from them (the holder)
+    assert int(msg.split(" problems:")[0].rsplit(" ", 1)[1]) >= 3  # and what follows from them (the holder)
     for needle in ("camera.focal_length_mm 50.0 cannot focus", "DOE grid would be 30000²", "min_feature_um",
                    "holder: "):
         assert needle in msg, needle

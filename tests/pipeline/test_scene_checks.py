@@ -113,9 +113,11 @@ def test_a_bad_budget_is_refused_with_the_scene(tmp_path):
     with pytest.raises(DoefabError) as exc:
         load_scene(_scene(tmp_path, '[tolerance]\nbudget = "tight.toml"'))
     msg = str(exc.value)
-    assert "2 problem(s)" in msg
+    assert "2 problems:\n  - tolerance.budget" in msg and msg.count("\n  - ") == 2  # one problem to a line
     assert "tolerance.budget tight.toml: etch.systematic_sigma_percent = -3 is outside 0–50" in msg
     assert "tolerance.budget tight.toml: spec.hdr.psf_metric_min = 5.0 is outside 0–1" in msg
+    with pytest.raises(DoefabError, match='write budget = "default" \\(lower case\\)'):
+        load_scene(_scene(tmp_path, '[tolerance]\nbudget = "Default"'))  # the shipped budget's name, another case
     (tmp_path / "tight.toml").write_text("[etch]\nsystematic_sigma_percent = 3\n")
     assert load_scene(_scene(tmp_path, '[tolerance]\nbudget = "tight.toml"')).budget_path() == tmp_path / "tight.toml"
 

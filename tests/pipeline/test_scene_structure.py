@@ -103,13 +103,16 @@ def test_a_design_wavelength_far_above_the_bands_is_warned_of(tmp_path):
 
 def test_the_depth_ring_follows_the_blur_only_where_the_blur_changes(tmp_path):
     """Another substrate, design wavelength or lens f-number leave the plain half's blur, so the ring keeps the
-    paper's law (it moved from 20 to 28 px); another aperture takes the blur's ring."""
+    paper's law (it moved from 20 to 28 px); another aperture, focus, pixel pitch or sensor distance takes the
+    blur's ring."""
     shipped = resolve(load_scene(_scene(tmp_path, "", task="depth"))).task.ring_max_px
     for text in ('[fabrication]\nmaterial = "N-BK7"', "[fabrication]\ndesign_wavelength_nm = 600",
                  "[camera]\nlens_f_number = 1.4"):
         assert resolve(load_scene(_scene(tmp_path, text, task="depth"))).task.ring_max_px == shipped, text
-    wider = resolve(load_scene(_scene(tmp_path, "[camera]\naperture_diameter_mm = 8.7", task="depth")))
-    assert wider.task.ring_max_px != shipped
+    for text in ("aperture_diameter_mm = 8.7", "focus_distance_m = 3.0", "sensor_pitch_um = 6.0",
+                 "sensor_distance_mm = 49.5"):  # each of D, z_focus, pitch, s in D·s·|1/z_focus − 1/z| / pitch
+        other = resolve(load_scene(_scene(tmp_path, "[camera]\n" + text, task="depth")))
+        assert other.task.ring_max_px != shipped, text
 
 
 def test_a_budget_path_is_relative_to_the_scene_wherever_the_command_runs(tmp_path, monkeypatch):

@@ -214,3 +214,18 @@ def test_a_scene_whose_reconstruction_stage_will_be_skipped_is_told_so_before_th
     assert len(far) == 1 and "shipped-anyway" not in far[0] and 'weights = "train"' in far[0]
     assert not warned('task = "hdr"\nstages = ["design", "reconstruction"]\n')  # the committed design
     assert not warned('task = "hdr"\nstages = ["design"]\n[design]\nstreak_arm_px = 30\n')  # no such stage
+
+
+def test_a_focus_distance_far_beyond_the_hyperfocal_is_warned_as_millimetres(tmp_path):
+    """focus_distance_m = 5000 on the HDR camera: a point at infinity blurs by D·s/z_f over the pitch (thin lens,
+    computed here from the camera's geometry), far under half a pixel, so it focuses as inf does and 5000 mm (5 m)
+    was most likely meant; 5 m, and 120 m (infinity blurred by 2/3 px), are not warned."""
+    res = resolve(_scene(tmp_path, 'task = "hdr"\nstages = ["design"]\n[camera]\nfocus_distance_m = 5000.0\n'))
+    cam = res.camera
+    blur = cam.aperture_diameter * cam.sensor_distance / 5000.0 / cam.sensor_pitch
+    note = [w for w in res.warnings if "focus_distance_m" in w]
+    assert len(note) == 1 and f"blurs by {blur:.2g} px" in note[0] and "write focus_distance_m = 5" in note[0]
+    assert blur < 0.05
+    for text in ("", "[camera]\nfocus_distance_m = 120.0\n"):  # 5 m; 120 m, where infinity blurs by 0.67 px
+        res = resolve(_scene(tmp_path, 'task = "hdr"\nstages = ["design"]\n' + text))
+        assert not [w for w in res.warnings if "focus_distance_m" in w], res.warnings

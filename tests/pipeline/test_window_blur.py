@@ -32,8 +32,8 @@ def _scene(tmp_path, camera=None, planes=PLANES, kernel=63, name="s.toml"):
 
 
 def _fixes(msg: str) -> list[tuple[str, float]]:
-    """The (key, value) pairs the window's refusal suggests, in its order (the problems are joined by "; ")."""
-    window = msg.split("optics.kernel_px", 1)[1].split("; ")[1]
+    """The (key, value) pairs the window's refusal suggests, in its order (several problems stand one to a line)."""
+    window = msg.split("optics.kernel_px", 1)[1].split("\n")[0].split("; ")[1]
     return [(m[1], float(m[2])) for m in re.finditer(r"(optics\.kernel_px|camera\.\w+) [≥≤=] ([\d.]+)", window)]
 
 
