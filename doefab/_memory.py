@@ -74,7 +74,8 @@ def _cgroup_rooms(root) -> list[int]:
     """The room under each cgroup v2 memory limit from this process's group up to ``root``, and under a cgroup v1
     memory limit (bytes)."""
     try:
-        rel = next(line[3:].strip() for line in open("/proc/self/cgroup") if line.startswith("0::"))
+        with open("/proc/self/cgroup") as f:
+            rel = next(line[3:].strip() for line in f if line.startswith("0::"))
     except (OSError, StopIteration):
         rel = "/"
     group, rooms = root / rel.lstrip("/"), []

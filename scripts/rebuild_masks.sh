@@ -11,5 +11,5 @@ for task in streak grating half-ring; do
     design="masks/$task/design"
     if [ -n "$src" ]; then design="$src/$task"; fi
     .venv/bin/doefab masks --design "$design" --out "masks/$task" --name "${task//-/}" --oasis --force
-    .venv/bin/python -c "from doefab.design.committed import pack_design; print(pack_design('masks/$task/design', '$task'))"
+    .venv/bin/python -c "from doefab.design.packing import pack_design; print(pack_design('masks/$task/design', '$task'))"
 done

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 PKG = Path(__file__).resolve().parents[1] / "doefab"
 HEAVY = {"cadquery", "klayout", "dask", "OCP", "pya", "colour", "skimage", "rawpy", "OpenEXR", "spectral",
          "tifffile", "imageio"}
@@ -51,13 +53,19 @@ def _imports(path: Path, text: str | None = None):
                     yield f"{module}.{a.name}", node
 
 
-def test_import_doefab_is_light():
-    """``import doefab`` loads none of the heavy packages (its speed is a benchmark's business, not a test's)."""
-    code = "import sys; import doefab; print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in " \
+@pytest.mark.parametrize("what, statement", [
+    ("import doefab", "import doefab"),
+    # the command line's parser, built for every command (--help, --version, scene new, a bad flag)
+    ("doefab --help", "from doefab.cli import build_parser; build_parser().format_help()"),
+])
+def test_import_doefab_is_light(what, statement):
+    """``import doefab`` and the command line's parser load none of the heavy packages (their speed is a
+    benchmark's business, not a test's)."""
+    code = f"import sys; {statement}; print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in " \
            "{'torch', 'matplotlib', 'cadquery', 'klayout', 'dask', 'gdstk', 'trimesh', 'manifold3d', 'scipy', " \
            "'skimage', 'colour', 'nlopt'})))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "", f"import doefab loaded {out}"
+    assert out.strip() == "", f"{what} loaded {out}"
 
 
 def test_heavy_packages_only_inside_functions():

@@ -4,6 +4,7 @@ a folder outside the repository, with the committed designs and shipped networks
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -123,6 +124,13 @@ def test_the_license_ships_and_a_build_leaves_the_tree_clean(installed, tmp_path
     import zipfile
 
     _, _, _, wheel, _ = installed
+    import doefab
+
+    # one version: the package's, which the wheel's name and metadata and CITATION.cff carry
+    assert wheel.name.startswith(f"doefab-{doefab.__version__}-")
+    meta = next(n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".dist-info/METADATA"))
+    assert f"\nVersion: {doefab.__version__}\n" in zipfile.ZipFile(wheel).read(meta).decode()
+    assert re.search(rf"^version: \"?{re.escape(doefab.__version__)}\"?$", (REPO / "CITATION.cff").read_text(), re.M)
     assert "MIT License" in (REPO / "LICENSE").read_text()
     names = zipfile.ZipFile(wheel).namelist()
     lic = [n for n in names if n.endswith("licenses/LICENSE")]

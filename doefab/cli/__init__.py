@@ -14,6 +14,7 @@ import errno
 import signal
 import sys
 import traceback
+from pathlib import Path
 
 from doefab.cli._args import OneLineParser
 from doefab.cli._exits import (EXIT_CHECK, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, EXIT_USAGE,
@@ -71,6 +72,19 @@ class _TopFormatter(argparse.RawDescriptionHelpFormatter):
         self._action_max_length = 16  # room for the longest subcommand name ("tolerance") beside its help
 
 
+def _cache_fix(filename) -> str:
+    """The fix for a cache folder that cannot be read or written (a read-only home): another one, by
+    ``$DOEFAB_CACHE``; "" where ``filename`` is not the cache or a folder above it."""
+    from doefab.io import cache_root
+
+    if not filename:
+        return ""
+    path, cache = Path(filename).absolute(), cache_root().absolute()
+    if path == cache or path in cache.parents or cache in path.parents:
+        return f"; doefab keeps its cache in {cache}: set $DOEFAB_CACHE to a folder you can write"
+    return ""
+
+
 def build_parser() -> argparse.ArgumentParser:
     from doefab.cli import (calibrate, demo, design, diagnose, doctor, evaluate, finetune, holder, masks, psf,
                             reconstruct, run, scene, tolerance, train)
@@ -85,10 +99,19 @@ def build_parser() -> argparse.ArgumentParser:
     for name, subparser in sub.choices.items():
         subparser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                help="show the Python traceback of an error")
-        # the descriptions are the modules' docstrings, written for the API pages: a terminal shows ``x`` as x
-        subparser.description = _plain(subparser.description)
-        subparser.epilog = _plain(subparser.epilog)
+        _plain_texts(subparser)
     return parser
+
+
+def _plain_texts(parser) -> None:
+    """The descriptions are the modules' docstrings, written for the API pages: a terminal shows ``x`` as x, in
+    ``parser`` and the parsers of its own subcommands (``scene new``)."""
+    parser.description = _plain(parser.description)
+    parser.epilog = _plain(parser.epilog)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _plain_texts(child)
 
 
 def _plain(text: str | None) -> str | None:
@@ -113,9 +136,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = build_parser()
     args = parser.parse_args(argv)
-    if not getattr(args, "command", None):
-        parser.print_help()
-        return EXIT_OK
+    if not getattr(args, "command", None):  # a usage error: the help, on stderr, says what to give
+        parser.print_help(sys.stderr)
+        return EXIT_USAGE
     prog = f"doefab {args.command}"
     status, message, error = EXIT_OK, "", None
     previous = _handle_sigterm()
@@ -144,7 +167,8 @@ def main(argv: list[str] | None = None) -> int:
         error = exc
         full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
         where = f" {exc.filename}" if getattr(exc, "filename", None) else _output_folder(args) if full else ""
-        fix = "; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)" if full else ""
+        fix = ("; free space on that disk, or write elsewhere (--out; $DOEFAB_CACHE for the cache)" if full
+               else _cache_fix(exc.filename))
         status, message = EXIT_USAGE, f"error: cannot read or write{where}: {exc.strerror or exc}{fix}"
     except MemoryError:
         status, message = EXIT_USAGE, _out_of_memory(args)

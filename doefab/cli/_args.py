@@ -9,8 +9,8 @@ import sys
 
 from doefab.applications import has
 
-__all__ = ["number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder", "task_design_arg",
-           "add_device_arg"]
+__all__ = ["DefaultsHelp", "number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg", "design_folder",
+           "task_design_arg", "add_device_arg"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -19,6 +19,17 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message: str):  # noqa: D401 - argparse's hook
         print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)
+
+
+class DefaultsHelp(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's "(default: X)" after a flag's help, except where the help tells its default itself or there is
+    none to tell (None, a switch that is off)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text.lower() or action.default in (None, False, argparse.SUPPRESS):
+            return text
+        return super()._get_help_string(action)
 
 
 def number(kind=float, lo=None, hi=None, lo_open: bool = False, unit: str = "", hint: str = ""):

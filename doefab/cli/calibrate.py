@@ -26,7 +26,8 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("recordings", metavar="RECORDINGS.toml", help="the recordings file (see doefab calibrate --help)")
     p.add_argument("--design", default=None,
-                   help="the design folder (or mask set) the part was made from; default: the file's design key")
+                   help="the design folder (or mask set, or shipped design's name) the part was made from; "
+                        "default: the file's design key")
     p.add_argument("--out", required=True, help="output folder (psf_pair.npz, crosstalk.json, calibration.html)")
     p.add_argument("--force", action="store_true", help="replace an earlier calibrate output in OUT")
     add_device_arg(p)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 
 import numpy as np
 
-from doefab.cli._args import add_device_arg, number
+from doefab.cli._args import DefaultsHelp, add_device_arg, number
 
 RGB_M = (656e-9, 589e-9, 486e-9)
 GRATING_PERIOD_PX = 16  # the test grating's period, DOE pixels
@@ -17,6 +16,17 @@ GRATING_PERIOD_PX = 16  # the test grating's period, DOE pixels
 def _depths(cam) -> tuple:
     """The demo's planes (m): the camera's focus, a star, a nearer point."""
     return cam.focus_distance, math.inf, 2.0
+
+
+#: the least --kernel (px): the default camera's plain-half blur at the demo's planes and the test grating's window
+#: (``min_kernel``; a constant so that building the parser, for --help or any subcommand, does not load torch)
+MIN_KERNEL = 149
+
+
+def min_kernel(cam) -> int:
+    """The least PSF window (px) the demo takes on ``cam``: its plain half's blur at the demo's planes with room,
+    and the test grating's first orders with their metric boxes. Example: ``min_kernel(Camera()) == MIN_KERNEL``."""
+    return max(cam.window_for_blur(_depths(cam)), _grating_window(cam))
 
 
 def _grating_window(cam) -> int:
@@ -29,16 +39,12 @@ def _grating_window(cam) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("demo", help="plot the default camera's coded and uncoded PSFs",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=DefaultsHelp)
     p.add_argument("--out", default="out/demo", help="output folder (an earlier demo output there is replaced; "
                                                      "any other non-empty folder is refused)")
-    from doefab.optics.camera import Camera
-
-    cam = Camera()
-    low = max(cam.window_for_blur(_depths(cam)), _grating_window(cam))
-    p.add_argument("--kernel", type=number(int, low, 511, unit="sensor pixels"), default=255,
-                   help=f"PSF window K (sensor pixels; ≥ {low}: the plain half's blur at 2 m with 2 px of room and "
-                        f"the test grating's first orders with their metric boxes)")
+    p.add_argument("--kernel", type=number(int, MIN_KERNEL, 511, unit="sensor pixels"), default=255,
+                   help=f"PSF window K (sensor pixels; ≥ {MIN_KERNEL}: the plain half's blur at 2 m with 2 px of "
+                        f"room and the test grating's first orders with their metric boxes)")
     add_device_arg(p)
     p.set_defaults(func=run)
 

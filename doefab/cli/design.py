@@ -6,17 +6,16 @@ Interrupted (Ctrl-C) or stopped runs keep OUT/checkpoint.pt: run the same comman
 
 from __future__ import annotations
 
-import argparse
 
 from doefab.applications import DESIGN_TASKS, design_is
-from doefab.cli._args import add_device_arg, number
+from doefab.cli._args import DefaultsHelp, add_device_arg, number
 from doefab.errors import DoefabError
 from doefab.fabrication.process import DEFAULT_LEVELS, LEVEL_CHOICES
 
 
 def register(sub) -> None:
     p = sub.add_parser("design", help="optimise a DOE for a task and quantize it to L levels",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=DefaultsHelp)
     p.add_argument("--task", required=True, choices=list(DESIGN_TASKS), help="task")
     p.add_argument("--out", required=True, help="design folder to write")
     p.add_argument("--iterations", type=number(int, 1, 1_000_000, unit="steps"), default=None,

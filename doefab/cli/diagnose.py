@@ -24,8 +24,8 @@ def register(sub) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--psf", required=True, help="the measured PSF pair (psf_pair.npz from doefab calibrate)")
     p.add_argument("--design", default=None,
-                   help="the design folder (or mask set) the part was made from; default: the design the pair's "
-                        "calibration names")
+                   help="the design folder (or mask set, or shipped design's name) the part was made from; "
+                        "default: the design the pair's calibration names")
     p.add_argument("--budget", default=None, help="the tolerance budget (TOML) the errors are judged against; "
                                                   "default: the shipped one")
     p.add_argument("--starts", type=number(int, 1, 100, unit="fits"), default=None,

@@ -21,16 +21,15 @@ weights file's SHA-256 and, with --psf, each pair's file, SHA-256 and provenance
 
 from __future__ import annotations
 
-import argparse
 
 from doefab.applications import APPLICATIONS
-from doefab.cli._args import add_device_arg, add_sensor_args, number
+from doefab.cli._args import DefaultsHelp, add_device_arg, add_sensor_args, number
 from doefab.io import json_text
 
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="score reconstruction networks on held-out test scenes",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=DefaultsHelp)
     p.add_argument("--task", required=True, choices=list(APPLICATIONS), help="task")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--images", type=number(int, 1, 10_000), default=16, help="test scenes")

@@ -12,10 +12,12 @@ import sys
 
 from holder_cad.params import HolderError, HolderParams
 
+from doefab.cli._args import DefaultsHelp
+
 
 def register(sub) -> None:
     p = sub.add_parser("holder", help="build and check the 3D-printable DOE holder",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=DefaultsHelp)
     add_arguments(p)
     p.set_defaults(func=run)
 

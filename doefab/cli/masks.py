@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from doefab.cli._args import number, plain_name_arg
+from doefab.cli._args import design_folder, number, plain_name_arg
 from doefab.diekey import DEFAULT_THICKNESS_MM
 from doefab.errors import DoefabError
 from doefab.io import json_text
@@ -22,7 +22,8 @@ from doefab.io import json_text
 def register(sub) -> None:
     p = sub.add_parser("masks", help="export a design as binary mask layers, or --verify a set",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--design", help="design folder (design.json + levels.npy)")
+    p.add_argument("--design", help="design folder (design.json + levels.npy), a mask set, or a shipped design's "
+                                         "name (streak, grating, half-ring)")
     p.add_argument("--out", help="mask-set folder to write (must not exist unless --force)")
     p.add_argument("--verify", metavar="DIR", help="re-check an existing mask set instead of exporting")
     p.add_argument("--name", type=plain_name_arg, default=None,
@@ -73,11 +74,10 @@ def run(args) -> int:
     if not args.design or not args.out:
         raise DoefabError("give --design DIR and --out DIR (or --verify DIR)")
     from doefab.cli._output import claim_output
-    from doefab.design.design import Design
     from doefab.fabrication.layers import etch_layer
     from doefab.fabrication.process import mask_count
 
-    design = Design.load(args.design)
+    ddir, design = design_folder(args.design)  # a folder, a mask set or a shipped design's name
     layers = [etch_layer(b) for b in range(mask_count(design.n_levels))]
     if args.etch_order is not None and sorted(args.etch_order) != layers:
         raise DoefabError(f"--etch-order {' '.join(map(str, args.etch_order))} must name each etch layer of this "
@@ -94,7 +94,7 @@ def run(args) -> int:
                        align_chain=args.align_chain, resist=args.resist,
                        etch_order=None if args.etch_order is None else tuple(args.etch_order),
                        use_klayout=not args.no_klayout, pattern_faces=args.pattern_faces)
-    report = export_masks(design, Path(args.out), opts, design_dir=args.design, force=args.force)
+    report = export_masks(design, Path(args.out), opts, design_dir=ddir, force=args.force)
     for lay, st in report["layers"].items():
         corners = report.get("width_space", {}).get(str(lay), {}).get("corner_contacts")
         print(f"layer {lay}: {st['polygons']} polygons, {st['vertices']} vertices (max {st['max_vertices']}), "

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.cli._args import add_device_arg, depth_m, number, wavelength_nm
+from doefab.cli._args import DefaultsHelp, add_device_arg, depth_m, number, wavelength_nm
 from doefab.errors import DoefabError
 from doefab.optics.camera import PRESETS
 
 
-class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+class _Help(argparse.RawDescriptionHelpFormatter, DefaultsHelp):
     """The description as written (its examples on their own lines), and each flag's default where it has one."""
 
     def _get_help_string(self, action):
@@ -41,7 +41,8 @@ def register(sub) -> None:
     camera.add_argument("--scene", metavar="FILE", default=None,
                         help="a scene file (.toml): its camera, bands, depth planes and PSF window")
     camera.add_argument("--design", metavar="DIR", default=None,
-                        help="a design folder or mask set: its L-level DOE, camera, bands, depth planes and window")
+                        help="a design folder, mask set or shipped design's name (streak, grating, half-ring): "
+                             "its L-level DOE, camera, bands, depth planes and window")
     p.add_argument("--wavelengths-nm", type=wavelength_nm, nargs="+", default=None,
                    help="wavelengths (nm; default: the scene's or design's, else 656 589 486)")
     p.add_argument("--depths-m", type=depth_m, nargs="+", default=None,

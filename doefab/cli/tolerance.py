@@ -24,7 +24,8 @@ from doefab.tolerance.schedulers import MAX_WORKERS
 def register(sub) -> None:
     p = sub.add_parser("tolerance", help="yield of fabricated and mounted parts (Monte Carlo)", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--design", required=True, help="a design folder, or a mask set (its design/ is used)")
+    p.add_argument("--design", required=True, help="a design folder, a mask set (its design/ is used), or a shipped "
+                                                      "design's name (streak, grating, half-ring)")
     p.add_argument("--budget", default=None, help="tolerance budget TOML (default: the shipped one for the prototype)")
     p.add_argument("--holder", default=None,
                    help="a built holder (holder.json or its folder): its clearances and DOE-to-glass distance "

@@ -15,17 +15,16 @@ rises again; with --steps the schedule runs over the steps).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 from doefab.applications import APPLICATIONS
-from doefab.cli._args import add_device_arg, add_sensor_args, number
+from doefab.cli._args import DefaultsHelp, add_device_arg, add_sensor_args, number
 
 
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a reconstruction network on this machine",
-                       description=__doc__, formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       description=__doc__, formatter_class=DefaultsHelp)
     p.add_argument("--task", required=True, choices=list(APPLICATIONS), help="task")
     p.add_argument("--variant", default="proposed", choices=["proposed", "coded_only", "uncoded_only"],
                    help="network variant (the ablations use the same architecture and budget)")

@@ -2,9 +2,9 @@
 
 Each is ``doefab/designs/<name>.npz``: its ``design.json`` and its level map, compressed. The repository's mask
 sets (``masks/<name>/``, the fab deliverables) carry the same design in their ``design/`` folder; a test keeps
-the two equal, and ``scripts/rebuild_masks.sh`` re-packs a design it rebuilds. ``committed_dir(name)`` unpacks
-a design once into the cache (``$DOEFAB_CACHE``, default ``~/.cache/doefab``) and returns that folder, a design
-folder like any other.
+the two equal, and ``scripts/rebuild_masks.sh`` re-packs a design it rebuilds (``packing.pack_design``).
+``committed_dir(name)`` unpacks a design once into the cache (``$DOEFAB_CACHE``, default ``~/.cache/doefab``) and
+returns that folder, a design folder like any other.
 """
 
 from __future__ import annotations
@@ -17,25 +17,10 @@ import numpy as np
 
 from doefab.errors import DoefabError
 
-__all__ = ["COMMITTED", "committed_dir", "pack_design", "PACKAGE_DESIGNS"]
+__all__ = ["COMMITTED", "committed_dir", "PACKAGE_DESIGNS"]
 
 COMMITTED = ("streak", "grating", "half-ring")
 PACKAGE_DESIGNS = Path(__file__).resolve().parents[1] / "designs"
-
-
-def pack_design(folder: str | Path, name: str, target: str | Path | None = None) -> Path:
-    """Write design folder ``folder`` (design.json + levels.npy) as the packaged design ``name``."""
-    from doefab.design.design import Design
-    from doefab.io import atomic_write_bytes
-
-    folder = Path(folder)
-    Design.load(folder)  # only a sound design is shipped
-    text = (folder / "design.json").read_bytes()
-    levels = np.load(folder / "levels.npy", allow_pickle=False)
-    buf = io.BytesIO()
-    np.savez_compressed(buf, design_json=np.frombuffer(text, np.uint8), levels=levels)
-    out = Path(target) if target is not None else PACKAGE_DESIGNS / f"{name}.npz"
-    return atomic_write_bytes(out, buf.getvalue())
 
 
 def committed_dir(name: str) -> Path:

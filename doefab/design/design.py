@@ -46,11 +46,22 @@ def _versions() -> dict:
 
 
 def design_folder_of(path: str | Path) -> Path:
-    """The design folder ``path`` names: itself, or a mask set's ``design/``.
+    """The design folder ``path`` names: itself, a mask set's ``design/``, or, where nothing is at ``path``, the
+    committed design it names (``streak``, or ``masks/streak`` and ``masks/streak/design`` as the repository's mask
+    sets are called: an installed package has no ``masks/`` folder) unpacked from the package (``committed_dir``).
 
-    Example: ``design_folder_of("masks/streak")`` is ``masks/streak/design``."""
+    Example: ``design_folder_of("masks/streak")`` is ``masks/streak/design`` in the repository, and the unpacked
+    committed design elsewhere."""
     d = Path(path)
-    return d / "design" if (d / "design" / "design.json").is_file() else d
+    if (d / "design" / "design.json").is_file():
+        return d / "design"
+    from doefab.design.committed import COMMITTED, committed_dir
+
+    parts = d.parts[:-1] if d.parts[-1:] == ("design",) else d.parts  # masks/streak/design names it too
+    named = parts[-1] if len(parts) == 1 or (len(parts) == 2 and parts[0] == "masks") else None
+    if named in COMMITTED and not d.exists():
+        return committed_dir(named)
+    return d
 
 
 def designs_inside_hint(folder: str | Path) -> str:

@@ -34,7 +34,8 @@ def _plt():
 
 
 def knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
-    """(title, file, caption) of every error-against-run-time plot, each with the chosen setting marked."""
+    """(title, file, caption) of every error-against-run-time plot, each with the chosen setting marked (file None:
+    a benchmark's figure this installation cannot draw, the caption saying why)."""
     rdir = out / "report_files"
     rdir.mkdir(exist_ok=True)
     figs = [_psf_knob(rdir), _design_knob(out, scene, rdir), _training_knob(out, scene, done, rdir)]
@@ -44,13 +45,22 @@ def knob_plots(out: Path, scene, done: dict) -> list[tuple[str, str, str]]:
     return [f for f in figs if f is not None]
 
 
+def _absent(title: str, table: str):
+    """A benchmark figure whose table this installation lacks (a wheel carries no ``benchmarks/``): (title, None,
+    why), which the report prints as a line where the figure would stand."""
+    return title, None, (f"not shown: its table, `{table}` (a {BENCHMARK}), is in doefab's source repository, "
+                         f"not in this installation")
+
+
 def _psf_knob(rdir: Path):
-    csv_path = REPO / "benchmarks" / "results" / "psf_error_vs_time.csv"
-    if not csv_path.is_file():
-        return None
+    table = "benchmarks/results/psf_error_vs_time.csv"
+    if not (REPO / table).is_file():
+        return _absent("PSF sampling", table)
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
-    for r in csv.DictReader(open(csv_path)):
+    with open(REPO / table, newline="") as f:
+        records = list(csv.DictReader(f))
+    for r in records:
         try:
             t, e = float(r["time_s"]), float(r["rel_l2"])
         except (KeyError, ValueError):
@@ -75,7 +85,8 @@ def _design_knob(out: Path, scene, rdir: Path):
     hist = out / "design" / "history.csv"
     plt = _plt()
     if hist.is_file():
-        rows = list(csv.DictReader(open(hist)))
+        with open(hist, newline="") as f:
+            rows = list(csv.DictReader(f))
         fig, ax = plt.subplots(figsize=(6, 3.8), layout="constrained")
         t = [float(r["wall_time_s"]) for r in rows]
         m = [float(r["metric"]) for r in rows]
@@ -88,6 +99,8 @@ def _design_knob(out: Path, scene, rdir: Path):
         return "Optimiser iterations", "report_files/knob_design.png", "this run's design history"
     from doefab.applications import application
 
+    if not (REPO / DESIGN_TABLE).is_file():
+        return _absent("Optimiser iterations", DESIGN_TABLE)
     rows = _benchmark_designs(application(scene.task).design_task)
     if not rows:
         return None
@@ -179,7 +192,8 @@ def _training_knob(out: Path, scene, done: dict, rdir: Path):
     for v, p in curves:
         if not p.is_file():
             continue
-        rows = list(csv.reader(open(p)))
+        with open(p, newline="") as f:
+            rows = list(csv.reader(f))
         metric = rows[0][3].removeprefix("val_")
         pts = [(float(r[1]) / 60, float(r[3])) for r in rows[1:] if r[3] not in ("nan", "")]
         ax.plot([a for a, _ in pts], [b for _, b in pts], label=v.replace("_", "-"))

@@ -45,7 +45,8 @@ def write_report(out: Path, scene, done: dict, res: ResolvedScene, quick: bool =
     blocks.append(("Error against run time", [("p", "Each knob's error against its run time, with the chosen setting "
                                                     "marked; the caption says whether a plot is this run's or a "
                                                     f"{BENCHMARK}.")]
-                   + [("img", f, f"{t}: {c}") for t, f, c in knob_plots(out, scene, done)]))
+                   + [("img", f, f"{t}: {c}") if f else ("p", f"{t}: {c}")
+                      for t, f, c in knob_plots(out, scene, done)]))
     shown: set[str] = set()  # each figure once, where it first appears
     blocks = [(sec, [it for it in items if it[0] != "img" or ((out / it[1]).is_file() and not _seen(shown, it[1]))])
               for sec, items in blocks]

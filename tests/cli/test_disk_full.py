@@ -39,3 +39,21 @@ def test_a_full_disk_in_a_writer_that_names_no_file_names_the_output_folder(tmp_
     status = main(["psf", "--wavelengths-nm", "550", "--kernel", "31", "--out", str(out)])
     err = capsys.readouterr().err
     assert status == 2 and f"a file under {out}" in err and "free space on that disk" in err, err
+
+
+def test_a_cache_that_cannot_be_written_is_told_to_move_by_doefab_cache(tmp_path, monkeypatch, capsys):
+    """A read-only home (the cache under ~/.cache): the one-line error names the cache and $DOEFAB_CACHE; an
+    unwritable file elsewhere gets no such hint."""
+    import doefab.cli.psf as psf_cli
+
+    cache = tmp_path / "home" / ".cache" / "doefab"
+    monkeypatch.delenv("DOEFAB_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache.parent))
+    for where, hinted in ((cache.parent, True), (cache / "designs" / "x", True), (tmp_path / "mine", False)):
+        denied = OSError(errno.EACCES, "Permission denied")
+        denied.filename = str(where)
+        monkeypatch.setattr(psf_cli, "run", lambda args, e=denied: (_ for _ in ()).throw(e))
+        status = main(["psf", "--wavelengths-nm", "550", "--kernel", "31", "--out", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert status == 2 and ("set $DOEFAB_CACHE to a folder you can write" in err) == hinted, err
+        assert err.count("\n") == 1

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from doefab.design.committed import COMMITTED, committed_dir, pack_design
+from doefab.design.committed import COMMITTED, committed_dir
+from doefab.design.packing import pack_design
 from doefab.design.design import Design
 from doefab.errors import DoefabError
 

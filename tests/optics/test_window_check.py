@@ -66,6 +66,9 @@ def test_doefab_demo_takes_only_windows_that_hold_its_planes_blur_and_its_gratin
     assert doefab.Camera().window_for_blur([5.0, float("inf"), 2.0]) == 29
     far = 0.05 * 656e-9 / (16 * 5.4e-6) / 5.4e-6
     assert 2 * math.ceil(far + 1 + 2) + 1 == 149
+    from doefab.cli.demo import MIN_KERNEL, min_kernel
+
+    assert min_kernel(doefab.Camera()) == MIN_KERNEL == 149  # the parser's constant is the camera's computation
     for k in ("27", "147"):
         with pytest.raises(SystemExit):
             main(["demo", "--kernel", k, "--out", str(tmp_path / "d")])

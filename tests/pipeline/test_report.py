@@ -298,3 +298,19 @@ def test_markdown_tables_keep_their_columns_and_figures_their_captions():
     table = [ln for ln in md if ln.startswith("|")]
     assert all(len(re.split(r"(?<!\\)\|", ln)) == 5 for ln in table), table  # 3 cells between 4 bars
     assert "*a `code` caption, not this run*" in md and "![a code caption, not this run](f.png)" in md
+
+
+def test_an_installation_without_the_benchmark_tables_says_why_their_figures_are_missing(tmp_path, monkeypatch):
+    """A wheel carries no ``benchmarks/``: the two benchmark figures are replaced by a line naming the table and
+    where it is, which the report prints where the figure would stand (they were dropped without a word)."""
+    out, done = _run_folder(tmp_path / "run")
+    monkeypatch.setattr(knobs, "REPO", tmp_path / "installed")  # a tree without benchmarks/results
+    figs = {t: (f, c) for t, f, c in knob_plots(out, load_scene(REPO / "scenes" / "hdr.toml"), done)}
+    for title, table in (("PSF sampling", "benchmarks/results/psf_error_vs_time.csv"),
+                         ("Optimiser iterations", DESIGN_TABLE)):
+        f, caption = figs[title]
+        assert f is None and f"`{table}`" in caption and "not in this installation" in caption
+    write_report(out, load_scene(REPO / "scenes" / "hdr.toml"), done, SETTINGS)
+    text = (out / "report.md").read_text()
+    assert "PSF sampling: not shown: its table, `benchmarks/results/psf_error_vs_time.csv` (a repository-wide" in text
+    assert "<p>PSF sampling: not shown" in (out / "report.html").read_text()
