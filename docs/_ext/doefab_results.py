@@ -41,6 +41,7 @@ MEASUREMENTS = (
     Measurement("psf_error_vs_time", "benchmarks/psf_error_vs_time.py",
                 (R + "psf_error_vs_time.md", R + "psf_error_vs_time.png")),
     Measurement("psf_floor", "benchmarks/psf_floor.py", (R + "psf_floor.md",)),
+    Measurement("psf_defocus_staircase", "benchmarks/psf_defocus_staircase.py", (R + "psf_defocus_staircase.md",)),
     Measurement("start_metrics", "benchmarks/start_metrics.py", (R + "start_metrics.md",)),
     Measurement("design_metric_vs_time", "benchmarks/design_metric_vs_time.py",
                 (R + "design_metric_vs_time.md", R + "design_metric_vs_time.png")),

@@ -21,9 +21,9 @@ __all__ = ["Camera", "PRESETS", "STOP_TOLERANCE", "BLUR_ROOM_PX", "window_reach"
 #: may be the stop (the reports say so); a lens pupil narrower by more cuts the DOE (``Camera.lens_cuts_doe``)
 STOP_TOLERANCE = 0.01
 #: the room (sensor px) a window sized for the plain half's geometric blur leaves past it: diffraction spreads the
-#: light past the geometric edge (a 63 px window loses 2.1–2.7 % of the half's light where the half disc reaches its
-#: edge, 1.5–2.0 % with 2 px of room, 0.4–0.6 % in focus, 486–656 nm, by wave-optics PSFs;
-#: tests/pipeline/test_window_blur.py)
+#: light past the geometric edge (on the 16 mm f/2.8 camera with 2.4 µm pixels of tests/pipeline/test_window_blur.py,
+#: a 63 px window loses 2.1–2.7 % of the half's light where the half disc reaches its edge, 1.5–2.0 % with 2 px of
+#: room, 0.4–0.6 % in focus, 486–656 nm, by wave-optics PSFs; the fractions depend on the camera)
 BLUR_ROOM_PX = 2
 
 

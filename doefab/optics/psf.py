@@ -24,9 +24,24 @@ from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
 
-__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands"]
+__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands", "staircase_error"]
 
 SOURCE_PHASE_LIMIT = math.pi / 2  # max smooth phase change between neighbouring pupil samples (radians)
+
+
+def staircase_error(step: float) -> float:
+    """About how far (relative L2) a structured height map's PSF is off at a plane out of focus, where the point's
+    wavefront changes by ``step`` rad between pupil samples at the pupil's rim.
+
+    The pupil holds the wavefront constant over each sample (a DOE pixel at ``pupil_oversample`` 1) and a
+    structured map's PSF takes the flat pixel's envelope, so the wavefront's tilt inside a pixel is lost: the
+    light of a pixel at radius r is damped by sinc(Δφ_r / 2π), Δφ_r = step · r / R, which on a uniformly lit disc
+    is a relative L2 error of step² / (12 √3) and a lost fraction step² / 24 of the light (small steps; measured by
+    ``benchmarks/psf_defocus_staircase.py``). ``pupil_oversample`` q divides the step by q. A plain (flat) half
+    takes no envelope and stays within the routes' sampling limit, ``SOURCE_PHASE_LIMIT``.
+
+    Example: ``staircase_error(0.45)`` is about 0.0097 (1 %)."""
+    return float(step) ** 2 / (12 * math.sqrt(3))
 
 
 @dataclass
@@ -159,7 +174,9 @@ class PSFPlan:
             aperture as one coherent pupil (the pair's DOE on x < 0, ``height_right`` or flat on x > 0; blank: a
             conventional camera; used for reference checks).
         route: ``"spectral"`` (default), ``"mft"``, ``"fft"`` or ``"asm"``, or a Route object.
-        pupil_oversample: pupil samples per DOE pixel and axis (heights are held per DOE pixel).
+        pupil_oversample: pupil samples per DOE pixel and axis (heights are held per DOE pixel). A structured
+            map's PSF at a plane out of focus is off by about ``staircase_error(step / q)`` (the wavefront is held
+            flat over each sample; ``step``: its phase change between DOE pixels, as ``doefab doctor`` prints).
         precision: ``"float32"`` (default) or ``"float64"``.
         center: (u, v) sensor position of the window's centre pixel, metres.
         check: run the routes' sampling checks and, for a centred window, check that it holds the plain half's

@@ -220,23 +220,25 @@ def pitch_fix(cam, pitch_max: float) -> list[str]:
     return [f"camera.doe_pitch_um ≤ {um:.3g}"] if cam.aperture_diameter / (um * 1e-6) <= MAX_DOE_PIXELS else []
 
 
-def phase_step_fix(cam, lam_min: float, depths, factor: int = 1) -> str:
+def phase_step_fix(cam, lam_min: float, depths, factor: int = 1, limit: float | None = None) -> str:
     """The scene keys that bring the source's phase step per pupil sample below the limit at every plane of
     ``depths`` on ``cam``'s grid (a design grid coarsened by ``factor``: the DOE pitch it suggests is divided by
     it): the planes nearer the focus (a nearest depth farther away where a plane nearer than the focus is too steep,
     and a farthest depth nearer where one beyond it is: both where both are), or a finer DOE pitch (the step is
     proportional to it). The step is the wavefront's slope at the pupil's edge a,
-    2π p / λ · |a / √(a² + z²) − a / √(a² + f²)| for a point at z with the focus at f; "" where every plane passes."""
+    2π p / λ · |a / √(a² + z²) − a / √(a² + f²)| for a point at z with the focus at f; "" where every plane passes.
+    ``limit``: the step allowed (rad; default ``SOURCE_PHASE_LIMIT``)."""
     from doefab.optics.psf import SOURCE_PHASE_LIMIT
 
+    limit = SOURCE_PHASE_LIMIT if limit is None else limit
     steps = {float(z): source_phase_step(cam, lam_min, z) for z in depths}
     worst = max(steps.values())
-    if worst <= SOURCE_PHASE_LIMIT:
+    if worst <= limit:
         return ""
     a, f = cam.aperture_diameter / 2, cam.focus_distance
-    room = SOURCE_PHASE_LIMIT * lam_min / (2 * math.pi * cam.doe_pitch)  # the slope the limit allows
+    room = limit * lam_min / (2 * math.pi * cam.doe_pitch)  # the slope the limit allows
     focus = 0.0 if math.isinf(f) else a / math.hypot(a, f)
-    steep = [z for z, v in steps.items() if v > SOURCE_PHASE_LIMIT]
+    steep = [z for z, v in steps.items() if v > limit]
     bounds = []
     if any(z < f for z in steep):
         c = focus + room
@@ -245,7 +247,7 @@ def phase_step_fix(cam, lam_min: float, depths, factor: int = 1) -> str:
         c = focus - room
         bounds.append(f"a farthest depth ≤ {a * math.sqrt(1 / c**2 - 1) * 0.99:.3g} m" if c > 0 else None)
     fixes = [" and ".join(bounds) + " (optics.depths_m)"] if bounds and None not in bounds else []
-    fixes += pitch_fix(cam, cam.doe_pitch * SOURCE_PHASE_LIMIT / worst / factor)
+    fixes += pitch_fix(cam, cam.doe_pitch * limit / worst / factor)
     return " or ".join(fixes) or "depth planes nearer the focus distance"
 
 

@@ -37,7 +37,29 @@ def system_warnings(cam, task) -> list[str]:
     notes.append(_design_wavelength_note(cam, task.wavelengths(cam)))
     notes.append(_diffraction_note(cam, task))
     notes.append(_far_focus_note(cam))
+    notes.append(_staircase_note(cam, task))
     return [n for n in notes if n]
+
+
+STAIRCASE_MAX = 0.01  # relative L2 of the coded PSF at the steepest plane (``staircase_error``) warned above
+
+
+def _staircase_note(cam, task) -> str | None:
+    """The coded half's PSF at the steepest plane off by more than ``STAIRCASE_MAX`` (``psf.staircase_error``: the
+    DOE's pixels hold the point's wavefront flat), with the planes or pitch that bring it within (None otherwise)."""
+    from doefab.optics.psf import staircase_error
+    from doefab.pipeline.sampling import distance_text, phase_step_fix, steepest_plane
+
+    lam_min = min(task.wavelengths(cam))
+    z, step = steepest_plane(cam, lam_min, task.depths(cam))
+    if staircase_error(step) <= STAIRCASE_MAX:
+        return None
+    allowed = math.sqrt(STAIRCASE_MAX * 12 * math.sqrt(3))  # the step at which staircase_error is STAIRCASE_MAX
+    fix = phase_step_fix(cam, lam_min, task.depths(cam), limit=allowed)
+    return (f"a point at {distance_text(z)} changes its phase by {step:.2f} rad between DOE pixels at "
+            f"{lam_min * 1e9:.0f} nm: the coded half's PSF there is about {staircase_error(step) * 100:.1f} % off "
+            f"(relative L2, step² / (12 √3): each DOE pixel holds the wavefront flat), more than "
+            f"{STAIRCASE_MAX * 100:g} %; for PSFs within it set {fix}")
 
 
 def _far_focus_note(cam) -> str | None:

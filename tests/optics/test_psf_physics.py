@@ -125,3 +125,31 @@ def test_uncoded_defocus_centroid_follows_geometric_optics():
     cy = (psf.sum(1) * -c).sum() / psf.sum()
     assert cx == pytest.approx(4 * rho / (3 * math.pi), rel=0.05)
     assert abs(cy) < 0.05 * rho
+
+
+@pytest.mark.parametrize("step", [0.45, 0.9])
+def test_a_structured_doe_out_of_focus_is_off_by_the_staircase_estimate(step):
+    """One pupil sample per DOE pixel holds the point's wavefront flat over each pixel: the half-ring's start at a
+    plane whose wavefront steps ``step`` rad per pixel at the rim is off from the limit of finer sampling
+    (Richardson, q = 2 and 4) by about step² / (12 √3) (``staircase_error``, within 30 %: a small-step estimate on a
+    uniformly lit disc); the plain half, a sampled smooth wavefront with no envelope, by far less. The depth comes
+    from the exact spherical wavefront's rim slope, 2π p / λ · |a/√(a² + z²) − a/√(a² + f²)|."""
+    from doefab.optics.psf import staircase_error
+    from doefab.tasks.halfring import HalfRingTask
+
+    lam, focus, p = 486e-9, 3.5, 8.64e-3 / 512
+    cam = doefab.Camera(doe_pixels=128, doe_pitch=p, aperture_diameter=128 * p, focus_distance=focus)
+    h = HalfRingTask().init_height(cam, np.random.default_rng(0))
+    a = cam.aperture_diameter / 2
+    c = step * lam / (2 * math.pi * p) + a / math.hypot(a, focus)
+    z = a * math.sqrt(1 / c**2 - 1)
+
+    def error(half):
+        psf = {q: getattr(doefab.split_aperture_psf(h, cam, [lam], [z], kernel_size=101, halves=(half,),
+                                                    precision="float64", pupil_oversample=q), half)[0, 0].numpy()
+               for q in (1, 2, 4)}
+        ref = (4 * psf[4] - psf[2]) / 3
+        return np.linalg.norm(psf[1] - ref) / np.linalg.norm(ref)
+
+    assert error("coded") == pytest.approx(staircase_error(step), rel=0.3)
+    assert error("uncoded") < 0.1 * staircase_error(step)
