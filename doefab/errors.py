@@ -11,11 +11,32 @@ __all__ = ["DoefabError", "SamplingError", "CheckFailed", "problems_error"]
 
 
 class DoefabError(ValueError):
-    """Bad input or an impossible request (subclass of ``ValueError``)."""
+    """Bad input or an impossible request (subclass of ``ValueError``).
+
+    Example:
+
+        >>> import doefab
+        >>> try:
+        ...     doefab.material_by_name("unobtainium")
+        ... except doefab.DoefabError as exc:
+        ...     print(isinstance(exc, ValueError))
+        True
+    """
 
 
 class SamplingError(DoefabError):
-    """A propagator's sampling condition is violated; the message names the condition and the fix."""
+    """A propagator's sampling condition is violated; the message names the condition and the fix.
+
+    Example:
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=64, doe_pitch=135e-6)  # 135 µm pupil samples: a 37 px alias-free field
+        >>> try:
+        ...     doefab.PSFPlan(cam, [550e-9], [float("inf")], kernel_size=101)
+        ... except doefab.SamplingError as exc:
+        ...     print(str(exc)[:37])
+        [spectral] output window aliasing: th
+    """
 
 
 class CheckFailed(DoefabError):

@@ -95,6 +95,14 @@ class Design:
         seed, optimizer, iterations: how it was made.  history: rows (step, wall_time_s, loss, metric).
         psf_quantized / targets: optional (n_depths, n_wavelengths, K, K) arrays for the figures.
         n_levels: L, the levels the fab makes (2, 4, 8, 16 or 32: log2 L binary masks).
+
+    Example:
+
+        >>> import doefab
+        >>> from doefab.design.committed import committed_dir
+        >>> d = doefab.Design.load(committed_dir("streak"))  # a design folder: design.json + levels.npy
+        >>> d.task, d.n_levels, d.levels.shape
+        ('streak', 16, (3200, 3200))
     """
 
     task: str

@@ -50,7 +50,13 @@ def mix_crosstalk(left, right, alpha_lr, alpha_rl):
     """The paper's Eq. 29: the recorded views ``(L*, R*)`` of clean views ``left``, ``right`` (numpy or torch, of
     one shape; the ratios are fractions, scalars or arrays broadcastable to the views).
 
-    Example: ``mix_crosstalk(np.ones(4), np.zeros(4), 0.1, 0.05)`` → ``(0.9 · 1, 0.1 · 1)`` per pixel."""
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> left, right = doefab.mix_crosstalk(np.ones(4), np.zeros(4), 0.1, 0.05)  # α_l→r = 0.1, α_r→l = 0.05
+        >>> left.tolist(), right.tolist()  # 0.9 of the left view's light stays, 0.1 crosses over
+        ([0.9, 0.9, 0.9, 0.9], [0.1, 0.1, 0.1, 0.1])
+    """
     _same_views(left, right, "left and right")
     check_pair(alpha_lr, alpha_rl)
     a, b = _ratio("alpha_lr", alpha_lr, left), _ratio("alpha_rl", alpha_rl, left)
@@ -62,6 +68,13 @@ def unmix_crosstalk(left_star, right_star, alpha_lr, alpha_rl, min_determinant: 
 
     Raises DoefabError where ``1 − α_l→r − α_r→l < min_determinant`` (the inverse would amplify noise by more
     than ``1 / min_determinant``).
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> left, right = doefab.mix_crosstalk(np.array([0.6]), np.array([0.2]), 0.1, 0.05)  # Eq. 29
+        >>> [round(float(v[0]), 6) for v in doefab.unmix_crosstalk(left, right, 0.1, 0.05)]
+        [0.6, 0.2]
     """
     if not isinstance(min_determinant, (int, float)) or not 0 < min_determinant <= 1:
         raise DoefabError(f"min_determinant must be a number in (0, 1] (the smallest 1 − α_l→r − α_r→l accepted; "
@@ -91,6 +104,15 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
             sensors show); None keeps per-pixel ratios.
     Returns:
         ``(alpha_lr, alpha_rl)``.
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> left_blocked = (np.full((4, 3), 0.45), np.full((4, 3), 0.05))  # (L*, R*): R* is all crosstalk
+        >>> right_blocked = (np.full((4, 3), 0.02), np.full((4, 3), 0.48))
+        >>> a_lr, a_rl = doefab.calibrate_crosstalk(left_blocked, right_blocked)  # one ratio per column
+        >>> a_lr.round(3).tolist(), a_rl.round(3).tolist()
+        ([[0.1, 0.1, 0.1]], [[0.04, 0.04, 0.04]])
     """
     def ratio(pair, num_index):
         l_s, r_s = (np.asarray(x, dtype=np.float64) for x in pair)
@@ -124,23 +146,37 @@ def _rows(rows) -> int:
     return int(rows)
 
 
+def _noise_and_rng(noise, rng):
+    """``noise`` as a model (a ``doefab.imaging.sensor`` preset name, model or ``Sensor``: ``noise_model``) and
+    ``rng`` as a ``numpy.random.Generator`` (a seed, or one), each checked."""
+    from doefab import validate as _validate
+    from doefab.imaging.sensor import noise_model
+
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(_validate.seed("seed", rng))
+    return noise_model(noise), rng
+
+
 def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", rng=0, level: float = 0.5):
     """(α̂_l→r, α̂_r→l) per column from two simulated white-wall captures of ``rows`` rows, each with one aperture
     half blocked (Eq. 30), exposed so the open half's view reaches ``level`` of full scale, with ``noise`` (a
     ``doefab.imaging.sensor`` preset name or model) on each recorded view, estimated by
     :func:`calibrate_crosstalk`. The true ratios are scalars, per-column profiles or [rows, columns] maps (each
     row its own, e.g. :meth:`SensorCrosstalk.ratios`); the estimate is one per column, whatever they are.
-    ``rng``: a seed or a ``numpy.random.Generator``."""
-    from doefab import validate as _validate
-    from doefab.imaging.sensor import noise_model
+    ``rng``: a seed or a ``numpy.random.Generator``.
 
+    Example:
+
+        >>> import doefab
+        >>> a_lr, a_rl = doefab.simulate_calibration(0.1, 0.05, rows=512, rng=0)  # the true ratios, a scalar each
+        >>> round(float(a_lr.mean()), 3), round(float(a_rl.mean()), 3)
+        (0.1, 0.05)
+    """
     rows = _rows(rows)
     if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level <= 1:
         raise DoefabError(f"level must be the white wall's exposure as a fraction of full scale in (0, 1], got "
                           f"{level!r}")
-    if not isinstance(rng, np.random.Generator):
-        rng = np.random.default_rng(_validate.seed("seed", rng))
-    noise = noise_model(noise)
+    noise, rng = _noise_and_rng(noise, rng)
     check_pair(alpha_lr, alpha_rl)  # fractions of one shape (or scalars) that leave the views separable
     probe = np.zeros(1)
     a, b = _ratio("alpha_lr", alpha_lr, probe), _ratio("alpha_rl", alpha_rl, probe)
@@ -169,6 +205,14 @@ class DualPixelCrosstalk:
     saturated (full scale) in its view. Views are [..., H, W] arrays (numpy);
     ratios are scalars, per-column arrays of length W or [H, W] maps (a real sensor's true ratios:
     :meth:`SensorCrosstalk.camera`). The coded capture is the right view.
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> xt = doefab.DualPixelCrosstalk(0.1, 0.05)  # α_l→r, α_r→l; no estimate: the pipeline leaves the mix in
+        >>> coded, uncoded = xt.record(np.full((4, 4), 0.6), np.full((4, 4), 0.2), noise="none")
+        >>> round(float(coded[0, 0]), 3), round(float(uncoded[0, 0]), 3)  # 0.1·0.2 + 0.95·0.6, 0.9·0.2 + 0.05·0.6
+        (0.59, 0.21)
     """
 
     def __init__(self, alpha_lr, alpha_rl, estimate=None):
@@ -206,8 +250,11 @@ class DualPixelCrosstalk:
         return cls(a if not scalar else float(a[0]), b if not scalar else float(b[0]),
                    estimate if not scalar else (float(estimate[0][0]), float(estimate[1][0])))
 
-    def record(self, coded, uncoded, noise, rng):
-        """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first)."""
+    def record(self, coded, uncoded, noise="default", rng=0):
+        """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first). ``noise``:
+        a ``doefab.imaging.sensor`` preset name (``"default"``, ``"authors"``, ``"none"``), model or ``Sensor``;
+        ``rng``: a seed or a ``numpy.random.Generator``."""
+        noise, rng = _noise_and_rng(noise, rng)
         left, right = mix_crosstalk(uncoded, coded, self.alpha_lr, self.alpha_rl)
         right = np.clip(noise.apply(right, rng), 0.0, 1.0)
         left = np.clip(noise.apply(left, rng), 0.0, 1.0)

@@ -64,6 +64,15 @@ def depth_encoding_score(psf, depths, signal: float = 0.25, contrast: float = 0.
         spectrum: ``"natural"`` (1/f²) or ``"white"`` texture.
     Returns:
         {"predicted_error_m", "min_dprime", "mean_log10_dprime", "dprime": [...], "pairs_m": [[z_i, z_i+1], ...]}
+
+    Example:
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)  # focused at 5 m
+        >>> pair = doefab.split_aperture_psf(None, cam, [550e-9], [2.0, 3.0, 5.0], kernel_size=31)
+        >>> score = doefab.depth_encoding_score(pair.uncoded, [2.0, 3.0, 5.0])
+        >>> score["pairs_m"], score["min_dprime"] > 1  # neighbouring planes told apart
+        ([[2.0, 3.0], [3.0, 5.0]], True)
     """
     for name, v, lo, hi in (("signal", signal, 0, 1), ("contrast", contrast, 0, 1)):
         number_in(name, v, lo, hi, unit="(a fraction of full scale, not a percentage)", lo_open=True)

@@ -60,7 +60,12 @@ def sensor_response(wavelengths, source=DEFAULT_RESPONSE, every_channel: bool = 
     sees (on average below ``MIN_CHANNEL_FRACTION`` of its peak) are refused; without it a narrow-band source (a
     633 nm laser, which blue does not see) is fine.
 
-    Example: ``sensor_response([633e-9])`` is [3, 1], red the largest.
+    Example:
+
+        >>> import doefab
+        >>> r = doefab.sensor_response([633e-9])  # (3 channels, 1 band), the strongest channel's peak 1
+        >>> r.shape, int(r.argmax())  # red sees a 633 nm laser most
+        ((3, 1), 0)
     """
     lam = np.asarray(wavelengths, np.float64).ravel()
     if lam.size == 0 or not np.all(np.isfinite(lam)):
@@ -155,7 +160,15 @@ class Sensor:
     ``imaging.responses.RESPONSES`` or a CSV path) and its noise (``full_well_e``: electrons at a capture value of
     1, within ``FULL_WELL_RANGE_E``; ``read_noise_e``: rms electrons, within ``READ_NOISE_RANGE_E``). The default
     is the prototype's (Canon EOS 5D Mark II curves, 25 000 e⁻, 3 e⁻). A CSV response is read and checked when
-    the sensor is made; a named one when first used."""
+    the sensor is made; a named one when first used.
+
+    Example:
+
+        >>> import doefab
+        >>> s = doefab.Sensor(full_well_e=10000.0, read_noise_e=2.0)  # electrons
+        >>> s.response, s.full_well_e
+        ('Canon EOS 5D Mark II', 10000.0)
+    """
 
     response: str = DEFAULT_RESPONSE
     full_well_e: float = DEFAULT_FULL_WELL_E

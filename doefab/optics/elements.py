@@ -13,7 +13,15 @@ __all__ = ["blank_height", "blazed_grating_height", "as_height_tensor"]
 
 
 def blank_height(camera: Camera) -> np.ndarray:
-    """(N, N) float64 zeros: a DOE with no structure."""
+    """(N, N) float64 zeros: a DOE with no structure.
+
+    Example:
+
+        >>> import doefab
+        >>> h = doefab.blank_height(doefab.Camera(doe_pixels=64, doe_pitch=135e-6))
+        >>> h.shape, float(h.max())
+        ((64, 64), 0.0)
+    """
     camera = require_camera(camera)
     return np.zeros((camera.doe_pixels, camera.doe_pixels), dtype=np.float64)
 
@@ -31,6 +39,14 @@ def blazed_grating_height(camera: Camera, period_pixels: float = 16, n_levels: i
     Returns:
         (N, N) float64 heights, metres. Pixel j's phase is sampled at its centre for the continuous
         blaze, and equals floor(N_steps · frac(x/Λ)) / N_steps of a wave for the staircase.
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> cam = doefab.Camera(doe_pixels=64, doe_pitch=135e-6)
+        >>> h = doefab.blazed_grating_height(cam, 16, n_levels=4)  # 16 DOE pixels per period, 4 steps
+        >>> len(np.unique(h)), round(float(h.max()) * 1e9, 1)  # nm: 3/4 of the 2π height at 550 nm
+        (4, 896.9)
     """
     camera = require_camera(camera)
     period_pixels = number_in("period_pixels", period_pixels, 2, 1e6, unit="DOE pixels (not metres)")

@@ -73,6 +73,14 @@ def gap_transmittance(height: torch.Tensor, camera: Camera, wavelength: float, d
         pad: zero-padding factor of the angular spectrum grid. Default: just enough that light diffracted at
             the grid's largest angle (sin θ = λ / 2b, b the DOE pitch) over the gap cannot wrap around into the
             grid (linear, not circular, convolution), plus 16 pixels.
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> cam = doefab.Camera(doe_pixels=64, doe_pitch=135e-6)
+        >>> t = doefab.gap_transmittance(np.zeros((64, 64)), cam, 550e-9, float("inf"), 1e-3)  # a blank DOE 1 mm out
+        >>> tuple(t.shape), round(float(abs(t[32, 32])), 3)  # a plane wave crosses it unchanged
+        ((64, 64), 1.0)
     """
     camera, g = require_camera(camera), check_gap(gap)
     wavelength = wavelength_m("wavelength", wavelength)

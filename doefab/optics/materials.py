@@ -45,6 +45,14 @@ class Material:
         name: human-readable name, stored in design and mask manifests.
         b: Sellmeier B coefficients (dimensionless), three values.
         c_um: Sellmeier C coefficients in micrometres (the resonance wavelengths), three values.
+
+    Example:
+
+        >>> import doefab
+        >>> silica = doefab.Material("fused silica", b=(0.6961663, 0.4079426, 0.8974794),
+        ...                          c_um=(0.0684043, 0.1162414, 9.896161))
+        >>> round(float(silica.index(587.6e-9)), 4)  # n_d, the Malitson (1965) Sellmeier
+        1.4585
     """
 
     name: str
@@ -171,7 +179,15 @@ def substrate_name(name) -> str:
 
 def material_by_name(name: str) -> Material:
     """A built-in substrate by name (``substrate_name``: ``"fused silica"``, ``"N-BK7"``, ``"CaF2"``,
-    ``"sapphire"``, ``"PMMA"``, in any case)."""
+    ``"sapphire"``, ``"PMMA"``, in any case).
+
+    Example:
+
+        >>> import doefab
+        >>> glass = doefab.material_by_name("n-bk7")
+        >>> glass.name, round(float(glass.index(587.6e-9)), 4)  # n_d
+        ('N-BK7', 1.5168)
+    """
     try:
         return SUBSTRATES[substrate_name(name)].material
     except DoefabError as exc:

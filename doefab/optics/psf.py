@@ -187,6 +187,15 @@ class PSFPlan:
             there; ``half_psf`` returns tensors there, ``__call__`` returns the pair where the height came from
             (a tensor's device; the CPU for a numpy array or a blank DOE).
         route_options: passed to the route (``pixel_nodes`` for mft, ``oversample`` for fft, ``pad`` for asm).
+
+    Example:
+
+        >>> import doefab
+        >>> cam = doefab.Camera(doe_pixels=64, doe_pitch=135e-6)  # the 8.64 mm DOE on a coarse 64² grid
+        >>> plan = doefab.PSFPlan(cam, [550e-9], [float("inf")], kernel_size=31)
+        >>> pair = plan(None)  # a blank DOE; a height map (metres, N × N) in its place computes its PSFs
+        >>> tuple(pair.coded.shape), round(float(pair.coded.sum()), 2)  # (depths, wavelengths, K, K); half the light
+        ((1, 1, 31, 31), 0.49)
     """
 
     def __init__(self, camera: Camera, wavelengths, depths, kernel_size: int = 255,

@@ -96,6 +96,12 @@ def finetune_end_to_end(design_dir, out_dir, minutes: float = 20.0, weights_dir=
     ``sensor``: the ``imaging.sensor.Sensor`` whose noise the captures carry (None: the default sensor's); a
     starting network trained for another sensor's noise is refused. ``device``: where the PSFs, the rendering and
     the network run ("auto", "cpu", "cuda", "cuda:N"; None: the current default, ``doefab._devices.default_device``).
+
+    Example:
+
+        >>> from doefab import finetune_end_to_end
+        >>> summary = finetune_end_to_end("masks/half-ring", "out/e2e", minutes=20)  # doctest: +SKIP
+        >>> sorted(summary)[:3]  # doctest: +SKIP
     """
     from doefab._devices import resolve_device
     from doefab.design.design import Design

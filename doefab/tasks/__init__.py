@@ -16,7 +16,15 @@ TASKS = {"streak": StreakTask, "grating": GratingTask, "half-ring": HalfRingTask
 
 
 def get_task(name, **params) -> Task:
-    """A task object by name (``streak``, ``grating``, ``half-ring``) with optional parameters."""
+    """A task object by name (``streak``, ``grating``, ``half-ring``) with optional parameters.
+
+    Example:
+
+        >>> import doefab
+        >>> task = doefab.get_task("grating", period_pixels=16)
+        >>> task.name, task.period_pixels
+        ('grating', 16)
+    """
     if isinstance(name, Task):
         return name
     try:

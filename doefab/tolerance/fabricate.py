@@ -135,6 +135,15 @@ def fabricated_height(levels, camera, design_wavelength: float | None = None, de
         n_levels: L, the design's levels (2, 4, 8, 16 or 32; ``Design.n_levels``).
     Returns:
         (N·s, N·s) float64 heights; with no error, each DOE pixel's height repeated s × s times.
+
+    Example:
+
+        >>> import numpy as np, doefab
+        >>> cam = doefab.Camera(doe_pixels=64, doe_pitch=135e-6)
+        >>> levels = np.zeros((64, 64), np.uint8); levels[:, :32] = 8
+        >>> h = doefab.fabricated_height(levels, cam)  # no error: each pixel's level × d, on a 4× finer grid
+        >>> h.shape, (np.unique(h) * 1e9).round(2).tolist()  # nm
+        ((256, 256), [0.0, 597.94])
     """
     from doefab.tolerance.relief import MaskErrors, ReliefModel, corner_bias, mean_height, pattern_heights
 
