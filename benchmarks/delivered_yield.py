@@ -40,7 +40,8 @@ def judge_design(design: str, parts: int, networks: dict, grid, seed: int, work:
     """One design's PSF-level and delivered-quality yields, means and variance components."""
     from doefab.tolerance.delivered import delivered_summary
     from doefab.tolerance.errors import PartErrors, load_budget
-    from doefab.tolerance.montecarlo import monte_carlo, summarize
+    from doefab.tolerance.montecarlo import monte_carlo
+    from doefab.tolerance.yieldstats import summarize
     from doefab.tolerance.spec import TASK_OF_DESIGN
     from doefab.tolerance.study import evaluate_part, judge_for
 

@@ -41,6 +41,10 @@ __all__ = ["simulate_captures", "convolve", "convolve_valid", "render_layers", "
 #: about 5e4×). Brighter light saturates every pixel a PSF's 1e-6 tail reaches, and its shot noise overflows the
 #: Poisson sampler.
 MAX_RADIANCE = 1e6
+#: Above this peak radiance the captures are convolved in float64: float32's FFT rounding spreads about 2e-9 of the
+#: brightest point over the whole frame (2e-4 of full scale at 1e5 and 1.5e-3 at 1e6, where no PSF reaches;
+#: ``tests/imaging/test_bright_scenes.py``), below 1e-6 of full scale only up to here (2⁸, the training scenes' top)
+FLOAT32_RADIANCE = 256.0
 
 
 class Capture(np.ndarray):
@@ -198,7 +202,8 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
         raise DoefabError(f"scene holds radiance up to {top:.3g}: simulate_captures takes radiance up to "
                           f"{MAX_RADIANCE:g} times the clipping level of a full exposure (1); scale the scene, e.g. "
                           f"multiply it by {100 / top:.3g} to put its brightest point at 100")
-    s = s.to(dev, torch.float32)
+    dtype = torch.float64 if top > FLOAT32_RADIANCE else torch.float32
+    s = s.to(dev, dtype)
     if pair.coded is None or pair.uncoded is None:
         raise DoefabError("the PSF pair lacks a half: compute it with halves=('coded', 'uncoded')")
     c, h, w = s.shape
@@ -217,9 +222,9 @@ def simulate_captures(scene, pair, depth_map=None, response=None, noise="default
     views = []
     with torch.no_grad():
         for half in ("coded", "uncoded"):
-            psf = pair[half].detach().to(dev, torch.float32)
+            psf = pair[half].detach().to(dev, dtype)
             blurred = render_layers(s, psf, masks, pair.depths)
-            rgb = torch.einsum("rc,chw->rhw", t.to(dev), blurred) if t is not None else blurred
+            rgb = torch.einsum("rc,chw->rhw", t.to(dev, dtype), blurred) if t is not None else blurred
             views.append(rgb.double().cpu().numpy())
     out = [v.astype(np.float32) for v in _camera(crosstalk).record(views[0], views[1], noise_obj, rng)]
     return _labelled(out[0], pair, torch_in), _labelled(out[1], pair, torch_in)

@@ -114,20 +114,23 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
         >>> a_lr.round(3).tolist(), a_rl.round(3).tolist()
         ([[0.1, 0.1, 0.1]], [[0.04, 0.04, 0.04]])
     """
-    def ratio(pair, num_index):
+    def ratio(pair, num_index, name):
         l_s, r_s = (np.asarray(x, dtype=np.float64) for x in pair)
         _same_views(l_s, r_s, "a calibration pair's views")
-        total = l_s + r_s
+        num, total = (l_s, r_s)[num_index], l_s + r_s
+        if axis_mean is not None:  # a dark-subtracted view's pixels scatter about 0: their mean is the estimate
+            num, total = num.mean(axis=axis_mean, keepdims=True), total.mean(axis=axis_mean, keepdims=True)
         if not np.all(np.isfinite(total)) or np.any(total <= 0):
             raise DoefabError("calibration captures must be finite and lit everywhere (a white wall, not black)")
-        num = (l_s, r_s)[num_index]
-        if axis_mean is not None:
-            return num.mean(axis=axis_mean, keepdims=True) / total.mean(axis=axis_mean, keepdims=True)
-        return num / total
+        out = num / total
+        if out.min() < 0 or out.max() >= 1:  # a view below black, or the blocked half's view the brighter
+            i = np.unravel_index(int(np.argmax(np.abs(out - 0.5))), out.shape)
+            raise DoefabError(f"the white-wall captures give {name} = {out[i]:.3g} (column {i[-1]}), outside [0, 1): "
+                              f"the view of the blocked half must be the darker one and neither below black; check "
+                              f"which half was blocked in each pair and the frames' black level")
+        return out
 
-    alpha_lr = ratio(blocked_left_pair, 1)
-    alpha_rl = ratio(blocked_right_pair, 0)
-    return alpha_lr, alpha_rl
+    return ratio(blocked_left_pair, 1, "α_l→r"), ratio(blocked_right_pair, 0, "α_r→l")
 
 
 def save_crosstalk(path, alpha_lr, alpha_rl, se_lr, se_rl, meta: dict | None = None):
@@ -191,7 +194,7 @@ def simulate_calibration(alpha_lr, alpha_rl, rows: int = 3072, noise="default", 
     pairs = []
     for left, right in ((white, dark), (dark, white)):  # left aperture half blocked → only the left view lit
         l_s, r_s = mix_crosstalk(left, right, a, b)
-        pairs.append((np.clip(noise.apply(l_s, rng), 1e-9, None), np.clip(noise.apply(r_s, rng), 1e-9, None)))
+        pairs.append((noise.apply(l_s, rng), noise.apply(r_s, rng)))  # unclipped: a dark view's noise averages out
     a_hat, b_hat = calibrate_crosstalk(pairs[0], pairs[1])
     return a_hat.ravel(), b_hat.ravel()
 

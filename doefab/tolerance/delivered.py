@@ -164,7 +164,7 @@ def delivered_summary(samples: list[dict], nominal_scenes: dict, spec: dict, tas
     bootstrap's and the parts' Wilson interval: resampled parts cannot fail when every part passed, Wilson's stays
     honest there; with a few scenes the bootstrap's scene share reads narrow (:func:`mean_interval`). Empty without
     per-scene values."""
-    from doefab.tolerance.montecarlo import wilson
+    from doefab.tolerance.yieldstats import wilson
     from doefab.tolerance.spec import PRIMARY, SPAN, spec_limits
 
     if not samples or "network_scenes" not in samples[0] or task not in PRIMARY:

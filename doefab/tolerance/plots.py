@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from doefab.plotting import save_figure
-from doefab.tolerance.montecarlo import wilson
+from doefab.tolerance.yieldstats import wilson
 
 __all__ = ["sweep_plots", "tornado_plot", "levels_plot", "yield_plot", "distribution_plot"]
 

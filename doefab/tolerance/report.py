@@ -229,7 +229,8 @@ def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = 
 
 def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, workers, networks, spec, task,
                  progress, weights_dir=None) -> None:
-    from doefab.tolerance.montecarlo import monte_carlo, summarize, wilson
+    from doefab.tolerance.montecarlo import monte_carlo
+    from doefab.tolerance.yieldstats import summarize, wilson
     from doefab.tolerance.spec import meets
 
     t = time.perf_counter()

@@ -7,7 +7,7 @@ import math
 
 from doefab.reconstruction.metrics import DISPLAY, metric_text
 from doefab.tolerance.kinds import KINDS
-from doefab.tolerance.montecarlo import interval_text
+from doefab.tolerance.yieldstats import interval_text
 
 __all__ = ["body_lines", "lead_text", "summary_lines", "spec_words", "delta_text", "noise_of", "NOISE_NOTE", "REMEDY"]
 

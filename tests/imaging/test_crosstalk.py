@@ -92,3 +92,23 @@ def test_views_of_two_shapes_are_refused_by_name():
             doefab.mix_crosstalk(a, b, 0.1, 0.05)
         with pytest.raises(DoefabError, match="left_star and right_star must be the two views"):
             doefab.unmix_crosstalk(a, b, 0.1, 0.05)
+
+
+def test_a_dim_calibration_is_noisy_but_not_biased():
+    """A white wall exposed to 1e-3 of full scale: the dark view holds 0.05 · 1e-3 · 25 000 = 1.25 e⁻ against 3 e⁻ of
+    read noise, which scatters about 0; clipping it at 0 (or any floor) turned that noise into light (the estimate
+    read 0.079 for 0.05). Averaged over 3072 rows, the estimate's spread is about 3 e⁻ / √3072 / 25 e⁻ = 0.002."""
+    a, b = doefab.simulate_calibration(0.05, 0.05, rows=3072, level=1e-3, rng=0)
+    assert abs(float(a.mean()) - 0.05) < 0.006 and abs(float(b.mean()) - 0.05) < 0.006, (a, b)
+
+
+def test_captures_that_give_a_ratio_outside_zero_to_one_are_named_at_the_calibration():
+    """A view below black (−0.01 after a wrong black level) gives α = 0.5 / 0.49 = 1.02: refused where it arises,
+    naming the captures, not later as "no dual-pixel crosstalk". Dark-subtracted pixels that scatter below 0 while
+    their column's mean is positive are data, not an error."""
+    lit, below = np.full((4, 3), 0.5), np.full((4, 3), -0.01)
+    with pytest.raises(DoefabError, match=r"α_l→r = 1.02 \(column 0\), outside \[0, 1\).*black level"):
+        doefab.calibrate_crosstalk((below, lit), (lit, np.full((4, 3), 0.02)))
+    scatter = np.array([[0.03], [-0.01], [0.02], [0.0]]) * np.ones((1, 3))  # mean 0.01 of a 0.5 wall
+    a_lr, _ = doefab.calibrate_crosstalk((np.full((4, 3), 0.49), scatter), (np.full((4, 3), 0.02), lit))
+    assert np.allclose(a_lr, 0.01 / 0.5)

@@ -83,7 +83,7 @@ def test_the_summary_yield_is_the_parts_share_and_its_interval_holds_wilsons():
     """Per label: the yield is the share of parts whose scene mean meets the spec against the error-free part's
     scene mean (as ``summarize`` counts it), and its interval joins the bootstrap's with Wilson's, which stays
     open at a yield of 1."""
-    from doefab.tolerance.montecarlo import summarize, wilson
+    from doefab.tolerance.yieldstats import summarize, wilson
 
     x, _, b = _table(parts=10, scenes=4, part_sd=0.3, scene_sd=1.0, noise_sd=0.1, seed=7)
     samples = [{"metric": 0.8, "worst": 0.7, "l1_to_nominal": 0.1,
@@ -110,7 +110,7 @@ def test_the_report_states_the_delivered_yield_its_interval_and_the_scene_noise_
     """The summary's opening takes the delivered mean's and yield's intervals over parts and scenes; its list
     gives the delivered-quality yield with both intervals and says whether a part's scene noise lies below the
     part-to-part spread, or how many scenes would put it there."""
-    from doefab.tolerance.montecarlo import summarize
+    from doefab.tolerance.yieldstats import summarize
     from doefab.tolerance.reporttext import lead_text, summary_lines
 
     def res_for(noise_sd, parts=10):
@@ -205,7 +205,7 @@ def test_a_delivered_change_inside_its_scene_noise_ranks_nothing():
                                        "measured_psf": {"psnr_highlight": noise, "psnr": 0.1}}}
 
     samples = [{"metric": 0.85, "worst": 0.8, "l1_to_nominal": 0.1}] * 3
-    from doefab.tolerance.montecarlo import summarize
+    from doefab.tolerance.yieldstats import summarize
 
     nominal = {"psf": {"psf_metric": 0.869}}
     res = {"task": "hdr", "stop": "the DOE", "warnings": [], "budget": {"spec": {}}, "nominal": nominal,

@@ -9,7 +9,7 @@ import pytest
 import doefab
 from doefab.cli import main
 from doefab.design.design import Design
-from doefab.tolerance import montecarlo, study
+from doefab.tolerance import montecarlo, study, yieldstats
 from doefab.tolerance.errors import PartErrors, load_budget
 
 
@@ -91,27 +91,30 @@ def test_the_part_log_is_strict_json_and_a_nan_metric_resumes_as_nan(design_dir,
 
 def test_summary_statistics():
     rows = [{"metric": m, "worst": m, "l1_to_nominal": 0.0} for m in (0.4, 0.6, 0.6, 0.8)]
-    s = montecarlo.summarize(rows, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
+    s = yieldstats.summarize(rows, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
     assert s["metric"]["mean"] == pytest.approx(0.6)
     from scipy.stats import t
 
     half = t.ppf(0.975, 3) * np.std([0.4, 0.6, 0.6, 0.8], ddof=1) / 2  # Student's t: 3.18, not 1.96, at 4 parts
     assert s["metric"]["ci95"] == pytest.approx([0.6 - half, 0.6 + half])
-    two = montecarlo.mean_ci([0.4, 0.6])["ci95"]  # two parts: t = 12.7 at one degree of freedom
+    two = yieldstats.mean_ci([0.4, 0.6])["ci95"]  # two parts: t = 12.7 at one degree of freedom
     assert two == pytest.approx([0.5 - 12.7062 * 0.1, 0.5 + 12.7062 * 0.1], rel=1e-5)
-    assert all(np.isnan(montecarlo.mean_ci([0.4, float("nan")])["ci95"]))  # one part left: no interval
+    assert all(np.isnan(yieldstats.mean_ci([0.4, float("nan")])["ci95"]))  # one part left: no interval
+    left_out = yieldstats.mean_ci([float("inf"), 1.0, 2.0, float("nan")])  # what the mean is of, said
+    assert (left_out["n"], left_out["n_not_finite"], left_out["mean"]) == (2, 2, 1.5)
+    assert (s["metric"]["n"], s["metric"]["n_not_finite"]) == (4, 0)
     assert s["yield"]["value"] == 0.75 and 0 < s["yield"]["ci95"][0] < 0.75 < s["yield"]["ci95"][1] <= 1
     # relative limit: at most 0.25 below the nominal 0.9 → 0.65: two of four parts pass
-    s = montecarlo.summarize(rows, {"hdr": {"psf_metric_loss_max": 0.25}}, "hdr", {"psf": {"psf_metric": 0.9}})
+    s = yieldstats.summarize(rows, {"hdr": {"psf_metric_loss_max": 0.25}}, "hdr", {"psf": {"psf_metric": 0.9}})
     assert s["yield"]["value"] == 0.25
 
 
 def test_wilson_interval_against_its_formula_and_at_the_edges():
-    lo, hi = montecarlo.wilson(24, 24)
+    lo, hi = yieldstats.wilson(24, 24)
     assert hi == 1.0 and lo == pytest.approx(24 / (24 + 1.96**2), rel=1e-9)  # all pass: (n/(n + z²), 1)
-    lo, hi = montecarlo.wilson(0, 10)
+    lo, hi = yieldstats.wilson(0, 10)
     assert lo == 0.0 and hi == pytest.approx(1.96**2 / (10 + 1.96**2), rel=1e-9)
-    lo, hi = montecarlo.wilson(5, 10)
+    lo, hi = yieldstats.wilson(5, 10)
     assert lo < 0.5 < hi and hi - 0.5 == pytest.approx(0.5 - lo)
 
 
@@ -241,7 +244,7 @@ def test_the_yield_band_is_wilsons_everywhere(design_dir, tmp_path):
     p.write_text("[sensor]\ncrosstalk_lr_percent = 0.0\ncrosstalk_rl_percent = 0.0\n[spec.hdr]\npsf_metric_min = 0.0\n")
     res = run_study(design_dir, load_budget(p), tmp_path / "w", samples=5, grid=1, progress=False)
     conv = res["convergence"][-1]
-    assert conv["yield"] == 1.0 and conv["yield_ci95"] == pytest.approx(list(montecarlo.wilson(5, 5)))
+    assert conv["yield"] == 1.0 and conv["yield_ci95"] == pytest.approx(list(yieldstats.wilson(5, 5)))
     assert conv["yield_ci95"][0] < 0.6 and res["summary"]["yield"]["ci95"] == conv["yield_ci95"]
     assert (tmp_path / "w" / "yield_vs_n.png").stat().st_size > 1000
 
@@ -267,7 +270,7 @@ def test_the_yield_figure_draws_wilsons_band_for_every_n(tmp_path, monkeypatch):
     ok = [True, True, True, False, True, True]
     plots.yield_plot(tmp_path / "y.png", ok, "spec")
     k = np.cumsum(ok)
-    want = np.array([montecarlo.wilson(int(a), n + 1) for n, a in enumerate(k)])
+    want = np.array([yieldstats.wilson(int(a), n + 1) for n, a in enumerate(k)])
     assert np.allclose(drawn["lo"], want[:, 0]) and np.allclose(drawn["hi"], want[:, 1])
     assert drawn["hi"][0] - drawn["lo"][0] > 0.5  # one passing part: Wilson is wide, Wald would be 0
 
@@ -343,7 +346,7 @@ def test_a_limit_between_two_parts_passes_the_better_and_fails_the_worse():
         spec = {"hdr": table}
         assert [meets({"psf_metric": m}, spec, "hdr", "psf", nominal) for m in (good, bad)] == [True, False], table
         rows = [{"metric": m, "worst": m, "l1_to_nominal": 0.0} for m in (good, bad)]
-        assert montecarlo.summarize(rows, spec, "hdr", {"psf": nominal})["yield"]["value"] == 0.5
+        assert yieldstats.summarize(rows, spec, "hdr", {"psf": nominal})["yield"]["value"] == 0.5
     spec = {"hdr": {"psf_metric_min": (good + bad) / 2}}
     assert nominal_failures(spec, "hdr", "psf", nominal) == []
     assert nominal_failures(spec, "hdr", "psf", {"psf_metric": bad}) != []

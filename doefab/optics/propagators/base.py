@@ -118,8 +118,8 @@ def check_window(setup: FocalSetup, route: str) -> None:
             f"[{route}] output window aliasing: the K = {setup.kernel_size} px window reaches "
             f"{half * 1e3:.3f} mm from the axis but the pupil sampled at {setup.pitch * 1e6:.3g} µm repeats its "
             f"far field every {2 * alias_half * 1e3:.3f} mm at {lam * 1e9:.0f} nm (alias-free half-width "
-            f"{alias_half * 1e3:.3f} mm). Fix: a smaller kernel (≤ {max(kmax, 0)} px), a finer pupil sampling "
-            f"(pupil_oversample ≥ {math.ceil(half / alias_half)}) or a finer DOE pitch.")
+            f"{alias_half * 1e3:.3f} mm). Fix: " + (f"a smaller kernel (≤ {kmax} px), " if kmax >= 1 else "")
+            + f"a finer pupil sampling (pupil_oversample ≥ {math.ceil(half / alias_half)}) or a finer DOE pitch.")
 
 
 def check_smooth_phase(phase: np.ndarray, mask: np.ndarray, limit: float, route: str, what: str, q: int) -> None:
