@@ -35,7 +35,8 @@ class Metric(NamedTuple):
     label: how reports name it.  unit: as printed ("dB", "m", "rad"; "" for a ratio or for HDR radiance, which is
     relative).  higher_is_better: its direction.  span: (lo, hi) the values it can take, in ``unit`` (the range
     of a tolerance budget's absolute limit on it).  scale: what a unitless value is relative to, where it is
-    not a plain ratio (records write it beside the unit)."""
+    not a plain ratio (records write it beside the unit).  scale_unit: how a report prints that scale after a
+    value ("× clip"), where ``unit`` is "" (spec keys spell the unit, which stays empty for a relative one)."""
 
     name: str
     label: str
@@ -43,6 +44,12 @@ class Metric(NamedTuple):
     higher_is_better: bool
     span: tuple[float, float]
     scale: str = ""
+    scale_unit: str = ""
+
+    @property
+    def shown_unit(self) -> str:
+        """The unit a report prints beside a value: ``unit``, else ``scale_unit`` ("" for a plain ratio)."""
+        return self.unit or self.scale_unit
 
 
 @dataclass(frozen=True)
@@ -112,8 +119,8 @@ APPLICATIONS = {a.name: a for a in (
                 network="doefab.reconstruction.hdrnet", highlights=True,
                 metrics=(Metric("psnr_highlight", "highlight PSNR", "dB", True, _PSNR),
                          Metric("psnr", "PSNR", "dB", True, _PSNR),
-                         Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK), _CLIP),
-                         Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK), _CLIP)),
+                         Metric("rmse_highlight", "highlight RMSE", "", False, (0.0, HDR_PEAK), _CLIP, "× clip"),
+                         Metric("rmse", "RMSE", "", False, (0.0, HDR_PEAK), _CLIP, "× clip")),
                 metric_function="doefab.reconstruction.metrics:hdr_metrics", kernel=95, out_channels=3,
                 image_unit="log(1 + radiance) / log(257)", error_unit="radiance",
                 scene_function="doefab.reconstruction.specs:hdr_scene"),

@@ -100,14 +100,13 @@ def _check_network(design_task: str, ddir, weights_dir) -> None:
 
 
 def run(args) -> int:
-    import shutil
     from pathlib import Path
 
     from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
     from doefab.tolerance.errors import holder_mounting, load_budget
-    from doefab.tolerance.report import RESULT_FILES, STEPS, run_study
+    from doefab.tolerance.report import STEPS, run_study
     from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
     ddir, design = design_folder(args.design)  # validated before any output exists
@@ -133,15 +132,11 @@ def run(args) -> int:
                        keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in saved))
     args.resume_hint = resume_hint(f"finished samples are kept in {out.path}", args.force)
     out.create()
-    if args.force:  # a fresh study: no saved parts, no finished steps, no results of the earlier one
-        for f in ("samples.jsonl", *RESULT_FILES):
-            (out.path / f).unlink(missing_ok=True)
-        shutil.rmtree(out.path / STEPS, ignore_errors=True)
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
                     budget_path=(args.budget or "doefab/tolerance/budget.toml (default)")
                     + (f", [mounting] from {args.holder}" if args.holder else ""), networks=args.networks,
-                    surrogate=args.surrogate, weights_dir=args.weights_dir)
+                    surrogate=args.surrogate, weights_dir=args.weights_dir, fresh=args.force)
     from doefab.tolerance.report import summary_lines
 
     for line in summary_lines(res):

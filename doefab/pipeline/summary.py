@@ -36,7 +36,10 @@ def _files(out: Path, done: dict) -> list[str]:
 def _links(folder: str, names: list[str]) -> str:
     """A folder of the run and its files as links relative to the report (which sits at the run folder's top, so
     they hold wherever the folder is copied)."""
-    return f"[{folder}/]({folder}/) (" + ", ".join(f"[{n}]({folder}/{n})" for n in names) + ")"
+    from urllib.parse import quote
+
+    # the targets percent-encoded: a name with a space or parenthesis would end a Markdown link's target
+    return f"[{folder}/]({quote(folder)}/) (" + ", ".join(f"[{n}]({quote(f'{folder}/{n}')})" for n in names) + ")"
 
 
 def summary_items(out: Path, done: dict, task: str) -> list[tuple]:

@@ -113,9 +113,10 @@ def _design_wavelength_note(cam, lams) -> str | None:
 def sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
     """A response an RGB task does not use; an RGB task's bands (its R, G and B channels) where the camera's
     default colour response does not see them (a near-infrared design: the colour scenes do not hold it)."""
+    size = _sensor_size_note(scene, cam, task)
+    out = [size] if size else []
     if has(scene.task, "spectral"):
-        return []
-    out = []
+        return out
     if "response" in scene.sensor and not sensor.has_default_response():
         out.append(f"sensor.response {scene.sensor['response']!r} is not used by the {scene.task} task: its scenes "
                    f"are the camera's own RGB (only the noise applies)")
@@ -127,6 +128,23 @@ def sensor_warnings(scene: Scene, sensor, task, cam) -> list[str]:
                    f"channels, and {', '.join(f'{w * 1e9:.4g}' for w in outside)} nm lie outside {words}: its "
                    f"colour scenes hold no light there")
     return out
+
+
+def _sensor_size_note(scene: Scene, cam, task) -> str | None:
+    """A sensor (``camera.sensor_diagonal_mm``) whose diagonal, in its pixels, is shorter than the PSF window's or
+    the test images': light a PSF spreads, or an image, that no sensor of that size records (None otherwise)."""
+    d = scene.camera.get("sensor_diagonal_mm")
+    if isinstance(d, bool) or not isinstance(d, (int, float)):
+        return None
+    across = d * 1e-3 / cam.sensor_pitch  # the sensor's diagonal in its pixels
+    sides = {"the PSF window (optics.kernel_px)": task.kernel_size,
+             "the test images (reconstruction.size_px)": int(scene.reconstruction.get("size_px", 256))}
+    over = [f"{what}, {k} px, {k * math.sqrt(2):.0f} px across" for what, k in sides.items() if k * math.sqrt(2) > across]
+    if not over:
+        return None
+    return (f"camera.sensor_diagonal_mm = {d:g}: the sensor is {across:.0f} px across its diagonal at "
+            f"{cam.sensor_pitch * 1e6:g} µm, less than {' and '.join(over)}: no sensor of that size records them; "
+            f"check the diagonal (in mm) and camera.sensor_pitch_um")
 
 
 def depth_warnings(scene: Scene, cam, task, from_blur: bool) -> list[str]:

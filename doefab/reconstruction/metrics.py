@@ -13,9 +13,10 @@ __all__ = ["hdr_metrics", "spectral_metrics", "depth_metrics", "depth_pixels", "
            "HIGHLIGHT_ABOVE", "DISPLAY", "metric_label", "metric_text"]
 
 HIGHLIGHT_ABOVE = 2.0  # highlight pixels: radiance that saturates the plain half-exposure capture
-#: each task's metrics as reports name them: name → (display name, unit as printed; "" for a ratio or for HDR
-#: radiance, which is relative: 1 is the plain capture's clip) — a view of ``doefab.applications``' Metric rows
-DISPLAY = View(lambda a: {m.name: (m.label, m.unit) for m in a.metrics})
+#: each task's metrics as reports name them: name → (display name, unit as printed: ``Metric.shown_unit``, "" for
+#: a ratio, "× clip" for HDR radiance, which is relative: 1 is the plain capture's clip) — a view of
+#: ``doefab.applications``' Metric rows
+DISPLAY = View(lambda a: {m.name: (m.label, m.shown_unit) for m in a.metrics})
 DIGITS = {"dB": 2}  # decimals a report prints per unit (3 for every other)
 
 

@@ -31,12 +31,14 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
               do_sweep: bool = False, do_levels: bool = False, workers: int | None = None, scheduler=None,
               budget_path=None,
               networks: bool = False, surrogate: bool = False, weights_dir=None, progress: bool = True,
-              network_top: int | None = None) -> dict:
+              network_top: int | None = None, fresh: bool = False) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
     Monte Carlo (None: one per core when there are enough parts); ``scheduler``: a Dask scheduler instead
     (``schedulers.parse_scheduler``; a ``tcp://`` one must answer before any work). ``networks``: False, True (the
-    network judge's default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split)."""
+    network judge's default scenes) or the judge's scenes (``netjudge.judge_settings``: images, size, split).
+    ``fresh``: an earlier study's parts, steps and results in ``out`` are removed, once the design is read and
+    before any part is judged (a study refused before that keeps them)."""
     from doefab._memory import keep_freed_memory
     from doefab.tolerance.mounted import stop_case
 
@@ -47,6 +49,12 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
 
     out = Path(out)
     judge = study.judge_for(str(design_dir), 1)
+    if fresh:  # a fresh study: no saved parts, no finished steps, no results of the earlier one
+        import shutil
+
+        for f in ("samples.jsonl", *RESULT_FILES):
+            (out / f).unlink(missing_ok=True)
+        shutil.rmtree(out / STEPS, ignore_errors=True)
     if samples > 0:  # a resume of another study is refused before any step is judged or replaced
         from doefab.tolerance.montecarlo import check_resumable
 

@@ -286,6 +286,13 @@ def test_the_files_to_send_name_the_run_folder_where_it_is_now(tmp_path):
             "[README.txt](masks/README.txt))") in items  # links relative to the report, which sits beside them
     assert "to the printer: [holder/](holder/) ([holder.stl](holder/holder.stl))" in items
     assert not any("old_place" in i or str(tmp_path) in i for i in items)
+    from doefab.pipeline.report import html_text
+
+    # a name with a space and parentheses: the target percent-encoded, a link in Markdown and in HTML alike
+    done["holder"]["files"] = ["holder (v2).stl"]
+    line = next(i for i in summary_items(out, done, "hyperspectral")[1][1] if "to the printer" in i)
+    assert "[holder (v2).stl](holder/holder%20%28v2%29.stl)" in line
+    assert '<a href="holder/holder%20%28v2%29.stl">holder (v2).stl</a>' in html_text(line)
 
 
 def test_markdown_tables_keep_their_columns_and_figures_their_captions():

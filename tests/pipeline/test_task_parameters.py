@@ -254,3 +254,20 @@ def test_a_coded_psf_the_staircase_puts_more_than_one_percent_off_is_warned_with
         assert not [w for w in fixed.warnings if "holds the wavefront flat" in w], (text, fixed.warnings)
     assert not [w for w in resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n')).warnings
                 if "holds the wavefront flat" in w]
+
+
+def test_a_sensor_smaller_than_the_psf_window_or_the_test_images_is_warned(tmp_path):
+    """A 1.5 mm diagonal at 5.4 µm is 1.5e-3 / 5.4e-6 = 278 px across: the 256 px test images (362 px across their
+    diagonal) do not fit, the HDR task's 95 px window (134 px) does; a 1 mm diagonal (185 px) misses the images and
+    a 135 px window (191 px across); the
+    28.2 mm APS-C diagonal of scenes/my_camera.toml is not warned."""
+    def note(text):
+        res = resolve(_scene(tmp_path, 'task = "hdr"\nstages = ["design"]\n[camera]\n' + text))
+        return [w for w in res.warnings if "sensor_diagonal_mm" in w]
+
+    (one,) = note("sensor_diagonal_mm = 1.5\n")
+    assert "278 px across its diagonal" in one and "reconstruction.size_px), 256 px, 362 px across" in one
+    assert "optics.kernel_px" not in one
+    (both,) = note("sensor_diagonal_mm = 1.0\n[optics]\nkernel_px = 135\n")
+    assert "185 px across" in both and "optics.kernel_px), 135 px, 191 px across" in both
+    assert not note("sensor_diagonal_mm = 28.2\n") and not note("")

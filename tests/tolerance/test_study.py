@@ -103,6 +103,15 @@ def test_summary_statistics():
     left_out = yieldstats.mean_ci([float("inf"), 1.0, 2.0, float("nan")])  # what the mean is of, said
     assert (left_out["n"], left_out["n_not_finite"], left_out["mean"]) == (2, 2, 1.5)
     assert (s["metric"]["n"], s["metric"]["n_not_finite"]) == (4, 0)
+    # three parts near the top: t's interval, mean ± 4.30 · sd / √3, reaches past the fraction's 1 and is cut there
+    near = [{"metric": m, "worst": m, "l1_to_nominal": 0.01} for m in (0.99, 0.98, 0.80)]
+    top = yieldstats.summarize(near, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
+    reach = np.mean([0.99, 0.98, 0.80]) + t.ppf(0.975, 2) * np.std([0.99, 0.98, 0.80], ddof=1) / np.sqrt(3)
+    assert reach > 1 and top["metric"]["ci95"][1] == 1.0 and top["l1_to_nominal"]["ci95"] == [0.01, 0.01]
+    network = [{"metric": 0.9, "worst": 0.9, "l1_to_nominal": 0.0, "network": {"n": {"psnr": p}}}
+               for p in (99.0, 99.5, 80.0)]
+    psnr = yieldstats.summarize(network, {"hdr": {"psf_metric_min": 0.5}}, "hdr", {"psf": {"psf_metric": 0.9}})
+    assert psnr["network"]["n"]["metrics"]["psnr"]["ci95"][1] == 100.0  # a PSNR's span: 0–100 dB
     assert s["yield"]["value"] == 0.75 and 0 < s["yield"]["ci95"][0] < 0.75 < s["yield"]["ci95"][1] <= 1
     # relative limit: at most 0.25 below the nominal 0.9 → 0.65: two of four parts pass
     s = yieldstats.summarize(rows, {"hdr": {"psf_metric_loss_max": 0.25}}, "hdr", {"psf": {"psf_metric": 0.9}})
@@ -720,6 +729,11 @@ def test_a_metric_or_change_that_is_not_a_number_prints_a_dash():
     from doefab.tolerance.reporttext import delta_text
 
     assert metric_text("hdr", "psnr", float("nan")) == "—" and metric_text("hdr", "psnr", 29.891) == "29.89 dB"
+    # an HDR RMSE is radiance relative to the plain capture's clipping level: printed with that scale, not bare
+    from doefab.reconstruction.metrics import metric_label
+
+    assert metric_text("hdr", "rmse", 0.1234) == "0.123 × clip" and metric_label("hdr", "rmse") == "RMSE (× clip)"
+    assert metric_text("depth", "delta125", 0.8) == "0.800"  # a plain fraction stays bare
     got = delta_text("hdr", {"psnr": float("nan"), "psnr_highlight": -1.234}, {"psnr": 0.4, "psnr_highlight": 0.5})
     assert got == "PSNR —, highlight PSNR -1.23 ± 0.5 dB"
     assert delta_text("hdr", {"psnr": float("nan")}, names=False) == "—"
@@ -797,19 +811,29 @@ def test_a_last_row_that_lost_only_its_newline_is_kept(design_dir, tmp_path):
 
 def test_tolerance_force_removes_the_earlier_results_and_keeps_a_users_file(design_dir, tmp_path, monkeypatch):
     """--force starts afresh: an interrupted forced study leaves no tolerance.json or report of the earlier one
-    (which would read as its result), while a file of the user's in the folder stays."""
-    import doefab.tolerance.report as report
+    (which would read as its result), while a file of the user's in the folder stays; a forced study refused
+    before it starts (its design unreadable as a study) keeps the earlier one's."""
+    import doefab.tolerance.montecarlo as mc
+    from doefab.errors import DoefabError
 
     out = tmp_path / "t"
     argv = ["tolerance", "--design", str(design_dir), "--samples", "2", "--grid", "1", "--out", str(out)]
     assert main(argv) == 0
-    assert {"tolerance.json", "report.md", "tornado.png"} <= {p.name for p in out.iterdir()}
+    done = {"tolerance.json", "report.md", "tornado.png", "samples.jsonl"}
+    assert done <= {p.name for p in out.iterdir()}
     (out / "my_notes.png").write_bytes(b"mine")
+
+    def refused(*a, **k):
+        raise DoefabError("this design cannot be studied")
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(report, "run_study", interrupted)
+    monkeypatch.setattr(study, "judge_for", refused)
+    assert main(argv + ["--force"]) == 2
+    assert done <= {p.name for p in out.iterdir()}  # refused before any part: nothing of the earlier study lost
+    monkeypatch.undo()
+    monkeypatch.setattr(mc, "check_resumable", interrupted)  # interrupted once the fresh study has begun
     assert main(argv + ["--force"]) == 130
     left = {p.name for p in out.iterdir()}
     assert not left & {"tolerance.json", "report.md", "tornado.png", "samples.jsonl", "steps"}, left
