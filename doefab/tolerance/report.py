@@ -45,20 +45,13 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     _check_runners(workers, scheduler)
     keep_freed_memory()
     from doefab.applications import of_design
+    from doefab.tolerance.montecarlo import check_resumable
     from doefab.tolerance.spec import limits_text, nominal_failures
 
     out = Path(out)
     judge = study.judge_for(str(design_dir), 1)
-    if fresh:  # a fresh study: no saved parts, no finished steps, no results of the earlier one
-        import shutil
-
-        for f in ("samples.jsonl", *RESULT_FILES):
-            (out / f).unlink(missing_ok=True)
-        shutil.rmtree(out / STEPS, ignore_errors=True)
-    if samples > 0:  # a resume of another study is refused before any step is judged or replaced
-        from doefab.tolerance.montecarlo import check_resumable
-
-        check_resumable(out, judge.design, budget, seed, grid, networks, weights_dir, judge.chain)
+    _open_folder(out, fresh, samples > 0, lambda: check_resumable(out, judge.design, budget, seed, grid, networks,
+                                                                  weights_dir, judge.chain))
     task = getattr(of_design(judge.design.task), "name", judge.design.task)
     spec = budget.get("spec", {})
     res: dict = {"design": str(design_dir), "task": task, "seed": seed, "stop": stop_case(judge.fine),
@@ -154,6 +147,20 @@ def _grid_record(judge, budget, grid, progress) -> dict:
         rec["seconds"] = round(time.perf_counter() - t, 1)
         return rec
     return {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
+
+
+def _open_folder(out: Path, fresh: bool, resumes: bool, check) -> None:
+    """The study's folder: ``fresh``, no saved parts, no finished steps and no results of an earlier study in it (a
+    user's other files stay); where the study has parts to judge (``resumes``), ``check()`` refuses a resume of
+    another study before any step is judged or replaced."""
+    import shutil
+
+    if fresh:
+        for f in ("samples.jsonl", *RESULT_FILES):
+            (out / f).unlink(missing_ok=True)
+        shutil.rmtree(out / STEPS, ignore_errors=True)
+    if resumes:
+        check()
 
 
 def _check_runners(workers, scheduler) -> None:
