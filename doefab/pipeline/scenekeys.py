@@ -119,7 +119,8 @@ KEYS = (
         help="sensor pixel pitch"),
     Key("camera", "sensor_diagonal_mm", "float", "mm", 1.0, 200.0, default="none: the holder's 24°",
         help="the sensor's diagonal (43.3 for full frame): the holder's hole in front of the DOE flares to pass "
-             "the field it sees, atan(diagonal / 2 / sensor distance), unless holder.field_half_angle_deg is given"),
+             "the field it sees, atan(diagonal / 2 / sensor distance), unless holder.field_half_angle_deg is given; "
+             "a sensor smaller than the PSF window or the test images is warned of"),
     Key("camera", "doe_pitch_um", "float", "µm", 0.1, 1000.0, default="5.4 (2.7 for HDR)",
         help="the fab's DOE pixel; the DOE grid is the aperture divided by it"),
     Key("camera", "split", "choice", choices=("vertical", "horizontal"), default="vertical",
