@@ -4,7 +4,7 @@ A pupil sampled once per DOE pixel (``pupil_oversample`` q = 1) holds the point 
 over each pixel, and a structured height map's PSF takes the flat pixel's envelope: the wavefront's tilt inside a
 pixel is lost. For a quadratic defocus whose phase changes by Δφ between neighbouring pixels at the pupil's rim,
 the light a pixel sends along its tilt is damped by sinc(Δφ_r / 2π) with Δφ_r = Δφ r / R at radius r, which on a
-uniformly lit disc gives (small steps)
+uniformly lit disc gives (the sinc's second order)
 
 - a lost fraction of the coded light of about Δφ² / 24, and
 - a relative L2 error of the PSF of about Δφ² / (12 √3) = 0.048 Δφ².

@@ -26,7 +26,8 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--design", required=True, help="a design folder, a mask set (its design/ is used), or a shipped "
                                                       "design's name (streak, grating, half-ring)")
-    p.add_argument("--budget", default=None, help="tolerance budget TOML (default: the shipped one for the prototype)")
+    p.add_argument("--budget", default=None,
+                   help="tolerance budget TOML, or default (the shipped one for the prototype, also when left out)")
     p.add_argument("--holder", default=None,
                    help="a built holder (holder.json or its folder): its clearances and DOE-to-glass distance "
                         "replace the budget's [mounting] decenter, rotation and axial gap")
@@ -115,6 +116,8 @@ def run(args) -> int:
                           "--weights-dir")
     if args.networks:  # the judge's network, checked before any output exists or any part is judged
         _check_network(design.task, ddir, args.weights_dir)
+    if args.budget is not None and args.budget.strip().lower() == "default" and not Path(args.budget).exists():
+        args.budget = None  # the shipped budget by its name, as a scene's tolerance.budget = "default" names it
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))

@@ -36,9 +36,12 @@ def staircase_error(step: float) -> float:
     The pupil holds the wavefront constant over each sample (a DOE pixel at ``pupil_oversample`` 1) and a
     structured map's PSF takes the flat pixel's envelope, so the wavefront's tilt inside a pixel is lost: the
     light of a pixel at radius r is damped by sinc(Δφ_r / 2π), Δφ_r = step · r / R, which on a uniformly lit disc
-    is a relative L2 error of step² / (12 √3) and a lost fraction step² / 24 of the light (small steps; measured by
-    ``benchmarks/psf_defocus_staircase.py``). ``pupil_oversample`` q divides the step by q. A plain (flat) half
-    takes no envelope and stays within the routes' sampling limit, ``SOURCE_PHASE_LIMIT``.
+    is a relative L2 error of step² / (12 √3) and a lost fraction step² / 24 of the light (the sinc's second
+    order). Measured (``benchmarks/psf_defocus_staircase.py``), the half-ring's start follows it within 15 % from
+    0.45 to 1.4 rad and is 2× above it at 0.1 rad, where light diffracted onto the envelope's slope adds a part
+    linear in the step; a map that scatters light widely is further above it at small steps (7.7× at 0.1 rad,
+    1.7× at 0.45). ``pupil_oversample`` q divides the step by q. A plain (flat) half takes no envelope and stays
+    within the routes' sampling limit, ``SOURCE_PHASE_LIMIT``.
 
     Example: ``staircase_error(0.45)`` is about 0.0097 (1 %)."""
     return float(step) ** 2 / (12 * math.sqrt(3))

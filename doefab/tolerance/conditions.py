@@ -5,8 +5,8 @@
 - ``parts``: PSF pairs of as-fabricated parts drawn from the tolerance budget (relief as its masks made it,
   mount errors; ``doefab.tolerance``), one per scene in turn — while the network is told the nominal PSF (or
   the part's, when a user measured it);
-- ``crosstalk``: a real sensor's dual-pixel crosstalk (``imaging.crosstalk.SensorCrosstalk``: dependent on the
-  light's angle along both axes of the field and on the half it came through, varying from row to row, drifted
+- ``crosstalk``: a real sensor's dual-pixel crosstalk (``imaging.sensorcrosstalk.SensorCrosstalk``: dependent
+  on the light's angle along both axes of the field and on the half it came through, varying from row to row, drifted
   since the calibration) mixed per Eq. 29 at each scene's place on the sensor, then unmixed with per-column ratios
   a simulated noisy white-wall calibration estimated (the user's pipeline): the part of the crosstalk a
   per-column calibration cannot hold stays in the captures (``describe()["crosstalk_residual_rms"]``);

@@ -157,15 +157,16 @@ def sample_errors(budget: dict, rng: np.random.Generator, seed: int = 0, *, n_ma
 
 
 def sensor_crosstalk(err: PartErrors):
-    """The true crosstalk (``imaging.crosstalk.SensorCrosstalk``) of the part's camera's sensor, seeded by the part."""
-    from doefab.imaging.crosstalk import SensorCrosstalk
+    """The true crosstalk (``imaging.sensorcrosstalk.SensorCrosstalk``) of the part's camera's sensor, seeded by
+    the part."""
+    from doefab.imaging.sensorcrosstalk import SensorCrosstalk
 
     return SensorCrosstalk(err.crosstalk, err.crosstalk_slope, width_px=err.calibrated_width_px, seed=err.seed)
 
 
 def crosstalk_ratios(err: PartErrors, columns, noise=None, rows=None) -> tuple:
     """(α_l→r, α_r→l, α̂_l→r, α̂_r→l) at sensor ``columns`` (pixels from the centre column): the part's camera's
-    true crosstalk (``imaging.crosstalk.SensorCrosstalk`` of its sensor, seeded by the part, in its capture
+    true crosstalk (``imaging.sensorcrosstalk.SensorCrosstalk`` of its sensor, seeded by the part, in its capture
     session) as [len(rows), len(columns)] maps at sensor ``rows`` (None: per column on the centre row), and the
     per-column estimate its calibration gives (simulated white-wall captures with ``noise``, None: the part's
     sensor's; the estimate is the true ratios when the camera is not calibrated — it is then not used)."""

@@ -36,6 +36,8 @@ def test_a_flag_whose_help_tells_its_default_is_not_told_it_again():
             assert "(default: None)" not in help_text and "(default: False)" not in help_text, (name, help_text)
     evaluate = dict(_parsers(build_parser()))["doefab evaluate"].format_help()
     assert "(default: 16)" in evaluate  # a default the help does not tell is still told
+    design = dict(_parsers(build_parser()))["doefab design"].format_help()
+    assert "(default: 0)" in design  # --seed 0: a default of 0 is told (0 == False)
 
 
 def test_doefab_alone_is_a_usage_error_with_the_help_on_stderr(capsys):

@@ -52,6 +52,15 @@ def test_a_shipped_designs_name_reaches_it_where_no_masks_folder_is(tmp_path, mo
     (tmp_path / "streak").mkdir()
     with pytest.raises(DoefabError, match="design.json is missing"):
         design_folder("streak")
-    # the command line too: the design is read (its layers named) before the output is claimed
+    # the command line too: the design is read (its layers named) before the output is claimed, and the fallback
+    # is said, not silent (a folder of that name may be what was meant)
     assert main(["masks", "--design", "masks/half-ring", "--out", str(tmp_path / "m"), "--etch-order", "9"]) == 2
-    assert "this 16-level design" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "this 16-level design" in err and "using the shipped design 'half-ring'" in err
+    # train/evaluate: the committed design by its name is the shipped networks' own, not "another design"
+    from argparse import Namespace
+
+    from doefab.cli._args import task_design_arg
+
+    args = Namespace(task="hdr", design="masks/streak", weights_dir=None)
+    assert task_design_arg(args, need_weights_dir=True) is None

@@ -112,3 +112,20 @@ def test_captures_that_give_a_ratio_outside_zero_to_one_are_named_at_the_calibra
     scatter = np.array([[0.03], [-0.01], [0.02], [0.0]]) * np.ones((1, 3))  # mean 0.01 of a 0.5 wall
     a_lr, _ = doefab.calibrate_crosstalk((np.full((4, 3), 0.49), scatter), (np.full((4, 3), 0.02), lit))
     assert np.allclose(a_lr, 0.01 / 0.5)
+    # a ratio below 0 within its rows' noise (−0.005 against a standard error of 0.0135): a ratio of 0
+    noisy = np.array([[0.01], [-0.02], [0.005], [-0.005]]) * np.ones((1, 3))
+    a_lr, _ = doefab.calibrate_crosstalk((np.full((4, 3), 0.5), noisy), (np.full((4, 3), 0.02), lit))
+    assert np.all(a_lr == 0.0)
+    with pytest.raises(DoefabError, match=r"α_l→r = -0.0204 \(column 0\)"):  # the same mean, but every row: black
+        doefab.calibrate_crosstalk((lit, np.full((4, 3), -0.01)), (np.full((4, 3), 0.02), lit))
+    with pytest.raises(DoefabError, match=r"\(row 0, column 0\)"):  # per pixel: the pixel named
+        doefab.calibrate_crosstalk((below, lit), (lit, np.full((4, 3), 0.02)), axis_mean=None)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_simulated_calibration_of_no_crosstalk_reads_zero_not_an_error(seed):
+    """True ratios of 0: the estimate scatters about 0 with the dark view's noise; a simulation cuts it to [0, 1)
+    instead of refusing its own captures (three of five seeds read below 0)."""
+    a, b = doefab.simulate_calibration(0.0, 0.0, rng=seed)
+    assert 0 <= float(a.min()) and float(a.max()) < 1e-4 and 0 <= float(b.min()) and float(b.max()) < 1e-4
+    assert doefab.DualPixelCrosstalk.calibrated(0.0, 0.0, seed=seed).estimate[0] >= 0

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from doefab.errors import DoefabError
-from doefab.imaging.crosstalk import SensorCrosstalk, check_pair, mix_crosstalk, simulate_calibration
+from doefab.imaging.crosstalk import check_pair, mix_crosstalk, simulate_calibration
+from doefab.imaging.sensorcrosstalk import SensorCrosstalk
 from doefab.imaging.sensor import noise_model
 
 PHI = NormalDist()

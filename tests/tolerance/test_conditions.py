@@ -249,7 +249,7 @@ def test_honest_captures_are_mixed_by_the_sensors_true_crosstalk_not_a_per_colum
     """A scene's views are mixed by the true crosstalk of its sensor over its crop (rows and columns, the crops
     along the calibrated region's diagonal): ratios that change from row to row, which the captures carry as
     Eq. 29 with that map predicts."""
-    from doefab.imaging.crosstalk import SensorCrosstalk
+    from doefab.imaging.sensorcrosstalk import SensorCrosstalk
     from doefab.reconstruction.specs import psf_pair
 
     sensor = _budget_sensor(calibrated=False)
@@ -291,7 +291,7 @@ def test_the_psf_level_judge_calibrates_with_the_parts_own_sensor(monkeypatch):
     25 000 e⁻ (shot noise, no read noise)."""
     from types import SimpleNamespace
 
-    import doefab.imaging.crosstalk as X
+    import doefab.imaging.sensorcrosstalk as X
     from doefab.tolerance.errors import PartErrors, crosstalk_ratios, sensor_crosstalk
     from doefab.tolerance.judge import PSFJudge
 

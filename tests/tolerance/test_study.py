@@ -838,3 +838,12 @@ def test_tolerance_force_removes_the_earlier_results_and_keeps_a_users_file(desi
     left = {p.name for p in out.iterdir()}
     assert not left & {"tolerance.json", "report.md", "tornado.png", "samples.jsonl", "steps"}, left
     assert (out / "my_notes.png").read_bytes() == b"mine"
+
+
+def test_tolerance_takes_default_for_the_shipped_budget_as_a_scene_does(design_dir, tmp_path):
+    """``--budget default`` (any case) is the shipped budget, as ``tolerance.budget = "default"`` is in a scene;
+    it was read as a file named default and refused."""
+    out = tmp_path / "t"
+    assert main(["tolerance", "--design", str(design_dir), "--samples", "2", "--grid", "1", "--budget", "Default",
+                 "--out", str(out)]) == 0
+    assert json.loads((out / "tolerance.json").read_text())["budget_file"].endswith("(default)")

@@ -10,10 +10,11 @@ pixel-integrated PSF is ``W_y @ I @ W_xᵀ`` with real K × L matrices built onc
 
 No quadrature nodes, no interpolation: the pixel integral is exact for the sampled pupil; the remaining
 error is the pupil sampling itself (rim, smooth phase inside a sample). The far field of one flat pupil
-sample (the envelope) is applied at pixel centres (at a window's edge it changes by 0.12 % across a sensor pixel
-for 255 px, 0.26 % for 512 px: 486 nm on the prototype's 5.4 µm DOE and sensor pixels). It grows with the DOE
-pitch: on a coarse design grid of 33.75 µm it changes by 2.2 % across a 5.4 µm pixel 0.25 mm off axis at 450 nm,
-so a structured map's PSF far off axis on such a grid carries that approximation (a blank map none).
+sample (the envelope) is applied at pixel centres (at a window's edge its intensity, sinc²(b u / (λ s)) from that
+formula, changes by 0.12 % across a sensor pixel for 255 px, 0.26 % for 512 px: 486 nm on the prototype's 5.4 µm
+DOE and sensor pixels). It grows with the DOE pitch: on a coarse design grid of 33.75 µm it changes by 2.2 %
+across a 5.4 µm pixel 0.25 mm off axis at 450 nm, so a structured map's PSF far off axis on such a grid
+carries that approximation (a blank map none).
 """
 
 from __future__ import annotations
