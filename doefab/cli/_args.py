@@ -9,7 +9,7 @@ import sys
 
 from doefab.applications import has
 
-__all__ = ["DefaultsHelp", "shipped_name", "number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg",
+__all__ = ["DefaultsHelp", "number", "OneLineParser", "wavelength_nm", "depth_m", "plain_name_arg",
            "design_folder", "task_design_arg", "add_device_arg"]
 
 
@@ -116,28 +116,15 @@ def plain_name_arg(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def shipped_name(path, folder) -> str | None:
-    """The committed design's name where ``design_folder_of(path)`` gave ``folder`` for a path that is not there
-    (``streak``, ``masks/streak``), else None."""
-    from pathlib import Path
-
-    from doefab.design.committed import COMMITTED
-
-    p = Path(path)
-    if p.exists() or folder in (p, p / "design"):
-        return None
-    return next((name for name in COMMITTED if Path(folder).name.startswith(f"{name}-")), None)
-
-
 def design_folder(path):
     """``(folder, Design)`` for a design folder or a mask set (its ``design/``), validated before any work."""
-    from doefab.design.design import Design, design_folder_of, designs_inside_hint
+    from doefab.design.design import Design, design_folder_of, designs_inside_hint, shipped_design_name
     from doefab.errors import DoefabError
 
     d = design_folder_of(path)
-    if shipped_name(path, d):  # said, not silent: a folder of that name may be what was meant
-        print(f"--design {path}: no such folder here; using the shipped design {shipped_name(path, d)!r}",
-              file=sys.stderr)
+    named = shipped_design_name(path)
+    if named:  # said, not silent: a folder of that name may be what was meant
+        print(f"--design {path}: no such folder here; using the shipped design {named!r}", file=sys.stderr)
     if d.is_dir() and not (d / "design.json").is_file():
         raise DoefabError(f"{path} is neither a design folder nor a mask set: design.json is missing (give the folder "
                           f"holding design.json, or a mask set holding design/design.json){designs_inside_hint(d)}")
@@ -148,6 +135,7 @@ def task_design_arg(args, need_weights_dir: bool):
     """``--design`` of train/evaluate as a resolved design folder (a mask set's ``design/``), checked to be a design
     of ``--task``'s kind before any work; None for the committed design. ``need_weights_dir``: the command reads
     networks, which for another design than the committed one cannot be the shipped ones."""
+    from doefab.design.design import shipped_design_name
     from doefab.errors import DoefabError
     from doefab.reconstruction.specs import check_design_task
 
@@ -155,7 +143,7 @@ def task_design_arg(args, need_weights_dir: bool):
         return None
     d, design = design_folder(args.design)  # validated: a clear error before any work
     check_design_task(args.task, design.task, args.design, flag="--task", wavelengths=design.wavelengths)
-    if shipped_name(args.design, d):  # the committed design by its name: the shipped networks are its own
+    if shipped_design_name(args.design):  # the committed design by its name: the shipped networks are its own
         return None
     if need_weights_dir and getattr(args, "weights_dir", None) is None:
         raise DoefabError("--design needs --weights-dir: the shipped weights belong to the committed design")

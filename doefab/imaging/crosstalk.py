@@ -33,7 +33,7 @@ from doefab.imaging.crossratios import check_pair
 from doefab.imaging.crossratios import ratio as _ratio
 
 __all__ = ["mix_crosstalk", "unmix_crosstalk", "calibrate_crosstalk", "MIN_DETERMINANT", "simulate_calibration",
-           "DualPixelCrosstalk", "check_pair", "save_crosstalk"]
+           "DualPixelCrosstalk", "check_pair", "save_crosstalk", "ratio_standard_error"]
 
 MIN_DETERMINANT = 0.05  # 1 − a − b below this amplifies noise more than 20×: refused
 
@@ -126,14 +126,13 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
         if not np.all(np.isfinite(total)) or np.any(total <= 0):
             raise DoefabError("calibration captures must be finite and lit everywhere (a white wall, not black)")
         out = num / total
+        if not strict:
+            return np.clip(out, 0.0, np.nextafter(1.0, 0.0))
         low = np.zeros_like(out)  # below it a ratio is not noise about 0
         if axis_mean is not None and l_s.shape[axis_mean] > 1:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                per = (l_s, r_s)[num_index] / (l_s + r_s)
-            per = np.where(np.isfinite(per), per, np.nan)
-            low = -5 * np.nanstd(per, axis=axis_mean, ddof=1, keepdims=True) / np.sqrt(l_s.shape[axis_mean])
+            low = -5 * ratio_standard_error((l_s, r_s)[num_index], (l_s, r_s)[1 - num_index], axis_mean)
         bad = (out >= 1) | (out < np.nan_to_num(low))
-        if strict and bad.any():  # a view below black, or the blocked half's view the brighter
+        if bad.any():  # a view below black, or the blocked half's view the brighter
             i = np.unravel_index(int(np.argmax(bad)), out.shape)
             where = f"column {i[-1]}" if axis_mean is not None else f"row {i[0]}, column {i[-1]}"
             raise DoefabError(f"the white-wall captures give {name} = {out[i]:.3g} ({where}), outside [0, 1): the "
@@ -142,6 +141,17 @@ def calibrate_crosstalk(blocked_left_pair, blocked_right_pair, axis_mean: int | 
         return np.clip(out, 0.0, np.nextafter(1.0, 0.0))
 
     return ratio(blocked_left_pair, 1, "α_l→r"), ratio(blocked_right_pair, 0, "α_r→l")
+
+
+def ratio_standard_error(view, other, axis: int = 0) -> np.ndarray:
+    """The standard error of a white-wall ratio ``view / (view + other)`` averaged along ``axis`` (0: rows): its
+    pixels' scatter along it, std / √n (ddof 1), a pixel without light left out; the result keeps ``axis`` (size 1).
+
+    Example: ``ratio_standard_error(np.array([[0.1], [0.3]]), np.array([[0.9], [0.7]]))`` is [[0.1]]."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.asarray(view, np.float64) / (np.asarray(view, np.float64) + np.asarray(other, np.float64))
+    per = np.where(np.isfinite(per), per, np.nan)
+    return np.nanstd(per, axis=axis, ddof=1, keepdims=True) / np.sqrt(per.shape[axis])
 
 
 def save_crosstalk(path, alpha_lr, alpha_rl, se_lr, se_rl, meta: dict | None = None):

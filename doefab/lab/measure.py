@@ -122,12 +122,12 @@ def wall_ratios(plain_open, coded_open) -> tuple[np.ndarray, np.ndarray, np.ndar
     left, plain view lit: α_l→r = R* / (L* + R*)), ``coded_open`` with the plain half blocked (α_r→l = L* /
     (L* + R*)): Eq. 30–31 by :func:`doefab.imaging.crosstalk.calibrate_crosstalk`, averaged over rows. Each
     standard error is the row-to-row scatter of the pixels' ratios in that column, std / √rows."""
-    from doefab.imaging.crosstalk import calibrate_crosstalk
+    from doefab.imaging.crosstalk import calibrate_crosstalk, ratio_standard_error
 
     pairs = [tuple(np.asarray(v, np.float64) for v in p) for p in (plain_open, coded_open)]
     a, b = calibrate_crosstalk(pairs[0], pairs[1])
     rows = pairs[0][0].shape[0]
     if rows < 2 or pairs[1][0].shape[0] < 2:
         raise DoefabError("white-wall frames need at least 2 rows for the ratios' standard errors")
-    se = [np.std(p[i] / (p[0] + p[1]), axis=0, ddof=1) / np.sqrt(p[0].shape[0]) for p, i in zip(pairs, (1, 0))]
+    se = [ratio_standard_error(p[i], p[1 - i], axis=0).ravel() for p, i in zip(pairs, (1, 0))]
     return a.ravel(), b.ravel(), se[0], se[1]

@@ -24,7 +24,8 @@ from doefab.optics.propagators import make_route
 from doefab.optics.propagators.base import FocalSetup, check_smooth_phase, scratch_kwargs
 from doefab.optics.pupil import APERTURES, HALVES, pupil_half, source_path_difference
 
-__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands", "staircase_error"]
+__all__ = ["PSFPair", "PSFPlan", "split_aperture_psf", "as_height_tensor", "describe_bands", "staircase_error",
+           "staircase_step"]
 
 SOURCE_PHASE_LIMIT = math.pi / 2  # max smooth phase change between neighbouring pupil samples (radians)
 
@@ -45,6 +46,13 @@ def staircase_error(step: float) -> float:
 
     Example: ``staircase_error(0.45)`` is about 0.0097 (1 %)."""
     return float(step) ** 2 / (12 * math.sqrt(3))
+
+
+def staircase_step(error: float) -> float:
+    """The wavefront's phase step per pupil sample (rad) at which ``staircase_error`` reaches ``error``.
+
+    Example: ``staircase_step(0.01)`` is about 0.456 rad."""
+    return math.sqrt(float(error) * 12 * math.sqrt(3))
 
 
 @dataclass

@@ -47,15 +47,14 @@ STAIRCASE_MAX = 0.01  # relative L2 of the coded PSF at the steepest plane (``st
 def _staircase_note(cam, task) -> str | None:
     """The coded half's PSF at the steepest plane off by more than ``STAIRCASE_MAX`` (``psf.staircase_error``: the
     DOE's pixels hold the point's wavefront flat), with the planes or pitch that bring it within (None otherwise)."""
-    from doefab.optics.psf import staircase_error
+    from doefab.optics.psf import staircase_error, staircase_step
     from doefab.pipeline.sampling import distance_text, phase_step_fix, steepest_plane
 
     lam_min = min(task.wavelengths(cam))
     z, step = steepest_plane(cam, lam_min, task.depths(cam))
     if staircase_error(step) <= STAIRCASE_MAX:
         return None
-    allowed = math.sqrt(STAIRCASE_MAX * 12 * math.sqrt(3))  # the step at which staircase_error is STAIRCASE_MAX
-    fix = phase_step_fix(cam, lam_min, task.depths(cam), limit=allowed)
+    fix = phase_step_fix(cam, lam_min, task.depths(cam), limit=staircase_step(STAIRCASE_MAX))
     return (f"a point at {distance_text(z)} changes its phase by {step:.2f} rad between DOE pixels at "
             f"{lam_min * 1e9:.0f} nm: the coded half's PSF there is about {staircase_error(step) * 100:.1f} % off "
             f"(relative L2, step² / (12 √3): each DOE pixel holds the wavefront flat), more than "
@@ -66,9 +65,12 @@ def _far_focus_note(cam) -> str | None:
     """A focus distance of 100 m or more where a point at infinity blurs by under half a pixel: the same focus as
     inf, and most often millimetres typed as metres (None otherwise)."""
     z = cam.focus_distance
-    if math.isinf(z) or z < 100.0 or cam.defocus_blur_px(math.inf) >= 0.5:
+    if math.isinf(z) or z < 100.0:
         return None
-    return (f"camera.focus_distance_m = {z:g} m: a point at infinity blurs by {cam.defocus_blur_px(math.inf):.2g} px, "
+    blur = cam.defocus_blur_px(math.inf)
+    if blur >= 0.5:
+        return None
+    return (f"camera.focus_distance_m = {z:g} m: a point at infinity blurs by {blur:.2g} px, "
             f"so this is the focus of inf; if you meant {z:g} mm, write focus_distance_m = {z / 1e3:g}")
 
 
