@@ -129,7 +129,11 @@ def test_the_license_ships_and_a_build_leaves_the_tree_clean(installed, tmp_path
     # one version: the package's, which the wheel's name and metadata and CITATION.cff carry
     assert wheel.name.startswith(f"doefab-{doefab.__version__}-")
     meta = next(n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".dist-info/METADATA"))
-    assert f"\nVersion: {doefab.__version__}\n" in zipfile.ZipFile(wheel).read(meta).decode()
+    text = zipfile.ZipFile(wheel).read(meta).decode()
+    assert f"\nVersion: {doefab.__version__}\n" in text
+    # who made it, as CITATION.cff says, and where it belongs on an index
+    cff_author = re.search(r'^authors:\n  - name: "([^"]+)"', (REPO / "CITATION.cff").read_text(), re.M).group(1)
+    assert f"\nAuthor: {cff_author}\n" in text and "\nClassifier: Topic :: Scientific/Engineering :: Physics\n" in text
     assert re.search(rf"^version: \"?{re.escape(doefab.__version__)}\"?$", (REPO / "CITATION.cff").read_text(), re.M)
     assert "MIT License" in (REPO / "LICENSE").read_text()
     names = zipfile.ZipFile(wheel).namelist()

@@ -188,15 +188,17 @@ def _wavelength(tab: _Table) -> tuple:
 
 
 def _design(raw: dict, design, base: Path, problems: list) -> Path | None:
+    from doefab.design.design import design_folder_of, designs_inside_hint, shipped_design_name
+
     if design is None and "design" in raw:
         if not isinstance(raw["design"], str) or not raw["design"]:
             problems.append(f"design = {raw['design']!r} must be the path of the design folder (a string)")
             return None
         design = (base / raw["design"]).resolve()
+        if not design.exists() and shipped_design_name(raw["design"]):  # a committed design by its name
+            design = Path(raw["design"])  # (design_folder_of unpacks it, as --design does)
     if design is None:
         return None
-    from doefab.design.design import design_folder_of, designs_inside_hint
-
     d = design_folder_of(design)
     if not (d / "design.json").is_file():
         problems.append(f"design: {d} is not a design folder (no design.json): give the folder the part was made "

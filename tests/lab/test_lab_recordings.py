@@ -122,6 +122,16 @@ def test_wavelength_in_metres_gets_the_unit_hint_and_design_is_resolved(lab, tmp
     assert load_recordings(_write(lab, _psf()), design=lab / "d").design == lab / "d"
 
 
+def test_a_committed_design_by_name_is_the_shipped_one_unless_a_folder_of_that_name_is_there(lab):
+    from doefab.design.committed import committed_dir
+
+    got = load_recordings(_write(lab, 'design = "half-ring"\n' + _psf())).design
+    assert got == committed_dir("half-ring") and (got / "design.json").is_file()
+    (lab / "half-ring").mkdir()
+    (lab / "half-ring" / "design.json").write_text("{}")  # the lab's own folder of that name wins
+    assert load_recordings(_write(lab, 'design = "half-ring"\n' + _psf())).design == lab / "half-ring"
+
+
 def test_a_folder_of_designs_given_as_the_design_names_them(lab):
     for name in ("set_b", "set_a"):
         (lab / "masks" / name / "design").mkdir(parents=True)
