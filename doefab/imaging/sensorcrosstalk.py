@@ -117,6 +117,20 @@ class SensorCrosstalk:
         b = ndtr((zb - kb * u) / widen) * (1 - rho) * (1 + db)
         return np.clip(a, 0.0, 0.999), np.clip(b, 0.0, 0.999)
 
+    def worst_determinant(self, columns: int = 65) -> tuple:
+        """(1 − α_l→r − α_r→l, α_l→r, α_r→l) where Eq. 29's determinant is smallest over the calibrated region (every
+        row, ``columns`` columns evenly across it, its edges included), at the calibration (no session's drift): how
+        close the sensor's worst pixel comes to views that cannot be separated.
+
+        Example: ``SensorCrosstalk((0.05, 0.05), 0.02).worst_determinant()[0]`` is about 0.83, below the
+        centre's 0.9: the ratios rise toward the region's corners."""
+        at = np.linspace(-0.5, 0.5, columns) * self.width_px
+        rows = np.arange(self.width_px) - self.width_px / 2 + 0.5
+        a, b = self.ratios(rows, at, session=None)
+        det = 1.0 - a - b
+        i = np.unravel_index(int(np.argmin(det)), det.shape)
+        return float(det[i]), float(a[i]), float(b[i])
+
     def drift(self, session: int) -> np.ndarray:
         """(δ_l→r, δ_r→l): each ratio's relative change in capture ``session`` since the calibration."""
         from doefab import validate as _validate

@@ -88,18 +88,16 @@ def diagnose(scene, precision_check: bool = True, res: ResolvedScene | None = No
         diff = float((psf["float32"] - psf["float64"]).norm() / psf["float64"].norm())
         rows.append(_row("float32 against float64 PSF (shortest wavelength, nearest depth)", diff, 1e-3, "rel. L2",
                          diff <= 1e-3, FLOAT64_FIX))
+    from doefab.imaging.sensorcrosstalk import SensorCrosstalk
     from doefab.tolerance.errors import load_budget, sensor_errors
 
     sens = sensor_errors(load_budget(scene.budget_path() if scene.tolerance is not None else None))
-    # the worst column: l→r rises toward one edge of the calibrated region and r→l toward the other
-    a = max(sens["crosstalk"][0] + sens["crosstalk_slope"], 0.0)
-    b = max(sens["crosstalk"][1] - sens["crosstalk_slope"], 0.0)
-    a2, b2 = max(sens["crosstalk"][0] - sens["crosstalk_slope"], 0.0), sens["crosstalk"][1] + sens["crosstalk_slope"]
-    if 1 - a2 - b2 < 1 - a - b:
-        a, b = a2, b2
-    det = 1 - a - b
+    # the sensor's worst pixel, as the tolerance study's captures are mixed (rising toward the region's corners)
+    det, a, b = SensorCrosstalk(sens["crosstalk"], sens["crosstalk_slope"],
+                                width_px=sens["calibrated_width_px"]).worst_determinant()
     cond = float(np.linalg.cond(np.array([[1 - a, b], [a, 1 - b]])))
-    rows.append(_row(f"crosstalk inverse determinant 1 − α_l→r − α_r→l (α = {a:g}, {b:g}; matrix condition {cond:.2f})",
+    rows.append(_row(f"crosstalk inverse determinant 1 − α_l→r − α_r→l at the sensor's worst pixel (α = {a:.3g}, "
+                     f"{b:.3g}; matrix condition {cond:.2f})",
                      det, 0.05, "", det >= 0.05, "recalibrate the sensor: ratios this large leave the views unseparated",
                      at_least=True))
     try:
