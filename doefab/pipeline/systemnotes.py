@@ -11,7 +11,7 @@ import math
 from doefab.applications import has
 from doefab.pipeline.scene import Scene
 
-__all__ = ["depth_span_px", "system_warnings", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M",
+__all__ = ["depth_span_px", "system_warnings", "design_grid_note", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M",
            "MIN_WAVES"]
 
 MIN_WAVES = 0.75  # the least of a wave the relief's full depth may give the longest band without a warning
@@ -59,6 +59,32 @@ def _staircase_note(cam, task) -> str | None:
             f"{lam_min * 1e9:.0f} nm: the coded half's PSF there is about {staircase_error(step) * 100:.1f} % off "
             f"(relative L2, step² / (12 √3): each DOE pixel holds the wavefront flat), more than "
             f"{STAIRCASE_MAX * 100:g} %; for PSFs within it set {fix}")
+
+
+def design_grid_note(cam, task, factor: int) -> str | None:
+    """The design stage's coded PSF at the steepest plane off by more than ``STAIRCASE_MAX`` on the design grid
+    (``design.sampling`` = ``factor``: a pupil ``factor``× coarser, so the wavefront's steps are ``factor``× larger)
+    where the full grid's is within it (None otherwise: a full grid above it has its own note)."""
+    from doefab.optics.psf import staircase_error
+    from doefab.pipeline.sampling import design_camera, distance_text, steepest_plane
+
+    if factor <= 1 or cam.doe_pixels % factor:
+        return None
+    lam_min, depths = min(task.wavelengths(cam)), task.depths(cam)
+    full = staircase_error(steepest_plane(cam, lam_min, depths)[1])
+
+    def error(d):
+        return staircase_error(steepest_plane(design_camera(cam, d), lam_min, depths)[1])
+
+    if full > STAIRCASE_MAX or error(factor) <= STAIRCASE_MAX:
+        return None
+    z, step = steepest_plane(design_camera(cam, factor), lam_min, depths)
+    fits = max(d for d in range(1, factor) if cam.doe_pixels % d == 0 and error(d) <= STAIRCASE_MAX)
+    return (f"design.sampling = {factor}: the design stage's pupil is {factor}× coarser, so a point at "
+            f"{distance_text(z)} changes its phase by {step:.2f} rad between its pixels at {lam_min * 1e9:.0f} nm and "
+            f"its coded PSF there is about {error(factor) * 100:.1f} % off (the full grid's {full * 100:.1f} %): the "
+            f"relief is optimised against PSFs the part will not have; for design PSFs within "
+            f"{STAIRCASE_MAX * 100:g} % set design.sampling = {fits}")
 
 
 def _far_focus_note(cam) -> str | None:

@@ -262,6 +262,31 @@ def test_a_coded_psf_the_staircase_puts_more_than_one_percent_off_is_warned_with
                 if "holds the wavefront flat" in w]
 
 
+def test_a_design_grid_whose_coded_psf_the_staircase_puts_more_than_one_percent_off_is_warned(tmp_path):
+    """The depth camera with a plane at 0.7 m: the rim slope steps 2π p / λ · |a/√(a² + z²) − a/√(a² + f²)| per DOE
+    pixel at 486 nm, 0.34 rad on the full 5.4 µm grid (0.57 % off, within 1 %) but twice that on the design grid of
+    design.sampling = 2 (2.3 %): warned, with design.sampling = 1 as the fix, which is not warned. The shipped depth
+    scene (1 m, sampling 2: 0.43 rad, 0.89 %) is not warned."""
+    import math
+
+    base = 'task = "depth"\nstages = ["design"]\n[optics]\nkernel_px = 151\ndepths_m = [0.7, 1.0, 2.0, 3.0]\n'
+    a, f, lam = 4.32e-3, 3.5, 486e-9
+
+    def err(p):
+        step = 2 * math.pi * p / lam * abs(a / math.hypot(a, 0.7) - a / math.hypot(a, f))
+        return step**2 / (12 * math.sqrt(3)) * 100
+
+    def notes(text):
+        return [w for w in resolve(_scene(tmp_path, base + text)).warnings if "design stage's pupil" in w]
+
+    (note,) = notes("[design]\nsampling = 2\n")
+    assert f"about {err(10.8e-6):.1f} % off (the full grid's {err(5.4e-6):.1f} %)" in note
+    assert note.endswith("set design.sampling = 1")
+    assert not notes("[design]\nsampling = 1\n")
+    shipped = resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n[design]\nsampling = 2\n'))
+    assert not [w for w in shipped.warnings if "design stage's pupil" in w]
+
+
 def test_a_sensor_smaller_than_the_psf_window_or_the_test_images_is_warned(tmp_path):
     """A 1.5 mm diagonal at 5.4 µm is 1.5e-3 / 5.4e-6 = 278 px across: the 256 px test images (362 px across their
     diagonal) do not fit, the HDR task's 95 px window (134 px) does; a 1 mm diagonal (185 px) misses the images and
