@@ -25,8 +25,8 @@ from doefab.fabrication.process import DEFAULT_LEVELS, check_levels
 from doefab.io import atomic_write_bytes, atomic_write_json, atomic_write_text, read_json
 from doefab.optics.camera import Camera, require_camera
 
-__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of", "shipped_design_name", "designs_inside_hint",
-           "DESIGN_FILES"]
+__all__ = ["Design", "levels_sha256", "FORMAT_VERSION", "design_folder_of", "shipped_design_name", "committed_name",
+           "designs_inside_hint", "DESIGN_FILES"]
 
 FORMAT_VERSION = 1
 # what ``Design.save`` writes into its folder (design.json last); an earlier design's go before a fresh run
@@ -69,12 +69,20 @@ def shipped_design_name(path: str | Path) -> str | None:
     ``masks/streak/design``: the repository's mask sets), else None: what ``design_folder_of`` unpacks.
 
     Example: ``shipped_design_name("masks/half-ring")`` is ``"half-ring"`` where no ``masks/`` folder is."""
+    return None if Path(path).exists() else committed_name(path)
+
+
+def committed_name(path: str | Path) -> str | None:
+    """The committed design a relative ``path`` names by its shape alone (``streak``, ``masks/streak``,
+    ``masks/streak/design``), whether or not anything is at it; None for any other path.
+
+    Example: ``committed_name("masks/streak/design")`` is ``"streak"``; ``committed_name("out/streak")`` is None."""
     from doefab.design.committed import COMMITTED
 
     d = Path(path)
     parts = d.parts[:-1] if d.parts[-1:] == ("design",) else d.parts  # masks/streak/design names it too
     named = parts[-1] if len(parts) == 1 or (len(parts) == 2 and parts[0] == "masks") else None
-    return named if named in COMMITTED and not d.exists() else None
+    return named if named in COMMITTED else None
 
 
 def designs_inside_hint(folder: str | Path) -> str:

@@ -122,7 +122,7 @@ class SensorCrosstalk:
         row, ``columns`` columns evenly across it, its edges included), at the calibration (no session's drift): how
         close the sensor's worst pixel comes to views that cannot be separated.
 
-        Example: ``SensorCrosstalk((0.05, 0.05), 0.02).worst_determinant()[0]`` is about 0.83, below the
+        Example: ``SensorCrosstalk((0.05, 0.05), 0.02).worst_determinant()[0]`` is about 0.82, below the
         centre's 0.9: the ratios rise toward the region's corners."""
         at = np.linspace(-0.5, 0.5, columns) * self.width_px
         rows = np.arange(self.width_px) - self.width_px / 2 + 0.5

@@ -188,15 +188,18 @@ def _wavelength(tab: _Table) -> tuple:
 
 
 def _design(raw: dict, design, base: Path, problems: list) -> Path | None:
-    from doefab.design.design import design_folder_of, designs_inside_hint, shipped_design_name
+    from doefab.design.design import committed_name, design_folder_of, designs_inside_hint
 
     if design is None and "design" in raw:
         if not isinstance(raw["design"], str) or not raw["design"]:
             problems.append(f"design = {raw['design']!r} must be the path of the design folder (a string)")
             return None
         design = (base / raw["design"]).resolve()
-        if not design.exists() and shipped_design_name(raw["design"]):  # a committed design by its name
-            design = Path(raw["design"])  # (design_folder_of unpacks it, as --design does)
+        named = committed_name(raw["design"])
+        if named and not design.exists():  # a committed design by its name, nothing of that name beside the file
+            from doefab.design.committed import committed_dir
+
+            design = committed_dir(named)
     if design is None:
         return None
     d = design_folder_of(design)

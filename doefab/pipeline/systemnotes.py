@@ -65,8 +65,8 @@ def design_grid_note(cam, task, factor: int) -> str | None:
     """The design stage's coded PSF at the steepest plane off by more than ``STAIRCASE_MAX`` on the design grid
     (``design.sampling`` = ``factor``: a pupil ``factor``× coarser, so the wavefront's steps are ``factor``× larger)
     where the full grid's is within it (None otherwise: a full grid above it has its own note)."""
-    from doefab.optics.psf import staircase_error
-    from doefab.pipeline.sampling import design_camera, distance_text, steepest_plane
+    from doefab.optics.psf import staircase_error, staircase_step
+    from doefab.pipeline.sampling import design_camera, distance_text, phase_step_fix, steepest_plane
 
     if factor <= 1 or cam.doe_pixels % factor:
         return None
@@ -78,13 +78,15 @@ def design_grid_note(cam, task, factor: int) -> str | None:
 
     if full > STAIRCASE_MAX or error(factor) <= STAIRCASE_MAX:
         return None
-    z, step = steepest_plane(design_camera(cam, factor), lam_min, depths)
+    dcam = design_camera(cam, factor)
+    z, step = steepest_plane(dcam, lam_min, depths)
     fits = max(d for d in range(1, factor) if cam.doe_pixels % d == 0 and error(d) <= STAIRCASE_MAX)
+    other = phase_step_fix(dcam, lam_min, depths, factor, limit=staircase_step(STAIRCASE_MAX))
     return (f"design.sampling = {factor}: the design stage's pupil is {factor}× coarser, so a point at "
-            f"{distance_text(z)} changes its phase by {step:.2f} rad between its pixels at {lam_min * 1e9:.0f} nm and "
-            f"its coded PSF there is about {error(factor) * 100:.1f} % off (the full grid's {full * 100:.1f} %): the "
-            f"relief is optimised against PSFs the part will not have; for design PSFs within "
-            f"{STAIRCASE_MAX * 100:g} % set design.sampling = {fits}")
+            f"{distance_text(z)} changes its phase by {step:.2f} rad between design pixels at {lam_min * 1e9:.0f} nm "
+            f"and its coded PSF there is about {error(factor) * 100:.2g} % off (relative L2; the full grid's "
+            f"{full * 100:.2g} %): the relief is optimised against PSFs the part will not have; for design PSFs "
+            f"within {STAIRCASE_MAX * 100:g} % set design.sampling = {fits}{f', or {other}' if other else ''}")
 
 
 def _far_focus_note(cam) -> str | None:

@@ -121,3 +121,24 @@ def test_maps_are_checked_and_refused_by_name():
         SensorCrosstalk(0.05)
     with pytest.raises(DoefabError, match=r"rows must be a list of finite pixel positions"):
         SensorCrosstalk().ratios([np.nan], [0.0])
+
+
+@pytest.mark.parametrize("centre", [(0.05, 0.05), (0.3, 0.1)])
+def test_the_worst_determinant_is_at_a_corner_of_the_calibrated_region(centre):
+    """Without row variation the determinant 1 − α_l→r − α_r→l is least where the spots are widest and the ratios
+    highest: a corner of the region (u, v = ±1, rows reach ±(1 − 1/w)). Computed here with the standard library's
+    normal distribution from the model's law, Φ((z ± k·u) / (1 + g·(u² + v²))), at the four corners."""
+    a0, b0 = centre
+    slope, g, w = 0.02, 0.05, 512
+    s = SensorCrosstalk((a0, b0), slope, spot_growth=g, row_sigma=0.0, drift_sigma=0.0, width_px=w)
+    za, zb = PHI.inv_cdf(a0), PHI.inv_cdf(b0)
+    ka, kb = PHI.inv_cdf(a0 + slope) * (1 + g) - za, zb - PHI.inv_cdf(b0 - slope) * (1 + g)
+    v = 1 - 1 / w
+    corners = [1 - PHI.cdf((za + ka * u) / (1 + g * (1 + v * v))) - PHI.cdf((zb - kb * u) / (1 + g * (1 + v * v)))
+               for u in (-1.0, 1.0)]
+    det, a, b = s.worst_determinant()
+    assert det == pytest.approx(min(corners), abs=1e-9) and det == pytest.approx(1 - a - b, abs=1e-12)
+    assert det < 1 - a0 - b0  # below the centre's
+    # the fixed row pattern only lowers it further, by about its rms times the ratios' difference at the corner
+    rowed = SensorCrosstalk((a0, b0), slope, spot_growth=g, width_px=w).worst_determinant()[0]
+    assert det - 0.1 < rowed < det

@@ -122,11 +122,16 @@ def test_wavelength_in_metres_gets_the_unit_hint_and_design_is_resolved(lab, tmp
     assert load_recordings(_write(lab, _psf()), design=lab / "d").design == lab / "d"
 
 
-def test_a_committed_design_by_name_is_the_shipped_one_unless_a_folder_of_that_name_is_there(lab):
+def test_a_committed_design_by_name_is_the_shipped_one_unless_a_folder_of_that_name_is_there(lab, tmp_path,
+                                                                                            monkeypatch):
     from doefab.design.committed import committed_dir
 
+    elsewhere = tmp_path / "elsewhere"  # run from a folder that holds an unrelated half-ring/: beside the file decides
+    (elsewhere / "half-ring").mkdir(parents=True)
+    monkeypatch.chdir(elsewhere)
     got = load_recordings(_write(lab, 'design = "half-ring"\n' + _psf())).design
     assert got == committed_dir("half-ring") and (got / "design.json").is_file()
+    assert load_recordings(_write(lab, 'design = "masks/half-ring"\n' + _psf())).design == got
     (lab / "half-ring").mkdir()
     (lab / "half-ring" / "design.json").write_text("{}")  # the lab's own folder of that name wins
     assert load_recordings(_write(lab, 'design = "half-ring"\n' + _psf())).design == lab / "half-ring"

@@ -59,10 +59,11 @@ def test_wavelength_extremes(small_camera, lam):
 
 
 def test_doctor_fails_a_crosstalk_calibration_that_cannot_separate_the_views(tmp_path):
-    """At 45 % crosstalk each way, ±2 % across the sensor, the worst column's mean determinant is 1 − 0.47 − 0.43 =
-    0.10, and the sensor's worst pixel (its spots widen toward the corners, its rows scatter) a little less: it passes.
-    At 48.5 % the pixel's is below 0.05: the doctor must say so and how to fix it. The doctor's value is the least
-    1 − α_l→r − α_r→l of the sensor's own ratio maps, found here by brute force over every row and 257 columns."""
+    """At 45 % crosstalk each way, ±2 % across the sensor, the determinant at the calibrated edge of the centre row
+    is 1 − 0.47 − 0.43 = 0.10, and the sensor's worst pixel (its spots widen toward the corners, its rows scatter)
+    a little less, 0.084: it passes. At 48.5 % the pixel's is below 0.05: the doctor must say so and how to fix it.
+    The doctor's value is the least 1 − α_l→r − α_r→l of the sensor's ratio maps, found here over every row and
+    257 columns (``test_crosstalk_sensor`` checks the maps and the corner against the model's law)."""
     import numpy as np
 
     from doefab.imaging.sensorcrosstalk import SensorCrosstalk

@@ -266,7 +266,7 @@ def test_a_design_grid_whose_coded_psf_the_staircase_puts_more_than_one_percent_
     """The depth camera with a plane at 0.7 m: the rim slope steps 2π p / λ · |a/√(a² + z²) − a/√(a² + f²)| per DOE
     pixel at 486 nm, 0.34 rad on the full 5.4 µm grid (0.57 % off, within 1 %) but twice that on the design grid of
     design.sampling = 2 (2.3 %): warned, with design.sampling = 1 as the fix, which is not warned. The shipped depth
-    scene (1 m, sampling 2: 0.43 rad, 0.89 %) is not warned."""
+    scene (1 m, sampling 2: 0.43 rad, 0.89 %) is not warned; at sampling 4 (0.86 rad, 3.6 %) it is, with 2 as the fix."""
     import math
 
     base = 'task = "depth"\nstages = ["design"]\n[optics]\nkernel_px = 151\ndepths_m = [0.7, 1.0, 2.0, 3.0]\n'
@@ -280,11 +280,21 @@ def test_a_design_grid_whose_coded_psf_the_staircase_puts_more_than_one_percent_
         return [w for w in resolve(_scene(tmp_path, base + text)).warnings if "design stage's pupil" in w]
 
     (note,) = notes("[design]\nsampling = 2\n")
-    assert f"about {err(10.8e-6):.1f} % off (the full grid's {err(5.4e-6):.1f} %)" in note
-    assert note.endswith("set design.sampling = 1")
+    assert f"about {err(10.8e-6):.2g} % off (relative L2; the full grid's {err(5.4e-6):.2g} %)" in note
+    assert "set design.sampling = 1, or a nearest depth ≥" in note
     assert not notes("[design]\nsampling = 1\n")
-    shipped = resolve(_scene(tmp_path, 'task = "depth"\nstages = ["design"]\n[design]\nsampling = 2\n'))
-    assert not [w for w in shipped.warnings if "design stage's pupil" in w]
+
+    def shipped(sampling):
+        res = resolve(_scene(tmp_path, f'task = "depth"\nstages = ["design"]\n[design]\nsampling = {sampling}\n'))
+        return [w for w in res.warnings if "design stage's pupil" in w]
+
+    assert not shipped(2)
+    (four,) = shipped(4)  # 0.86 rad, 3.6 %: the coarsest grid within 1 % is 2, not 1
+    assert "about 3.6 % off" in four and "set design.sampling = 2, or" in four
+    # a full grid already above 1 % has its own note, not a second one for its design grid
+    res = resolve(_scene(tmp_path, base.replace("0.7,", "0.5,") + "[design]\nsampling = 2\n"))
+    assert not [w for w in res.warnings if "design stage's pupil" in w]
+    assert [w for w in res.warnings if "holds the wavefront flat" in w]
 
 
 def test_a_sensor_smaller_than_the_psf_window_or_the_test_images_is_warned(tmp_path):
