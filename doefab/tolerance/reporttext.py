@@ -73,9 +73,9 @@ def spec_words(res: dict, level: str, label: str = "nominal_psf") -> str | None:
     nominal = res["nominal"]["psf"] if level == "psf" else res["nominal"].get("network", {}).get(label, {})
     table = res.get("budget", {}).get("spec", {})
     limits = spec_limits(table, task, level, nominal)
-    return ", ".join(f"PSF metric {op} {v:.3f}" if m == "psf_metric" else
-                     f"{_name(task, m)} {op} {metric_text(task, m, v)}" + relative_words(task, table, k, m, nominal)
-                     for k, m, v, op in limits) or None
+    name = {"psf_metric": "PSF metric"}
+    return ", ".join(f"{name.get(m) or _name(task, m)} {op} {metric_text(task, m, v)}"
+                     + relative_words(task, table, k, m, nominal) for k, m, v, op in limits) or None
 
 
 def lead_text(res: dict) -> str | None:

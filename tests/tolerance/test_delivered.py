@@ -311,6 +311,8 @@ def test_a_relative_spec_is_said_as_what_it_is_relative_to():
            "nominal": {"psf": {"psf_metric": 0.87}, "network": {"nominal_psf": {"psnr_highlight": 29.35}}}}
     assert spec_words(res, "network") == "highlight PSNR ≥ 28.35 dB (1.00 dB below the error-free part's 29.35 dB)"
     assert spec_words(res, "psf") == "PSF metric ≥ 0.800"
+    res["budget"]["spec"]["hdr"] = {"psf_metric_loss_max": 0.05}  # relative at the PSF level too: 0.87 − 0.05
+    assert spec_words(res, "psf") == "PSF metric ≥ 0.820 (0.050 below the error-free part's 0.870)"
 
 
 def test_a_change_that_rounds_to_zero_has_no_minus_sign():
