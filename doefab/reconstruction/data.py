@@ -17,9 +17,7 @@ Why these are fair stand-ins for the paper's datasets:
   reflectance spectra shipped by colour-science (and smooth synthetic ones in training) under measured and
   synthesised light (``spectra``), laid out in regions following the edges of real photographs, with shading.
 - Depth (the paper's § 4.5 uses rendered scenes, 1–5 m): layered scenes — a far background, often a receding ground
-  plane, and 2–6 occluding textured objects at random depths — with a metric depth map. Half the training scenes
-  are rooms and streets instead (``depthlayouts``): slanted and curved surfaces, backgrounds anywhere in the range,
-  objects evenly in inverse depth; the held-out splits keep the layered scenes.
+  plane, and 2–6 occluding textured objects at random depths — with a metric depth map.
 """
 
 from __future__ import annotations
@@ -33,7 +31,6 @@ import numpy as np
 
 from doefab.applications import has
 from doefab.reconstruction.bands import HS_WAVELENGTHS_M, illuminant_spectra
-from doefab.reconstruction.depthlayouts import WORLD_SHARE, shape_mask, world_layout
 
 __all__ = ["SPLIT_SEEDS", "PART_SEEDS", "SYNTHETIC", "CONTENT", "sample_rng", "texture", "hdr_sample", "spectral_sample",
            "depth_sample", "illuminant_spectra", "HS_WAVELENGTHS_M", "IMAGES", "split_images", "resample_bands",
@@ -228,12 +225,25 @@ def resample_bands(values: np.ndarray, wavelengths_m, axis: int = 0) -> np.ndarr
     return np.moveaxis(out, -1, axis)
 
 
+def _shape_mask(rng, size):
+    yy, xx = np.mgrid[:size, :size]
+    cy, cx = rng.uniform(0, size, 2)
+    ry, rx = rng.uniform(0.08, 0.4, 2) * size
+    kind = rng.integers(3)
+    if kind == 0:
+        return ((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2 <= 1
+    if kind == 1:
+        return (np.abs(yy - cy) <= ry) & (np.abs(xx - cx) <= rx)
+    a = rng.uniform(0, np.pi)
+    u = (xx - cx) * np.cos(a) + (yy - cy) * np.sin(a)
+    v = -(xx - cx) * np.sin(a) + (yy - cy) * np.cos(a)
+    return (np.abs(u) <= rx) & (np.abs(v) <= ry * 0.5)
+
+
 def depth_sample(rng: np.random.Generator, size: int, split: str, near: float = 1.0, far: float = 5.0):
     """(scene [3, S, S] radiance, depth [S, S] metres): background (often a receding ground plane) and 2–6
     occluding textured objects between ``near`` and ``far``, drawn far to near."""
     _generated_only(split)
-    if split == "train" and rng.random() < WORLD_SHARE:  # training only: the other splits' scenes stay as they were
-        return world_layout(rng, size, near, far, lambda r: texture(r, size, split))
     gain = rng.uniform(0.8, 1.8)  # exposure: radiance up to ~2, so a half-exposure capture reaches ~1
     scene = texture(rng, size, split) * gain
     z_bg = rng.uniform(0.7 * far, far)
@@ -249,7 +259,7 @@ def depth_sample(rng: np.random.Generator, size: int, split: str, near: float = 
         scene = np.where((rows >= horizon)[None, :, None], ground, scene)
     objects = sorted(rng.uniform(near, far, int(rng.integers(2, 7))), reverse=True)
     for z in objects:
-        m = shape_mask(rng, size)
+        m = _shape_mask(rng, size)
         m &= depth >= z  # an object in front of the ground only
         depth[m] = z
         scene = np.where(m[None], texture(rng, size, split) * gain * rng.uniform(0.5, 1.0), scene)
