@@ -277,7 +277,8 @@ class DualPixelCrosstalk:
     def record(self, coded, uncoded, noise="default", rng=0):
         """(coded, uncoded) as the camera's pipeline delivers them, in [0, 1] (noise drawn coded first). ``noise``:
         a ``doefab.imaging.sensor`` preset name (``"default"``, ``"authors"``, ``"none"``), model or ``Sensor``;
-        ``rng``: a seed or a ``numpy.random.Generator``."""
+        ``rng``: a seed or a ``numpy.random.Generator`` (a seed, 0 by default, draws the same noise every call:
+        pass one generator to successive calls for fresh noise each time)."""
         noise, rng = _noise_and_rng(noise, rng)
         left, right = mix_crosstalk(uncoded, coded, self.alpha_lr, self.alpha_rl)
         right = np.clip(noise.apply(right, rng), 0.0, 1.0)
