@@ -55,7 +55,7 @@ MEASUREMENTS = (
     Measurement("holder_timing", "benchmarks/holder_timing.py", (R + "holder_timing.md",)),
     Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
                 before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
-                        "bash scripts/train_shipped.sh 500 out/s16 depth",
+                        "bash scripts/train_shipped.sh 1000 out/s55 depth",
                         "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
     Measurement("reconstruction_tables_final", None, (R + "reconstruction_tables_final.md", R + "final_split_reads.md"),
                 before=("for t in hdr hyperspectral depth; do",
@@ -104,6 +104,9 @@ MEASUREMENTS = (
     Measurement("pair_reuse", "benchmarks/pair_reuse.py", (R + "pair_reuse.md",)),
     Measurement("depth_gap", "benchmarks/depth_gap.py", (R + "depth_gap.md",)),
     Measurement("depth_planes", "benchmarks/depth_planes.py", (R + "depth_planes.md",)),
+    Measurement("depth_recipes", "benchmarks/depth_recipes.py", (R + "depth_recipes.md",),
+                before=("doefab train --task depth --variant proposed --steps 1000 --minutes 600 "
+                        "--out out/recipes/A",)),
     Measurement("hdr_highlight_bias", "benchmarks/hdr_highlight_bias.py", (R + "hdr_highlight_bias.md",)),
     Measurement("judge_rounding", "benchmarks/judge_rounding.py", (R + "judge_rounding.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),

@@ -57,3 +57,19 @@ def test_seeds_scored_on_other_scenes_are_refused(rv):
             rv.carried_seeds(now, committed)
     now["real"].update(images=12, real_sha256={"hdr": "a", "definition": "y"})  # another realdata.py, same scenes
     assert rv.carried_seeds(now, committed) == (seeds, None)
+
+
+def test_seeds_of_a_network_shipped_before_are_said_to_be_its_recipes(rv):
+    """A network that replaced the one the seeds were trained beside keeps that spread, named as the earlier
+    network's (its weights and steps), with the present network's own score beside it."""
+    old = {**_real([40.0, 42.0]), "weights": {"proposed": {"sha256": "a" * 64, "steps": 500}}}
+    committed = {"real": old, "seeds": [_seed(41.5), _seed(40.5)]}
+    now = {"real": {**_real([42.0, 44.0], code="git c"), "weights": {"proposed": {"sha256": "b" * 64, "steps": 1000}}}}
+    seeds, base = rv.carried_seeds(now, committed)
+    assert base["weights"] == {"sha256": "a" * 64, "steps": 500} and base["rows"]["proposed"]["psnr_highlight"] == 41.0
+    now["seed_base"] = base
+    text = " ".join(rv.spread_lines({"hdr": now}, {"hdr": seeds}))
+    assert "network shipped before this one (weights aaaaaaaaaaaa, 500 steps; its own score 41 in the row" in text
+    assert "(1000 steps, bbbbbbbbbbbb, 43 in the table above)" in text
+    assert "the present recipe's own spread over seeds is not measured" in text
+
