@@ -2,7 +2,8 @@
 validation set (split ``real``: nine Middlebury 2014 scenes' measured depth) and the synthetic validation split, both
 under honest captures (six fabricated parts per split, crosstalk unmixed by a noisy calibration, depth between the
 network's planes), 12 scenes of 256² px, torch on one thread; and each network's read of a fronto-parallel wall at
-1–5 m behind four photographs (``depth_planes``: where the shipped network reads a wall at 1 m as 2.2 m). Each
+1–5 m behind the validation split's three photographs (``WALL_PHOTOS``; framed as ``depth_planes`` frames its
+own, whose photographs include test ones). Each
 candidate is a weights folder made by ``doefab train --task depth --variant proposed`` with its recipe, named on the
 command line; its validation curve (the run folder's history.csv, validation MAE every 50 steps on 8 scenes of
 128² px) is printed beside it, to show whether the run had reached its plateau.
@@ -10,8 +11,8 @@ command line; its validation curve (the run folder's history.csv, validation MAE
     .venv/bin/python benchmarks/depth_recipes.py "1000 steps=out/recipes/A" "1000 steps, room layouts=out/recipes/B"
 
 Each NAME=FOLDER: the folder holds depth_proposed.{pt,json} and history.csv (``--out`` and the weights in one
-folder). The shipped network is scored in the same run. Writes benchmarks/results/depth_recipes.{md,json}; the
-test split is not read.
+folder). The shipped network is scored in the same run. Writes benchmarks/results/depth_recipes.{md,json}; no test
+content is read. ``--walls-only NAME=FOLDER …`` reads the walls again for the committed runs of those names.
 """
 
 from __future__ import annotations
@@ -35,24 +36,37 @@ RECIPES = {"1000 steps": "the shipped network's recipe (honest captures, 128-px 
                                        "evenly in inverse depth: `depthlayouts` of git 28d013e, taken out again in "
                                        "a5e87bc)"}
 WALLS = (1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 5.0)
+WALL_PHOTOS = ("immunohistochemistry", "gravel", "stereo_motorcycle")  # data.IMAGES["val"], checked in main
 SPLITS = ("real", "val")
 
 
+def _wall_photo(image, side: int):
+    """A validation photograph (linear radiance, ``data.split_images``) resized to ``side``² and scaled to
+    0.05–0.9, as ``depth_planes`` scales its photographs."""
+    import numpy as np
+    from skimage import transform
+
+    im = transform.resize(image, (side, side), anti_aliasing=True)
+    return (0.05 + 0.85 * im / max(float(im.max()), 1e-6)).astype(np.float32).transpose(2, 0, 1)
+
+
 def wall_reads(weights_dir) -> dict:
-    """{wall depth (m): [read per photograph]} of ``weights_dir``'s proposed depth network (None: the shipped)."""
+    """{wall depth (m): [read per photograph]} of ``weights_dir``'s proposed depth network (None: the shipped) behind
+    the validation split's photographs (``WALL_PHOTOS``)."""
     import numpy as np
     import torch
 
     import depth_planes as dp
     import doefab
+    from doefab.reconstruction.data import split_images
 
     torch.set_num_threads(1)
     rec = doefab.load_reconstructor("depth", weights_dir=weights_dir)
     margin = rec.pair.coded.shape[-1] // 2
     side = dp.SIZE + 2 * margin
     reads: dict = {}
-    for photo in dp.PHOTOS:
-        scene = dp._photo(photo, side)
+    for image in split_images("val"):
+        scene = _wall_photo(image, side)
         for z in WALLS:
             depth = np.full((side, side), z, np.float32)
             reads.setdefault(f"{z:g}", []).append(dp._read(rec, scene, rec.pair, margin, depth))
@@ -104,14 +118,17 @@ def markdown(res: dict, command: str) -> str:
     lines = ["# Depth training recipes on validation data", "",
              f"`{command}`: each proposed depth network on {res['images']} scenes of {res['size_px']}² px of the "
              "measured set (real) and of the synthetic validation split, honest captures (6 fabricated parts per "
-             "split), torch on one thread; and its median read of a wall behind four photographs (astronaut, coffee, "
-             "chelsea, rocket; `depth_planes.py`'s frames, one thread). The test split is not read.", "",
+             "split), torch on one thread; and its median read of a wall behind the validation split's photographs ("
+             + ", ".join(WALL_PHOTOS) + "; framed as `depth_planes.py` frames its own, one thread). No test "
+             "content is read.", "",
              "| network | steps | MAE real (m) | δ<1.25 real | MAE val (m) | δ<1.25 val | "
              + " | ".join(f"wall {z:g} m" for z in WALLS) + " |", "| --- " * (6 + len(WALLS)) + "|"]
     for name, e in res["runs"].items():
         walls = " | ".join(f"{float(np.median(e['walls_m'][f'{z:g}'])):.2f}" for z in WALLS)
         lines.append(f"| {name} | {e['steps']} | {e['real']['mae']:.3f} | {e['real']['delta125']:.3f} | "
                      f"{e['val']['mae']:.3f} | {e['val']['delta125']:.3f} | {walls} |")
+    if res.get("walls_command"):
+        lines += ["", f"The walls were read again behind the validation photographs by `{res['walls_command']}`."]
     lines += [""] + [f"- {n}: {RECIPES[n]}." for n in res["runs"] if n in RECIPES]
     lines += ["", "Validation MAE (m) during each run (8 scenes of 128² px, every 50 steps):", ""]
     for name, e in res["runs"].items():
@@ -131,9 +148,20 @@ def main() -> None:
     ap.add_argument("--images", type=int, default=12)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--work", type=Path, default=ROOT / "out" / "depth_recipes")
+    ap.add_argument("--walls-only", action="store_true",
+                    help="read the walls again for the committed runs named NAME=FOLDER, nothing else")
     args = ap.parse_args()
-    if args.tables_only:
+    from doefab.reconstruction.data import IMAGES
+
+    assert tuple(IMAGES["val"]) == WALL_PHOTOS, "the wall photographs are the validation split's"
+    if args.tables_only or args.walls_only:
         res = json.loads((RESULTS / "depth_recipes.json").read_text())
+        for item in args.candidates if args.walls_only else ():
+            name, _, folder = item.partition("=")
+            res["runs"][name]["walls_m"] = wall_reads(Path(folder))
+            res["walls_command"] = ".venv/bin/python benchmarks/depth_recipes.py --walls-only " + " ".join(
+                f'"{c}"' for c in args.candidates)
+        atomic_write_json(RESULTS / "depth_recipes.json", res)
         atomic_write_text(RESULTS / "depth_recipes.md", markdown(res, res["command"]))
         return
     candidates = {}

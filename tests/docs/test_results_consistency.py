@@ -143,8 +143,9 @@ def test_the_final_test_set_was_read_once_per_task_condition_and_networks_and_pu
     the latest read of its task and condition: its task, condition, code, scene count and every network's weights
     (SHA-256 prefix) as logged."""
     reads = _final_reads()
-    seen = [(task, "clean" if "clean captures" in what else "honest", what.split("; ", 1)[1])
-            for _, _, task, what in reads]
+    seen = [(task, "clean" if "clean captures" in what else "honest",
+             frozenset(re.findall(r"\w+ \(weights [0-9a-f]{12}\)", what.split("; ", 1)[1])))
+            for _, _, task, what in reads]  # the networks read, in whatever order the row lists them
     assert len(set(seen)) == len(seen), seen  # no set of networks read twice
     assert {(t, c) for t, c, _ in seen} == {(t, c) for t in TASKS for c in ("honest", "clean")}, seen
     latest = {}

@@ -72,4 +72,11 @@ def test_seeds_of_a_network_shipped_before_are_said_to_be_its_recipes(rv):
     assert "network shipped before this one (weights aaaaaaaaaaaa, 500 steps; its own score 41 in the row" in text
     assert "(1000 steps, bbbbbbbbbbbb, 43 in the table above)" in text
     assert "the present recipe's own spread over seeds is not measured" in text
+    # the same network re-scored (same weights, another budget) keeps the plain wording: its own seeds
+    now["real"]["weights"]["proposed"] = {"sha256": "a" * 64, "steps": 500}
+    same = " ".join(rv.spread_lines({"hdr": now}, {"hdr": seeds}))
+    assert "shipped before" not in same and "were scored at git a" in same
+    # another network of as many steps is another network: told by its weights, not its steps
+    now["real"]["weights"]["proposed"] = {"sha256": "c" * 64, "steps": 500}
+    assert "shipped before this one" in " ".join(rv.spread_lines({"hdr": now}, {"hdr": seeds}))
 
