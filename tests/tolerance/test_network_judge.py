@@ -31,11 +31,12 @@ def test_perfect_part_reads_the_same_with_either_psf(judge):
 
 def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_it_back(judge, monkeypatch):
     """The DOE off centre across the split line: told the nominal PSF, the depth network reads the part's
-    captures worse the larger the decenter (MAE 0.42 m perfect, 0.59 m at 0.2 mm, 0.92 m at 0.4 mm), at 0.4 mm
-    worse than a depth-blind guess (the scene's median depth everywhere, 0.84 m) that the perfect part's reading
-    halves; told the part's own PSF pair, it reads them about as well as the perfect part's (within 15 %). The
-    judge's 0.4 mm numbers are those of the captures it rendered, each reconstruction repeated here and its MAE
-    computed with numpy (on one torch thread, as the judge reconstructs)."""
+    captures worse the larger the decenter (MAE 0.35 m perfect, 0.42 m at 0.2 mm, 0.62 m at 0.4 mm: more than 1.5×
+    the perfect part's; the 500-step network read 0.42, 0.59 and 0.92 m), where a depth-blind guess (the scene's
+    median depth everywhere, 0.84 m) reads far worse than the perfect part; told the part's own PSF pair, it reads
+    them about as well as the perfect part's (within 15 %). The judge's 0.4 mm numbers are those of the captures it
+    rendered, each reconstruction repeated here and its MAE computed with numpy (on one torch thread, as the judge
+    reconstructs)."""
     import doefab.reconstruction.specs as specs
     from doefab.reconstruction.evaluate import one_thread
 
@@ -56,7 +57,7 @@ def test_a_decentred_part_costs_the_nominal_reading_and_its_measured_pair_wins_i
         assert r[label]["mae"] == pytest.approx(value, rel=1e-5), label
     blind = float(np.abs(t - np.median(t)).mean())
     assert perfect < 0.75 * blind and perfect < small["nominal_psf"]["mae"] < mae["nominal_psf"]
-    assert blind < mae["nominal_psf"]
+    assert mae["nominal_psf"] > 1.5 * perfect  # the decenter costs the nominal reading
     for measured in (small["measured_psf"]["mae"], mae["measured_psf"]):
         assert measured == pytest.approx(perfect, rel=0.15)
 
