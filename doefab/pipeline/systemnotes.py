@@ -76,15 +76,16 @@ def design_grid_note(cam, task, factor: int) -> str | None:
     def error(d):
         return staircase_error(steepest_plane(design_camera(cam, d), lam_min, depths)[1])
 
-    if full > STAIRCASE_MAX or error(factor) <= STAIRCASE_MAX:
-        return None
     dcam = design_camera(cam, factor)
     z, step = steepest_plane(dcam, lam_min, depths)
+    err = staircase_error(step)
+    if full > STAIRCASE_MAX or err <= STAIRCASE_MAX:
+        return None
     fits = max(d for d in range(1, factor) if cam.doe_pixels % d == 0 and error(d) <= STAIRCASE_MAX)
     other = phase_step_fix(dcam, lam_min, depths, factor, limit=staircase_step(STAIRCASE_MAX))
     return (f"design.sampling = {factor}: the design stage's pupil is {factor}× coarser, so a point at "
             f"{distance_text(z)} changes its phase by {step:.2f} rad between design pixels at {lam_min * 1e9:.0f} nm "
-            f"and its coded PSF there is about {error(factor) * 100:.2g} % off (relative L2; the full grid's "
+            f"and its coded PSF there is about {err * 100:.2g} % off (relative L2; the full grid's "
             f"{full * 100:.2g} %): the relief is optimised against PSFs the part will not have; for design PSFs "
             f"within {STAIRCASE_MAX * 100:g} % set design.sampling = {fits}{f', or {other}' if other else ''}")
 
