@@ -11,7 +11,7 @@ import math
 from doefab.applications import has
 from doefab.pipeline.scene import Scene
 
-__all__ = ["depth_span_px", "system_warnings", "design_grid_note", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M",
+__all__ = ["depth_span_px", "system_warnings", "design_grid_notes", "sensor_warnings", "depth_warnings", "band_warnings", "DATA_STEP_M",
            "MIN_WAVES"]
 
 MIN_WAVES = 0.75  # the least of a wave the relief's full depth may give the longest band without a warning
@@ -61,15 +61,15 @@ def _staircase_note(cam, task) -> str | None:
             f"{STAIRCASE_MAX * 100:g} %; for PSFs within it set {fix}")
 
 
-def design_grid_note(cam, task, factor: int) -> str | None:
+def design_grid_notes(cam, task, factor: int) -> list[str]:
     """The design stage's coded PSF at the steepest plane off by more than ``STAIRCASE_MAX`` on the design grid
     (``design.sampling`` = ``factor``: a pupil ``factor``× coarser, so the wavefront's steps are ``factor``× larger)
-    where the full grid's is within it (None otherwise: a full grid above it has its own note)."""
+    where the full grid's is within it, as a one-line note (none otherwise: a full grid above it has its own)."""
     from doefab.optics.psf import staircase_error, staircase_step
     from doefab.pipeline.sampling import design_camera, distance_text, phase_step_fix, steepest_plane
 
     if factor <= 1 or cam.doe_pixels % factor:
-        return None
+        return []
     lam_min, depths = min(task.wavelengths(cam)), task.depths(cam)
     full = staircase_error(steepest_plane(cam, lam_min, depths)[1])
 
@@ -80,14 +80,14 @@ def design_grid_note(cam, task, factor: int) -> str | None:
     z, step = steepest_plane(dcam, lam_min, depths)
     err = staircase_error(step)
     if full > STAIRCASE_MAX or err <= STAIRCASE_MAX:
-        return None
+        return []
     fits = max(d for d in range(1, factor) if cam.doe_pixels % d == 0 and error(d) <= STAIRCASE_MAX)
     other = phase_step_fix(dcam, lam_min, depths, factor, limit=staircase_step(STAIRCASE_MAX))
-    return (f"design.sampling = {factor}: the design stage's pupil is {factor}× coarser, so a point at "
+    return [f"design.sampling = {factor}: the design stage's pupil is {factor}× coarser, so a point at "
             f"{distance_text(z)} changes its phase by {step:.2f} rad between design pixels at {lam_min * 1e9:.0f} nm "
             f"and its coded PSF there is about {err * 100:.2g} % off (relative L2; the full grid's "
             f"{full * 100:.2g} %): the relief is optimised against PSFs the part will not have; for design PSFs "
-            f"within {STAIRCASE_MAX * 100:g} % set design.sampling = {fits}{f', or {other}' if other else ''}")
+            f"within {STAIRCASE_MAX * 100:g} % set design.sampling = {fits}{f', or {other}' if other else ''}"]
 
 
 def _far_focus_note(cam) -> str | None:
