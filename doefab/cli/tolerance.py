@@ -106,7 +106,7 @@ def run(args) -> int:
     from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
-    from doefab.tolerance.errors import holder_mounting, load_budget
+    from doefab.tolerance.errors import holder_mounting, load_budget, names_default_budget
     from doefab.tolerance.report import STEPS, run_study
     from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
@@ -116,7 +116,7 @@ def run(args) -> int:
                           "--weights-dir")
     if args.networks:  # the judge's network, checked before any output exists or any part is judged
         _check_network(design.task, ddir, args.weights_dir)
-    if args.budget is not None and args.budget.strip().lower() == "default" and not Path(args.budget).exists():
+    if names_default_budget(args.budget):
         args.budget = None  # the shipped budget by its name, as a scene's tolerance.budget = "default" names it
     budget = load_budget(args.budget)
     if args.holder:

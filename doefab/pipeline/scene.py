@@ -47,8 +47,10 @@ class Scene:
 
     def budget_path(self) -> Path | None:
         """The tolerance budget file: None for the shipped default, else relative to the scene file (or absolute)."""
+        from doefab.tolerance.errors import names_default_budget
+
         b = (self.tolerance or {}).get("budget", "default")
-        return None if b == "default" else scene_relative(self.path, b)
+        return None if names_default_budget(b, self.path.parent) else scene_relative(self.path, b)
 
     def response_path(self) -> str:
         """``sensor.response``: a camera name as given, a CSV path relative to the scene file (or absolute)."""
@@ -325,15 +327,13 @@ def scene_relative(scene_path: Path, given: str) -> Path:
 def _budget_problems(scene_path: Path, budget) -> list[str]:
     """The problems of the tolerance budget a scene names (every key's range, the spec's limits), each named
     ``tolerance.budget FILE: ...``: a bad budget is refused with the scene, before any stage runs."""
-    from doefab.tolerance.errors import budget_problems
+    from doefab.tolerance.errors import budget_problems, names_default_budget
 
-    if budget == "default" or not isinstance(budget, str):
+    if not isinstance(budget, str) or names_default_budget(budget, scene_path.parent):
         return []  # the shipped budget; a value of another type is named by the schema check
     path = scene_relative(scene_path, budget)
     if path.is_dir():
         return [f"tolerance.budget {budget!r}: {path} is a folder: give a budget TOML file (or default)"]
-    if not path.is_file() and budget.strip().lower() == "default":
-        return [f"tolerance.budget {budget!r}: write budget = \"default\" (lower case) for the shipped budget"]
     if not path.is_file():
         return [f"tolerance.budget {budget!r}: no file at {path} (a path relative to the scene file, or absolute; or "
                 f"default)"]

@@ -19,7 +19,7 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
                                       whole_keys)
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
-           "is_shipped_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors",
+           "is_shipped_budget", "names_default_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors",
            "crosstalk_ratios", "sensor_crosstalk", "budget_values"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
@@ -71,16 +71,32 @@ class PartErrors:
                                                                                      "rotation")})
 
 
+def names_default_budget(name, base: str | Path | None = None) -> bool:
+    """Whether ``name`` is the shipped budget's name: None, or the text ``default`` in any case and spacing where no
+    file of that name exists (relative to ``base``, else the working directory): one rule for a scene's
+    ``tolerance.budget``, ``--budget`` and ``load_budget``.
+
+    >>> names_default_budget("Default"), names_default_budget("my_budget.toml")
+    (True, False)
+    """
+    if name is None:
+        return True
+    if not isinstance(name, str) or name.strip().lower() != "default":
+        return False
+    return not (Path(base) / name if base is not None else Path(name)).exists()
+
+
 def is_shipped_budget(path: str | Path | None) -> bool:
-    """Whether a budget path names the shipped default budget (None, or ``DEFAULT_BUDGET`` by any path)."""
-    return path is None or Path(path).resolve() == DEFAULT_BUDGET.resolve()
+    """Whether a budget path names the shipped default budget (None or ``default``, or ``DEFAULT_BUDGET`` by any
+    path)."""
+    return names_default_budget(path) or Path(path).resolve() == DEFAULT_BUDGET.resolve()
 
 
 def load_budget(path: str | Path | None = None) -> dict:
     """Read and validate a budget file (every problem listed with its key). A key the file leaves out takes the
     shipped default budget's value; ``budget["defaults_used"]`` lists those keys (a ``[spec.<task>]`` table the
     file gives replaces the default's table of that task as a whole)."""
-    p = Path(path) if path is not None else DEFAULT_BUDGET
+    p = DEFAULT_BUDGET if names_default_budget(path) else Path(path)
     data = read_toml(p, "budget file")
     problems = _problems(data)
     if problems:

@@ -116,10 +116,28 @@ def test_a_bad_budget_is_refused_with_the_scene(tmp_path):
     assert "2 problems:\n  - tolerance.budget" in msg and msg.count("\n  - ") == 2  # one problem to a line
     assert "tolerance.budget tight.toml: etch.systematic_sigma_percent = -3 is outside 0–50" in msg
     assert "tolerance.budget tight.toml: spec.hdr.psf_metric_min = 5.0 is outside 0–1" in msg
-    with pytest.raises(DoefabError, match='write budget = "default" \\(lower case\\)'):
-        load_scene(_scene(tmp_path, '[tolerance]\nbudget = "Default"'))  # the shipped budget's name, another case
+    # the shipped budget's name in another case is the shipped budget, as --budget Default is at the CLI
+    assert load_scene(_scene(tmp_path, '[tolerance]\nbudget = " Default"')).budget_path() is None
     (tmp_path / "tight.toml").write_text("[etch]\nsystematic_sigma_percent = 3\n")
     assert load_scene(_scene(tmp_path, '[tolerance]\nbudget = "tight.toml"')).budget_path() == tmp_path / "tight.toml"
+
+
+def test_the_shipped_budget_has_one_name_for_scenes_the_cli_and_the_api(tmp_path, monkeypatch):
+    """``default`` in any case names the shipped budget in a scene, at ``--budget`` (tolerance and diagnose both
+    call ``load_budget``) and in ``load_budget``; a file of that name beside the scene, or in the working directory,
+    is read as the file it is."""
+    from doefab.io import read_toml
+    from doefab.tolerance.errors import DEFAULT_BUDGET, load_budget, names_default_budget
+
+    shipped = read_toml(DEFAULT_BUDGET, "budget")
+    assert {k: v for k, v in load_budget("DEFAULT").items() if k != "defaults_used"} == shipped
+    assert load_budget("default")["defaults_used"] == []
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "Default").write_text("[etch]\nsystematic_sigma_percent = 7\n")
+    assert not names_default_budget("Default") and names_default_budget("default")  # a case-sensitive file system
+    assert load_budget("Default")["etch"]["systematic_sigma_percent"] == 7
+    assert shipped["etch"]["systematic_sigma_percent"] != 7
+    assert load_scene(_scene(tmp_path, '[tolerance]\nbudget = "Default"')).budget_path() == tmp_path / "Default"
 
 
 def test_a_scene_and_its_budget_saved_with_a_byte_order_mark_load(tmp_path):
