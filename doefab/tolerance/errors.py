@@ -19,8 +19,8 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
                                       whole_keys)
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
-           "is_shipped_budget", "names_default_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap", "sensor_errors",
-           "crosstalk_ratios", "sensor_crosstalk", "budget_values"]
+           "is_shipped_budget", "names_default_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap",
+           "sensor_errors", "crosstalk_ratios", "sensor_crosstalk", "budget_values"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
