@@ -16,6 +16,7 @@ design (--grid auto). Parts are checkpointed in OUT/samples.jsonl: rerun with --
 from __future__ import annotations
 
 import argparse
+import sys
 
 from doefab.cli._args import add_device_arg, number
 from doefab.tolerance.schedulers import MAX_WORKERS
@@ -106,7 +107,7 @@ def run(args) -> int:
     from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
-    from doefab.tolerance.errors import holder_mounting, load_budget, names_default_budget
+    from doefab.tolerance.errors import calibration_warning, holder_mounting, load_budget, names_default_budget
     from doefab.tolerance.report import STEPS, run_study
     from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
@@ -121,6 +122,9 @@ def run(args) -> int:
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
+    note = calibration_warning(budget)
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")
     both = runner_conflict(args.workers, args.scheduler, ("--workers", "--scheduler"))

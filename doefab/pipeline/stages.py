@@ -352,8 +352,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     """The scene's part judged through its task's network: delivered quality, its yield against the budget's
     [spec], a tornado in delivered terms for the errors that matter most, the grid each error needs; the
     quantization study at PSF level. A rerun after an interruption continues from the saved parts."""
-    from doefab.imaging.sensor import Sensor
-    from doefab.tolerance.errors import holder_mounting, load_budget
+    from doefab.tolerance.errors import holder_mounting, load_budget, with_sensor_noise
     from doefab.tolerance.netjudge import SCENES
     from doefab.tolerance.report import run_study
 
@@ -365,9 +364,7 @@ def stage_tolerance(scene, res, out: Path, quick: bool) -> dict:
     holder = out.parent / "holder" / "holder.json"
     if holder.is_file():  # the mounting errors of the holder this scene built
         budget.setdefault("mounting", {}).update(holder_mounting(holder))
-    noise, default = scene_sensor(scene).record(with_response=False), Sensor().record(with_response=False)
-    # the scene's sensor noise (where not the default's): the PSF-level judge's crosstalk calibration draws it
-    budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
+    with_sensor_noise(budget, scene_sensor(scene))  # the PSF-level judge's crosstalk calibration draws it
     samples = QUICK["parts"] if quick else int(tol.get("samples", 20))
     own, stale = networks_trained_here(scene, res, out.parent)  # before the shipped ones, which fit one system
     shipped_fits = own is None and res.reuse and not shipped_sensor_differs(scene.task, res.sensor)

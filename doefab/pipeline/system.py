@@ -26,8 +26,8 @@ from doefab.applications import application, band_problem, design_is, has
 from doefab.pipeline.designkeys import design_key_problems, design_key_warnings
 from doefab.pipeline.resolved import ResolvedScene
 from doefab.pipeline.scene import Scene, check_scene
-from doefab.pipeline.systemnotes import (band_warnings, depth_span_px, depth_warnings, design_grid_notes,
-                                         sensor_warnings, system_warnings)
+from doefab.pipeline.systemnotes import (band_warnings, calibration_notes, depth_span_px, depth_warnings,
+                                         design_grid_notes, sensor_warnings, system_warnings)
 from doefab.pipeline.sceneholder import die_checks, holder_checks, holder_warnings, scene_die_m
 from doefab.pipeline.scenekeys import weights_mode
 from doefab.validate import distance_or_inf, distance_record
@@ -383,7 +383,7 @@ def resolve(scene: Scene) -> ResolvedScene:
                        + design_grid_notes(cam, task, int(settings["sampling"]))
                        + depth_warnings(scene, cam, task, ring_from_blur(scene, cam, task.depths(cam)))
                        + band_warnings(scene, cam, task) + skipped + holder_warnings(scene, cam)
-                       + design_key_warnings(scene, cfg, task)),
+                       + design_key_warnings(scene, cfg, task) + calibration_notes(scene, sensor)),
         stage_warnings=tuple(skipped))
 
 

@@ -178,6 +178,18 @@ def _sensor_size_note(scene: Scene, cam, task) -> str | None:
             f"check the diagonal (in mm) and camera.sensor_pitch_um")
 
 
+def calibration_notes(scene: Scene, sensor) -> list[str]:
+    """The tolerance stage's crosstalk calibration where its noise swamps the sensor's own changes
+    (``tolerance.errors.calibration_warning``: the scene's budget with the scene's sensor noise, as the stage
+    judges); none without that stage."""
+    if scene.tolerance is None or "tolerance" not in scene.stages:
+        return []
+    from doefab.tolerance.errors import calibration_warning, load_budget, with_sensor_noise
+
+    note = calibration_warning(with_sensor_noise(load_budget(scene.budget_path()), sensor))
+    return [note] if note else []
+
+
 def depth_warnings(scene: Scene, cam, task, from_blur: bool) -> list[str]:
     """A depth design whose planes barely change the plain half's blur (no depth cue: often millimetres typed into
     a key in metres), and a default ring radius (the camera's defocus blur, ``defocus_ring_px``) capped to fit the

@@ -20,7 +20,8 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
 
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
            "is_shipped_budget", "names_default_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap",
-           "sensor_errors", "crosstalk_ratios", "sensor_crosstalk", "budget_values"]
+           "sensor_errors", "crosstalk_ratios", "sensor_crosstalk", "budget_values", "calibration_warning",
+           "CALIBRATION_SCATTER_MAX", "with_sensor_noise"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -28,6 +29,9 @@ DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 BUDGET_KEYS = budget_keys()
 # keys that count something: whole numbers only (3072 or 3072.0, not 1.5)
 WHOLE_KEYS = whole_keys()
+# a crosstalk calibration whose per-column ratios scatter by more than this fraction of the ratio is warned of: above
+# the sensor model's own row-to-row (2 %) and session-to-session (3 %) changes (``sensorcrosstalk``)
+CALIBRATION_SCATTER_MAX = 0.05
 
 
 @dataclass
@@ -195,6 +199,46 @@ def crosstalk_ratios(err: PartErrors, columns, noise=None, rows=None) -> tuple:
     rng = np.random.default_rng(np.random.SeedSequence([int(err.seed), 29]))
     a_hat, b_hat = sensor.calibrate(columns, err.calibration_rows, noise, rng, err.calibration_level)
     return a, b, a_hat, b_hat
+
+
+def with_sensor_noise(budget: dict, sensor) -> dict:
+    """``budget`` (changed in place, and returned) with the noise of ``sensor`` (an ``imaging.sensor.Sensor``: a
+    scene's) in its ``[sensor]`` section where that differs from the default sensor's: the noise the PSF-level
+    judge's crosstalk calibration draws.
+
+    Example: ``with_sensor_noise(load_budget(), Sensor(read_noise_e=8.0))["sensor"]["read_noise_e"]`` → 8.0."""
+    from doefab.imaging.sensor import Sensor
+
+    noise, default = sensor.record(with_response=False), Sensor().record(with_response=False)
+    budget.setdefault("sensor", {}).update({k: v for k, v in noise.items() if v != default[k]})
+    return budget
+
+
+def calibration_warning(budget: dict) -> str | None:
+    """A warning where the budget's crosstalk calibration (``[sensor]``: rows, exposure and the sensor's noise) leaves
+    each column's ratio scattered by more than ``CALIBRATION_SCATTER_MAX`` of it (``imaging.crosstalk
+    .calibration_scatter`` at the smaller centre ratio): its noise, not the sensor, then sets what the calibration
+    leaves in every part's captures. None for a calibration within it, an uncalibrated camera or no crosstalk.
+
+    Example: ``calibration_warning(load_budget())`` is None (3072 rows at half of full scale: 0.07 %)."""
+    from doefab.imaging.crosstalk import calibration_scatter
+    from doefab.imaging.sensorcrosstalk import DRIFT_SIGMA, ROW_SIGMA
+
+    s = sensor_errors(budget)
+    alpha = min(s["crosstalk"])
+    if not s["calibrated"] or alpha <= 0:
+        return None
+    rows, level, fw, rn = s["calibration_rows"], s["calibration_level"], s["full_well_e"], s["read_noise_e"]
+    rel = calibration_scatter(alpha, rows, level, fw, rn)
+    if rel <= CALIBRATION_SCATTER_MAX:
+        return None
+    return (f"tolerance budget [sensor]: a crosstalk calibration of {rows} row{'s' * (rows != 1)} at "
+            f"calibration_level = {level:g} on a sensor of {fw:g} e⁻ full well and {rn:g} e⁻ read noise scatters "
+            f"each column's {100 * alpha:g} % ratio by {100 * rel:.0f} % of it, more than the sensor's own changes "
+            f"from row to row ({100 * ROW_SIGMA:g} %) and between sessions ({100 * DRIFT_SIGMA:g} %): the "
+            f"calibration's noise sets the crosstalk residual of every part; average more rows or expose the white "
+            f"wall brighter (the shipped budget: calibration_rows = 3072, calibration_level = 0.5) unless this is "
+            f"your lab's calibration")
 
 
 def holder_mounting(holder_json: str | Path) -> dict:

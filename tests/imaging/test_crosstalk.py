@@ -129,3 +129,19 @@ def test_a_simulated_calibration_of_no_crosstalk_reads_zero_not_an_error(seed):
     a, b = doefab.simulate_calibration(0.0, 0.0, rng=seed)
     assert 0 <= float(a.min()) and float(a.max()) < 1e-4 and 0 <= float(b.min()) and float(b.max()) < 1e-4
     assert doefab.DualPixelCrosstalk.calibrated(0.0, 0.0, seed=seed).estimate[0] >= 0
+
+
+@pytest.mark.parametrize("alpha, rows, level, read_noise", [(0.05, 16, 0.05, 3.0), (0.2, 4, 0.02, 3.0),
+                                                            (0.05, 16, 0.05, 40.0)])
+def test_calibration_scatter_is_the_simulated_calibrations(alpha, rows, level, read_noise):
+    """The delta-method scatter of one column's ratio against the spread of 6000 simulated calibrations of the same
+    true ratio (Poisson shot noise and Gaussian read noise drawn per pixel): shot-noise bound and read-noise bound."""
+    from doefab.imaging.crosstalk import calibration_scatter
+    from doefab.imaging.sensor import PoissonGaussian
+
+    cols = 6000
+    a_hat, _ = doefab.simulate_calibration(np.full(cols, alpha), np.full(cols, 0.05), rows=rows, rng=1, level=level,
+                                           noise=PoissonGaussian(25_000.0, read_noise))
+    simulated = float(np.std(a_hat, ddof=1)) / alpha  # the SD estimate's own scatter: about 1 %
+    assert calibration_scatter(alpha, rows, level, 25_000.0, read_noise) == pytest.approx(simulated, rel=0.04)
+    assert float(np.mean(a_hat)) == pytest.approx(alpha, rel=0.01)
