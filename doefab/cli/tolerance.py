@@ -87,9 +87,9 @@ def scheduler_arg(text: str) -> str:
     return text
 
 
-def _check_network(design_task: str, ddir, weights_dir) -> None:
-    """The proposed network the network-level study judges through: one for the design's application, trained for
-    this design (``loader.weights_record``; its PSFs are computed only once the study runs)."""
+def _check_network(design_task: str, ddir, weights_dir) -> dict:
+    """The record of the proposed network the network-level study judges through: one for the design's application,
+    trained for this design (``loader.weights_record``; its PSFs are computed only once the study runs)."""
     from doefab.applications import of_design
     from doefab.errors import DoefabError
     from doefab.reconstruction.loader import weights_record
@@ -98,7 +98,21 @@ def _check_network(design_task: str, ddir, weights_dir) -> None:
     if app is None:
         raise DoefabError(f"--networks: no reconstruction network judges a {design_task} design; drop --networks "
                           f"for the PSF-level study")
-    weights_record(app.name, "proposed", weights_dir, ddir)
+    return weights_record(app.name, "proposed", weights_dir, ddir)
+
+
+def _calibration_notes(budget: dict, record: dict | None) -> list[str]:
+    """The budget's crosstalk calibration where its noise swamps the sensor's changes (``calibration_warning``):
+    with the budget's sensor noise (the PSF-level judge's) and, for a network-level study, the noise of the sensor
+    the network was trained for (its captures')."""
+    import copy
+
+    from doefab.imaging.sensor import sensor_from_record
+    from doefab.tolerance.errors import calibration_warning, with_sensor_noise
+
+    budgets = [budget] + ([with_sensor_noise(copy.deepcopy(budget), sensor_from_record(record.get("sensor")))]
+                          if record is not None else [])
+    return list(dict.fromkeys(n for n in map(calibration_warning, budgets) if n))
 
 
 def run(args) -> int:
@@ -107,7 +121,7 @@ def run(args) -> int:
     from doefab.cli._args import design_folder
     from doefab.cli._output import claim_output, resume_hint
     from doefab.errors import DoefabError
-    from doefab.tolerance.errors import calibration_warning, holder_mounting, load_budget, names_default_budget
+    from doefab.tolerance.errors import holder_mounting, load_budget, names_default_budget
     from doefab.tolerance.report import STEPS, run_study
     from doefab.tolerance.schedulers import check_reachable, runner_conflict
 
@@ -115,15 +129,15 @@ def run(args) -> int:
     if args.weights_dir is not None and not args.networks:
         raise DoefabError("--weights-dir is read only by the network-level study: add --networks, or drop "
                           "--weights-dir")
+    record = None
     if args.networks:  # the judge's network, checked before any output exists or any part is judged
-        _check_network(design.task, ddir, args.weights_dir)
+        record = _check_network(design.task, ddir, args.weights_dir)
     if names_default_budget(args.budget):
         args.budget = None  # the shipped budget by its name, as a scene's tolerance.budget = "default" names it
     budget = load_budget(args.budget)
     if args.holder:
         budget.setdefault("mounting", {}).update(holder_mounting(args.holder))
-    note = calibration_warning(budget)
-    if note:
+    for note in _calibration_notes(budget, record):
         print(f"warning: {note}", file=sys.stderr)
     if args.resume and args.force:
         raise DoefabError("--resume continues a study and --force starts one afresh: give one of them")

@@ -159,9 +159,9 @@ def calibration_scatter(alpha: float, rows: int, level: float, full_well_e: floa
     """The relative standard error of one column's ratio ``alpha`` from a white-wall calibration (Eq. 30–31,
     :func:`simulate_calibration`) of ``rows`` rows exposed to ``level`` of full scale on a sensor of ``full_well_e``
     electrons at value 1 and ``read_noise_e`` electrons rms: the ratio of the rows' means, by the delta method,
-    ``√(α(1 − α)T + σ²(1 − 2α + 2α²)) / (T √rows) / α`` with ``T = level · full_well_e`` (the lit view's electrons,
-    shot noise binomial-like, the read noise in both views). Where few electrons reach the blocked view the
-    simulation's estimate, cut at 0, scatters somewhat less.
+    ``√(α(1 − α)T + σ²(1 − 2α + 2α²)) / (T √rows) / α`` with ``T = level · full_well_e`` (the open half's
+    electrons, both views together; shot noise binomial-like, the read noise in both views). Where few electrons
+    reach the blocked view the simulation's estimate, cut at 0, scatters somewhat less.
 
     Example: ``calibration_scatter(0.05, 3072, 0.5, 25_000, 3.0)`` is about 0.0007 (the paper's calibration);
     ``calibration_scatter(0.05, 1, 0.01, 25_000, 3.0)`` about 0.36 (one dim row)."""

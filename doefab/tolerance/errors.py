@@ -21,7 +21,7 @@ from doefab.tolerance.sources import (budget_keys, budget_value, drawn_fields, n
 __all__ = ["PartErrors", "load_budget", "budget_problems", "sample_errors", "budget_value", "DEFAULT_BUDGET",
            "is_shipped_budget", "names_default_budget", "BUDGET_KEYS", "WHOLE_KEYS", "holder_mounting", "nominal_gap",
            "sensor_errors", "crosstalk_ratios", "sensor_crosstalk", "budget_values", "calibration_warning",
-           "CALIBRATION_SCATTER_MAX", "with_sensor_noise"]
+           "CALIBRATION_SCATTER_MAX", "CALIBRATION_RATIO_FLOOR", "with_sensor_noise"]
 
 DEFAULT_BUDGET = Path(__file__).with_name("budget.toml")
 
@@ -32,6 +32,8 @@ WHOLE_KEYS = whole_keys()
 # a crosstalk calibration whose per-column ratios scatter by more than this fraction of the ratio is warned of: above
 # the sensor model's own row-to-row (2 %) and session-to-session (3 %) changes (``sensorcrosstalk``)
 CALIBRATION_SCATTER_MAX = 0.05
+# below this a ratio's calibration error is judged against this ratio: a small share of the light however relative
+CALIBRATION_RATIO_FLOOR = 0.01
 
 
 @dataclass
@@ -216,29 +218,44 @@ def with_sensor_noise(budget: dict, sensor) -> dict:
 
 def calibration_warning(budget: dict) -> str | None:
     """A warning where the budget's crosstalk calibration (``[sensor]``: rows, exposure and the sensor's noise) leaves
-    each column's ratio scattered by more than ``CALIBRATION_SCATTER_MAX`` of it (``imaging.crosstalk
-    .calibration_scatter`` at the smaller centre ratio): its noise, not the sensor, then sets what the calibration
-    leaves in every part's captures. None for a calibration within it, an uncalibrated camera or no crosstalk.
+    a column's ratio scattered by more than ``CALIBRATION_SCATTER_MAX`` of it (``imaging.crosstalk
+    .calibration_scatter``; a ratio under ``CALIBRATION_RATIO_FLOOR`` counted as that much, its error a small share
+    of the light however relative), at the centre row's centre and edges, where the sensor model
+    (``sensor_crosstalk``) puts the smallest ratios: its noise, not the sensor, then sets what the calibration leaves
+    in every part's captures. None for a calibration within it, an uncalibrated camera or none of either crosstalk.
 
-    Example: ``calibration_warning(load_budget())`` is None (3072 rows at half of full scale: 0.07 %)."""
+    Example: ``calibration_warning(load_budget())`` is None (3072 rows at half of full scale: 0.09 % of the smallest
+    ratio, 3 %)."""
     from doefab.imaging.crosstalk import calibration_scatter
-    from doefab.imaging.sensorcrosstalk import DRIFT_SIGMA, ROW_SIGMA
+    from doefab.imaging.sensorcrosstalk import DRIFT_SIGMA, ROW_SIGMA, SensorCrosstalk
 
     s = sensor_errors(budget)
-    alpha = min(s["crosstalk"])
-    if not s["calibrated"] or alpha <= 0:
+    if not s["calibrated"] or not any(s["crosstalk"]):
+        return None  # the stage calibrates only a sensor with crosstalk (``crosstalk_ratios``)
+    rows, level, fw, rn, w = (s[k] for k in ("calibration_rows", "calibration_level", "full_well_e",
+                                             "read_noise_e", "calibrated_width_px"))
+    where = ("left edge", "centre", "right edge")
+    sensor = SensorCrosstalk(s["crosstalk"], s["crosstalk_slope"], row_sigma=0.0, width_px=w)
+    ratios = sensor.ratios([0.0], [-w / 2, 0.0, w / 2], session=None)
+
+    def excess(a: float) -> float:  # the scatter against what is warned of, in its units
+        warned = CALIBRATION_SCATTER_MAX * max(a, CALIBRATION_RATIO_FLOOR)
+        return calibration_scatter(a, rows, level, fw, rn) * a / warned
+
+    alpha, name, at = max(((float(a), name, at) for name, r in zip(("l→r", "r→l"), ratios)
+                           for a, at in zip(r[0], where) if a > 0), key=lambda t: excess(t[0]), default=(0, "", ""))
+    if alpha <= 0 or excess(alpha) <= 1:
         return None
-    rows, level, fw, rn = s["calibration_rows"], s["calibration_level"], s["full_well_e"], s["read_noise_e"]
     rel = calibration_scatter(alpha, rows, level, fw, rn)
-    if rel <= CALIBRATION_SCATTER_MAX:
-        return None
     return (f"tolerance budget [sensor]: a crosstalk calibration of {rows} row{'s' * (rows != 1)} at "
             f"calibration_level = {level:g} on a sensor of {fw:g} e⁻ full well and {rn:g} e⁻ read noise scatters "
-            f"each column's {100 * alpha:g} % ratio by {100 * rel:.0f} % of it, more than the sensor's own changes "
-            f"from row to row ({100 * ROW_SIGMA:g} %) and between sessions ({100 * DRIFT_SIGMA:g} %): the "
-            f"calibration's noise sets the crosstalk residual of every part; average more rows or expose the white "
-            f"wall brighter (the shipped budget: calibration_rows = 3072, calibration_level = 0.5) unless this is "
-            f"your lab's calibration")
+            f"the {name} ratio at the calibrated region's {at} ({100 * alpha:.2g} %) by ±{100 * rel * alpha:.2g} "
+            f"percentage points{f' ({100 * rel:.0f} % of it)' if alpha >= CALIBRATION_RATIO_FLOOR else ''}, more "
+            f"than the sensor's own changes from row to row "
+            f"({100 * ROW_SIGMA:g} %) and between sessions ({100 * DRIFT_SIGMA:g} %): the calibration's noise sets "
+            f"the crosstalk residual of every part; average more rows or expose the white wall brighter (the "
+            f"shipped budget: calibration_rows = 3072, calibration_level = 0.5) unless this is your lab's "
+            f"calibration")
 
 
 def holder_mounting(holder_json: str | Path) -> dict:

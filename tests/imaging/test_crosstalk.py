@@ -132,10 +132,12 @@ def test_a_simulated_calibration_of_no_crosstalk_reads_zero_not_an_error(seed):
 
 
 @pytest.mark.parametrize("alpha, rows, level, read_noise", [(0.05, 16, 0.05, 3.0), (0.2, 4, 0.02, 3.0),
-                                                            (0.05, 16, 0.05, 40.0)])
+                                                            (0.05, 16, 0.05, 40.0), (0.3, 16, 0.01, 40.0)])
 def test_calibration_scatter_is_the_simulated_calibrations(alpha, rows, level, read_noise):
     """The delta-method scatter of one column's ratio against the spread of 6000 simulated calibrations of the same
-    true ratio (Poisson shot noise and Gaussian read noise drawn per pixel): shot-noise bound and read-noise bound."""
+    true ratio (Poisson shot noise and Gaussian read noise drawn per pixel): shot-noise bound and read-noise bound,
+    the last at a large ratio, where the read noise's weight 1 − 2α + 2α² (both views carry it, the ratio's
+    covariance) differs most from 1."""
     from doefab.imaging.crosstalk import calibration_scatter
     from doefab.imaging.sensor import PoissonGaussian
 

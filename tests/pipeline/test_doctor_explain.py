@@ -193,10 +193,11 @@ def test_a_scenes_holder_thread_no_filter_has_is_warned_with_its_key(tmp_path):
 
 
 def test_a_calibration_its_noise_swamps_is_warned_with_the_scenes_sensor_noise(tmp_path):
-    """A budget whose crosstalk calibration (16 rows at 5 % of full scale) scatters each ratio by 3 % of it with the
-    default sensor (3 e⁻ read noise) passes silently; the same calibration on the scene's sensor of 40 e⁻ read noise
-    scatters it by 16 % (√(0.05·0.95·1250 + 40²·0.905) / (1250·√16) / 0.05), over the 5 % warned of, as the
-    tolerance stage draws it; without the tolerance stage there is nothing to warn of."""
+    """A budget whose crosstalk calibration (16 rows at 5 % of full scale) scatters the smallest ratio (r→l at the
+    calibrated region's right edge: 5 % − the 2 % slope) by 4.5 % of it with the default sensor (3 e⁻ read noise)
+    passes silently; the same calibration on the scene's sensor of 40 e⁻ read noise scatters it by 26 %
+    (√(0.03·0.97·1250 + 40²·0.9418) / (1250·√16) / 0.03), over the 5 % warned of, as the tolerance stage draws it;
+    without the tolerance stage there is nothing to warn of."""
     from doefab.imaging.sensor import Sensor
     from doefab.pipeline.systemnotes import calibration_notes
     from doefab.tolerance.errors import calibration_warning, load_budget
@@ -209,7 +210,8 @@ def test_a_calibration_its_noise_swamps_is_warned_with_the_scenes_sensor_noise(t
     scene.write_text(text + "\n[sensor]\nread_noise_e = 40.0\n")
     notes = [n for n in resolve(load_scene(scene)).warnings if "crosstalk calibration" in n]  # (and the networks')
     assert len(notes) == 1 and "calibration of 16 rows at calibration_level = 0.05" in notes[0], notes
-    assert "40 e⁻ read noise" in notes[0] and "ratio by 16 % of it" in notes[0]
+    assert "40 e⁻ read noise" in notes[0] and "r→l ratio at the calibrated region's right edge (3 %)" in notes[0]
+    assert "±0.79 percentage points (26 % of it)" in notes[0]
     assert calibration_warning(load_budget(tmp_path / "dim.toml")) is None  # the budget's own (default) noise
     scene.write_text(text.replace('"tolerance", ', "") + "\n[sensor]\nread_noise_e = 40.0\n")
     assert calibration_notes(load_scene(scene), Sensor(read_noise_e=40.0)) == []

@@ -63,3 +63,46 @@ def test_every_problem_of_a_budget_is_listed_together(tmp_path):
         assert any(needle in q for q in problems), needle
     p.write_text("[sensor]\ncalibration_rows = 1536.0\ncalibrated_width_px = 2048\n")  # whole, written as a float
     assert budget_problems(p) == []
+
+
+def _budget(**sensor):
+    from doefab.tolerance.errors import load_budget
+
+    b = load_budget()
+    b["sensor"].update(sensor)
+    return b
+
+
+def test_a_calibration_is_judged_where_the_sensor_puts_its_smallest_ratio_and_a_tiny_ratio_in_absolute_terms():
+    """The warning reads the centre row's centre and edges: with a 4.5 % slope the r→l ratio is 0.5 % at the
+    right edge, where 16 rows at 5 % of full scale scatter it by ±0.078 points (√(0.005·0.995·1250 + 9·0.99) /
+    (1250·4)), over the 5 % of 1 % (a ratio under 1 % is judged against 1 %) warned of, although the centre's 5 %
+    ratio is scattered by 3.3 % of it; with the 2 % slope the smallest ratio, 3 %, by 4.5 %: no warning. 0.005 %
+    crosstalk with 256 rows at half of full scale: none; a dim single row: ±1.2 points on the near-zero ratio of a
+    sensor without r→l crosstalk, warned; no calibration, or no crosstalk: nothing."""
+    from doefab.tolerance.errors import calibration_warning
+
+    edge = calibration_warning(_budget(crosstalk_slope_percent=4.5, calibration_rows=16, calibration_level=0.05))
+    assert edge and "r→l ratio at the calibrated region's right edge (0.5 %) by ±0.078 percentage points," in edge
+    assert calibration_warning(_budget(calibration_rows=16, calibration_level=0.05)) is None
+    # ±0.0016 points on a 0.01 % ratio (the model's least): 16 % of the ratio, nothing of the light
+    assert calibration_warning(_budget(crosstalk_rl_percent=0.005, calibration_rows=256)) is None
+    dim = calibration_warning(_budget(crosstalk_rl_percent=0.0, calibration_rows=1, calibration_level=0.01))
+    assert dim and "r→l ratio" in dim and "±1.2 percentage points, more" in dim, dim  # no "% of it" below 1 %
+    assert calibration_warning(_budget(calibrated=False, calibration_rows=1, calibration_level=0.01)) is None
+    assert calibration_warning(_budget(crosstalk_lr_percent=0.0, crosstalk_rl_percent=0.0, calibration_rows=1,
+                                       calibration_level=0.01)) is None
+
+
+def test_a_network_level_study_warns_with_the_noise_of_the_networks_sensor():
+    """``doefab tolerance --networks``: the network's captures draw the calibration with the sensor it was trained
+    for; a calibration fine at the budget's noise (3 e⁻) but swamped at the network's 40 e⁻ is warned of once."""
+    from doefab.cli.tolerance import _calibration_notes
+
+    b = _budget(calibration_rows=16, calibration_level=0.05)
+    assert _calibration_notes(b, None) == [] and _calibration_notes(b, {}) == []
+    notes = _calibration_notes(b, {"sensor": {"read_noise_e": 40.0}})
+    assert len(notes) == 1 and "40 e⁻ read noise" in notes[0]
+    assert "read_noise_e" not in b["sensor"]  # the budget itself is left as it was
+    dim = _budget(calibration_rows=1, calibration_level=0.01)
+    assert len(_calibration_notes(dim, {})) == 1  # the same warning twice is said once
