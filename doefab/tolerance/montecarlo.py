@@ -15,6 +15,7 @@ with (e.g. ``CUDA_VISIBLE_DEVICES=i dask worker ...`` per GPU) and the device as
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -270,15 +271,20 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
 
         client = Client(scheduler)
     try:
-        if nw is None:
+        fn, head = evaluate_part, ()
+        if nw is None:  # a running scheduler: its workers now, and each part where it is computed (a late joiner)
             _check_worker_code(client)
             client.run(_set_default_device, remote_worker_device(default_device()))
+            fn, head = _part_on_worker, (_part_model_digest(), remote_worker_device(default_device()))
         study = uuid.uuid4().hex[:12]  # this study's own keys: a shared scheduler never answers another's part
-        futs = {client.submit(evaluate_part, ddir, supersample, errs[i].to_json(), networks,
+        futs = {client.submit(fn, *head, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
                               key=f"doefab-sample-{study}-{i}", retries=2, pure=False): i for i in todo}
         for f in as_completed(futs):
-            record(futs[f], f.result())
+            got = f.result()
+            if isinstance(got, dict) and OTHER_CODE in got:
+                raise DoefabError(_other_code_text([got[OTHER_CODE]]))
+            record(futs[f], got)
     finally:
         client.close()
         if cluster is not None:
@@ -296,8 +302,41 @@ def _check_worker_code(client) -> None:
     except (ImportError, AttributeError):  # a doefab without the digest: an older version
         other = ["(some)"]
     if other:
-        raise DoefabError(f"the scheduler's workers {', '.join(other)} run another version of doefab's part model "
-                          f"than this process: start them from the same doefab (same version and files)")
+        raise DoefabError(_other_code_text(other))
+
+
+def _other_code_text(workers: list[str]) -> str:
+    return (f"the scheduler's workers {', '.join(workers)} run another version of doefab's part model than this "
+            f"process: start them from the same doefab (same version and files)")
+
+
+OTHER_CODE = "doefab: a worker with another part model"  # what ``_part_on_worker`` returns in place of a part
+
+
+@functools.lru_cache(maxsize=1)
+def _part_model_digest() -> str:
+    """``conditions.model_sources_sha256()``, once per process (it reads the part model's sources)."""
+    from doefab.tolerance.conditions import model_sources_sha256
+
+    return model_sources_sha256()
+
+
+def _part_on_worker(expected: str, device: str, *args):
+    """Run on a ``tcp://`` scheduler's worker: ``study.evaluate_part(*args)`` on ``device`` where the worker's part
+    model is ``expected`` (this process's), else ``{OTHER_CODE: the worker's address}`` — a worker that joined after
+    the study's first check is checked as the first ones were, and its part is not mixed in."""
+    from doefab.tolerance.study import evaluate_part
+
+    if _part_model_digest() != expected:
+        try:
+            from distributed import get_worker
+
+            name = get_worker().address
+        except (ImportError, ValueError):
+            name = "(a worker)"
+        return {OTHER_CODE: name}
+    _set_default_device(device)
+    return evaluate_part(*args)
 
 
 def remote_worker_device(text: str) -> str:

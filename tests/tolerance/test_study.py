@@ -784,6 +784,55 @@ def test_studies_sharing_a_dask_scheduler_keep_their_own_parts_and_its_workers_r
     assert len(keys) == 6  # refused before any part was submitted
 
 
+def test_a_dask_worker_that_joins_after_the_check_with_other_code_is_refused_at_its_part(monkeypatch):
+    """The check of a ``tcp://`` scheduler's workers runs at the study's start; a worker that joins later is checked
+    where it computes a part (``_part_on_worker``: this process's part-model digest goes with each part), and its
+    part is refused with the same error, never recorded; a worker with this code computes the part."""
+    pytest.importorskip("dask.distributed")
+    import dask.distributed as dd
+
+    from doefab._devices import ENV
+    from doefab.tolerance import study
+    from doefab.tolerance.conditions import model_sources_sha256
+
+    monkeypatch.delenv(ENV, raising=False)  # a worker sets its device there: restored after the test
+    calls = []
+    monkeypatch.setattr(study, "evaluate_part", lambda *a: calls.append(a) or {"metric": 0.5})
+    here = model_sources_sha256()
+    assert montecarlo._part_on_worker(here, "cpu", "d", 1, "{}", False, None) == {"metric": 0.5} and len(calls) == 1
+    late = montecarlo._part_on_worker("0" * 64, "cpu", "d", 1, "{}", False, None)
+    assert late == {montecarlo.OTHER_CODE: "(a worker)"} and len(calls) == 1  # not computed with other code
+
+    class Done:
+        def __init__(self, value):
+            self.value = value
+
+        def result(self):
+            return self.value
+
+    class FakeClient:  # every worker at the start runs this code; the part of key 1 lands on a late one
+        def __init__(self, address):
+            pass
+
+        def run(self, fn, *args):
+            return {"tcp://w1": here} if fn is model_sources_sha256 else {}
+
+        def submit(self, fn, *args, key, **kw):
+            assert fn is montecarlo._part_on_worker and args[0] == here  # the digest goes with the part
+            return Done({montecarlo.OTHER_CODE: "tcp://w9"} if key.endswith("-1") else fn(*args))
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(dd, "Client", FakeClient)
+    monkeypatch.setattr(dd, "as_completed", lambda futs: list(futs))
+    got = []
+    with pytest.raises(doefab.DoefabError, match="workers tcp://w9 run another version of doefab's part model"):
+        montecarlo._run_dask("tcp://127.0.0.1:1", "d", 1, [0, 1, 2], {i: PartErrors() for i in range(3)},
+                             lambda i, r: got.append(i))
+    assert got == [0]  # the late worker's part is not recorded
+
+
 def test_a_resume_of_another_study_is_refused_before_its_steps_are_judged_or_replaced(design_dir, tmp_path):
     """run_study reads samples.jsonl's header first: a changed budget is refused with the finished grid study and
     tornado of the earlier study as they were."""
