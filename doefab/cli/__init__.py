@@ -155,6 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         status, what = ((EXIT_TERMINATED, "terminated (SIGTERM)") if isinstance(exc, Terminated)
                         else (EXIT_INTERRUPTED, "interrupted"))
         hint, keep = getattr(args, "resume_hint", None), getattr(args, "keep_on_failure", None)
+        hint = hint() if callable(hint) else hint  # a hint that depends on what the run saved before it stopped
         kept = not _will_discard(args) and (keep is None or keep())  # the hint only where its file is there
         message = what + "; " + (hint if hint and kept else "nothing was kept")
     except CheckFailed as exc:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from doefab.io import OutputDir
 
 
@@ -22,6 +24,36 @@ def resume_hint(kept: str, force: bool) -> str:
     the command with ``--resume`` in its place (repeated as it was, ``--force`` would start afresh again)."""
     how = "with --resume in place of --force" if force else "with --resume"
     return f"{kept}: rerun the same command {how} to continue"
+
+
+def checkpoint_hint(path, kept: str, force: bool):
+    """``resume_hint`` for a run whose loop clears an earlier run's checkpoint only where it starts (after its own
+    checks and set-up): a ``--force`` run interrupted before that finds the earlier run's checkpoint in ``path``
+    untouched, and the hint then says so — rerun as given to start afresh, or with ``--resume`` in place of
+    ``--force`` to continue that earlier run — where ``--resume`` would otherwise continue the earlier run unawares.
+    A callable the CLI calls at the interrupt (a plain ``resume_hint`` without ``--force``)."""
+    if not force:
+        return resume_hint(kept, False)
+    ckpt = Path(path) / "checkpoint.pt"
+    before = _stamp(ckpt)
+
+    def hint() -> str:
+        if before is not None and _stamp(ckpt) == before:
+            return (f"the earlier run's checkpoint in {path} is kept, untouched (this run stopped before its first "
+                    f"step): rerun the same command to start afresh, or with --resume in place of --force to "
+                    f"continue the earlier run")
+        return resume_hint(kept, True)
+
+    return hint
+
+
+def _stamp(path):
+    """(inode, modification time, size) of a file, None where there is none."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
 
 
 def clear_earlier_run(out: OutputDir, force: bool, extra=()) -> None:

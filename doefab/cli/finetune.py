@@ -71,7 +71,7 @@ E2E_DEFAULTS = {"doe_every": 4, "lr_doe": 0.01, "sampling": 2}
 
 def run(args) -> int:
     from doefab.cli._args import design_folder, sensor_arg
-    from doefab.cli._output import check_resume, claim_output, resume_hint
+    from doefab.cli._output import check_resume, checkpoint_hint, claim_output
     from doefab.errors import DoefabError
     from doefab.reconstruction.endtoend import finetune_end_to_end
     from doefab.reconstruction.specs import check_bands
@@ -102,7 +102,7 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    args.resume_hint = resume_hint(f"the checkpoint in {out.path} is kept", args.force)
+    args.resume_hint = checkpoint_hint(out.path, f"the checkpoint in {out.path} is kept", args.force)
     out.create()
     res = finetune_end_to_end(d, out.path, minutes=args.minutes, weights_dir=args.weights_dir,
                               doe_every=args.doe_every, lr_doe=args.lr_doe, lr_net=args.lr_net,
@@ -117,7 +117,7 @@ def run(args) -> int:
 def _run_on_pair(args) -> int:
     """``--psf``: the task's proposed network fine-tuned alone on the pair (``partfinetune.finetune_on_pair``)."""
     from doefab.cli._args import sensor_arg, task_design_arg
-    from doefab.cli._output import check_resume, claim_output, resume_hint
+    from doefab.cli._output import check_resume, checkpoint_hint, claim_output
     from doefab.cli.evaluate import check_psf_args, read_crosstalk_arg, read_psf_arg
     from doefab.errors import DoefabError
     from doefab.reconstruction.loader import load_reconstructor
@@ -142,7 +142,7 @@ def _run_on_pair(args) -> int:
         check_resume(out)
     start = load_reconstructor(args.task, "proposed", args.weights_dir, design, sensor=sensor)
     check_psf_args(args.task, start.pair, pair, None)
-    args.resume_hint = resume_hint(f"the checkpoint in {out.path} is kept", args.force)
+    args.resume_hint = checkpoint_hint(out.path, f"the checkpoint in {out.path} is kept", args.force)
     out.create()
     from doefab.tolerance.conditions import measured
 

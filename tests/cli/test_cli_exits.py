@@ -74,3 +74,38 @@ def test_tolerance_resume_of_a_folder_without_a_study_is_refused(tmp_path, capsy
     rc = main(["tolerance", "--design", str(design_dir("hdr")), "--out", str(tmp_path / "typo"), "--resume"])
     assert rc == 2 and "holds no tolerance study to continue" in capsys.readouterr().err
     assert not (tmp_path / "typo").exists()
+
+
+def test_a_force_finetune_stopped_before_its_first_step_says_the_earlier_checkpoint_is_untouched(tmp_path, capsys,
+                                                                                                monkeypatch):
+    """finetune clears an earlier run's checkpoint only where its loop starts (a refused run keeps it): a --force run
+    interrupted in its set-up leaves that checkpoint as it was, and the hint says so (a --resume would continue the
+    earlier run, not start this one); once the run saved its own, the hint is --resume in place of --force."""
+    import doefab.reconstruction.endtoend as e2e
+    from cli_helpers import REPO
+
+    out = tmp_path / "ft"
+    argv = ["finetune", "--design", str(REPO / "masks" / "half-ring"), "--minutes", "1", "--out", str(out)]
+
+    def saved(tag):
+        def stop(design, path, **kw):
+            (path / "checkpoint.pt").write_bytes(tag)  # what the loop saves at a step
+            raise KeyboardInterrupt
+        return stop
+
+    def set_up_only(design, path, **kw):
+        raise KeyboardInterrupt  # still computing the design's PSFs
+
+    monkeypatch.setattr(e2e, "finetune_end_to_end", saved(b"earlier"))
+    assert main(argv) == 130
+    assert "rerun the same command with --resume to continue" in capsys.readouterr().err
+    monkeypatch.setattr(e2e, "finetune_end_to_end", set_up_only)
+    assert main([*argv, "--force"]) == 130
+    err = capsys.readouterr().err
+    assert f"the earlier run's checkpoint in {out} is kept, untouched" in err and "--resume in place of --force to " \
+        "continue the earlier run" in err, err
+    assert (out / "checkpoint.pt").read_bytes() == b"earlier"
+    monkeypatch.setattr(e2e, "finetune_end_to_end", saved(b"this run"))
+    assert main([*argv, "--force"]) == 130
+    err = capsys.readouterr().err
+    assert "rerun the same command with --resume in place of --force to continue" in err and "untouched" not in err
