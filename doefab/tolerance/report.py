@@ -18,6 +18,7 @@ from doefab.tolerance import plots, study
 from doefab.tolerance.delivered import change_noise
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS
+from doefab.tolerance.partmemo import PartMemo
 from doefab.tolerance.reporttext import REMEDY, body_lines, lead_text, spec_words, summary_lines
 
 __all__ = ["run_study", "REMEDY", "summary_lines"]
@@ -83,9 +84,9 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     mc_grid = res["grid"]["monte_carlo_grid"]
     _require_memory(judge, mc_grid, res["grid"], workers, scheduler)
     t = time.perf_counter()
-    res["tornado"] = cached_step(out, "tornado", _tornado_key(key, networks),
-                                 lambda: study.tornado(design_dir, budget, grids, networks, weights_dir, progress,
-                                                       network_top), reused)
+    res["tornado"] = _tornado_step(out, _tornado_key(key, networks), reused,
+                                   lambda memo: study.tornado(design_dir, budget, grids, networks, weights_dir,
+                                                              progress, network_top, evaluate=memo))
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
         if "network_delta_scenes" in r:
@@ -219,6 +220,15 @@ def _tornado_key(key: dict, networks) -> dict:
     if networks and key.get("network_top") is not None and judge_settings(networks) != judge_settings(True):
         return {**key, "tornado_scenes": "the study's"}
     return key
+
+
+def _tornado_step(out: Path, key: dict, reused: list, compute) -> list[dict]:
+    """The tornado, kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
+    judges its parts through a ``partmemo.PartMemo``): an interrupted tornado resumes with the parts it judged."""
+    memo = PartMemo(Path(out) / STEPS / "tornado.parts.jsonl", key)
+    rows = cached_step(out, "tornado", key, lambda: compute(memo), reused)
+    memo.discard()  # the step is kept whole
+    return rows
 
 
 def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):

@@ -97,10 +97,12 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
 
 
 def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool = False, weights_dir=None,
-            progress: bool = True, network_top: int | None = None) -> list[dict]:
+            progress: bool = True, network_top: int | None = None, evaluate=None) -> list[dict]:
     """Each error alone at one standard deviation of the budget, largest change first: the PSF metric, and with
     ``networks`` the delivered metrics (reconstructed with the nominal PSF and with the part's own) — for every
-    error, or for the ``network_top`` largest at PSF level."""
+    error, or for the ``network_top`` largest at PSF level. ``evaluate``: what judges a part (default
+    ``evaluate_part``; ``partmemo.PartMemo`` keeps each judged part for a resumed study)."""
+    evaluate = evaluate or evaluate_part
     grids = grids or {}
     present = [k for k in KINDS if k.from_budget(budget) != 0.0]
     rest = []  # the errors judged at PSF level only
@@ -111,16 +113,18 @@ def tornado(design_dir, budget: dict, grids: dict | None = None, networks: bool 
             # takes them from the design's planes (depth renders on finer planes: nothing to take up there)
             for s in {int(grids.get(k.name, 1)) for k in present} if not nj.renders_elsewhere else ():
                 stack.enter_context(judge_for(design_dir, s).computing_at(kernel))
-            psf = tornado(design_dir, budget, grids, False, progress=progress)
+            psf = tornado(design_dir, budget, grids, False, progress=progress, evaluate=evaluate)
         top = {r["error"] for r in psf[:network_top]}
         rest = [r for r in psf if r["error"] not in top]
         present = [k for k in present if k.name in top]
-    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) + rest,
+    return sorted(tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress, evaluate) + rest,
                   key=lambda r: -abs(r["delta"]))
 
 
-def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress) -> list[dict]:
-    """The tornado's rows for the error kinds ``present`` (unsorted)."""
+def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, progress, evaluate=None) -> list[dict]:
+    """The tornado's rows for the error kinds ``present`` (unsorted), each part judged by ``evaluate`` (default
+    ``evaluate_part``)."""
+    evaluate = evaluate or evaluate_part
     bar = _bar(len(present), "tornado" + (" (networks)" if networks else ""), progress)
     base = {}
     rows = []
@@ -128,10 +132,10 @@ def tornado_rows(design_dir, budget, present, grids, networks, weights_dir, prog
         s = int(grids.get(k.name, 1))
         j = judge_for(design_dir, s)
         if s not in base:
-            base[s] = evaluate_part(str(design_dir), s, PartErrors().to_json(), networks, weights_dir)
+            base[s] = dict(evaluate(str(design_dir), s, PartErrors().to_json(), networks, weights_dir))
             base[s]["metric"] = j.score(j.nominal)["metric"]
-        r = evaluate_part(str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks, weights_dir)
-        b = base[s] if k.base_from_budget is None else evaluate_part(  # a spread about a nominal value: from it
+        r = evaluate(str(design_dir), s, k.budget_part(budget, j.n_masks).to_json(), networks, weights_dir)
+        b = base[s] if k.base_from_budget is None else evaluate(  # a spread about a nominal value: from it
             str(design_dir), s, k.base_part(budget).to_json(), networks, weights_dir)
         row = {"error": k.name, "value": k.from_budget(budget) / k.si, "unit": k.unit, "grid": s,
                "metric": r["metric"], "delta": r["metric"] - b["metric"]}

@@ -1,0 +1,67 @@
+"""The parts a study step has judged, kept part by part: an interrupted step resumes with them.
+
+A study's steps are kept whole once finished (``report.cached_step``); a long step (the tornado through the
+networks: two parts per error, each judged on the network judge's scenes) interrupted before its end would
+otherwise judge every part again. ``PartMemo`` judges a part as ``study.evaluate_part`` does and appends the
+result to a JSON-lines file that opens with the step's key; a step resumed with the same key takes the parts
+already there instead of judging them again, and a file of another key (another design, budget, grid, network or
+version of the part model) is started afresh. The results are the same to the last bit: JSON keeps a float's
+every digit.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from doefab.io import atomic_write_text, from_json_ready, json_ready, json_text
+
+__all__ = ["PartMemo"]
+
+
+def _text(key) -> str:
+    """A key as its canonical JSON text (sorted, numpy values and non-finite numbers as ``json_ready`` writes them)."""
+    return json.dumps(json_ready(key), sort_keys=True, default=str)
+
+
+class PartMemo:
+    """``memo(design_dir, supersample, errors, networks, weights_dir)``: ``study.evaluate_part``'s result, from
+    ``path`` where a run of this ``key`` judged that part before, else judged and appended there.
+
+    Example: ``PartMemo(out / "steps" / "tornado.parts.jsonl", key)`` passed to ``study.tornado(evaluate=...)``."""
+
+    def __init__(self, path: str | Path, key, evaluate=None):
+        self.path, self.key, self._evaluate = Path(path), _text(key), evaluate
+        self.done: dict[str, dict] = {}
+        lines = self.path.read_text().splitlines() if self.path.is_file() else []
+        try:
+            same = bool(lines) and _text(json.loads(lines[0]).get("key")) == self.key
+        except (ValueError, AttributeError):
+            same = False
+        for line in lines[1:] if same else []:
+            try:
+                row = json.loads(line)
+                self.done[row["part"]] = from_json_ready(row["value"])
+            except (ValueError, KeyError, TypeError):
+                continue  # a line cut by an interruption: that part is judged again
+        # the file as read, without a cut line: each later part appends a whole line of its own
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        rows = [json_text({"part": p, "value": v}, indent=None) for p, v in self.done.items()]
+        atomic_write_text(self.path, "\n".join([json_text({"key": json.loads(self.key)}, indent=None)] + rows) + "\n")
+
+    def __call__(self, design_dir, supersample: int, errors: dict, networks: bool = False, weights_dir=None) -> dict:
+        part = json.dumps([str(design_dir), int(supersample), json_ready(errors), networks,
+                           None if weights_dir is None else str(weights_dir)], sort_keys=True, default=str)
+        if part not in self.done:
+            evaluate = self._evaluate
+            if evaluate is None:
+                from doefab.tolerance.study import evaluate_part as evaluate
+            value = evaluate(design_dir, supersample, errors, networks, weights_dir)
+            with open(self.path, "a") as fh:
+                fh.write(json_text({"part": part, "value": value}, indent=None) + "\n")
+            self.done[part] = from_json_ready(json.loads(json_text(value, indent=None)))  # as a resumed run reads it
+        return self.done[part]
+
+    def discard(self) -> None:
+        """Remove the file (its step is kept whole now)."""
+        self.path.unlink(missing_ok=True)
