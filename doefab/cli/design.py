@@ -56,7 +56,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     import doefab
-    from doefab.cli._output import check_resume, claim_output, resume_hint
+    from doefab.cli._output import check_resume, checkpoint_hint, claim_output
     from doefab.design.design import DESIGN_FILES
     from doefab.tasks import get_task
 
@@ -72,7 +72,7 @@ def run(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
-    args.resume_hint = resume_hint(f"the checkpoint in {out.path} is kept", args.force)
+    args.resume_hint = checkpoint_hint(out.path, f"the checkpoint in {out.path} is kept", args.force)
     settings = {"qat_fraction": args.qat_fraction, "fab_weight": args.fab_weight,
                 "checkpoint_every": args.checkpoint_every, "sampling": args.sampling, "n_levels": args.n_levels}
     if args.lr is not None:

@@ -140,9 +140,9 @@ def _run_on_pair(args) -> int:
                        keep_on_failure=lambda: (args.outdir.path / "checkpoint.pt").is_file())
     if args.resume:
         check_resume(out)
+    args.resume_hint = checkpoint_hint(out.path, f"the checkpoint in {out.path} is kept", args.force)
     start = load_reconstructor(args.task, "proposed", args.weights_dir, design, sensor=sensor)
     check_psf_args(args.task, start.pair, pair, None)
-    args.resume_hint = checkpoint_hint(out.path, f"the checkpoint in {out.path} is kept", args.force)
     out.create()
     from doefab.tolerance.conditions import measured
 

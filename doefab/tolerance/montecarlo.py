@@ -273,9 +273,12 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
     try:
         fn, head = evaluate_part, ()
         if nw is None:  # a running scheduler: its workers now, and each part where it is computed (a late joiner)
-            _check_worker_code(client)
+            from doefab.tolerance.conditions import model_sources_sha256
+
+            here = model_sources_sha256()  # this process's part model now, for both checks
+            _check_worker_code(client, here)
             client.run(_set_default_device, remote_worker_device(default_device()))
-            fn, head = _part_on_worker, (_part_model_digest(), remote_worker_device(default_device()))
+            fn, head = _part_on_worker, (here, remote_worker_device(default_device()))
         study = uuid.uuid4().hex[:12]  # this study's own keys: a shared scheduler never answers another's part
         futs = {client.submit(fn, *head, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
@@ -291,12 +294,12 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
             cluster.close()
 
 
-def _check_worker_code(client) -> None:
-    """Refuse a ``tcp://`` scheduler whose workers compute parts with other code than this process (another doefab
-    version or a modified copy): their parts would be mixed into this study without a sign."""
+def _check_worker_code(client, here: str) -> None:
+    """Refuse a ``tcp://`` scheduler whose workers compute parts with other code than this process's, ``here``
+    (``conditions.model_sources_sha256``; another doefab version or a modified copy): their parts would be mixed
+    into this study without a sign."""
     from doefab.tolerance.conditions import model_sources_sha256
 
-    here = model_sources_sha256()
     try:
         other = sorted(w for w, d in client.run(model_sources_sha256).items() if d != here)
     except (ImportError, AttributeError):  # a doefab without the digest: an older version
@@ -315,7 +318,7 @@ OTHER_CODE = "doefab: a worker with another part model"  # what ``_part_on_worke
 
 @functools.lru_cache(maxsize=1)
 def _part_model_digest() -> str:
-    """``conditions.model_sources_sha256()``, once per process (it reads the part model's sources)."""
+    """``conditions.model_sources_sha256()``, once per worker process (it reads the part model's sources)."""
     from doefab.tolerance.conditions import model_sources_sha256
 
     return model_sources_sha256()

@@ -11,6 +11,7 @@ every digit.
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -60,7 +61,7 @@ class PartMemo:
             with open(self.path, "a") as fh:
                 fh.write(json_text({"part": part, "value": value}, indent=None) + "\n")
             self.done[part] = from_json_ready(json.loads(json_text(value, indent=None)))  # as a resumed run reads it
-        return self.done[part]
+        return copy.deepcopy(self.done[part])  # the caller's to change: the kept part stays as judged
 
     def discard(self) -> None:
         """Remove the file (its step is kept whole now)."""

@@ -67,6 +67,18 @@ def test_an_interrupted_force_run_leaves_no_earlier_result_and_says_to_resume_in
     assert "rerun the same command with --resume in place of --force to continue" in err
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["checkpoint.pt", "my_photo.png"]
 
+    def set_up_only(*a, **k):
+        raise KeyboardInterrupt  # in the run's set-up: the earlier checkpoint as it was
+
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("doefab.design.optimize"), "prepare_run", set_up_only)
+    kept = (out / "checkpoint.pt").read_bytes()
+    assert main([*argv, "--out", str(out), "--force"]) == 130
+    err = capsys.readouterr().err
+    assert f"the earlier run's checkpoint in {out} is kept, untouched" in err and (out / "checkpoint.pt").read_bytes(
+        ) == kept, err
+
 
 def test_tolerance_resume_of_a_folder_without_a_study_is_refused(tmp_path, capsys):
     from doefab.reconstruction.specs import design_dir

@@ -36,3 +36,23 @@ def design_dir(tmp_path_factory):
                metrics={"name": "m", "continuous": 0.5, "quantized": 0.5})
     d.save(root / "design")
     return root / "design"
+
+
+@pytest.fixture
+def fake_judges(monkeypatch):
+    """Stand-ins for a design's PSF judge (every part at metric 0.5) and its network judge (a network of 63-px
+    kernels that renders elsewhere, as depth does), so a tornado's bookkeeping runs without any PSF."""
+    from contextlib import nullcontext
+    from types import SimpleNamespace
+
+    import torch
+
+    from doefab.tolerance import study
+
+    nj = SimpleNamespace(rec=SimpleNamespace(pair=SimpleNamespace(coded=torch.zeros(3, 3, 63, 63))),
+                         renders_elsewhere=True)
+    monkeypatch.setattr(study, "network_judge_for", lambda *a, **k: nj)
+    judge = SimpleNamespace(n_masks=4, nominal=None, score=lambda part: {"metric": 0.5},
+                            computing_at=lambda kernel: nullcontext())
+    monkeypatch.setattr(study, "judge_for", lambda d, s=1: judge)
+    return judge

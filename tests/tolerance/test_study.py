@@ -799,7 +799,8 @@ def test_a_dask_worker_that_joins_after_the_check_with_other_code_is_refused_at_
     calls = []
     monkeypatch.setattr(study, "evaluate_part", lambda *a: calls.append(a) or {"metric": 0.5})
     here = model_sources_sha256()
-    assert montecarlo._part_on_worker(here, "cpu", "d", 1, "{}", False, None) == {"metric": 0.5} and len(calls) == 1
+    assert montecarlo._part_on_worker(here, "cpu", "d", 1, "{}", False, None) == {"metric": 0.5}
+    assert calls == [("d", 1, "{}", False, None)]  # evaluate_part's own arguments, in its order
     late = montecarlo._part_on_worker("0" * 64, "cpu", "d", 1, "{}", False, None)
     assert late == {montecarlo.OTHER_CODE: "(a worker)"} and len(calls) == 1  # not computed with other code
 
@@ -826,11 +827,12 @@ def test_a_dask_worker_that_joins_after_the_check_with_other_code_is_refused_at_
 
     monkeypatch.setattr(dd, "Client", FakeClient)
     monkeypatch.setattr(dd, "as_completed", lambda futs: list(futs))
-    got = []
+    got, errs = [], {i: PartErrors(seed=i) for i in range(3)}
     with pytest.raises(doefab.DoefabError, match="workers tcp://w9 run another version of doefab's part model"):
-        montecarlo._run_dask("tcp://127.0.0.1:1", "d", 1, [0, 1, 2], {i: PartErrors() for i in range(3)},
-                             lambda i, r: got.append(i))
+        montecarlo._run_dask("tcp://127.0.0.1:1", "d", 1, [0, 1, 2], errs, lambda i, r: got.append(i), False, "w")
     assert got == [0]  # the late worker's part is not recorded
+    # each part reached evaluate_part with the arguments _run_dask forwards (parts 0 and 2 on workers of this code)
+    assert calls[-2:] == [("d", 1, errs[i].to_json(), False, "w") for i in (0, 2)]
 
 
 def test_a_resume_of_another_study_is_refused_before_its_steps_are_judged_or_replaced(design_dir, tmp_path):

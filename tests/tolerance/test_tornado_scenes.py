@@ -1,26 +1,15 @@
 """The tornado's network rows are judged on the scenes the study asks for, as its error-free part and its
 Monte Carlo parts are."""
 
-from contextlib import nullcontext
-from types import SimpleNamespace
-
-import torch
-
 from doefab.tolerance import study
 from doefab.tolerance.errors import load_budget
 
 
-def test_the_tornados_network_rows_are_judged_on_the_scenes_the_study_asks_for(monkeypatch):
+def test_the_tornados_network_rows_are_judged_on_the_scenes_the_study_asks_for(monkeypatch, fake_judges):
     """``doefab run --quick`` judges its parts on 2 scenes of 128² px: the tornado's top errors (and the
     error-free part they are measured from) must be judged on those, not on the judge's default 8 of 256²."""
     settings = {"images": 2, "size": 128, "split": "test"}
     asked = []
-    nj = SimpleNamespace(rec=SimpleNamespace(pair=SimpleNamespace(coded=torch.zeros(3, 3, 63, 63))),
-                         renders_elsewhere=True)
-    monkeypatch.setattr(study, "network_judge_for", lambda *a, **k: nj)
-    judge = SimpleNamespace(n_masks=4, nominal=None, score=lambda part: {"metric": 0.5},
-                            computing_at=lambda kernel: nullcontext())
-    monkeypatch.setattr(study, "judge_for", lambda d, s=1: judge)
 
     def evaluate(design_dir, supersample, errors, networks=False, weights_dir=None):
         asked.append(networks)
