@@ -82,7 +82,7 @@ def test_the_bar_counts_steps_when_they_are_counted(tmp_path, capsys):
     run_loop(tmp_path, {"case": "steps"}, 30.0, step, lambda: 0.5, {"w": opt}, [(opt, 0.1)], val_every=2,
              max_steps=4, desc="train test")
     err = capsys.readouterr().err
-    assert "4/4" in err and "1800" not in err  # the steps, not the 30 min budget's seconds
+    assert "4/4" in err and "/1800" not in err  # the steps, not the 30 min budget's seconds (a rate may read 1800)
 
 
 def test_a_finished_run_resumed_adds_no_row_and_a_half_written_checkpoint_is_cleared(tmp_path):
