@@ -15,7 +15,6 @@ with (e.g. ``CUDA_VISIBLE_DEVICES=i dask worker ...`` per GPU) and the device as
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -275,10 +274,10 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
         if nw is None:  # a running scheduler: its workers now, and each part where it is computed (a late joiner)
             from doefab.tolerance.conditions import model_sources_sha256
 
-            here = model_sources_sha256()  # this process's part model now, for both checks
+            here, device = model_sources_sha256(), remote_worker_device(default_device())  # for both checks
             _check_worker_code(client, here)
-            client.run(_set_default_device, remote_worker_device(default_device()))
-            fn, head = _part_on_worker, (here, remote_worker_device(default_device()))
+            client.run(_set_default_device, device)
+            fn, head = _part_on_worker, (here, device)
         study = uuid.uuid4().hex[:12]  # this study's own keys: a shared scheduler never answers another's part
         futs = {client.submit(fn, *head, ddir, supersample, errs[i].to_json(), networks,
                               None if weights_dir is None else str(weights_dir),
@@ -316,21 +315,14 @@ def _other_code_text(workers: list[str]) -> str:
 OTHER_CODE = "doefab: a worker with another part model"  # what ``_part_on_worker`` returns in place of a part
 
 
-@functools.lru_cache(maxsize=1)
-def _part_model_digest() -> str:
-    """``conditions.model_sources_sha256()``, once per worker process (it reads the part model's sources)."""
-    from doefab.tolerance.conditions import model_sources_sha256
-
-    return model_sources_sha256()
-
-
 def _part_on_worker(expected: str, device: str, *args):
     """Run on a ``tcp://`` scheduler's worker: ``study.evaluate_part(*args)`` on ``device`` where the worker's part
     model is ``expected`` (this process's), else ``{OTHER_CODE: the worker's address}`` — a worker that joined after
     the study's first check is checked as the first ones were, and its part is not mixed in."""
+    from doefab.tolerance.conditions import model_sources_sha256
     from doefab.tolerance.study import evaluate_part
 
-    if _part_model_digest() != expected:
+    if model_sources_sha256() != expected:  # a few ms beside a part's seconds
         try:
             from distributed import get_worker
 

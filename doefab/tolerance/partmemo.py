@@ -57,10 +57,11 @@ class PartMemo:
             evaluate = self._evaluate
             if evaluate is None:
                 from doefab.tolerance.study import evaluate_part as evaluate
-            value = evaluate(design_dir, supersample, errors, networks, weights_dir)
+            row = json_text({"part": part, "value": evaluate(design_dir, supersample, errors, networks, weights_dir)},
+                            indent=None)
             with open(self.path, "a") as fh:
-                fh.write(json_text({"part": part, "value": value}, indent=None) + "\n")
-            self.done[part] = from_json_ready(json.loads(json_text(value, indent=None)))  # as a resumed run reads it
+                fh.write(row + "\n")
+            self.done[part] = from_json_ready(json.loads(row)["value"])  # as a resumed run reads it
         return copy.deepcopy(self.done[part])  # the caller's to change: the kept part stays as judged
 
     def discard(self) -> None:
