@@ -49,11 +49,14 @@ def block_design(design, block: int):
                   extra={"bands": pick, "depth": z}, n_levels=design.n_levels)
 
 
-def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERANCE, progress: bool = False) -> dict:
+def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERANCE, progress: bool = False,
+               keep=None) -> dict:
     """{kind: {"value", "unit", "bound": {s: metric-error bound, scaled to the whole design}, "block_bound": {s:
     the block's own}, "seconds": {s: ...}, "grid": chosen s}} for the grid-dependent kinds present in ``budget``,
     "block_to_full": the scale per band, and "monte_carlo_grid": the finest of the chosen grids (``judge``: the
-    design's ``PSFJudge``; its alignment chain is used on the block too, its error-free PSF gives the scale)."""
+    design's ``PSFJudge``; its alignment chain is used on the block too, its error-free PSF gives the scale).
+    ``keep(name, compute)``: what judges each kind (default: ``compute()``; ``partmemo.PartMemo.keep`` keeps each
+    for a resumed study: its grids then come back keyed by text, "1", as a kept study's do)."""
     from doefab.tolerance.judge import PSFJudge
 
     kinds = [k for k in KINDS if k.grid and k.from_budget(budget) != 0.0]
@@ -78,9 +81,8 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
         from tqdm import tqdm
 
         bar = tqdm(total=len(kinds), desc="grid study", unit="error kind")
-    for k in kinds:
-        if bar is not None:
-            bar.set_postfix(error=k.name)
+
+    def row(k) -> dict:
         part = k.budget_part(budget, judge.n_masks)
         psf = {}
         secs = {}
@@ -93,9 +95,15 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
         bound = {s: bound_of(psf[s] - ref) for s in GRIDS}
         chosen = next((s for s in GRIDS if bound[s] <= tolerance), REFERENCE)
         effect = bound_of(ref - judges[REFERENCE].nominal)
-        out["kinds"][k.name] = {"value": k.from_budget(budget) / k.si, "unit": k.unit, "bound": bound,
-                                "block_bound": {s: bound_of(psf[s] - ref, False) for s in GRIDS},
-                                "effect_bound": effect, "seconds": secs, "grid": chosen}
+        return {"value": k.from_budget(budget) / k.si, "unit": k.unit, "bound": bound,
+                "block_bound": {s: bound_of(psf[s] - ref, False) for s in GRIDS},
+                "effect_bound": effect, "seconds": secs, "grid": chosen}
+
+    keep = keep or (lambda name, compute: compute())
+    for k in kinds:
+        if bar is not None:
+            bar.set_postfix(error=k.name)
+        out["kinds"][k.name] = keep(k.name, lambda: row(k))
         if bar is not None:
             bar.update(1)
     if bar is not None:

@@ -1,12 +1,13 @@
 """The parts a study step has judged, kept part by part: an interrupted step resumes with them.
 
-A study's steps are kept whole once finished (``report.cached_step``); a long step (the tornado through the
-networks: two parts per error, each judged on the network judge's scenes) interrupted before its end would
-otherwise judge every part again. ``PartMemo`` judges a part as ``study.evaluate_part`` does and appends the
-result to a JSON-lines file that opens with the step's key; a step resumed with the same key takes the parts
-already there instead of judging them again, and a file of another key (another design, budget, grid, network or
-version of the part model) is started afresh. The results are the same to the last bit: JSON keeps a float's
-every digit.
+A study's steps are kept whole once finished (``report.cached_step``); a long step interrupted before its end (the
+tornado through the networks: two parts per error, each judged on the network judge's scenes; the quantization
+study's level counts; the sweeps' magnitudes; the grid study's error kinds) would otherwise judge every part again.
+``PartMemo`` keeps each part's result in a JSON-lines file that opens with the step's key: ``memo(...)`` judges a
+part as ``study.evaluate_part`` does, ``memo.keep(name, compute)`` any part the step names. A step resumed with the
+same key takes the parts already there instead of judging them again, and a file of another key (another design,
+budget, grid, network or version of the part model) is started afresh. The results are the same to the last bit:
+JSON keeps a float's every digit (a dict's whole-number keys come back as text, as a kept step's do).
 """
 
 from __future__ import annotations
@@ -53,16 +54,22 @@ class PartMemo:
     def __call__(self, design_dir, supersample: int, errors: dict, networks: bool = False, weights_dir=None) -> dict:
         part = json.dumps([str(design_dir), int(supersample), json_ready(errors), networks,
                            None if weights_dir is None else str(weights_dir)], sort_keys=True, default=str)
+        evaluate = self._evaluate
+        if evaluate is None:
+            from doefab.tolerance.study import evaluate_part as evaluate
+        return self.keep(part, lambda: evaluate(design_dir, supersample, errors, networks, weights_dir))
+
+    def keep(self, part: str, compute) -> dict:
+        """``compute()``'s result for the part the step names ``part``: read back where this key's run kept it, else
+        computed and appended. Either way as a resumed run reads it, and a copy: the kept part stays as judged.
+
+        Example: ``memo.keep("levels=8", lambda: row_of(8))``."""
         if part not in self.done:
-            evaluate = self._evaluate
-            if evaluate is None:
-                from doefab.tolerance.study import evaluate_part as evaluate
-            row = json_text({"part": part, "value": evaluate(design_dir, supersample, errors, networks, weights_dir)},
-                            indent=None)
+            row = json_text({"part": part, "value": compute()}, indent=None)
             with open(self.path, "a") as fh:
                 fh.write(row + "\n")
-            self.done[part] = from_json_ready(json.loads(row)["value"])  # as a resumed run reads it
-        return copy.deepcopy(self.done[part])  # the caller's to change: the kept part stays as judged
+            self.done[part] = from_json_ready(json.loads(row)["value"])
+        return copy.deepcopy(self.done[part])
 
     def discard(self) -> None:
         """Remove the file (its step is kept whole now)."""

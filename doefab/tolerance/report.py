@@ -30,9 +30,8 @@ HOLDOUT_PARTS = 16  # validation parts, where the study has fewer direct Monte C
 
 def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed: int = 0, grid="auto",
               do_sweep: bool = False, do_levels: bool = False, workers: int | None = None, scheduler=None,
-              budget_path=None,
-              networks: bool = False, surrogate: bool = False, weights_dir=None, progress: bool = True,
-              network_top: int | None = None, fresh: bool = False) -> dict:
+              budget_path=None, networks: bool = False, surrogate: bool = False, weights_dir=None,
+              progress: bool = True, network_top: int | None = None, fresh: bool = False) -> dict:
     """All requested studies of one design; returns what ``tolerance.json`` holds. ``network_top``: judge only
     the tornado's largest errors (at PSF level) through the network. ``workers``: local processes for the
     Monte Carlo (None: one per core when there are enough parts); ``scheduler``: a Dask scheduler instead
@@ -41,13 +40,13 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     ``fresh``: an earlier study's parts, steps and results in ``out`` are removed, once the design is read and
     before any part is judged (a study refused before that keeps them)."""
     from doefab._memory import keep_freed_memory
+    from doefab.applications import of_design
+    from doefab.tolerance.montecarlo import check_resumable
     from doefab.tolerance.mounted import stop_case
+    from doefab.tolerance.spec import limits_text, nominal_failures
 
     _check_runners(workers, scheduler)
     keep_freed_memory()
-    from doefab.applications import of_design
-    from doefab.tolerance.montecarlo import check_resumable
-    from doefab.tolerance.spec import limits_text, nominal_failures
 
     out = Path(out)
     judge = study.judge_for(str(design_dir), 1)
@@ -78,31 +77,32 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     # limits relative to the error-free part differ per label: each label's parts are judged against its own
     res["spec_by_label"] = {label: _limits(spec, task, "network", {"network": {"nominal_psf": nom}}, limits_text)
                             for label, nom in res["nominal"].get("network", {}).items()}
-    res["grid"] = cached_step(out, "grid", key, lambda: _grid_record(judge, budget, grid, progress), reused)
+    res["grid"] = memo_step(out, "grid", key, reused, lambda memo: _grid_record(judge, budget, grid, progress, memo))
     grids = ({k: v["grid"] for k, v in res["grid"]["kinds"].items()} if grid == "auto" else
              {k.name: int(grid) for k in KINDS})
     mc_grid = res["grid"]["monte_carlo_grid"]
     _require_memory(judge, mc_grid, res["grid"], workers, scheduler)
     t = time.perf_counter()
-    res["tornado"] = _tornado_step(out, _tornado_key(key, networks), reused,
-                                   lambda memo: study.tornado(design_dir, budget, grids, networks, weights_dir,
-                                                              progress, network_top, evaluate=memo))
+    res["tornado"] = memo_step(out, "tornado", _tornado_key(key, networks), reused,
+                               lambda memo: study.tornado(design_dir, budget, grids, networks, weights_dir, progress,
+                                                          network_top, evaluate=memo))
     res["tornado_seconds"] = None if "tornado" in reused else round(time.perf_counter() - t, 1)
     for r in res["tornado"]:  # each delivered change's scene noise, from its paired per-scene changes
         if "network_delta_scenes" in r:
             r["network_delta_ci95"] = change_noise(r["network_delta_scenes"])
     if do_sweep:
-        t = time.perf_counter()
-        res["sweeps"] = study.sweep(design_dir, grids, progress=progress)["sweeps"]
-        res["sweep_seconds"] = round(time.perf_counter() - t, 1)
+        t, res["sweeps"] = time.perf_counter(), memo_step(out, "sweeps", key, reused, lambda memo: study.sweep(
+            design_dir, grids, progress=progress, keep=memo.keep)["sweeps"])
+        res["sweep_seconds"] = None if "sweeps" in reused else round(time.perf_counter() - t, 1)
     if samples > 0:
         _monte_carlo(res, design_dir, budget, out, samples, seed, mc_grid, scheduler, workers, networks, spec,
                      task, progress, weights_dir)
     if surrogate:
         _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
     if do_levels:
-        res["quantization"] = study.quantization_study(design_dir, supersample=mc_grid, networks=networks,
-                                                       weights_dir=weights_dir, progress=progress)
+        res["quantization"] = memo_step(out, "quantization", key, reused, lambda memo: study.quantization_study(
+            design_dir, supersample=mc_grid, networks=networks, weights_dir=weights_dir, progress=progress,
+            keep=memo.keep))
         _level_changes(res["quantization"], judge.design.n_levels)
     _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)
@@ -138,13 +138,13 @@ def _limits(spec, task, level, nominal, limits_text) -> str | None:
         return None
 
 
-def _grid_record(judge, budget, grid, progress) -> dict:
-    """Per-kind grids: measured on the design (``grid="auto"``) or one grid for all."""
+def _grid_record(judge, budget, grid, progress, memo=None) -> dict:
+    """Per-kind grids: measured on the design (``grid="auto"``; each kind kept by ``memo``) or one grid for all."""
     from doefab.tolerance.grid import grid_study
 
     if grid == "auto":
         t = time.perf_counter()
-        rec = grid_study(judge, budget, progress=progress)
+        rec = grid_study(judge, budget, progress=progress, keep=None if memo is None else memo.keep)
         rec["seconds"] = round(time.perf_counter() - t, 1)
         return rec
     return {"monte_carlo_grid": int(grid), "kinds": {}, "fixed": True}
@@ -222,13 +222,16 @@ def _tornado_key(key: dict, networks) -> dict:
     return key
 
 
-def _tornado_step(out: Path, key: dict, reused: list, compute) -> list[dict]:
-    """The tornado, kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
-    judges its parts through a ``partmemo.PartMemo``): an interrupted tornado resumes with the parts it judged."""
-    memo = PartMemo(Path(out) / STEPS / "tornado.parts.jsonl", key)
-    rows = cached_step(out, "tornado", key, lambda: compute(memo), reused)
+def memo_step(out: Path, name: str, key: dict, reused: list, compute):
+    """A study step kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
+    judges its parts through a ``partmemo.PartMemo``, steps/<name>.parts.jsonl): an interrupted step resumes with the
+    parts it judged.
+
+    Example: ``memo_step(out, "tornado", key, [], lambda memo: study.tornado(..., evaluate=memo))``."""
+    memo = PartMemo(Path(out) / STEPS / f"{name}.parts.jsonl", key)
+    value = cached_step(out, name, key, lambda: compute(memo), reused)
     memo.discard()  # the step is kept whole
-    return rows
+    return value
 
 
 def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):

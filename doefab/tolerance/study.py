@@ -70,9 +70,11 @@ def sweep_names() -> list[str]:
     return [k.name for k in KINDS if k.sweep]
 
 
-def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = True) -> dict:
+def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = True, keep=None) -> dict:
     """Each PSF metric against each error's magnitude (one error at a time), each kind on its grid
-    (``grids[name]``, default 1)."""
+    (``grids[name]``, default 1). ``keep(name, compute)``: what judges each magnitude (default: ``compute()``;
+    ``partmemo.PartMemo.keep`` keeps each for a resumed study)."""
+    keep = keep or _compute
     grids = grids or {}
     nominal = {}
     out = {"sweeps": {}}
@@ -84,7 +86,7 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
         nominal.setdefault(s, judge.score(judge.nominal))
         rows = []
         for m in k.sweep:
-            r = judge.evaluate(k.build(m * k.si, judge.n_masks))
+            r = keep(f"{k.name} at {m!r} on grid {s}", lambda: judge.evaluate(k.build(m * k.si, judge.n_masks)))
             rows.append({"magnitude": m, **r})
             if bar is not None:
                 bar.update(1)
@@ -165,6 +167,11 @@ def network_changes(part: dict, base: dict) -> tuple[dict, dict]:
     return means, scenes
 
 
+def _compute(name: str, compute):
+    """``compute()``: a step's part judged where nothing keeps it (``partmemo.PartMemo.keep``'s signature)."""
+    return compute()
+
+
 def _bar(total, desc, progress, unit="part"):
     """A progress line (tqdm: what runs, k/n done, elapsed and time left), None when ``progress`` is off."""
     if not progress:
@@ -174,16 +181,18 @@ def _bar(total, desc, progress, unit="part"):
     return tqdm(total=total, desc=desc, unit=unit)
 
 
-def quantization_study(design_dir, levels=None, supersample: int = 1,
-                       networks: bool = False, weights_dir=None, progress: bool = True) -> list[dict]:
+def quantization_study(design_dir, levels=None, supersample: int = 1, networks: bool = False, weights_dir=None,
+                       progress: bool = True, keep=None) -> list[dict]:
     """The same design at continuous (None) and N-level quantization, on the PSF metric (and, with
     ``networks``, through the network given the nominal and the quantized design's PSF). ``levels``: default
     continuous, the design's L and every fab level count below it. Each row says what it was quantized from: the
     continuous design when the folder keeps it (``height.npy`` or radial knots), else the design's L-level map
     re-quantized (fewer levels from L are not what a coarser design would be). ``progress``: a progress line
-    per level count judged."""
+    per level count judged. ``keep(name, compute)``: what judges each level count (default: ``compute()``;
+    ``partmemo.PartMemo.keep`` keeps each row for a resumed study)."""
     from doefab.fabrication.process import LEVEL_CHOICES
 
+    keep = keep or _compute
     judge = judge_for(design_dir, supersample)
     d = judge.design
     if levels is None:
@@ -194,7 +203,8 @@ def quantization_study(design_dir, levels=None, supersample: int = 1,
     for n in levels:
         if bar is not None:
             bar.set_postfix(levels="continuous" if n is None else n)
-        rows.append(_quantized_row(design_dir, judge, height, n, supersample, networks, weights_dir))
+        rows.append(keep(f"levels {n}", lambda: _quantized_row(design_dir, judge, height, n, supersample, networks,
+                                                               weights_dir)))
         if bar is not None:
             bar.update(1)
     if bar is not None:

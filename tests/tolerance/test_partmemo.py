@@ -67,9 +67,9 @@ def test_an_interrupted_tornado_resumes_with_the_parts_it_judged(design_dir, tmp
 
 
 def test_the_studys_tornado_step_keeps_its_parts_until_it_is_kept_whole(tmp_path):
-    """``report._tornado_step``: interrupted, the parts judged so far stay in steps/tornado.parts.jsonl; resumed, they
-    are read back; finished, the step is kept whole (steps/tornado.json) and the parts' file goes."""
-    from doefab.tolerance.report import STEPS, _tornado_step
+    """``report.memo_step`` of the tornado: interrupted, the parts judged so far stay in steps/tornado.parts.jsonl;
+    resumed, they are read back; finished, the step is kept whole (steps/tornado.json) and the parts' file goes."""
+    from doefab.tolerance.report import STEPS, memo_step
 
     calls = []
     judge = _counting(calls)
@@ -84,9 +84,9 @@ def test_the_studys_tornado_step_keeps_its_parts_until_it_is_kept_whole(tmp_path
         return [{"error": "etch", "delta": memo("d", 1, {"seed": s})["metric"]} for s in (1, 2)]
 
     with pytest.raises(KeyboardInterrupt):
-        _tornado_step(tmp_path, {"k": 1}, [], interrupted)
+        memo_step(tmp_path, "tornado", {"k": 1}, [], interrupted)
     assert (tmp_path / STEPS / "tornado.parts.jsonl").is_file() and calls == [1]
-    rows = _tornado_step(tmp_path, {"k": 1}, [], finished)
+    rows = memo_step(tmp_path, "tornado", {"k": 1}, [], finished)
     assert calls == [1, 2] and [r["delta"] for r in rows] == [0.1 + 0.01 * s + 1e-17 for s in (1, 2)]
     assert (tmp_path / STEPS / "tornado.json").is_file() and not (tmp_path / STEPS / "tornado.parts.jsonl").exists()
 
@@ -111,7 +111,6 @@ def test_a_network_tornado_judges_its_psf_pass_and_its_network_pass_through_the_
     memo = PartMemo(tmp_path / "t.jsonl", {"k": 1}, evaluate)
     rows = study.tornado("design", load_budget(None), networks=True, network_top=2, progress=False, evaluate=memo)
     assert False in asked and True in asked and sum("network" in r for r in rows) == 2
-
 
 
 def test_an_interrupted_studys_tornado_resumes_part_by_part(design_dir, tmp_path, monkeypatch):
@@ -140,3 +139,106 @@ def test_an_interrupted_studys_tornado_resumes_part_by_part(design_dir, tmp_path
     monkeypatch.setattr(study, "evaluate_part", real)
     assert res["tornado"] == run_study(design_dir, load_budget(), tmp_path / "w", samples=0, grid=1,
                                        progress=False)["tornado"]
+
+
+def test_keep_reads_a_named_part_back_as_a_resumed_run_reads_it(tmp_path):
+    """``PartMemo.keep``: a part the step names is computed once, read back by a resumed step of the same key, and
+    handed out as JSON reads it back (a whole-number key as text) both times, so a fresh and a resumed step agree."""
+    path, calls = tmp_path / "q.parts.jsonl", []
+
+    def row(n):
+        calls.append(n)
+        return {"levels": n, "bound": {1: 0.25 + n * 1e-17}, "worst": float("nan")}
+
+    memo = PartMemo(path, {"k": 1})
+    first = [memo.keep(f"levels {n}", lambda: row(n)) for n in (8, 4, 8)]
+    assert calls == [8, 4] and first[0] == {**first[2], "worst": first[0]["worst"]}
+    assert first[0]["bound"] == {"1": 0.25 + 8e-17} and first[0]["worst"] != first[0]["worst"]  # NaN kept
+    first[0]["levels"] = 0  # a caller changing what it was given
+    again = PartMemo(path, {"k": 1})
+    assert [again.keep(f"levels {n}", lambda: row(n))["bound"] for n in (8, 4)] == [{"1": 0.25 + n * 1e-17}
+                                                                                    for n in (8, 4)]
+    assert again.keep("levels 8", lambda: row(8))["levels"] == 8 and calls == [8, 4]
+
+
+def _stopping(n, calls, keep):
+    """``keep`` that records the parts it is asked for and is interrupted when asked for the ``n + 1``-th."""
+    def stopping(name, compute):
+        if len(calls) == n:
+            raise KeyboardInterrupt
+        calls.append(name)
+        return keep(name, compute)
+    return stopping
+
+
+def _computing(seen, keep):
+    """``keep`` that records each part it computes (not the ones it reads back)."""
+    return lambda name, compute: keep(name, lambda: seen.append(name) or compute())
+
+
+def test_an_interrupted_sweep_resumes_with_the_magnitudes_it_judged(design_dir, tmp_path):
+    """The sweeps of two error kinds interrupted at their fourth magnitude, then resumed through a memo: only the
+    others are judged, and the rows are the uninterrupted sweeps' (as JSON reads them back) to the last bit."""
+    from doefab.io import from_json_ready, json_ready
+    from doefab.tolerance import study
+
+    names = study.sweep_names()[:2]
+    whole = study.sweep(design_dir, names=names, progress=False)["sweeps"]
+    path, asked, judged = tmp_path / "sweeps.parts.jsonl", [], []
+    with pytest.raises(KeyboardInterrupt):
+        study.sweep(design_dir, names=names, progress=False, keep=_stopping(3, asked, PartMemo(path, {"k": 1}).keep))
+    resumed = study.sweep(design_dir, names=names, progress=False,
+                          keep=_computing(judged, PartMemo(path, {"k": 1}).keep))
+    assert len(asked) == 3 and judged and not set(asked) & set(judged)
+    assert len(judged) == sum(len(v["rows"]) for v in whole.values()) - 3
+    assert resumed["sweeps"] == from_json_ready(json.loads(json.dumps(json_ready(whole))))
+
+
+def test_an_interrupted_studys_quantization_resumes_level_by_level(design_dir, tmp_path, monkeypatch):
+    """``run_study`` interrupted in its quantization study keeps the level counts judged so far; the rerun judges only
+    the others, its rows are an uninterrupted study's, and the parts' file is gone once the step is kept whole."""
+    from doefab.tolerance import study
+    from doefab.tolerance.report import STEPS, run_study
+
+    real, calls, again = study._quantized_row, [], []
+
+    def stopping(*a):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(a[3])
+        return real(*a)
+
+    monkeypatch.setattr(study, "_quantized_row", stopping)
+    out, budget = tmp_path / "o", load_budget()
+    with pytest.raises(KeyboardInterrupt):
+        run_study(design_dir, budget, out, samples=0, grid=1, do_levels=True, progress=False)
+    assert (out / STEPS / "quantization.parts.jsonl").is_file() and (out / STEPS / "tornado.json").is_file()
+    monkeypatch.setattr(study, "_quantized_row", lambda *a: again.append(a[3]) or real(*a))
+    res = run_study(design_dir, budget, out, samples=0, grid=1, do_levels=True, progress=False)
+    assert again and not set(calls) & set(again) and "quantization" not in res["steps_reused"]
+    assert "tornado" in res["steps_reused"] and not (out / STEPS / "quantization.parts.jsonl").exists()
+    monkeypatch.setattr(study, "_quantized_row", real)
+    whole = study.quantization_study(design_dir, supersample=1, progress=False)
+    assert len(calls) + len(again) == len(whole) and res["quantization"] == whole
+    assert (out / STEPS / "quantization.json").is_file()
+
+
+def test_an_interrupted_grid_study_resumes_kind_by_kind(design_dir, tmp_path, monkeypatch):
+    """The grid study (``grid="auto"``) interrupted after its first error kind, then resumed: the rerun judges only the
+    other kinds and keeps the first's as it was judged."""
+    from doefab.tolerance import grid as grid_mod
+    from doefab.tolerance.report import STEPS, _grid_record
+    from doefab.tolerance.partmemo import PartMemo as Memo
+    from doefab.tolerance.study import judge_for
+
+    judge, budget, path = judge_for(str(design_dir), 1), load_budget(), tmp_path / STEPS / "grid.parts.jsonl"
+    asked, judged, real = [], [], grid_mod.grid_study
+    monkeypatch.setattr(grid_mod, "grid_study", lambda j, b, **kw: real(j, b, **{**kw, "keep": _stopping(
+        1, asked, kw["keep"])}))
+    with pytest.raises(KeyboardInterrupt):
+        _grid_record(judge, budget, "auto", False, Memo(path, {"k": 1}))
+    monkeypatch.setattr(grid_mod, "grid_study", lambda j, b, **kw: real(j, b, **{**kw, "keep": _computing(
+        judged, kw["keep"])}))
+    rec = _grid_record(judge, budget, "auto", False, Memo(path, {"k": 1}))
+    assert len(asked) == 1 and judged and asked[0] not in judged and set(rec["kinds"]) == set(asked + judged)
+    assert rec["monte_carlo_grid"] == max(v["grid"] for v in rec["kinds"].values())
