@@ -10,7 +10,8 @@ Examples:
 Writes OUT/tolerance.json (every part's errors and metrics; means with 95 % intervals; yield against the
 budget's [spec.<task>] with its Wilson interval), OUT/report.md (opening with what the part delivers, its
 yield, what limits it and what would buy the most) and figures. The grid each error needs is measured on the
-design (--grid auto). Parts are checkpointed in OUT/samples.jsonl: rerun with --resume to continue.
+design (--grid auto). Parts are checkpointed as they finish (the Monte Carlo's in OUT/samples.jsonl, the other
+studies' in OUT/steps/): rerun with --resume to continue.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ def register(sub) -> None:
                         "--device) or tcp://HOST:PORT")
     add_device_arg(p)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--resume", action="store_true", help="continue the samples in OUT/samples.jsonl")
+    p.add_argument("--resume", action="store_true", help="continue the study in OUT with the parts and steps it finished")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
     p.set_defaults(func=run)
 
@@ -151,7 +152,7 @@ def run(args) -> int:
                           f"{STEPS}/): start one without --resume")
     out = claim_output(args, "tolerance", replace=args.force or args.resume, replace_flag="--force (or --resume)",
                        keep_on_failure=lambda: any((args.outdir.path / f).exists() for f in saved))
-    args.resume_hint = resume_hint(f"finished samples are kept in {out.path}", args.force)
+    args.resume_hint = resume_hint(f"the parts and steps it finished are kept in {out.path}", args.force)
     out.create()
     res = run_study(ddir, budget, out.path, samples=args.samples, seed=args.seed, grid=args.grid,
                     do_sweep=args.sweep, do_levels=args.levels, workers=args.workers, scheduler=args.scheduler,
