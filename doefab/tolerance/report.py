@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,7 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     from doefab.applications import of_design
     from doefab.tolerance.montecarlo import check_resumable
     from doefab.tolerance.mounted import stop_case
+    from doefab.tolerance.netjudge import judge_settings
     from doefab.tolerance.spec import limits_text, nominal_failures
 
     _check_runners(workers, scheduler)
@@ -59,8 +61,6 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
                  "budget_file": str(budget_path or "doefab/tolerance/budget.toml (default)"), "budget": budget,
                  "level": "network" if networks else "psf"}
     if networks:
-        from doefab.tolerance.netjudge import judge_settings
-
         res["network_judge"] = judge_settings(networks)  # the scenes every part is judged on
     res["nominal"] = {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}
     key = _step_key(judge, budget, grid, networks, weights_dir, network_top)
@@ -97,8 +97,9 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     if samples > 0:
         _monte_carlo(res, design_dir, budget, out, samples, seed, mc_grid, scheduler, workers, networks, spec,
                      task, progress, weights_dir)
-    if surrogate:
-        _surrogate(res, design_dir, budget, mc_grid, spec, task, progress)
+    if surrogate:  # its validation parts are the Monte Carlo's where it has enough: its step's key holds them
+        res["surrogate"] = memo_step(out, "surrogate", {**key, "monte_carlo": [mc_grid, seed, samples]}, reused,
+                                     partial(_surrogate, res, design_dir, budget, mc_grid, spec, task, progress))
     if do_levels:
         res["quantization"] = memo_step(out, "quantization", key, reused, lambda memo: study.quantization_study(
             design_dir, supersample=mc_grid, networks=networks, weights_dir=weights_dir, progress=progress,
@@ -282,17 +283,25 @@ def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, w
     res["convergence"] = conv
 
 
-def _surrogate(res, design_dir, budget, grid, spec, task, progress) -> None:
+def _surrogate(res, design_dir, budget, grid, spec, task, progress, memo) -> dict:
     """The surrogate: fitted, calibrated on parts of its own, its yield, and validated on parts it never saw (the
-    direct Monte Carlo's where the study has at least ``HOLDOUT_PARTS`` of them, paired part by part)."""
+    direct Monte Carlo's where the study has at least ``HOLDOUT_PARTS`` of them, paired part by part). Each part it
+    judges is kept by ``memo`` (``partmemo.PartMemo``): an interrupted fit resumes with them."""
+    import json
+
+    from doefab.io import json_ready
     from doefab.tolerance.spec import spec_limits
     from doefab.tolerance.surrogate import calibrate, fit_surrogate, surrogate_yield, validate
 
     judge = study.judge_for(str(design_dir), grid)
-    model = fit_surrogate(lambda p: judge.evaluate(p)["metric"], budget, judge.chain, progress, n_masks=judge.n_masks,
-                          gap=not judge.fine.doe_is_stop)
+
+    def metric(part) -> float:
+        name = json.dumps(json_ready(part.to_json()), sort_keys=True, default=str)
+        return memo.keep(name, lambda: judge.evaluate(part)["metric"])
+
+    model = fit_surrogate(metric, budget, judge.chain, progress, n_masks=judge.n_masks, gap=not judge.fine.doe_is_stop)
     t = time.perf_counter()
-    model = calibrate(model, budget, judge.chain, _own_parts(judge, budget, 0, CALIBRATION_PARTS),
+    model = calibrate(model, budget, judge.chain, _own_parts(metric, judge, budget, 0, CALIBRATION_PARTS),
                       n_masks=judge.n_masks)
     limit = max((lim for _, _, lim, _ in spec_limits(spec, task, "psf", res["nominal"]["psf"])), default=-math.inf)
     y = surrogate_yield(model, budget, judge.chain, limit, n_masks=judge.n_masks)
@@ -302,21 +311,20 @@ def _surrogate(res, design_dir, budget, grid, spec, task, progress) -> None:
         held, against = [(PartErrors(**{k: _tup(v) for k, v in r["errors"].items()}), r["metric"]) for r in rows], \
             "the direct Monte Carlo's parts"
     else:
-        held, against = _own_parts(judge, budget, 1, HOLDOUT_PARTS), "held-out parts of its own"
-    res["surrogate"] = {"model": model, "yield": y,
-                        "validation": {**validate(model, budget, judge.chain, held, limit, n_masks=judge.n_masks),
-                                       "parts": against}}
+        held, against = _own_parts(metric, judge, budget, 1, HOLDOUT_PARTS), "held-out parts of its own"
+    checked = validate(model, budget, judge.chain, held, limit, n_masks=judge.n_masks)
+    return {"model": model, "yield": y, "validation": {**checked, "parts": against}}
 
 
-def _own_parts(judge, budget, role: int, n: int) -> list:
-    """``n`` parts of the surrogate's own, drawn from the budget and judged directly: ``role`` 0 calibrates it,
-    1 validates it. Their streams' spawn keys, (role, i), are never a direct Monte Carlo's, (i,)."""
+def _own_parts(metric, judge, budget, role: int, n: int) -> list:
+    """``n`` parts of the surrogate's own, drawn from the budget and judged directly (``metric(part)``): ``role`` 0
+    calibrates it, 1 validates it. Their streams' spawn keys, (role, i), are never a direct Monte Carlo's, (i,)."""
     from doefab.tolerance.errors import sample_errors
 
     children = np.random.SeedSequence(SURROGATE_SEED, spawn_key=(role,)).spawn(n)
     parts = (sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=judge.n_masks)
              for c in children)
-    return [(p, judge.evaluate(p)["metric"]) for p in parts]
+    return [(p, metric(p)) for p in parts]
 
 
 def _tup(v):

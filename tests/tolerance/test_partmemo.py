@@ -242,3 +242,37 @@ def test_an_interrupted_grid_study_resumes_kind_by_kind(design_dir, tmp_path, mo
     rec = _grid_record(judge, budget, "auto", False, Memo(path, {"k": 1}))
     assert len(asked) == 1 and judged and asked[0] not in judged and set(rec["kinds"]) == set(asked + judged)
     assert rec["monte_carlo_grid"] == max(v["grid"] for v in rec["kinds"].values())
+
+
+def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, tmp_path, monkeypatch):
+    """The surrogate's fit interrupted at its sixth part, then resumed through ``report.memo_step``: the parts judged
+    before are read back (none judged twice), and the fit, its yield and its validation are an uninterrupted one's."""
+    from functools import partial
+
+    from doefab.applications import of_design
+    from doefab.tolerance import report, study
+
+    judge, budget = study.judge_for(str(design_dir), 1), load_budget()
+    real, asked, again = judge.evaluate, [], []
+
+    def stopping(part):
+        if len(asked) == 5:
+            raise KeyboardInterrupt
+        asked.append(part)
+        return real(part)
+
+    res = {"nominal": {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}}
+    args = (res, design_dir, budget, 1, budget.get("spec", {}), of_design(judge.design.task).name, False)
+    monkeypatch.setattr(judge, "evaluate", stopping)
+    with pytest.raises(KeyboardInterrupt):
+        report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
+    monkeypatch.setattr(judge, "evaluate", lambda part: again.append(part) or real(part))
+    got = report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
+    monkeypatch.setattr(judge, "evaluate", real)
+    whole = report._surrogate(*args, PartMemo(tmp_path / "whole.parts.jsonl", {"k": 2}))
+    assert len(asked) == 5 and again and not any(p in asked for p in again)
+    assert not (tmp_path / report.STEPS / "surrogate.parts.jsonl").exists()
+    drop = ("seconds", "seconds_total")
+    assert {k: v for k, v in got["model"].items() if k not in drop} == \
+        {k: v for k, v in whole["model"].items() if k not in drop}
+    assert got["yield"] == whole["yield"] and got["validation"] == whole["validation"]

@@ -159,7 +159,7 @@ class _ToyJudge:
 
 
 @pytest.mark.parametrize("direct_parts", [20, 3])
-def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatch, direct_parts):
+def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatch, direct_parts, tmp_path):
     """The study's surrogate step, with the toy as its judge: with at least 16 direct Monte Carlo parts it is
     validated on exactly those (paired: its direct yield is theirs), else on 16 held-out parts of its own; its
     calibration and held-out parts are drawn from streams no direct run draws, even one seeded with the
@@ -167,6 +167,7 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
     from functools import partial
 
     from doefab.tolerance import report, surrogate
+    from doefab.tolerance.partmemo import PartMemo
 
     budget = load_budget()
     metric = _toy(budget)
@@ -182,7 +183,8 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
              for c in children]
     rows = [{"errors": p.to_json(), "metric": metric(p)} for p in parts]
     res = {"nominal": {"psf": {"psf_metric": M0}}, "samples": rows}
-    report._surrogate(res, "toy", budget, 1, {"hdr": {"psf_metric_min": 0.66}}, "hdr", False)
+    res["surrogate"] = report._surrogate(res, "toy", budget, 1, {"hdr": {"psf_metric_min": 0.66}}, "hdr", False,
+                                         PartMemo(tmp_path / "surrogate.parts.jsonl", {"study": 1}))
     v, cal = res["surrogate"]["validation"], res["surrogate"]["model"]["calibration"]
     direct, fitted = {p.depth_scale for p in parts}, {p.depth_scale for p, _ in seen}
     assert cal["n"] == len(seen) == 16 and not direct & fitted and not fitted & {p.depth_scale for p, _ in checked}
