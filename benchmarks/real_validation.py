@@ -13,7 +13,8 @@ Evaluations go to out/real_validation/<task>_<split>/ (an evaluation already the
 reused: the run resumes); writes benchmarks/results/real_validation.json (each evaluation's metrics.json) and
 real_validation.md (the sources with their licenses, the tables, proposed against each ablation on the real set
 scene by scene, and the shipping rule with its decisions, ``shipping_decisions``). Split used: val and real
-(validation); the test split is not read (its depth δ<1.25 is quoted from the committed benchmarks/results/evaluate_depth.json).
+(validation); the test split is not read (its depth δ<1.25 is quoted from the committed
+benchmarks/results/evaluate_depth.json).
 """
 
 from __future__ import annotations

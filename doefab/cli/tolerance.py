@@ -58,7 +58,8 @@ def register(sub) -> None:
                         "--device) or tcp://HOST:PORT")
     add_device_arg(p)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--resume", action="store_true", help="continue the study in OUT with the parts and steps it finished")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the study in OUT with the parts and steps it finished")
     p.add_argument("--force", action="store_true", help="replace an earlier tolerance study in OUT")
     p.set_defaults(func=run)
 

@@ -60,7 +60,7 @@ RESUMABLE = {"design": ("checkpoint.pt", "history.csv"),
              "reconstruction": ("run_proposed", "run_coded_only", "run_uncoded_only", "weights"),
              "tolerance": ("samples.jsonl", "steps")}
 PROGRESS = {"design": ("checkpoint.pt",), "reconstruction": ("run_*/checkpoint.pt", "weights/*.pt"),
-            "tolerance": ("samples.jsonl", "steps/*.json")}
+            "tolerance": ("samples.jsonl", "steps/*.json", "steps/*.parts.jsonl")}
 
 
 def has_progress(folder: Path, stages) -> bool:

@@ -1,6 +1,7 @@
-"""The parts a study step has judged, kept part by part: an interrupted step resumes with them.
+"""A study's steps kept on disk: whole once finished (``cached_step``), and part by part while they run
+(``PartMemo``; ``memo_step`` does both), so an interrupted study resumes with what it judged.
 
-A study's steps are kept whole once finished (``report.cached_step``); a long step interrupted before its end (the
+A study's steps are kept whole once finished (``cached_step``); a long step interrupted before its end (the
 tornado through the networks: two parts per error, each judged on the network judge's scenes; the quantization
 study's level counts; the sweeps' magnitudes; the grid study's error kinds) would otherwise judge every part again.
 ``PartMemo`` keeps each part's result in a JSON-lines file that opens with the step's key: ``memo(...)`` judges a
@@ -14,11 +15,15 @@ from __future__ import annotations
 
 import copy
 import json
+import time
 from pathlib import Path
 
-from doefab.io import atomic_write_text, from_json_ready, json_ready, json_text
+from doefab.io import atomic_write_json, atomic_write_text, from_json_ready, json_ready, json_text, read_json
 
-__all__ = ["PartMemo"]
+__all__ = ["PartMemo", "memo_step", "cached_step", "STEPS", "IN_PART"]
+
+STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
+IN_PART = " (in part)"  # marks a step in a study's ``steps_reused`` that resumed with an interrupted run's parts
 
 
 def _text(key) -> str:
@@ -74,3 +79,37 @@ class PartMemo:
     def discard(self) -> None:
         """Remove the file (its step is kept whole now)."""
         self.path.unlink(missing_ok=True)
+
+
+def memo_step(out: Path, name: str, key: dict, reused: list, compute):
+    """A study step kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
+    judges its parts through a ``PartMemo``, steps/<name>.parts.jsonl): an interrupted step resumes with the
+    parts it judged.
+
+    Example: ``memo_step(out, "tornado", key, [], lambda memo: study.tornado(..., evaluate=memo))``."""
+    memo = PartMemo(Path(out) / STEPS / f"{name}.parts.jsonl", key)
+    kept = len(memo.done)  # parts an interrupted run of this study judged
+    value = cached_step(out, name, key, lambda: compute(memo), reused)
+    if kept and reused is not None and name not in reused:  # resumed with them: this run judged the rest
+        reused.append(f"{name}{IN_PART}")
+    memo.discard()  # the step is kept whole
+    return value
+
+
+def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):
+    """``compute()``'s result, kept in ``out/steps/<name>.json`` with the ``key`` of the study it belongs to: a
+    resumed study of the same design, budget, grid and networks reuses it instead of computing it again (and
+    ``name`` is appended to ``reused``)."""
+    path = Path(out) / STEPS / f"{name}.json"
+    try:
+        rec = read_json(path)
+        if rec.get("key") == from_json_ready(json.loads(json.dumps(json_ready(key), default=str))):  # as read back
+            if reused is not None:
+                reused.append(name)
+            return rec["value"]
+    except (OSError, ValueError, AttributeError):
+        pass
+    t = time.perf_counter()
+    value = compute()
+    atomic_write_json(path, {"key": key, "value": value, "seconds": round(time.perf_counter() - t, 1)})
+    return value

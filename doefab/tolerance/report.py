@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from doefab.io import atomic_write_json, atomic_write_text, from_json_ready, json_ready, read_json
+from doefab.io import atomic_write_json, atomic_write_text, json_ready
 from doefab.tolerance import plots, study
 from doefab.tolerance.delivered import change_noise
 from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS
-from doefab.tolerance.partmemo import PartMemo
+from doefab.tolerance.partmemo import IN_PART, STEPS, cached_step, memo_step
 from doefab.tolerance.reporttext import REMEDY, body_lines, lead_text, spec_words, summary_lines
 
 __all__ = ["run_study", "REMEDY", "summary_lines"]
@@ -101,14 +101,27 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
         res["surrogate"] = memo_step(out, "surrogate", {**key, "monte_carlo": [mc_grid, seed, samples]}, reused,
                                      partial(_surrogate, res, design_dir, budget, mc_grid, spec, task, progress))
     if do_levels:
-        res["quantization"] = memo_step(out, "quantization", key, reused, lambda memo: study.quantization_study(
-            design_dir, supersample=mc_grid, networks=networks, weights_dir=weights_dir, progress=progress,
-            keep=memo.keep))
-        _level_changes(res["quantization"], judge.design.n_levels)
+        res["quantization"] = _quantization(out, key, reused, judge, design_dir, mc_grid, networks, weights_dir,
+                                            progress)
     _figures(out, res)
     atomic_write_json(out / "tolerance.json", res)
     atomic_write_text(out / "report.md", "\n".join(_markdown(res)) + "\n")
     return res
+
+
+def _quantization(out, key, reused, judge, design_dir, grid, networks, weights_dir, progress) -> list[dict]:
+    """The quantization study's rows on ``grid``, kept level count by level count (``memo_step``) under the study's
+    key, the grid and the design's continuous heights (which the folder's level map does not fix), with each
+    network-judged row's change from the design's own level count."""
+    import hashlib
+
+    height = study.continuous_height(judge.design)
+    digest = None if height is None else hashlib.sha256(np.ascontiguousarray(height, np.float64).tobytes()).hexdigest()
+    rows = memo_step(out, "quantization", {**key, "grid": grid, "continuous_height_sha256": digest}, reused,
+                     lambda memo: study.quantization_study(design_dir, supersample=grid, networks=networks,
+                                                           weights_dir=weights_dir, progress=progress, keep=memo.keep))
+    _level_changes(rows, judge.design.n_levels)
+    return rows
 
 
 def _level_changes(rows: list, n_levels: int) -> None:
@@ -197,7 +210,6 @@ def _require_memory(judge, grid: int, record: dict, workers, scheduler) -> None:
     require_memory(part_size(judge.design, judge.n_masks), grid, GRIDS, bounds, parts=parts_at_once(workers, scheduler))
 
 
-STEPS = "steps"  # the folder of finished study steps a resumed study reuses (``cached_step``)
 # what a finished study writes beside samples.jsonl and steps/ (``run_study``, ``_figures``)
 RESULT_FILES = ("tolerance.json", "report.md", "tornado.png", "sweeps.png", "quantization.png", "yield_vs_n.png",
                 "delivered.png")
@@ -221,39 +233,6 @@ def _tornado_key(key: dict, networks) -> dict:
     if networks and key.get("network_top") is not None and judge_settings(networks) != judge_settings(True):
         return {**key, "tornado_scenes": "the study's"}
     return key
-
-
-def memo_step(out: Path, name: str, key: dict, reused: list, compute):
-    """A study step kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
-    judges its parts through a ``partmemo.PartMemo``, steps/<name>.parts.jsonl): an interrupted step resumes with the
-    parts it judged.
-
-    Example: ``memo_step(out, "tornado", key, [], lambda memo: study.tornado(..., evaluate=memo))``."""
-    memo = PartMemo(Path(out) / STEPS / f"{name}.parts.jsonl", key)
-    value = cached_step(out, name, key, lambda: compute(memo), reused)
-    memo.discard()  # the step is kept whole
-    return value
-
-
-def cached_step(out: Path, name: str, key: dict, compute, reused: list | None = None):
-    """``compute()``'s result, kept in ``out/steps/<name>.json`` with the ``key`` of the study it belongs to: a
-    resumed study of the same design, budget, grid and networks reuses it instead of computing it again (and
-    ``name`` is appended to ``reused``)."""
-    import json
-
-    path = Path(out) / STEPS / f"{name}.json"
-    try:
-        rec = read_json(path)
-        if rec.get("key") == from_json_ready(json.loads(json.dumps(json_ready(key), default=str))):  # as read back
-            if reused is not None:
-                reused.append(name)
-            return rec["value"]
-    except (OSError, ValueError, AttributeError):
-        pass
-    t = time.perf_counter()
-    value = compute()
-    atomic_write_json(path, {"key": key, "value": value, "seconds": round(time.perf_counter() - t, 1)})
-    return value
 
 
 def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, workers, networks, spec, task,
@@ -289,7 +268,6 @@ def _surrogate(res, design_dir, budget, grid, spec, task, progress, memo) -> dic
     judges is kept by ``memo`` (``partmemo.PartMemo``): an interrupted fit resumes with them."""
     import json
 
-    from doefab.io import json_ready
     from doefab.tolerance.spec import spec_limits
     from doefab.tolerance.surrogate import calibrate, fit_surrogate, surrogate_yield, validate
 
@@ -375,8 +353,12 @@ def _delivered_figure(out: Path, res: dict) -> None:
 
 def _markdown(res: dict) -> list[str]:
     reused = res.get("steps_reused") or []
-    note = ([f"Reused from the interrupted run of the same study: {', '.join(reused).replace('_', ' ')} (their run "
-             f"times are that run's).", ""] if reused else [])
+    whole = [r.replace("_", " ") for r in reused if not r.endswith(IN_PART)]
+    part = [r[:-len(IN_PART)].replace("_", " ") for r in reused if r.endswith(IN_PART)]
+    note = ([" ".join([f"Reused from the interrupted run of the same study: {', '.join(whole)} (their run times are "
+                       f"that run's)." if whole else "",
+                       f"Resumed with the parts the interrupted run judged: {', '.join(part)} (their run times "
+                       f"count this run's parts only)." if part else ""]).strip(), ""] if reused else [])
     lead = lead_text(res)
     return [f"# Tolerance study of {res['design']}", "", *([lead, ""] if lead else []), *summary_lines(res), "", *note,
             *body_lines(res)]

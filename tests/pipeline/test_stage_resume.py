@@ -65,6 +65,15 @@ def test_a_failed_run_with_nothing_resumable_is_not_kept(tmp_path):
     assert stagerun.has_progress(tmp_path, ["design", "reconstruction"])
 
 
+def test_a_tolerance_study_interrupted_in_its_first_step_has_progress(tmp_path):
+    """A study interrupted before any step was kept whole holds only the parts of that step
+    (steps/<step>.parts.jsonl, ``partmemo.memo_step``): that is work worth keeping, as a finished step is."""
+    (tmp_path / "tolerance" / "steps").mkdir(parents=True)
+    assert not stagerun.has_progress(tmp_path, ["tolerance"])
+    (tmp_path / "tolerance" / "steps" / "grid.parts.jsonl").write_text('{"key": {}}\n{"part": "mask overlay"}\n')
+    assert stagerun.has_progress(tmp_path, ["tolerance"])
+
+
 @pytest.mark.parametrize("name", sorted(stagerun.RESUMABLE))
 def test_changed_inputs_or_force_start_afresh(tmp_path, monkeypatch, name):
     scene = SimpleNamespace(raw={"design": {"iterations": 60}}, task="hdr")

@@ -3,6 +3,7 @@ and gives the rows an uninterrupted one gives, bit for bit."""
 
 import json
 
+import numpy as np
 import pytest
 
 from doefab.tolerance.errors import load_budget
@@ -154,7 +155,8 @@ def test_keep_reads_a_named_part_back_as_a_resumed_run_reads_it(tmp_path):
     first = [memo.keep(f"levels {n}", lambda: row(n)) for n in (8, 4, 8)]
     assert calls == [8, 4] and first[0] == {**first[2], "worst": first[0]["worst"]}
     assert first[0]["bound"] == {"1": 0.25 + 8e-17} and first[0]["worst"] != first[0]["worst"]  # NaN kept
-    first[0]["levels"] = 0  # a caller changing what it was given
+    first[0]["levels"] = 0  # a caller changing what it was given changes no kept part
+    assert memo.keep("levels 8", lambda: row(8))["levels"] == 8
     again = PartMemo(path, {"k": 1})
     assert [again.keep(f"levels {n}", lambda: row(n))["bound"] for n in (8, 4)] == [{"1": 0.25 + n * 1e-17}
                                                                                     for n in (8, 4)]
@@ -225,8 +227,9 @@ def test_an_interrupted_studys_quantization_resumes_level_by_level(design_dir, t
 
 def test_an_interrupted_grid_study_resumes_kind_by_kind(design_dir, tmp_path, monkeypatch):
     """The grid study (``grid="auto"``) interrupted after its first error kind, then resumed: the rerun judges only the
-    other kinds and keeps the first's as it was judged."""
+    other kinds, and the record is an uninterrupted study's (the first kind's bounds as that run judged them)."""
     from doefab.tolerance import grid as grid_mod
+    from doefab.tolerance.kinds import kind
     from doefab.tolerance.report import STEPS, _grid_record
     from doefab.tolerance.partmemo import PartMemo as Memo
     from doefab.tolerance.study import judge_for
@@ -241,12 +244,20 @@ def test_an_interrupted_grid_study_resumes_kind_by_kind(design_dir, tmp_path, mo
         judged, kw["keep"])}))
     rec = _grid_record(judge, budget, "auto", False, Memo(path, {"k": 1}))
     assert len(asked) == 1 and judged and asked[0] not in judged and set(rec["kinds"]) == set(asked + judged)
-    assert rec["monte_carlo_grid"] == max(v["grid"] for v in rec["kinds"].values())
+    monkeypatch.setattr(grid_mod, "grid_study", real)
+    whole = _grid_record(judge, budget, "auto", False, Memo(tmp_path / "whole.parts.jsonl", {"k": 2}))
+    assert {k: {f: x for f, x in v.items() if f != "seconds"} for k, v in rec["kinds"].items()} == \
+        {k: {f: x for f, x in v.items() if f != "seconds"} for k, v in whole["kinds"].items()}
+    assert rec["monte_carlo_grid"] == whole["monte_carlo_grid"]
+    for name, row in rec["kinds"].items():  # each kind's row is its own: judged at its own budget value
+        k = kind(name)
+        assert row["value"] == k.from_budget(budget) / k.si and row["unit"] == k.unit
 
 
 def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, tmp_path, monkeypatch):
-    """The surrogate's fit interrupted at its sixth part, then resumed through ``report.memo_step``: the parts judged
-    before are read back (none judged twice), and the fit, its yield and its validation are an uninterrupted one's."""
+    """The surrogate interrupted in its calibration (after its fit's parts), then resumed through
+    ``report.memo_step``: the parts judged before are read back (none judged twice), and the fit, its yield and its
+    validation are an uninterrupted one's."""
     from functools import partial
 
     from doefab.applications import of_design
@@ -256,23 +267,60 @@ def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, t
     real, asked, again = judge.evaluate, [], []
 
     def stopping(part):
-        if len(asked) == 5:
+        if len(asked) == stop:
             raise KeyboardInterrupt
         asked.append(part)
         return real(part)
 
     res = {"nominal": {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}}
     args = (res, design_dir, budget, 1, budget.get("spec", {}), of_design(judge.design.task).name, False)
+    whole = report._surrogate(*args, PartMemo(tmp_path / "whole.parts.jsonl", {"k": 2}))
+    stop = whole["model"]["parts"] + 3  # in the calibration, after the fit's parts
     monkeypatch.setattr(judge, "evaluate", stopping)
     with pytest.raises(KeyboardInterrupt):
         report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
     monkeypatch.setattr(judge, "evaluate", lambda part: again.append(part) or real(part))
     got = report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
-    monkeypatch.setattr(judge, "evaluate", real)
-    whole = report._surrogate(*args, PartMemo(tmp_path / "whole.parts.jsonl", {"k": 2}))
-    assert len(asked) == 5 and again and not any(p in asked for p in again)
+    assert len(asked) == stop and again and not any(p in asked for p in again)
     assert not (tmp_path / report.STEPS / "surrogate.parts.jsonl").exists()
     drop = ("seconds", "seconds_total")
     assert {k: v for k, v in got["model"].items() if k not in drop} == \
         {k: v for k, v in whole["model"].items() if k not in drop}
     assert got["yield"] == whole["yield"] and got["validation"] == whole["validation"]
+
+
+def test_an_interrupted_studys_sweeps_resume_and_the_report_says_so(design_dir, tmp_path, monkeypatch):
+    """``run_study`` interrupted in its sweeps keeps the magnitudes judged; the rerun judges only the others, its
+    sweeps are an uninterrupted study's, and its report says which steps it took whole and which in part."""
+    from doefab.tolerance import study
+    from doefab.tolerance.report import IN_PART, run_study
+
+    real, asked, judged = study.sweep, [], []
+    monkeypatch.setattr(study, "sweep", lambda *a, keep, **k: real(*a, keep=_stopping(4, asked, keep), **k))
+    out, budget = tmp_path / "o", load_budget()
+    with pytest.raises(KeyboardInterrupt):
+        run_study(design_dir, budget, out, samples=0, grid=1, do_sweep=True, progress=False)
+    monkeypatch.setattr(study, "sweep", lambda *a, keep, **k: real(*a, keep=_computing(judged, keep), **k))
+    res = run_study(design_dir, budget, out, samples=0, grid=1, do_sweep=True, progress=False)
+    assert len(asked) == 4 and judged and not set(asked) & set(judged)
+    assert res["steps_reused"] == ["grid", "tornado", "sweeps" + IN_PART]
+    report = (out / "report.md").read_text()
+    assert "Reused from the interrupted run of the same study: grid, tornado" in report
+    assert "Resumed with the parts the interrupted run judged: sweeps" in report
+    monkeypatch.setattr(study, "sweep", real)
+    assert res["sweeps"] == run_study(design_dir, budget, tmp_path / "w", samples=0, grid=1, do_sweep=True,
+                                      progress=False)["sweeps"]
+
+
+def test_the_quantization_step_is_keyed_by_its_grid_and_the_designs_continuous_heights(monkeypatch, design_dir):
+    """The quantization study's rows depend on the grid and on the continuous heights the design folder keeps (which
+    its level map does not fix): a study resumed on another grid or with other heights does not take the kept rows."""
+    from doefab.tolerance import report, study
+
+    keys = []
+    monkeypatch.setattr(report, "memo_step", lambda out, name, key, reused, compute: keys.append(key) or [])
+    judge = study.judge_for(str(design_dir), 1)
+    for grid, height in ((1, None), (2, None), (1, np.ones((4, 4))), (1, np.ones((4, 4)) * 2)):
+        monkeypatch.setattr(study, "continuous_height", lambda design, h=height: h)
+        report._quantization("o", {"study": 1}, [], judge, design_dir, grid, False, None, False)
+    assert all(k["study"] == 1 for k in keys) and len({json.dumps(k, sort_keys=True) for k in keys}) == 4
