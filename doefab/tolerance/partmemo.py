@@ -3,7 +3,8 @@
 
 A study's steps are kept whole once finished (``cached_step``); a long step interrupted before its end (the
 tornado through the networks: two parts per error, each judged on the network judge's scenes; the quantization
-study's level counts; the sweeps' magnitudes; the grid study's error kinds) would otherwise judge every part again.
+study's level counts; the sweeps' magnitudes; the grid study's error kinds; the surrogate's parts) would otherwise
+judge every part again.
 ``PartMemo`` keeps each part's result in a JSON-lines file that opens with the step's key: ``memo(...)`` judges a
 part as ``study.evaluate_part`` does, ``memo.keep(name, compute)`` any part the step names. A step resumed with the
 same key takes the parts already there instead of judging them again, and a file of another key (another design,
