@@ -1,15 +1,14 @@
 """A study's steps kept on disk: whole once finished (``cached_step``), and part by part while they run
 (``PartMemo``; ``memo_step`` does both), so an interrupted study resumes with what it judged.
 
-A study's steps are kept whole once finished (``cached_step``); a long step interrupted before its end (the
-tornado through the networks: two parts per error, each judged on the network judge's scenes; the quantization
-study's level counts; the sweeps' magnitudes; the grid study's error kinds; the surrogate's parts) would otherwise
-judge every part again.
-``PartMemo`` keeps each part's result in a JSON-lines file that opens with the step's key: ``memo(...)`` judges a
-part as ``study.evaluate_part`` does, ``memo.keep(name, compute)`` any part the step names. A step resumed with the
-same key takes the parts already there instead of judging them again, and a file of another key (another design,
-budget, grid, network or version of the part model) is started afresh. The results are the same to the last bit:
-JSON keeps a float's every digit (a dict's whole-number keys come back as text, as a kept step's do).
+A long step interrupted before its end (the tornado through the networks: two parts per error, each judged on the
+network judge's scenes; the quantization study's level counts; the sweeps' magnitudes; the grid study's error kinds;
+the surrogate's parts) would otherwise judge every part again. ``PartMemo`` keeps each part's result in a JSON-lines
+file that opens with the step's key: ``memo(...)`` judges a part as ``study.evaluate_part`` does, ``memo.keep(name,
+compute)`` any part the step names. A step resumed with the same key takes the parts already there instead of
+judging them again, and a file of another key (another design, budget, grid, network or version of the part model)
+is started afresh. The results are the same to the last bit: JSON keeps a float's every digit (a dict's whole-number
+keys come back as text, as a kept step's do).
 """
 
 from __future__ import annotations
@@ -52,9 +51,13 @@ class PartMemo:
                 self.done[row["part"]] = from_json_ready(row["value"])
             except (ValueError, KeyError, TypeError):
                 continue  # a line cut by an interruption: that part is judged again
-        # the file as read, without a cut line: each later part appends a whole line of its own
+        if self.done:  # the file as read, without a cut line: each later part appends a whole line of its own
+            self._write([json_text({"part": p, "value": v}, indent=None) for p, v in self.done.items()])
+        else:  # nothing of this key: the file is written with its first part (an empty one is no progress)
+            self.path.unlink(missing_ok=True)
+
+    def _write(self, rows: list[str]) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        rows = [json_text({"part": p, "value": v}, indent=None) for p, v in self.done.items()]
         atomic_write_text(self.path, "\n".join([json_text({"key": json.loads(self.key)}, indent=None)] + rows) + "\n")
 
     def __call__(self, design_dir, supersample: int, errors: dict, networks: bool = False, weights_dir=None) -> dict:
@@ -69,11 +72,14 @@ class PartMemo:
         """``compute()``'s result for the part the step names ``part``: read back where this key's run kept it, else
         computed and appended. Either way as a resumed run reads it, and a copy: the kept part stays as judged.
 
-        Example: ``memo.keep("levels=8", lambda: row_of(8))``."""
+        Example: ``memo.keep("levels 8", lambda: row_of(8))``."""
         if part not in self.done:
             row = json_text({"part": part, "value": compute()}, indent=None)
-            with open(self.path, "a") as fh:
-                fh.write(row + "\n")
+            if not self.done:
+                self._write([row])
+            else:
+                with open(self.path, "a") as fh:
+                    fh.write(row + "\n")
             self.done[part] = from_json_ready(json.loads(row)["value"])
         return copy.deepcopy(self.done[part])
 
@@ -82,7 +88,7 @@ class PartMemo:
         self.path.unlink(missing_ok=True)
 
 
-def memo_step(out: Path, name: str, key: dict, reused: list, compute):
+def memo_step(out: Path, name: str, key: dict, reused: list | None, compute):
     """A study step kept whole once finished (``cached_step``) and part by part while it runs (``compute(memo)``
     judges its parts through a ``PartMemo``, steps/<name>.parts.jsonl): an interrupted step resumes with the
     parts it judged.

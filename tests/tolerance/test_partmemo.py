@@ -142,6 +142,18 @@ def test_an_interrupted_studys_tornado_resumes_part_by_part(design_dir, tmp_path
                                        progress=False)["tornado"]
 
 
+def test_a_step_that_kept_no_part_leaves_no_file(tmp_path):
+    """A memo opened and left before any part (or over a file of another key) leaves no parts file behind, not even a
+    folder: an empty one would read as progress (``pipeline.stagerun.has_progress``)."""
+    path = tmp_path / "steps" / "grid.parts.jsonl"
+    PartMemo(path, {"k": 1})
+    assert not path.parent.exists()
+    PartMemo(path, {"k": 1}).keep("mask overlay", lambda: {"grid": 2})
+    assert len(path.read_text().splitlines()) == 2
+    PartMemo(path, {"k": 2})  # another study's key: its file is started afresh, with its first part
+    assert not path.exists()
+
+
 def test_keep_reads_a_named_part_back_as_a_resumed_run_reads_it(tmp_path):
     """``PartMemo.keep``: a part the step names is computed once, read back by a resumed step of the same key, and
     handed out as JSON reads it back (a whole-number key as text) both times, so a fresh and a resumed step agree."""
@@ -218,6 +230,7 @@ def test_an_interrupted_studys_quantization_resumes_level_by_level(design_dir, t
     monkeypatch.setattr(study, "_quantized_row", lambda *a: again.append(a[3]) or real(*a))
     res = run_study(design_dir, budget, out, samples=0, grid=1, do_levels=True, progress=False)
     assert again and not set(calls) & set(again) and "quantization" not in res["steps_reused"]
+    assert "quantization (in part)" in res["steps_reused"]
     assert "tornado" in res["steps_reused"] and not (out / STEPS / "quantization.parts.jsonl").exists()
     monkeypatch.setattr(study, "_quantized_row", real)
     whole = study.quantization_study(design_dir, supersample=1, progress=False)
@@ -303,7 +316,7 @@ def test_an_interrupted_studys_sweeps_resume_and_the_report_says_so(design_dir, 
     monkeypatch.setattr(study, "sweep", lambda *a, keep, **k: real(*a, keep=_computing(judged, keep), **k))
     res = run_study(design_dir, budget, out, samples=0, grid=1, do_sweep=True, progress=False)
     assert len(asked) == 4 and judged and not set(asked) & set(judged)
-    assert res["steps_reused"] == ["grid", "tornado", "sweeps" + IN_PART]
+    assert res["steps_reused"] == ["grid", "tornado", "sweeps" + IN_PART] and res["sweep_seconds"] is not None
     report = (out / "report.md").read_text()
     assert "Reused from the interrupted run of the same study: grid, tornado" in report
     assert "Resumed with the parts the interrupted run judged: sweeps" in report
