@@ -58,6 +58,7 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
     ``keep(name, compute)``: what judges each kind (default: ``compute()``; ``partmemo.PartMemo.keep`` keeps each
     for a resumed study: its grids then come back keyed by text, "1", as a kept study's do)."""
     from doefab.tolerance.judge import PSFJudge
+    from doefab.tolerance.study import compute_now
 
     kinds = [k for k in KINDS if k.grid and k.from_budget(budget) != 0.0]
     out: dict = {"block_px": block, "tolerance": tolerance, "reference_grid": REFERENCE, "kinds": {}}
@@ -99,7 +100,7 @@ def grid_study(judge, budget: dict, block: int = 128, tolerance: float = TOLERAN
                 "block_bound": {s: bound_of(psf[s] - ref, False) for s in GRIDS},
                 "effect_bound": effect, "seconds": secs, "grid": chosen}
 
-    keep = keep or (lambda name, compute: compute())
+    keep = keep or compute_now
     for k in kinds:
         if bar is not None:
             bar.set_postfix(error=k.name)

@@ -16,7 +16,7 @@ from doefab.tolerance.errors import PartErrors
 from doefab.tolerance.kinds import KINDS, kind
 
 __all__ = ["judge_for", "network_judge_for", "evaluate_part", "network_changes", "sweep", "tornado",
-           "quantization_study", "continuous_height", "sweep_names"]
+           "quantization_study", "continuous_height", "sweep_names", "compute_now"]
 
 _JUDGES: dict = {}
 _NET_JUDGES: dict = {}
@@ -74,7 +74,7 @@ def sweep(design_dir, grids: dict | None = None, names=None, progress: bool = Tr
     """Each PSF metric against each error's magnitude (one error at a time), each kind on its grid
     (``grids[name]``, default 1). ``keep(name, compute)``: what judges each magnitude (default: ``compute()``;
     ``partmemo.PartMemo.keep`` keeps each for a resumed study)."""
-    keep = keep or _compute
+    keep = keep or compute_now
     grids = grids or {}
     nominal = {}
     out = {"sweeps": {}}
@@ -167,8 +167,9 @@ def network_changes(part: dict, base: dict) -> tuple[dict, dict]:
     return means, scenes
 
 
-def _compute(name: str, compute):
-    """``compute()``: a step's part judged where nothing keeps it (``partmemo.PartMemo.keep``'s signature)."""
+def compute_now(name: str, compute):
+    """``compute()``: a step's part judged where nothing keeps it (``partmemo.PartMemo.keep``'s signature), the
+    default ``keep`` of the studies that take one. Example: ``compute_now("levels 8", lambda: 8) == 8``."""
     return compute()
 
 
@@ -192,7 +193,7 @@ def quantization_study(design_dir, levels=None, supersample: int = 1, networks: 
     ``partmemo.PartMemo.keep`` keeps each row for a resumed study)."""
     from doefab.fabrication.process import LEVEL_CHOICES
 
-    keep = keep or _compute
+    keep = keep or compute_now
     judge = judge_for(design_dir, supersample)
     d = judge.design
     if levels is None:

@@ -17,6 +17,16 @@ def _counting(calls):
     return evaluate
 
 
+def _interrupted_at(n, calls, real, name=lambda *a: a):
+    """``real`` that records ``name(*args)`` of each call it makes and is interrupted (Ctrl-C) at its ``n + 1``-th."""
+    def stopping(*a):
+        if len(calls) == n:
+            raise KeyboardInterrupt
+        calls.append(name(*a))
+        return real(*a)
+    return stopping
+
+
 def test_a_part_judged_once_is_read_back_under_its_key_and_a_cut_line_is_judged_again(tmp_path):
     path, calls = tmp_path / "steps" / "t.parts.jsonl", []
     memo = PartMemo(path, {"design": "a"}, _counting(calls))
@@ -47,13 +57,7 @@ def test_an_interrupted_tornado_resumes_with_the_parts_it_judged(design_dir, tmp
     budget = load_budget()
     whole = study.tornado(design_dir, budget, progress=False)
     path, key, calls = tmp_path / "tornado.parts.jsonl", {"study": 1}, []
-
-    def stopping(*args):
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        calls.append(args[2])
-        return study.evaluate_part(*args)
-
+    stopping = _interrupted_at(3, calls, study.evaluate_part, lambda *a: a[2])
     with pytest.raises(KeyboardInterrupt):
         study.tornado(design_dir, budget, progress=False, evaluate=PartMemo(path, key, stopping))
     resumed_calls = []
@@ -121,14 +125,7 @@ def test_an_interrupted_studys_tornado_resumes_part_by_part(design_dir, tmp_path
     from doefab.tolerance.report import STEPS, run_study
 
     real, calls, again = study.evaluate_part, [], []
-
-    def stopping(*a):
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        calls.append(a[2])
-        return real(*a)
-
-    monkeypatch.setattr(study, "evaluate_part", stopping)
+    monkeypatch.setattr(study, "evaluate_part", _interrupted_at(3, calls, real, lambda *a: a[2]))
     out = tmp_path / "o"
     with pytest.raises(KeyboardInterrupt):
         run_study(design_dir, load_budget(), out, samples=0, grid=1, progress=False)
@@ -177,12 +174,7 @@ def test_keep_reads_a_named_part_back_as_a_resumed_run_reads_it(tmp_path):
 
 def _stopping(n, calls, keep):
     """``keep`` that records the parts it is asked for and is interrupted when asked for the ``n + 1``-th."""
-    def stopping(name, compute):
-        if len(calls) == n:
-            raise KeyboardInterrupt
-        calls.append(name)
-        return keep(name, compute)
-    return stopping
+    return _interrupted_at(n, calls, keep, lambda name, compute: name)
 
 
 def _computing(seen, keep):
@@ -215,14 +207,7 @@ def test_an_interrupted_studys_quantization_resumes_level_by_level(design_dir, t
     from doefab.tolerance.report import STEPS, run_study
 
     real, calls, again = study._quantized_row, [], []
-
-    def stopping(*a):
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        calls.append(a[3])
-        return real(*a)
-
-    monkeypatch.setattr(study, "_quantized_row", stopping)
+    monkeypatch.setattr(study, "_quantized_row", _interrupted_at(2, calls, real, lambda *a: a[3]))
     out, budget = tmp_path / "o", load_budget()
     with pytest.raises(KeyboardInterrupt):
         run_study(design_dir, budget, out, samples=0, grid=1, do_levels=True, progress=False)
@@ -278,18 +263,11 @@ def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, t
 
     judge, budget = study.judge_for(str(design_dir), 1), load_budget()
     real, asked, again = judge.evaluate, [], []
-
-    def stopping(part):
-        if len(asked) == stop:
-            raise KeyboardInterrupt
-        asked.append(part)
-        return real(part)
-
     res = {"nominal": {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}}
     args = (res, design_dir, budget, 1, budget.get("spec", {}), of_design(judge.design.task).name, False)
     whole = report._surrogate(*args, PartMemo(tmp_path / "whole.parts.jsonl", {"k": 2}))
     stop = whole["model"]["parts"] + 3  # in the calibration, after the fit's parts
-    monkeypatch.setattr(judge, "evaluate", stopping)
+    monkeypatch.setattr(judge, "evaluate", _interrupted_at(stop, asked, real, lambda part: part))
     with pytest.raises(KeyboardInterrupt):
         report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
     monkeypatch.setattr(judge, "evaluate", lambda part: again.append(part) or real(part))
