@@ -97,9 +97,8 @@ def run_study(design_dir: Path, budget: dict, out: Path, samples: int = 20, seed
     if samples > 0:
         _monte_carlo(res, design_dir, budget, out, samples, seed, mc_grid, scheduler, workers, networks, spec,
                      task, progress, weights_dir)
-    if surrogate:  # its validation parts are the Monte Carlo's where it has enough: its step's key holds them
-        res["surrogate"] = memo_step(out, "surrogate", {**key, "monte_carlo": [mc_grid, seed, samples]}, reused,
-                                     partial(_surrogate, res, design_dir, budget, mc_grid, spec, task, progress))
+    if surrogate:  # fitted once per study; validated on the Monte Carlo's parts as they stand
+        res["surrogate"] = _surrogate(out, key, reused, res, design_dir, budget, mc_grid, spec, task, progress)
     if do_levels:
         res["quantization"] = _quantization(out, key, reused, judge, design_dir, mc_grid, networks, weights_dir,
                                             progress)
@@ -262,36 +261,60 @@ def _monte_carlo(res, design_dir, budget, out, samples, seed, grid, scheduler, w
     res["convergence"] = conv
 
 
-def _surrogate(res, design_dir, budget, grid, spec, task, progress, memo) -> dict:
-    """The surrogate: fitted, calibrated on parts of its own, its yield, and validated on parts it never saw (the
-    direct Monte Carlo's where the study has at least ``HOLDOUT_PARTS`` of them, paired part by part). Each part it
-    judges is kept by ``memo`` (``partmemo.PartMemo``): an interrupted fit resumes with them."""
-    import json
-
+def _surrogate(out, key, reused, res, design_dir, budget, grid, spec, task, progress) -> dict:
+    """The surrogate on ``grid``: fitted and calibrated on parts of its own, with its yield (the step "surrogate",
+    kept under the study's ``key`` and the grid, so a resumed study with more Monte Carlo parts does not fit it
+    again), and validated on parts it never saw: the direct Monte Carlo's where the study has at least
+    ``HOLDOUT_PARTS`` (``res["samples"]``, paired part by part, read afresh each run), else held-out parts of its
+    own (the step "surrogate_holdout"). Each part it judges is kept (``memo_step``): an interrupted step resumes
+    with them."""
     from doefab.tolerance.spec import spec_limits
-    from doefab.tolerance.surrogate import calibrate, fit_surrogate, surrogate_yield, validate
+    from doefab.tolerance.surrogate import validate
 
     judge = study.judge_for(str(design_dir), grid)
+    limit = max((lim for _, _, lim, _ in spec_limits(spec, task, "psf", res["nominal"]["psf"])), default=-math.inf)
+    step_key = {**key, "grid": grid}
+    fitted = memo_step(out, "surrogate", step_key, reused, partial(_surrogate_fit, judge, budget, limit, progress))
+    rows = res.get("samples") or []
+    if len(rows) >= HOLDOUT_PARTS:
+        held, against = [(_part(r["errors"]), r["metric"]) for r in rows], "the direct Monte Carlo's parts"
+    else:
+        own = memo_step(out, "surrogate_holdout", step_key, reused, lambda memo: [
+            [p.to_json(), m] for p, m in _own_parts(_kept_metric(judge, memo), judge, budget, 1, HOLDOUT_PARTS)])
+        held, against = [(_part(e), m) for e, m in own], "held-out parts of its own"
+    checked = validate(fitted["model"], budget, judge.chain, held, limit, n_masks=judge.n_masks)
+    return {**fitted, "validation": {**checked, "parts": against}}
 
-    def metric(part) -> float:
-        name = json.dumps(json_ready(part.to_json()), sort_keys=True, default=str)
-        return memo.keep(name, lambda: judge.evaluate(part)["metric"])
 
+def _surrogate_fit(judge, budget, limit, progress, memo) -> dict:
+    """{"model", "yield"}: the surrogate fitted, calibrated on ``CALIBRATION_PARTS`` parts of its own, and its yield
+    against ``limit`` (the lowest PSF metric that meets the spec); each part judged through ``memo``."""
+    from doefab.tolerance.surrogate import calibrate, fit_surrogate, surrogate_yield
+
+    metric = _kept_metric(judge, memo)
     model = fit_surrogate(metric, budget, judge.chain, progress, n_masks=judge.n_masks, gap=not judge.fine.doe_is_stop)
     t = time.perf_counter()
     model = calibrate(model, budget, judge.chain, _own_parts(metric, judge, budget, 0, CALIBRATION_PARTS),
                       n_masks=judge.n_masks)
-    limit = max((lim for _, _, lim, _ in spec_limits(spec, task, "psf", res["nominal"]["psf"])), default=-math.inf)
     y = surrogate_yield(model, budget, judge.chain, limit, n_masks=judge.n_masks)
     model["seconds_total"] = round(model["seconds"] + time.perf_counter() - t, 1)
-    rows = res.get("samples") or []
-    if len(rows) >= HOLDOUT_PARTS:
-        held, against = [(PartErrors(**{k: _tup(v) for k, v in r["errors"].items()}), r["metric"]) for r in rows], \
-            "the direct Monte Carlo's parts"
-    else:
-        held, against = _own_parts(metric, judge, budget, 1, HOLDOUT_PARTS), "held-out parts of its own"
-    checked = validate(model, budget, judge.chain, held, limit, n_masks=judge.n_masks)
-    return {"model": model, "yield": y, "validation": {**checked, "parts": against}}
+    return {"model": model, "yield": y}
+
+
+def _kept_metric(judge, memo):
+    """``metric(part)``: the part's PSF metric through ``judge``, kept by ``memo`` (``PartMemo``) under the part's
+    errors."""
+    import json
+
+    def metric(part) -> float:
+        name = json.dumps(json_ready(part.to_json()), sort_keys=True, default=str)
+        return memo.keep(name, lambda: judge.evaluate(part)["metric"])
+    return metric
+
+
+def _part(errors: dict) -> PartErrors:
+    """A part's errors from their JSON (``PartErrors.to_json``, as kept)."""
+    return PartErrors(**{k: _tup(v) for k, v in errors.items()})
 
 
 def _own_parts(metric, judge, budget, role: int, n: int) -> list:
@@ -355,7 +378,7 @@ def _markdown(res: dict) -> list[str]:
     reused = res.get("steps_reused") or []
     whole = [r.replace("_", " ") for r in reused if not r.endswith(IN_PART)]
     part = [r[:-len(IN_PART)].replace("_", " ") for r in reused if r.endswith(IN_PART)]
-    note = ([" ".join([f"Reused from the interrupted run of the same study: {', '.join(whole)} (their run times are "
+    note = ([" ".join([f"Reused from an earlier run of the same study: {', '.join(whole)} (their run times are "
                        f"that run's)." if whole else "",
                        f"Resumed with the parts the interrupted run judged: {', '.join(part)} (their run times "
                        f"count this run's parts only)." if part else ""]).strip(), ""] if reused else [])

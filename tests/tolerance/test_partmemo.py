@@ -253,11 +253,9 @@ def test_an_interrupted_grid_study_resumes_kind_by_kind(design_dir, tmp_path, mo
 
 
 def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, tmp_path, monkeypatch):
-    """The surrogate interrupted in its calibration (after its fit's parts), then resumed through
-    ``report.memo_step``: the parts judged before are read back (none judged twice), and the fit, its yield and its
-    validation are an uninterrupted one's."""
-    from functools import partial
-
+    """The surrogate interrupted in its calibration (after its fit's parts), then resumed: the parts judged before
+    are read back (none judged twice), and the fit, its yield and its validation (on held-out parts of its own:
+    the study has no Monte Carlo parts) are an uninterrupted one's; both steps are then kept whole."""
     from doefab.applications import of_design
     from doefab.tolerance import report, study
 
@@ -265,19 +263,23 @@ def test_an_interrupted_surrogate_resumes_with_the_parts_it_judged(design_dir, t
     real, asked, again = judge.evaluate, [], []
     res = {"nominal": {"psf": {"psf_metric": judge.score(judge.nominal)["metric"]}}}
     args = (res, design_dir, budget, 1, budget.get("spec", {}), of_design(judge.design.task).name, False)
-    whole = report._surrogate(*args, PartMemo(tmp_path / "whole.parts.jsonl", {"k": 2}))
+    whole = report._surrogate(tmp_path / "whole", {"k": 1}, [], *args)
     stop = whole["model"]["parts"] + 3  # in the calibration, after the fit's parts
     monkeypatch.setattr(judge, "evaluate", _interrupted_at(stop, asked, real, lambda part: part))
     with pytest.raises(KeyboardInterrupt):
-        report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
+        report._surrogate(tmp_path, {"k": 1}, [], *args)
     monkeypatch.setattr(judge, "evaluate", lambda part: again.append(part) or real(part))
-    got = report.memo_step(tmp_path, "surrogate", {"k": 1}, [], partial(report._surrogate, *args))
+    reused = []
+    got = report._surrogate(tmp_path, {"k": 1}, reused, *args)
     assert len(asked) == stop and again and not any(p in asked for p in again)
-    assert not (tmp_path / report.STEPS / "surrogate.parts.jsonl").exists()
+    assert reused == ["surrogate" + report.IN_PART]
+    assert not list((tmp_path / report.STEPS).glob("*.parts.jsonl"))
+    assert {p.name for p in (tmp_path / report.STEPS).iterdir()} == {"surrogate.json", "surrogate_holdout.json"}
     drop = ("seconds", "seconds_total")
     assert {k: v for k, v in got["model"].items() if k not in drop} == \
         {k: v for k, v in whole["model"].items() if k not in drop}
     assert got["yield"] == whole["yield"] and got["validation"] == whole["validation"]
+    assert got["validation"]["parts"] == "held-out parts of its own"
 
 
 def test_an_interrupted_studys_sweeps_resume_and_the_report_says_so(design_dir, tmp_path, monkeypatch):
@@ -296,7 +298,7 @@ def test_an_interrupted_studys_sweeps_resume_and_the_report_says_so(design_dir, 
     assert len(asked) == 4 and judged and not set(asked) & set(judged)
     assert res["steps_reused"] == ["grid", "tornado", "sweeps" + IN_PART] and res["sweep_seconds"] is not None
     report = (out / "report.md").read_text()
-    assert "Reused from the interrupted run of the same study: grid, tornado" in report
+    assert "Reused from an earlier run of the same study: grid, tornado" in report
     assert "Resumed with the parts the interrupted run judged: sweeps" in report
     monkeypatch.setattr(study, "sweep", real)
     assert res["sweeps"] == run_study(design_dir, budget, tmp_path / "w", samples=0, grid=1, do_sweep=True,

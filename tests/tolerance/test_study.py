@@ -445,7 +445,7 @@ def test_run_study_reuses_its_steps_only_for_the_same_study(design_dir, tmp_path
     run_study(design_dir, load_budget(), out, samples=0, grid=1, progress=False)
     res = run_study(design_dir, load_budget(), out, samples=0, grid=1, progress=False)
     assert len(calls) == 1 and "tornado" in res["steps_reused"]
-    assert "Reused from the interrupted run" in (out / "report.md").read_text()
+    assert "Reused from an earlier run of the same study" in (out / "report.md").read_text()
     other = tmp_path / "b.toml"
     other.write_text("[overlay]\nshift_sigma_um = 1.5\n")
     run_study(design_dir, load_budget(other), out, samples=0, grid=1, progress=False)

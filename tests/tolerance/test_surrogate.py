@@ -167,7 +167,6 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
     from functools import partial
 
     from doefab.tolerance import report, surrogate
-    from doefab.tolerance.partmemo import PartMemo
 
     budget = load_budget()
     metric = _toy(budget)
@@ -183,8 +182,8 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
              for c in children]
     rows = [{"errors": p.to_json(), "metric": metric(p)} for p in parts]
     res = {"nominal": {"psf": {"psf_metric": M0}}, "samples": rows}
-    res["surrogate"] = report._surrogate(res, "toy", budget, 1, {"hdr": {"psf_metric_min": 0.66}}, "hdr", False,
-                                         PartMemo(tmp_path / "surrogate.parts.jsonl", {"study": 1}))
+    res["surrogate"] = report._surrogate(tmp_path, {"study": 1}, [], res, "toy", budget, 1,
+                                         {"hdr": {"psf_metric_min": 0.66}}, "hdr", False)
     v, cal = res["surrogate"]["validation"], res["surrogate"]["model"]["calibration"]
     direct, fitted = {p.depth_scale for p in parts}, {p.depth_scale for p, _ in seen}
     assert cal["n"] == len(seen) == 16 and not direct & fitted and not fitted & {p.depth_scale for p, _ in checked}
@@ -195,3 +194,34 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
         assert v["parts"] == "held-out parts of its own" and v["n"] == len(checked) == 16
         assert not direct & {p.depth_scale for p, _ in checked}
     assert res["surrogate"]["yield"]["limit"] == 0.66 and v["yield_difference_ci95"][0] <= v["yield_difference"]
+
+
+def test_a_study_resumed_with_more_monte_carlo_parts_keeps_its_fit_and_validates_on_them(monkeypatch, tmp_path):
+    """The surrogate step of a study with 3 direct Monte Carlo parts (validated on 16 held-out parts of its own),
+    then of the same study resumed with 20: the fit, its calibration and its yield are kept (no part judged again)
+    and it is validated on the 20, paired part by part."""
+    from functools import partial
+
+    from doefab.tolerance import report, surrogate
+
+    budget = load_budget()
+    metric, judged = _toy(budget), []
+    monkeypatch.setattr(report.study, "judge_for", lambda *a, **k: _ToyJudge(lambda p: judged.append(p) or metric(p)))
+    monkeypatch.setattr(surrogate, "surrogate_yield", partial(surrogate.surrogate_yield, draws=500, resamples=50))
+    children = np.random.SeedSequence(2024).spawn(20)
+    rows = [{"errors": p.to_json(), "metric": metric(p)} for p in (
+        sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=4) for c in children)]
+    spec, runs = {"hdr": {"psf_metric_min": 0.66}}, []
+    for n in (3, 20):
+        judged.clear()
+        reused = []
+        res = {"nominal": {"psf": {"psf_metric": M0}}, "samples": rows[:n]}
+        runs.append((report._surrogate(tmp_path, {"study": 1}, reused, res, "toy", budget, 1, spec, "hdr", False),
+                     len(judged), reused))
+    (first, n_first, _), (second, n_second, reused) = runs
+    assert first["validation"]["parts"] == "held-out parts of its own" and n_first == first["model"]["parts"] + 32
+    assert reused == ["surrogate"] and n_second == 0
+    assert second["model"] == first["model"] and second["yield"] == first["yield"]
+    v = second["validation"]
+    assert v["parts"] == "the direct Monte Carlo's parts" and v["n"] == 20
+    assert v["yield_direct"] == np.mean([r["metric"] >= 0.66 for r in rows])
