@@ -1,13 +1,15 @@
 """Wall time of the main job: the three shipped scenes end to end, as on a fresh clone (an empty doefab cache, so
 every fabricated part's PSFs are computed; a fresh output folder), the one command the README gives:
 
-    doefab run scenes/hdr.toml scenes/hyperspectral.toml scenes/depth.toml
+    doefab run scenes/depth.toml scenes/hdr.toml scenes/hyperspectral.toml
 
-(run in a fresh folder, so it writes out/run/<scene>/ there; it runs each scene in a process of its own).
+(run in a fresh folder, so it writes out/run/<scene>/ there; it runs each scene in a process of its own, ``--jobs``
+of them at a time: by default one per core, as memory allows; the longest scene first).
 
-Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [--quick]
+Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [--quick] [--jobs N]
 
-Writes benchmarks/results/run_time.md (or run_time_quick.md): seconds per scene and per stage, and the total,
+Writes benchmarks/results/run_time.md (run_time_side_by_side.md where scenes ran side by side; _quick with
+--quick): seconds per scene and per stage, and the total,
 from each run's run.json; the largest resident memory of any one of its processes, and the job's peak memory:
 the machine's memory in use (MemTotal − MemAvailable), sampled every second, above what was in use before it
 started (so run it with nothing else on the machine).
@@ -28,7 +30,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results"
-SCENES = ("hdr", "hyperspectral", "depth")
+SCENES = ("depth", "hdr", "hyperspectral")  # the longest first: it sets the job's time when scenes run side by side
 STAGES = ("design", "masks", "holder", "reconstruction", "tolerance")
 
 
@@ -55,7 +57,13 @@ def peak_while(proc: subprocess.Popen, baseline: int, every_s: float = 1.0) -> i
 
 
 def main() -> None:
-    quick = "--quick" in sys.argv[1:]
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--jobs", default="auto", help="doefab run --jobs (default auto)")
+    args = ap.parse_args()
+    quick = args.quick
     work = ROOT / "out" / ("bench_run_quick" if quick else "bench_run")
     if work.exists():
         shutil.rmtree(work)
@@ -66,9 +74,10 @@ def main() -> None:
         baseline = memory_in_use_bytes()
         t0 = time.perf_counter()
         proc = subprocess.Popen([sys.executable, "-m", "doefab", "run",
-                                 *(str(ROOT / "scenes" / f"{s}.toml") for s in SCENES), *(["--quick"] if quick else [])],
-                                cwd=work, env=env, stdout=subprocess.DEVNULL)
+                                 *(str(ROOT / "scenes" / f"{s}.toml") for s in SCENES), *(["--quick"] if quick else []),
+                                 "--jobs", str(args.jobs)], cwd=work, env=env, stdout=(work / "stdout.txt").open("w"))
         job_gib = peak_while(proc, baseline) / 2**30
+        said = (work / "stdout.txt").read_text()  # "N scenes, J at a time (...)" first when they run side by side
         total = time.perf_counter() - t0
         if proc.returncode != 0:
             raise SystemExit(f"the main job failed (exit status {proc.returncode})")
@@ -80,17 +89,22 @@ def main() -> None:
         cells = [f"{rec['stages'][st]['seconds']:.0f}" if st in rec["stages"] else "—" for st in STAGES]
         rows.append(f"| {s} | " + " | ".join(cells) + f" | {rec['seconds']:.0f} |")
         inside += rec["seconds"]
+    lanes = said.split(" at a time")[0].split(", ")[-1] if " at a time" in said else "1"
+    how = (f"{lanes} scenes at a time, each torch on {said.split('torch on ')[1].split(' thread')[0]} thread(s): the "
+           f"scenes' own totals add to {inside:.0f} s" if lanes != "1" else
+           f"one scene after another: {total - inside:.0f} s of it lie outside the scenes' own totals (each scene runs "
+           f"in a process of its own: starting Python and doefab, checking its scene file)")
     text = (f"The main job{' with --quick' if quick else ''} from an empty cache (`.venv/bin/python "
-            f"benchmarks/run_time.py{' --quick' if quick else ''}`: `doefab run scenes/hdr.toml "
-            f"scenes/hyperspectral.toml scenes/depth.toml`), seconds per stage on this 2-core machine.\n\n"
-            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min), of it "
-            f"{total - inside:.0f} s outside the scenes' own totals (each scene runs in a process of its own: "
-            f"starting Python and doefab, checking its scene file); the largest "
+            f"benchmarks/run_time.py{' --quick' if quick else ''} --jobs {args.jobs}`: `doefab run "
+            f"{' '.join(f'scenes/{s}.toml' for s in SCENES)} --jobs {args.jobs}`), seconds per stage on this "
+            f"{os.cpu_count()}-core machine.\n\n"
+            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min), {how}; the largest "
             f"resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (the machine's memory in use "
             f"above what it was before, sampled every second): {job_gib:.1f} GiB.\n")
     from doefab.io import atomic_write_text
 
-    atomic_write_text(OUT / ("run_time_quick.md" if quick else "run_time.md"), text)
+    name = "run_time" + ("_quick" if quick else "") + ("_side_by_side" if lanes != "1" else "")
+    atomic_write_text(OUT / f"{name}.md", text)
     print(text)
 
 

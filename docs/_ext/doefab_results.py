@@ -95,6 +95,8 @@ MEASUREMENTS = (
                        f"`benchmarks/results/tolerance_{d}/`") for d in ("streak", "grating", "halfring")),
     Measurement("tolerance_grid", "benchmarks/tolerance_grid.py", (R + "tolerance_grid.md",)),
     Measurement("run_time", "benchmarks/run_time.py", (R + "run_time.md",)),
+    Measurement("run_time_side_by_side", None, (R + "run_time_side_by_side.md",),
+                command=".venv/bin/python benchmarks/run_time.py --jobs 2"),
     Measurement("illuminant_search", "benchmarks/illuminant_search.py", (R + "illuminant_search.md",)),
     Measurement("spectra_nearest_pairs", "benchmarks/spectra_nearest_pairs.py", (R + "spectra_nearest_pairs.md",)),
     Measurement("spectra_training_content", "benchmarks/spectra_training_content.py",

@@ -3,7 +3,8 @@ and a report (OUT/report.html and OUT/report.md), doing only what the scene need
 
 Stages whose inputs did not change are kept from the previous run (so an interrupted run continues where it
 stopped); --force STAGE recomputes one. --quick: smaller samples and images, same stages. Several scenes are all
-checked first, then each runs in a process of its own (a scene's caches and its memory end with it).
+checked first, then each runs in a process of its own (a scene's caches and its memory end with it), --jobs of
+them at a time (default: one per core, as memory allows), in the order given: list the longest first.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import argparse
 
 from doefab.cli._args import add_device_arg
+from doefab.cli._lanes import describe_status, jobs_arg, run_scene_process
 
 
 def register(sub) -> None:
@@ -21,6 +23,10 @@ def register(sub) -> None:
     p.add_argument("--force", action="append", default=[], metavar="STAGE",
                    help="recompute this stage even if its inputs are unchanged (repeatable)")
     p.add_argument("--quick", action="store_true", help="smaller samples and images, same stages (CI)")
+    p.add_argument("--jobs", type=jobs_arg, default="auto", metavar="N",
+                   help="with several scenes, how many run at once, each its own process with its output in "
+                        "out/run/<scene name>.log: a number, or auto (default: one per core, as many as fit in "
+                        "the memory available at 11 GiB each); 1 runs them one after another on this terminal")
     add_device_arg(p, scene=True)
     p.set_defaults(func=run)
 
@@ -80,66 +86,37 @@ def shared_output_folders(scenes) -> None:
 
 
 def run_each_in_own_process(args) -> int:
-    """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, in order, stopping at the first that
-    fails (its exit status is returned; it printed its own error). Ctrl-C reaches the running scene from the
-    terminal; SIGTERM is passed on to it; either way this process waits for the scene, and no later scene
-    starts."""
+    """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, ``args.jobs`` at a time
+    (``_lanes.scene_jobs``) in order; one at a time each prints to this terminal, several at once each to
+    out/run/<scene name>.log. Stops starting scenes at the first that fails (its exit status is returned; it printed
+    its own error). Ctrl-C reaches the running scenes from the terminal; SIGTERM is passed on to them; either way
+    this process waits for them, and no later scene starts."""
     import sys
+    from pathlib import Path
+
+    from doefab._memory import available_bytes
+    from doefab.cli._lanes import lane_env, run_lanes, scene_jobs
 
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
              + (["--debug"] if getattr(args, "debug", False) else [])
              + (["--device", args.device] if args.device is not None else []))
-    for scene in args.scene:
-        rc, how = run_scene_process([sys.executable, "-m", "doefab", "run", scene, *flags])
-        if rc != 0:
-            print(f"[doefab run] stopped: {scene} {how}; the scenes after it were not run", file=sys.stderr)
-            return rc
-    return 0
-
-
-def run_scene_process(cmd: list[str]) -> tuple[int, str]:
-    """Start a scene's process and wait for it; returns (exit status, what happened in words). A death by signal
-    N is status 128 + N. On Ctrl-C (which the terminal sends to the scene too) or SIGTERM (``Terminated``, passed
-    on here) the scene is waited for while it cleans up, and the status is 130 or 143 whatever the scene
-    returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short)."""
-    import signal
-    import subprocess
-
-    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
-
-    child = None
-    try:
-        child = subprocess.Popen(cmd)
-        rc = child.wait()
-    except KeyboardInterrupt as exc:
-        if child is None:
-            raise
-        status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
-        if status == EXIT_TERMINATED:
-            child.send_signal(signal.SIGTERM)
-        how = describe_status(status)
-        while True:
-            try:
-                child.wait()
+    commands = [[sys.executable, "-m", "doefab", "run", scene, *flags] for scene in args.scene]
+    jobs = scene_jobs(getattr(args, "jobs", 1), len(commands), available=available_bytes())
+    if jobs > 1:
+        env = lane_env(jobs)
+        print(f"[doefab run] {len(commands)} scenes, {jobs} at a time (torch on {env['OMP_NUM_THREADS']} thread(s) "
+              f"each; --jobs 1 runs them one after another)", flush=True)
+        rc, scene = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
+                              jobs, env)
+        how = describe_status(rc) if scene else describe_status(rc).replace("was ", "were ", 1)
+    else:
+        rc = scene = 0
+        for s, cmd in zip(args.scene, commands):
+            rc, how = run_scene_process(cmd)
+            if rc:
+                scene = s
                 break
-            except KeyboardInterrupt:
-                child.kill()
-                how += "; killed at the second interrupt"
-        return status, how
-    rc = 128 - rc if rc < 0 else rc
-    return rc, describe_status(rc)
-
-
-def describe_status(rc: int) -> str:
-    """A scene process's exit status in words."""
-    import signal
-
-    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED
-
-    if rc in (EXIT_INTERRUPTED, EXIT_TERMINATED):
-        return "was interrupted (Ctrl-C)" if rc == EXIT_INTERRUPTED else "was terminated (SIGTERM)"
-    if rc > 128 and rc - 128 in {s.value for s in signal.Signals}:
-        sig = signal.Signals(rc - 128)
-        why = " (SIGKILL: often the system running out of memory; see dmesg)" if sig == signal.SIGKILL else ""
-        return f"was killed by {sig.name}{why}"
-    return f"failed (exit status {rc})"
+    if rc:
+        print(f"[doefab run] stopped: {scene or 'the scenes'} {how}; the scenes not yet started were not run",
+              file=sys.stderr)
+    return rc

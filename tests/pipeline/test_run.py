@@ -188,13 +188,19 @@ def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline_run, "run_stage", in_this_process)
     monkeypatch.chdir(tmp_path)
     rec = lambda name: json.loads((tmp_path / "out" / "run" / name / "run.json").read_text())  # noqa: E731
-    for force, reused in (([], None), ([], True), (["--force", "holder"], None)):
-        assert main(["run", "a.toml", "b.toml", "--quick", *force]) == 0
+    log = lambda name: tmp_path / "out" / "run" / f"{name}.log"  # noqa: E731
+    for force, reused, jobs in (([], None, "2"), ([], True, "1"), (["--force", "holder"], None, "auto")):
+        assert main(["run", "a.toml", "b.toml", "--quick", "--jobs", jobs, *force]) == 0
         for name in ("a", "b"):
             r = rec(name)
             assert r["quick"] and list(r["stages"]) == ["holder"] and r["scene"] == f"{name}.toml"
             assert r["stages"]["holder"]["reused_from_previous_run"] is reused, (force, name)
             assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
+            # side by side each scene's output goes to a log of its own; one after another, to the terminal
+            assert log(name).is_file() == (jobs == "2") or jobs == "auto", (jobs, name)
+            if jobs == "2":
+                assert f"{name}.toml: " in log(name).read_text() and "report" in log(name).read_text()
+                log(name).unlink()
 
 
 def test_a_scene_process_killed_by_a_signal_is_named():

@@ -1,0 +1,202 @@
+"""The scenes of ``doefab run A B …``, each its own ``doefab run SCENE`` process: one at a time on this terminal
+(``run_scene_process``), or up to ``jobs`` at a time in the order given, each one's output in a log of its own
+(``run_lanes``).
+
+The tolerance study through a task's network (most of a shipped scene's time) scores its scenes on one torch
+thread, so a machine with more cores than one scene keeps busy can run scenes side by side. On 2 cores two at a
+time gained little (the Monte Carlo already runs two worker processes; ``docs/results/main-job.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["SCENE_BYTES", "jobs_arg", "scene_jobs", "lane_env", "run_lanes", "run_scene_process", "describe_status"]
+
+#: the memory ``--jobs auto`` plans per scene: the shipped main job's peak, one scene at a time, a scene's process
+#: and its tolerance workers together (10.8 GiB, ``docs/results/main-job.md``; two side by side peaked at 15.4 GiB)
+SCENE_BYTES = 11 * 2**30
+POLL_S = 0.2  # how often the running scenes are looked at
+
+
+def jobs_arg(text: str):
+    """``--jobs``: "auto" or a whole number ≥ 1 (argparse type). Example: ``jobs_arg("2") == 2``."""
+    if text == "auto":
+        return text
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--jobs must be auto or a whole number of scenes ≥ 1, got {text!r}: e.g. "
+                                         f"--jobs 2, or --jobs 1 to run the scenes one after another")
+    return n
+
+
+def scene_jobs(jobs, scenes: int, cores: int | None = None, available: int | None = None) -> int:
+    """How many of ``scenes`` scenes run at once for ``jobs`` (``jobs_arg``'s "auto" or N): N, at most one per
+    scene; "auto": one per core this process may use (``cores``), no more than fit, ``SCENE_BYTES`` each, in the
+    memory available (``available`` bytes; None: not known, not limiting), at least one.
+
+    Example: ``scene_jobs("auto", 3, cores=2, available=64 * 2**30) == 2``."""
+    if jobs != "auto":
+        return max(1, min(int(jobs), scenes))
+    if cores is None:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except AttributeError:
+            cores = os.cpu_count() or 1
+    fit = scenes if available is None else available // SCENE_BYTES
+    return max(1, min(scenes, cores, fit))
+
+
+def lane_env(jobs: int, cores: int | None = None) -> dict:
+    """The environment of each scene's process when ``jobs`` run at once: this one's, with torch's threads
+    (``OMP_NUM_THREADS``) the cores shared out, ``cores // jobs`` (at least one), unless it is set already (to
+    something other than nothing).
+
+    Example: ``lane_env(2, cores=2)["OMP_NUM_THREADS"] == "1"`` where the variable is not set."""
+    cores = cores or len(os.sched_getaffinity(0))
+    env = dict(os.environ)
+    if not env.get("OMP_NUM_THREADS", "").strip():  # unset or empty
+        env["OMP_NUM_THREADS"] = str(max(1, cores // jobs))
+    return env
+
+
+def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
+    """Run each ``(name, command, log)`` of ``items`` as a process of its own, up to ``jobs`` at a time in order,
+    its output (stdout and stderr) to the file ``log``; returns (exit status, the name of the item that failed, or
+    None). Once one fails no other starts, and the running ones finish (their finished stages are kept either way).
+    Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed on to each): the running ones are
+    waited for while they clean up (a second Ctrl-C kills them) and the status is 130 or 143.
+
+    Example: ``run_lanes([("a", [sys.executable, "-c", "pass"], Path("a.log"))], 2) == (0, None)``."""
+    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+
+    pending, running, failed = list(items), {}, (0, None)
+    try:
+        while running or (pending and not failed[0]):
+            while pending and not failed[0] and len(running) < jobs:
+                running.update(_start(*pending.pop(0), env))
+            child = _finished(running)
+            name, log, start = running.pop(child)
+            rc = 128 - child.returncode if child.returncode < 0 else child.returncode
+            _say_done(name, log, rc, time.perf_counter() - start)
+            if rc and not failed[0]:
+                failed = (rc, name)
+    except KeyboardInterrupt as exc:
+        status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+        _stop(running, status == EXIT_TERMINATED)
+        return status, None
+    return failed
+
+
+def _start(name: str, cmd: list[str], log: Path, env) -> dict:
+    import subprocess
+
+    log = Path(log)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as out:
+        child = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+    print(f"[doefab run] {name}: started; its output goes to {log}", flush=True)
+    return {child: (name, log, time.perf_counter())}
+
+
+def _finished(running: dict):
+    """The first of the ``running`` processes to end (looked at every ``POLL_S`` seconds)."""
+    while True:
+        for child in running:
+            if child.poll() is not None:
+                return child
+        time.sleep(POLL_S)
+
+
+def _say_done(name: str, log: Path, rc: int, seconds: float) -> None:
+    tail = _last_lines(log, 1 if rc == 0 else 12)
+    if rc == 0:
+        print(f"[doefab run] {name}: done in {seconds:.0f} s" + (f" ({tail[-1]})" if tail else ""), flush=True)
+        return
+    print(f"[doefab run] {name} {describe_status(rc)} after {seconds:.0f} s; the end of {log}:", file=sys.stderr)
+    for line in tail:
+        print(f"    {line}", file=sys.stderr)
+
+
+def _last_lines(log: Path, n: int) -> list[str]:
+    """The last ``n`` non-empty lines of ``log``, each as a terminal shows it (a progress bar's last state)."""
+    try:
+        with open(log, newline="", errors="replace") as f:  # "\r" kept: it ends a progress bar's state
+            text = f.read()
+    except OSError:
+        return []
+    lines = [ln.split("\r")[-1].rstrip() for ln in text.split("\n")]
+    return [ln for ln in lines if ln.strip()][-n:]
+
+
+def _stop(running: dict, terminate: bool) -> None:
+    """Wait for every ``running`` process after an interrupt, SIGTERM passed on to each first when ``terminate``;
+    a second Ctrl-C kills those still running."""
+    import signal
+
+    if terminate:
+        for child in running:
+            child.send_signal(signal.SIGTERM)
+    for child in running:
+        while True:
+            try:
+                child.wait()
+                break
+            except KeyboardInterrupt:
+                for c in running:
+                    c.kill()
+
+
+def run_scene_process(cmd: list[str]) -> tuple[int, str]:
+    """Start a scene's process and wait for it; returns (exit status, what happened in words). A death by signal
+    N is status 128 + N. On Ctrl-C (which the terminal sends to the scene too) or SIGTERM (``Terminated``, passed
+    on here) the scene is waited for while it cleans up, and the status is 130 or 143 whatever the scene
+    returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short)."""
+    import signal
+    import subprocess
+
+    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
+
+    child = None
+    try:
+        child = subprocess.Popen(cmd)
+        rc = child.wait()
+    except KeyboardInterrupt as exc:
+        if child is None:
+            raise
+        status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+        if status == EXIT_TERMINATED:
+            child.send_signal(signal.SIGTERM)
+        how = describe_status(status)
+        while True:
+            try:
+                child.wait()
+                break
+            except KeyboardInterrupt:
+                child.kill()
+                how += "; killed at the second interrupt"
+        return status, how
+    rc = 128 - rc if rc < 0 else rc
+    return rc, describe_status(rc)
+
+
+def describe_status(rc: int) -> str:
+    """A scene process's exit status in words."""
+    import signal
+
+    from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED
+
+    if rc in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+        return "was interrupted (Ctrl-C)" if rc == EXIT_INTERRUPTED else "was terminated (SIGTERM)"
+    if rc > 128 and rc - 128 in {s.value for s in signal.Signals}:
+        sig = signal.Signals(rc - 128)
+        why = " (SIGKILL: often the system running out of memory; see dmesg)" if sig == signal.SIGKILL else ""
+        return f"was killed by {sig.name}{why}"
+    return f"failed (exit status {rc})"
