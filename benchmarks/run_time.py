@@ -4,7 +4,7 @@ every fabricated part's PSFs are computed; a fresh output folder), the one comma
     doefab run scenes/depth.toml scenes/hdr.toml scenes/hyperspectral.toml
 
 (run in a fresh folder, so it writes out/run/<scene>/ there; it runs each scene in a process of its own, ``--jobs``
-of them at a time: by default one per core, as memory allows; the longest scene first).
+of them at a time: by default one; the longest scene first).
 
 Run with nothing else on the machine: .venv/bin/python benchmarks/run_time.py [--quick] [--jobs N]
 
@@ -61,7 +61,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--jobs", default="auto", help="doefab run --jobs (default auto)")
+    ap.add_argument("--jobs", default="1", help="doefab run --jobs (default 1: one scene after another)")
     args = ap.parse_args()
     quick = args.quick
     work = ROOT / "out" / ("bench_run_quick" if quick else "bench_run")
@@ -98,9 +98,9 @@ def main() -> None:
             f"benchmarks/run_time.py{' --quick' if quick else ''} --jobs {args.jobs}`: `doefab run "
             f"{' '.join(f'scenes/{s}.toml' for s in SCENES)} --jobs {args.jobs}`), seconds per stage on this "
             f"{os.cpu_count()}-core machine.\n\n"
-            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min), {how}; the largest "
-            f"resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (the machine's memory in use "
-            f"above what it was before, sampled every second): {job_gib:.1f} GiB.\n")
+            + "\n".join(rows) + f"\n\nThe three scenes together: {total:.0f} s ({total / 60:.1f} min), {how}; the "
+            f"largest resident memory of any one process: {peak_gib:.1f} GiB; the job's peak memory (the machine's "
+            f"memory in use above what it was before, sampled every second): {job_gib:.1f} GiB.\n")
     from doefab.io import atomic_write_text
 
     name = "run_time" + ("_quick" if quick else "") + ("_side_by_side" if lanes != "1" else "")

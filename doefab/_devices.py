@@ -16,14 +16,35 @@ from contextlib import contextmanager
 
 from doefab.errors import DoefabError
 
-__all__ = ["DEVICE_WORDS", "ENV", "check_device", "device_syntax",
+__all__ = ["DEVICE_WORDS", "ENV", "CORES_ENV", "check_device", "device_syntax",
            "resolve_device", "default_device", "using_device", "to_device",
-           "describe_device"]
+           "describe_device", "usable_cores"]
 
 DEVICE_WORDS = ("auto", "cpu", "cuda", "cuda:N")
 ENV = "DOEFAB_DEVICE"  # the default device of this process and the worker processes it starts
 _SYNTAX = re.compile(r"^(auto|cpu|cuda)(:(?:0|[1-9]\d*))?$")  # cuda:01 is no torch device
 _current: str | None = None  # set by ``using_device``
+CORES_ENV = "DOEFAB_CORES"  # the cores a process may use when it shares the machine (``doefab run --jobs``)
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may use: ``$DOEFAB_CORES`` where set to a whole number ≥ 1 (a scene of ``doefab
+    run --jobs`` gets its share), else the cores it may run on (its affinity; the machine's count where that is
+    not known).
+
+    Example: ``usable_cores() >= 1``."""
+    import os
+
+    try:
+        given = int(os.environ.get(CORES_ENV, ""))
+    except ValueError:
+        given = 0
+    if given >= 1:
+        return given
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
 
 
 def _example(name: str, value: str) -> str:

@@ -39,31 +39,32 @@ def jobs_arg(text: str):
 
 def scene_jobs(jobs, scenes: int, cores: int | None = None, available: int | None = None) -> int:
     """How many of ``scenes`` scenes run at once for ``jobs`` (``jobs_arg``'s "auto" or N): N, at most one per
-    scene; "auto": one per core this process may use (``cores``), no more than fit, ``SCENE_BYTES`` each, in the
-    memory available (``available`` bytes; None: not known, not limiting), at least one.
+    scene; "auto": one per core this process may use (``cores``; None: ``_devices.usable_cores``), no more than
+    fit, ``SCENE_BYTES`` each, in the memory available (``available`` bytes; None: not known, not limiting), at
+    least one.
 
     Example: ``scene_jobs("auto", 3, cores=2, available=64 * 2**30) == 2``."""
+    from doefab._devices import usable_cores
+
     if jobs != "auto":
         return max(1, min(int(jobs), scenes))
-    if cores is None:
-        try:
-            cores = len(os.sched_getaffinity(0))
-        except AttributeError:
-            cores = os.cpu_count() or 1
     fit = scenes if available is None else available // SCENE_BYTES
-    return max(1, min(scenes, cores, fit))
+    return max(1, min(scenes, cores or usable_cores(), fit))
 
 
 def lane_env(jobs: int, cores: int | None = None) -> dict:
-    """The environment of each scene's process when ``jobs`` run at once: this one's, with torch's threads
-    (``OMP_NUM_THREADS``) the cores shared out, ``cores // jobs`` (at least one), unless it is set already (to
-    something other than nothing).
+    """The environment of each scene's process when ``jobs`` run at once: this one's, with the cores shared out,
+    ``cores // jobs`` each (at least one; ``cores`` None: ``_devices.usable_cores``) — the tolerance study's worker
+    processes (``DOEFAB_CORES``) and torch's threads (``OMP_NUM_THREADS``, unless set to something already) — and
+    Python's output unbuffered, so each log is up to date (also when a scene is killed).
 
-    Example: ``lane_env(2, cores=2)["OMP_NUM_THREADS"] == "1"`` where the variable is not set."""
-    cores = cores or len(os.sched_getaffinity(0))
-    env = dict(os.environ)
+    Example: ``lane_env(2, cores=2)["DOEFAB_CORES"] == "1"``."""
+    from doefab._devices import CORES_ENV, usable_cores
+
+    share = str(max(1, (cores or usable_cores()) // jobs))
+    env = {**os.environ, CORES_ENV: share, "PYTHONUNBUFFERED": "1"}
     if not env.get("OMP_NUM_THREADS", "").strip():  # unset or empty
-        env["OMP_NUM_THREADS"] = str(max(1, cores // jobs))
+        env["OMP_NUM_THREADS"] = share
     return env
 
 
@@ -72,7 +73,8 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     its output (stdout and stderr) to the file ``log``; returns (exit status, the name of the item that failed, or
     None). Once one fails no other starts, and the running ones finish (their finished stages are kept either way).
     Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed on to each): the running ones are
-    waited for while they clean up (a second Ctrl-C kills them) and the status is 130 or 143.
+    waited for while they clean up (a second Ctrl-C kills them) and the status is 130 or 143. Any other error
+    here stops the running ones (SIGTERM) before it is raised.
 
     Example: ``run_lanes([("a", [sys.executable, "-c", "pass"], Path("a.log"))], 2) == (0, None)``."""
     from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
@@ -81,37 +83,40 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     try:
         while running or (pending and not failed[0]):
             while pending and not failed[0] and len(running) < jobs:
-                running.update(_start(*pending.pop(0), env))
-            child = _finished(running)
-            name, log, start = running.pop(child)
-            rc = 128 - child.returncode if child.returncode < 0 else child.returncode
-            _say_done(name, log, rc, time.perf_counter() - start)
-            if rc and not failed[0]:
-                failed = (rc, name)
+                _start(running, *pending.pop(0), env)
+            for child in _ended(running):  # every one that ended, before any other starts
+                name, log, start = running.pop(child)
+                rc = 128 - child.returncode if child.returncode < 0 else child.returncode
+                _say_done(name, log, rc, time.perf_counter() - start)
+                if rc and not failed[0]:
+                    failed = (rc, name)
     except KeyboardInterrupt as exc:
         status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
         _stop(running, status == EXIT_TERMINATED)
         return status, None
+    except BaseException:
+        _stop(running, True)
+        raise
     return failed
 
 
-def _start(name: str, cmd: list[str], log: Path, env) -> dict:
+def _start(running: dict, name: str, cmd: list[str], log: Path, env) -> None:
+    """Start ``cmd`` with its output to ``log`` and add it to ``running``."""
     import subprocess
 
     log = Path(log)
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "w") as out:
-        child = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+        running[subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)] = (name, log, time.perf_counter())
     print(f"[doefab run] {name}: started; its output goes to {log}", flush=True)
-    return {child: (name, log, time.perf_counter())}
 
 
-def _finished(running: dict):
-    """The first of the ``running`` processes to end (looked at every ``POLL_S`` seconds)."""
+def _ended(running: dict) -> list:
+    """The ``running`` processes that have ended, once at least one has (looked at every ``POLL_S`` seconds)."""
     while True:
-        for child in running:
-            if child.poll() is not None:
-                return child
+        ended = [child for child in running if child.poll() is not None]
+        if ended:
+            return ended
         time.sleep(POLL_S)
 
 
@@ -158,7 +163,9 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
     """Start a scene's process and wait for it; returns (exit status, what happened in words). A death by signal
     N is status 128 + N. On Ctrl-C (which the terminal sends to the scene too) or SIGTERM (``Terminated``, passed
     on here) the scene is waited for while it cleans up, and the status is 130 or 143 whatever the scene
-    returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short)."""
+    returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short).
+
+    Example: ``run_scene_process([sys.executable, "-c", "raise SystemExit(3)"]) == (3, "failed (exit status 3)")``."""
     import signal
     import subprocess
 
@@ -188,7 +195,7 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
 
 
 def describe_status(rc: int) -> str:
-    """A scene process's exit status in words."""
+    """A scene process's exit status in words. Example: ``describe_status(2) == "failed (exit status 2)"``."""
     import signal
 
     from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED

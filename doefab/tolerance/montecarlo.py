@@ -227,12 +227,12 @@ def _bar(total, desc, progress):
 
 
 def auto_workers(samples: int) -> int:
-    """Worker processes for ``samples`` parts: one per usable core, or in process (1) when there are too few
-    parts to repay each worker's start-up (it builds its own judge, ~5 s for a grating design)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count() or 1
+    """Worker processes for ``samples`` parts: one per usable core (``_devices.usable_cores``: a scene of ``doefab
+    run --jobs`` its share), or in process (1) when there are too few parts to repay each worker's start-up (it
+    builds its own judge, ~5 s for a grating design)."""
+    from doefab._devices import usable_cores
+
+    cores = usable_cores()
     return cores if cores > 1 and samples >= 4 * cores else 1
 
 

@@ -28,12 +28,23 @@ def test_auto_runs_one_scene_per_core_as_far_as_memory_allows():
 def test_each_scene_gets_its_share_of_the_cores_unless_the_user_set_the_threads(monkeypatch):
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     assert lane_env(2, cores=2)["OMP_NUM_THREADS"] == "1"
-    assert lane_env(2, cores=8)["OMP_NUM_THREADS"] == "4"
-    assert lane_env(3, cores=2)["OMP_NUM_THREADS"] == "1"
+    assert lane_env(2, cores=8)["OMP_NUM_THREADS"] == lane_env(2, cores=8)["DOEFAB_CORES"] == "4"
+    assert lane_env(3, cores=2)["OMP_NUM_THREADS"] == "1" and lane_env(3, cores=2)["PYTHONUNBUFFERED"] == "1"
     monkeypatch.setenv("OMP_NUM_THREADS", "")  # set to nothing: torch's OpenMP would refuse it
     assert lane_env(2, cores=2)["OMP_NUM_THREADS"] == "1"
     monkeypatch.setenv("OMP_NUM_THREADS", "6")
-    assert lane_env(2, cores=2)["OMP_NUM_THREADS"] == "6"
+    assert lane_env(2, cores=2)["OMP_NUM_THREADS"] == "6" and lane_env(2, cores=2)["DOEFAB_CORES"] == "1"
+
+
+def test_a_scene_side_by_side_starts_as_many_tolerance_workers_as_its_share_of_the_cores(monkeypatch, tmp_path):
+    """The environment reaches each scene, and the tolerance study's worker count (``montecarlo.auto_workers``)
+    reads its share there: two scenes on fourteen cores each start seven workers, whatever this machine has."""
+    code = ("from doefab.tolerance.montecarlo import auto_workers; import os; "
+            "print(os.environ['OMP_NUM_THREADS'], auto_workers(1000))")
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    items = [(n, [sys.executable, "-c", code], tmp_path / f"{n}.log") for n in "ab"]
+    assert run_lanes(items, 2, lane_env(2, cores=14)) == (0, None)
+    assert (tmp_path / "a.log").read_text() == (tmp_path / "b.log").read_text() == "7 7\n"
 
 
 def _meets(mine, other, timeout=60):
@@ -47,7 +58,8 @@ def _meets(mine, other, timeout=60):
 
 def test_scenes_run_side_by_side_each_with_its_own_log(tmp_path, capsys):
     a, b = tmp_path / "a.flag", tmp_path / "b.flag"
-    items = [("a.toml", _meets(a, b), tmp_path / "logs" / "a.log"), ("b.toml", _meets(b, a), tmp_path / "logs" / "b.log")]
+    items = [("a.toml", _meets(a, b), tmp_path / "logs" / "a.log"),
+             ("b.toml", _meets(b, a), tmp_path / "logs" / "b.log")]
     assert run_lanes(items, 2) == (0, None)
     assert (tmp_path / "logs" / "a.log").read_text() == "wrote a.flag\nmet\n"
     assert (tmp_path / "logs" / "b.log").read_text() == "wrote b.flag\nmet\n"
@@ -58,8 +70,9 @@ def test_scenes_run_side_by_side_each_with_its_own_log(tmp_path, capsys):
 
 def test_one_at_a_time_they_do_not_overlap(tmp_path):
     a, b = tmp_path / "a.flag", tmp_path / "b.flag"
-    items = [("a", _meets(a, b, timeout=1), tmp_path / "a.log"), ("b", [sys.executable, "-c", "pass"], tmp_path / "b.log")]
-    assert run_lanes(items, 1) == (5, "a")  # a waited for b in vain: b had not started
+    items = [("a", _meets(a, b, timeout=1), tmp_path / "a.log"),
+             ("b", [sys.executable, "-c", "pass"], tmp_path / "b.log")]
+    assert run_lanes(items, 1) == (5, "a")  # a waited in vain for b.flag, which no process writes
     assert not (tmp_path / "b.log").exists()  # and after a failure no other scene starts
 
 
@@ -74,3 +87,16 @@ def test_a_failure_stops_what_has_not_started_lets_the_running_finish_and_shows_
     err = capsys.readouterr().err
     assert "[doefab run] bad failed (exit status 3)" in err and "    stage 3: bad input, fix it" in err
     assert "progress" not in err  # a progress bar's earlier states are not shown
+
+
+def test_scenes_that_end_together_are_all_seen_before_another_starts(tmp_path, monkeypatch):
+    """A scene that fails in the same look as one that succeeds (the one that succeeded listed first) still
+    keeps any further scene from starting."""
+    from doefab.cli import _lanes
+
+    monkeypatch.setattr(_lanes, "POLL_S", 3.0)  # both end within one look
+    ok = [sys.executable, "-c", "pass"]
+    bad = [sys.executable, "-c", "raise SystemExit(4)"]
+    items = [("ok", ok, tmp_path / "ok.log"), ("bad", bad, tmp_path / "bad.log"), ("later", ok, tmp_path / "l.log")]
+    assert run_lanes(items, 2) == (4, "bad")
+    assert not (tmp_path / "l.log").exists()

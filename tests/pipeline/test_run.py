@@ -197,7 +197,8 @@ def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
             assert r["stages"]["holder"]["reused_from_previous_run"] is reused, (force, name)
             assert (tmp_path / "out" / "run" / name / "holder" / "stage.json").is_file()
             # side by side each scene's output goes to a log of its own; one after another, to the terminal
-            assert log(name).is_file() == (jobs == "2") or jobs == "auto", (jobs, name)
+            if jobs != "auto":  # auto: one at a time or side by side, as this machine's cores and memory allow
+                assert log(name).is_file() == (jobs == "2"), (jobs, name)
             if jobs == "2":
                 assert f"{name}.toml: " in log(name).read_text() and "report" in log(name).read_text()
                 log(name).unlink()
