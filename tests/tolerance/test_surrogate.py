@@ -199,7 +199,7 @@ def test_the_study_validates_on_parts_neither_fit_nor_calibration_saw(monkeypatc
 def test_a_study_resumed_with_more_monte_carlo_parts_keeps_its_fit_and_validates_on_them(monkeypatch, tmp_path):
     """The surrogate step of a study with 3 direct Monte Carlo parts (validated on 16 held-out parts of its own),
     then of the same study resumed with 20: the fit, its calibration and its yield are kept (no part judged again)
-    and it is validated on the 20, paired part by part."""
+    and it is validated on the 20, paired part by part; with 3 again, its held-out parts are kept too."""
     from functools import partial
 
     from doefab.tolerance import report, surrogate
@@ -212,13 +212,14 @@ def test_a_study_resumed_with_more_monte_carlo_parts_keeps_its_fit_and_validates
     rows = [{"errors": p.to_json(), "metric": metric(p)} for p in (
         sample_errors(budget, np.random.default_rng(c), seed=int(c.generate_state(1)[0]), n_masks=4) for c in children)]
     spec, runs = {"hdr": {"psf_metric_min": 0.66}}, []
-    for n in (3, 20):
+    for n in (3, 20, 3):
         judged.clear()
         reused = []
         res = {"nominal": {"psf": {"psf_metric": M0}}, "samples": rows[:n]}
         runs.append((report._surrogate(tmp_path, {"study": 1}, reused, res, "toy", budget, 1, spec, "hdr", False),
                      len(judged), reused))
-    (first, n_first, _), (second, n_second, reused) = runs
+    (first, n_first, _), (second, n_second, reused), (third, n_third, reused_third) = runs
+    assert reused_third == ["surrogate", "surrogate_holdout"] and n_third == 0 and third == first
     assert first["validation"]["parts"] == "held-out parts of its own" and n_first == first["model"]["parts"] + 32
     assert reused == ["surrogate"] and n_second == 0
     assert second["model"] == first["model"] and second["yield"] == first["yield"]
