@@ -86,7 +86,7 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
                 _start(running, *pending.pop(0), env)
             for child in _ended(running):  # every one that ended, before any other starts
                 name, log, start = running.pop(child)
-                rc = 128 - child.returncode if child.returncode < 0 else child.returncode
+                rc = _status(child.returncode)
                 _say_done(name, log, rc, time.perf_counter() - start)
                 if rc and not failed[0]:
                     failed = (rc, name)
@@ -141,14 +141,15 @@ def _last_lines(log: Path, n: int) -> list[str]:
     return [ln for ln in lines if ln.strip()][-n:]
 
 
-def _stop(running: dict, terminate: bool) -> None:
+def _stop(running, terminate: bool) -> bool:
     """Wait for every ``running`` process after an interrupt, SIGTERM passed on to each first when ``terminate``;
-    a second Ctrl-C kills those still running."""
+    a second Ctrl-C kills those still running. Returns whether they were killed."""
     import signal
 
     if terminate:
         for child in running:
             child.send_signal(signal.SIGTERM)
+    killed = False
     for child in running:
         while True:
             try:
@@ -157,6 +158,13 @@ def _stop(running: dict, terminate: bool) -> None:
             except KeyboardInterrupt:
                 for c in running:
                     c.kill()
+                killed = True
+    return killed
+
+
+def _status(returncode: int) -> int:
+    """A process's exit status as a shell gives it: a death by signal N is 128 + N."""
+    return 128 - returncode if returncode < 0 else returncode
 
 
 def run_scene_process(cmd: list[str]) -> tuple[int, str]:
@@ -166,7 +174,6 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
     returned; a second Ctrl-C kills it (a second SIGTERM is ignored: the clean-up is not cut short).
 
     Example: ``run_scene_process([sys.executable, "-c", "raise SystemExit(3)"]) == (3, "failed (exit status 3)")``."""
-    import signal
     import subprocess
 
     from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
@@ -179,19 +186,9 @@ def run_scene_process(cmd: list[str]) -> tuple[int, str]:
         if child is None:
             raise
         status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
-        if status == EXIT_TERMINATED:
-            child.send_signal(signal.SIGTERM)
-        how = describe_status(status)
-        while True:
-            try:
-                child.wait()
-                break
-            except KeyboardInterrupt:
-                child.kill()
-                how += "; killed at the second interrupt"
-        return status, how
-    rc = 128 - rc if rc < 0 else rc
-    return rc, describe_status(rc)
+        killed = _stop([child], status == EXIT_TERMINATED)
+        return status, describe_status(status) + ("; killed at the second interrupt" if killed else "")
+    return _status(rc), describe_status(_status(rc))
 
 
 def describe_status(rc: int) -> str:
