@@ -70,11 +70,12 @@ def lane_env(jobs: int, cores: int | None = None) -> dict:
 
 def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     """Run each ``(name, command, log)`` of ``items`` as a process of its own, up to ``jobs`` at a time in order,
-    its output (stdout and stderr) to the file ``log``; returns (exit status, the name of the item that failed, or
-    None). Once one fails no other starts, and the running ones finish (their finished stages are kept either way).
-    Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed on to each): the running ones are
-    waited for while they clean up (a second Ctrl-C kills them) and the status is 130 or 143. Any other error
-    here stops the running ones (SIGTERM) before it is raised.
+    its output (stdout and stderr) to the file ``log``; returns (exit status, what stopped them in words — e.g.
+    "b failed (exit status 3)" — or None). Once one fails no other starts, and the running ones finish (their
+    finished stages are kept either way). Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed
+    on to each): the running ones are waited for while they clean up (a second Ctrl-C kills them), each one's end
+    is shown as any other's, and the status is 130 or 143, the words naming a scene that had failed before. Any
+    other error here stops the running ones (SIGTERM) before it is raised.
 
     Example: ``run_lanes([("a", [sys.executable, "-c", "pass"], Path("a.log"))], 2) == (0, None)``."""
     from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated
@@ -85,15 +86,17 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
             while pending and not failed[0] and len(running) < jobs:
                 _start(running, *pending.pop(0), env)
             for child in _ended(running):  # every one that ended, before any other starts
-                name, log, start = running.pop(child)
-                rc = _status(child.returncode)
-                _say_done(name, log, rc, time.perf_counter() - start)
+                name, rc = _end(running, child)
                 if rc and not failed[0]:
-                    failed = (rc, name)
+                    failed = (rc, f"{name} {describe_status(rc)}")
     except KeyboardInterrupt as exc:
         status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
-        _stop(running, status == EXIT_TERMINATED)
-        return status, None
+        killed = _stop(running, status == EXIT_TERMINATED)
+        for child in list(running):
+            _end(running, child)
+        what = describe_status(status).replace("was ", "were ", 1)
+        return status, (f"the scenes {what}" + (f" after {failed[1]}" if failed[0] else "")
+                        + ("; killed at the second interrupt" if killed else ""))
     except BaseException:
         _stop(running, True)
         raise
@@ -109,6 +112,14 @@ def _start(running: dict, name: str, cmd: list[str], log: Path, env) -> None:
     with open(log, "w") as out:
         running[subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)] = (name, log, time.perf_counter())
     print(f"[doefab run] {name}: started; its output goes to {log}", flush=True)
+
+
+def _end(running: dict, child) -> tuple[str, int]:
+    """Take the ended ``child`` out of ``running`` and say how it ended; returns (its name, its exit status)."""
+    name, log, start = running.pop(child)
+    rc = _status(child.returncode)
+    _say_done(name, log, rc, time.perf_counter() - start)
+    return name, rc
 
 
 def _ended(running: dict) -> list:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 
 from doefab.cli._args import add_device_arg
-from doefab.cli._lanes import describe_status, jobs_arg, run_scene_process
+from doefab.cli._lanes import jobs_arg, run_scene_process
 
 
 def register(sub) -> None:
@@ -106,17 +106,15 @@ def run_each_in_own_process(args) -> int:
         env = lane_env(jobs)
         print(f"[doefab run] {len(commands)} scenes, {jobs} at a time (torch on {env['OMP_NUM_THREADS']} thread(s) "
               f"each; --jobs 1 runs them one after another)", flush=True)
-        rc, scene = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
-                              jobs, env)
-        how = describe_status(rc) if scene else describe_status(rc).replace("was ", "were ", 1)
+        rc, what = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
+                             jobs, env)
     else:
-        rc = scene = 0
+        rc, what = 0, None
         for s, cmd in zip(args.scene, commands):
             rc, how = run_scene_process(cmd)
             if rc:
-                scene = s
+                what = f"{s} {how}"
                 break
     if rc:
-        print(f"[doefab run] stopped: {scene or 'the scenes'} {how}; the scenes not yet started were not run",
-              file=sys.stderr)
+        print(f"[doefab run] stopped: {what}; the scenes not yet started were not run", file=sys.stderr)
     return rc

@@ -72,7 +72,8 @@ def test_one_at_a_time_they_do_not_overlap(tmp_path):
     a, b = tmp_path / "a.flag", tmp_path / "b.flag"
     items = [("a", _meets(a, b, timeout=1), tmp_path / "a.log"),
              ("b", [sys.executable, "-c", "pass"], tmp_path / "b.log")]
-    assert run_lanes(items, 1) == (5, "a")  # a waited in vain for b.flag, which no process writes
+    # a waited in vain for b.flag, which no process writes
+    assert run_lanes(items, 1) == (5, "a failed (exit status 5)")
     assert not (tmp_path / "b.log").exists()  # and after a failure no other scene starts
 
 
@@ -82,7 +83,7 @@ def test_a_failure_stops_what_has_not_started_lets_the_running_finish_and_shows_
     never = [sys.executable, "-c", "pass"]
     items = [("slow", slow, tmp_path / "slow.log"), ("bad", fail, tmp_path / "bad.log"),
              ("later", never, tmp_path / "later.log")]
-    assert run_lanes(items, 2) == (3, "bad")
+    assert run_lanes(items, 2) == (3, "bad failed (exit status 3)")
     assert (tmp_path / "slow.log").read_text() == "slow done\n" and not (tmp_path / "later.log").exists()
     err = capsys.readouterr().err
     assert "[doefab run] bad failed (exit status 3)" in err and "    stage 3: bad input, fix it" in err
@@ -98,5 +99,98 @@ def test_scenes_that_end_together_are_all_seen_before_another_starts(tmp_path, m
     ok = [sys.executable, "-c", "pass"]
     bad = [sys.executable, "-c", "raise SystemExit(4)"]
     items = [("ok", ok, tmp_path / "ok.log"), ("bad", bad, tmp_path / "bad.log"), ("later", ok, tmp_path / "l.log")]
-    assert run_lanes(items, 2) == (4, "bad")
+    assert run_lanes(items, 2) == (4, "bad failed (exit status 4)")
     assert not (tmp_path / "l.log").exists()
+
+
+def _cleans_up(flag, on="SIGINT", status=130):
+    """A scene that says it started, then waits; on signal ``on`` it writes ``flag`` (its clean-up) and exits with
+    ``status`` (as ``doefab run`` does on Ctrl-C or SIGTERM); on nothing it gives up after a minute (exit 5)."""
+    code = (f"import pathlib, signal, sys, time\n"
+            f"def stop(*_):\n    pathlib.Path({str(flag)!r}).write_text('x'); print('cleaned up'); sys.exit({status})\n"
+            f"signal.signal(signal.{on}, stop); print('started', flush=True); time.sleep(60); sys.exit(5)")
+    return [sys.executable, "-c", code]
+
+
+def _interrupt_once_started(monkeypatch, logs, interrupt):
+    """Patch the wait for scenes to end: once every log in ``logs`` says "started", call ``interrupt`` (which sends
+    the signals and raises as the signal would) instead of waiting."""
+    import time
+
+    from doefab.cli import _lanes
+
+    def look(running):
+        while True:
+            ended = [child for child in running if child.poll() is not None]
+            if ended:
+                return ended
+            if all(log.exists() and "started" in log.read_text() for log in logs):
+                interrupt(running)
+            time.sleep(0.05)
+
+    monkeypatch.setattr(_lanes, "_ended", look)
+
+
+def test_ctrl_c_waits_for_the_scenes_to_clean_up_and_names_the_one_that_had_failed(tmp_path, monkeypatch, capsys):
+    """Ctrl-C reaches every scene from the terminal (here: sent to each) while one had already failed: the running
+    scene cleans up, its end is shown, no further scene starts, the status is 130 and the words keep the failure."""
+    import signal
+
+    from doefab.cli._exits import EXIT_INTERRUPTED
+
+    flag, log = tmp_path / "cleaned", tmp_path / "long.log"
+    bad = [sys.executable, "-c", "print('started'); raise SystemExit(3)"]
+    items = [("long", _cleans_up(flag), log), ("bad", bad, tmp_path / "bad.log"),
+             ("later", [sys.executable, "-c", "pass"], tmp_path / "later.log")]
+
+    def ctrl_c(running):
+        for child in running:
+            child.send_signal(signal.SIGINT)
+        raise KeyboardInterrupt
+
+    _interrupt_once_started(monkeypatch, [log, tmp_path / "bad.log"], ctrl_c)
+    rc, what = run_lanes(items, 2)
+    assert rc == EXIT_INTERRUPTED and flag.exists() and not (tmp_path / "later.log").exists()
+    assert what == "the scenes were interrupted (Ctrl-C) after bad failed (exit status 3)"
+    err = capsys.readouterr().err
+    assert "[doefab run] long was interrupted (Ctrl-C)" in err and "    cleaned up" in err
+
+
+def test_sigterm_is_passed_on_to_each_scene_and_waited_for(tmp_path, monkeypatch, capsys):
+    from doefab.cli._exits import EXIT_TERMINATED, Terminated
+
+    flags = [tmp_path / "a.done", tmp_path / "b.done"]
+    logs = [tmp_path / "a.log", tmp_path / "b.log"]
+    items = [(n, _cleans_up(f, on="SIGTERM", status=143), log) for n, f, log in zip("ab", flags, logs)]
+
+    def sigterm(running):  # only this process gets it: run_lanes must pass it on
+        raise Terminated
+
+    _interrupt_once_started(monkeypatch, logs, sigterm)
+    assert run_lanes(items, 2) == (EXIT_TERMINATED, "the scenes were terminated (SIGTERM)")
+    assert all(f.exists() for f in flags)
+    err = capsys.readouterr().err
+    assert "[doefab run] a was terminated (SIGTERM)" in err and "[doefab run] b was terminated (SIGTERM)" in err
+
+
+def test_a_second_ctrl_c_kills_a_scene_still_cleaning_up(tmp_path):
+    """A scene that ignores SIGTERM keeps ``_stop`` waiting; a Ctrl-C then (sent here to this process a moment
+    later) kills it."""
+    import os
+    import signal
+    import subprocess
+    import threading
+
+    from doefab.cli._lanes import _stop
+
+    child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGTERM, "
+                              "signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"], stdout=subprocess.PIPE)
+    assert child.stdout.readline() == b"ready\n"
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        assert _stop([child], terminate=True) is True
+    finally:
+        timer.cancel()
+        child.kill()
+    assert child.wait() == -signal.SIGKILL

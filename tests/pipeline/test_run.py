@@ -205,7 +205,7 @@ def test_several_scenes_run_each_in_a_process_of_its_own(tmp_path, monkeypatch):
 
 
 def test_a_scene_process_killed_by_a_signal_is_named():
-    from doefab.cli.run import describe_status, run_scene_process
+    from doefab.cli._lanes import describe_status, run_scene_process
 
     rc, how = run_scene_process([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
     assert rc == 137 and "SIGKILL" in how and "memory" in how
