@@ -19,6 +19,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -275,7 +276,10 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
             from doefab.tolerance.conditions import model_sources_sha256
 
             here, device = model_sources_sha256(), remote_worker_device(default_device())  # for both checks
-            _check_worker_code(client, here)
+            if not _check_worker_code(client, here):  # the parts wait for a worker: say so, not a silent bar
+                print(f"doefab tolerance: the scheduler {scheduler} has no workers yet; the parts wait for one (start "
+                      f"it with: dask worker {scheduler}); Ctrl-C stops and keeps the parts judged by then",
+                      file=sys.stderr, flush=True)
             client.run(_set_default_device, device)
             fn, head = _part_on_worker, (here, device)
         study = uuid.uuid4().hex[:12]  # this study's own keys: a shared scheduler never answers another's part
@@ -293,18 +297,20 @@ def _run_dask(scheduler, ddir, supersample, todo, errs, record, networks=False, 
             cluster.close()
 
 
-def _check_worker_code(client, here: str) -> None:
+def _check_worker_code(client, here: str) -> int:
     """Refuse a ``tcp://`` scheduler whose workers compute parts with other code than this process's, ``here``
     (``conditions.model_sources_sha256``; another doefab version or a modified copy): their parts would be mixed
-    into this study without a sign."""
+    into this study without a sign. Returns how many workers it has now."""
     from doefab.tolerance.conditions import model_sources_sha256
 
     try:
-        other = sorted(w for w, d in client.run(model_sources_sha256).items() if d != here)
+        digests = client.run(model_sources_sha256)
     except (ImportError, AttributeError):  # a doefab without the digest: an older version
-        other = ["(some)"]
+        digests = {"(some)": None}
+    other = sorted(w for w, d in digests.items() if d != here)
     if other:
         raise DoefabError(_other_code_text(other))
+    return len(digests)
 
 
 def _other_code_text(workers: list[str]) -> str:

@@ -784,6 +784,41 @@ def test_studies_sharing_a_dask_scheduler_keep_their_own_parts_and_its_workers_r
     assert len(keys) == 6  # refused before any part was submitted
 
 
+def test_a_dask_scheduler_without_workers_is_said_before_the_parts_wait(monkeypatch, capsys):
+    """A ``tcp://`` scheduler with no worker yet: the parts wait for one (a worker may join later), and the terminal
+    says so and how to start one, instead of a progress bar that never moves; with a worker nothing is said."""
+    pytest.importorskip("dask.distributed")
+    import dask.distributed as dd
+
+    from doefab.tolerance.conditions import model_sources_sha256
+
+    workers = {}
+
+    class FakeClient:
+        def __init__(self, address):
+            pass
+
+        def run(self, fn, *args):
+            return dict(workers) if fn is model_sources_sha256 else {}
+
+        def submit(self, fn, *args, key, **kw):
+            return key
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(dd, "Client", FakeClient)
+    monkeypatch.setattr(dd, "as_completed", lambda futs: [])  # what arrives later is not this test's
+    errs = {0: PartErrors()}
+    montecarlo._run_dask("tcp://10.1.2.3:8786", "d", 1, [0], errs, lambda i, r: None)
+    err = capsys.readouterr().err
+    assert "the scheduler tcp://10.1.2.3:8786 has no workers yet" in err
+    assert "dask worker tcp://10.1.2.3:8786" in err
+    workers["tcp://w1"] = model_sources_sha256()
+    montecarlo._run_dask("tcp://10.1.2.3:8786", "d", 1, [0], errs, lambda i, r: None)
+    assert capsys.readouterr().err == ""
+
+
 def test_a_dask_worker_that_joins_after_the_check_with_other_code_is_refused_at_its_part(monkeypatch):
     """The check of a ``tcp://`` scheduler's workers runs at the study's start; a worker that joins later is checked
     where it computes a part (``_part_on_worker``: this process's part-model digest goes with each part), and its
