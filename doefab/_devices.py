@@ -18,7 +18,7 @@ from doefab.errors import DoefabError
 
 __all__ = ["DEVICE_WORDS", "ENV", "CORES_ENV", "check_device", "device_syntax",
            "resolve_device", "default_device", "using_device", "to_device",
-           "describe_device", "usable_cores"]
+           "describe_device", "usable_cores", "visible_gpus"]
 
 DEVICE_WORDS = ("auto", "cpu", "cuda", "cuda:N")
 ENV = "DOEFAB_DEVICE"  # the default device of this process and the worker processes it starts
@@ -45,6 +45,20 @@ def usable_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:
         return os.cpu_count() or 1
+
+
+def visible_gpus() -> list[str]:
+    """The GPUs this process sees, as ``CUDA_VISIBLE_DEVICES`` names them (its entries where it is set, else
+    0..N-1 for the N that torch sees; none on a machine without CUDA): the values that give a child process one
+    GPU of its own.
+
+    Example: with ``CUDA_VISIBLE_DEVICES=4,5``, ``visible_gpus() == ["4", "5"]``."""
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if visible is not None:
+        return [g.strip() for g in visible.split(",") if g.strip()]
+    import torch
+
+    return [str(i) for i in range(torch.cuda.device_count())]
 
 
 def _example(name: str, value: str) -> str:

@@ -15,7 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["SCENE_BYTES", "jobs_arg", "scene_jobs", "lane_env", "run_lanes", "run_scene_process", "describe_status"]
+__all__ = ["SCENE_BYTES", "jobs_arg", "scene_jobs", "scene_gpus", "lane_env", "run_lanes", "run_scene_process",
+           "describe_status"]
 
 #: the memory ``--jobs auto`` plans per scene: the shipped main job's peak, one scene at a time, a scene's process
 #: and its tolerance workers together (10.8 GiB, ``docs/results/main-job.md``; two side by side peaked at 15.4 GiB)
@@ -37,11 +38,12 @@ def jobs_arg(text: str):
     return n
 
 
-def scene_jobs(jobs, scenes: int, cores: int | None = None, available: int | None = None) -> int:
+def scene_jobs(jobs, scenes: int, cores: int | None = None, available: int | None = None,
+               gpus: int | None = None) -> int:
     """How many of ``scenes`` scenes run at once for ``jobs`` (``jobs_arg``'s "auto" or N): N, at most one per
     scene; "auto": one per core this process may use (``cores``; None: ``_devices.usable_cores``), no more than
-    fit, ``SCENE_BYTES`` each, in the memory available (``available`` bytes; None: not known, not limiting), at
-    least one.
+    fit, ``SCENE_BYTES`` each, in the memory available (``available`` bytes; None: not known, not limiting), and
+    no more than ``gpus`` where the scenes compute on GPUs (``scene_gpus``; None: not limiting), at least one.
 
     Example: ``scene_jobs("auto", 3, cores=2, available=64 * 2**30) == 2``."""
     from doefab._devices import usable_cores
@@ -49,14 +51,29 @@ def scene_jobs(jobs, scenes: int, cores: int | None = None, available: int | Non
     if jobs != "auto":
         return max(1, min(int(jobs), scenes))
     fit = scenes if available is None else available // SCENE_BYTES
-    return max(1, min(scenes, cores or usable_cores(), fit))
+    return max(1, min(scenes, cores or usable_cores(), fit, scenes if gpus is None else gpus))
 
 
-def lane_env(jobs: int, cores: int | None = None) -> dict:
+def scene_gpus(devices: list[str], gpus: list[str]) -> tuple[int | None, list[str]]:
+    """For scenes computing on ``devices`` (each the device in effect: the flag's, else the scene's, else the
+    default) on a machine that sees ``gpus`` (``_devices.visible_gpus``): (how many GPUs "auto" may keep busy,
+    None where no scene computes on one; the GPU each side-by-side lane is given, ``CUDA_VISIBLE_DEVICES``, in
+    turn — none where a scene names its GPU, ``cuda:N``: the user placed it). Two scenes on one GPU would share
+    its memory, so "auto" runs one scene per GPU, each on a GPU of its own.
+
+    Example: ``scene_gpus(["auto", "cuda"], ["0", "1"]) == (2, ["0", "1"])``."""
+    on_gpu = [d for d in devices if d.startswith("cuda") or (d == "auto" and gpus)]
+    if not on_gpu or not gpus:
+        return None, []
+    return len(gpus), ([] if any(":" in d for d in on_gpu) else list(gpus))
+
+
+def lane_env(jobs: int, cores: int | None = None, gpu: str | None = None) -> dict:
     """The environment of each scene's process when ``jobs`` run at once: this one's, with the cores shared out,
     ``cores // jobs`` each (at least one; ``cores`` None: ``_devices.usable_cores``) — the tolerance study's worker
-    processes (``DOEFAB_CORES``) and torch's threads (``OMP_NUM_THREADS``, unless set to something already) — and
-    Python's output unbuffered, so each log is up to date (also when a scene is killed).
+    processes (``DOEFAB_CORES``) and torch's threads (``OMP_NUM_THREADS``, unless set to something already) —,
+    Python's output unbuffered, so each log is up to date (also when a scene is killed), and ``gpu`` the one GPU
+    it sees (``CUDA_VISIBLE_DEVICES``; None: as this process).
 
     Example: ``lane_env(2, cores=2)["DOEFAB_CORES"] == "1"``."""
     from doefab._devices import CORES_ENV, usable_cores
@@ -65,12 +82,15 @@ def lane_env(jobs: int, cores: int | None = None) -> dict:
     env = {**os.environ, CORES_ENV: share, "PYTHONUNBUFFERED": "1"}
     if not env.get("OMP_NUM_THREADS", "").strip():  # unset or empty
         env["OMP_NUM_THREADS"] = share
+    if gpu is not None:
+        env["CUDA_VISIBLE_DEVICES"] = gpu
     return env
 
 
 def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     """Run each ``(name, command, log)`` of ``items`` as a process of its own, up to ``jobs`` at a time in order,
-    its output (stdout and stderr) to the file ``log``; returns (exit status, what stopped them in words — e.g.
+    its output (stdout and stderr) to the file ``log``, in the environment ``env`` (None: this one's; a function:
+    ``env(lane)`` for the lane 0..jobs-1 it starts in, the lowest free one); returns (exit status, what stopped them in words — e.g.
     "b failed (exit status 3)" — or None). Once one fails no other starts, and the running ones finish (their
     finished stages are kept either way). Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed
     on to each): the running ones are waited for while they clean up (a second Ctrl-C kills them), each one's end
@@ -84,7 +104,8 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     try:
         while running or (pending and not failed[0]):
             while pending and not failed[0] and len(running) < jobs:
-                _start(running, *pending.pop(0), env)
+                lane = min(set(range(jobs)) - {v[3] for v in running.values()})
+                _start(running, *pending.pop(0), env(lane) if callable(env) else env, lane)
             for child in _ended(running):  # every one that ended, before any other starts
                 name, rc = _end(running, child)
                 if rc and not failed[0]:
@@ -103,20 +124,21 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     return failed
 
 
-def _start(running: dict, name: str, cmd: list[str], log: Path, env) -> None:
-    """Start ``cmd`` with its output to ``log`` and add it to ``running``."""
+def _start(running: dict, name: str, cmd: list[str], log: Path, env, lane: int) -> None:
+    """Start ``cmd`` with its output to ``log`` and add it to ``running`` in ``lane``."""
     import subprocess
 
     log = Path(log)
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "w") as out:
-        running[subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)] = (name, log, time.perf_counter())
+        child = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+    running[child] = (name, log, time.perf_counter(), lane)
     print(f"[doefab run] {name}: started; its output goes to {log}", flush=True)
 
 
 def _end(running: dict, child) -> tuple[str, int]:
     """Take the ended ``child`` out of ``running`` and say how it ended; returns (its name, its exit status)."""
-    name, log, start = running.pop(child)
+    name, log, start, _ = running.pop(child)
     rc = _status(child.returncode)
     _say_done(name, log, rc, time.perf_counter() - start)
     return name, rc

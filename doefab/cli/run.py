@@ -26,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("--jobs", type=jobs_arg, default="auto", metavar="N",
                    help="with several scenes, how many run at once, each its own process with its output in "
                         "out/run/<scene name>.log: a number, or auto (default: one per core, as many as fit in "
-                        "the memory available at 11 GiB each); 1 runs them one after another on this terminal")
+                        "the memory available at 11 GiB each, one per GPU on GPUs); 1 runs them one after another "
+                        "on this terminal")
     add_device_arg(p, scene=True)
     p.set_defaults(func=run)
 
@@ -34,7 +35,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from pathlib import Path
 
-    from doefab._devices import check_device
+    from doefab._devices import check_device, default_device
     from doefab.errors import DoefabError
     from doefab.io import OutputDir
     from doefab.pipeline.run import prepare_scene, run_scene
@@ -56,7 +57,7 @@ def run(args) -> int:
         runs.append((sc, od, prepare_scene(sc, od.path, tuple(args.force))))
     if len(runs) > 1:
         del runs  # the checks' designs are not held while the scenes run
-        return run_each_in_own_process(args)
+        return run_each_in_own_process(args, [args.device or sc.device or default_device() for sc in scenes])
     sc, od, res = runs[0]
     args.outdir = od  # a failure removes what this scene's run created, unless a stage finished
     args.keep_on_failure = lambda: has_progress(od.path, sc.stages)
@@ -85,29 +86,34 @@ def shared_output_folders(scenes) -> None:
                           f"each alone with its own --out")
 
 
-def run_each_in_own_process(args) -> int:
+def run_each_in_own_process(args, devices: list[str]) -> int:
     """Run each of ``args.scene`` as its own ``doefab run SCENE`` process, ``args.jobs`` at a time
-    (``_lanes.scene_jobs``) in order; one at a time each prints to this terminal, several at once each to
-    out/run/<scene name>.log. Stops starting scenes at the first that fails (its exit status is returned; it printed
-    its own error). Ctrl-C reaches the running scenes from the terminal; SIGTERM is passed on to them; either way
-    this process waits for them, and no later scene starts."""
+    (``_lanes.scene_jobs``; ``devices``: each scene's device in effect — side by side on GPUs, each scene is given
+    one of its own, ``_lanes.scene_gpus``) in order; one at a time each prints to this terminal, several at once
+    each to out/run/<scene name>.log. Stops starting scenes at the first that fails (its exit status is returned; it
+    printed its own error). Ctrl-C reaches the running scenes from the terminal; SIGTERM is passed on to them;
+    either way this process waits for them, and no later scene starts."""
     import sys
     from pathlib import Path
 
+    from doefab._devices import device_syntax, visible_gpus
     from doefab._memory import available_bytes
-    from doefab.cli._lanes import lane_env, run_lanes, scene_jobs
+    from doefab.cli._lanes import lane_env, run_lanes, scene_gpus, scene_jobs
 
+    devices = [device_syntax(d) for d in devices]
+    gpus, pins = scene_gpus(devices, visible_gpus() if any(d != "cpu" for d in devices) else [])
     flags = ([f for stage in args.force for f in ("--force", stage)] + (["--quick"] if args.quick else [])
              + (["--debug"] if getattr(args, "debug", False) else [])
              + (["--device", args.device] if args.device is not None else []))
     commands = [[sys.executable, "-m", "doefab", "run", scene, *flags] for scene in args.scene]
-    jobs = scene_jobs(getattr(args, "jobs", 1), len(commands), available=available_bytes())
+    jobs = scene_jobs(getattr(args, "jobs", 1), len(commands), available=available_bytes(), gpus=gpus)
     if jobs > 1:
         env = lane_env(jobs)
+        on = f", each on GPU {' or '.join(pins[:jobs])} (CUDA_VISIBLE_DEVICES)" if pins else ""
         print(f"[doefab run] {len(commands)} scenes, {jobs} at a time (torch on {env['OMP_NUM_THREADS']} thread(s) "
-              f"each; --jobs 1 runs them one after another)", flush=True)
+              f"each{on}; --jobs 1 runs them one after another)", flush=True)
         rc, what = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
-                             jobs, env)
+                             jobs, (lambda lane: lane_env(jobs, gpu=pins[lane % len(pins)])) if pins else env)
     else:
         rc, what = 0, None
         for s, cmd in zip(args.scene, commands):

@@ -361,18 +361,12 @@ def worker_envs(n_workers: int, device=None) -> list[dict]:
 
     Example: with ``CUDA_VISIBLE_DEVICES=4,5``, ``worker_envs(3, "cuda")`` puts the workers on GPUs 4, 5 and 4.
     """
-    from doefab._devices import ENV, resolve_device
+    from doefab._devices import ENV, resolve_device, visible_gpus
 
     dev = resolve_device(device)
     if dev.type != "cuda":
         return [{} for _ in range(n_workers)]
-    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
-    if visible is not None:
-        gpus = [g.strip() for g in visible.split(",") if g.strip()]
-    else:
-        import torch
-
-        gpus = [str(i) for i in range(torch.cuda.device_count())]
+    gpus = visible_gpus()
     if dev.index is not None:
         gpus = [gpus[dev.index]]
     return [{"CUDA_VISIBLE_DEVICES": gpus[i % len(gpus)], ENV: "cuda"} for i in range(n_workers)]

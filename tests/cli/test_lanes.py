@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from doefab.cli._lanes import SCENE_BYTES, jobs_arg, lane_env, run_lanes, scene_jobs
+from doefab.cli._lanes import SCENE_BYTES, jobs_arg, lane_env, run_lanes, scene_gpus, scene_jobs
 
 
 def test_jobs_is_auto_or_a_whole_number_of_scenes():
@@ -194,3 +194,48 @@ def test_a_second_ctrl_c_kills_a_scene_still_cleaning_up(tmp_path):
         timer.cancel()
         child.kill()
     assert child.wait() == -signal.SIGKILL
+
+
+def test_on_gpus_auto_runs_one_scene_per_gpu_each_on_its_own():
+    assert scene_gpus(["auto", "cuda"], ["4", "5"]) == (2, ["4", "5"])  # as CUDA_VISIBLE_DEVICES names them
+    assert scene_gpus(["auto", "auto"], []) == (None, [])  # no GPU: auto is the CPU
+    assert scene_gpus(["cpu", "cpu"], ["0"]) == (None, [])  # on the CPU: the GPUs limit nothing
+    assert scene_gpus(["cuda:1", "auto"], ["0", "1"]) == (2, [])  # a scene placed on its GPU: not moved
+    assert scene_jobs("auto", 3, cores=16, available=64 * SCENE_BYTES, gpus=1) == 1
+    assert scene_jobs("auto", 3, cores=16, available=64 * SCENE_BYTES, gpus=2) == 2
+    assert scene_jobs(3, 3, gpus=1) == 3  # a number is the user's
+    assert lane_env(2, cores=2, gpu="5")["CUDA_VISIBLE_DEVICES"] == "5"
+
+
+def test_a_scene_starts_in_the_lane_that_came_free_with_its_environment(tmp_path):
+    """``env`` as a function of the lane: the third scene starts where the first ended (its GPU), while the second,
+    in the other lane, still runs (it waits for the third)."""
+    flag = tmp_path / "c.flag"
+    show = "import os; print(os.environ['LANE_GPU'])"
+    items = [("a", [sys.executable, "-c", show], tmp_path / "a.log"),
+             ("b", [sys.executable, "-c", show + "\n" + _meets(tmp_path / "b.flag", flag)[2]], tmp_path / "b.log"),
+             ("c", [sys.executable, "-c", show + f"; import pathlib; pathlib.Path({str(flag)!r}).write_text('x')"],
+              tmp_path / "c.log")]
+    assert run_lanes(items, 2, lambda lane: {**__import__("os").environ, "LANE_GPU": "gpu" + "01"[lane]}) == (0, None)
+    assert [(tmp_path / f"{n}.log").read_text().split()[0] for n in "abc"] == ["gpu0", "gpu1", "gpu0"]
+    assert (tmp_path / "b.log").read_text().split()[-1] == "met"
+
+
+def test_side_by_side_on_gpus_each_scene_sees_one_gpu_of_its_own(monkeypatch):
+    """``doefab run A B C`` on a machine with two GPUs (here told so): auto runs two scenes at a time, whatever
+    its cores and memory, the lanes on GPU 3 and GPU 7 as ``CUDA_VISIBLE_DEVICES`` named them."""
+    import doefab._devices as dv
+    import doefab._memory as mem
+    from doefab.cli import _lanes
+    from doefab.cli.run import run_each_in_own_process
+
+    seen = {}
+    monkeypatch.setattr(dv, "visible_gpus", lambda: ["3", "7"])
+    monkeypatch.setattr(dv, "usable_cores", lambda: 16)
+    monkeypatch.setattr(mem, "available_bytes", lambda: 64 * SCENE_BYTES)
+    monkeypatch.setattr(_lanes, "run_lanes", lambda items, jobs, env: seen.update(jobs=jobs, env=env) or (0, None))
+    args = argparse.Namespace(scene=["a.toml", "b.toml", "c.toml"], force=[], quick=True, device=None, jobs="auto")
+    assert run_each_in_own_process(args, ["auto", "cuda", "auto"]) == 0
+    assert seen["jobs"] == 2 and [seen["env"](lane)["CUDA_VISIBLE_DEVICES"] for lane in (0, 1)] == ["3", "7"]
+    assert run_each_in_own_process(args, ["cpu", "cpu", "cpu"]) == 0
+    assert seen["jobs"] == 3 and isinstance(seen["env"], dict)  # on the CPU: one per core, no GPU given
