@@ -68,18 +68,22 @@ def scene_gpus(devices: list[str], gpus: list[str]) -> tuple[int | None, list[st
     return len(gpus), ([] if any(":" in d for d in on_gpu) else list(gpus))
 
 
-def lane_env(jobs: int, cores: int | None = None, gpu: str | None = None) -> dict:
+def lane_env(jobs: int, cores: int | None = None, gpu: str | None = None, available: int | None = None) -> dict:
     """The environment of each scene's process when ``jobs`` run at once: this one's, with the cores shared out,
     ``cores // jobs`` each (at least one; ``cores`` None: ``_devices.usable_cores``) — the tolerance study's worker
-    processes (``DOEFAB_CORES``) and torch's threads (``OMP_NUM_THREADS``, unless set to something already) —,
-    Python's output unbuffered, so each log is up to date (also when a scene is killed), and ``gpu`` the one GPU
-    it sees (``CUDA_VISIBLE_DEVICES``; None: as this process).
+    processes (``DOEFAB_CORES``) and torch's threads (``OMP_NUM_THREADS``, unless set to something already) —, the
+    ``available`` bytes of memory too (``_memory.SHARE_ENV``, which the tolerance study's count of the parts that
+    fit reads; None: not shared out), Python's output unbuffered, so each log is up to date (also when a scene is
+    killed), and ``gpu`` the one GPU it sees (``CUDA_VISIBLE_DEVICES``; None: as this process).
 
     Example: ``lane_env(2, cores=2)["DOEFAB_CORES"] == "1"``."""
     from doefab._devices import CORES_ENV, usable_cores
+    from doefab._memory import SHARE_ENV
 
     share = str(max(1, (cores or usable_cores()) // jobs))
     env = {**os.environ, CORES_ENV: share, "PYTHONUNBUFFERED": "1"}
+    if available is not None:
+        env[SHARE_ENV] = str(max(1, available // jobs))
     if not env.get("OMP_NUM_THREADS", "").strip():  # unset or empty
         env["OMP_NUM_THREADS"] = share
     if gpu is not None:

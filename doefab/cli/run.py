@@ -106,14 +106,16 @@ def run_each_in_own_process(args, devices: list[str]) -> int:
              + (["--debug"] if getattr(args, "debug", False) else [])
              + (["--device", args.device] if args.device is not None else []))
     commands = [[sys.executable, "-m", "doefab", "run", scene, *flags] for scene in args.scene]
-    jobs = scene_jobs(getattr(args, "jobs", 1), len(commands), available=available_bytes(), gpus=gpus)
+    available = available_bytes()
+    jobs = scene_jobs(getattr(args, "jobs", 1), len(commands), available=available, gpus=gpus)
     if jobs > 1:
-        env = lane_env(jobs)
+        env = lane_env(jobs, available=available)
         on = f", each on GPU {' or '.join(pins[:jobs])} (CUDA_VISIBLE_DEVICES)" if pins else ""
         print(f"[doefab run] {len(commands)} scenes, {jobs} at a time (torch on {env['OMP_NUM_THREADS']} thread(s) "
               f"each{on}; --jobs 1 runs them one after another)", flush=True)
         rc, what = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
-                             jobs, (lambda lane: lane_env(jobs, gpu=pins[lane % len(pins)])) if pins else env)
+                             jobs, (lambda lane: lane_env(jobs, gpu=pins[lane % len(pins)], available=available)) if pins
+                             else env)
     else:
         rc, what = 0, None
         for s, cmd in zip(args.scene, commands):

@@ -79,7 +79,7 @@ def require_memory(size: tuple, grid: int, grids: tuple, bounds: dict | None = N
     grid do not fit in the memory available (``parts_that_fit``; ``size``: (DOE pixels across, masks, bands)); the
     message names the largest of the grid study's ``grids`` (``grid.GRIDS``) that fits and, from its ``bounds``
     ({grid: the task metric's error bound there}), what that grid costs in accuracy."""
-    from doefab._memory import available_bytes
+    from doefab._memory import SHARE_ENV, available_bytes, memory_share
     from doefab.errors import DoefabError
 
     have = available_bytes() if available is None else available  # read once: the message states what was judged
@@ -89,6 +89,9 @@ def require_memory(size: tuple, grid: int, grids: tuple, bounds: dict | None = N
     fits = [s for s in sorted(grids, reverse=True) if s < grid and parts_that_fit(size, s, have) >= parts]
     what = f"{parts} parts at once" if parts > 1 else "one part"
     where = f"on a machine with {math.ceil(need / 1e9)} GB free" + (", or with fewer workers" if parts > 1 else "")
+    if memory_share() is not None:  # a scene of doefab run --jobs, or the user's own limit
+        where += (f" ({SHARE_ENV} limits this process: doefab run --jobs gives each scene side by side its part of "
+                  f"the memory; fewer at once, e.g. --jobs 1, give each more)")
     if not fits:
         fix = f"run it {where}"
     else:

@@ -207,6 +207,20 @@ def test_on_gpus_auto_runs_one_scene_per_gpu_each_on_its_own():
     assert lane_env(2, cores=2, gpu="5")["CUDA_VISIBLE_DEVICES"] == "5"
 
 
+def test_each_scene_side_by_side_gets_its_share_of_the_memory(tmp_path, monkeypatch):
+    """The memory available is shared out like the cores: each scene counts no more than its part as available
+    (``_memory.available_bytes``, which the tolerance study's count of the parts that fit reads)."""
+    from doefab._memory import SHARE_ENV
+
+    assert lane_env(2, cores=2, available=8 * 2**30)[SHARE_ENV] == str(4 * 2**30)
+    monkeypatch.delenv(SHARE_ENV, raising=False)
+    assert SHARE_ENV not in lane_env(2, cores=2, available=None)  # not known: not shared out
+    code = "from doefab._memory import available_bytes; print(available_bytes() < 2**30)"
+    items = [("a", [sys.executable, "-c", code], tmp_path / "a.log")]
+    assert run_lanes(items, 2, lane_env(2, cores=2, available=2 * 2**30)) == (0, None)
+    assert (tmp_path / "a.log").read_text() == "True\n"
+
+
 def test_a_scene_starts_in_the_lane_that_came_free_with_its_environment(tmp_path):
     """``env`` as a function of the lane: the third scene starts where the first ended (its GPU), while the second,
     in the other lane, still runs (it waits for the third)."""

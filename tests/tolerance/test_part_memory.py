@@ -93,6 +93,15 @@ def test_a_study_that_does_not_fit_is_refused_naming_a_grid_the_study_measured()
     assert "supersample" not in str(e.value)
 
 
+def test_a_scene_side_by_side_that_does_not_fit_its_share_is_told_to_run_fewer_at_once(monkeypatch):
+    from doefab._memory import SHARE_ENV
+
+    size = (2000, 4, 3)
+    monkeypatch.setenv(SHARE_ENV, str(10**6))
+    with pytest.raises(DoefabError, match=f"{SHARE_ENV} limits this process.*--jobs 1"):
+        fields.require_memory(size, 1, GRIDS, available=10**6)
+
+
 def test_a_study_is_refused_before_any_part_when_memory_is_short(design_dir, tmp_path, monkeypatch):
     import doefab._memory
     from doefab.tolerance.errors import load_budget
