@@ -16,8 +16,8 @@ _TRIM_NEVER = 2**31 - 1  # bytes: the largest value mallopt takes (an int)
 # glibc's environment names for the two settings keep_freed_memory makes: no mmap'd blocks, no heap trimming
 MALLOC_ENV = {"MALLOC_MMAP_MAX_": "0", "MALLOC_TRIM_THRESHOLD_": str(_TRIM_NEVER)}
 _MALLOC_SET = False
-#: the memory, in bytes, that a process and the workers it starts share with no one (``doefab run --jobs`` gives each
-#: scene its part of what was available); ``available_bytes`` counts no more than it, less what this process holds
+#: the memory, in bytes, that a process and the workers it starts may count on (``doefab run --jobs`` gives each
+#: scene its part of what was available); ``available_bytes`` counts no more than it
 SHARE_ENV = "DOEFAB_MEMORY_BYTES"
 
 
@@ -53,7 +53,7 @@ def available_bytes() -> int | None:
     lowered to the room left under each cgroup memory limit above this process (v2: ``memory.max`` −
     ``memory.current``; v1: ``memory.limit_in_bytes`` − ``memory.usage_in_bytes``; the reclaimable inactive page
     cache counted as free) inside a container or a batch job, and to this process's share ``$DOEFAB_MEMORY_BYTES``
-    less what it holds, where that is set (``SHARE_ENV``; each scene of ``doefab run --jobs`` is given one); None where
+    where that is set (``SHARE_ENV``; each scene of ``doefab run --jobs`` is given one); None where
     nothing can be read (not Linux, no share).
 
     Example:
@@ -74,7 +74,7 @@ def available_bytes() -> int | None:
     found += _cgroup_rooms(Path("/sys/fs/cgroup"))
     share = memory_share()
     if share is not None:
-        found.append(max(0, share - _resident_bytes()))
+        found.append(share)
     return min(found) if found else None
 
 
@@ -88,17 +88,6 @@ def memory_share() -> int | None:
     except ValueError:
         return None
     return share if share >= 1 else None
-
-
-def _resident_bytes() -> int:
-    """The memory this process holds now (its resident set, ``/proc/self/statm``; 0 where that cannot be read)."""
-    import os
-
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, IndexError):
-        return 0
 
 
 def _cgroup_rooms(root) -> list[int]:

@@ -215,7 +215,7 @@ def test_each_scene_side_by_side_gets_its_share_of_the_memory(tmp_path, monkeypa
     assert lane_env(2, cores=2, available=8 * 2**30)[SHARE_ENV] == str(4 * 2**30)
     monkeypatch.delenv(SHARE_ENV, raising=False)
     assert SHARE_ENV not in lane_env(2, cores=2, available=None)  # not known: not shared out
-    code = "from doefab._memory import available_bytes; print(available_bytes() < 2**30)"
+    code = "from doefab._memory import available_bytes; print(available_bytes() == 2**30)"
     items = [("a", [sys.executable, "-c", code], tmp_path / "a.log")]
     assert run_lanes(items, 2, lane_env(2, cores=2, available=2 * 2**30)) == (0, None)
     assert (tmp_path / "a.log").read_text() == "True\n"
