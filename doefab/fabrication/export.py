@@ -302,6 +302,10 @@ def layout_levels(levels: np.ndarray, pattern_faces: str) -> np.ndarray:
     return np.ascontiguousarray(levels[:, ::-1]) if pattern_faces == "lens" else levels
 
 
+ORIGIN_MEANS = ("layout position of the top-left corner of the drawn pixel grid, x right, y up: of layout pixel "
+                "[0, 0], which holds level-map (design) pixel ")
+
+
 def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, order, cd_nm, die_nm) -> dict:
     depths = depth_fields(camera.material, camera.design_wavelength, n_levels)
     positive = opts.resist == "positive"
@@ -349,7 +353,7 @@ def _manifest(camera, opts, lv, n_levels, pitch_nm, origin_nm, files, align_to, 
                         for p in range(n_masks + 1)},
         "pitch_m": nm_to_m(pitch_nm),
         "origin_m": [nm_to_m(origin_nm[0]), nm_to_m(origin_nm[1])],
-        "origin_means": "layout position of the top-left corner of level-map pixel [0, 0]; x right, y up",
+        "origin_means": ORIGIN_MEANS + ("[0, N−1] (mirrored_x)" if opts.pattern_faces == "lens" else "[0, 0]"),
         "shape": [n, n], "row0": "top",
         "layout_view": "drawn as seen from the patterned (etched) face, x right, y up",
         "pattern_faces": opts.pattern_faces,

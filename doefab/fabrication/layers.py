@@ -20,8 +20,9 @@ LAYER_PURPOSES = {
                   "aperture; clear slits on the y axis mark the split line x = 0)",
     KEY_LAYER: "alignment keys (crosses) and, on etch plates, clear windows over the keys they align to; "
                "datatype = plate",
-    VERNIER_LAYER: "verniers (reference pitch 20 µm on the chrome plate, 22 µm on etch plates) and a CD ladder "
-                   "(1, 1.5, 2, 3 × CD); datatype = plate",
+    VERNIER_LAYER: "verniers (each plate's scale against the reference scale on the plate it aligns to; bar "
+                   "width, pitches and reading step in the manifest's verniers) and a CD ladder (1, 1.5, 2, 3 × CD); "
+                   "datatype = plate",
     LABEL_LAYER: "labels (reserved, not written)",
     OUTLINE_LAYER: "die outline",
 }
