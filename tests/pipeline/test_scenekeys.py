@@ -24,6 +24,7 @@ def test_template_is_a_valid_scene_for_another_camera(task, tmp_path):
     assert cam.doe_pitch == pytest.approx(4e-6)
     assert cam.aperture_diameter == pytest.approx(35e-3 / 4, rel=1e-9)
     assert res.custom_camera and not res.reuse
+    assert res.warnings == ()  # a fresh template is consistent with itself (doctor and run warn of nothing)
 
 
 @pytest.mark.parametrize("task", ["hdr", "hyperspectral", "depth"])
@@ -118,3 +119,19 @@ def test_a_key_under_its_earlier_name_is_refused_with_the_new_one(tmp_path):
         load_scene(p)
     p.write_text('task = "hdr"\n[fabrication]\nn_levels = 8\n')
     assert load_scene(p).fabrication["n_levels"] == 8
+
+
+def test_a_tolerance_stage_without_its_table_is_said_before_the_run(tmp_path):
+    """``tolerance`` in the stages but no ``[tolerance]`` table: the stage will be skipped, and doctor and run say so
+    before any work (with the table to add); without the stage, nothing is said."""
+    from doefab.pipeline.system import resolve
+
+    text = template("hdr")
+    cut = text[:text.index("[tolerance]")] + text[text.index("[holder]"):]  # the template without its table
+    p = tmp_path / "s.toml"
+    p.write_text(cut)
+    said = [w for w in resolve(load_scene(p)).warnings if w.startswith("tolerance:")]
+    assert len(said) == 1 and "will be skipped" in said[0] and "[tolerance]" in said[0]
+    p.write_text(cut.replace('"tolerance", ', ""))
+    assert "tolerance" not in load_scene(p).stages
+    assert not [w for w in resolve(load_scene(p)).warnings if w.startswith("tolerance:")]
