@@ -94,12 +94,12 @@ def lane_env(jobs: int, cores: int | None = None, gpu: str | None = None, availa
 def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
     """Run each ``(name, command, log)`` of ``items`` as a process of its own, up to ``jobs`` at a time in order,
     its output (stdout and stderr) to the file ``log``, in the environment ``env`` (None: this one's; a function:
-    ``env(lane)`` for the lane 0..jobs-1 it starts in, the lowest free one); returns (exit status, what stopped them in words — e.g.
-    "b failed (exit status 3)" — or None). Once one fails no other starts, and the running ones finish (their
-    finished stages are kept either way). Ctrl-C (which the terminal sends to every scene too) or SIGTERM (passed
-    on to each): the running ones are waited for while they clean up (a second Ctrl-C kills them), each one's end
-    is shown as any other's, and the status is 130 or 143, the words naming a scene that had failed before. Any
-    other error here stops the running ones (SIGTERM) before it is raised.
+    ``env(lane)`` for the lane 0..jobs-1 it starts in, the lowest free one); returns (exit status, what stopped
+    them in words — e.g. "b failed (exit status 3)" — or None). Once one fails no other starts, and the running
+    ones finish (their finished stages are kept either way). Ctrl-C (which the terminal sends to every scene too)
+    or SIGTERM (passed on to each): the running ones are waited for while they clean up (a second Ctrl-C kills
+    them), each one's end is shown as any other's, and the status is 130 or 143, the words naming a scene that had
+    failed before. Any other error here stops the running ones (SIGTERM) before it is raised.
 
     Example: ``run_lanes([("a", [sys.executable, "-c", "pass"], Path("a.log"))], 2) == (0, None)``."""
     from doefab.cli._exits import EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated

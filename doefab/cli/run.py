@@ -113,9 +113,9 @@ def run_each_in_own_process(args, devices: list[str]) -> int:
         on = f", each on GPU {' or '.join(pins[:jobs])} (CUDA_VISIBLE_DEVICES)" if pins else ""
         print(f"[doefab run] {len(commands)} scenes, {jobs} at a time (torch on {env['OMP_NUM_THREADS']} thread(s) "
               f"each{on}; --jobs 1 runs them one after another)", flush=True)
+        lanes = (lambda lane: lane_env(jobs, gpu=pins[lane % len(pins)], available=available)) if pins else env
         rc, what = run_lanes([(s, c, Path("out/run") / f"{Path(s).stem}.log") for s, c in zip(args.scene, commands)],
-                             jobs, (lambda lane: lane_env(jobs, gpu=pins[lane % len(pins)], available=available)) if pins
-                             else env)
+                             jobs, lanes)
     else:
         rc, what = 0, None
         for s, cmd in zip(args.scene, commands):

@@ -170,9 +170,11 @@ def test_pattern_toward_the_lens_mirrors_the_layout(cam, tmp_path):
     assert xs.min() == pytest.approx(270 - 5 * 5.4) and xs.max() == pytest.approx(270)  # µm: at the layout's right
     assert verify_mask_set(tmp_path / "m", use_klayout=False)["levels_reproduced"]
     # the drawn grid's top-left corner (origin_m, µm here) is the layout's left edge, where design column N−1 lies
-    assert man["origin_m"][0] * 1e6 == pytest.approx(-270) and "level-map (design) pixel [0, N−1]" in man["origin_means"]
+    assert man["origin_m"][0] * 1e6 == pytest.approx(-270)
+    assert "level-map (design) pixel [0, N−1]" in man["origin_means"]
     export_masks(LevelMap(lv, cam), tmp_path / "s", MaskOptions(use_klayout=False, pattern_faces="scene"))
-    assert "level-map (design) pixel [0, 0]" in json.loads((tmp_path / "s" / "manifest.json").read_text())["origin_means"]
+    scene_facing = json.loads((tmp_path / "s" / "manifest.json").read_text())
+    assert "level-map (design) pixel [0, 0]" in scene_facing["origin_means"]
     # the marks' pitches follow the CD (manifest verniers): no layer purpose states a fixed one
     assert man["verniers"]["reference_pitch_nm"] and not any(re.search(r"\d\s*µm", o["purpose"])
                                                               for o in man["other_layers"])
