@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from doefab.cli._args import add_device_arg
@@ -61,4 +62,6 @@ def run(args) -> int:
         c = summary["crosstalk"]
         print(f"crosstalk (column means): α l→r = {c['alpha_lr']:.4f}, α r→l = {c['alpha_rl']:.4f}")
     print(f"wrote {', '.join(summary['files'])}")
+    for w in summary["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
     return 0

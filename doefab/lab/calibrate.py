@@ -22,6 +22,7 @@ from doefab.errors import DoefabError
 from doefab.imaging.crossratios import check_pair
 from doefab.lab.measure import extract, normalise, photon_transfer, register, wall_ratios
 from doefab.lab.recordings import Recordings, band_index, check_recordings, plane_index, recordings_sha256
+from doefab.lab.viewcheck import template_fits, view_warnings
 
 __all__ = ["calibrate", "measure_recordings", "write_calibration", "Calibration", "psf_grid", "nominal_psfs",
            "registration_size", "calibrate_recording", "measure_walls", "rgb_bands", "PSFGrid"]
@@ -199,8 +200,11 @@ def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float,
     psfs = {(z, b): normalise(extract(ch, chief, k), float(ref.sum()), what)
             for (z, b, _), ch, ref in zip(keys, chans, refs)}
     centre = np.array(signal.shape[:2]) // 2
+    other = "uncoded" if half == "coded" else "coded"
+    fits = template_fits(list(psfs.values()), refs, chans, wide_refs,
+                         [wide[other][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys])
     return {"psfs": psfs, "chief_px": chief.tolist(), "shift_px": (chief - centre).tolist(), "frames": frames.n,
-            "darks": len(r.dark), **light}
+            "darks": len(r.dark), "template_fit": fits, **light}
 
 
 def _wall_view(paths, dark, fmt: str, black: float) -> np.ndarray:
@@ -275,12 +279,14 @@ def _design_of(rec: Recordings):
 class Calibration:
     """What the recordings gave, before anything is written: the calibrated ``pair`` (with its provenance), the
     design's ``nominal`` PSFs on the same grid ({half: array}), per recording a summary ``rows`` (shift, frames,
-    signal, photons, SNR), and the crosstalk ``walls`` (per-column arrays and rows; None without ``[[wall]]``)."""
+    signal, photons, SNR), the crosstalk ``walls`` (per-column arrays and rows; None without ``[[wall]]``) and
+    ``warnings`` (:func:`view_warnings`)."""
 
     pair: object
     nominal: dict
     rows: list
     walls: dict | None
+    warnings: tuple = ()
 
 
 def measure_recordings(recordings: Recordings, progress: bool = False) -> Calibration:
@@ -322,7 +328,7 @@ def measure_recordings(recordings: Recordings, progress: bool = False) -> Calibr
                    torch.from_numpy(measured["uncoded"].astype(np.float32)),
                    tuple(design.wavelengths[b] for b in grid.bands), tuple(design.depths[z] for z in grid.planes),
                    design.camera.sensor_pitch, provenance=prov)
-    return Calibration(pair, nominal, rows, walls)
+    return Calibration(pair, nominal, rows, walls, tuple(view_warnings(rows)))
 
 
 def write_calibration(cal: Calibration, out_dir) -> dict:
@@ -342,8 +348,10 @@ def write_calibration(cal: Calibration, out_dir) -> dict:
         files.append(save_crosstalk(out / "crosstalk.json", w["alpha_lr"], w["alpha_rl"], w["alpha_lr_se"],
                                     w["alpha_rl_se"], {"rows": w["rows"], "source": "calibrate",
                                                        "recordings_sha256": prov["recordings_sha256"]}))
-    files.append(write_report(out / "calibration.html", cal.pair, cal.nominal, cal.rows, cal.walls, prov))
-    summary = {"files": [str(f) for f in files], "recordings": cal.rows, "provenance": prov}
+    files.append(write_report(out / "calibration.html", cal.pair, cal.nominal, cal.rows, cal.walls, prov,
+                              cal.warnings))
+    summary = {"files": [str(f) for f in files], "recordings": cal.rows, "provenance": prov,
+               "warnings": list(cal.warnings)}
     if cal.walls is not None:
         summary["crosstalk"] = {k: float(np.mean(cal.walls[k])) for k in ("alpha_lr", "alpha_rl")}
     return summary

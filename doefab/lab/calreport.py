@@ -192,9 +192,11 @@ _STYLE = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:
           "padding:2px 6px;text-align:right}th{background:#f3f3f3}img{max-width:100%}code{font-size:0.9em}")
 
 
-def write_report(path, pair, nominal: dict, rows: list[dict], walls: dict | None, provenance: dict):
+def write_report(path, pair, nominal: dict, rows: list[dict], walls: dict | None, provenance: dict,
+                 warnings=()):
     """Write ``calibration.html`` atomically: ``pair`` the calibrated PSFs, ``nominal`` {half: array} the design's
-    on the same grid, ``rows`` the recordings' summaries, ``walls`` the crosstalk (or None). Returns the path."""
+    on the same grid, ``rows`` the recordings' summaries, ``walls`` the crosstalk (or None), ``warnings`` (each a
+    sentence, shown first). Returns the path."""
     k = pair.coded.shape[-1]
     n_planes, n_bands = len(pair.depths), len(pair.wavelengths)
     parts = [f"<h1>Calibration of a fabricated part</h1><p>{len(rows)} point-source recordings give both halves' "
@@ -206,6 +208,7 @@ def write_report(path, pair, nominal: dict, rows: list[dict], walls: dict | None
              + ("" if walls is None else
                 f"Crosstalk from the white-wall pairs: mean α l→r = {np.mean(walls['alpha_lr']):.4f}, α r→l = "
                 f"{np.mean(walls['alpha_rl']):.4f} over {walls['alpha_lr'].size} columns.") + "</p>",
+             *(f"<p><strong>Warning:</strong> {html.escape(w)}.</p>" for w in warnings),
              "<h2>Recordings</h2>", _recordings_table(rows),
              "<p>Shift: from the frame's centre pixel to the chief ray, rows down and columns right. Photons: the "
              "window's signal over the conversion gain that the frames' photon transfer (variance against signal) "

@@ -178,7 +178,8 @@ def actions(diag: dict) -> list[str]:
     """What to do about the part, in words, from a ``diagnosis.json`` record: re-make each mask with an identified
     error outside the budget (|z| > ``OUTSIDE``), the lithography for an edge bias outside it, re-mount the die for
     a mount error outside it; fine-tune the networks for the part when its measured PSF metric falls more than
-    ``FINETUNE_LOSS`` below the error-free part's; else nothing."""
+    ``FINETUNE_LOSS`` below the error-free part's; diagnose again with a wider budget when the fit holds errors at
+    its bound; else nothing."""
     out_rows = [r for r in diag["against_budget"] if r["identifiable"] and abs(r["z"]) > OUTSIDE]
     todo = []
     for k in sorted({r["mask"] for r in out_rows if r["group"] == "mask"}):
@@ -197,6 +198,12 @@ def actions(diag: dict) -> list[str]:
     if loss > FINETUNE_LOSS:
         todo.append(f"fine-tune the networks for this part (doefab finetune --psf psf_pair_fitted.npz): its PSF metric "
                     f"is {pm['as_measured']:.3f} as measured against {pm['nominal']:.3f} for the error-free part")
+    held = diag.get("fit", {}).get("at_bound", [])
+    if held:  # the fit ran into its bound: the part lies beyond what the budget describes, or the recordings are off
+        todo.append(f"diagnose again with a wider budget: the fit holds {', '.join(held)} at its bound (±{BOUND:g} "
+                    f"budget σ), so this part is further off than the budget describes, or its recordings are not "
+                    f"this design's as the recordings file says (check which view is coded, the frames' orientation "
+                    f"and the wavelengths); until then these numbers are no diagnosis")
     if not todo:
         todo.append(f"nothing: every identified error is within the budget (|z| ≤ {OUTSIDE:g}) and the PSF metric "
                     f"within {FINETUNE_LOSS:g} of the error-free part's; give the networks the part's pair "

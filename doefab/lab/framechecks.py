@@ -181,11 +181,20 @@ def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level, kernel: in
     for sc, vc in chans:
         win, vwin = sc[window], vc[window]
         total.append(float(win.sum()))
-        ksnr.append(total[-1] / math.sqrt(max(float(vwin.sum()), 1e-300)))
-        psnr.append(float(win.max()) / math.sqrt(max(float(np.median(vwin)), 1e-300)))
+        ksnr.append(_snr(total[-1], float(vwin.sum())))
+        # the typical pixel's noise; where most pixels scatter by less than a DN (median 0), the window's mean
+        noise = float(np.median(vwin)) or float(vwin.mean())
+        psnr.append(_snr(float(win.max()), noise))
         floor.append(float(np.maximum(-win, 0.0).sum()) / total[-1] if total[-1] > 0 else math.inf)
     return PSFSignal(s, frames.n, (int(peak[0]), int(peak[1])), window, tuple(total), tuple(ksnr), tuple(psnr), how,
                      tuple(floor))
+
+
+def _snr(signal: float, variance: float) -> float:
+    """``signal`` over the noise σ; with no measurable noise, infinite for light and 0 for none."""
+    if variance > 0:
+        return signal / math.sqrt(variance)
+    return math.inf if signal > 0 else 0.0
 
 
 def psf_signal(rec, r, kernel: int) -> PSFSignal:

@@ -122,6 +122,43 @@ def test_noiseless_recordings_calibrate_to_the_nominal_psfs(design_dir, tmp_path
     assert prov["recordings_sha256"] == recordings_sha256(rec) and len(prov["shifts_px"]) == len(entries)
     page = (tmp_path / "out" / "calibration.html").read_text()
     assert page.count("data:image/png;base64,") >= 3 and "<script" not in page and "src=\"http" not in page
+    assert summary["warnings"] == [] and "Warning:" not in page  # the halves the file states
+
+
+def test_recordings_of_the_halves_swapped_are_warned_of(design_dir, tmp_path):
+    """The coded half's recordings labelled plain and the plain half's coded (half and view both, so no check
+    refuses them): the calibration is written, and the summary and its page say the halves look swapped."""
+    from doefab.lab.calibrate import calibrate
+    from doefab.lab.recordings import load_recordings
+
+    (tmp_path / "design").symlink_to(design_dir)
+    entries = [(h, h, z, b) for h in ("coded", "plain") for z in (0, 1) for b in (0, 1, 2)]
+    path = _write(tmp_path, design_dir, entries)
+    text = path.read_text().replace('"coded"', '"@"').replace('"plain"', '"coded"').replace('"@"', '"plain"')
+    path.write_text(text)
+    summary = calibrate(load_recordings(path), tmp_path / "out")
+    assert len(summary["warnings"]) == 2 and all("swapped" in w for w in summary["warnings"])
+    assert "the coded recordings, registered to the design's coded half, are off by" in summary["warnings"][0]
+    assert "swapped" in (tmp_path / "out" / "calibration.html").read_text()
+
+
+def test_psfs_mirrored_left_right_are_warned_of():
+    """A plain recording of an asymmetric PSF (a streak left of centre) flipped left–right: it fits the stated
+    template 200 % off and the mirrored one exactly, and is warned of as mirrored; a symmetric PSF (mirror = itself)
+    and a difference within the noise are not."""
+    from doefab.lab.viewcheck import template_fits, view_warnings
+
+    plain = np.zeros((15, 15))
+    plain[7, 3:7] = 1.0
+    wide = np.pad(plain, 8)  # the registration's wider window
+    flipped = [np.pad(plain[:, ::-1], 8)]
+    fits = template_fits([plain[:, ::-1]], [plain], flipped, [wide], [np.pad(np.eye(15), 8)])
+    assert fits["stated"] == pytest.approx(2.0) and fits["mirrored"] == pytest.approx(0.0, abs=1e-6)
+    (w,) = view_warnings([{"half": "plain", "template_fit": fits}])
+    assert w.startswith("the plain recordings, registered to the design's plain half, are off by 200%")
+    assert "mirrored left–right" in w and "by 0%" in w
+    assert view_warnings([{"half": "plain", "template_fit": {"stated": 0.0, "swapped": 0.3, "mirrored": 0.0}}]) == []
+    assert view_warnings([{"half": "coded", "template_fit": {"stated": 0.06, "swapped": 0.02, "mirrored": 0.5}}]) == []
 
 
 def test_rgb_channels_are_the_bands_in_decreasing_wavelength(design_dir, tmp_path):
@@ -381,6 +418,23 @@ def test_a_recording_short_only_on_its_noise_floor_is_told_the_frames_to_average
     dark = FrameSet(rng.normal(0, 1, (200, 200)) - 0.5, np.full((200, 200), 4.0), 4, Path("g.tiff"))
     (text,) = _light_problems(SimpleNamespace(name="[[psf]] 2"), dark, measure_psf(dark, None, 0.0, k), k)
     assert "the frames hold no PSF above the noise" in text and "inf" not in text
+
+
+def test_a_peak_over_pixels_that_scatter_by_less_than_a_dn_reads_a_finite_signal_to_noise():
+    """Most window pixels with no scatter at all (a quiet sensor's dark region: median variance 0): the peak's SNR is
+    read against the window's mean variance, not a division by nearly nothing; no light and no noise reads 0."""
+    from pathlib import Path
+
+    from doefab.lab.framechecks import FrameSet, measure_psf
+
+    k = 15
+    mean, var = np.zeros((40, 40)), np.zeros((40, 40))
+    mean[20, 20], var[18:23, 18:23] = 90.0, 9.0 * 4  # one frame's variance; the mean of 4 frames scatters by 3 DN
+    got = measure_psf(FrameSet(mean, var, 4, Path("f")), None, 0.0, k)
+    assert got.peak_snr[0] == pytest.approx(90.0 / math.sqrt(9.0 * 25 / k**2))  # the window's mean variance
+    assert got.kernel_snr[0] == pytest.approx(90.0 / math.sqrt(9.0 * 25))
+    none = measure_psf(FrameSet(np.zeros((40, 40)), np.zeros((40, 40)), 4, Path("f")), None, 0.0, k)
+    assert none.peak_snr[0] == none.kernel_snr[0] == 0.0
 
 
 def test_a_recording_whose_clipped_noise_would_dim_the_psf_is_refused(design_dir, tmp_path):

@@ -287,6 +287,20 @@ def test_the_words_follow_the_budget(rows, metric, first):
     assert len([a for a in got if a.startswith("re-make mask")]) == (1 if first == "re-make mask 3" else 0)
 
 
+def test_a_fit_held_at_its_bound_is_no_diagnosis():
+    """Errors the fit holds at its ±6σ bound (not identifiable there, so outside no budget row): the part is not
+    "nothing to do" — the words say to diagnose again with a wider budget and to check the recordings."""
+    from doefab.lab.diagreport import actions
+
+    rows = [{**_row("etch depth mask 1", -6.0, "mask", 1), "identifiable": False}]
+    diag = {"against_budget": rows, "psf_metric": {"nominal": 0.87, "as_measured": 0.87},
+            "fit": {"at_bound": ["etch depth mask 1", "overlay mask 2 x"]}}
+    got = actions(diag)
+    assert len(got) == 1 and got[0].startswith("diagnose again with a wider budget")
+    assert "etch depth mask 1, overlay mask 2 x" in got[0] and "which view is coded" in got[0]
+    assert actions({**diag, "fit": {"at_bound": []}})[0].startswith("nothing")
+
+
 def test_the_held_errors_are_the_budgets_unfitted_ones(small_design, budget):
     """A budget without mask rotations, roughness or spread in the errors the fit holds gives held draws that
     change nothing; its mask rotations alone change the PSFs, each draw differently and with another seed
