@@ -158,8 +158,9 @@ def run(args) -> int:
     from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.io import atomic_write_json
     from doefab.lab.outputs import write_result_rows
+    from doefab.lab.capturenotes import clipped_note, small_frame_note
     from doefab.lab.reconstruct import (DEFAULT_TILE, capture_levels, default_overlap, iter_tiled, load_views,
-                                        output_channels, small_frame_note)
+                                        output_channels)
     from doefab.reconstruction.loader import load_reconstructor
 
     pairs = _pairs(args)
@@ -178,7 +179,7 @@ def run(args) -> int:
     for c, u in pairs:
         coded, uncoded = load_views(c, u, camera, **levels)
         info: dict = {}
-        notes = [n for n in [small_frame_note(rec, coded.shape[1:], psf)] if n]
+        notes = [n for n in [small_frame_note(rec, coded.shape[1:], psf), clipped_note(coded, uncoded)] if n]
         for note in notes:
             print(f"doefab reconstruct: warning: {c.name}: {note}", file=sys.stderr, flush=True)
         rows = iter_tiled(rec, coded, uncoded, tile, overlap, psf=psf, progress=True, info=info)

@@ -47,7 +47,7 @@ from doefab.errors import DoefabError
 
 __all__ = ["MULTIPLE", "MIN_SIDE", "DEFAULT_TILE", "default_overlap", "check_tiling", "tile_starts", "blend_window",
            "iter_tiled", "reconstruct_tiled", "output_channels", "capture_levels", "read_capture", "unmix_views",
-           "load_views", "small_frame_note"]
+           "load_views"]
 
 MULTIPLE = 32  # the networks' sides are multiples of this (``reconstruction.networks.check_input``) ...
 MIN_SIDE = 64  # ... and at least this
@@ -242,20 +242,6 @@ def reconstruct_tiled(rec, coded: np.ndarray, uncoded: np.ndarray, tile: int = D
     for r, block in iter_tiled(rec, coded, uncoded, tile, overlap, psf, progress):
         out[:, r:r + block.shape[1]] = block
     return out[0] if has(rec.task, "depth") else out
-
-
-def small_frame_note(rec, size_hw: tuple[int, int], psf=None) -> str | None:
-    """A frame whose shorter side is below the PSF window the network reads (the measured ``psf``'s where given):
-    the light the DOE spreads past the frame's edges is missing from its captures. None where it is not.
-
-    Example: ``small_frame_note(load_reconstructor("hyperspectral"), (96, 96))`` names the 191 px window."""
-    k = int((psf if psf is not None else rec.pair).coded.shape[-1])
-    h, w = size_hw
-    if min(h, w) >= k:
-        return None
-    return (f"the frame is {w}×{h} px, under the {k} px PSF window the {rec.task} network reads: light the DOE "
-            f"spreads past the frame's edges is missing from the captures, so the result is less reliable, the more "
-            f"so the smaller the frame; capture (or crop) at least {k} px on each side")
 
 
 MOST_ABOVE_WHITE = 0.01  # the share of a frame's values that may lie above --white-level (clipped to it)

@@ -120,6 +120,27 @@ def _two_sizes(work):
     write_frame(work / "u" / "x.tiff", np.full((96, 96, 3), 30000.0))
     return args
 
+def test_captures_clipped_in_both_views_are_warned_of(tmp_path, capsys):
+    """A fifth of the frame at full scale in both views (and a few clipped pixels anywhere else): neither view
+    measures the scene there, and the warning says so with its share; one view clipped alone is the HDR design's
+    case and is not warned of."""
+    from doefab.lab.capturenotes import clipped_note
+
+    rng = np.random.default_rng(1)
+    coded, plain = rng.uniform(0, 30000, (96, 128, 3)), rng.uniform(0, 30000, (96, 128, 3))
+    coded[:, :26], plain[:, :26] = 65535, 65535  # 26 of 128 columns: 20.3 % of the pixels
+    write_frame(tmp_path / "c/x.tiff", coded)
+    write_frame(tmp_path / "u/x.tiff", plain)
+    rc = main(["reconstruct", "--task", "hdr", "--coded", str(tmp_path / "c/x.tiff"), "--uncoded",
+               str(tmp_path / "u/x.tiff"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "x.tiff: 20.3% of the pixels clip in both captures" in err
+    assert json.loads((tmp_path / "o" / "reconstruct.json").read_text())["pairs"][0]["warnings"]
+    one = np.zeros((3, 8, 8))
+    assert clipped_note(np.ones((3, 8, 8)), one) is None and "100.0%" in clipped_note(np.ones((3, 8, 8)), one + 1)
+
+
 
 @pytest.mark.parametrize("build, needle", [
     (lambda w: ["--coded", w / "*.tiff", "--uncoded", w / "*.png"] if _pair(w) else [], "no file matches"),
