@@ -48,17 +48,18 @@ def usable_cores() -> int:
 
 
 def visible_gpus() -> list[str]:
-    """The GPUs this process sees, as ``CUDA_VISIBLE_DEVICES`` names them (its entries where it is set, else
-    0..N-1 for the N that torch sees; none on a machine without CUDA): the values that give a child process one
-    GPU of its own.
+    """The GPUs this process sees, as ``CUDA_VISIBLE_DEVICES`` names them (its first N entries where it is set, else
+    0..N-1, for the N GPUs torch sees; none where torch sees none, e.g. a CPU build or ``CUDA_VISIBLE_DEVICES=-1``):
+    the values that give a child process one GPU of its own.
 
     Example: with ``CUDA_VISIBLE_DEVICES=4,5``, ``visible_gpus() == ["4", "5"]``."""
-    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
-    if visible is not None:
-        return [g.strip() for g in visible.split(",") if g.strip()]
     import torch
 
-    return [str(i) for i in range(torch.cuda.device_count())]
+    count = torch.cuda.device_count() if torch.cuda.is_available() else 0  # e.g. 0 for CUDA_VISIBLE_DEVICES=-1
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if visible is not None:
+        return [g.strip() for g in visible.split(",") if g.strip()][:count]
+    return [str(i) for i in range(count)]
 
 
 def _example(name: str, value: str) -> str:

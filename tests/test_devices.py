@@ -164,3 +164,20 @@ def test_a_remote_worker_is_told_the_kind_of_device_not_this_machines_gpu_number
     from doefab.tolerance.montecarlo import remote_worker_device
 
     assert [remote_worker_device(d) for d in ("cuda:1", "cuda", "cpu", "auto")] == ["cuda", "cuda", "cpu", "auto"]
+
+
+def test_the_visible_gpus_are_those_torch_sees(monkeypatch):
+    """``CUDA_VISIBLE_DEVICES`` names them, but only as many as torch sees: "-1" (GPUs hidden) or a CPU build of torch
+    under a scheduler that sets the variable is no GPU."""
+    from doefab._devices import visible_gpus
+
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "-1")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 0)
+    assert visible_gpus() == []
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "4, 5")
+    assert visible_gpus() == ["4", "5"]
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES")
+    assert visible_gpus() == ["0", "1"]

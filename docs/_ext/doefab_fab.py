@@ -46,7 +46,9 @@ def table_summary(m: dict) -> list[str]:
             ("units", f"database unit {m['database_unit_m'] * 1e9:g} nm, user unit {m['user_unit_m'] * 1e6:g} µm"),
             ("die", f"{_mm(m['die_m'])} mm × {_mm(m['die_m'])} mm, square"),
             ("pixel grid", f"{m['shape'][0]} × {m['shape'][1]} pixels at {_um(m['pitch_m'])} µm; top-left corner of "
-                           f"pixel [0, 0] at ({_mm(m['origin_m'][0])}, {_mm(m['origin_m'][1])}) mm"),
+                           f"the drawn grid (layout pixel [0, 0]"
+                           + (", the level map's [0, N−1]" if m.get("mirrored_x") else "")
+                           + f") at ({_mm(m['origin_m'][0])}, {_mm(m['origin_m'][1])}) mm"),
             ("clear aperture", f"{_mm(m['clear_aperture_diameter_m'])} mm diameter, centred on the die"),
             ("substrate", f"{mat['name']}, n = {m['refractive_index_at_design_wavelength']:.6f} at the design "
                           f"wavelength {m['design_wavelength_m'] * 1e9:g} nm"),

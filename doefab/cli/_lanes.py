@@ -118,7 +118,9 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
         status = EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
         killed = _stop(running, status == EXIT_TERMINATED)
         for child in list(running):
-            _end(running, child)
+            name, rc = _end(running, child)
+            if rc not in (0, EXIT_INTERRUPTED, EXIT_TERMINATED) and not failed[0]:  # it failed before the interrupt
+                failed = (rc, f"{name} {describe_status(rc)}")
         what = describe_status(status).replace("was ", "were ", 1)
         return status, (f"the scenes {what}" + (f" after {failed[1]}" if failed[0] else "")
                         + ("; killed at the second interrupt" if killed else ""))

@@ -201,8 +201,8 @@ def calibrate_recording(r, grid: PSFGrid, nominal: dict, fmt: str, black: float,
             for (z, b, _), ch, ref in zip(keys, chans, refs)}
     centre = np.array(signal.shape[:2]) // 2
     other = "uncoded" if half == "coded" else "coded"
-    fits = template_fits(list(psfs.values()), refs, chans, wide_refs,
-                         [wide[other][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys])
+    other_wide = [wide[other][grid.planes.index(z), grid.bands.index(b)] for z, b, _ in keys]
+    fits = template_fits(chans, wide_refs, other_wide, k)
     return {"psfs": psfs, "chief_px": chief.tolist(), "shift_px": (chief - centre).tolist(), "frames": frames.n,
             "darks": len(r.dark), "template_fit": fits, **light}
 

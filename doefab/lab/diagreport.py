@@ -200,10 +200,11 @@ def actions(diag: dict) -> list[str]:
                     f"is {pm['as_measured']:.3f} as measured against {pm['nominal']:.3f} for the error-free part")
     held = diag.get("fit", {}).get("at_bound", [])
     if held:  # the fit ran into its bound: the part lies beyond what the budget describes, or the recordings are off
-        todo.append(f"diagnose again with a wider budget: the fit holds {', '.join(held)} at its bound (±{BOUND:g} "
-                    f"budget σ), so this part is further off than the budget describes, or its recordings are not "
-                    f"this design's as the recordings file says (check which view is coded, the frames' orientation "
-                    f"and the wavelengths); until then these numbers are no diagnosis")
+        todo.insert(0, f"diagnose again with a wider budget (--budget): the fit holds {', '.join(held)} at its bound "
+                       f"(±{BOUND:g} budget σ), so this part is further off than the budget describes, or its "
+                       f"recordings are not this design's as the recordings file says (check which view is coded, "
+                       f"the frames' orientation and the wavelengths); until then the other words here are no "
+                       f"diagnosis")
     if not todo:
         todo.append(f"nothing: every identified error is within the budget (|z| ≤ {OUTSIDE:g}) and the PSF metric "
                     f"within {FINETUNE_LOSS:g} of the error-free part's; give the networks the part's pair "

@@ -183,8 +183,8 @@ def measure_psf(frames: FrameSet, dark: FrameSet | None, black_level, kernel: in
         total.append(float(win.sum()))
         ksnr.append(_snr(total[-1], float(vwin.sum())))
         # the typical pixel's noise; where most pixels scatter by less than a DN (median 0), the window's mean
-        noise = float(np.median(vwin)) or float(vwin.mean())
-        psnr.append(_snr(float(win.max()), noise))
+        noise_var = float(np.median(vwin)) or float(vwin.mean())
+        psnr.append(_snr(float(win.max()), noise_var))
         floor.append(float(np.maximum(-win, 0.0).sum()) / total[-1] if total[-1] > 0 else math.inf)
     return PSFSignal(s, frames.n, (int(peak[0]), int(peak[1])), window, tuple(total), tuple(ksnr), tuple(psnr), how,
                      tuple(floor))

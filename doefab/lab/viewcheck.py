@@ -20,14 +20,13 @@ VIEW_MISMATCH = 0.5  # another template fits at most this fraction as far off as
 VIEW_MARGIN = 0.05  # ... and closer by more than this share of the light (not a difference within the noise)
 
 
-def template_fits(psfs, refs, chans, wide_refs, other_wide) -> dict:
-    """{"stated", "swapped", "mirrored"}: how far off a recording fits each template. ``psfs``: its PSFs as
-    calibrated against ``refs`` (the stated half's, over the kernel); ``chans``: its channels; ``wide_refs``,
+def template_fits(chans, wide_refs, other_wide, k: int) -> dict:
+    """{"stated", "swapped", "mirrored"}: how far off a recording's channels ``chans`` fit each template when
+    registered, cut to the ``k``-pixel kernel and scaled as the calibration does (:func:`_fit_off`). ``wide_refs``,
     ``other_wide``: the stated and the other half's PSFs over the registration's wider window.
 
-    Example: ``template_fits(psfs, refs, chans, wide, other)["stated"] == 0.0`` for a noiseless recording."""
-    k = refs[0].shape[-1]
-    return {"stated": _off(psfs, refs), "swapped": _fit_off(chans, other_wide, k),
+    Example: ``template_fits(chans, wide, other, 31)["stated"]`` is 0 for a noiseless recording of the stated half."""
+    return {"stated": _fit_off(chans, wide_refs, k), "swapped": _fit_off(chans, other_wide, k),
             "mirrored": _fit_off(chans, [w[..., ::-1] for w in wide_refs], k)}
 
 
@@ -47,7 +46,6 @@ def _fit_off(chans, wide_refs, k: int) -> float:
         return _off([normalise(extract(ch, chief, k), float(ref.sum()), "") for ch, ref in zip(chans, refs)], refs)
     except (DoefabError, ValueError, IndexError):
         return math.inf
-
 
 
 def view_warnings(rows: list[dict]) -> list[str]:

@@ -372,7 +372,7 @@ def resolve(scene: Scene) -> ResolvedScene:
     committed_settings = _settings(dname, committed.camera, ctask, {}, cfg, committed, {})
     differ = sorted(k for k in settings if settings[k] != committed_settings.get(k))
     skipped = _skipped_networks(scene, cam, task, differ, sensor)  # stage_reconstruction's skip, said before
-    if "tolerance" in scene.stages and scene.tolerance is None:  # stage_tolerance's skip, said before
+    if "tolerance" in scene.stages and scene.tolerance is None and "stages" in scene.raw:  # listed, yet skipped
         skipped.append("tolerance: the scene has no [tolerance] table, so the tolerance stage will be skipped: add "
                        "one (e.g. [tolerance] with samples = 20; budget = \"default\" is the shipped budget) to "
                        "judge its parts, or leave \"tolerance\" out of stages")

@@ -156,6 +156,34 @@ def test_ctrl_c_waits_for_the_scenes_to_clean_up_and_names_the_one_that_had_fail
     assert "[doefab run] long was interrupted (Ctrl-C)" in err and "    cleaned up" in err
 
 
+def test_a_scene_that_failed_just_before_the_interrupt_is_still_named(tmp_path, monkeypatch):
+    """The interrupt comes while a scene has just failed, before its end was seen: its failure is kept in the words
+    (the interrupted scene's own status, 130, is no failure)."""
+    import signal
+
+    from doefab.cli import _lanes
+    from doefab.cli._exits import EXIT_INTERRUPTED
+
+    flag, log = tmp_path / "cleaned", tmp_path / "long.log"
+    bad = [sys.executable, "-c", "raise SystemExit(3)"]
+    items = [("long", _cleans_up(flag), log), ("bad", bad, tmp_path / "bad.log")]
+
+    def ctrl_c_once_bad_ended(running):
+        import time
+
+        while not (log.exists() and "started" in log.read_text()) or all(c.poll() is None for c in running):
+            time.sleep(0.05)  # bad has ended, unseen; long runs
+        for child in running:
+            if child.poll() is None:
+                child.send_signal(signal.SIGINT)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_lanes, "_ended", ctrl_c_once_bad_ended)
+    assert run_lanes(items, 2) == (EXIT_INTERRUPTED, "the scenes were interrupted (Ctrl-C) after bad failed "
+                                                     "(exit status 3)")
+    assert flag.exists()
+
+
 def test_sigterm_is_passed_on_to_each_scene_and_waited_for(tmp_path, monkeypatch, capsys):
     from doefab.cli._exits import EXIT_TERMINATED, Terminated
 
@@ -186,13 +214,15 @@ def test_a_second_ctrl_c_kills_a_scene_still_cleaning_up(tmp_path):
     child = subprocess.Popen([sys.executable, "-c", "import signal, time; signal.signal(signal.SIGTERM, "
                               "signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"], stdout=subprocess.PIPE)
     assert child.stdout.readline() == b"ready\n"
-    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C as Python has it by default (an
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))  # earlier test's worker set-up may not)
     timer.start()
     try:
         assert _stop([child], terminate=True) is True
     finally:
         timer.cancel()
         child.kill()
+        signal.signal(signal.SIGINT, previous)
     assert child.wait() == -signal.SIGKILL
 
 
@@ -222,17 +252,17 @@ def test_each_scene_side_by_side_gets_its_share_of_the_memory(tmp_path, monkeypa
 
 
 def test_a_scene_starts_in_the_lane_that_came_free_with_its_environment(tmp_path):
-    """``env`` as a function of the lane: the third scene starts where the first ended (its GPU), while the second,
-    in the other lane, still runs (it waits for the third)."""
+    """``env`` as a function of the lane: the second scene ends at once, so the third starts in its lane (its GPU),
+    not in turn after the first, which still runs (it waits for the third)."""
     flag = tmp_path / "c.flag"
     show = "import os; print(os.environ['LANE_GPU'])"
-    items = [("a", [sys.executable, "-c", show], tmp_path / "a.log"),
-             ("b", [sys.executable, "-c", show + "\n" + _meets(tmp_path / "b.flag", flag)[2]], tmp_path / "b.log"),
+    items = [("a", [sys.executable, "-c", show + "\n" + _meets(tmp_path / "a.flag", flag)[2]], tmp_path / "a.log"),
+             ("b", [sys.executable, "-c", show], tmp_path / "b.log"),
              ("c", [sys.executable, "-c", show + f"; import pathlib; pathlib.Path({str(flag)!r}).write_text('x')"],
               tmp_path / "c.log")]
     assert run_lanes(items, 2, lambda lane: {**__import__("os").environ, "LANE_GPU": "gpu" + "01"[lane]}) == (0, None)
-    assert [(tmp_path / f"{n}.log").read_text().split()[0] for n in "abc"] == ["gpu0", "gpu1", "gpu0"]
-    assert (tmp_path / "b.log").read_text().split()[-1] == "met"
+    assert [(tmp_path / f"{n}.log").read_text().split()[0] for n in "abc"] == ["gpu0", "gpu1", "gpu1"]
+    assert (tmp_path / "a.log").read_text().split()[-1] == "met"
 
 
 def test_side_by_side_on_gpus_each_scene_sees_one_gpu_of_its_own(monkeypatch):

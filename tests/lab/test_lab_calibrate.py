@@ -143,21 +143,25 @@ def test_recordings_of_the_halves_swapped_are_warned_of(design_dir, tmp_path):
 
 
 def test_psfs_mirrored_left_right_are_warned_of():
-    """A plain recording of an asymmetric PSF (a streak left of centre) flipped left–right: it fits the stated
-    template 200 % off and the mirrored one exactly, and is warned of as mirrored; a symmetric PSF (mirror = itself)
-    and a difference within the noise are not."""
+    """A plain recording of an L-shaped PSF (its mirror is no shift of itself) flipped left–right, registered as the
+    calibration registers: it fits the stated template far off and the mirrored one exactly, and is warned of as
+    mirrored; a recording of the stated PSF, a symmetric PSF flipped and a difference within the noise are not."""
     from doefab.lab.viewcheck import template_fits, view_warnings
 
-    plain = np.zeros((15, 15))
-    plain[7, 3:7] = 1.0
-    wide = np.pad(plain, 8)  # the registration's wider window
-    flipped = [np.pad(plain[:, ::-1], 8)]
-    fits = template_fits([plain[:, ::-1]], [plain], flipped, [wide], [np.pad(np.eye(15), 8)])
-    assert fits["stated"] == pytest.approx(2.0) and fits["mirrored"] == pytest.approx(0.0, abs=1e-6)
+    ell = np.zeros((15, 15))
+    ell[4:11, 5], ell[10, 5:10] = 1.0, 1.0  # an L: a vertical bar and a foot to the right
+    wide, other = [np.pad(ell, 8)], [np.pad(np.eye(15), 8)]  # the registration's wider window
+    frame = np.pad(ell[:, ::-1], 20)  # the recording: the L flipped, in a larger frame
+    fits = template_fits([frame], wide, other, 15)
+    assert fits["stated"] > 0.5 and fits["mirrored"] == pytest.approx(0.0, abs=1e-6)
     (w,) = view_warnings([{"half": "plain", "template_fit": fits}])
-    assert w.startswith("the plain recordings, registered to the design's plain half, are off by 200%")
+    assert w.startswith("the plain recordings, registered to the design's plain half, are off by")
     assert "mirrored left–right" in w and "by 0%" in w
-    assert view_warnings([{"half": "plain", "template_fit": {"stated": 0.0, "swapped": 0.3, "mirrored": 0.0}}]) == []
+    assert template_fits([np.pad(ell, 20)], wide, other, 15)["stated"] == pytest.approx(0.0, abs=1e-6)
+    bar = np.zeros((15, 15))
+    bar[7, 3:12] = 1.0  # symmetric left–right: its mirror is itself
+    flipped_bar = template_fits([np.pad(bar[:, ::-1], 20)], [np.pad(bar, 8)], other, 15)
+    assert flipped_bar["stated"] == pytest.approx(0, abs=1e-6)
     assert view_warnings([{"half": "coded", "template_fit": {"stated": 0.06, "swapped": 0.02, "mirrored": 0.5}}]) == []
 
 

@@ -296,7 +296,10 @@ def test_a_fit_held_at_its_bound_is_no_diagnosis():
     diag = {"against_budget": rows, "psf_metric": {"nominal": 0.87, "as_measured": 0.87},
             "fit": {"at_bound": ["etch depth mask 1", "overlay mask 2 x"]}}
     got = actions(diag)
-    assert len(got) == 1 and got[0].startswith("diagnose again with a wider budget")
+    assert len(got) == 1 and got[0].startswith("diagnose again with a wider budget (--budget)")
+    outside = rows + [_row("overlay mask 3 x", 3.1, "mask", 3)]  # an identified error outside the budget too
+    both = actions({**diag, "against_budget": outside})
+    assert both[0].startswith("diagnose again") and both[1].startswith("re-make mask 3")
     assert "etch depth mask 1, overlay mask 2 x" in got[0] and "which view is coded" in got[0]
     assert actions({**diag, "fit": {"at_bound": []}})[0].startswith("nothing")
 

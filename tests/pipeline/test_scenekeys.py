@@ -122,8 +122,9 @@ def test_a_key_under_its_earlier_name_is_refused_with_the_new_one(tmp_path):
 
 
 def test_a_tolerance_stage_without_its_table_is_said_before_the_run(tmp_path):
-    """``tolerance`` in the stages but no ``[tolerance]`` table: the stage will be skipped, and doctor and run say so
-    before any work (with the table to add); without the stage, nothing is said."""
+    """``tolerance`` listed in the scene's stages but no ``[tolerance]`` table: the stage will be skipped, and doctor
+    and run say so before any work (with the table to add); without the stage, or with the stages left at their
+    default (all: a scene without ``[tolerance]`` is the way to run no Monte Carlo), nothing is said."""
     from doefab.pipeline.system import resolve
 
     text = template("hdr")
@@ -132,6 +133,7 @@ def test_a_tolerance_stage_without_its_table_is_said_before_the_run(tmp_path):
     p.write_text(cut)
     said = [w for w in resolve(load_scene(p)).warnings if w.startswith("tolerance:")]
     assert len(said) == 1 and "will be skipped" in said[0] and "[tolerance]" in said[0]
-    p.write_text(cut.replace('"tolerance", ', ""))
-    assert "tolerance" not in load_scene(p).stages
-    assert not [w for w in resolve(load_scene(p)).warnings if w.startswith("tolerance:")]
+    for text in (cut.replace('"tolerance", ', ""),  # not listed
+                 "\n".join(ln for ln in cut.splitlines() if not ln.startswith("stages = "))):  # all by default
+        p.write_text(text)
+        assert not [w for w in resolve(load_scene(p)).warnings if w.startswith("tolerance:")]
