@@ -119,7 +119,8 @@ def run_lanes(items, jobs: int, env=None) -> tuple[int, str | None]:
         killed = _stop(running, status == EXIT_TERMINATED)
         for child in list(running):
             name, rc = _end(running, child)
-            if rc not in (0, EXIT_INTERRUPTED, EXIT_TERMINATED) and not failed[0]:  # it failed before the interrupt
+            stopped = (0, EXIT_INTERRUPTED, EXIT_TERMINATED) + ((128 + 9,) if killed else ())  # 137: SIGKILL here
+            if rc not in stopped and not failed[0]:  # it failed before the interrupt
                 failed = (rc, f"{name} {describe_status(rc)}")
         what = describe_status(status).replace("was ", "were ", 1)
         return status, (f"the scenes {what}" + (f" after {failed[1]}" if failed[0] else "")
