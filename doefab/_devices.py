@@ -18,7 +18,7 @@ from doefab.errors import DoefabError
 
 __all__ = ["DEVICE_WORDS", "ENV", "CORES_ENV", "check_device", "device_syntax",
            "resolve_device", "default_device", "using_device", "to_device",
-           "describe_device", "usable_cores", "visible_gpus"]
+           "describe_device", "usable_cores", "visible_gpus", "env_count"]
 
 DEVICE_WORDS = ("auto", "cpu", "cuda", "cuda:N")
 ENV = "DOEFAB_DEVICE"  # the default device of this process and the worker processes it starts
@@ -27,19 +27,24 @@ _current: str | None = None  # set by ``using_device``
 CORES_ENV = "DOEFAB_CORES"  # the cores a process may use when it shares the machine (``doefab run --jobs``)
 
 
+def env_count(name: str) -> int | None:
+    """The environment variable ``name`` where it holds a whole number ≥ 1 (a count or a size that doefab gives a
+    process it starts), else None. Example: ``env_count("DOEFAB_CORES")`` is None where it is unset."""
+    try:
+        n = int(os.environ.get(name, ""))
+    except ValueError:
+        return None
+    return n if n >= 1 else None
+
+
 def usable_cores() -> int:
     """The CPU cores this process may use: ``$DOEFAB_CORES`` where set to a whole number ≥ 1 (a scene of ``doefab
     run --jobs`` gets its share), else the cores it may run on (its affinity; the machine's count where that is
     not known).
 
     Example: ``usable_cores() >= 1``."""
-    import os
-
-    try:
-        given = int(os.environ.get(CORES_ENV, ""))
-    except ValueError:
-        given = 0
-    if given >= 1:
+    given = env_count(CORES_ENV)
+    if given is not None:
         return given
     try:
         return len(os.sched_getaffinity(0))

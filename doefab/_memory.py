@@ -81,13 +81,9 @@ def available_bytes() -> int | None:
 def memory_share() -> int | None:
     """``$DOEFAB_MEMORY_BYTES`` where set to a whole number of bytes ≥ 1, else None. Example: ``memory_share()``
     is None unless a share was given (``doefab run --jobs`` gives each scene side by side one)."""
-    import os
+    from doefab._devices import env_count
 
-    try:
-        share = int(os.environ.get(SHARE_ENV, ""))
-    except ValueError:
-        return None
-    return share if share >= 1 else None
+    return env_count(SHARE_ENV)
 
 
 def _cgroup_rooms(root) -> list[int]:
