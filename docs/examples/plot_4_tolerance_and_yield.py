@@ -21,7 +21,6 @@ import tempfile
 from pathlib import Path
 
 import matplotlib.pyplot as plt
-import numpy as np
 
 import doefab
 from doefab.cli import main as doefab_command
@@ -37,7 +36,8 @@ task = doefab.get_task("streak", **task_params)
 
 
 def metric(height):
-    """The task metric (fraction of the coded light within 1 px of the cross) of a height map in metres."""
+    """The task metric (fraction of the coded light on the cross's arms, within 1 px and off its centre) of a height
+    map in metres."""
     pair = doefab.split_aperture_psf(height, camera, design.wavelengths, design.depths, kernel_size=31,
                                      halves=("coded",))
     return task.metric(pair.coded, camera)["value"]
