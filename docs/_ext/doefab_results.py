@@ -124,6 +124,7 @@ MEASUREMENTS = (
                         "--results benchmarks/results/diagnose_coverage_no_roughness"),
     Measurement("measured_pair", "benchmarks/measured_pair.py", (R + "measured_pair.md",)),
     Measurement("reconstruct_memory", "benchmarks/reconstruct_memory.py", (R + "reconstruct_memory.md",)),
+    Measurement("swapped_views", "benchmarks/swapped_views.py", (R + "swapped_views.md",)),
     Measurement("real_validation", "benchmarks/real_validation.py", (R + "real_validation.md",)),
     Measurement("hdr_fewer_iters", "benchmarks/hdr_fewer_iters.py", (R + "hdr_fewer_iters.md",)),
     Measurement("gpu_table", None, (R + "gpu_table.md",), command="bash benchmarks/gpu_run.sh",

@@ -158,7 +158,7 @@ def run(args) -> int:
     from doefab.imaging.crosstalk import DualPixelCrosstalk
     from doefab.io import atomic_write_json
     from doefab.lab.outputs import write_result_rows
-    from doefab.lab.capturenotes import clipped_note, small_frame_note
+    from doefab.lab.capturenotes import clipped_note, small_frame_note, swapped_note
     from doefab.lab.reconstruct import (DEFAULT_TILE, capture_levels, default_overlap, iter_tiled, load_views,
                                         output_channels)
     from doefab.reconstruction.loader import load_reconstructor
@@ -179,7 +179,8 @@ def run(args) -> int:
     for c, u in pairs:
         coded, uncoded = load_views(c, u, camera, **levels)
         info: dict = {}
-        notes = [n for n in [small_frame_note(rec, coded.shape[1:], psf), clipped_note(coded, uncoded)] if n]
+        notes = [n for n in [small_frame_note(rec, coded.shape[1:], psf), clipped_note(coded, uncoded),
+                             swapped_note(coded, uncoded, psf or rec.pair)] if n]
         for note in notes:
             print(f"doefab reconstruct: warning: {c.name}: {note}", file=sys.stderr, flush=True)
         rows = iter_tiled(rec, coded, uncoded, tile, overlap, psf=psf, progress=True, info=info)
