@@ -36,9 +36,12 @@ def committed_label(task: str) -> str:
     from doefab.design.committed import committed_dir
     from doefab.design.design import Design
 
-    cfg = Design.load(committed_dir(task)).extra.get("config", {})
+    d = Design.load(committed_dir(task))
+    cfg = d.extra.get("config", {})
     grid = "full grid" if int(cfg.get("sampling", 1)) == 1 else f"1/{cfg.get('sampling')} grid"
-    return f"the committed design ({cfg.get('optimizer', 'adam')}, {cfg.get('parameterization') or 'pixel'}, {grid})"
+    other = "; optimised on another metric: design.json's metrics.optimised_on" if "optimised_on" in d.metrics else ""
+    return (f"the committed design ({cfg.get('optimizer', 'adam')}, {cfg.get('parameterization') or 'pixel'}, {grid}"
+            f"{other})")
 
 
 def committed_run(task: str):

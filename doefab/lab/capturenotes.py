@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 __all__ = ["small_frame_note", "clipped_note", "swapped_note", "view_mismatch", "channel_psfs", "MOST_CLIPPED_BOTH",
-           "SWAPPED_RATIO", "SIDE_PX"]
+           "looks_swapped", "SWAPPED_RATIO", "SWAPPED_GAP", "SIDE_PX"]
 
 
 def small_frame_note(rec, size_hw: tuple[int, int], psf=None) -> str | None:
@@ -47,6 +47,7 @@ def clipped_note(coded: np.ndarray, uncoded: np.ndarray) -> str | None:
 
 
 SWAPPED_RATIO = 0.5  # the views swapped must fit at most this fraction as far off as stated to be warned of
+SWAPPED_GAP = 0.005  # ... and closer by more than this share of the variance
 SIDE_PX = 512  # the central square of a frame the check reads (sensor px)
 
 
@@ -68,48 +69,61 @@ def channel_psfs(pair) -> tuple[np.ndarray, np.ndarray]:
 def view_mismatch(coded: np.ndarray, uncoded: np.ndarray, pc: np.ndarray, pu: np.ndarray) -> tuple[float, float]:
     """(as stated, swapped): how far the two views break the split aperture's identity coded ⊛ PSF_plain =
     plain ⊛ PSF_coded (both are the scene through both halves): 1 − r² of the two sides (r: their correlation over
-    the channels, each side less its mean per channel; a common gain of a view leaves it alone), over the pixels
-    whose PSF window holds no clipped pixel; each the least over the PSF's planes. ``coded``,
-    ``uncoded``: [3, H, W] views in [0, 1]; ``pc``, ``pu``: (planes, 3, K, K) from :func:`channel_psfs`. NaN where
-    no pixel is usable or the frame holds no structure.
+    the channels, each side less its mean per channel, 0 where negative; a common gain of a view leaves it alone),
+    over the pixels whose PSF window holds no clipped or non-finite pixel, in the frame's central square of
+    ``SIDE_PX`` (or twice the window); each the least over the PSF's planes. ``coded``, ``uncoded``: [3, H, W] views
+    in [0, 1]; ``pc``, ``pu``: (planes, 3, K, K) from :func:`channel_psfs`. NaN where no pixel is usable (a frame no
+    wider than the window among them) or the frame holds no structure.
 
     Example: ``view_mismatch(c, u, pc, pu)[0]`` is 0 for noiseless views rendered with ``pc``, ``pu`` at one plane."""
     from scipy.signal import fftconvolve
 
     from doefab.reconstruction.highlights import CLIPPED
 
-    k = pc.shape[-1]
+    k, side = pc.shape[-1], max(SIDE_PX, 2 * pc.shape[-1])
     h, w = coded.shape[1:]
-    r0, c0 = max((h - SIDE_PX) // 2, 0), max((w - SIDE_PX) // 2, 0)
-    views = [np.asarray(v, np.float64)[:, r0:r0 + SIDE_PX, c0:c0 + SIDE_PX] for v in (coded, uncoded)]
-    clipped = ((views[0] >= CLIPPED) | (views[1] >= CLIPPED)).any(axis=0).astype(np.float64)
-    usable = fftconvolve(clipped, np.ones((k, k)), mode="valid") < 0.5
+    if min(h, w) <= k:
+        return math.nan, math.nan
+    r0, c0 = max((h - side) // 2, 0), max((w - side) // 2, 0)
+    views = [np.array(np.asarray(v)[:, r0:r0 + side, c0:c0 + side], np.float64) for v in (coded, uncoded)]
+    bad = np.zeros(views[0].shape[1:], bool)
+    for v in views:
+        bad |= ~np.isfinite(v).all(axis=0) | (v >= CLIPPED).any(axis=0)
+        v[:, bad] = 0.0
+    usable = fftconvolve(bad.astype(np.float64), np.ones((k, k)), mode="valid") < 0.5
     if not usable.any():
         return math.nan, math.nan
 
     def off(a, pa, b, pb) -> float:
-        x, y = fftconvolve(a[None], pa, mode="valid", axes=(-2, -1)), fftconvolve(b[None], pb, mode="valid",
-                                                                                   axes=(-2, -1))
-        x, y = x[..., usable], y[..., usable]
+        x, y = (fftconvolve(v[None], p, mode="valid", axes=(-2, -1))[..., usable] for v, p in ((a, pa), (b, pb)))
+        level = (x.mean(axis=-1) ** 2).sum(axis=1) * x.shape[-1] + (y.mean(axis=-1) ** 2).sum(axis=1) * y.shape[-1]
         x, y = x - x.mean(axis=-1, keepdims=True), y - y.mean(axis=-1, keepdims=True)
         xx, yy, xy = ((a * b).sum(axis=(1, 2)) for a, b in ((x, x), (y, y), (x, y)))
-        ok = np.minimum(xx, yy) > 1e-12 * max(float(xx.max()), float(yy.max()), 1e-30)
-        return float(np.min(1.0 - xy[ok] ** 2 / (xx[ok] * yy[ok]))) if ok.any() else math.nan
+        ok = np.minimum(xx, yy) > 1e-8 * level + 1e-30  # structure above the FFT's rounding of a flat frame
+        r2 = np.maximum(xy[ok], 0.0) ** 2 / (xx[ok] * yy[ok])
+        return float(np.min(1.0 - r2)) if ok.any() else math.nan
     return off(views[0], pu, views[1], pc), off(views[1], pu, views[0], pc)
 
 
+def looks_swapped(stated: float, swapped: float) -> bool:
+    """Whether views that break the identity by ``stated`` as given and ``swapped`` the other way round
+    (:func:`view_mismatch`) were given the wrong way round: swapped at most ``SWAPPED_RATIO`` of stated and closer by
+    more than ``SWAPPED_GAP`` (not a difference within rounding). False where either is NaN.
+
+    Example: ``looks_swapped(0.6, 0.1)`` is True; ``looks_swapped(0.004, 0.001)`` is False."""
+    return bool(swapped <= SWAPPED_RATIO * stated and stated - swapped > SWAPPED_GAP)
+
+
 def swapped_note(coded: np.ndarray, uncoded: np.ndarray, pair) -> str | None:
-    """Views that fit the split aperture's identity (:func:`view_mismatch`) at most ``SWAPPED_RATIO`` as far off
-    swapped as stated: the coded and plain captures were most likely given the wrong way round. None where they fit
-    as stated, the frame is smaller than the PSF window or holds nothing to tell by. ``pair``: the PSFs the network
-    is told (its own or ``--psf``'s).
+    """Views that :func:`looks_swapped` calls swapped: the coded and plain captures were most likely given the
+    wrong way round. None where they fit as given, or where the frame holds nothing to tell by (no wider than the PSF
+    window, clipped within every window, without structure). ``pair``: the PSFs the network is told (its own or
+    ``--psf``'s).
 
     Example: ``swapped_note(plain_view, coded_view, rec.pair)`` names the swap for views of a textured scene."""
     pc, pu = channel_psfs(pair)
-    if min(coded.shape[1:]) <= pc.shape[-1]:
-        return None
     stated, swapped = view_mismatch(coded, uncoded, pc, pu)
-    if not swapped <= SWAPPED_RATIO * stated:  # NaN: nothing to tell by
+    if not looks_swapped(stated, swapped):
         return None
     return (f"the coded and plain captures look swapped: the coded one convolved with the plain half's PSF and the "
             f"plain one with the coded half's leave {stated:.0%} of their variance unexplained by each other, "

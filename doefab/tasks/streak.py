@@ -66,7 +66,8 @@ class StreakTask(Task):
         """The arms: the cross widened by ``band_px`` each side, less the square where its two bands overlap."""
         c, w = self.kernel_size // 2, self.band_px
         arms = self._cross(w)
-        arms[c - w:c + w + 1, c - w:c + w + 1] = 0.0
+        lo = max(c - w, 0)  # a band wider than the window: the whole window is its centre
+        arms[lo:c + w + 1, lo:c + w + 1] = 0.0
         return arms.expand(1, len(self.wavelengths(camera)), -1, -1)
 
     def init_height(self, camera: Camera, rng: np.random.Generator) -> np.ndarray:

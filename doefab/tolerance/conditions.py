@@ -214,6 +214,19 @@ def model_sources_sha256(packages=PART_MODEL) -> str:
     return sources_sha256(Path(__file__).resolve().parent.parent, tuple(packages))
 
 
+def metric_sha256(design) -> str:
+    """SHA-256 (16 hex digits) of the 0/1 masks of the pixels a design's task metric counts (``Task.band_masks`` on
+    its camera): part of a tolerance run's identity, so parts scored on another metric are not mixed in.
+
+    Example: ``metric_sha256(Design.load("masks/streak/design"))`` changes where the streak's arms do."""
+    from doefab.tasks import get_task
+
+    task = get_task(design.task, **design.task_params)
+    task.bind(design.camera)
+    masks = np.ascontiguousarray(task.band_masks(design.camera).detach().cpu().numpy(), np.float64)
+    return hashlib.sha256(masks.tobytes()).hexdigest()[:16]
+
+
 def _key(task, design, split, n, budget, kernel, chain) -> str:
     from doefab.fabrication.levels import levels_sha256
     from doefab.tolerance.errors import budget_values

@@ -39,17 +39,19 @@ def run_identity(design, budget: dict, seed: int, grid: int, networks: bool, wei
                  chain: dict | None = None) -> dict:
     """What a samples.jsonl must have been written for to be resumed: the design (level map, camera, bands,
     planes, levels), the budget, seed, grid, the mask set's alignment chain, the source of the code that computes a
-    part (``conditions.model_sources_sha256``: parts of another version are not mixed in) and, through networks, the
-    network's weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
+    part (``conditions.model_sources_sha256``: parts of another version are not mixed in), the pixels the task's PSF
+    metric counts (``Task.band_masks``: parts scored on another metric are not mixed in either) and, through networks,
+    the network's weights (their SHA-256) and the scenes the network judge reads (``netjudge.judge_settings``)."""
     b = budget_values(budget)
     system = {"camera": design.camera.to_dict(), "wavelengths_m": list(design.wavelengths), "n_levels": design.n_levels,
               "depths_m": [z if math.isfinite(z) else "inf" for z in design.depths]}
-    from doefab.tolerance.conditions import model_sources_sha256
+    from doefab.tolerance.conditions import metric_sha256, model_sources_sha256
 
     out = {"design_levels_sha256": design.extra.get("levels_sha256") or _levels_sha(design.levels),
            "design_system_sha256": _digest(system), "part_model_sha256": model_sources_sha256(),
            "budget_sha256": _digest(b), "seed": int(seed), "grid": int(grid), "level": "network" if networks else "psf",
-           "alignment_chain": {str(k): int(v) for k, v in sorted((chain or {}).items())}}
+           "alignment_chain": {str(k): int(v) for k, v in sorted((chain or {}).items())},
+           "metric_sha256": metric_sha256(design)}
     if networks:
         from doefab.tolerance.netjudge import judge_settings
 

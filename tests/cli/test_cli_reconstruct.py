@@ -145,14 +145,13 @@ def test_captures_clipped_in_both_views_are_warned_of(tmp_path, capsys):
     assert clipped_note(few, few) is None and "2.0% of the pixels" in clipped_note(more, more)
 
 
-
 def test_views_that_break_the_split_apertures_identity_less_swapped_are_warned_of():
     """Views of one scene through two PSFs obey coded ⊛ PSF_plain = plain ⊛ PSF_coded in the valid region, to
     rounding; given the other way round they do not, and the note names the swap. Random PSFs at one plane and a
     random scene: the identity is the convolution's commutativity, computed here by direct summation."""
     from scipy.signal import convolve2d
 
-    from doefab.lab.capturenotes import swapped_note, view_mismatch
+    from doefab.lab.capturenotes import looks_swapped, swapped_note, view_mismatch
     from doefab.optics.psf import PSFPair
 
     rng = np.random.default_rng(3)
@@ -169,7 +168,13 @@ def test_views_that_break_the_split_apertures_identity_less_swapped_are_warned_o
     pair = PSFPair(torch.from_numpy(pc), torch.from_numpy(pu), (656e-9, 589e-9, 486e-9), (5.0,), 5.4e-6)
     assert swapped_note(views[0], views[1], pair) is None
     assert "look swapped" in swapped_note(views[1], views[0], pair)
-    assert swapped_note(views[1][:, :k, :k], views[0][:, :k, :k], pair) is None  # no wider than the window
+    assert np.isnan(view_mismatch(views[1][:, :k, :k], views[0][:, :k, :k], pc, pu)).all()  # no wider than K
+    holed = [v.copy() for v in views]
+    holed[1][1, 60, 60] = np.nan  # a dead pixel leaves out the windows that hold it, not the whole frame
+    assert "look swapped" in swapped_note(holed[1], holed[0], pair) and np.isnan(holed[1][1, 60, 60])
+    flat = [np.full_like(v, 0.3) for v in views]  # nothing to tell by
+    assert np.isnan(view_mismatch(flat[0], flat[1], pc, pu)).all() and swapped_note(flat[1], flat[0], pair) is None
+    assert looks_swapped(0.6, 0.1) and not looks_swapped(0.004, 0.001) and not looks_swapped(np.nan, 0.0)
 
 
 def test_swapped_captures_are_warned_of_by_reconstruct(tmp_path, capsys):
@@ -191,6 +196,7 @@ def test_swapped_captures_are_warned_of_by_reconstruct(tmp_path, capsys):
         assert ("captures look swapped" in err) == warned, err
         notes = json.loads((out / "reconstruct.json").read_text())["pairs"][0]["warnings"]
         assert any("look swapped" in n for n in notes) == warned
+
 
 @pytest.mark.parametrize("build, needle", [
     (lambda w: ["--coded", w / "*.tiff", "--uncoded", w / "*.png"] if _pair(w) else [], "no file matches"),

@@ -31,19 +31,37 @@ def cache(tmp_path, monkeypatch):
     monkeypatch.setenv("DOEFAB_CACHE", str(tmp_path / "cache"))
 
 
-# changes to the shipped budget since the evaluations were scored that these designs do not see: the holder's
-# DOE-to-glass gap (1.6 mm before the retention screws' heads were kept 0.2 mm clear of the glass, now 1.8 mm) —
-# an axial gap changes no PSF where the DOE's baffle is the aperture stop, as in the shipped designs
-UNSEEN_CHANGES = ({"axial_gap_mm": 1.6},)
+# changes to the shipped budget since the evaluations were scored that these designs do not see, each (section,
+# task or None, the earlier values): the holder's DOE-to-glass gap (1.6 mm before the retention screws' heads were
+# kept 0.2 mm clear of the glass, now 1.8 mm) — an axial gap changes no PSF where the DOE's baffle is the aperture
+# stop, as in the shipped designs; the HDR spec's PSF-metric limit (0.80 on the cross with its centre, 0.65 on its
+# arms) — a spec judges parts after they are drawn and scored, it draws and scores none
+UNSEEN_CHANGES = (("mounting", None, {"axial_gap_mm": 1.6}), ("spec", "hdr", {"psf_metric_min": 0.80}))
+
+
+def _with(budget: dict, change) -> dict:
+    section, task, values = change
+    if task is None:
+        return {**budget, section: {**budget[section], **values}}
+    return {**budget, section: {**budget[section], task: {**budget[section][task], **values}}}
 
 
 def _shipped_budget(recorded: str) -> dict:
-    """The shipped budget, whose digest must be ``recorded`` or differ from it only by ``UNSEEN_CHANGES``."""
+    """The shipped budget, whose digest must be ``recorded`` or differ from it only by ``UNSEEN_CHANGES`` (any of
+    them)."""
+    from itertools import combinations
+
     from doefab.tolerance.conditions import budget_sha256
     from doefab.tolerance.errors import load_budget
 
     budget = load_budget()
-    earlier = [budget] + [{**budget, "mounting": {**budget["mounting"], **c}} for c in UNSEEN_CHANGES]
+    earlier = []
+    for n in range(len(UNSEEN_CHANGES) + 1):
+        for changes in combinations(UNSEEN_CHANGES, n):
+            b = budget
+            for c in changes:
+                b = _with(b, c)
+            earlier.append(b)
     assert recorded in {budget_sha256(b) for b in earlier}, ("the shipped budget changed since the committed "
                                                             "evaluations: score them again (benchmarks/real_validation.py)")
     return budget

@@ -24,22 +24,22 @@ def test_streak_target_is_a_cross_summing_to_half():
     assert np.allclose(tg[tg > 0], 0.5 / 41)
 
 
-
 def test_streak_metric_counts_the_arms_not_the_spot_a_plain_half_focuses_to():
-    """The metric is the arms' light: the ideal cross (4·arm + 1 equal pixels) scores the share of its pixels more
-    than band_px = 1 from the centre, 4·(arm − 1) / (4·arm + 1); a plain coded half on the HDR camera (f/5.8: a spot of about a pixel at 5.4 µm) puts
-    little on the arms. The cross with its centre counted would score that spot 0.96."""
+    """The metric is the arms' light: the ideal cross (4·arm + 1 equal pixels) scores the share of its pixels more than
+    band_px = 1 from the centre, 4·(arm − 1) / (4·arm + 1); a plain coded half on the HDR camera (f/5.8: a spot of
+    about a pixel at 5.4 µm) puts little on the arms. The cross with its centre counted would score that spot 0.96."""
     task = get_task("streak", kernel_size=31, arm_px=10)
     cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)  # the HDR aperture (8.64 mm) on a coarse grid
     ideal = task.metric(task.targets(cam), cam)["value"]
     assert ideal == pytest.approx(36 / 41)
     flat = doefab.split_aperture_psf(None, cam, [589e-9], [cam.focus_distance], kernel_size=31).coded
-    assert float(flat.sum()) > 0.45  # the window holds the spot: what the arms miss is elsewhere on the cross
+    assert float(flat.sum()) > 0.45  # the window holds the spot's light
     frac = float(task.fractions(flat, cam)[0, 0])
     assert frac < 0.2
     k = np.arange(31) - 15
     centre = (np.abs(k)[:, None] <= 1) & (np.abs(k)[None, :] <= 1)
     assert float(flat[0, 0].numpy()[centre].sum()) / 0.5 > 0.7  # most of it in the 3 × 3 centre the metric leaves out
+
 
 def test_grating_spots_follow_the_grating_equation():
     task = get_task("grating")
