@@ -66,7 +66,7 @@ class StreakTask(Task):
         """The arms: the cross widened by ``band_px`` each side, less the square where its two bands overlap."""
         c, w = self.kernel_size // 2, self.band_px
         arms = self._cross(w)
-        lo = max(c - w, 0)  # a band wider than the window: the whole window is its centre
+        lo = max(c - w, 0)  # a band wider than the window: the whole window is its centre (no arms)
         arms[lo:c + w + 1, lo:c + w + 1] = 0.0
         return arms.expand(1, len(self.wavelengths(camera)), -1, -1)
 

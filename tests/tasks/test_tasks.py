@@ -32,6 +32,10 @@ def test_streak_metric_counts_the_arms_not_the_spot_a_plain_half_focuses_to():
     cam = doefab.Camera(doe_pixels=256, doe_pitch=33.75e-6)  # the HDR aperture (8.64 mm) on a coarse grid
     ideal = task.metric(task.targets(cam), cam)["value"]
     assert ideal == pytest.approx(36 / 41)
+    # arms counted by hand in the 31 px window (arm 10): width 0 → the 40 pixels off the centre; width 2 → two 5 × 25
+    # strips (250) less their 5 × 5 overlap counted twice and the 5 × 5 centre (200); a band wider than the window → 0
+    for band, want in ((0, 40), (2, 200), (16, 0)):
+        assert float(get_task("streak", kernel_size=31, arm_px=10, band_px=band).band_masks(cam)[0, 0].sum()) == want
     flat = doefab.split_aperture_psf(None, cam, [589e-9], [cam.focus_distance], kernel_size=31).coded
     assert float(flat.sum()) > 0.45  # the window holds the spot's light
     frac = float(task.fractions(flat, cam)[0, 0])
