@@ -118,8 +118,10 @@ def stage_design(scene, res, out: Path, quick: bool) -> dict:
 
     if res.reuse:
         _copy_design(res.committed_dir, out)
+        older = ("; optimised on an earlier metric and kept with the networks trained for it (its design.json's "
+                 "metrics.optimised_on)" if "optimised_on" in res.committed.metrics else "")
         info = {"status": "reused", "why": f"the scene's design settings equal the committed design "
-                                          f"{res.settings['design_task']} (shipped with doefab)"}
+                                          f"{res.settings['design_task']} (shipped with doefab){older}"}
     else:
         print(f"[doefab run] design: {redesign_note(res, quick)}", flush=True)
         args = design_arguments(res, quick)

@@ -82,6 +82,7 @@ def test_quick_run_end_to_end(quick_run):
     run = json.loads((out / "run.json").read_text())
     st = run["stages"]
     assert st["design"]["status"] == "reused" and st["masks"]["status"] == "reused"
+    assert "optimised on an earlier metric" in st["design"]["why"]  # the streak's record says so: the run does too
     assert st["holder"]["status"] == "ran" and st["tolerance"]["status"] == "ran"
     assert st["reconstruction"]["status"] == "reused"
     html = (out / "report.html").read_text()
