@@ -67,10 +67,11 @@ def main(argv=None) -> None:
             s, w = np.array(got).T
             rows.append(f"| {task} | {split} | {a.scenes} | {int(np.isnan(s).sum())} | {np.nanmedian(s):.3f} | "
                         f"{np.nanmedian(w):.3f} | "
-                        f"{sum(looks_swapped(*g) for g in got)} | {sum(looks_swapped(*g[::-1]) for g in got)} |")
+                        f"{sum(looks_swapped(*g) for g in got)} | "
+                        f"{sum(looks_swapped(*g[::-1]) for g in got)} |")
     text = [f"`.venv/bin/python benchmarks/swapped_views.py --scenes {a.scenes} --size {a.size}`: each pair checked as "
-            f"given and swapped (warned where one order fits at most {SWAPPED_RATIO} as far off as the other and closer "
-            f"by more than {SWAPPED_GAP}; "
+            f"given and swapped (warned where one order fits at most {SWAPPED_RATIO} as far off as the other and "
+            f"closer by more than {SWAPPED_GAP}; "
             "mismatch: 1 − r² of coded ⊛ PSF_plain against plain ⊛ PSF_coded, the least over the pair's planes).", "",
             *rows]
     OUT.write_text("\n".join(text) + "\n")

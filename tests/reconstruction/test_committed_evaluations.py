@@ -5,8 +5,8 @@ gives, for every variant, the per-scene metrics that ``benchmarks/results/real_v
 of themselves (most agree exactly; a few differ in their last digits).
 
 The part is drawn from the shipped budget; its digest must be the one the evaluations record, or differ from it only
-by a change these designs do not see (``UNSEEN_CHANGES``: the holder's DOE-to-glass gap), so the committed numbers
-are the shipped budget's.
+by changes these designs do not see (``UNSEEN_CHANGES``: the holder's DOE-to-glass gap, the HDR spec's PSF-metric
+limit), so the committed numbers are the shipped budget's.
 
 The depth task is not compared: the digest of its measured scenes (``real_sha256["depth"]``) hashes linear images made
 with float32 powers whose last bits follow numpy's vector paths, so a machine without AVX-512 computes another

@@ -65,7 +65,6 @@ def test_interrupted_study_resumes(design_dir, tmp_path):
     assert sorted(r["index"] for r in rows[1:]) == [0, 1, 2, 3]  # the cut line gone, no row glued to it
 
 
-
 def test_parts_scored_on_another_metric_are_not_resumed_into_a_study(design_dir, tmp_path, monkeypatch):
     """The task's metric lives outside the part model's code: a study whose parts were scored on other pixels (the
     streak's cross with its centre) is refused on resume, naming the metric, as one on another budget is."""
@@ -79,6 +78,7 @@ def test_parts_scored_on_another_metric_are_not_resumed_into_a_study(design_dir,
         montecarlo.monte_carlo(design_dir, budget, 2, tmp_path, seed=1, progress=False)
     monkeypatch.undo()
     assert len(montecarlo.monte_carlo(design_dir, budget, 2, tmp_path, seed=1, progress=False)) == 2
+
 
 def test_the_part_log_is_strict_json_and_a_nan_metric_resumes_as_nan(design_dir, tmp_path, monkeypatch):
     """samples.jsonl is read by jq and browsers too: a part whose metric is undefined is written as "nan", not as
