@@ -76,8 +76,9 @@ def view_mismatch(coded: np.ndarray, uncoded: np.ndarray, pc: np.ndarray, pu: np
     wider than the window among them) or the frame holds no structure.
 
     Example: ``view_mismatch(c, u, pc, pu)[0]`` is 0 for noiseless views rendered with ``pc``, ``pu`` at one plane."""
-    from scipy.signal import fftconvolve
+    import torch
 
+    from doefab.imaging.captures import convolve_valid
     from doefab.reconstruction.highlights import CLIPPED
 
     k, side = pc.shape[-1], max(SIDE_PX, 2 * pc.shape[-1])
@@ -85,17 +86,19 @@ def view_mismatch(coded: np.ndarray, uncoded: np.ndarray, pc: np.ndarray, pu: np
     if min(h, w) <= k:
         return math.nan, math.nan
     r0, c0 = max((h - side) // 2, 0), max((w - side) // 2, 0)
-    views = [np.array(np.asarray(v)[:, r0:r0 + side, c0:c0 + side], np.float64) for v in (coded, uncoded)]
-    bad = np.zeros(views[0].shape[1:], bool)
+    views = [torch.tensor(np.asarray(v)[:, r0:r0 + side, c0:c0 + side], dtype=torch.float64) for v in (coded, uncoded)]
+    bad = torch.zeros(views[0].shape[1:], dtype=torch.bool)
     for v in views:
-        bad |= ~np.isfinite(v).all(axis=0) | (v >= CLIPPED).any(axis=0)
+        bad |= ~torch.isfinite(v).all(dim=0) | (v >= CLIPPED).any(dim=0)
+    for v in views:
         v[:, bad] = 0.0
-    usable = fftconvolve(bad.astype(np.float64), np.ones((k, k)), mode="valid") < 0.5
+    usable = (convolve_valid(bad[None].double(), torch.ones(1, k, k, dtype=torch.float64))[0] < 0.5).numpy()
     if not usable.any():
         return math.nan, math.nan
+    pc, pu = torch.as_tensor(pc, dtype=torch.float64), torch.as_tensor(pu, dtype=torch.float64)
 
     def off(a, pa, b, pb) -> float:
-        x, y = (fftconvolve(v[None], p, mode="valid", axes=(-2, -1))[..., usable] for v, p in ((a, pa), (b, pb)))
+        x, y = (convolve_valid(v[None], p).numpy()[..., usable] for v, p in ((a, pa), (b, pb)))
         level = (x.mean(axis=-1) ** 2).sum(axis=1) * x.shape[-1] + (y.mean(axis=-1) ** 2).sum(axis=1) * y.shape[-1]
         x, y = x - x.mean(axis=-1, keepdims=True), y - y.mean(axis=-1, keepdims=True)
         xx, yy, xy = ((a * b).sum(axis=(1, 2)) for a, b in ((x, x), (y, y), (x, y)))
@@ -111,7 +114,9 @@ def looks_swapped(stated: float, swapped: float) -> bool:
     more than ``SWAPPED_GAP`` (not a difference within rounding). False where either is NaN.
 
     Example: ``looks_swapped(0.6, 0.1)`` is True; ``looks_swapped(0.004, 0.001)`` is False."""
-    return bool(swapped <= SWAPPED_RATIO * stated and stated - swapped > SWAPPED_GAP)
+    from doefab.lab.viewcheck import clearly_better
+
+    return clearly_better(stated, swapped, SWAPPED_RATIO, SWAPPED_GAP)
 
 
 def swapped_note(coded: np.ndarray, uncoded: np.ndarray, pair) -> str | None:

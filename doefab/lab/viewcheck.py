@@ -14,10 +14,19 @@ import numpy as np
 from doefab.errors import DoefabError
 from doefab.lab.measure import extract, normalise, register
 
-__all__ = ["template_fits", "view_warnings", "VIEW_MISMATCH", "VIEW_MARGIN"]
+__all__ = ["template_fits", "view_warnings", "clearly_better", "VIEW_MISMATCH", "VIEW_MARGIN"]
 
 VIEW_MISMATCH = 0.5  # another template fits at most this fraction as far off as the stated one: warned of
 VIEW_MARGIN = 0.05  # ... and closer by more than this share of the light (not a difference within the noise)
+
+
+def clearly_better(stated: float, other: float, ratio: float, margin: float) -> bool:
+    """Whether an alternative reading that is ``other`` off fits clearly better than the stated one, ``stated`` off:
+    at most ``ratio`` as far off and closer by more than ``margin`` (not a difference within the noise). False
+    where either is NaN.
+
+    Example: ``clearly_better(0.6, 0.1, VIEW_MISMATCH, VIEW_MARGIN)`` is True."""
+    return bool(other <= ratio * stated and stated - other > margin)
 
 
 def template_fits(chans, wide_refs, other_wide, k: int) -> dict:
@@ -67,7 +76,7 @@ def view_warnings(rows: list[dict]) -> list[str]:
                 "the design's mirrored left–right (the frames flipped? check the camera's or the raw converter's "
                 "orientation)": total["mirrored"]}
         what, best = min(alts.items(), key=lambda kv: kv[1])
-        if total["stated"] - best > VIEW_MARGIN and best <= VIEW_MISMATCH * total["stated"]:
+        if clearly_better(total["stated"], best, VIEW_MISMATCH, VIEW_MARGIN):
             out.append(f"the {half} recordings, registered to the design's {half} half, are off by "
                        f"{total['stated']:.0%} (Σ|measured − nominal| / Σ nominal), but registered to {what} by "
                        f"{best:.0%}")
