@@ -54,9 +54,9 @@ MEASUREMENTS = (
     Measurement("mask_export", "benchmarks/mask_export.py", (R + "mask_export.md",)),
     Measurement("holder_timing", "benchmarks/holder_timing.py", (R + "holder_timing.md",)),
     Measurement("reconstruction_tables", "benchmarks/reconstruction_tables.py", (R + "reconstruction_tables.md",),
-                before=("bash scripts/train_shipped.sh 500 out/s15 hdr",
+                before=("bash scripts/train_shipped.sh 1000 out/s62 hdr",
                         "bash scripts/train_shipped.sh 1000 out/s55 depth",
-                        "bash scripts/train_shipped.sh 200 out/s14 hyperspectral")),
+                        "bash scripts/train_shipped.sh 200 out/s62 hyperspectral")),
     Measurement("reconstruction_tables_final", None, (R + "reconstruction_tables_final.md", R + "final_split_reads.md"),
                 before=("for t in hdr hyperspectral depth; do",
                         "  .venv/bin/python -m doefab evaluate --task $t --split final --images 12 --size 256 "
@@ -109,6 +109,10 @@ MEASUREMENTS = (
     Measurement("depth_recipes", "benchmarks/depth_recipes.py", (R + "depth_recipes.md",),
                 before=("doefab train --task depth --variant proposed --steps 1000 --minutes 600 "
                         "--out out/recipes/A",)),
+    Measurement("training_plateau", "benchmarks/training_plateau.py",
+                (R + "training_plateau_hdr.md", R + "training_plateau_hyperspectral.md"),
+                before=("doefab train --task hdr --variant proposed --steps 1000 --minutes 600 --weights-dir "
+                        "out/s62/weights --out out/s62/train/hdr_proposed",)),
     Measurement("hdr_highlight_bias", "benchmarks/hdr_highlight_bias.py", (R + "hdr_highlight_bias.md",)),
     Measurement("judge_rounding", "benchmarks/judge_rounding.py", (R + "judge_rounding.md",)),
     Measurement("diagnose_coverage", "benchmarks/diagnose_coverage.py", (R + "diagnose_coverage.md",)),

@@ -235,7 +235,7 @@ def test_the_readme_claims_are_the_final_sets_numbers():
     claims = text[text.index("Against the paper's claims, on the final set"):]
     m, lo, hi, better, n = _paired("hdr", "psnr_highlight", "uncoded_only")
     assert f"highlight PSNR {m:+.1f} dB over uncoded only" in claims
-    assert f"interval over scenes is {lo:.1f} to {hi:+.1f} dB (better on {better} of {n} scenes)" in claims
+    assert f"interval over scenes {lo:+.1f} to {hi:+.1f} dB (better on {better} of {n} scenes)" in claims
     m, lo, hi, _, _ = _paired("hyperspectral", "psnr", "uncoded_only")
     assert f"PSNR {m:+.1f} dB over uncoded only ({lo:+.1f} to {hi:+.1f} dB)" in claims
     depth = _evaluation("depth", "", "final")["rows"]
