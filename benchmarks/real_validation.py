@@ -133,9 +133,11 @@ def spread_lines(runs: dict, seeds: dict) -> list[str]:
     from doefab.applications import APPLICATIONS
 
     lines = ["Run-to-run spread of the proposed network's primary metric on the measured set, over training seeds "
-             "(the shipped network is seed 0; the other seeds were trained with `doefab train --task T --variant "
+             "(seed 0 is the network shipped when they were scored; the other seeds were trained with `doefab train "
+             "--task T --variant "
              "proposed --steps N --seed S` at this code, the shipped ones at the code their weights record):", "",
-             "| task | metric | shipped (seed 0) | other seeds | mean | SD over seeds |", "| --- | --- | --- | --- | --- | --- |"]
+             "| task | metric | seed 0 (shipped when the seeds were scored) | other seeds | mean | SD over seeds |",
+             "| --- | --- | --- | --- | --- | --- |"]
     notes = []
     for task in KEYS:
         others = seeds.get(task)

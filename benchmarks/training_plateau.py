@@ -9,7 +9,9 @@ beside it, to show where it levels off.
     .venv/bin/python benchmarks/training_plateau.py hdr "1000 steps=out/s62/weights:out/s62/train/hdr_proposed"
 
 Each NAME=WEIGHTS:RUN: WEIGHTS holds <task>_<variant>.{pt,json}, RUN the run's history.csv. ``--variant`` (default
-proposed) names the network compared. The shipped network is scored in the same run. Writes
+proposed) names the network compared. The shipped network is scored by the same code path; an evaluation already
+in WORK for the same weights, scenes and tolerance budget is reused (``real_validation.evaluate_split``), and each
+split's evaluation records its code. Writes
 benchmarks/results/training_plateau_<task>.{md,json} (a variant scored before keeps its rows); no test content
 is read.
 """
@@ -51,6 +53,11 @@ def curve(task: str, variant: str, run: Path | None) -> list[tuple[int, float]]:
     return out
 
 
+def _tag(name: str) -> str:
+    """A candidate's name as its evaluations' folder names it."""
+    return "".join(c if c.isalnum() else "_" for c in name)
+
+
 def measure(task: str, variant: str, candidates: dict, images: int, size: int, work: Path) -> dict:
     from doefab.reconstruction.loader import load_reconstructor
 
@@ -60,12 +67,12 @@ def measure(task: str, variant: str, candidates: dict, images: int, size: int, w
         entry = {"weights_sha256": meta["weights_sha256"], "steps": meta["training"]["steps"],
                  "wall_time_s": meta["training"].get("wall_time_s"), "command": meta["training"]["command"],
                  "code": meta["training"].get("code"), "curve": curve(task, variant, run)}
-        tag = name.replace(" ", "_").replace(",", "")
+        tag = _tag(name)
         for split in SPLITS:
             r = evaluate_split(task, split, images, size, work, weights_dir=weights, variants=(variant,),
                                name=f"{task}_{variant}_{tag}_{split}")
             entry[split] = {k: r["rows"][variant][k] for k in KEYS[task]}
-            entry["eval_code"] = r["code"]
+            entry.setdefault("eval_code", {})[split] = r["code"]
             print(name, split, entry[split], flush=True)
         res[name] = entry
     return {"images": images, "size_px": size, "variant": variant, "runs": res}
@@ -117,6 +124,8 @@ def main() -> None:
         weights, _, run = folders.partition(":")
         if not weights or not run or not (Path(weights) / f"{args.task}_{args.variant}.json").is_file():
             ap.error(f"{item!r}: give NAME=WEIGHTS:RUN, WEIGHTS holding {args.task}_{args.variant}.json")
+        if name == "shipped" or _tag(name) in {_tag(n) for n in candidates} | {"shipped"}:
+            ap.error(f"{item!r}: name each candidate once, and not 'shipped' (the shipped network's row)")
         candidates[name] = (Path(weights), Path(run))
     res = measure(args.task, args.variant, candidates, args.images, args.size, args.work)
     res["command"] = (f".venv/bin/python benchmarks/training_plateau.py {args.task} "
